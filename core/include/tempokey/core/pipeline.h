@@ -1,0 +1,66 @@
+// An ordered pipeline of operations on one clip (retime, reduce, bake, convert): what a job runs.
+#ifndef TEMPOKEY_CORE_PIPELINE_H_
+#define TEMPOKEY_CORE_PIPELINE_H_
+
+#include <optional>
+#include <span>
+#include <stop_token>
+#include <string_view>
+#include <variant>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "tempokey/core/clip.h"
+#include "tempokey/core/keyed_clip.h"
+#include "tempokey/core/progress.h"
+#include "tempokey/core/reduce.h"
+#include "tempokey/core/retime.h"
+
+namespace tempokey::core {
+
+struct RetimeStep {
+  TimeWarpSpec warp;
+  RetimeOptions options;
+};
+
+struct ReduceStep {
+  ReduceOptions options;
+};
+
+// Keyed clip -> sampled clip; unset rate keeps the source frame time.
+struct BakeStep {
+  std::optional<FrameRate> rate;
+};
+
+// Sampled clip -> sampled clip.
+struct ConvertStep {
+  bool wrap_rotations = false;
+};
+
+using PipelineStep = std::variant<RetimeStep, ReduceStep, BakeStep, ConvertStep>;
+using StepReport = std::variant<RetimeReport, ReductionReport>;
+
+struct PipelineResult {
+  std::variant<Clip, KeyedClip> output;
+  std::vector<StepReport> reports;  // one per retime or reduce step, in order
+};
+
+// "retime", "reduce", "bake" or "convert".
+std::string_view StepName(const PipelineStep& step);
+
+// Checks, before anything is queued, that the steps fit together (retime, reduce and convert
+// take a sampled clip; bake takes a keyed clip), that each step's options are valid, and the
+// first step against `clip`'s timing (ValidateRetime()).
+// Errors: kInvalidArgument "operation 2 (bake): needs a keyed clip, got a sampled clip".
+absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> steps);
+
+// Runs `steps` in order on `clip`. Progress is reported over the whole pipeline; cancellation is
+// checked between steps and, inside them, between channels.
+// Errors: those of ValidatePipeline() and of each step, prefixed "operation 1 (retime): ".
+absl::StatusOr<PipelineResult> RunPipeline(Clip clip, std::span<const PipelineStep> steps,
+                                           const ProgressFn& progress = {},
+                                           std::stop_token stop = {});
+
+}  // namespace tempokey::core
+
+#endif  // TEMPOKEY_CORE_PIPELINE_H_
