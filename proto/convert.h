@@ -1,0 +1,101 @@
+// Conversions between tempokey.v1 messages and core types. Everything that comes off the wire is
+// validated here, so the server and the client share one set of rules and messages.
+#ifndef TEMPOKEY_PROTO_CONVERT_H_
+#define TEMPOKEY_PROTO_CONVERT_H_
+
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "google/protobuf/repeated_field.h"
+#include "tempokey/core/clip.h"
+#include "tempokey/core/keyed_clip.h"
+#include "tempokey/core/pipeline.h"
+#include "tempokey/v1/clip.pb.h"
+#include "tempokey/v1/motion_service.pb.h"
+#include "tempokey/v1/operations.pb.h"
+
+namespace tempokey::wire {
+
+namespace v1 = ::tempokey::v1;
+
+// Default size of the samples carried by one ChannelSamples / KeyedCurve message.
+inline constexpr std::int64_t kDefaultSliceBytes = 1 << 20;
+
+// ---- clips --------------------------------------------------------------------------------------
+
+// The layout of `clip` (everything but samples).
+v1::ClipHeader ClipHeaderToProto(const core::Clip& clip);
+
+// Calls `emit` with consecutive slices of `clip`'s samples, channel by channel, each carrying at
+// most `slice_bytes` of samples (at least one sample). Stops at and returns the first error
+// `emit` returns.
+absl::Status ForEachSamplesSlice(const core::Clip& clip, std::int64_t slice_bytes,
+                                 const std::function<absl::Status(v1::ChannelSamples&&)>& emit);
+
+// Header plus one whole-channel slice per channel.
+v1::Clip ClipToProto(const core::Clip& clip);
+
+// Rebuilds a clip from a header and slices arriving in any order. Every slice is checked as it
+// arrives (channel index in range, frames in range, no overlap with what arrived before, finite
+// samples), so a bad upload is refused at the first bad message and memory stays bounded by the
+// header's declared size, itself checked against `limits` before anything is allocated.
+//
+// Errors: kInvalidArgument naming the channel, frame and value ("samples message 3: channel 7
+// (Hips.Xrotation) frames 100..199 overlap frames already received"); kFailedPrecondition for
+// samples before the header or a second header.
+class ClipAssembler {
+ public:
+  explicit ClipAssembler(core::ClipLimits limits = {});
+
+  absl::Status AddHeader(const v1::ClipHeader& header);
+  absl::Status AddSamples(const v1::ChannelSamples& samples);
+  bool has_header() const { return has_header_; }
+  // Bytes of samples received so far.
+  std::int64_t bytes_received() const { return samples_received_ * 8; }
+  // The clip, once every sample of every channel has arrived; ValidateClip() passed.
+  // Errors: kInvalidArgument "channel 3 (Hips.Zrotation): frames 512..993 never arrived".
+  absl::StatusOr<core::Clip> Finish() &&;
+
+ private:
+  core::ClipLimits limits_;
+  bool has_header_ = false;
+  core::Clip clip_;
+  std::vector<std::vector<std::pair<std::int64_t, std::int64_t>>> received_;  // per channel
+  std::int64_t samples_received_ = 0;
+  std::int64_t messages_ = 0;
+};
+
+// ClipAssembler over a whole Clip message.
+absl::StatusOr<core::Clip> ClipFromProto(const v1::Clip& clip, const core::ClipLimits& limits = {});
+
+// ---- keyed clips --------------------------------------------------------------------------------
+
+v1::KeyedCurve KeyedCurveToProto(int channel_index, const core::Curve& curve);
+v1::KeyedClip KeyedClipToProto(const core::KeyedClip& keyed);
+// Errors: kInvalidArgument for column length mismatches and anything ValidateKeyedClip() refuses.
+absl::StatusOr<core::KeyedClip> KeyedClipFromProto(const v1::KeyedClip& keyed,
+                                                   const core::ClipLimits& limits = {});
+
+// ---- operations ---------------------------------------------------------------------------------
+
+// Each Operation as a core pipeline step. Checks the messages themselves (an empty oneof, two warp
+// domains at once, an enum value out of range, a proto3 `optional` field set to an invalid value);
+// the steps' own validation is core::ValidatePipeline()'s.
+// Errors: kInvalidArgument "operation 2: reduce.paper.step_y must be > 0, got -1";
+//         kUnimplemented for an operation or method this build does not implement.
+absl::StatusOr<std::vector<core::PipelineStep>> PipelineFromProto(
+    const google::protobuf::RepeatedPtrField<v1::Operation>& operations);
+
+// The inverse, for clients that build steps in core terms (the CLI).
+v1::Operation PipelineStepToProto(const core::PipelineStep& step);
+
+v1::OperationReport StepReportToProto(const core::StepReport& report);
+core::StepReport StepReportFromProto(const v1::OperationReport& report);
+
+}  // namespace tempokey::wire
+
+#endif  // TEMPOKEY_PROTO_CONVERT_H_
