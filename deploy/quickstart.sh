@@ -1,0 +1,71 @@
+#!/usr/bin/env bash
+# The README's two commands. Each does its own set-up on a fresh Debian 12 machine (as root):
+#
+#   deploy/quickstart.sh demo   install, build, start tempokey-server on loopback, run the main job
+#                               with the CLI on a real clip from ../shared/data, stop the server
+#   deploy/quickstart.sh test   install, build, run the whole test suite (what .ci/run calls)
+#
+# Environment: TEMPOKEY_BUILD_DIR (default: build), TEMPOKEY_JOBS (default: nproc),
+# TEMPOKEY_SANITIZER_TESTS=0 skips the sanitizer stage of `test`.
+set -euo pipefail
+
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$here"
+build_dir="${TEMPOKEY_BUILD_DIR:-build}"
+jobs="${TEMPOKEY_JOBS:-$(nproc)}"
+shared_dir="$(cd "$here/.." && pwd)/shared"
+
+log() { printf '\n== %s\n' "$*"; }
+
+build() {
+  log "installing dependencies (Debian packages)"
+  deploy/install-deps.sh
+  log "building (Release) in $build_dir"
+  cmake -S . -B "$build_dir" -G Ninja -DCMAKE_BUILD_TYPE=Release "$@" >/dev/null
+  ninja -C "$build_dir" -j "$jobs"
+}
+
+demo() {
+  build -DTEMPOKEY_BUILD_BENCH=OFF
+  local clip="${1:-$shared_dir/data/bvh/cmu/131_01.bvh}"
+  local work
+  work="$(mktemp -d)"
+  log "starting tempokey-server on 127.0.0.1 (free port)"
+  "$build_dir/server/tempokey-server" --address 127.0.0.1:0 --port_file "$work/port" \
+    >"$work/server.log" 2>&1 &
+  local server_pid=$!
+  trap 'kill -TERM "$server_pid" 2>/dev/null || true' EXIT
+  for _ in $(seq 1 100); do [[ -s "$work/port" ]] && break; sleep 0.1; done
+  [[ -s "$work/port" ]] || { cat "$work/server.log"; echo "error: server did not start" >&2; exit 1; }
+  local target="127.0.0.1:$(cat "$work/port")"
+
+  log "tempokey health --server $target"
+  "$build_dir/client/tempokey" --server "$target" health
+  log "tempokey run $clip -o $work/$(basename "$clip")"
+  "$build_dir/client/tempokey" --server "$target" run "$clip" -o "$work/$(basename "$clip")"
+  log "tempokey info $work/$(basename "$clip")"
+  "$build_dir/client/tempokey" info "$work/$(basename "$clip")"
+
+  log "stopping the server (SIGTERM drain)"
+  kill -TERM "$server_pid"
+  local status=0
+  wait "$server_pid" || status=$?
+  trap - EXIT
+  echo "tempokey-server exited with status $status"
+  return "$status"
+}
+
+test_suite() {
+  build
+  log "test suite (CTest, Release)"
+  ctest --test-dir "$build_dir" --output-on-failure -j "$jobs" --timeout 900
+  if [[ "${TEMPOKEY_SANITIZER_TESTS:-1}" != "0" ]]; then
+    deploy/sanitizer-tests.sh
+  fi
+}
+
+case "${1:-}" in
+  demo) shift; demo "$@" ;;
+  test) shift; test_suite "$@" ;;
+  *) echo "usage: deploy/quickstart.sh demo [CLIP.bvh] | test" >&2; exit 2 ;;
+esac
