@@ -31,13 +31,34 @@ inline constexpr std::int64_t kDefaultSliceBytes = 1 << 20;
 v1::ClipHeader ClipHeaderToProto(const core::Clip& clip);
 
 // Calls `emit` with consecutive slices of `clip`'s samples, channel by channel, each carrying at
-// most `slice_bytes` of samples (at least one sample). Stops at and returns the first error
-// `emit` returns.
+// most `slice_bytes` of samples (at least one sample; `slice_bytes` <= 0 means
+// kDefaultSliceBytes). Stops at and returns the first error `emit` returns.
 absl::Status ForEachSamplesSlice(const core::Clip& clip, std::int64_t slice_bytes,
                                  const std::function<absl::Status(v1::ChannelSamples&&)>& emit);
 
 // Header plus one whole-channel slice per channel.
 v1::Clip ClipToProto(const core::Clip& clip);
+
+// How many doubles one slice of at most `slice_bytes` carries (>= 1; `slice_bytes` <= 0 means
+// kDefaultSliceBytes; capped at 256 MiB so a slice always fits one message).
+std::int64_t SamplesPerSlice(std::int64_t slice_bytes);
+
+// Samples [first_frame, first_frame + count) of channel `channel_index` of `clip`.
+// Precondition: the range lies inside the channel (callers iterate within it).
+v1::ChannelSamples SamplesSliceToProto(const core::Clip& clip, int channel_index,
+                                       std::int64_t first_frame, std::int64_t count);
+
+// The layout a header describes (every channel's samples empty), checked with
+// core::ValidateClipLayout() against `limits`, and its markers (finite time, duration >= 0).
+// Joint channel lists are rebuilt from ChannelInfo.joint_index in channel order.
+// Errors: kInvalidArgument naming the field ("header.channels[3].kind: unknown value 12").
+absl::StatusOr<core::Clip> ClipLayoutFromProto(const v1::ClipHeader& header,
+                                               const core::ClipLimits& limits = {});
+
+// Wire enum <-> core enum. Errors: kInvalidArgument for CHANNEL_KIND_UNSPECIFIED or an unknown
+// value.
+v1::ChannelKind ChannelKindToProto(core::ChannelKind kind);
+absl::StatusOr<core::ChannelKind> ChannelKindFromProto(int kind);
 
 // Rebuilds a clip from a header and slices arriving in any order. Every slice is checked as it
 // arrives (channel index in range, frames in range, no overlap with what arrived before, finite
@@ -45,8 +66,9 @@ v1::Clip ClipToProto(const core::Clip& clip);
 // header's declared size, itself checked against `limits` before anything is allocated.
 //
 // Errors: kInvalidArgument naming the channel, frame and value ("samples message 3: channel 7
-// (Hips.Xrotation) frames 100..199 overlap frames already received"); kFailedPrecondition for
-// samples before the header or a second header.
+// (Hips.Xrotation): frames 100..199 overlap frames 150..199 already received"), also for samples
+// before the header, a second header, or Finish() without a header (a malformed stream is bad
+// input).
 class ClipAssembler {
  public:
   explicit ClipAssembler(core::ClipLimits limits = {});
@@ -54,6 +76,12 @@ class ClipAssembler {
   absl::Status AddHeader(const v1::ClipHeader& header);
   absl::Status AddSamples(const v1::ChannelSamples& samples);
   bool has_header() const { return has_header_; }
+  // The clip being assembled: after AddHeader() its full layout; a channel's sample vector is
+  // allocated (frame_count values) when its first slice arrives, so frames not received yet
+  // read as 0. Meant for callers that digest or inspect the accepted data incrementally.
+  const core::Clip& clip() const { return clip_; }
+  // Samples declared by the header (frame_count x channels); 0 before it.
+  std::int64_t samples_expected() const { return samples_expected_; }
   // Bytes of samples received so far.
   std::int64_t bytes_received() const { return samples_received_ * 8; }
   // The clip, once every sample of every channel has arrived; ValidateClip() passed.
@@ -67,6 +95,7 @@ class ClipAssembler {
   std::vector<std::vector<std::pair<std::int64_t, std::int64_t>>> received_;  // per channel
   std::int64_t samples_received_ = 0;
   std::int64_t messages_ = 0;
+  std::int64_t samples_expected_ = 0;
 };
 
 // ClipAssembler over a whole Clip message.
@@ -74,9 +103,30 @@ absl::StatusOr<core::Clip> ClipFromProto(const v1::Clip& clip, const core::ClipL
 
 // ---- keyed clips --------------------------------------------------------------------------------
 
+// Column-wise curve. Weights: when any key of the curve has a weight, the weight columns carry
+// one entry per key, keys without one getting 1/3 (what a non-weighted key behaves as).
 v1::KeyedCurve KeyedCurveToProto(int channel_index, const core::Curve& curve);
 v1::KeyedClip KeyedClipToProto(const core::KeyedClip& keyed);
-// Errors: kInvalidArgument for column length mismatches and anything ValidateKeyedClip() refuses.
+
+// Keys [first_key, first_key + count) of `curve` as one KeyedCurve piece (weight columns as in
+// KeyedCurveToProto(), decided over the whole curve so all pieces agree).
+// Precondition: the range lies inside the curve.
+v1::KeyedCurve KeyedCurveSliceToProto(int channel_index, const core::Curve& curve,
+                                      std::int64_t first_key, std::int64_t count);
+// How many keys of `curve` one piece of at most `slice_bytes` carries (>= 1).
+std::int64_t KeysPerSlice(const core::Curve& curve, std::int64_t slice_bytes);
+
+// Calls `emit` with the curves of `keyed` in channel order, a curve with more than `slice_bytes`
+// of columns split into several KeyedCurve messages of the same channel_index carrying
+// consecutive keys (at least one key each; `slice_bytes` <= 0 means kDefaultSliceBytes).
+// KeyedClipFromProto() joins such pieces again. Stops at and returns the first error of `emit`.
+absl::Status ForEachKeyedCurveSlice(const core::KeyedClip& keyed, std::int64_t slice_bytes,
+                                    const std::function<absl::Status(v1::KeyedCurve&&)>& emit);
+
+// Curves may come in pieces: KeyedCurve messages with the same channel_index are joined in
+// arrival order. Every channel of the header needs a curve.
+// Errors: kInvalidArgument for a bad header, a channel index out of range, column length
+// mismatches, a channel without a curve, and anything ValidateKeyedClip() refuses.
 absl::StatusOr<core::KeyedClip> KeyedClipFromProto(const v1::KeyedClip& keyed,
                                                    const core::ClipLimits& limits = {});
 

@@ -1,8 +1,20 @@
 // Key-reduced clips: per channel a cubic Hermite curve of keys (SPEC 1, 4.3).
+//
+// Evaluation semantics (Maya weighted / non-weighted tangents, glTF CUBICSPLINE):
+// between keys a and b, with dt = b.time_seconds - a.time_seconds > 0,
+//   wa = a.out_weight (1/3 when unset), wb = b.in_weight (1/3 when unset),
+// the curve is the 2D cubic Bezier in (time, value) with controls
+//   time:  a.t,  a.t + wa*dt,                  b.t - wb*dt,                 b.t
+//   value: a.v,  a.v + a.out_tangent*wa*dt,    b.v - b.in_tangent*wb*dt,    b.v
+// evaluated at the parameter s where its time coordinate equals the query time. When neither key
+// of a segment carries a weight, time is linear in s and this is exactly the standard cubic
+// Hermite in time with tangents scaled by dt (glTF CUBICSPLINE). Before the first key and after
+// the last the curve holds the end key's value.
 #ifndef TEMPOKEY_CORE_KEYED_CLIP_H_
 #define TEMPOKEY_CORE_KEYED_CLIP_H_
 
 #include <optional>
+#include <string_view>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -12,7 +24,8 @@ namespace tempokey::core {
 
 // One key. Tangents are slopes in value units per second. Weights, when set, make the tangent
 // 2D (Maya weighted tangents): the Bezier handle spans weight × (segment length in time) along
-// the time axis, i.e. non-weighted keys behave as weights of 1/3.
+// the time axis, i.e. non-weighted keys behave as weights of 1/3. `in_*` applies to the segment
+// ending at this key, `out_*` to the segment starting at it.
 struct Key {
   double time_seconds = 0.0;
   double value = 0.0;
@@ -30,7 +43,8 @@ struct Curve {
   friend bool operator==(const Curve&, const Curve&) = default;
 };
 
-// The layout of the clip the curves came from (its samples empty) and one curve per channel.
+// The layout of the clip the curves came from (its samples empty; frame_count and
+// frame_time_seconds describe that source) and one curve per channel, in channel order.
 struct KeyedClip {
   Clip layout;
   std::vector<Curve> curves;
@@ -38,17 +52,44 @@ struct KeyedClip {
   friend bool operator==(const KeyedClip&, const KeyedClip&) = default;
 };
 
-// Errors: kInvalidArgument naming channel and key: no keys, times not strictly increasing,
-// non-finite values, weights not in (0, 1] when present, curve count != channel count.
+// Slack allowed on the sum of a segment's two weights above 1, so weights computed from a
+// monotonic 2D tangent pair survive the rounding of the division.
+inline constexpr double kWeightSumSlack = 1e-9;
+
+// Checks a keyed clip: ValidateClipLayout() on the layout; one curve per channel; each curve has
+// at least one key; every time, value, tangent and weight is finite; times strictly increase;
+// weights, when present, are in (0, 1]; within each segment out_weight(a) + in_weight(b) <= 1
+// (+ kWeightSumSlack), unset weights counting as 1/3, which keeps time monotonic in s.
+//
+// Errors: kInvalidArgument naming channel and key, e.g.
+//   "channel 3 (Hips.Xrotation): key 5: time 0.5 s is not after the previous key's 0.5 s".
+// Thread-safe.
 absl::Status ValidateKeyedClip(const KeyedClip& keyed);
 
-// The curve's value at `time_seconds`: the cubic Hermite of the two keys around it (Maya / glTF
-// CUBICSPLINE semantics); constant before the first and after the last key.
+// The same checks on one curve; `label` prefixes messages ("channel 3 (Hips.Xrotation)").
+absl::Status ValidateCurve(const Curve& curve, std::string_view label);
+
+// The parameter s in [0, 1] at which the cubic Bezier with controls x0 <= x1 <= x2 <= x3 reaches
+// `x` (0 at or below x0, 1 at or above x3). Safeguarded Newton on the cubic: the result is the
+// root to within a few ulps of s wherever the curve is not flat (|s - s*| <= 1e-12 for the
+// weights ValidateCurve() admits). Precondition: the controls are non-decreasing; they are not
+// checked here. Thread-safe.
+double SolveBezierParameter(double x0, double x1, double x2, double x3, double x);
+
+// The curve's value at `time_seconds` (semantics above); constant before the first and after the
+// last key. Precondition: ValidateCurve() passed (an empty curve gives 0). O(log keys).
+// Thread-safe.
 double EvaluateCurve(const Curve& curve, double time_seconds);
 
-// Samples every curve at i * frame_time_seconds for i = 0 .. floor(duration * rate + 1e-9),
-// where duration is the layout's; unset `frame_time_seconds` keeps the layout's frame time.
-// Errors: kInvalidArgument from ValidateKeyedClip() or a frame time that is not finite and > 0.
+// Samples every curve at i * frame_time_seconds for i = 0 .. floor(duration / frame_time + 1e-9),
+// where duration is the layout's ((frame_count - 1) * layout frame time); unset
+// `frame_time_seconds` keeps the layout's frame time. The result has the layout's skeleton,
+// channels (with samples), name and markers.
+//
+// Errors: kInvalidArgument from ValidateKeyedClip(), a frame time that is not finite and > 0, or
+// a result over ClipLimits' sample cap ("bake at 1e-09 s per frame gives 1000000001 frames x
+// 96 channels, over the limit of 200000000 samples").
+// Thread-safe.
 absl::StatusOr<Clip> Bake(const KeyedClip& keyed,
                           std::optional<double> frame_time_seconds = std::nullopt);
 

@@ -16,19 +16,24 @@ namespace tempokey::core {
 
 enum class ReduceMethod { kTolerance, kPaper };
 
-// The paper's Hermite DP fit (SPEC 4.1). Steps are in frames (x) and value units (y); tangent
-// steps in the 2D (frame, value) tangent space.
+// The paper's Hermite DP fit (SPEC 4.1; definitions in hermite_dp.h). Steps are in frames (x)
+// and value units (y: degrees for rotations, file units for positions); tangent steps in the 2D
+// (frame, value) tangent space (per unit of the segment parameter).
 struct PaperParams {
-  double step_x_frames = 1.0;
-  double step_y = 0.5;
-  double step_tangent_x = 1.0;
-  double step_tangent_y = 0.5;
-  // Stop when every step has been halved below this.
+  double step_x_frames = 1.0;    // (0, 1e6]
+  double step_y = 0.5;           // (0, 1e6]
+  double step_tangent_x = 1.0;   // (0, 1e6]
+  double step_tangent_y = 0.5;   // (0, 1e6]
+  // Stop when every step has been halved below this. (0, 1e6].
   double accuracy = 0.01;
+  // DP passes at most, [1, 1000].
   int max_iterations = 8;
-  // Gaussian sigma (frames) of the smoothed copy used to find derivative zero crossings.
+  // Gaussian sigma (frames) of the smoothed copy whose first and second central differences
+  // give the initial keys at their zero crossings. Raw captures have a zero crossing at almost
+  // every frame; 2 frames removes the jitter without moving real extrema. [0, 1000], 0 = none.
   double smoothing_sigma_frames = 2.0;
-  // Minimum distance between initial keys, in frames.
+  // Minimum distance between initial keys, in frames; candidates closer to an already kept key
+  // are dropped (extrema are kept before inflections). [1, 1000000].
   int min_key_spacing_frames = 4;
 };
 
@@ -59,6 +64,7 @@ struct ChannelReduction {
   std::int64_t max_error_frame = 0;
 };
 
+// Errors are in value units (degrees for rotations, unwrapped), measured at every source frame.
 struct ReductionReport {
   std::vector<ChannelReduction> channels;
   std::int64_t key_count = 0;
@@ -68,31 +74,58 @@ struct ReductionReport {
   int worst_channel_index = 0;
   std::int64_t worst_frame = 0;
   int iterations = 0;  // paper: the most refinement iterations any channel ran
+
+  // Keys kept as a percentage of samples (0 for an empty report).
+  double key_percent() const {
+    return sample_count > 0
+               ? 100.0 * static_cast<double>(key_count) / static_cast<double>(sample_count)
+               : 0.0;
+  }
 };
 
 struct ReduceResult {
   KeyedClip keyed;
   ReductionReport report;
+  // paper: per channel, the fit's total squared error (value units squared, against the
+  // unwrapped input) before the first DP pass and after each pass; never increasing. Empty
+  // for constant channels, which take two flat keys without a fit.
+  std::vector<std::vector<double>> squared_error_history;
 };
 
-// Checks `options` for the chosen method (steps > 0, accuracy > 0, 1 <= max_iterations <= 1000,
-// sigma >= 0, spacing >= 1, bounds > 0, ...). Errors: kInvalidArgument naming the field and value.
+// Checks `options` for the chosen method: the method is known; paper: steps and accuracy in
+// (0, 1e6], 1 <= max_iterations <= 1000, sigma in [0, 1000], 1 <= spacing <= 1000000;
+// tolerance: error bounds finite and > 0, key budget >= 2 when set, a known pose alignment.
+// Errors: kInvalidArgument naming the field and value, e.g.
+//   "paper.step_y must be > 0, got -1", "paper.max_iterations must be in [1, 1000], got 0".
+// Thread-safe.
 absl::Status ValidateReduceOptions(const ReduceOptions& options);
 
-// Fits every channel of `clip` (angles unwrapped first) and reports the error against the input.
+// Fits every channel of `clip` and reports the error against the input (MeasureReduction()).
+// Rotation channels are unwrapped first (UnwrapDegrees()), so the curves carry unwrapped angles;
+// re-wrap after baking if wanted. Channels whose samples are all equal get two flat keys at the
+// first and last frame (one key for a one-frame clip). `paper`: initial keys, DP passes and the
+// conversion to weighted keys as in hermite_dp.h; keys land at fractional frames.
 //
 // Errors:
-//   kInvalidArgument  `clip` fails ValidateClip() or `options` fail ValidateReduceOptions().
-//   kUnimplemented    a method this build does not have yet.
+//   kInvalidArgument  `clip` fails ValidateClip(), `options` fail ValidateReduceOptions(), or a
+//                     sample's magnitude exceeds 1e100 (its square would overflow the error).
+//   kUnimplemented    method `tolerance` (a later issue): "reduce method 'tolerance' is not
+//                     implemented yet; use method 'paper'".
 //   kCancelled        `stop` was requested; checked between channels.
+// Progress: once per channel, "reduce 12/96".
 //
 // Thread-safe: a pure function of its arguments.
 absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& options,
                                         const ProgressFn& progress = {},
                                         std::stop_token stop = {});
 
-// Measures `keyed` against `clip` at every source frame (one error metric for reduction, tests
-// and benchmarks). Errors: kInvalidArgument when the two do not have the same channels.
+// Measures `keyed` against `clip` at every source frame f (one error metric for reduction, tests
+// and benchmarks): error = EvaluateCurve(curve, f * clip.frame_time_seconds) - sample, with
+// rotation samples unwrapped first. Per channel: keys, RMS and max |error| and its frame; per
+// clip: totals, RMS over all samples, the worst channel and frame. Pass a clean clip to measure
+// against a known truth.
+// Errors: kInvalidArgument when either fails validation or the channel count or kinds differ.
+// Thread-safe.
 absl::StatusOr<ReductionReport> MeasureReduction(const Clip& clip, const KeyedClip& keyed);
 
 }  // namespace tempokey::core

@@ -1,0 +1,232 @@
+#include "client/cli.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <iostream>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "client/cli_errors.h"
+#include "client/command.h"
+#include "tempokey/core/status.h"
+
+namespace tempokey::client {
+namespace {
+
+using core::AsAbsl;
+
+constexpr FlagSpec kHelpFlag{"--help", "-h", "", "show this help and exit"};
+constexpr FlagSpec kVersionFlag{"--version", "", "", "print the version and exit"};
+
+// Column where flag and command descriptions start in help text.
+constexpr std::size_t kHelpColumn = 30;
+
+std::string PadTo(std::string text, std::size_t width) {
+  if (text.size() + 2 > width) return absl::StrCat(text, "\n", std::string(width, ' '));
+  text.resize(width, ' ');
+  return text;
+}
+
+std::string FlagLine(const FlagSpec& flag) {
+  std::string left = "  ";
+  if (!flag.short_name.empty()) absl::StrAppend(&left, AsAbsl(flag.short_name), ", ");
+  absl::StrAppend(&left, AsAbsl(flag.name));
+  if (!flag.value_name.empty()) absl::StrAppend(&left, " ", AsAbsl(flag.value_name));
+  return absl::StrCat(PadTo(std::move(left), kHelpColumn), AsAbsl(flag.help), "\n");
+}
+
+std::string ToolHelp() {
+  std::string text =
+      "usage: tempokey [global options] COMMAND [ARGS] [options]\n"
+      "\n"
+      "Retimes motion-capture clips and reduces them to key-frame curves on a tempokey server.\n"
+      "\n"
+      "commands:\n";
+  for (const Command* command : AllCommands()) {
+    absl::StrAppend(&text, PadTo(absl::StrCat("  ", AsAbsl(command->name)), kHelpColumn),
+                    AsAbsl(command->summary), "\n");
+  }
+  absl::StrAppend(&text, "\nglobal options (accepted by every command):\n");
+  for (const FlagSpec& flag : GlobalFlags()) absl::StrAppend(&text, FlagLine(flag));
+  absl::StrAppend(&text, FlagLine(kHelpFlag), FlagLine(kVersionFlag));
+  absl::StrAppend(&text,
+                  "\n"
+                  "Results go to stdout. An error is one line on stderr, \"error: <message>\";\n"
+                  "refusals by the server read \"error: server: <gRPC CODE>: <message>\".\n"
+                  "Exit codes: 0 ok, 1 failed, 2 usage.\n"
+                  "Run 'tempokey COMMAND --help' for the options of a command.\n");
+  return text;
+}
+
+std::string CommandHelp(const Command& command) {
+  std::string text = absl::StrCat("usage: tempokey ", AsAbsl(command.name), " ",
+                                  AsAbsl(command.synopsis), "\n\n", AsAbsl(command.description));
+  if (!command.flags.empty()) {
+    absl::StrAppend(&text, "\noptions:\n");
+    for (const FlagSpec& flag : command.flags) absl::StrAppend(&text, FlagLine(flag));
+  }
+  absl::StrAppend(&text, "\nglobal options: --server TARGET, --timeout SECONDS, TLS and token "
+                         "flags (see tempokey --help)\n");
+  return text;
+}
+
+std::string JobsHelp() {
+  std::string text =
+      "usage: tempokey jobs SUBCOMMAND [ARGS] [options]\n"
+      "\n"
+      "Manages the jobs of a server.\n"
+      "\n"
+      "subcommands:\n";
+  for (const Command* command : AllCommands()) {
+    if (!command->name.starts_with("jobs ")) continue;
+    absl::StrAppend(&text,
+                    PadTo(absl::StrCat("  ", AsAbsl(command->name.substr(5)), " ",
+                                       AsAbsl(command->synopsis)),
+                          kHelpColumn),
+                    AsAbsl(command->summary), "\n");
+  }
+  absl::StrAppend(&text, "\nRun 'tempokey jobs SUBCOMMAND --help' for its options.\n");
+  return text;
+}
+
+const Command* FindCommand(std::string_view name) {
+  for (const Command* command : AllCommands()) {
+    if (command->name == name) return command;
+  }
+  return nullptr;
+}
+
+const FlagSpec* FindSpec(std::span<const FlagSpec> flags, std::string_view arg) {
+  const std::string_view name = arg.substr(0, arg.find('='));
+  for (const FlagSpec& flag : flags) {
+    if (flag.name == name || (!flag.short_name.empty() && flag.short_name == arg)) return &flag;
+  }
+  return nullptr;
+}
+
+// The command line split into the command's words and everything else.
+struct Invocation {
+  std::vector<std::string> words;  // "retime" or "jobs", "list"
+  std::vector<std::string> rest;   // flags (global ones included) and positionals, in order
+  bool tool_help = false;          // --help before any command
+  bool version = false;
+};
+
+// Finds the command: global flags (and their values) may precede it; any other flag there is a
+// usage error. "jobs" takes its subcommand as the next word.
+absl::StatusOr<Invocation> SplitInvocation(std::span<const std::string> args) {
+  Invocation invocation;
+  std::size_t i = 0;
+  for (; i < args.size(); ++i) {
+    const std::string& arg = args[i];
+    if (arg.size() < 2 || arg[0] != '-') break;
+    if (arg == "--help" || arg == "-h") {
+      invocation.tool_help = true;
+      continue;
+    }
+    if (arg == "--version") {
+      invocation.version = true;
+      continue;
+    }
+    const FlagSpec* spec = FindSpec(GlobalFlags(), arg);
+    if (spec == nullptr) {
+      return UsageError(absl::StrCat("unknown flag ", arg.substr(0, arg.find('=')),
+                                     " (see tempokey --help)"));
+    }
+    invocation.rest.push_back(arg);
+    if (!spec->value_name.empty() && arg.find('=') == std::string::npos && i + 1 < args.size()) {
+      invocation.rest.push_back(args[++i]);
+    }
+  }
+  if (i < args.size()) {
+    invocation.words.push_back(args[i++]);
+    if (invocation.words[0] == "jobs" && i < args.size() && args[i].rfind('-', 0) != 0) {
+      invocation.words.push_back(args[i++]);
+    }
+  }
+  invocation.rest.insert(invocation.rest.end(), args.begin() + static_cast<std::ptrdiff_t>(i),
+                         args.end());
+  return invocation;
+}
+
+bool WantsHelp(const std::vector<std::string>& rest) {
+  for (const std::string& arg : rest) {
+    if (arg == "--") return false;
+    if (arg == "--help" || arg == "-h") return true;
+  }
+  return false;
+}
+
+absl::Status Dispatch(std::span<const std::string> args, const CliIo& io) {
+  TEMPOKEY_ASSIGN_OR_RETURN(Invocation invocation, SplitInvocation(args));
+  if (invocation.version) {
+    io.out << "tempokey " << TEMPOKEY_VERSION << "\n";
+    return absl::OkStatus();
+  }
+  if (invocation.words.empty()) {
+    if (invocation.tool_help) {
+      io.out << ToolHelp();
+      return absl::OkStatus();
+    }
+    return UsageError("missing command (see tempokey --help)");
+  }
+  if (invocation.words[0] == "help") {
+    // `tempokey help` and `tempokey help retime`.
+    std::vector<std::string> topic(invocation.rest.begin(), invocation.rest.end());
+    if (topic.empty()) {
+      io.out << ToolHelp();
+      return absl::OkStatus();
+    }
+    std::vector<std::string> again = topic;
+    again.push_back("--help");
+    return Dispatch(again, io);
+  }
+  if (invocation.words[0] == "jobs" && invocation.words.size() == 1) {
+    if (invocation.tool_help || WantsHelp(invocation.rest)) {
+      io.out << JobsHelp();
+      return absl::OkStatus();
+    }
+    return UsageError(
+        "jobs: missing subcommand: list, get, cancel, delete, watch or result (see tempokey jobs "
+        "--help)");
+  }
+  std::string name = invocation.words[0];
+  if (invocation.words.size() == 2) absl::StrAppend(&name, " ", invocation.words[1]);
+  const Command* command = FindCommand(name);
+  if (command == nullptr) {
+    if (invocation.words[0] == "jobs") {
+      return UsageError(absl::StrCat("jobs: unknown subcommand '", invocation.words[1],
+                                     "' (see tempokey jobs --help)"));
+    }
+    return UsageError(absl::StrCat("unknown command '", name, "' (see tempokey --help)"));
+  }
+  if (invocation.tool_help || WantsHelp(invocation.rest)) {
+    io.out << CommandHelp(*command);
+    return absl::OkStatus();
+  }
+
+  std::vector<FlagSpec> flags(command->flags.begin(), command->flags.end());
+  flags.insert(flags.end(), GlobalFlags().begin(), GlobalFlags().end());
+  TEMPOKEY_ASSIGN_OR_RETURN(ParsedArgs parsed, ParseArgs(invocation.rest, flags, command->name));
+  CommandContext context(io, *command, std::move(parsed));
+  return command->run(context);
+}
+
+}  // namespace
+
+int RunCli(std::span<const std::string> args, const CliIo& io) {
+  const absl::Status status = Dispatch(args, io);
+  io.out.flush();
+  if (!status.ok()) io.err << ErrorLine(status) << "\n";
+  io.err.flush();
+  return ExitCodeFor(status);
+}
+
+int Main(int argc, char** argv) {
+  std::vector<std::string> args(argv + std::min(argc, 1), argv + argc);
+  const CliIo io{.out = std::cout, .err = std::cerr, .show_progress = isatty(STDERR_FILENO) == 1};
+  return RunCli(args, io);
+}
+
+}  // namespace tempokey::client

@@ -1,0 +1,50 @@
+#include "client/cli_errors.h"
+
+#include "absl/strings/cord.h"
+#include "absl/strings/str_cat.h"
+#include "tempokey/core/status.h"
+
+namespace tempokey::client {
+namespace {
+
+// The payload that marks usage errors; the value is irrelevant.
+constexpr char kUsagePayload[] = "tempokey.cli/usage";
+
+}  // namespace
+
+absl::Status UsageError(std::string_view message) {
+  return AsUsageError(absl::InvalidArgumentError(core::AsAbsl(message)));
+}
+
+absl::Status AsUsageError(const absl::Status& status) {
+  if (status.ok()) return status;
+  absl::Status marked = status;
+  marked.SetPayload(kUsagePayload, absl::Cord("1"));
+  return marked;
+}
+
+bool IsUsageError(const absl::Status& status) {
+  return !status.ok() && status.GetPayload(kUsagePayload).has_value();
+}
+
+int ExitCodeFor(const absl::Status& status) {
+  if (status.ok()) return kExitOk;
+  return IsUsageError(status) ? kExitUsage : kExitFailed;
+}
+
+absl::Status ServerError(const absl::Status& status) {
+  if (status.ok()) return status;
+  return absl::Status(status.code(), absl::StrCat("server: ", absl::StatusCodeToString(status.code()),
+                                                  ": ", status.message()));
+}
+
+std::string ErrorLine(const absl::Status& status) {
+  std::string message(status.message());
+  if (message.empty()) message = absl::StatusCodeToString(status.code());
+  for (char& c : message) {
+    if (c == '\n' || c == '\r') c = ' ';
+  }
+  return absl::StrCat("error: ", message);
+}
+
+}  // namespace tempokey::client

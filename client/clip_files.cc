@@ -1,0 +1,122 @@
+#include "client/clip_files.h"
+
+#include <algorithm>
+#include <cctype>
+#include <filesystem>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "client/cli_errors.h"
+#include "tempokey/core/bvh.h"
+#include "tempokey/core/csv.h"
+#include "tempokey/core/status.h"
+
+namespace tempokey::client {
+namespace {
+
+using core::AsAbsl;
+
+struct FormatName {
+  FileFormat format;
+  std::string_view extension;
+};
+constexpr FormatName kFormatNames[] = {
+    {FileFormat::kBvh, ".bvh"},
+    {FileFormat::kCsv, ".csv"},
+    {FileFormat::kKeyedJson, ".json"},
+    {FileFormat::kMayaAnim, ".anim"},
+};
+
+std::string_view ExtensionOf(FileFormat format) {
+  for (const FormatName& name : kFormatNames) {
+    if (name.format == format) return name.extension;
+  }
+  return "";
+}
+
+std::string LowerExtension(const std::string& path) {
+  std::string extension = std::filesystem::path(path).extension().string();
+  std::transform(extension.begin(), extension.end(), extension.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return extension;
+}
+
+}  // namespace
+
+bool IsKeyedFormat(FileFormat format) {
+  return format == FileFormat::kKeyedJson || format == FileFormat::kMayaAnim;
+}
+
+absl::StatusOr<FileFormat> FormatForPath(std::string_view flag, const std::string& path,
+                                         std::span<const FileFormat> allowed) {
+  const std::string extension = LowerExtension(path);
+  for (FileFormat format : allowed) {
+    if (extension == ExtensionOf(format)) return format;
+  }
+  std::vector<std::string> names;
+  for (FileFormat format : allowed) names.emplace_back(ExtensionOf(format));
+  const std::string what = extension.empty() ? std::string("no extension")
+                                             : absl::StrCat("unknown format '", extension, "'");
+  return UsageError(absl::StrCat(AsAbsl(flag), flag.empty() ? "" : " ", path, ": ", what,
+                                 " (expected ", absl::StrJoin(names, ", "), ")"));
+}
+
+absl::StatusOr<core::Clip> ReadClipFile(const std::string& path,
+                                        std::optional<double> csv_frame_time_seconds) {
+  TEMPOKEY_ASSIGN_OR_RETURN(FileFormat format, FormatForPath("", path, kSampledFormats));
+  if (format == FileFormat::kBvh) return core::ReadBvhFile(path);
+  if (!csv_frame_time_seconds) {
+    return UsageError(absl::StrCat(path, ": a CSV file does not store its frame rate; give it with "
+                                         "--input-fps"));
+  }
+  return core::ReadCsvFile(path, *csv_frame_time_seconds);
+}
+
+absl::Status WriteClipFile(const std::string& path, FileFormat format, const core::Clip& clip) {
+  switch (format) {
+    case FileFormat::kBvh:
+      return core::WriteBvhFile(path, clip);
+    case FileFormat::kCsv:
+      return core::WriteCsvFile(path, clip);
+    case FileFormat::kKeyedJson:
+    case FileFormat::kMayaAnim:
+      break;
+  }
+  return absl::InvalidArgumentError(absl::StrCat(
+      path, ": ", AsAbsl(ExtensionOf(format)), " holds keyed curves, not a sampled clip"));
+}
+
+absl::Status WriteKeyedClipFile(const std::string& path, FileFormat format,
+                                const core::KeyedClip& keyed) {
+  (void)keyed;
+  switch (format) {
+    case FileFormat::kKeyedJson:
+    case FileFormat::kMayaAnim:
+      return absl::UnimplementedError(absl::StrCat(
+          path, ": writing ", AsAbsl(ExtensionOf(format)), " keyed exports is not implemented yet"));
+    case FileFormat::kBvh:
+    case FileFormat::kCsv:
+      break;
+  }
+  return absl::InvalidArgumentError(absl::StrCat(
+      path, ": ", AsAbsl(ExtensionOf(format)), " holds sampled clips, not keyed curves"));
+}
+
+absl::Status WriteOutput(const std::string& path, FileFormat format,
+                         const std::variant<core::Clip, core::KeyedClip>& output) {
+  if (const auto* clip = std::get_if<core::Clip>(&output)) {
+    if (IsKeyedFormat(format)) {
+      return absl::InternalError(absl::StrCat(path, ": the server returned a sampled clip where "
+                                                    "keyed curves were expected"));
+    }
+    return WriteClipFile(path, format, *clip);
+  }
+  if (!IsKeyedFormat(format)) {
+    return absl::InternalError(absl::StrCat(path, ": the server returned keyed curves where a "
+                                                  "sampled clip was expected"));
+  }
+  return WriteKeyedClipFile(path, format, std::get<core::KeyedClip>(output));
+}
+
+}  // namespace tempokey::client

@@ -1,0 +1,63 @@
+// Reading the CLI's input clips and writing its outputs, the format chosen by file extension.
+// Every output is written atomically (core::WriteFileAtomically): a failed or interrupted run
+// leaves the old file or none, never half of one.
+#ifndef TEMPOKEY_CLIENT_CLIP_FILES_H_
+#define TEMPOKEY_CLIENT_CLIP_FILES_H_
+
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+#include <variant>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "tempokey/core/clip.h"
+#include "tempokey/core/keyed_clip.h"
+
+namespace tempokey::client {
+
+enum class FileFormat {
+  kBvh,        // .bvh: hierarchy and motion
+  kCsv,        // .csv: one column per channel; the rate is not stored
+  kKeyedJson,  // .json: keyed curves (README schema)
+  kMayaAnim,   // .anim: Maya ASCII animation curves with weighted tangents
+};
+
+// ".bvh" -> kBvh, ... (case-insensitive). Errors: a usage error naming `flag` and the path
+// ("-o out.txt: unknown output format '.txt' (expected .bvh, .csv)") when the extension is
+// not one of `allowed`.
+absl::StatusOr<FileFormat> FormatForPath(std::string_view flag, const std::string& path,
+                                         std::span<const FileFormat> allowed);
+
+inline constexpr FileFormat kSampledFormats[] = {FileFormat::kBvh, FileFormat::kCsv};
+inline constexpr FileFormat kAllFormats[] = {FileFormat::kBvh, FileFormat::kCsv,
+                                             FileFormat::kKeyedJson, FileFormat::kMayaAnim};
+
+// Whether `format` holds keyed curves (.json, .anim) rather than samples.
+bool IsKeyedFormat(FileFormat format);
+
+// Reads a .bvh, or a .csv at `csv_frame_time_seconds` (the rate is not in the file).
+// Errors: a usage error for another extension, or a .csv without a frame time; the readers'
+// own errors ("walk.bvh:12:7: expected ..."; kNotFound "walk.bvh: no such file").
+absl::StatusOr<core::Clip> ReadClipFile(const std::string& path,
+                                        std::optional<double> csv_frame_time_seconds);
+
+// Writes a sampled clip as .bvh or .csv. Errors: kInvalidArgument for a keyed format or a clip
+// BVH cannot hold (no skeleton); write errors naming the path.
+absl::Status WriteClipFile(const std::string& path, FileFormat format, const core::Clip& clip);
+
+// Writes a keyed clip as .json or .anim. Errors: kInvalidArgument for a sampled format; write
+// errors naming the path.
+absl::Status WriteKeyedClipFile(const std::string& path, FileFormat format,
+                                const core::KeyedClip& keyed);
+
+// Writes whichever `output` holds, checking that it suits `format`.
+// Errors: kInternal when a keyed result meets a sampled format or the reverse (the CLI builds
+// pipelines so this cannot happen); those of the writers above.
+absl::Status WriteOutput(const std::string& path, FileFormat format,
+                         const std::variant<core::Clip, core::KeyedClip>& output);
+
+}  // namespace tempokey::client
+
+#endif  // TEMPOKEY_CLIENT_CLIP_FILES_H_

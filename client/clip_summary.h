@@ -1,0 +1,51 @@
+// Human-readable summaries the CLI prints: clips, frame rates, retime and reduction reports.
+// Every line is "label: value" with the labels padded to one column, so scripts can grep them.
+#ifndef TEMPOKEY_CLIENT_CLIP_SUMMARY_H_
+#define TEMPOKEY_CLIENT_CLIP_SUMMARY_H_
+
+#include <string>
+#include <string_view>
+
+#include "tempokey/core/clip.h"
+#include "tempokey/core/keyed_clip.h"
+#include "tempokey/core/reduce.h"
+#include "tempokey/core/retime.h"
+
+namespace tempokey::client {
+
+// The rate a frame time stands for, snapped for display only to a common rate within 1e-4
+// relative ("120 fps", "29.97 fps", "23.976 fps"), else 6 significant digits ("81.3008 fps"),
+// followed by the frame time exactly as stored: "120 fps (0.0083333 s)".
+// Precondition: `frame_time_seconds` finite and > 0.
+std::string FormatFrameRate(double frame_time_seconds);
+
+// "ZYX (19 joints), ZXY (12 joints)": the rotation orders of the clip's joints (the order of
+// each joint's rotation channels), most common first, ties in order of first appearance; "none"
+// without rotation channels.
+std::string FormatRotationOrders(const core::Clip& clip);
+
+// The multi-line summary of `info`, `upload` and written outputs, each line ending in '\n':
+//   name:            131_01
+//   frames:          994
+//   rate:            120 fps (0.0083333 s)
+//   duration:        8.275 s
+//   joints:          31
+//   channels:        96 (6 position, 90 rotation)
+//   rotation orders: ZYX (19 joints), ZXY (12 joints)
+std::string FormatClipSummary(const core::Clip& clip);
+
+// Label-value lines for a retime report (output frames and duration, fit factor, max
+// decimation ratio, filtered samples).
+std::string FormatRetimeReport(const core::RetimeReport& report);
+
+// Label-value lines for a reduction report: keys kept of samples with their percentage, RMS and
+// max error (degrees for rotations, file units for positions) and the worst channel and frame,
+// named through `layout` (the clip the curves came from).
+std::string FormatReductionReport(const core::ReductionReport& report, const core::Clip& layout);
+
+// "label:" padded to the summary's value column.
+std::string SummaryLine(std::string_view label, std::string_view value);
+
+}  // namespace tempokey::client
+
+#endif  // TEMPOKEY_CLIENT_CLIP_SUMMARY_H_

@@ -1,0 +1,769 @@
+// The paper's Hermite DP fit (SPEC 4.1); definitions in hermite_dp.h.
+#include "tempokey/core/hermite_dp.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <numeric>
+#include <utility>
+
+#include "absl/container/flat_hash_map.h"
+#include "absl/strings/str_cat.h"
+#include "tempokey/core/status.h"
+
+namespace tempokey::core {
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr int kStates = 81;
+constexpr int kCenterState = 40;
+constexpr int kMaxIterationsLimit = 1000;
+
+// ---- initial keys -------------------------------------------------------------------------------
+
+std::vector<double> GaussianSmooth(std::span<const double> samples, double sigma) {
+  std::vector<double> out(samples.begin(), samples.end());
+  if (sigma <= 0.0 || samples.size() < 2) return out;
+  const int n = static_cast<int>(samples.size());
+  const int radius = std::max(1, static_cast<int>(std::ceil(3.0 * sigma)));
+  std::vector<double> kernel(static_cast<std::size_t>(radius) + 1);
+  for (int k = 0; k <= radius; ++k) {
+    kernel[k] = std::exp(-0.5 * (k * k) / (sigma * sigma));
+  }
+  for (int f = 0; f < n; ++f) {
+    double sum = 0.0;
+    double weight = 0.0;
+    for (int k = -radius; k <= radius; ++k) {
+      const int g = f + k;
+      if (g < 0 || g >= n) continue;
+      const double w = kernel[static_cast<std::size_t>(std::abs(k))];
+      sum += w * samples[g];
+      weight += w;
+    }
+    out[f] = sum / weight;
+  }
+  return out;
+}
+
+// Frames where `derivative` (defined on 1..n-2) crosses zero: an exact zero at f, or a sign
+// change between f and f+1 (then whichever of the two is nearer zero).
+std::vector<int> ZeroCrossings(const std::vector<double>& derivative) {
+  std::vector<int> frames;
+  const int n = static_cast<int>(derivative.size());
+  for (int f = 1; f <= n - 2; ++f) {
+    const double here = derivative[f];
+    if (here == 0.0) {
+      frames.push_back(f);
+      continue;
+    }
+    if (f + 1 > n - 2) break;
+    const double next = derivative[f + 1];
+    if ((here < 0.0 && next > 0.0) || (here > 0.0 && next < 0.0)) {
+      frames.push_back(std::abs(next) < std::abs(here) ? f + 1 : f);
+    }
+  }
+  return frames;
+}
+
+// Central first and second differences of `smooth` on 1..n-2 (zero elsewhere).
+std::pair<std::vector<double>, std::vector<double>> Differences(const std::vector<double>& smooth) {
+  const std::size_t n = smooth.size();
+  std::vector<double> first(n, 0.0);
+  std::vector<double> second(n, 0.0);
+  for (std::size_t f = 1; f + 1 < n; ++f) {
+    first[f] = 0.5 * (smooth[f + 1] - smooth[f - 1]);
+    second[f] = smooth[f + 1] - 2.0 * smooth[f] + smooth[f - 1];
+  }
+  return {std::move(first), std::move(second)};
+}
+
+// Slope per frame of `smooth` at `f`: central inside, one-sided at the ends.
+double SlopeAt(const std::vector<double>& smooth, int f) {
+  const int n = static_cast<int>(smooth.size());
+  if (n < 2) return 0.0;
+  if (f == 0) return smooth[1] - smooth[0];
+  if (f == n - 1) return smooth[n - 1] - smooth[n - 2];
+  return 0.5 * (smooth[f + 1] - smooth[f - 1]);
+}
+
+// ---- direct evaluation --------------------------------------------------------------------------
+
+struct Basis {
+  double h00, h10, h01, h11;
+};
+
+Basis HermiteBasis(double s) {
+  const double s2 = s * s;
+  const double s3 = s2 * s;
+  return {2.0 * s3 - 3.0 * s2 + 1.0, s3 - 2.0 * s2 + s, -2.0 * s3 + 3.0 * s2, s3 - s2};
+}
+
+double SolveSegmentParameter(double ax, double atx, double bx, double btx, double frame) {
+  return SolveBezierParameter(ax, ax + atx / 3.0, bx - btx / 3.0, bx, frame);
+}
+
+// [first, end) frames of a segment from x = ax to x = bx.
+std::pair<std::int64_t, std::int64_t> SegmentFrames(double ax, double bx, bool last) {
+  const auto first = static_cast<std::int64_t>(std::ceil(ax));
+  const auto end = last ? static_cast<std::int64_t>(std::floor(bx)) + 1
+                        : static_cast<std::int64_t>(std::ceil(bx));
+  return {first, end};
+}
+
+// ---- the optimized DP pass ----------------------------------------------------------------------
+
+// The three values each component of a key offers in a pass.
+struct KeyGrid {
+  std::array<double, 3> x, y, tx, ty;
+  bool x_fixed = false;
+};
+
+KeyGrid MakeGrid(const HermiteKey2D& key, const HermiteSteps& steps, bool x_fixed) {
+  KeyGrid grid;
+  for (int o = 0; o < 3; ++o) {
+    const double d = static_cast<double>(o - 1);
+    grid.x[o] = key.x + d * steps.x;
+    grid.y[o] = key.y + d * steps.y;
+    grid.tx[o] = key.tx + d * steps.tangent_x;
+    grid.ty[o] = key.ty + d * steps.tangent_y;
+  }
+  grid.x_fixed = x_fixed;
+  return grid;
+}
+
+// State s = sx * 9 + sy with sx = ix * 3 + itx and sy = iy * 3 + ity.
+constexpr int XIndex(int sx) { return sx / 3; }
+constexpr int TxIndex(int sx) { return sx % 3; }
+constexpr double Offset(int index) { return static_cast<double>(index - 1); }
+// Offsets of the first and second component of a 9-state index (i * 3 + j).
+constexpr std::array<double, 9> kOffsetHigh = {-1, -1, -1, 0, 0, 0, 1, 1, 1};
+constexpr std::array<double, 9> kOffsetLow = {-1, 0, 1, -1, 0, 1, -1, 0, 1};
+
+double TieTolerance(double m, double scale) {
+  return kDpTieRelative * m + kDpTieAbsolute * scale;
+}
+
+// The chosen candidate of one target (the tie rule of hermite_dp.h) given the smallest, `m`:
+// {value, state}, or {inf, -1} when none is finite.
+std::pair<double, int> ChooseCandidate(const double* candidates, double m, double scale) {
+  if (m == kInf) return {kInf, -1};
+  const double threshold = m + TieTolerance(m, scale);
+  if (candidates[kCenterState] <= threshold) return {candidates[kCenterState], kCenterState};
+  for (int s = 0; s < kStates; ++s) {
+    if (candidates[s] <= threshold) return {candidates[s], s};
+  }
+  return {m, -1};  // unreachable: m itself is <= threshold
+}
+
+// The error of one x-combination of a segment as a quadratic form in the y-offsets
+// delta = (dy_a, dty_a, dy_b, dty_b) in {-1, 0, 1}^4:
+//   E(delta) = e0 + g . delta + delta^T H delta,
+// built from residuals at the grid centre so that no large sums cancel.
+struct SegmentForm {
+  double e0 = 0.0;
+  std::array<double, 4> g{};
+  std::array<std::array<double, 4>, 4> h{};
+};
+
+// Solves x(s) = target on [0, 1] for the power-basis cubic ((a s + b) s + c) s (x measured from
+// the segment start), starting from `guess`; safeguarded Newton as SolveBezierParameter().
+inline double SolveCubic(double a, double b, double c, double span, double target, double guess) {
+  if (!(target > 0.0)) return 0.0;
+  if (!(target < span)) return 1.0;
+  double lo = 0.0;
+  double hi = 1.0;
+  double s = guess;
+  for (int iteration = 0; iteration < 200; ++iteration) {
+    const double f = ((a * s + b) * s + c) * s - target;
+    if (f == 0.0) return s;
+    if (f < 0.0) {
+      lo = s;
+    } else {
+      hi = s;
+    }
+    const double slope = (3.0 * a * s + 2.0 * b) * s + c;
+    double next = slope > 0.0 ? s - f / slope : lo - 1.0;
+    if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+    if (std::abs(next - s) <= 1e-15 || hi - lo <= 1e-15) return next;
+    s = next;
+  }
+  return s;
+}
+
+// The Hermite basis at every frame of one x-shape, shared by every segment and x-combination
+// with that shape. A segment's x(s) depends only on its length L = bx - ax, the two tangent
+// x-components and where the first frame falls (t0 = first frame - ax): the frames sit at
+// t0, t0 + 1, ... <= L from the segment start. With integer steps most x-combinations of a pass,
+// and many across segments and passes, share a shape, so each x(s) = frame solve runs once.
+struct ShapeKey {
+  double length, atx, btx, t0;
+  friend bool operator==(const ShapeKey&, const ShapeKey&) = default;
+  template <typename H>
+  friend H AbslHashValue(H h, const ShapeKey& k) {
+    return H::combine(std::move(h), k.length, k.atx, k.btx, k.t0);
+  }
+};
+
+// Per shape: count entries of basis (4 doubles) and running Gram sums (10 doubles).
+struct ShapeEntry {
+  const double* data;
+  int count;
+};
+constexpr int kShapeStride = 14;
+
+class ShapeCache {
+ public:
+  // The entry of `key`, computed on first use.
+  const ShapeEntry& Get(const ShapeKey& key) {
+    auto [it, inserted] = entries_.try_emplace(key, ShapeEntry{nullptr, 0});
+    if (inserted) it->second = Compute(key);
+    return it->second;
+  }
+  // Keeps memory bounded across long fits; entries are recomputed on demand.
+  void TrimIfLarge() {
+    if (blocks_.size() > 64) {
+      blocks_.clear();
+      block_used_ = kBlockDoubles;
+      entries_.clear();
+    }
+  }
+
+ private:
+  static constexpr std::size_t kBlockDoubles = std::size_t{1} << 16;
+
+  // Room for `doubles` values that stays put (entries point into it).
+  double* Allocate(std::size_t doubles) {
+    if (doubles > kBlockDoubles) {
+      blocks_.push_back(std::make_unique<double[]>(doubles));
+      return blocks_.back().get();
+    }
+    if (block_used_ + doubles > kBlockDoubles) {
+      blocks_.push_back(std::make_unique<double[]>(kBlockDoubles));
+      block_used_ = 0;
+      current_ = blocks_.back().get();
+    }
+    double* out = current_ + block_used_;
+    block_used_ += doubles;
+    return out;
+  }
+
+  ShapeEntry Compute(const ShapeKey& key) {
+    const double length = key.length;
+    const double d1 = key.atx / 3.0;
+    const double d2 = length - key.btx / 3.0;
+    const double pa = length - 3.0 * d2 + 3.0 * d1;
+    const double pb = 3.0 * d2 - 6.0 * d1;
+    const double pc = 3.0 * d1;
+    // The slack keeps a target that rounds a hair above the segment end (s = 1) in the table.
+    const double last = std::floor(length - key.t0 + 1e-9);
+    const int count = last >= 0.0 ? static_cast<int>(last) + 1 : 0;
+    double* out = Allocate(static_cast<std::size_t>(count) * kShapeStride + 1);
+    ShapeEntry entry{out, 0};
+    std::array<double, 10> gram{};
+    double s = 0.0;
+    for (int k = 0; k < count; ++k) {
+      const double target = key.t0 + static_cast<double>(k);
+      // Frames advance by one: a Newton step from the previous solution is a close first guess.
+      const double slope = (3.0 * pa * s + 2.0 * pb) * s + pc;
+      double guess = slope > 0.0 ? s + (target - ((pa * s + pb) * s + pc) * s) / slope : 0.5;
+      if (!(guess > 0.0 && guess < 1.0)) guess = target / length;
+      s = SolveCubic(pa, pb, pc, length, target, guess);
+      const Basis h = HermiteBasis(s);
+      gram[0] += h.h00 * h.h00;
+      gram[1] += h.h00 * h.h10;
+      gram[2] += h.h00 * h.h01;
+      gram[3] += h.h00 * h.h11;
+      gram[4] += h.h10 * h.h10;
+      gram[5] += h.h10 * h.h01;
+      gram[6] += h.h10 * h.h11;
+      gram[7] += h.h01 * h.h01;
+      gram[8] += h.h01 * h.h11;
+      gram[9] += h.h11 * h.h11;
+      double* row = out + static_cast<std::size_t>(k) * kShapeStride;
+      row[0] = h.h00;
+      row[1] = h.h10;
+      row[2] = h.h01;
+      row[3] = h.h11;
+      std::copy(gram.begin(), gram.end(), row + 4);
+      ++entry.count;
+    }
+    return entry;
+  }
+
+  absl::flat_hash_map<ShapeKey, ShapeEntry> entries_;
+  std::vector<std::unique_ptr<double[]>> blocks_;
+  double* current_ = nullptr;
+  std::size_t block_used_ = kBlockDoubles;
+};
+
+// Builds the form of one x-combination from its shape: the Gram matrix of the basis over the
+// segment's frames comes from the cache, the data terms are summed here in coordinates relative
+// to `y_ref` (a sample near the segment) so the quadratic form does not cancel large sums.
+SegmentForm BuildSegmentForm(std::span<const double> samples, ShapeCache& cache, double ax,
+                             double atx, double bx, double btx, bool last, double y_ref,
+                             const std::array<double, 4>& centre_y, const HermiteSteps& steps) {
+  SegmentForm form;
+  const auto [first, end] = SegmentFrames(ax, bx, last);
+  const int n = static_cast<int>(end - first);
+  if (n <= 0) {
+    return form;
+  }
+  const ShapeKey key{bx - ax, atx, btx, static_cast<double>(first) - ax};
+  const ShapeEntry& entry = cache.Get(key);
+  const double* data = entry.data;
+  if (entry.count < n) {  // unreachable: the table covers every frame up to bx
+    form.e0 = kInf;
+    return form;
+  }
+  std::array<double, 4> b{};
+  double c = 0.0;
+  const double* sample = samples.data() + first;
+  for (int k = 0; k < n; ++k) {
+    const double* h = data + k * kShapeStride;
+    const double d = sample[k] - y_ref;
+    b[0] += d * h[0];
+    b[1] += d * h[1];
+    b[2] += d * h[2];
+    b[3] += d * h[3];
+    c += d * d;
+  }
+  const double* g = data + (n - 1) * kShapeStride + 4;
+  const std::array<double, 4> w = {centre_y[0] - y_ref, centre_y[1], centre_y[2] - y_ref,
+                                   centre_y[3]};
+  // E(w + D delta) = e0 + 2 (G w - b)^T D delta + delta^T D G D delta.
+  const std::array<double, 4> gw = {
+      g[0] * w[0] + g[1] * w[1] + g[2] * w[2] + g[3] * w[3],
+      g[1] * w[0] + g[4] * w[1] + g[5] * w[2] + g[6] * w[3],
+      g[2] * w[0] + g[5] * w[1] + g[7] * w[2] + g[8] * w[3],
+      g[3] * w[0] + g[6] * w[1] + g[8] * w[2] + g[9] * w[3]};
+  double wgw = 0.0;
+  double bw = 0.0;
+  for (int k = 0; k < 4; ++k) {
+    wgw += w[k] * gw[k];
+    bw += b[k] * w[k];
+  }
+  form.e0 = std::max(0.0, wgw - 2.0 * bw + c);
+  const std::array<double, 4> d = {steps.y, steps.tangent_y, steps.y, steps.tangent_y};
+  const int index[4][4] = {{0, 1, 2, 3}, {1, 4, 5, 6}, {2, 5, 7, 8}, {3, 6, 8, 9}};
+  for (int k = 0; k < 4; ++k) {
+    form.g[k] = 2.0 * d[k] * (gw[k] - b[k]);
+    for (int l = k; l < 4; ++l) form.h[k][l] = d[k] * d[l] * g[index[k][l]];
+  }
+  return form;
+}
+
+// Viterbi tables of one pass.
+class DpPass {
+ public:
+  DpPass(std::span<const double> samples, std::span<const HermiteKey2D> keys,
+         const HermiteSteps& steps, ShapeCache& cache)
+      : samples_(samples),
+        keys_(keys),
+        steps_(steps),
+        scale_(DpTieScale(samples)),
+        cache_(cache) {
+    const std::size_t k = keys.size();
+    grids_.reserve(k);
+    for (std::size_t i = 0; i < k; ++i) {
+      grids_.push_back(MakeGrid(keys[i], steps, i == 0 || i + 1 == k));
+    }
+    cost_.assign(k, {});
+    predecessor_.assign(k, {});
+  }
+
+  HermiteDpPass Run() {
+    const std::size_t k = keys_.size();
+    for (int s = 0; s < kStates; ++s) {
+      cost_[0][s] = XIndex(s / 9) == 1 ? 0.0 : kInf;
+    }
+    for (std::size_t i = 0; i + 1 < k; ++i) Advance(i);
+    const double lowest = *std::min_element(cost_[k - 1].begin(), cost_[k - 1].end());
+    const auto [best, state] = ChooseCandidate(cost_[k - 1].data(), lowest, scale_);
+    HermiteDpPass pass;
+    pass.squared_error = best;
+    pass.keys.resize(k);
+    int current = state;
+    for (std::size_t i = k; i-- > 0;) {
+      pass.keys[i] = KeyOfState(i, current);
+      if (current != kCenterState) pass.moved = true;
+      if (i > 0) current = predecessor_[i][current];
+    }
+    return pass;
+  }
+
+ private:
+  HermiteKey2D KeyOfState(std::size_t i, int state) const {
+    const KeyGrid& grid = grids_[i];
+    const int sx = state / 9;
+    const int sy = state % 9;
+    return {grid.x[XIndex(sx)], grid.y[sy / 3], grid.tx[TxIndex(sx)], grid.ty[sy % 3]};
+  }
+
+  // The candidates of one target state that can still be chosen: every evaluated candidate
+  // within the tie window of the smallest seen so far. The window only shrinks as that minimum
+  // falls, so the set at the end is exactly the candidates within the final window, and those
+  // skipped by a lower bound above the window at the time could never have joined it.
+  struct TargetChoice {
+    double minimum = kInf;
+    double window = kInf;
+    int count = 0;
+    std::array<double, kStates> value;
+    std::array<std::int8_t, kStates> state;
+
+    void Reset() {
+      minimum = kInf;
+      window = kInf;
+      count = 0;
+    }
+
+    void Offer(double c, int s, double scale) {
+      if (!(c <= window)) return;
+      if (c < minimum) {
+        minimum = c;
+        window = c + TieTolerance(c, scale);
+        int kept = 0;
+        for (int k = 0; k < count; ++k) {
+          if (value[k] <= window) {
+            value[kept] = value[k];
+            state[kept] = state[k];
+            ++kept;
+          }
+        }
+        count = kept;
+      }
+      value[count] = c;
+      state[count] = static_cast<std::int8_t>(s);
+      ++count;
+    }
+
+    // The tie rule: state 40 if it is in the window, else the lowest state.
+    std::pair<double, int> Choose() const {
+      if (count == 0) return {kInf, -1};
+      int pick = 0;
+      for (int k = 0; k < count; ++k) {
+        if (state[k] == kCenterState) return {value[k], kCenterState};
+        if (state[k] < state[pick]) pick = k;
+      }
+      return {value[pick], state[pick]};
+    }
+  };
+
+  // Fills cost_[i + 1] and predecessor_[i + 1] from cost_[i] through segment i.
+  void Advance(std::size_t i) {
+    const bool last = i + 2 == keys_.size();
+    const KeyGrid& ga = grids_[i];
+    const KeyGrid& gb = grids_[i + 1];
+    const std::array<double, kStates>& in = cost_[i];
+    const std::array<double, 4> centre_y = {ga.y[1], ga.ty[1], gb.y[1], gb.ty[1]};
+    const double last_frame = static_cast<double>(samples_.size() - 1);
+    const double y_ref =
+        samples_[static_cast<std::size_t>(std::clamp(std::ceil(ga.x[1]), 0.0, last_frame))];
+
+    // Predecessor x-states by their cheapest state: the good ones first tighten the windows,
+    // and the rest can stop at the first that cannot reach any target's window.
+    std::array<double, 9> cheapest;
+    std::array<int, 9> order;
+    for (int sx = 0; sx < 9; ++sx) {
+      cheapest[sx] = *std::min_element(in.begin() + sx * 9, in.begin() + sx * 9 + 9);
+      order[sx] = sx;
+    }
+    std::stable_sort(order.begin(), order.end(),
+                     [&](int l, int r) { return cheapest[l] < cheapest[r]; });
+
+    std::array<TargetChoice, 9>& targets = targets_;
+    for (int tx = 0; tx < 9; ++tx) {
+      for (TargetChoice& target : targets) target.Reset();
+      const bool allowed = !gb.x_fixed || XIndex(tx) == 1;
+      for (int sx : order) {
+        if (!allowed || cheapest[sx] == kInf) break;
+        double widest = 0.0;
+        for (const TargetChoice& target : targets) widest = std::max(widest, target.window);
+        if (cheapest[sx] > widest) break;
+        const double ax = ga.x[XIndex(sx)];
+        const double atx = ga.tx[TxIndex(sx)];
+        const double bx = gb.x[XIndex(tx)];
+        const double btx = gb.tx[TxIndex(tx)];
+        if (!SegmentIsFeasible(ax, atx, bx, btx)) continue;
+        const SegmentForm form =
+            BuildSegmentForm(samples_, cache_, ax, atx, bx, btx, last, y_ref, centre_y, steps_);
+        OfferCandidates(form, in.data() + sx * 9, sx, targets);
+      }
+      for (int ty = 0; ty < 9; ++ty) {
+        const auto [value, state] = targets[ty].Choose();
+        cost_[i + 1][tx * 9 + ty] = value;
+        predecessor_[i + 1][tx * 9 + ty] = static_cast<std::int8_t>(state);
+      }
+    }
+  }
+
+  // Offers in_row[sy] + E(sy, ty) for one x-combination to the nine targets, with
+  //   E(sy, ty) = alpha(sy) + beta(ty) + dy_a * z0(ty) + dty_a * z1(ty)
+  // split by key. A candidate is at least A(sy) + beta - |z0| - |z1| (A = in + alpha), so
+  // predecessors are visited by increasing A and a target stops at the first whose bound is
+  // above its window.
+  void OfferCandidates(const SegmentForm& form, const double* in_row, int sx,
+                       std::array<TargetChoice, 9>& targets) const {
+    const auto& h = form.h;
+    // alpha(d0, d1) = g0 d0 + g1 d1 + H00 d0^2 + 2 H01 d0 d1 + H11 d1^2, d in {-1, 0, 1}.
+    const double a_minus = h[0][0] - form.g[0];
+    const double a_plus = h[0][0] + form.g[0];
+    const double b_minus = h[1][1] - form.g[1];
+    const double b_plus = h[1][1] + form.g[1];
+    const double ab = 2.0 * h[0][1];
+    const std::array<double, 9> alpha = {a_minus + b_minus + ab, a_minus, a_minus + b_plus - ab,
+                                         b_minus,                0.0,     b_plus,
+                                         a_plus + b_minus - ab,  a_plus,  a_plus + b_plus + ab};
+    std::array<double, 9> a_value;
+    double a_least = kInf;
+    for (int sy = 0; sy < 9; ++sy) {
+      a_value[sy] = in_row[sy] + alpha[sy];
+      a_least = std::min(a_least, a_value[sy]);
+    }
+    if (a_least == kInf) return;
+
+    const double c_minus = h[2][2] - form.g[2];
+    const double c_plus = h[2][2] + form.g[2];
+    const double d_minus = h[3][3] - form.g[3];
+    const double d_plus = h[3][3] + form.g[3];
+    const double cd = 2.0 * h[2][3];
+    const std::array<double, 9> beta = {c_minus + d_minus + cd, c_minus, c_minus + d_plus - cd,
+                                        d_minus,                0.0,     d_plus,
+                                        c_plus + d_minus - cd,  c_plus,  c_plus + d_plus + cd};
+    for (int ty = 0; ty < 9; ++ty) {
+      TargetChoice& target = targets[ty];
+      const double d2 = kOffsetHigh[ty];
+      const double d3 = kOffsetLow[ty];
+      const double b = form.e0 + beta[ty];
+      const double z0 = 2.0 * (h[0][2] * d2 + h[0][3] * d3);
+      const double z1 = 2.0 * (h[1][2] * d2 + h[1][3] * d3);
+      if (a_least + b - (std::abs(z0) + std::abs(z1)) > target.window) continue;
+      const std::array<double, 9> terms = {b - z0 - z1, b - z0, b - z0 + z1, b - z1,     b,
+                                           b + z1,      b + z0 - z1, b + z0, b + z0 + z1};
+      std::array<double, 9> c;
+      for (int sy = 0; sy < 9; ++sy) c[sy] = a_value[sy] + terms[sy];
+      for (int sy = 0; sy < 9; ++sy) {
+        if (c[sy] <= target.window) target.Offer(c[sy], sx * 9 + sy, scale_);
+      }
+    }
+  }
+
+  std::span<const double> samples_;
+  std::span<const HermiteKey2D> keys_;
+  HermiteSteps steps_;
+  double scale_;
+  std::vector<KeyGrid> grids_;
+  std::vector<std::array<double, kStates>> cost_;
+  std::vector<std::array<std::int8_t, kStates>> predecessor_;
+  ShapeCache& cache_;
+  std::array<TargetChoice, 9> targets_;
+};
+
+absl::Status CheckStep(const char* name, double value) {
+  if (!(value > 0.0) || !std::isfinite(value)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("step ", name, " must be finite and > 0, got ", value));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+std::vector<int> InitialKeyFrames(std::span<const double> samples, double sigma_frames,
+                                  int min_spacing_frames) {
+  const int n = static_cast<int>(samples.size());
+  if (n <= 1) return {0};
+  const std::vector<double> smooth = GaussianSmooth(samples, sigma_frames);
+  const auto [first, second] = Differences(smooth);
+  std::vector<int> kept = {0, n - 1};
+  if (n - 1 < min_spacing_frames) return kept;
+  // Kept frames in order, so the spacing check looks at two neighbours only.
+  std::vector<int> sorted = kept;
+  auto try_keep = [&](int f) {
+    const auto it = std::lower_bound(sorted.begin(), sorted.end(), f);
+    if (it != sorted.end() && *it - f < min_spacing_frames) return;
+    if (it != sorted.begin() && f - *(it - 1) < min_spacing_frames) return;
+    sorted.insert(it, f);
+  };
+  for (int f : ZeroCrossings(first)) try_keep(f);
+  for (int f : ZeroCrossings(second)) try_keep(f);
+  return sorted;
+}
+
+std::vector<HermiteKey2D> InitialHermiteKeys(std::span<const double> samples, double sigma_frames,
+                                             int min_spacing_frames) {
+  const std::vector<int> frames = InitialKeyFrames(samples, sigma_frames, min_spacing_frames);
+  const std::vector<double> smooth = GaussianSmooth(samples, sigma_frames);
+  std::vector<HermiteKey2D> keys;
+  keys.reserve(frames.size());
+  for (std::size_t k = 0; k < frames.size(); ++k) {
+    const int f = frames[k];
+    double gap = kInf;
+    if (k > 0) gap = std::min(gap, static_cast<double>(f - frames[k - 1]));
+    if (k + 1 < frames.size()) gap = std::min(gap, static_cast<double>(frames[k + 1] - f));
+    if (gap == kInf) gap = 1.0;
+    keys.push_back({static_cast<double>(f), samples[f], gap, gap * SlopeAt(smooth, f)});
+  }
+  return keys;
+}
+
+double HermiteValueAtFrame(const HermiteKey2D& a, const HermiteKey2D& b, double frame) {
+  const double s = SolveSegmentParameter(a.x, a.tx, b.x, b.tx, frame);
+  const Basis h = HermiteBasis(s);
+  return h.h00 * a.y + h.h10 * a.ty + h.h01 * b.y + h.h11 * b.ty;
+}
+
+double SegmentSquaredError(std::span<const double> samples, const HermiteKey2D& a,
+                           const HermiteKey2D& b, bool last) {
+  const auto [first, end] = SegmentFrames(a.x, b.x, last);
+  double sum = 0.0;
+  for (std::int64_t f = first; f < end; ++f) {
+    const double r = HermiteValueAtFrame(a, b, static_cast<double>(f)) - samples[f];
+    sum += r * r;
+  }
+  return sum;
+}
+
+double CurveSquaredError(std::span<const double> samples, std::span<const HermiteKey2D> keys) {
+  double sum = 0.0;
+  for (std::size_t i = 0; i + 1 < keys.size(); ++i) {
+    sum += SegmentSquaredError(samples, keys[i], keys[i + 1], i + 2 == keys.size());
+  }
+  return sum;
+}
+
+double DpTieScale(std::span<const double> samples) {
+  double scale = 0.0;
+  for (double v : samples) {
+    const double d = v - samples[0];
+    scale += d * d;
+  }
+  return scale;
+}
+
+absl::Status ValidateHermiteKeys(std::span<const double> samples,
+                                 std::span<const HermiteKey2D> keys) {
+  if (samples.size() < 2) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("a fit needs at least 2 samples, got ", samples.size()));
+  }
+  if (keys.size() < 2) {
+    return absl::InvalidArgumentError(absl::StrCat("a fit needs at least 2 keys, got ", keys.size()));
+  }
+  for (std::size_t f = 0; f < samples.size(); ++f) {
+    if (!std::isfinite(samples[f])) {
+      return absl::InvalidArgumentError(absl::StrCat("sample ", f, " is ", samples[f]));
+    }
+  }
+  for (std::size_t k = 0; k < keys.size(); ++k) {
+    const HermiteKey2D& key = keys[k];
+    if (!std::isfinite(key.x) || !std::isfinite(key.y) || !std::isfinite(key.tx) ||
+        !std::isfinite(key.ty)) {
+      return absl::InvalidArgumentError(absl::StrCat("key ", k, " is not finite"));
+    }
+  }
+  const double last_frame = static_cast<double>(samples.size() - 1);
+  if (keys.front().x != 0.0 || keys.back().x != last_frame) {
+    return absl::InvalidArgumentError(absl::StrCat("keys must span frames 0 to ", last_frame,
+                                                   ", got ", keys.front().x, " to ",
+                                                   keys.back().x));
+  }
+  for (std::size_t k = 0; k + 1 < keys.size(); ++k) {
+    const HermiteKey2D& a = keys[k];
+    const HermiteKey2D& b = keys[k + 1];
+    if (!SegmentIsFeasible(a.x, a.tx, b.x, b.tx)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "key ", k, ": segment to key ", k + 1, " is not monotonic in time (x ", a.x, " to ",
+          b.x, ", tx ", a.tx, " and ", b.tx, ")"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+HermiteDpPass RunHermiteDpPass(std::span<const double> samples,
+                               std::span<const HermiteKey2D> keys, const HermiteSteps& steps) {
+  ShapeCache cache;
+  return DpPass(samples, keys, steps, cache).Run();
+}
+
+absl::StatusOr<HermiteFitResult> FitHermiteDp(std::span<const double> samples,
+                                              std::vector<HermiteKey2D> initial,
+                                              const HermiteFitOptions& options) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateHermiteKeys(samples, initial));
+  TEMPOKEY_RETURN_IF_ERROR(CheckStep("x", options.steps.x));
+  TEMPOKEY_RETURN_IF_ERROR(CheckStep("y", options.steps.y));
+  TEMPOKEY_RETURN_IF_ERROR(CheckStep("tangent_x", options.steps.tangent_x));
+  TEMPOKEY_RETURN_IF_ERROR(CheckStep("tangent_y", options.steps.tangent_y));
+  if (!(options.accuracy > 0.0) || !std::isfinite(options.accuracy)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("accuracy must be finite and > 0, got ", options.accuracy));
+  }
+  if (options.max_iterations < 0 || options.max_iterations > kMaxIterationsLimit) {
+    return absl::InvalidArgumentError(absl::StrCat("max_iterations must be in [0, ",
+                                                   kMaxIterationsLimit, "], got ",
+                                                   options.max_iterations));
+  }
+
+  HermiteFitResult result;
+  result.keys = std::move(initial);
+  result.squared_error = CurveSquaredError(samples, result.keys);
+  result.squared_error_history.push_back(result.squared_error);
+  HermiteSteps steps = options.steps;
+  ShapeCache cache;
+  for (int iteration = 0; iteration < options.max_iterations; ++iteration) {
+    const double largest =
+        std::max({steps.x, steps.y, steps.tangent_x, steps.tangent_y});
+    if (largest < options.accuracy) break;
+    HermiteDpPass pass = DpPass(samples, result.keys, steps, cache).Run();
+    cache.TrimIfLarge();
+    ++result.iterations;
+    bool taken = false;
+    if (pass.moved) {
+      const double error = CurveSquaredError(samples, pass.keys);
+      if (error <= result.squared_error) {
+        result.keys = std::move(pass.keys);
+        result.squared_error = error;
+        taken = true;
+      }
+    }
+    if (!taken) {
+      steps.x *= 0.5;
+      steps.y *= 0.5;
+      steps.tangent_x *= 0.5;
+      steps.tangent_y *= 0.5;
+    }
+    result.squared_error_history.push_back(result.squared_error);
+  }
+  result.final_steps = steps;
+  return result;
+}
+
+Curve HermiteKeysToCurve(std::span<const HermiteKey2D> keys, double frame_time_seconds) {
+  Curve curve;
+  curve.keys.reserve(keys.size());
+  for (std::size_t k = 0; k < keys.size(); ++k) {
+    const HermiteKey2D& key = keys[k];
+    Key out;
+    out.time_seconds = key.x * frame_time_seconds;
+    out.value = key.y;
+    if (keys.size() == 1) {
+      curve.keys.push_back(out);
+      continue;
+    }
+    const double slope = key.ty / (key.tx * frame_time_seconds);
+    out.in_tangent = slope;
+    out.out_tangent = slope;
+    std::optional<double> in_weight;
+    std::optional<double> out_weight;
+    if (k > 0) in_weight = key.tx / (3.0 * (key.x - keys[k - 1].x));
+    if (k + 1 < keys.size()) out_weight = key.tx / (3.0 * (keys[k + 1].x - key.x));
+    out.in_weight = in_weight ? in_weight : out_weight;
+    out.out_weight = out_weight ? out_weight : in_weight;
+    curve.keys.push_back(out);
+  }
+  return curve;
+}
+
+}  // namespace tempokey::core

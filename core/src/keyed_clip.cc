@@ -1,0 +1,191 @@
+#include "tempokey/core/keyed_clip.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <string>
+
+#include "absl/strings/str_cat.h"
+#include "tempokey/core/status.h"
+
+namespace tempokey::core {
+namespace {
+
+constexpr double kDefaultWeight = 1.0 / 3.0;
+
+std::string Describe(double value) {
+  if (std::isnan(value)) return "NaN";
+  if (std::isinf(value)) return value > 0 ? "+infinity" : "-infinity";
+  return absl::StrCat(value);
+}
+
+absl::Status CheckFinite(std::string_view label, std::size_t key, std::string_view field,
+                         double value) {
+  if (std::isfinite(value)) return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrCat(AsAbsl(label), ": key ", key, ": ",
+                                                 AsAbsl(field), " is ", Describe(value)));
+}
+
+absl::Status CheckWeight(std::string_view label, std::size_t key, std::string_view field,
+                         const std::optional<double>& weight) {
+  if (!weight) return absl::OkStatus();
+  TEMPOKEY_RETURN_IF_ERROR(CheckFinite(label, key, field, *weight));
+  if (*weight <= 0.0 || *weight > 1.0) {
+    return absl::InvalidArgumentError(absl::StrCat(AsAbsl(label), ": key ", key, ": ",
+                                                   AsAbsl(field), " must be in (0, 1], got ",
+                                                   *weight));
+  }
+  return absl::OkStatus();
+}
+
+// Value of the segment from `a` to `b` at `time_seconds`, a.time <= time <= b.time.
+double EvaluateSegment(const Key& a, const Key& b, double time_seconds) {
+  const double dt = b.time_seconds - a.time_seconds;
+  if (!a.out_weight && !b.in_weight) {
+    // Time is linear in s: the plain cubic Hermite with tangents scaled by dt.
+    const double s = (time_seconds - a.time_seconds) / dt;
+    const double s2 = s * s;
+    const double s3 = s2 * s;
+    const double h00 = 2 * s3 - 3 * s2 + 1;
+    const double h10 = s3 - 2 * s2 + s;
+    const double h01 = -2 * s3 + 3 * s2;
+    const double h11 = s3 - s2;
+    return h00 * a.value + h10 * a.out_tangent * dt + h01 * b.value + h11 * b.in_tangent * dt;
+  }
+  const double wa = a.out_weight.value_or(kDefaultWeight) * dt;
+  const double wb = b.in_weight.value_or(kDefaultWeight) * dt;
+  // Controls relative to a.time keep the solve well conditioned far from time 0.
+  const double s = SolveBezierParameter(0.0, wa, dt - wb, dt, time_seconds - a.time_seconds);
+  const double y0 = a.value;
+  const double y1 = a.value + a.out_tangent * wa;
+  const double y2 = b.value - b.in_tangent * wb;
+  const double y3 = b.value;
+  const double u = 1.0 - s;
+  return u * u * u * y0 + 3.0 * u * u * s * y1 + 3.0 * u * s * s * y2 + s * s * s * y3;
+}
+
+}  // namespace
+
+double SolveBezierParameter(double x0, double x1, double x2, double x3, double x) {
+  if (!(x > x0)) return 0.0;
+  if (!(x < x3)) return 1.0;
+  // x(s) - x0 = ((a s + b) s + c) s with the power-basis coefficients of the Bezier.
+  const double d1 = x1 - x0;
+  const double d2 = x2 - x0;
+  const double d3 = x3 - x0;
+  const double a = d3 - 3.0 * d2 + 3.0 * d1;
+  const double b = 3.0 * d2 - 6.0 * d1;
+  const double c = 3.0 * d1;
+  const double target = x - x0;
+  double lo = 0.0;
+  double hi = 1.0;
+  double s = target / d3;
+  for (int iteration = 0; iteration < 200; ++iteration) {
+    const double f = ((a * s + b) * s + c) * s - target;
+    if (f == 0.0) return s;
+    if (f < 0.0) {
+      lo = s;
+    } else {
+      hi = s;
+    }
+    const double slope = (3.0 * a * s + 2.0 * b) * s + c;
+    double next = slope > 0.0 ? s - f / slope : lo - 1.0;
+    // Newton leaving the bracket (or a flat spot) falls back to bisection, so the loop always
+    // converges on a monotonic cubic.
+    if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+    if (std::abs(next - s) <= 1e-15 || hi - lo <= 1e-15) return next;
+    s = next;
+  }
+  return s;
+}
+
+absl::Status ValidateCurve(const Curve& curve, std::string_view label) {
+  if (curve.keys.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat(AsAbsl(label), ": the curve has no keys"));
+  }
+  for (std::size_t k = 0; k < curve.keys.size(); ++k) {
+    const Key& key = curve.keys[k];
+    TEMPOKEY_RETURN_IF_ERROR(CheckFinite(label, k, "time", key.time_seconds));
+    TEMPOKEY_RETURN_IF_ERROR(CheckFinite(label, k, "value", key.value));
+    TEMPOKEY_RETURN_IF_ERROR(CheckFinite(label, k, "in tangent", key.in_tangent));
+    TEMPOKEY_RETURN_IF_ERROR(CheckFinite(label, k, "out tangent", key.out_tangent));
+    TEMPOKEY_RETURN_IF_ERROR(CheckWeight(label, k, "in weight", key.in_weight));
+    TEMPOKEY_RETURN_IF_ERROR(CheckWeight(label, k, "out weight", key.out_weight));
+    if (k == 0) continue;
+    const Key& previous = curve.keys[k - 1];
+    if (!(key.time_seconds > previous.time_seconds)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          AsAbsl(label), ": key ", k, ": time ", key.time_seconds,
+          " s is not after the previous key's ", previous.time_seconds, " s"));
+    }
+    const double weight_sum =
+        previous.out_weight.value_or(kDefaultWeight) + key.in_weight.value_or(kDefaultWeight);
+    if (weight_sum > 1.0 + kWeightSumSlack) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          AsAbsl(label), ": key ", k, ": in weight plus the previous key's out weight is ",
+          weight_sum, ", over 1 (time would run backwards)"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ValidateKeyedClip(const KeyedClip& keyed) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateClipLayout(keyed.layout));
+  if (keyed.curves.size() != keyed.layout.channels.size()) {
+    return absl::InvalidArgumentError(absl::StrCat("keyed clip has ", keyed.curves.size(),
+                                                   " curves for ", keyed.layout.channels.size(),
+                                                   " channels"));
+  }
+  for (std::size_t c = 0; c < keyed.curves.size(); ++c) {
+    TEMPOKEY_RETURN_IF_ERROR(
+        ValidateCurve(keyed.curves[c], ChannelLabel(keyed.layout, static_cast<int>(c))));
+  }
+  return absl::OkStatus();
+}
+
+double EvaluateCurve(const Curve& curve, double time_seconds) {
+  const std::vector<Key>& keys = curve.keys;
+  if (keys.empty()) return 0.0;
+  if (!(time_seconds > keys.front().time_seconds)) return keys.front().value;
+  if (!(time_seconds < keys.back().time_seconds)) return keys.back().value;
+  // First key strictly after the query; the segment starts one before it.
+  const auto next = std::upper_bound(
+      keys.begin(), keys.end(), time_seconds,
+      [](double t, const Key& key) { return t < key.time_seconds; });
+  const Key& b = *next;
+  const Key& a = *(next - 1);
+  return EvaluateSegment(a, b, time_seconds);
+}
+
+absl::StatusOr<Clip> Bake(const KeyedClip& keyed, std::optional<double> frame_time_seconds) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateKeyedClip(keyed));
+  const double frame_time = frame_time_seconds.value_or(keyed.layout.frame_time_seconds);
+  if (!std::isfinite(frame_time) || frame_time <= 0.0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("bake frame time must be finite and > 0 seconds, got ", Describe(frame_time)));
+  }
+  const ClipLimits limits;
+  const double duration = keyed.layout.duration_seconds();
+  const double last_index = std::floor(duration / frame_time + 1e-9);
+  const auto channel_count = static_cast<double>(keyed.layout.channels.size());
+  if (last_index + 1.0 > static_cast<double>(limits.max_samples) / channel_count) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "bake at ", frame_time, " s per frame gives ", last_index + 1.0, " frames x ",
+        keyed.layout.channels.size(), " channels, over the limit of ", limits.max_samples,
+        " samples"));
+  }
+  Clip clip = keyed.layout;
+  clip.frame_time_seconds = frame_time;
+  clip.frame_count = static_cast<std::int64_t>(last_index) + 1;
+  for (std::size_t c = 0; c < clip.channels.size(); ++c) {
+    std::vector<double>& samples = clip.channels[c].samples;
+    samples.resize(static_cast<std::size_t>(clip.frame_count));
+    for (std::int64_t i = 0; i < clip.frame_count; ++i) {
+      samples[static_cast<std::size_t>(i)] =
+          EvaluateCurve(keyed.curves[c], static_cast<double>(i) * frame_time);
+    }
+  }
+  return clip;
+}
+
+}  // namespace tempokey::core

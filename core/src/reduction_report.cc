@@ -1,0 +1,81 @@
+// The one error metric of key reduction (SPEC 4, STYLE: one metric for reduction, tests and
+// benchmarks): keyed curves evaluated at every source frame against the unwrapped samples.
+#include <cmath>
+#include <cstdint>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "tempokey/core/reduce.h"
+#include "tempokey/core/rotation.h"
+#include "tempokey/core/status.h"
+
+namespace tempokey::core {
+namespace {
+
+struct ChannelErrors {
+  ChannelReduction summary;
+  double squared_sum = 0.0;
+};
+
+ChannelErrors MeasureChannel(const Clip& clip, int c, const Curve& curve) {
+  std::vector<double> samples = clip.channels[c].samples;
+  if (IsRotation(clip.channels[c].kind)) UnwrapDegrees(samples);
+  ChannelErrors out;
+  out.summary.channel_index = c;
+  out.summary.key_count = static_cast<std::int64_t>(curve.keys.size());
+  out.summary.sample_count = static_cast<std::int64_t>(samples.size());
+  for (std::size_t f = 0; f < samples.size(); ++f) {
+    const double t = static_cast<double>(f) * clip.frame_time_seconds;
+    const double error = std::abs(EvaluateCurve(curve, t) - samples[f]);
+    out.squared_sum += error * error;
+    if (error > out.summary.max_error) {
+      out.summary.max_error = error;
+      out.summary.max_error_frame = static_cast<std::int64_t>(f);
+    }
+  }
+  out.summary.rms_error =
+      samples.empty() ? 0.0 : std::sqrt(out.squared_sum / static_cast<double>(samples.size()));
+  return out;
+}
+
+}  // namespace
+
+absl::StatusOr<ReductionReport> MeasureReduction(const Clip& clip, const KeyedClip& keyed) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateClip(clip));
+  TEMPOKEY_RETURN_IF_ERROR(ValidateKeyedClip(keyed));
+  if (keyed.layout.channels.size() != clip.channels.size()) {
+    return absl::InvalidArgumentError(absl::StrCat("keyed clip has ", keyed.layout.channels.size(),
+                                                   " channels, the clip has ",
+                                                   clip.channels.size()));
+  }
+  for (std::size_t c = 0; c < clip.channels.size(); ++c) {
+    if (keyed.layout.channels[c].kind != clip.channels[c].kind) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          ChannelLabel(clip, static_cast<int>(c)), ": the keyed clip's channel is ",
+          AsAbsl(ChannelKindName(keyed.layout.channels[c].kind)), ", not ",
+          AsAbsl(ChannelKindName(clip.channels[c].kind))));
+    }
+  }
+
+  ReductionReport report;
+  double squared_sum = 0.0;
+  for (std::size_t c = 0; c < clip.channels.size(); ++c) {
+    const ChannelErrors errors = MeasureChannel(clip, static_cast<int>(c), keyed.curves[c]);
+    const ChannelReduction& channel = errors.summary;
+    report.key_count += channel.key_count;
+    report.sample_count += channel.sample_count;
+    squared_sum += errors.squared_sum;
+    if (channel.max_error > report.max_error) {
+      report.max_error = channel.max_error;
+      report.worst_channel_index = channel.channel_index;
+      report.worst_frame = channel.max_error_frame;
+    }
+    report.channels.push_back(channel);
+  }
+  report.rms_error = report.sample_count > 0
+                         ? std::sqrt(squared_sum / static_cast<double>(report.sample_count))
+                         : 0.0;
+  return report;
+}
+
+}  // namespace tempokey::core

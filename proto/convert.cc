@@ -1,0 +1,1067 @@
+#include "proto/convert.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <string>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "tempokey/core/status.h"
+
+namespace tempokey::wire {
+namespace {
+
+template <class... Ts>
+struct Overloaded : Ts... {
+  using Ts::operator()...;
+};
+template <class... Ts>
+Overloaded(Ts...) -> Overloaded<Ts...>;
+
+// Largest slice we ever build, whatever the caller asks for: RepeatedField sizes are int.
+constexpr std::int64_t kMaxSliceBytes = std::int64_t{1} << 28;
+
+std::int64_t ValuesPerSlice(std::int64_t slice_bytes, std::int64_t bytes_per_value) {
+  if (slice_bytes <= 0) slice_bytes = kDefaultSliceBytes;
+  slice_bytes = std::min(slice_bytes, kMaxSliceBytes);
+  return std::max<std::int64_t>(1, slice_bytes / bytes_per_value);
+}
+
+std::string DescribeNonFinite(double value) {
+  if (std::isnan(value)) return "NaN";
+  return value > 0 ? "+infinity" : "-infinity";
+}
+
+// Index of the first non-finite value in [data, data + n), or n. The exponent test vectorizes;
+// the scan runs over every sample that comes off the wire.
+std::int64_t FirstNonFinite(const double* data, std::int64_t n) {
+  constexpr std::uint64_t kExponent = 0x7ff0000000000000ull;
+  std::uint64_t any = 0;
+  for (std::int64_t i = 0; i < n; ++i) {
+    std::uint64_t bits;
+    std::memcpy(&bits, &data[i], sizeof bits);
+    any |= static_cast<std::uint64_t>((bits & kExponent) == kExponent);
+  }
+  if (any == 0) return n;
+  for (std::int64_t i = 0; i < n; ++i) {
+    if (!std::isfinite(data[i])) return i;
+  }
+  return n;
+}
+
+absl::Status Invalid(std::string message) { return absl::InvalidArgumentError(message); }
+
+// ---- clip header ---------------------------------------------------------------------------------
+
+v1::Vec3 Vec3ToProto(const core::Vec3& v) {
+  v1::Vec3 out;
+  out.set_x(v[0]);
+  out.set_y(v[1]);
+  out.set_z(v[2]);
+  return out;
+}
+
+core::Vec3 Vec3FromProto(const v1::Vec3& v) { return {v.x(), v.y(), v.z()}; }
+
+// "frames 100..199" (inclusive bounds, as people count frames).
+std::string FrameRange(std::int64_t begin, std::int64_t end) {
+  return absl::StrCat("frames ", begin, "..", end - 1);
+}
+
+// ---- operations ----------------------------------------------------------------------------------
+
+// Error prefix for operation `index` (0-based): "operation 2: ".
+std::string OpPrefix(int index) { return absl::StrCat("operation ", index + 1, ": "); }
+
+absl::Status CheckFinite(int op, const std::string& field, double value) {
+  if (std::isfinite(value)) return absl::OkStatus();
+  return Invalid(absl::StrCat(OpPrefix(op), field, " must be finite, got ", DescribeNonFinite(value)));
+}
+
+absl::Status CheckPositive(int op, const std::string& field, double value) {
+  if (std::isfinite(value) && value > 0) return absl::OkStatus();
+  return Invalid(absl::StrCat(OpPrefix(op), field, " must be > 0, got ",
+                              std::isfinite(value) ? absl::StrCat(value) : DescribeNonFinite(value)));
+}
+
+absl::Status UnknownEnum(int op, const std::string& field, int value) {
+  return Invalid(absl::StrCat(OpPrefix(op), field, " has unknown value ", value));
+}
+
+absl::StatusOr<core::TimePoint> TimePointFromProto(int op, const std::string& field,
+                                                   const v1::TimePoint& tp) {
+  switch (tp.unit_case()) {
+    case v1::TimePoint::kSeconds:
+      TEMPOKEY_RETURN_IF_ERROR(CheckFinite(op, field + ".seconds", tp.seconds()));
+      return core::TimePoint{.value = tp.seconds(), .in_frames = false};
+    case v1::TimePoint::kFrames:
+      TEMPOKEY_RETURN_IF_ERROR(CheckFinite(op, field + ".frames", tp.frames()));
+      return core::TimePoint{.value = tp.frames(), .in_frames = true};
+    case v1::TimePoint::UNIT_NOT_SET:
+      break;
+  }
+  return Invalid(absl::StrCat(OpPrefix(op), field, " has no unit: set seconds or frames"));
+}
+
+v1::TimePoint TimePointToProto(const core::TimePoint& tp) {
+  v1::TimePoint out;
+  if (tp.in_frames) {
+    out.set_frames(tp.value);
+  } else {
+    out.set_seconds(tp.value);
+  }
+  return out;
+}
+
+// A rate given as numerator/denominator where 0/0 means "keep the source's".
+absl::StatusOr<std::optional<core::FrameRate>> RateFromProto(int op, const std::string& numerator_field,
+                                                             const std::string& denominator_field,
+                                                             std::int64_t numerator,
+                                                             std::int64_t denominator) {
+  if (numerator == 0 && denominator == 0) return std::optional<core::FrameRate>();
+  if (numerator <= 0 || denominator <= 0) {
+    return Invalid(absl::StrCat(OpPrefix(op), numerator_field, "/", denominator_field,
+                                " must both be 0 (keep the source rate) or both be > 0, got ",
+                                numerator, "/", denominator));
+  }
+  return std::optional<core::FrameRate>(
+      core::FrameRate{.numerator = numerator, .denominator = denominator});
+}
+
+absl::StatusOr<std::vector<core::SpeedKnot>> KnotsFromProto(
+    int op, const std::string& field,
+    const google::protobuf::RepeatedPtrField<v1::SpeedKnot>& knots) {
+  std::vector<core::SpeedKnot> out;
+  out.reserve(knots.size());
+  for (int k = 0; k < knots.size(); ++k) {
+    const std::string name = absl::StrCat(field, "[", k, "]");
+    TEMPOKEY_ASSIGN_OR_RETURN(core::TimePoint time,
+                              TimePointFromProto(op, name + ".time", knots[k].time()));
+    TEMPOKEY_RETURN_IF_ERROR(CheckFinite(op, name + ".speed", knots[k].speed()));
+    out.push_back(core::SpeedKnot{.time = time, .speed = knots[k].speed()});
+  }
+  return out;
+}
+
+absl::StatusOr<core::RetimeStep> RetimeFromProto(int op, const v1::RetimeOperation& r) {
+  core::RetimeStep step;
+  std::vector<std::string> domains;
+  if (r.speed_over_source_size() > 0) domains.push_back("speed_over_source");
+  if (r.speed_over_output_size() > 0) domains.push_back("speed_over_output");
+  if (r.time_map_size() > 0) domains.push_back("time_map");
+  if (domains.size() > 1) {
+    return Invalid(absl::StrCat(OpPrefix(op),
+                                "retime takes at most one of speed_over_source, speed_over_output "
+                                "and time_map, got ",
+                                domains[0], " and ", domains[1]));
+  }
+  if (r.speed_over_source_size() > 0) {
+    step.warp.domain = core::WarpDomain::kSpeedOverSource;
+    TEMPOKEY_ASSIGN_OR_RETURN(step.warp.speed,
+                              KnotsFromProto(op, "retime.speed_over_source", r.speed_over_source()));
+  } else if (r.speed_over_output_size() > 0) {
+    step.warp.domain = core::WarpDomain::kSpeedOverOutput;
+    TEMPOKEY_ASSIGN_OR_RETURN(step.warp.speed,
+                              KnotsFromProto(op, "retime.speed_over_output", r.speed_over_output()));
+  } else if (r.time_map_size() > 0) {
+    step.warp.domain = core::WarpDomain::kTimeMapKeys;
+    for (int k = 0; k < r.time_map_size(); ++k) {
+      const std::string name = absl::StrCat("retime.time_map[", k, "]");
+      TEMPOKEY_ASSIGN_OR_RETURN(core::TimePoint output,
+                                TimePointFromProto(op, name + ".output", r.time_map(k).output()));
+      TEMPOKEY_ASSIGN_OR_RETURN(core::TimePoint source,
+                                TimePointFromProto(op, name + ".source", r.time_map(k).source()));
+      step.warp.keys.push_back(core::TimeMapKey{.output = output, .source = source});
+    }
+  }
+  for (int h = 0; h < r.holds_size(); ++h) {
+    const std::string name = absl::StrCat("retime.holds[", h, "]");
+    TEMPOKEY_ASSIGN_OR_RETURN(core::TimePoint at, TimePointFromProto(op, name + ".at", r.holds(h).at()));
+    TEMPOKEY_RETURN_IF_ERROR(
+        CheckFinite(op, name + ".duration_seconds", r.holds(h).duration_seconds()));
+    step.warp.holds.push_back(core::Hold{.at = at, .duration_seconds = r.holds(h).duration_seconds()});
+  }
+  step.warp.reverse = r.reverse();
+
+  switch (r.fit_case()) {
+    case v1::RetimeOperation::kFitSeconds:
+      TEMPOKEY_RETURN_IF_ERROR(CheckPositive(op, "retime.fit_seconds", r.fit_seconds()));
+      step.options.fit_seconds = r.fit_seconds();
+      break;
+    case v1::RetimeOperation::kFitFrames:
+      if (r.fit_frames() < 1) {
+        return Invalid(absl::StrCat(OpPrefix(op), "retime.fit_frames must be >= 1, got ",
+                                    r.fit_frames()));
+      }
+      step.options.fit_frames = r.fit_frames();
+      break;
+    case v1::RetimeOperation::FIT_NOT_SET:
+      break;
+  }
+  step.options.fit_to_grid = !r.disable_fit_to_grid();
+  TEMPOKEY_ASSIGN_OR_RETURN(step.options.output_rate,
+                            RateFromProto(op, "retime.output_rate_numerator",
+                                          "retime.output_rate_denominator",
+                                          r.output_rate_numerator(), r.output_rate_denominator()));
+  switch (r.filter()) {
+    case v1::RESAMPLE_FILTER_UNSPECIFIED:
+    case v1::RESAMPLE_FILTER_TENT:
+      step.options.filter = core::ResampleFilter::kTent;
+      break;
+    case v1::RESAMPLE_FILTER_LINEAR:
+      step.options.filter = core::ResampleFilter::kLinear;
+      break;
+    case v1::RESAMPLE_FILTER_BOX:
+      step.options.filter = core::ResampleFilter::kBox;
+      break;
+    case v1::RESAMPLE_FILTER_CUBIC:
+      step.options.filter = core::ResampleFilter::kCubic;
+      break;
+    case v1::RESAMPLE_FILTER_LANCZOS3:
+      step.options.filter = core::ResampleFilter::kLanczos3;
+      break;
+    default:
+      return UnknownEnum(op, "retime.filter", r.filter());
+  }
+  switch (r.method()) {
+    case v1::RETIME_METHOD_UNSPECIFIED:
+    case v1::RETIME_METHOD_EXACT:
+      step.options.method = core::RetimeMethod::kExact;
+      break;
+    case v1::RETIME_METHOD_PAPER:
+      step.options.method = core::RetimeMethod::kPaper;
+      break;
+    default:
+      return UnknownEnum(op, "retime.method", r.method());
+  }
+  switch (r.rotation_mode()) {
+    case v1::ROTATION_MODE_UNSPECIFIED:
+    case v1::ROTATION_MODE_QUATERNION:
+      step.options.rotation_mode = core::RotationMode::kQuaternion;
+      break;
+    case v1::ROTATION_MODE_EULER:
+      step.options.rotation_mode = core::RotationMode::kEuler;
+      break;
+    default:
+      return UnknownEnum(op, "retime.rotation_mode", r.rotation_mode());
+  }
+  for (int p = 0; p < r.pins_size(); ++p) {
+    const std::string name = absl::StrCat("retime.pins[", p, "]");
+    TEMPOKEY_ASSIGN_OR_RETURN(core::TimePoint source,
+                              TimePointFromProto(op, name + ".source", r.pins(p).source()));
+    step.options.pins.push_back(
+        core::Pin{.source = source, .output_frame = r.pins(p).output_frame()});
+  }
+  // 0 selects the default range; anything else is the caller's and core checks it.
+  if (r.min_speed() != 0.0) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckPositive(op, "retime.min_speed", r.min_speed()));
+    step.options.min_speed = r.min_speed();
+  }
+  if (r.max_speed() != 0.0) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckPositive(op, "retime.max_speed", r.max_speed()));
+    step.options.max_speed = r.max_speed();
+  }
+  return step;
+}
+
+absl::StatusOr<core::ReduceStep> ReduceFromProto(int op, const v1::ReduceOperation& r) {
+  core::ReduceStep step;
+  core::ReduceOptions& o = step.options;
+  switch (r.method()) {
+    case v1::REDUCE_METHOD_UNSPECIFIED:
+    case v1::REDUCE_METHOD_TOLERANCE:
+      o.method = core::ReduceMethod::kTolerance;
+      break;
+    case v1::REDUCE_METHOD_PAPER:
+      o.method = core::ReduceMethod::kPaper;
+      break;
+    default:
+      return UnknownEnum(op, "reduce.method", r.method());
+  }
+
+  const v1::PaperParams& p = r.paper();
+  if (p.has_step_x_frames()) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckPositive(op, "reduce.paper.step_x_frames", p.step_x_frames()));
+    o.paper.step_x_frames = p.step_x_frames();
+  }
+  if (p.has_step_y()) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckPositive(op, "reduce.paper.step_y", p.step_y()));
+    o.paper.step_y = p.step_y();
+  }
+  if (p.has_step_tangent_x()) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckPositive(op, "reduce.paper.step_tangent_x", p.step_tangent_x()));
+    o.paper.step_tangent_x = p.step_tangent_x();
+  }
+  if (p.has_step_tangent_y()) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckPositive(op, "reduce.paper.step_tangent_y", p.step_tangent_y()));
+    o.paper.step_tangent_y = p.step_tangent_y();
+  }
+  if (p.has_accuracy()) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckPositive(op, "reduce.paper.accuracy", p.accuracy()));
+    o.paper.accuracy = p.accuracy();
+  }
+  if (p.has_max_iterations()) {
+    if (p.max_iterations() < 1 || p.max_iterations() > 1000) {
+      return Invalid(absl::StrCat(OpPrefix(op), "reduce.paper.max_iterations must be in 1..1000, got ",
+                                  p.max_iterations()));
+    }
+    o.paper.max_iterations = p.max_iterations();
+  }
+  if (p.has_smoothing_sigma_frames()) {
+    const double sigma = p.smoothing_sigma_frames();
+    if (!std::isfinite(sigma) || sigma < 0) {
+      return Invalid(absl::StrCat(OpPrefix(op), "reduce.paper.smoothing_sigma_frames must be >= 0, got ",
+                                  std::isfinite(sigma) ? absl::StrCat(sigma) : DescribeNonFinite(sigma)));
+    }
+    o.paper.smoothing_sigma_frames = sigma;
+  }
+  if (p.has_min_key_spacing_frames()) {
+    if (p.min_key_spacing_frames() < 1) {
+      return Invalid(absl::StrCat(OpPrefix(op), "reduce.paper.min_key_spacing_frames must be >= 1, got ",
+                                  p.min_key_spacing_frames()));
+    }
+    o.paper.min_key_spacing_frames = p.min_key_spacing_frames();
+  }
+
+  const v1::ToleranceParams& t = r.tolerance();
+  if (t.has_max_rotation_error_degrees()) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckPositive(op, "reduce.tolerance.max_rotation_error_degrees",
+                                           t.max_rotation_error_degrees()));
+    o.tolerance.max_rotation_error_degrees = t.max_rotation_error_degrees();
+  }
+  if (t.has_max_position_error()) {
+    TEMPOKEY_RETURN_IF_ERROR(
+        CheckPositive(op, "reduce.tolerance.max_position_error", t.max_position_error()));
+    o.tolerance.max_position_error = t.max_position_error();
+  }
+  if (t.has_max_scalar_error()) {
+    TEMPOKEY_RETURN_IF_ERROR(
+        CheckPositive(op, "reduce.tolerance.max_scalar_error", t.max_scalar_error()));
+    o.tolerance.max_scalar_error = t.max_scalar_error();
+  }
+  if (t.has_key_budget()) {
+    if (t.key_budget() < 1) {
+      return Invalid(absl::StrCat(OpPrefix(op), "reduce.tolerance.key_budget must be >= 1, got ",
+                                  t.key_budget()));
+    }
+    o.tolerance.key_budget = t.key_budget();
+  }
+  switch (t.pose_alignment()) {
+    case v1::POSE_ALIGNMENT_UNSPECIFIED:
+    case v1::POSE_ALIGNMENT_NONE:
+      o.tolerance.pose_alignment = core::PoseAlignment::kNone;
+      break;
+    case v1::POSE_ALIGNMENT_JOINT:
+      o.tolerance.pose_alignment = core::PoseAlignment::kJoint;
+      break;
+    case v1::POSE_ALIGNMENT_CLIP:
+      o.tolerance.pose_alignment = core::PoseAlignment::kClip;
+      break;
+    default:
+      return UnknownEnum(op, "reduce.tolerance.pose_alignment", t.pose_alignment());
+  }
+  return step;
+}
+
+v1::RetimeOperation RetimeToProto(const core::RetimeStep& step) {
+  v1::RetimeOperation r;
+  auto add_knots = [](const std::vector<core::SpeedKnot>& knots,
+                      google::protobuf::RepeatedPtrField<v1::SpeedKnot>* out) {
+    for (const core::SpeedKnot& k : knots) {
+      v1::SpeedKnot* knot = out->Add();
+      *knot->mutable_time() = TimePointToProto(k.time);
+      knot->set_speed(k.speed);
+    }
+  };
+  switch (step.warp.domain) {
+    case core::WarpDomain::kIdentity:
+      break;
+    case core::WarpDomain::kSpeedOverSource:
+      add_knots(step.warp.speed, r.mutable_speed_over_source());
+      break;
+    case core::WarpDomain::kSpeedOverOutput:
+      add_knots(step.warp.speed, r.mutable_speed_over_output());
+      break;
+    case core::WarpDomain::kTimeMapKeys:
+      for (const core::TimeMapKey& k : step.warp.keys) {
+        v1::TimeMapKey* key = r.add_time_map();
+        *key->mutable_output() = TimePointToProto(k.output);
+        *key->mutable_source() = TimePointToProto(k.source);
+      }
+      break;
+  }
+  for (const core::Hold& h : step.warp.holds) {
+    v1::Hold* hold = r.add_holds();
+    *hold->mutable_at() = TimePointToProto(h.at);
+    hold->set_duration_seconds(h.duration_seconds);
+  }
+  r.set_reverse(step.warp.reverse);
+  const core::RetimeOptions& o = step.options;
+  if (o.fit_seconds) r.set_fit_seconds(*o.fit_seconds);
+  if (o.fit_frames) r.set_fit_frames(*o.fit_frames);
+  r.set_disable_fit_to_grid(!o.fit_to_grid);
+  if (o.output_rate) {
+    r.set_output_rate_numerator(o.output_rate->numerator);
+    r.set_output_rate_denominator(o.output_rate->denominator);
+  }
+  switch (o.filter) {
+    case core::ResampleFilter::kTent:
+      r.set_filter(v1::RESAMPLE_FILTER_TENT);
+      break;
+    case core::ResampleFilter::kLinear:
+      r.set_filter(v1::RESAMPLE_FILTER_LINEAR);
+      break;
+    case core::ResampleFilter::kBox:
+      r.set_filter(v1::RESAMPLE_FILTER_BOX);
+      break;
+    case core::ResampleFilter::kCubic:
+      r.set_filter(v1::RESAMPLE_FILTER_CUBIC);
+      break;
+    case core::ResampleFilter::kLanczos3:
+      r.set_filter(v1::RESAMPLE_FILTER_LANCZOS3);
+      break;
+  }
+  r.set_method(o.method == core::RetimeMethod::kPaper ? v1::RETIME_METHOD_PAPER
+                                                      : v1::RETIME_METHOD_EXACT);
+  r.set_rotation_mode(o.rotation_mode == core::RotationMode::kEuler ? v1::ROTATION_MODE_EULER
+                                                                    : v1::ROTATION_MODE_QUATERNION);
+  for (const core::Pin& p : o.pins) {
+    v1::Pin* pin = r.add_pins();
+    *pin->mutable_source() = TimePointToProto(p.source);
+    pin->set_output_frame(p.output_frame);
+  }
+  r.set_min_speed(o.min_speed);
+  r.set_max_speed(o.max_speed);
+  return r;
+}
+
+v1::ReduceOperation ReduceToProto(const core::ReduceStep& step) {
+  v1::ReduceOperation r;
+  const core::ReduceOptions& o = step.options;
+  if (o.method == core::ReduceMethod::kPaper) {
+    r.set_method(v1::REDUCE_METHOD_PAPER);
+    v1::PaperParams* p = r.mutable_paper();
+    p->set_step_x_frames(o.paper.step_x_frames);
+    p->set_step_y(o.paper.step_y);
+    p->set_step_tangent_x(o.paper.step_tangent_x);
+    p->set_step_tangent_y(o.paper.step_tangent_y);
+    p->set_accuracy(o.paper.accuracy);
+    p->set_max_iterations(o.paper.max_iterations);
+    p->set_smoothing_sigma_frames(o.paper.smoothing_sigma_frames);
+    p->set_min_key_spacing_frames(o.paper.min_key_spacing_frames);
+  } else {
+    r.set_method(v1::REDUCE_METHOD_TOLERANCE);
+    v1::ToleranceParams* t = r.mutable_tolerance();
+    t->set_max_rotation_error_degrees(o.tolerance.max_rotation_error_degrees);
+    t->set_max_position_error(o.tolerance.max_position_error);
+    t->set_max_scalar_error(o.tolerance.max_scalar_error);
+    if (o.tolerance.key_budget) {
+      t->set_key_budget(static_cast<std::int32_t>(std::min<std::int64_t>(
+          *o.tolerance.key_budget, std::numeric_limits<std::int32_t>::max())));
+    }
+    switch (o.tolerance.pose_alignment) {
+      case core::PoseAlignment::kNone:
+        t->set_pose_alignment(v1::POSE_ALIGNMENT_NONE);
+        break;
+      case core::PoseAlignment::kJoint:
+        t->set_pose_alignment(v1::POSE_ALIGNMENT_JOINT);
+        break;
+      case core::PoseAlignment::kClip:
+        t->set_pose_alignment(v1::POSE_ALIGNMENT_CLIP);
+        break;
+    }
+  }
+  return r;
+}
+
+}  // namespace
+
+// ---- clips ---------------------------------------------------------------------------------------
+
+v1::ChannelKind ChannelKindToProto(core::ChannelKind kind) {
+  switch (kind) {
+    case core::ChannelKind::kXPosition:
+      return v1::CHANNEL_KIND_X_POSITION;
+    case core::ChannelKind::kYPosition:
+      return v1::CHANNEL_KIND_Y_POSITION;
+    case core::ChannelKind::kZPosition:
+      return v1::CHANNEL_KIND_Z_POSITION;
+    case core::ChannelKind::kXRotation:
+      return v1::CHANNEL_KIND_X_ROTATION;
+    case core::ChannelKind::kYRotation:
+      return v1::CHANNEL_KIND_Y_ROTATION;
+    case core::ChannelKind::kZRotation:
+      return v1::CHANNEL_KIND_Z_ROTATION;
+    case core::ChannelKind::kScalar:
+      return v1::CHANNEL_KIND_SCALAR;
+  }
+  return v1::CHANNEL_KIND_UNSPECIFIED;
+}
+
+absl::StatusOr<core::ChannelKind> ChannelKindFromProto(int kind) {
+  switch (kind) {
+    case v1::CHANNEL_KIND_X_POSITION:
+      return core::ChannelKind::kXPosition;
+    case v1::CHANNEL_KIND_Y_POSITION:
+      return core::ChannelKind::kYPosition;
+    case v1::CHANNEL_KIND_Z_POSITION:
+      return core::ChannelKind::kZPosition;
+    case v1::CHANNEL_KIND_X_ROTATION:
+      return core::ChannelKind::kXRotation;
+    case v1::CHANNEL_KIND_Y_ROTATION:
+      return core::ChannelKind::kYRotation;
+    case v1::CHANNEL_KIND_Z_ROTATION:
+      return core::ChannelKind::kZRotation;
+    case v1::CHANNEL_KIND_SCALAR:
+      return core::ChannelKind::kScalar;
+    case v1::CHANNEL_KIND_UNSPECIFIED:
+      return Invalid("kind is CHANNEL_KIND_UNSPECIFIED");
+    default:
+      return Invalid(absl::StrCat("kind has unknown value ", kind));
+  }
+}
+
+v1::ClipHeader ClipHeaderToProto(const core::Clip& clip) {
+  v1::ClipHeader header;
+  header.set_name(clip.name);
+  header.set_frame_time_seconds(clip.frame_time_seconds);
+  header.set_frame_count(clip.frame_count);
+  header.mutable_joints()->Reserve(static_cast<int>(clip.skeleton.joints.size()));
+  for (const core::Joint& joint : clip.skeleton.joints) {
+    v1::Joint* j = header.add_joints();
+    j->set_name(joint.name);
+    j->set_parent_index(joint.parent);
+    *j->mutable_offset() = Vec3ToProto(joint.offset);
+    for (const core::Vec3& end_site : joint.end_sites) {
+      *j->add_end_site_offsets() = Vec3ToProto(end_site);
+    }
+  }
+  header.mutable_channels()->Reserve(static_cast<int>(clip.channels.size()));
+  for (const core::Channel& channel : clip.channels) {
+    v1::ChannelInfo* c = header.add_channels();
+    if (channel.joint >= 0) c->set_joint_index(channel.joint);
+    c->set_kind(ChannelKindToProto(channel.kind));
+    c->set_name(channel.name);
+  }
+  for (const core::Marker& marker : clip.markers) {
+    v1::Marker* m = header.add_markers();
+    m->set_name(marker.name);
+    m->set_time_seconds(marker.time_seconds);
+    m->set_duration_seconds(marker.duration_seconds);
+  }
+  return header;
+}
+
+absl::StatusOr<core::Clip> ClipLayoutFromProto(const v1::ClipHeader& header,
+                                               const core::ClipLimits& limits) {
+  // Counts first: a hostile header must not make us build large vectors before the checks.
+  if (header.joints_size() > limits.max_joints) {
+    return Invalid(absl::StrCat("header has ", header.joints_size(), " joints, over the limit of ",
+                                limits.max_joints));
+  }
+  if (header.channels_size() > limits.max_channels) {
+    return Invalid(absl::StrCat("header has ", header.channels_size(),
+                                " channels, over the limit of ", limits.max_channels));
+  }
+  core::Clip clip;
+  clip.name = header.name();
+  clip.frame_time_seconds = header.frame_time_seconds();
+  clip.frame_count = header.frame_count();
+  clip.skeleton.joints.resize(static_cast<std::size_t>(header.joints_size()));
+  for (int j = 0; j < header.joints_size(); ++j) {
+    const v1::Joint& in = header.joints(j);
+    core::Joint& joint = clip.skeleton.joints[j];
+    joint.name = in.name();
+    joint.parent = in.parent_index();
+    joint.offset = Vec3FromProto(in.offset());
+    joint.end_sites.reserve(static_cast<std::size_t>(in.end_site_offsets_size()));
+    for (const v1::Vec3& end_site : in.end_site_offsets()) {
+      joint.end_sites.push_back(Vec3FromProto(end_site));
+    }
+  }
+  clip.channels.resize(static_cast<std::size_t>(header.channels_size()));
+  for (int c = 0; c < header.channels_size(); ++c) {
+    const v1::ChannelInfo& in = header.channels(c);
+    core::Channel& channel = clip.channels[c];
+    absl::StatusOr<core::ChannelKind> kind = ChannelKindFromProto(in.kind());
+    if (!kind.ok()) {
+      return core::Annotate(kind.status(), absl::StrCat("header.channels[", c, "]"));
+    }
+    channel.kind = *kind;
+    channel.name = in.name();
+    if (in.has_joint_index()) {
+      if (in.joint_index() < 0 || in.joint_index() >= header.joints_size()) {
+        return Invalid(absl::StrCat("header.channels[", c, "]: joint_index ", in.joint_index(),
+                                    " out of range, the header has ", header.joints_size(),
+                                    " joints"));
+      }
+      channel.joint = in.joint_index();
+      clip.skeleton.joints[channel.joint].channels.push_back(c);
+    }
+  }
+  clip.markers.reserve(static_cast<std::size_t>(header.markers_size()));
+  for (int m = 0; m < header.markers_size(); ++m) {
+    const v1::Marker& in = header.markers(m);
+    if (!std::isfinite(in.time_seconds())) {
+      return Invalid(absl::StrCat("header.markers[", m, "] (", in.name(), "): time_seconds is ",
+                                  DescribeNonFinite(in.time_seconds())));
+    }
+    if (!std::isfinite(in.duration_seconds()) || in.duration_seconds() < 0) {
+      return Invalid(absl::StrCat("header.markers[", m, "] (", in.name(),
+                                  "): duration_seconds must be finite and >= 0, got ",
+                                  std::isfinite(in.duration_seconds())
+                                      ? absl::StrCat(in.duration_seconds())
+                                      : DescribeNonFinite(in.duration_seconds())));
+    }
+    clip.markers.push_back(core::Marker{.name = in.name(),
+                                        .time_seconds = in.time_seconds(),
+                                        .duration_seconds = in.duration_seconds()});
+  }
+  TEMPOKEY_RETURN_IF_ERROR(core::ValidateClipLayout(clip, limits));
+  return clip;
+}
+
+std::int64_t SamplesPerSlice(std::int64_t slice_bytes) {
+  return ValuesPerSlice(slice_bytes, sizeof(double));
+}
+
+v1::ChannelSamples SamplesSliceToProto(const core::Clip& clip, int channel_index,
+                                       std::int64_t first_frame, std::int64_t count) {
+  const double* samples = clip.channels[channel_index].samples.data() + first_frame;
+  v1::ChannelSamples slice;
+  slice.set_channel_index(channel_index);
+  slice.set_first_frame(first_frame);
+  slice.mutable_samples()->Add(samples, samples + count);
+  return slice;
+}
+
+absl::Status ForEachSamplesSlice(const core::Clip& clip, std::int64_t slice_bytes,
+                                 const std::function<absl::Status(v1::ChannelSamples&&)>& emit) {
+  const std::int64_t per_slice = SamplesPerSlice(slice_bytes);
+  for (std::size_t c = 0; c < clip.channels.size(); ++c) {
+    const auto total = static_cast<std::int64_t>(clip.channels[c].samples.size());
+    for (std::int64_t first = 0; first < total; first += per_slice) {
+      TEMPOKEY_RETURN_IF_ERROR(emit(SamplesSliceToProto(clip, static_cast<int>(c), first,
+                                                        std::min(per_slice, total - first))));
+    }
+  }
+  return absl::OkStatus();
+}
+
+v1::Clip ClipToProto(const core::Clip& clip) {
+  v1::Clip out;
+  *out.mutable_header() = ClipHeaderToProto(clip);
+  out.mutable_samples()->Reserve(static_cast<int>(clip.channels.size()));
+  for (std::size_t c = 0; c < clip.channels.size(); ++c) {
+    const std::vector<double>& samples = clip.channels[c].samples;
+    v1::ChannelSamples* slice = out.add_samples();
+    slice->set_channel_index(static_cast<std::int32_t>(c));
+    slice->set_first_frame(0);
+    slice->mutable_samples()->Add(samples.data(), samples.data() + samples.size());
+  }
+  return out;
+}
+
+ClipAssembler::ClipAssembler(core::ClipLimits limits) : limits_(limits) {}
+
+absl::Status ClipAssembler::AddHeader(const v1::ClipHeader& header) {
+  if (has_header_) {
+    return Invalid("a second clip header arrived; a clip has exactly one header, sent first");
+  }
+  absl::StatusOr<core::Clip> layout = ClipLayoutFromProto(header, limits_);
+  if (!layout.ok()) return core::Annotate(layout.status(), "clip header");
+  clip_ = *std::move(layout);
+  received_.assign(clip_.channels.size(), {});
+  samples_expected_ = clip_.sample_count();
+  has_header_ = true;
+  return absl::OkStatus();
+}
+
+absl::Status ClipAssembler::AddSamples(const v1::ChannelSamples& samples) {
+  ++messages_;
+  if (!has_header_) {
+    return Invalid(
+        absl::StrCat("samples message ", messages_, " arrived before the clip header"));
+  }
+  const int c = samples.channel_index();
+  const auto channel_count = static_cast<int>(clip_.channels.size());
+  if (c < 0 || c >= channel_count) {
+    return Invalid(absl::StrCat("samples message ", messages_, ": channel index ", c,
+                                " out of range, the clip has ", channel_count, " channels"));
+  }
+  const std::int64_t n = samples.samples_size();
+  const std::int64_t first = samples.first_frame();
+  const std::int64_t frames = clip_.frame_count;
+  if (n == 0) {
+    return Invalid(absl::StrCat("samples message ", messages_, ": ", core::ChannelLabel(clip_, c),
+                                ": carries no samples"));
+  }
+  if (first < 0 || first >= frames) {
+    return Invalid(absl::StrCat("samples message ", messages_, ": ", core::ChannelLabel(clip_, c),
+                                ": first_frame ", first, " out of range, the clip has ", frames,
+                                " frames (0..", frames - 1, ")"));
+  }
+  if (n > frames - first) {
+    return Invalid(absl::StrCat("samples message ", messages_, ": ", core::ChannelLabel(clip_, c),
+                                ": ", FrameRange(first, first + n), " run past the last frame ",
+                                frames - 1));
+  }
+  const std::int64_t end = first + n;
+
+  // Received ranges of the channel: sorted, disjoint, adjacent ones merged, so slices sent in
+  // order keep one range per channel and the check is O(1).
+  auto& ranges = received_[c];
+  auto overlap = [&](std::int64_t begin, std::int64_t stop) {
+    return Invalid(absl::StrCat("samples message ", messages_, ": ", core::ChannelLabel(clip_, c),
+                                ": ", FrameRange(first, end), " overlap ", FrameRange(begin, stop),
+                                " already received"));
+  };
+  auto next = std::upper_bound(ranges.begin(), ranges.end(), first,
+                               [](std::int64_t f, const auto& r) { return f < r.first; });
+  if (next != ranges.begin()) {
+    const auto& prev = *(next - 1);
+    if (prev.second > first) return overlap(first, std::min(end, prev.second));
+  }
+  if (next != ranges.end() && next->first < end) {
+    return overlap(next->first, std::min(end, next->second));
+  }
+
+  const double* data = samples.samples().data();
+  if (const std::int64_t bad = FirstNonFinite(data, n); bad < n) {
+    return Invalid(absl::StrCat("samples message ", messages_, ": ", core::ChannelLabel(clip_, c),
+                                ": sample at frame ", first + bad, " is ",
+                                DescribeNonFinite(data[bad])));
+  }
+
+  std::vector<double>& dest = clip_.channels[c].samples;
+  if (dest.empty()) dest.resize(static_cast<std::size_t>(frames));
+  std::memcpy(dest.data() + first, data, static_cast<std::size_t>(n) * sizeof(double));
+
+  const bool joins_prev = next != ranges.begin() && (next - 1)->second == first;
+  const bool joins_next = next != ranges.end() && next->first == end;
+  if (joins_prev && joins_next) {
+    (next - 1)->second = next->second;
+    ranges.erase(next);
+  } else if (joins_prev) {
+    (next - 1)->second = end;
+  } else if (joins_next) {
+    next->first = first;
+  } else {
+    ranges.insert(next, {first, end});
+  }
+  samples_received_ += n;
+  return absl::OkStatus();
+}
+
+absl::StatusOr<core::Clip> ClipAssembler::Finish() && {
+  if (!has_header_) return Invalid("no clip header arrived");
+  for (std::size_t c = 0; c < received_.size(); ++c) {
+    std::int64_t next = 0;
+    std::int64_t gap_begin = -1;
+    std::int64_t gap_end = -1;
+    for (const auto& [begin, end] : received_[c]) {
+      if (begin > next) {
+        gap_begin = next;
+        gap_end = begin;
+        break;
+      }
+      next = end;
+    }
+    if (gap_begin < 0 && next < clip_.frame_count) {
+      gap_begin = next;
+      gap_end = clip_.frame_count;
+    }
+    if (gap_begin >= 0) {
+      return Invalid(absl::StrCat(core::ChannelLabel(clip_, static_cast<int>(c)), ": ",
+                                  FrameRange(gap_begin, gap_end), " never arrived"));
+    }
+  }
+  TEMPOKEY_RETURN_IF_ERROR(core::ValidateClip(clip_, limits_));
+  has_header_ = false;
+  received_.clear();
+  return std::move(clip_);
+}
+
+absl::StatusOr<core::Clip> ClipFromProto(const v1::Clip& clip, const core::ClipLimits& limits) {
+  if (!clip.has_header()) return Invalid("clip has no header");
+  ClipAssembler assembler(limits);
+  TEMPOKEY_RETURN_IF_ERROR(assembler.AddHeader(clip.header()));
+  for (const v1::ChannelSamples& samples : clip.samples()) {
+    TEMPOKEY_RETURN_IF_ERROR(assembler.AddSamples(samples));
+  }
+  return std::move(assembler).Finish();
+}
+
+// ---- keyed clips ---------------------------------------------------------------------------------
+
+namespace {
+
+bool IsWeighted(const core::Curve& curve) {
+  return std::any_of(curve.keys.begin(), curve.keys.end(), [](const core::Key& k) {
+    return k.in_weight.has_value() || k.out_weight.has_value();
+  });
+}
+
+// Appends keys [begin, end) of `curve` to `out`'s columns.
+void AppendKeys(const core::Curve& curve, std::size_t begin, std::size_t end, bool weighted,
+                v1::KeyedCurve* out) {
+  const int n = static_cast<int>(end - begin);
+  out->mutable_time_seconds()->Reserve(out->time_seconds_size() + n);
+  out->mutable_value()->Reserve(out->value_size() + n);
+  out->mutable_in_tangent()->Reserve(out->in_tangent_size() + n);
+  out->mutable_out_tangent()->Reserve(out->out_tangent_size() + n);
+  if (weighted) {
+    out->mutable_in_weight()->Reserve(out->in_weight_size() + n);
+    out->mutable_out_weight()->Reserve(out->out_weight_size() + n);
+  }
+  constexpr double kUnweighted = 1.0 / 3.0;
+  for (std::size_t i = begin; i < end; ++i) {
+    const core::Key& k = curve.keys[i];
+    out->add_time_seconds(k.time_seconds);
+    out->add_value(k.value);
+    out->add_in_tangent(k.in_tangent);
+    out->add_out_tangent(k.out_tangent);
+    if (weighted) {
+      out->add_in_weight(k.in_weight.value_or(kUnweighted));
+      out->add_out_weight(k.out_weight.value_or(kUnweighted));
+    }
+  }
+}
+
+}  // namespace
+
+v1::KeyedCurve KeyedCurveToProto(int channel_index, const core::Curve& curve) {
+  v1::KeyedCurve out;
+  out.set_channel_index(channel_index);
+  AppendKeys(curve, 0, curve.keys.size(), IsWeighted(curve), &out);
+  return out;
+}
+
+v1::KeyedClip KeyedClipToProto(const core::KeyedClip& keyed) {
+  v1::KeyedClip out;
+  *out.mutable_header() = ClipHeaderToProto(keyed.layout);
+  out.mutable_curves()->Reserve(static_cast<int>(keyed.curves.size()));
+  for (std::size_t c = 0; c < keyed.curves.size(); ++c) {
+    *out.add_curves() = KeyedCurveToProto(static_cast<int>(c), keyed.curves[c]);
+  }
+  return out;
+}
+
+v1::KeyedCurve KeyedCurveSliceToProto(int channel_index, const core::Curve& curve,
+                                      std::int64_t first_key, std::int64_t count) {
+  v1::KeyedCurve piece;
+  piece.set_channel_index(channel_index);
+  AppendKeys(curve, static_cast<std::size_t>(first_key),
+             static_cast<std::size_t>(first_key + count), IsWeighted(curve), &piece);
+  return piece;
+}
+
+std::int64_t KeysPerSlice(const core::Curve& curve, std::int64_t slice_bytes) {
+  return ValuesPerSlice(slice_bytes,
+                        static_cast<std::int64_t>(sizeof(double)) * (IsWeighted(curve) ? 6 : 4));
+}
+
+absl::Status ForEachKeyedCurveSlice(const core::KeyedClip& keyed, std::int64_t slice_bytes,
+                                    const std::function<absl::Status(v1::KeyedCurve&&)>& emit) {
+  for (std::size_t c = 0; c < keyed.curves.size(); ++c) {
+    const core::Curve& curve = keyed.curves[c];
+    const std::int64_t per_slice = KeysPerSlice(curve, slice_bytes);
+    const auto total = static_cast<std::int64_t>(curve.keys.size());
+    std::int64_t first = 0;
+    do {
+      const std::int64_t n = std::min(per_slice, total - first);
+      TEMPOKEY_RETURN_IF_ERROR(emit(KeyedCurveSliceToProto(static_cast<int>(c), curve, first, n)));
+      first += n;
+    } while (first < total);
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<core::KeyedClip> KeyedClipFromProto(const v1::KeyedClip& keyed,
+                                                   const core::ClipLimits& limits) {
+  if (!keyed.has_header()) return Invalid("keyed clip has no header");
+  core::KeyedClip out;
+  absl::StatusOr<core::Clip> layout = ClipLayoutFromProto(keyed.header(), limits);
+  if (!layout.ok()) return core::Annotate(layout.status(), "keyed clip header");
+  out.layout = *std::move(layout);
+  const auto channel_count = static_cast<int>(out.layout.channels.size());
+  out.curves.resize(static_cast<std::size_t>(channel_count));
+  std::vector<bool> seen(static_cast<std::size_t>(channel_count), false);
+  std::int64_t total_keys = 0;
+  for (int m = 0; m < keyed.curves_size(); ++m) {
+    const v1::KeyedCurve& in = keyed.curves(m);
+    const int c = in.channel_index();
+    if (c < 0 || c >= channel_count) {
+      return Invalid(absl::StrCat("curve message ", m + 1, ": channel index ", c,
+                                  " out of range, the clip has ", channel_count, " channels"));
+    }
+    const std::string where =
+        absl::StrCat("curve message ", m + 1, ": ", core::ChannelLabel(out.layout, c));
+    const int n = in.time_seconds_size();
+    if (n == 0) return Invalid(absl::StrCat(where, ": carries no keys"));
+    if (in.value_size() != n || in.in_tangent_size() != n || in.out_tangent_size() != n) {
+      return Invalid(absl::StrCat(where, ": columns differ in length: time_seconds ", n,
+                                  ", value ", in.value_size(), ", in_tangent ",
+                                  in.in_tangent_size(), ", out_tangent ", in.out_tangent_size()));
+    }
+    if ((in.in_weight_size() != 0 && in.in_weight_size() != n) ||
+        (in.out_weight_size() != 0 && in.out_weight_size() != n)) {
+      return Invalid(absl::StrCat(where, ": weight columns must be empty or have one entry per key (",
+                                  n, "), got in_weight ", in.in_weight_size(), ", out_weight ",
+                                  in.out_weight_size()));
+    }
+    total_keys += n;
+    if (total_keys > limits.max_samples) {
+      return Invalid(absl::StrCat("keyed clip has more than ", limits.max_samples,
+                                  " keys, over the limit"));
+    }
+    std::vector<core::Key>& keys = out.curves[c].keys;
+    keys.reserve(keys.size() + static_cast<std::size_t>(n));
+    for (int i = 0; i < n; ++i) {
+      core::Key key;
+      key.time_seconds = in.time_seconds(i);
+      key.value = in.value(i);
+      key.in_tangent = in.in_tangent(i);
+      key.out_tangent = in.out_tangent(i);
+      if (in.in_weight_size() != 0) key.in_weight = in.in_weight(i);
+      if (in.out_weight_size() != 0) key.out_weight = in.out_weight(i);
+      keys.push_back(key);
+    }
+    seen[c] = true;
+  }
+  for (int c = 0; c < channel_count; ++c) {
+    if (!seen[c]) {
+      return Invalid(absl::StrCat(core::ChannelLabel(out.layout, c), ": no curve arrived"));
+    }
+  }
+  TEMPOKEY_RETURN_IF_ERROR(core::ValidateKeyedClip(out));
+  return out;
+}
+
+// ---- operations ----------------------------------------------------------------------------------
+
+absl::StatusOr<std::vector<core::PipelineStep>> PipelineFromProto(
+    const google::protobuf::RepeatedPtrField<v1::Operation>& operations) {
+  std::vector<core::PipelineStep> steps;
+  steps.reserve(static_cast<std::size_t>(operations.size()));
+  for (int i = 0; i < operations.size(); ++i) {
+    const v1::Operation& op = operations[i];
+    switch (op.kind_case()) {
+      case v1::Operation::kRetime: {
+        TEMPOKEY_ASSIGN_OR_RETURN(core::RetimeStep step, RetimeFromProto(i, op.retime()));
+        steps.emplace_back(std::move(step));
+        break;
+      }
+      case v1::Operation::kReduce: {
+        TEMPOKEY_ASSIGN_OR_RETURN(core::ReduceStep step, ReduceFromProto(i, op.reduce()));
+        steps.emplace_back(std::move(step));
+        break;
+      }
+      case v1::Operation::kBake: {
+        TEMPOKEY_ASSIGN_OR_RETURN(
+            std::optional<core::FrameRate> rate,
+            RateFromProto(i, "bake.rate_numerator", "bake.rate_denominator",
+                          op.bake().rate_numerator(), op.bake().rate_denominator()));
+        steps.emplace_back(core::BakeStep{.rate = rate});
+        break;
+      }
+      case v1::Operation::kConvert:
+        steps.emplace_back(core::ConvertStep{.wrap_rotations = op.convert().wrap_rotations()});
+        break;
+      case v1::Operation::KIND_NOT_SET:
+        return Invalid(absl::StrCat(OpPrefix(i),
+                                    "no operation set (one of retime, reduce, bake, convert)"));
+    }
+  }
+  return steps;
+}
+
+v1::Operation PipelineStepToProto(const core::PipelineStep& step) {
+  v1::Operation op;
+  std::visit(Overloaded{
+                 [&](const core::RetimeStep& s) { *op.mutable_retime() = RetimeToProto(s); },
+                 [&](const core::ReduceStep& s) { *op.mutable_reduce() = ReduceToProto(s); },
+                 [&](const core::BakeStep& s) {
+                   v1::BakeOperation* bake = op.mutable_bake();
+                   if (s.rate) {
+                     bake->set_rate_numerator(s.rate->numerator);
+                     bake->set_rate_denominator(s.rate->denominator);
+                   }
+                 },
+                 [&](const core::ConvertStep& s) {
+                   op.mutable_convert()->set_wrap_rotations(s.wrap_rotations);
+                 },
+             },
+             step);
+  return op;
+}
+
+v1::OperationReport StepReportToProto(const core::StepReport& report) {
+  v1::OperationReport out;
+  std::visit(Overloaded{
+                 [&](const core::RetimeReport& r) {
+                   v1::RetimeReport* o = out.mutable_retime();
+                   o->set_output_duration_seconds(r.output_duration_seconds);
+                   o->set_output_frame_count(r.output_frame_count);
+                   o->set_fit_factor(r.fit_factor);
+                   o->set_max_decimation_ratio(r.max_decimation_ratio);
+                   o->set_filtered_sample_count(r.filtered_sample_count);
+                 },
+                 [&](const core::ReductionReport& r) {
+                   v1::ReductionReport* o = out.mutable_reduction();
+                   o->mutable_channels()->Reserve(static_cast<int>(r.channels.size()));
+                   for (const core::ChannelReduction& ch : r.channels) {
+                     v1::ChannelReduction* c = o->add_channels();
+                     c->set_channel_index(ch.channel_index);
+                     c->set_key_count(ch.key_count);
+                     c->set_sample_count(ch.sample_count);
+                     c->set_rms_error(ch.rms_error);
+                     c->set_max_error(ch.max_error);
+                     c->set_max_error_frame(ch.max_error_frame);
+                   }
+                   o->set_key_count(r.key_count);
+                   o->set_sample_count(r.sample_count);
+                   o->set_rms_error(r.rms_error);
+                   o->set_max_error(r.max_error);
+                   o->set_worst_channel_index(r.worst_channel_index);
+                   o->set_worst_frame(r.worst_frame);
+                   o->set_iterations(r.iterations);
+                 },
+             },
+             report);
+  return out;
+}
+
+core::StepReport StepReportFromProto(const v1::OperationReport& report) {
+  if (report.has_reduction()) {
+    const v1::ReductionReport& r = report.reduction();
+    core::ReductionReport out;
+    out.channels.reserve(static_cast<std::size_t>(r.channels_size()));
+    for (const v1::ChannelReduction& c : r.channels()) {
+      out.channels.push_back(core::ChannelReduction{.channel_index = c.channel_index(),
+                                                    .key_count = c.key_count(),
+                                                    .sample_count = c.sample_count(),
+                                                    .rms_error = c.rms_error(),
+                                                    .max_error = c.max_error(),
+                                                    .max_error_frame = c.max_error_frame()});
+    }
+    out.key_count = r.key_count();
+    out.sample_count = r.sample_count();
+    out.rms_error = r.rms_error();
+    out.max_error = r.max_error();
+    out.worst_channel_index = r.worst_channel_index();
+    out.worst_frame = r.worst_frame();
+    out.iterations = r.iterations();
+    return out;
+  }
+  const v1::RetimeReport& r = report.retime();
+  return core::RetimeReport{.output_duration_seconds = r.output_duration_seconds(),
+                            .output_frame_count = r.output_frame_count(),
+                            .fit_factor = r.fit_factor(),
+                            .max_decimation_ratio = r.max_decimation_ratio(),
+                            .filtered_sample_count = r.filtered_sample_count()};
+}
+
+}  // namespace tempokey::wire

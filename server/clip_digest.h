@@ -1,0 +1,51 @@
+// Content ids of clips: "sha256:<64 hex>" over a canonical serialization of the layout and the
+// samples, so the same clip gets the same id however it was sliced for upload.
+//
+// Canonical form: the tag "tempokey.clip.v1", then the name, frame time (IEEE bits), frame
+// count, joints (name, parent, offset, end sites), channels (joint, kind, name) and markers,
+// every string length-prefixed and every number little-endian 8 bytes; then the samples of
+// channel 0, 1, ... each frame 0..N-1 as little-endian IEEE doubles.
+#ifndef TEMPOKEY_SERVER_CLIP_DIGEST_H_
+#define TEMPOKEY_SERVER_CLIP_DIGEST_H_
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+
+#include "tempokey/core/clip.h"
+
+namespace tempokey::server {
+
+// The content id of a whole clip.
+std::string ClipContentId(const core::Clip& clip);
+
+// Digests a clip while it is being assembled: samples that continue the canonical order are
+// hashed as they arrive (uploads sent channel by channel in frame order cost nothing extra at
+// the end); whatever arrived out of order is hashed from the finished clip by Finish().
+// Not thread-safe: one per upload.
+class IncrementalClipDigest {
+ public:
+  // Hashes the canonical header of `layout` (samples are not read).
+  explicit IncrementalClipDigest(const core::Clip& layout);
+  ~IncrementalClipDigest();
+  IncrementalClipDigest(const IncrementalClipDigest&) = delete;
+  IncrementalClipDigest& operator=(const IncrementalClipDigest&) = delete;
+
+  // Offers samples of `channel` starting at `first_frame`, already accepted by the assembler.
+  void Offer(int channel, std::int64_t first_frame, std::span<const double> samples);
+  // Hashes the rest from `clip` (the assembled clip with the same layout) and returns the id.
+  std::string Finish(const core::Clip& clip);
+
+ private:
+  struct Hasher;
+  std::unique_ptr<Hasher> hasher_;
+  std::int64_t frame_count_ = 0;
+  int channel_count_ = 0;
+  int next_channel_ = 0;          // canonical position reached so far
+  std::int64_t next_frame_ = 0;
+};
+
+}  // namespace tempokey::server
+
+#endif  // TEMPOKEY_SERVER_CLIP_DIGEST_H_

@@ -1,0 +1,145 @@
+// tempokey-server: serves tempokey.v1.MotionService until SIGTERM or SIGINT, then drains.
+//
+// Prints "tempokey-server listening on <host>:<port>" on stdout once serving, and with
+// --port_file writes the port there atomically, so scripts can wait for either. Exit codes: 0
+// after a clean drain, 1 when the server cannot start, 2 for bad flags.
+#include <pthread.h>
+#include <signal.h>
+
+#include <chrono>
+#include <cstdio>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "absl/flags/flag.h"
+#include "absl/flags/parse.h"
+#include "absl/flags/usage.h"
+#include "absl/strings/str_cat.h"
+#include "server/server.h"
+#include "spdlog/sinks/stdout_sinks.h"
+#include "spdlog/spdlog.h"
+#include "tempokey/core/file_io.h"
+#include "tempokey/core/status.h"
+
+ABSL_FLAG(std::string, address, "127.0.0.1:50051",
+          "Address to listen on; port 0 picks a free port (see --port_file).");
+ABSL_FLAG(std::string, port_file, "", "Write the bound port to this file once serving.");
+ABSL_FLAG(int, workers, 0,
+          "Worker threads running pipelines; 0: the CPUs this process may use (affinity and "
+          "cgroup quota).");
+ABSL_FLAG(int, queue_capacity, 64, "Jobs waiting for a worker before submits are refused.");
+ABSL_FLAG(int64_t, max_message_bytes, int64_t{64} << 20, "Largest message received, in bytes.");
+ABSL_FLAG(int64_t, max_clip_samples, int64_t{32} << 20,
+          "Largest clip accepted, in samples (frames x channels).");
+ABSL_FLAG(int64_t, max_stored_clips, 256, "Uploaded clips kept (least recently used evicted).");
+ABSL_FLAG(int64_t, max_stored_clip_bytes, int64_t{2} << 30, "Bytes of uploaded clips kept.");
+ABSL_FLAG(int64_t, max_stored_results, 1000, "Finished jobs kept with their results.");
+ABSL_FLAG(int64_t, max_stored_result_bytes, int64_t{2} << 30, "Bytes of job results kept.");
+ABSL_FLAG(int64_t, job_ttl_seconds, 3600, "Finished jobs are deleted this long after they end.");
+ABSL_FLAG(int64_t, drain_grace_seconds, 25,
+          "On SIGTERM, how long queued and running jobs get to finish.");
+ABSL_FLAG(int, max_concurrent_streams, 1024, "Streaming calls open at once.");
+ABSL_FLAG(int64_t, max_connection_age_seconds, 0,
+          "Close connections after this long so clients rebalance; 0: never.");
+ABSL_FLAG(std::string, metrics_address, "",
+          "Serve Prometheus metrics on this address (e.g. 127.0.0.1:9464); empty: off.");
+ABSL_FLAG(std::string, tls_cert, "", "PEM certificate chain; with --tls_key enables TLS.");
+ABSL_FLAG(std::string, tls_key, "", "PEM private key of --tls_cert.");
+ABSL_FLAG(std::string, tls_client_ca, "",
+          "PEM CA bundle; requires and verifies client certificates (mutual TLS).");
+ABSL_FLAG(std::string, auth_token_file, "",
+          "File of accepted bearer tokens, one per line; calls need "
+          "'authorization: Bearer <token>'.");
+ABSL_FLAG(bool, allow_insecure_remote, false,
+          "Allow a non-loopback --address without TLS.");
+ABSL_FLAG(std::string, log_level, "info", "trace, debug, info, warn, error or off.");
+
+namespace {
+
+using tempokey::server::ServerOptions;
+
+int Run(int argc, char** argv) {
+  // Block the stop signals in every thread (threads inherit the mask), then wait for them on
+  // this one with sigwait(): nothing runs in signal-handler context.
+  sigset_t stop_signals;
+  sigemptyset(&stop_signals);
+  sigaddset(&stop_signals, SIGTERM);
+  sigaddset(&stop_signals, SIGINT);
+  pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
+
+  absl::SetProgramUsageMessage("tempokey-server [--address host:port] [flags]");
+  std::vector<char*> positional = absl::ParseCommandLine(argc, argv);
+  spdlog::set_default_logger(spdlog::stderr_logger_mt("tempokey"));
+  spdlog::set_level(spdlog::level::from_str(absl::GetFlag(FLAGS_log_level)));
+  if (positional.size() > 1) {
+    spdlog::error("unexpected argument \"{}\" (flags only; see --help)", positional[1]);
+    return 2;
+  }
+
+  ServerOptions options;
+  options.address = absl::GetFlag(FLAGS_address);
+  options.workers = absl::GetFlag(FLAGS_workers);
+  options.queue_capacity = absl::GetFlag(FLAGS_queue_capacity);
+  options.max_message_bytes = absl::GetFlag(FLAGS_max_message_bytes);
+  options.max_clip_samples = absl::GetFlag(FLAGS_max_clip_samples);
+  options.max_stored_clips = absl::GetFlag(FLAGS_max_stored_clips);
+  options.max_stored_clip_bytes = absl::GetFlag(FLAGS_max_stored_clip_bytes);
+  options.max_stored_results = absl::GetFlag(FLAGS_max_stored_results);
+  options.max_stored_result_bytes = absl::GetFlag(FLAGS_max_stored_result_bytes);
+  options.job_ttl = std::chrono::seconds(absl::GetFlag(FLAGS_job_ttl_seconds));
+  options.drain_grace = std::chrono::seconds(absl::GetFlag(FLAGS_drain_grace_seconds));
+  options.max_concurrent_streams = absl::GetFlag(FLAGS_max_concurrent_streams);
+  options.max_connection_age = std::chrono::seconds(absl::GetFlag(FLAGS_max_connection_age_seconds));
+  options.metrics_address = absl::GetFlag(FLAGS_metrics_address);
+  options.tls_cert_file = absl::GetFlag(FLAGS_tls_cert);
+  options.tls_key_file = absl::GetFlag(FLAGS_tls_key);
+  options.tls_client_ca_file = absl::GetFlag(FLAGS_tls_client_ca);
+  options.allow_insecure_remote = absl::GetFlag(FLAGS_allow_insecure_remote);
+  if (const std::string token_file = absl::GetFlag(FLAGS_auth_token_file); !token_file.empty()) {
+    absl::StatusOr<std::vector<std::string>> tokens = tempokey::server::ReadTokenFile(token_file);
+    if (!tokens.ok()) {
+      spdlog::error("--auth_token_file: {}", tempokey::core::AsStd(tokens.status().message()));
+      return 2;
+    }
+    options.auth_tokens = *std::move(tokens);
+  }
+  if (absl::Status valid = tempokey::server::ValidateServerOptions(options); !valid.ok()) {
+    spdlog::error("{}", tempokey::core::AsStd(valid.message()));
+    return 2;
+  }
+
+  absl::StatusOr<std::unique_ptr<tempokey::server::Server>> server =
+      tempokey::server::Server::Start(options);
+  if (!server.ok()) {
+    spdlog::error("cannot start: {}", tempokey::core::AsStd(server.status().message()));
+    return 1;
+  }
+  const int port = (*server)->port();
+  std::string host = options.address.substr(0, options.address.rfind(':'));
+  auto announce = spdlog::stdout_logger_mt("announce");
+  announce->set_pattern("%v");
+  announce->info("tempokey-server listening on {}:{}", host, port);
+  announce->flush();
+  spdlog::info("listening on {}:{}", host, port);
+  if (const std::string port_file = absl::GetFlag(FLAGS_port_file); !port_file.empty()) {
+    if (absl::Status written = tempokey::core::WriteFileAtomically(port_file, absl::StrCat(port, "\n"));
+        !written.ok()) {
+      spdlog::error("--port_file: {}", tempokey::core::AsStd(written.message()));
+      (*server)->Drain();
+      return 1;
+    }
+  }
+
+  int signal_number = 0;
+  sigwait(&stop_signals, &signal_number);
+  spdlog::info("received {}, draining", signal_number == SIGTERM ? "SIGTERM" : "SIGINT");
+  (*server)->Drain();
+  server->reset();
+  spdlog::info("exiting");
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) { return Run(argc, argv); }

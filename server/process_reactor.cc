@@ -1,0 +1,279 @@
+// Process: clip header, sample slices and ProcessStart in; Progress and ResultPart out. The
+// pipeline runs on the JobPool like a job, but nothing is stored: the call owns its clip and
+// result, and ending the call (or the client cancelling) stops the pipeline between channels.
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "proto/convert.h"
+#include "server/job_proto.h"
+#include "server/reactors.h"
+#include "server/status_util.h"
+#include "spdlog/spdlog.h"
+#include "tempokey/core/status.h"
+
+namespace tempokey::server {
+namespace {
+
+using ProcessReactorBase = grpc::ServerBidiReactor<v1::ProcessRequest, v1::ProcessResponse>;
+
+// State shared by the reactor (gRPC threads) and the worker running the pipeline; outlives the
+// reactor while the worker holds it.
+class ProcessLink final {
+ public:
+  ProcessLink(ServiceContext* service, ProcessReactorBase* reactor,
+              grpc::CallbackServerContext* call)
+      : service_(service), reactor_(reactor), call_(call) {}
+
+  // Sets what the worker runs; before the task is queued.
+  void Prepare(core::Clip clip, std::vector<core::PipelineStep> steps, std::int64_t slice_bytes) {
+    clip_ = std::move(clip);
+    steps_ = std::move(steps);
+    slice_bytes_ = slice_bytes;
+    description_ = absl::StrCat("frames=", clip_.frame_count, " channels=", clip_.channels.size(),
+                                " operations=", DescribeSteps(steps_));
+    queued_at_ = std::chrono::steady_clock::now();
+  }
+
+  // On a worker.
+  void Run(std::stop_token pool_stop) {
+    {
+      std::lock_guard lock(mu_);
+      if (finished_) return;  // the client left while the call was queued
+    }
+    const auto started = std::chrono::steady_clock::now();
+    if (service_->options.test_hooks.on_job_start) service_->options.test_hooks.on_job_start("");
+    std::stop_callback forward(pool_stop, [this] { stop_.request_stop(); });
+    absl::StatusOr<core::PipelineResult> result = core::RunPipeline(
+        std::move(clip_), steps_,
+        [this](double fraction, std::string_view stage) { OnProgress(fraction, stage); },
+        stop_.get_token());
+    const auto ended = std::chrono::steady_clock::now();
+    const std::string outcome = result.ok()                                             ? "succeeded"
+                                : result.status().code() == absl::StatusCode::kCancelled ? "cancelled"
+                                                                                         : "failed";
+    const double queue_ms =
+        std::chrono::duration<double, std::milli>(started - queued_at_).count();
+    const double run_ms = std::chrono::duration<double, std::milli>(ended - started).count();
+    spdlog::info("process {} queue_wait_ms={:.1f} run_ms={:.1f} outcome={}{}", description_,
+                 queue_ms, run_ms, outcome,
+                 result.ok() ? "" : absl::StrCat(" error=\"", result.status().message(), "\""));
+    if (service_->metrics != nullptr) {
+      service_->metrics->RecordFinished("process", outcome, (queue_ms + run_ms) / 1000.0);
+    }
+    OnResult(std::move(result));
+  }
+
+  void OnWriteDone(bool ok) {
+    std::lock_guard lock(mu_);
+    writing_ = false;
+    if (finished_) return;
+    if (!ok) {
+      stop_.request_stop();
+      FinishLocked(absl::CancelledError("the Process stream broke"));
+    } else if (end_status_) {
+      FinishLocked(*end_status_);
+    } else {
+      WriteNextLocked();
+    }
+  }
+
+  void OnCancel() {
+    stop_.request_stop();
+    std::lock_guard lock(mu_);
+    if (!finished_ && !writing_) FinishLocked(absl::CancelledError("the Process call was cancelled"));
+  }
+
+  void FinishNow(const absl::Status& status) {
+    std::lock_guard lock(mu_);
+    if (finished_) return;
+    if (writing_) {
+      end_status_ = status;
+    } else {
+      FinishLocked(status);
+    }
+  }
+
+ private:
+  void OnProgress(double fraction, std::string_view stage) {
+    std::lock_guard lock(mu_);
+    if (finished_ || result_ready_) return;
+    // Latest wins: a new message per stage or per percent, never a backlog.
+    if (stage == last_stage_ && std::abs(fraction - last_fraction_) < 0.01) return;
+    last_stage_ = std::string(stage);
+    last_fraction_ = fraction;
+    v1::Progress progress;
+    progress.set_progress(fraction);
+    progress.set_stage(last_stage_);
+    pending_progress_ = std::move(progress);
+    if (!writing_) WriteNextLocked();
+  }
+
+  void OnResult(absl::StatusOr<core::PipelineResult> result) {
+    std::lock_guard lock(mu_);
+    if (finished_) return;
+    result_ready_ = true;
+    pending_progress_.reset();
+    if (!result.ok()) {
+      end_status_ = result.status();
+    } else {
+      slicer_.emplace(std::make_shared<const core::PipelineResult>(*std::move(result)),
+                      slice_bytes_);
+    }
+    if (writing_) return;
+    if (end_status_) {
+      FinishLocked(*end_status_);
+    } else {
+      WriteNextLocked();
+    }
+  }
+
+  void WriteNextLocked() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
+    message_.Clear();
+    if (pending_progress_) {
+      *message_.mutable_progress() = *std::move(pending_progress_);
+      pending_progress_.reset();
+    } else if (slicer_) {
+      if (!slicer_->Next(message_.mutable_result())) {
+        FinishLocked(absl::OkStatus());
+        return;
+      }
+    } else {
+      return;  // nothing to say yet
+    }
+    writing_ = true;
+    service_->BytesOut(static_cast<std::int64_t>(message_.ByteSizeLong()));
+    reactor_->StartWrite(&message_);
+  }
+
+  void FinishLocked(const absl::Status& status) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
+    finished_ = true;
+    slicer_.reset();
+    reactor_->Finish(ToGrpcStatus(status, call_));
+    reactor_ = nullptr;
+  }
+
+  ServiceContext* const service_;
+  // Worker-side inputs: written by Prepare() before the task is queued, read by Run().
+  core::Clip clip_;
+  std::vector<core::PipelineStep> steps_;
+  std::int64_t slice_bytes_ = 0;
+  std::string description_;
+  std::chrono::steady_clock::time_point queued_at_;
+  std::stop_source stop_;  // thread-safe by itself
+
+  std::mutex mu_;
+  ProcessReactorBase* reactor_ ABSL_GUARDED_BY(mu_);  // valid until finished_
+  grpc::CallbackServerContext* const call_;
+  bool finished_ ABSL_GUARDED_BY(mu_) = false;
+  bool writing_ ABSL_GUARDED_BY(mu_) = false;
+  bool result_ready_ ABSL_GUARDED_BY(mu_) = false;
+  std::string last_stage_ ABSL_GUARDED_BY(mu_);
+  double last_fraction_ ABSL_GUARDED_BY(mu_) = -1.0;
+  std::optional<v1::Progress> pending_progress_ ABSL_GUARDED_BY(mu_);
+  std::optional<ResultSlicer> slicer_ ABSL_GUARDED_BY(mu_);
+  std::optional<absl::Status> end_status_ ABSL_GUARDED_BY(mu_);
+  v1::ProcessResponse message_ ABSL_GUARDED_BY(mu_);  // the write in flight
+};
+
+class ProcessReactor final : public ProcessReactorBase {
+ public:
+  ProcessReactor(ServiceContext* service, grpc::CallbackServerContext* call)
+      : service_(service),
+        link_(std::make_shared<ProcessLink>(service, this, call)),
+        assembler_(service->clip_limits) {
+    absl::Status admitted = service_->CheckAuth(*call);
+    if (admitted.ok()) admitted = service_->AdmitStream();
+    if (!admitted.ok()) {
+      link_->FinishNow(admitted);
+      return;
+    }
+    holds_stream_ = true;
+    StartRead(&request_);
+  }
+
+  void OnReadDone(bool ok) override {
+    if (!ok) {
+      link_->FinishNow(absl::InvalidArgumentError(
+          "the Process stream ended before ProcessStart (send header, samples, then start)"));
+      return;
+    }
+    ++messages_;
+    service_->BytesIn(static_cast<std::int64_t>(request_.ByteSizeLong()));
+    absl::Status status = Accept();
+    if (!status.ok()) {
+      link_->FinishNow(status);
+      return;
+    }
+    if (!started_) StartRead(&request_);
+  }
+
+  void OnWriteDone(bool ok) override { link_->OnWriteDone(ok); }
+  void OnCancel() override { link_->OnCancel(); }
+  void OnDone() override {
+    if (holds_stream_) service_->CloseStream();
+    delete this;
+  }
+
+ private:
+  absl::Status Accept() {
+    switch (request_.part_case()) {
+      case v1::ProcessRequest::kHeader:
+        return assembler_.AddHeader(request_.header());
+      case v1::ProcessRequest::kSamples:
+        return assembler_.AddSamples(request_.samples());
+      case v1::ProcessRequest::kStart:
+        return Start(request_.start());
+      case v1::ProcessRequest::PART_NOT_SET:
+        break;
+    }
+    return absl::InvalidArgumentError(
+        absl::StrCat("Process message ", messages_, " has no header, samples or start"));
+  }
+
+  absl::Status Start(const v1::ProcessStart& start) {
+    if (start.slice_bytes() < 0) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("start.slice_bytes must be >= 0 (0: 1 MiB), got ", start.slice_bytes()));
+    }
+    if (!assembler_.has_header()) {
+      return absl::InvalidArgumentError("ProcessStart arrived before the clip header");
+    }
+    TEMPOKEY_ASSIGN_OR_RETURN(core::Clip clip, std::move(assembler_).Finish());
+    TEMPOKEY_ASSIGN_OR_RETURN(std::vector<core::PipelineStep> steps,
+                              PrepareSteps(start.operations(), clip));
+    link_->Prepare(std::move(clip), std::move(steps), start.slice_bytes());
+    absl::Status queued = service_->pool->TrySubmit(
+        [link = link_](std::stop_token pool_stop) { link->Run(std::move(pool_stop)); });
+    if (!queued.ok()) {
+      if (queued.code() == absl::StatusCode::kResourceExhausted && service_->metrics != nullptr) {
+        service_->metrics->RecordRejected("process");
+      }
+      return queued;
+    }
+    started_ = true;
+    return absl::OkStatus();
+  }
+
+  ServiceContext* const service_;
+  const std::shared_ptr<ProcessLink> link_;
+  bool holds_stream_ = false;
+  bool started_ = false;
+  std::int64_t messages_ = 0;
+  v1::ProcessRequest request_;
+  wire::ClipAssembler assembler_;
+};
+
+}  // namespace
+
+grpc::ServerBidiReactor<v1::ProcessRequest, v1::ProcessResponse>* NewProcessReactor(
+    ServiceContext* service, grpc::CallbackServerContext* call) {
+  return new ProcessReactor(service, call);
+}
+
+}  // namespace tempokey::server

@@ -1,0 +1,40 @@
+// The streaming calls of MotionService, one reactor class per method (each in its own file).
+// Internal to the server library.
+#ifndef TEMPOKEY_SERVER_REACTORS_H_
+#define TEMPOKEY_SERVER_REACTORS_H_
+
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "grpcpp/support/server_callback.h"
+#include "server/service_context.h"
+#include "tempokey/core/pipeline.h"
+#include "tempokey/v1/motion_service.pb.h"
+
+namespace tempokey::server {
+
+namespace v1 = ::tempokey::v1;
+
+grpc::ServerReadReactor<v1::UploadClipRequest>* NewUploadReactor(
+    ServiceContext* service, grpc::CallbackServerContext* call, v1::UploadClipResponse* response);
+grpc::ServerWriteReactor<v1::Job>* NewWatchReactor(ServiceContext* service,
+                                                   grpc::CallbackServerContext* call,
+                                                   const v1::WatchJobRequest* request);
+grpc::ServerWriteReactor<v1::ResultPart>* NewResultReactor(ServiceContext* service,
+                                                           grpc::CallbackServerContext* call,
+                                                           const v1::GetJobResultRequest* request);
+grpc::ServerBidiReactor<v1::ProcessRequest, v1::ProcessResponse>* NewProcessReactor(
+    ServiceContext* service, grpc::CallbackServerContext* call);
+
+// Operations off the wire, checked against `clip` (wire::PipelineFromProto() then
+// core::ValidatePipeline()), before anything is queued.
+// Errors: kInvalidArgument; kUnimplemented for operations core does not implement yet.
+absl::StatusOr<std::vector<core::PipelineStep>> PrepareSteps(
+    const google::protobuf::RepeatedPtrField<v1::Operation>& operations, const core::Clip& clip);
+
+// "retime+reduce" for log lines.
+std::string DescribeSteps(const std::vector<core::PipelineStep>& steps);
+
+}  // namespace tempokey::server
+
+#endif  // TEMPOKEY_SERVER_REACTORS_H_

@@ -1,0 +1,30 @@
+#include "server/retry_hint.h"
+
+#include <cstdint>
+#include <string>
+
+#include "absl/strings/cord.h"
+#include "absl/types/optional.h"
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+
+namespace tempokey::server {
+namespace {
+
+constexpr char kRetryAfterPayload[] = "tempokey/retry-after-ms";
+
+}  // namespace
+
+void SetRetryAfter(absl::Status& status, std::chrono::milliseconds delay) {
+  status.SetPayload(kRetryAfterPayload, absl::Cord(absl::StrCat(delay.count())));
+}
+
+std::optional<std::chrono::milliseconds> GetRetryAfter(const absl::Status& status) {
+  absl::optional<absl::Cord> payload = status.GetPayload(kRetryAfterPayload);
+  if (!payload) return std::nullopt;
+  std::int64_t ms = 0;
+  if (!absl::SimpleAtoi(std::string(*payload), &ms)) return std::nullopt;
+  return std::chrono::milliseconds(ms);
+}
+
+}  // namespace tempokey::server

@@ -1,0 +1,252 @@
+#include "server/server.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "grpcpp/ext/proto_server_reflection_plugin.h"
+#include "grpcpp/health_check_service_interface.h"
+#include "grpcpp/security/server_credentials.h"
+#include "grpcpp/server.h"
+#include "grpcpp/server_builder.h"
+#include "server/clip_store.h"
+#include "server/job_manager.h"
+#include "server/job_pool.h"
+#include "server/metrics.h"
+#include "server/motion_service.h"
+#include "server/reactors.h"
+#include "server/service_context.h"
+#include "spdlog/spdlog.h"
+#include "tempokey/core/file_io.h"
+#include "tempokey/core/status.h"
+
+namespace tempokey::server {
+namespace {
+
+// Calls still open when the gRPC server shuts down get this long before they are cancelled.
+constexpr std::chrono::seconds kShutdownCallDeadline{2};
+// After the grace period, cancelled jobs get this long to notice (they check between channels).
+constexpr std::chrono::seconds kCancelSettleTime{10};
+
+absl::StatusOr<std::string> ReadPem(std::string_view flag, const std::string& path) {
+  absl::StatusOr<std::string> pem = core::ReadFile(path, 1 << 20);
+  if (!pem.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat("--", core::AsAbsl(flag), " ", path, ": ",
+                                                   pem.status().message()));
+  }
+  return pem;
+}
+
+absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> BuildCredentials(const ServerOptions& o) {
+  if (o.tls_cert_file.empty()) return grpc::InsecureServerCredentials();
+  grpc::SslServerCredentialsOptions ssl(o.tls_client_ca_file.empty()
+                                            ? GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE
+                                            : GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY);
+  grpc::SslServerCredentialsOptions::PemKeyCertPair pair;
+  TEMPOKEY_ASSIGN_OR_RETURN(pair.cert_chain, ReadPem("tls_cert", o.tls_cert_file));
+  TEMPOKEY_ASSIGN_OR_RETURN(pair.private_key, ReadPem("tls_key", o.tls_key_file));
+  ssl.pem_key_cert_pairs.push_back(std::move(pair));
+  if (!o.tls_client_ca_file.empty()) {
+    TEMPOKEY_ASSIGN_OR_RETURN(ssl.pem_root_certs, ReadPem("tls_client_ca", o.tls_client_ca_file));
+  }
+  return grpc::SslServerCredentials(ssl);
+}
+
+std::string_view Outcome(JobState state) {
+  switch (state) {
+    case JobState::kSucceeded:
+      return "succeeded";
+    case JobState::kCancelled:
+      return "cancelled";
+    default:
+      return "failed";
+  }
+}
+
+// A 32-frame clip with a position and two rotation channels, for ProbeOperations().
+core::Clip ProbeClip() {
+  core::Clip clip;
+  clip.name = "probe";
+  clip.frame_time_seconds = 1.0 / 30.0;
+  clip.frame_count = 32;
+  core::Joint root;
+  root.name = "root";
+  root.channels = {0, 1, 2};
+  clip.skeleton.joints.push_back(root);
+  const core::ChannelKind kinds[] = {core::ChannelKind::kXPosition, core::ChannelKind::kZRotation,
+                                     core::ChannelKind::kXRotation};
+  for (core::ChannelKind kind : kinds) {
+    core::Channel channel;
+    channel.joint = 0;
+    channel.kind = kind;
+    for (std::int64_t f = 0; f < clip.frame_count; ++f) {
+      channel.samples.push_back(10.0 * std::sin(0.2 * static_cast<double>(f)) +
+                                static_cast<double>(f));
+    }
+    clip.channels.push_back(std::move(channel));
+  }
+  return clip;
+}
+
+}  // namespace
+
+std::vector<std::string> ProbeOperations() {
+  const core::Clip clip = ProbeClip();
+  auto offered = [&](std::vector<core::PipelineStep> steps) {
+    absl::StatusOr<core::PipelineResult> result = core::RunPipeline(clip, steps);
+    return result.ok() || result.status().code() != absl::StatusCode::kUnimplemented;
+  };
+  std::vector<std::string> operations;
+  if (offered({core::ConvertStep{.wrap_rotations = true}})) operations.push_back("convert");
+  core::RetimeStep retime;
+  if (offered({retime})) operations.push_back("retime");
+  retime.options.method = core::RetimeMethod::kPaper;
+  if (offered({retime})) operations.push_back("retime/paper");
+  core::ReduceStep tolerance;
+  const bool has_tolerance = offered({tolerance});
+  if (has_tolerance) {
+    operations.push_back("reduce");
+    operations.push_back("reduce/tolerance");
+  }
+  core::ReduceStep paper;
+  paper.options.method = core::ReduceMethod::kPaper;
+  const bool has_paper = offered({paper});
+  if (has_paper) operations.push_back("reduce/paper");
+  // Bake needs a keyed clip, which only a reduce step makes.
+  if ((has_tolerance || has_paper) &&
+      offered({has_tolerance ? tolerance : paper, core::BakeStep{}})) {
+    operations.push_back("bake");
+  }
+  return operations;
+}
+
+absl::StatusOr<std::unique_ptr<Server>> Server::Start(ServerOptions options) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateServerOptions(options));
+  std::unique_ptr<Server> server(new Server());
+  const int workers = options.workers > 0 ? options.workers : DefaultWorkerCount();
+  server->pool_ = std::make_unique<JobPool>(workers, options.queue_capacity);
+  server->clips_ = std::make_unique<ClipStore>(options.max_stored_clips,
+                                               options.max_stored_clip_bytes);
+  server->context_ = std::make_unique<ServiceContext>();
+  ServiceContext* context = server->context_.get();
+  context->options = options;
+  context->clip_limits.max_samples = options.max_clip_samples;
+  context->clip_limits.max_frames = std::min(context->clip_limits.max_frames, options.max_clip_samples);
+  context->clip_limits.max_channels =
+      std::min(context->clip_limits.max_channels, options.max_clip_samples);
+
+  JobManagerOptions job_options;
+  job_options.max_stored_results = options.max_stored_results;
+  job_options.max_stored_result_bytes = options.max_stored_result_bytes;
+  job_options.job_ttl = options.job_ttl;
+  job_options.on_job_start = options.test_hooks.on_job_start;
+  job_options.on_job_end = [context](const JobSnapshot& job, std::chrono::duration<double> wait,
+                                     std::chrono::duration<double> run) {
+    const std::string error =
+        job.error.ok() ? "" : absl::StrCat(" error=\"", job.error.message(), "\"");
+    spdlog::info("job id={} clip={} operations={} queue_wait_ms={:.1f} run_ms={:.1f} outcome={}{}",
+                 job.job_id, job.spec->clip_id, DescribeSteps(job.spec->steps),
+                 wait.count() * 1000.0, run.count() * 1000.0, Outcome(job.state), error);
+    if (context->metrics != nullptr) {
+      context->metrics->RecordFinished("job", Outcome(job.state), (wait + run).count());
+    }
+  };
+  server->jobs_ = std::make_unique<JobManager>(server->pool_.get(), std::move(job_options));
+  context->pool = server->pool_.get();
+  context->jobs = server->jobs_.get();
+  context->clips = server->clips_.get();
+  context->operations = ProbeOperations();
+
+  if (!options.metrics_address.empty()) {
+    JobPool* pool = server->pool_.get();
+    JobManager* jobs = server->jobs_.get();
+    ClipStore* clips = server->clips_.get();
+    TEMPOKEY_ASSIGN_OR_RETURN(
+        server->metrics_,
+        Metrics::Start(options.metrics_address,
+                       MetricsGaugeSources{.queue_depth = [pool] { return pool->queue_depth(); },
+                                           .running = [pool] { return pool->running(); },
+                                           .stored_jobs = [jobs] { return jobs->job_count(); },
+                                           .stored_clips = [clips] { return clips->size(); }}));
+    context->metrics = server->metrics_.get();
+  }
+
+  server->service_ = std::make_unique<MotionService>(context);
+  TEMPOKEY_ASSIGN_OR_RETURN(std::shared_ptr<grpc::ServerCredentials> credentials,
+                            BuildCredentials(options));
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort(options.address, credentials, &server->port_);
+  builder.SetMaxReceiveMessageSize(static_cast<int>(options.max_message_bytes));
+  builder.RegisterService(server->service_.get());
+  if (options.max_connection_age.count() > 0) {
+    builder.AddChannelArgument(GRPC_ARG_MAX_CONNECTION_AGE_MS,
+                               static_cast<int>(options.max_connection_age.count() * 1000));
+    builder.AddChannelArgument(GRPC_ARG_MAX_CONNECTION_AGE_GRACE_MS,
+                               static_cast<int>(options.drain_grace.count() * 1000));
+  }
+  server->grpc_server_ = builder.BuildAndStart();
+  if (server->grpc_server_ == nullptr || server->port_ == 0) {
+    return absl::UnavailableError(
+        absl::StrCat("cannot listen on ", options.address, " (address in use or invalid?)"));
+  }
+  grpc::HealthCheckServiceInterface* health = server->grpc_server_->GetHealthCheckService();
+  health->SetServingStatus("", true);
+  health->SetServingStatus(kMotionServiceName, true);
+  spdlog::info("serving on port {} workers={} queue_capacity={} tls={} mtls={} auth_tokens={} "
+               "operations={}",
+               server->port_, workers, options.queue_capacity, !options.tls_cert_file.empty(),
+               !options.tls_client_ca_file.empty(), options.auth_tokens.size(),
+               absl::StrJoin(context->operations, ","));
+  return server;
+}
+
+Server::~Server() {
+  Drain();
+  grpc_server_.reset();  // before the service and context its calls use
+}
+
+int Server::metrics_port() const { return metrics_ == nullptr ? 0 : metrics_->port(); }
+
+std::string Server::target() const { return absl::StrCat("127.0.0.1:", port_); }
+
+const ServerOptions& Server::options() const { return context_->options; }
+
+const std::vector<std::string>& Server::operations() const { return context_->operations; }
+
+std::shared_ptr<grpc::Channel> Server::InProcessChannel(const grpc::ChannelArguments& args) {
+  return grpc_server_->InProcessChannel(args);
+}
+
+void Server::Drain() {
+  std::call_once(drain_once_, [this] {
+    if (grpc_server_ == nullptr) {  // Start() failed half way
+      if (pool_ != nullptr) pool_->Shutdown();
+      return;
+    }
+    const auto grace = context_->options.drain_grace;
+    spdlog::info("draining: not ready, refusing new work, closing watches; {} queued and {} "
+                 "running get {} s to finish",
+                 pool_->queue_depth(), pool_->running(), grace.count());
+    grpc_server_->GetHealthCheckService()->SetServingStatus(kMotionServiceName, false);
+    context_->draining.store(true);
+    jobs_->BeginDrain();
+    if (!pool_->WaitIdle(std::chrono::steady_clock::now() + grace)) {
+      spdlog::warn("drain grace period over: cancelling {} queued and {} running",
+                   pool_->queue_depth(), pool_->running());
+      jobs_->CancelAll();
+      pool_->RequestStopAll();
+      pool_->WaitIdle(std::chrono::steady_clock::now() + kCancelSettleTime);
+    }
+    grpc_server_->Shutdown(std::chrono::system_clock::now() + kShutdownCallDeadline);
+    grpc_server_->Wait();
+    pool_->Shutdown();
+    spdlog::info("drained");
+  });
+}
+
+}  // namespace tempokey::server

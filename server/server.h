@@ -1,0 +1,87 @@
+// A running tempokey server: gRPC MotionService (callback API), health, reflection, the worker
+// pool, jobs, clip store and metrics. main.cc and the tests start it the same way.
+#ifndef TEMPOKEY_SERVER_SERVER_H_
+#define TEMPOKEY_SERVER_SERVER_H_
+
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "grpcpp/channel.h"
+#include "grpcpp/support/channel_arguments.h"
+#include "server/server_options.h"
+
+namespace grpc {
+class Server;
+}  // namespace grpc
+
+namespace tempokey::server {
+
+class ClipStore;
+class JobManager;
+class JobPool;
+class Metrics;
+class MotionService;
+struct ServiceContext;
+
+// The name health checks use for readiness.
+inline constexpr char kMotionServiceName[] = "tempokey.v1.MotionService";
+
+// Operation kinds core implements in this build ("convert", "retime", "retime/paper", "reduce",
+// "reduce/tolerance", "reduce/paper", "bake"), found by running each on a tiny clip: what
+// answers UNIMPLEMENTED is not offered.
+std::vector<std::string> ProbeOperations();
+
+class Server {
+ public:
+  // Validates `options`, starts the workers, binds the address and starts serving; health says
+  // SERVING for "" (live) and kMotionServiceName (ready).
+  // Errors: kInvalidArgument bad options; kUnavailable when the address or the metrics address
+  // cannot be bound or a TLS file cannot be read.
+  static absl::StatusOr<std::unique_ptr<Server>> Start(ServerOptions options);
+  // Drain() with what is left of the grace period, if it has not run.
+  ~Server();
+  Server(const Server&) = delete;
+  Server& operator=(const Server&) = delete;
+
+  // The bound port (the real one when the address asked for port 0).
+  int port() const { return port_; }
+  // The bound metrics port, 0 without metrics.
+  int metrics_port() const;
+  // "127.0.0.1:<port>" style target for clients on this machine.
+  std::string target() const;
+  const ServerOptions& options() const;
+  const std::vector<std::string>& operations() const;
+  JobManager& jobs() { return *jobs_; }
+  JobPool& pool() { return *pool_; }
+
+  // Graceful stop (SPEC 5): readiness goes NOT_SERVING; new jobs, uploads, watches and Process
+  // calls get UNAVAILABLE; open watches end with UNAVAILABLE; queued and running jobs get
+  // options.drain_grace to finish, then are cancelled; then the gRPC server shuts down (calls
+  // still open get a short deadline) and the workers stop. Blocks until done. Idempotent and
+  // thread-safe (a second caller waits for the first to finish). Never call it from a signal
+  // handler: main.cc waits for signals on a normal thread.
+  void Drain();
+
+  // A channel to this server that skips the network (benchmarks, tests).
+  std::shared_ptr<grpc::Channel> InProcessChannel(const grpc::ChannelArguments& args = {});
+
+ private:
+  Server() = default;
+
+  int port_ = 0;
+  std::unique_ptr<JobPool> pool_;
+  std::unique_ptr<JobManager> jobs_;
+  std::unique_ptr<ClipStore> clips_;
+  std::unique_ptr<Metrics> metrics_;
+  std::unique_ptr<ServiceContext> context_;
+  std::unique_ptr<MotionService> service_;
+  std::unique_ptr<grpc::Server> grpc_server_;
+  std::once_flag drain_once_;
+};
+
+}  // namespace tempokey::server
+
+#endif  // TEMPOKEY_SERVER_SERVER_H_

@@ -1,0 +1,86 @@
+// Settings of a tempokey server: listening address, worker pool, limits, retention, security.
+#ifndef TEMPOKEY_SERVER_SERVER_OPTIONS_H_
+#define TEMPOKEY_SERVER_SERVER_OPTIONS_H_
+
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+
+namespace tempokey::server {
+
+// Test-only hooks. Production code leaves them empty; tests use them to hold a worker at a known
+// point (e.g. to cancel or drain while a job is running) without faking any work.
+struct TestHooks {
+  // Called on the worker thread right before a job's pipeline (or a Process call's pipeline)
+  // runs, with the job id ("" for Process). May block; the job counts as running meanwhile.
+  std::function<void(std::string_view job_id)> on_job_start;
+};
+
+struct ServerOptions {
+  // Where to listen: "host:port" ("127.0.0.1:0" picks a free port; Server::port() tells which).
+  std::string address = "127.0.0.1:50051";
+  // Worker threads running pipelines; <= 0 means DefaultWorkerCount().
+  int workers = 0;
+  // Jobs (and Process calls) waiting for a worker; beyond it submits get RESOURCE_EXHAUSTED.
+  int queue_capacity = 64;
+  // Largest message the server accepts, in bytes (uploads come in slices far below it).
+  std::int64_t max_message_bytes = std::int64_t{64} << 20;
+  // Largest clip accepted (frames x channels), from uploads, inline clips and Process.
+  std::int64_t max_clip_samples = std::int64_t{32} << 20;
+  // Stored uploaded clips: count and total bytes of samples; least recently used evicted first.
+  std::int64_t max_stored_clips = 256;
+  std::int64_t max_stored_clip_bytes = std::int64_t{2} << 30;
+  // Finished jobs kept (with their results): count and total bytes of results; oldest first,
+  // never a job a watcher is attached to.
+  std::int64_t max_stored_results = 1000;
+  std::int64_t max_stored_result_bytes = std::int64_t{2} << 30;
+  // A finished job is deleted this long after it ended.
+  std::chrono::seconds job_ttl{3600};
+  // SIGTERM: how long running and queued jobs get to finish before they are cancelled.
+  std::chrono::seconds drain_grace{25};
+  // Streaming calls (uploads, watches, results, Process) open at once; beyond it new ones get
+  // RESOURCE_EXHAUSTED.
+  int max_concurrent_streams = 1024;
+  // Connections are closed (GOAWAY) after this long so clients rebalance across replicas;
+  // 0 disables it.
+  std::chrono::seconds max_connection_age{0};
+  // Prometheus exposition ("127.0.0.1:9464"); empty disables metrics.
+  std::string metrics_address;
+  // PEM files. Certificate and key enable TLS; a client CA additionally requires and verifies
+  // client certificates (mTLS).
+  std::string tls_cert_file;
+  std::string tls_key_file;
+  std::string tls_client_ca_file;
+  // Bearer tokens accepted in "authorization: Bearer <token>"; empty disables the check.
+  std::vector<std::string> auth_tokens;
+  // Allows listening on a non-loopback address without TLS.
+  bool allow_insecure_remote = false;
+  TestHooks test_hooks;
+};
+
+// Worker threads this process may use: the CPUs of its affinity mask, capped by the cgroup CPU
+// quota (cgroup v2 cpu.max, or v1 cpu.cfs_quota_us / cpu.cfs_period_us), rounded up; >= 1.
+int DefaultWorkerCount();
+
+// Reads bearer tokens from `path`: one per line, blank lines and lines starting with '#'
+// ignored, surrounding whitespace trimmed.
+// Errors: kNotFound / kUnavailable reading the file; kInvalidArgument when it holds no token.
+absl::StatusOr<std::vector<std::string>> ReadTokenFile(const std::string& path);
+
+// True for 127.0.0.0/8, ::1, "localhost" and unix-domain addresses ("unix:...").
+bool IsLoopbackAddress(std::string_view address);
+
+// Checks values no server can run with (sizes <= 0, a TLS key without its certificate, a
+// non-loopback address without TLS unless allow_insecure_remote).
+// Errors: kInvalidArgument naming the option and value.
+absl::Status ValidateServerOptions(const ServerOptions& options);
+
+}  // namespace tempokey::server
+
+#endif  // TEMPOKEY_SERVER_SERVER_OPTIONS_H_

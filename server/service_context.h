@@ -1,0 +1,57 @@
+// What the MotionService handlers share: options, the pool, jobs, clips, metrics, the stream
+// counter, and the one bearer-token check.
+#ifndef TEMPOKEY_SERVER_SERVICE_CONTEXT_H_
+#define TEMPOKEY_SERVER_SERVICE_CONTEXT_H_
+
+#include <atomic>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "grpcpp/server_context.h"
+#include "server/clip_store.h"
+#include "server/job_manager.h"
+#include "server/job_pool.h"
+#include "server/metrics.h"
+#include "server/server_options.h"
+#include "tempokey/core/clip.h"
+
+namespace tempokey::server {
+
+// Owned by Server, outlives every call. Thread-safe.
+struct ServiceContext {
+  ServerOptions options;
+  core::ClipLimits clip_limits;       // from options.max_clip_samples
+  JobPool* pool = nullptr;
+  JobManager* jobs = nullptr;
+  ClipStore* clips = nullptr;
+  Metrics* metrics = nullptr;         // null without --metrics_address
+  std::vector<std::string> operations;  // what GetServerInfo offers
+  std::atomic<bool> draining{false};
+  std::atomic<int> open_streams{0};
+
+  // The bearer-token check of every MotionService method: OK when no tokens are configured or
+  // the call carries "authorization: Bearer <one of them>" (compared in constant time).
+  // Errors: kUnauthenticated.
+  absl::Status CheckAuth(const grpc::CallbackServerContext& context) const;
+
+  // Claims one of options.max_concurrent_streams streaming calls; false when all are taken.
+  bool TryOpenStream();
+  void CloseStream();
+  // kUnavailable while draining (unless `allow_while_draining`: result downloads still work
+  // during the grace period), kResourceExhausted with no stream left; on OK the caller owns a
+  // stream slot (CloseStream() when the call ends).
+  absl::Status AdmitStream(bool allow_while_draining = false);
+
+  void BytesIn(std::int64_t bytes) const {
+    if (metrics != nullptr) metrics->AddBytesIn(bytes);
+  }
+  void BytesOut(std::int64_t bytes) const {
+    if (metrics != nullptr) metrics->AddBytesOut(bytes);
+  }
+};
+
+}  // namespace tempokey::server
+
+#endif  // TEMPOKEY_SERVER_SERVICE_CONTEXT_H_

@@ -1,0 +1,17 @@
+#include "server/status_util.h"
+
+#include <string>
+
+namespace tempokey::server {
+
+grpc::Status ToGrpcStatus(const absl::Status& status, grpc::ServerContextBase* context) {
+  if (status.ok()) return grpc::Status::OK;
+  if (context != nullptr) {
+    if (std::optional<std::chrono::milliseconds> retry = GetRetryAfter(status)) {
+      context->AddTrailingMetadata(kRetryAfterMetadataKey, std::to_string(retry->count()));
+    }
+  }
+  return grpc::Status(static_cast<grpc::StatusCode>(status.code()), std::string(status.message()));
+}
+
+}  // namespace tempokey::server

@@ -1,0 +1,152 @@
+// WatchJob: the snapshot at once, then latest-wins updates (a slow reader skips versions, never
+// queues them), ending after the terminal state. The JobManager talks to a WatchLink that
+// outlives the reactor, so an update racing with the end of the call finds the link closed
+// instead of a deleted reactor.
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <utility>
+
+#include "server/job_proto.h"
+#include "server/reactors.h"
+#include "server/status_util.h"
+
+namespace tempokey::server {
+namespace {
+
+class WatchReactor;
+
+class WatchLink final : public JobWatcher {
+ public:
+  explicit WatchLink(WatchReactor* reactor) : reactor_(reactor) {}
+
+  void OnJobUpdate(const JobSnapshot& snapshot) override;
+  void OnWatchClosed(const absl::Status& status) override;
+  void OnWriteDone(bool ok);
+  void OnCancel();
+  // Ends the call at once (before any write), e.g. for an unknown job.
+  void FinishNow(const absl::Status& status);
+
+ private:
+  void WriteNextLocked() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+  void FinishLocked(const absl::Status& status) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+
+  std::mutex mu_;
+  WatchReactor* reactor_ ABSL_GUARDED_BY(mu_);  // valid until finished_
+  bool finished_ ABSL_GUARDED_BY(mu_) = false;
+  bool writing_ ABSL_GUARDED_BY(mu_) = false;
+  bool terminal_queued_ ABSL_GUARDED_BY(mu_) = false;  // the last snapshot is sent or pending
+  std::int64_t newest_version_ ABSL_GUARDED_BY(mu_) = 0;
+  std::optional<JobSnapshot> pending_ ABSL_GUARDED_BY(mu_);
+  std::optional<absl::Status> close_ ABSL_GUARDED_BY(mu_);
+  v1::Job message_ ABSL_GUARDED_BY(mu_);  // the write in flight
+};
+
+class WatchReactor final : public grpc::ServerWriteReactor<v1::Job> {
+ public:
+  WatchReactor(ServiceContext* service, grpc::CallbackServerContext* call,
+               const v1::WatchJobRequest* request)
+      : service_(service), job_id_(request->job_id()), link_(std::make_shared<WatchLink>(this)) {
+    absl::Status admitted = service_->CheckAuth(*call);
+    if (admitted.ok()) admitted = service_->AdmitStream();
+    if (!admitted.ok()) {
+      link_->FinishNow(admitted);
+      return;
+    }
+    holds_stream_ = true;
+    absl::StatusOr<JobSnapshot> snapshot = service_->jobs->Watch(job_id_, link_);
+    if (!snapshot.ok()) {
+      link_->FinishNow(snapshot.status());
+      return;
+    }
+    watching_ = true;
+    link_->OnJobUpdate(*snapshot);
+  }
+
+  void OnWriteDone(bool ok) override { link_->OnWriteDone(ok); }
+  void OnCancel() override { link_->OnCancel(); }
+  void OnDone() override {
+    if (watching_) service_->jobs->Unwatch(job_id_, link_.get());
+    if (holds_stream_) service_->CloseStream();
+    delete this;
+  }
+
+  ServiceContext* service() const { return service_; }
+
+ private:
+  ServiceContext* const service_;
+  const std::string job_id_;
+  const std::shared_ptr<WatchLink> link_;
+  bool holds_stream_ = false;
+  bool watching_ = false;
+};
+
+void WatchLink::OnJobUpdate(const JobSnapshot& snapshot) {
+  std::lock_guard lock(mu_);
+  if (finished_ || terminal_queued_ || snapshot.version <= newest_version_) return;
+  newest_version_ = snapshot.version;
+  terminal_queued_ = IsTerminal(snapshot.state);
+  pending_ = snapshot;
+  if (!writing_) WriteNextLocked();
+}
+
+void WatchLink::OnWatchClosed(const absl::Status& status) {
+  std::lock_guard lock(mu_);
+  // A watch whose terminal snapshot is on its way ends normally after it.
+  if (finished_ || terminal_queued_) return;
+  close_ = status;
+  pending_.reset();
+  if (!writing_) FinishLocked(status);
+}
+
+void WatchLink::OnWriteDone(bool ok) {
+  std::lock_guard lock(mu_);
+  writing_ = false;
+  if (finished_) return;
+  if (!ok) {
+    FinishLocked(absl::CancelledError("the watch stream broke"));
+  } else if (pending_) {
+    WriteNextLocked();
+  } else if (close_) {
+    FinishLocked(*close_);
+  } else if (terminal_queued_) {
+    FinishLocked(absl::OkStatus());
+  }
+}
+
+void WatchLink::OnCancel() {
+  std::lock_guard lock(mu_);
+  // With a write in flight, its OnWriteDone(false) finishes the call.
+  if (!finished_ && !writing_) FinishLocked(absl::CancelledError("the watch was cancelled"));
+}
+
+void WatchLink::FinishNow(const absl::Status& status) {
+  std::lock_guard lock(mu_);
+  if (!finished_) FinishLocked(status);
+}
+
+void WatchLink::WriteNextLocked() {
+  message_ = JobToProto(*pending_);
+  pending_.reset();
+  writing_ = true;
+  reactor_->service()->BytesOut(static_cast<std::int64_t>(message_.ByteSizeLong()));
+  reactor_->StartWrite(&message_);
+}
+
+void WatchLink::FinishLocked(const absl::Status& status) {
+  finished_ = true;
+  WatchReactor* reactor = reactor_;
+  reactor_ = nullptr;
+  reactor->Finish(ToGrpcStatus(status));
+}
+
+}  // namespace
+
+grpc::ServerWriteReactor<v1::Job>* NewWatchReactor(ServiceContext* service,
+                                                   grpc::CallbackServerContext* call,
+                                                   const v1::WatchJobRequest* request) {
+  return new WatchReactor(service, call, request);
+}
+
+}  // namespace tempokey::server

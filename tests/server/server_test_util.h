@@ -1,0 +1,372 @@
+// Helpers for server tests: a real server on 127.0.0.1:0 with real gRPC stubs, synthetic clips,
+// status matchers, and small wrappers around the MotionService calls.
+#ifndef TEMPOKEY_TESTS_SERVER_SERVER_TEST_UTIL_H_
+#define TEMPOKEY_TESTS_SERVER_SERVER_TEST_UTIL_H_
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <future>
+#include <memory>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+#include "gmock/gmock.h"
+#include "grpcpp/client_context.h"
+#include "grpcpp/create_channel.h"
+#include "grpcpp/generic/generic_stub.h"
+#include "grpcpp/support/byte_buffer.h"
+#include "grpcpp/security/credentials.h"
+#include "gtest/gtest.h"
+#include "proto/convert.h"
+#include "server/server.h"
+#include "tempokey/core/clip.h"
+#include "tempokey/core/pipeline.h"
+#include "tempokey/v1/motion_service.grpc.pb.h"
+
+namespace tempokey::testing {
+
+namespace v1 = ::tempokey::v1;
+
+// Deadline for every test call: long enough never to fire on a working server, short enough
+// that a hang fails the test instead of the CI job.
+inline constexpr std::chrono::seconds kCallDeadline{60};
+
+inline void SetDeadline(grpc::ClientContext& context,
+                        std::chrono::seconds deadline = kCallDeadline) {
+  context.set_deadline(std::chrono::system_clock::now() + deadline);
+}
+
+// ---- matchers -----------------------------------------------------------------------------------
+
+MATCHER_P2(GrpcStatusIs, code, message_matcher,
+           "gRPC status " + ::testing::PrintToString(code) + " whose message " +
+               ::testing::DescribeMatcher<std::string>(message_matcher)) {
+  if (arg.error_code() != code) {
+    *result_listener << "code " << arg.error_code() << " message \"" << arg.error_message() << "\"";
+    return false;
+  }
+  return ::testing::ExplainMatchResult(message_matcher, arg.error_message(), result_listener);
+}
+
+MATCHER_P2(StatusIs, code, message_matcher,
+           "status " + ::testing::PrintToString(code) + " whose message " +
+               ::testing::DescribeMatcher<std::string>(message_matcher)) {
+  const absl::Status& status = arg;
+  if (status.code() != code) {
+    *result_listener << "status " << status.ToString();
+    return false;
+  }
+  return ::testing::ExplainMatchResult(message_matcher, std::string(status.message()),
+                                       result_listener);
+}
+
+#define TEMPOKEY_ASSERT_OK(expr)                              \
+  do {                                                        \
+    const auto& tempokey_assert_status_ = (expr);             \
+    ASSERT_TRUE(tempokey_assert_status_.ok()) << tempokey_assert_status_; \
+  } while (false)
+
+#define TEMPOKEY_ASSERT_GRPC_OK(expr)                                               \
+  do {                                                                              \
+    const ::grpc::Status tempokey_assert_status_ = (expr);                          \
+    ASSERT_TRUE(tempokey_assert_status_.ok())                                       \
+        << tempokey_assert_status_.error_code() << ": "                            \
+        << tempokey_assert_status_.error_message();                                 \
+  } while (false)
+
+// ---- clips --------------------------------------------------------------------------------------
+
+// A clip of `joints` joints with 3 rotation channels each (Z, X, Y order) plus 3 root position
+// channels, `frames` frames at 120 Hz. Values are smooth, distinct per channel and frame, and
+// some rotations leave (-180, 180] so ConvertStep{wrap_rotations} changes them.
+inline core::Clip MakeClip(int joints, std::int64_t frames, double seed = 0.0) {
+  core::Clip clip;
+  clip.name = "synthetic";
+  clip.frame_time_seconds = 1.0 / 120.0;
+  clip.frame_count = frames;
+  for (int j = 0; j < joints; ++j) {
+    core::Joint joint;
+    joint.name = "joint" + std::to_string(j);
+    joint.parent = j - 1;
+    joint.offset = {0.0, 1.0 + j, 0.0};
+    const std::vector<core::ChannelKind> kinds =
+        j == 0 ? std::vector<core::ChannelKind>{core::ChannelKind::kXPosition,
+                                                core::ChannelKind::kYPosition,
+                                                core::ChannelKind::kZPosition,
+                                                core::ChannelKind::kZRotation,
+                                                core::ChannelKind::kXRotation,
+                                                core::ChannelKind::kYRotation}
+               : std::vector<core::ChannelKind>{core::ChannelKind::kZRotation,
+                                                core::ChannelKind::kXRotation,
+                                                core::ChannelKind::kYRotation};
+    for (core::ChannelKind kind : kinds) {
+      const int c = static_cast<int>(clip.channels.size());
+      core::Channel channel;
+      channel.joint = j;
+      channel.kind = kind;
+      channel.samples.resize(static_cast<std::size_t>(frames));
+      for (std::int64_t f = 0; f < frames; ++f) {
+        const double t = static_cast<double>(f) / 120.0;
+        channel.samples[f] = 170.0 * std::sin(0.7 * t + 0.1 * c + seed) + 30.0 * std::cos(3.0 * t) +
+                             0.001 * c;
+      }
+      joint.channels.push_back(c);
+      clip.channels.push_back(std::move(channel));
+    }
+    clip.skeleton.joints.push_back(std::move(joint));
+  }
+  return clip;
+}
+
+// What ConvertStep{wrap_rotations = true} must produce: rotations wrapped into (-180, 180].
+inline core::Clip WrappedCopy(core::Clip clip) {
+  for (core::Channel& channel : clip.channels) {
+    if (!core::IsRotation(channel.kind)) continue;
+    for (double& v : channel.samples) {
+      double w = std::remainder(v, 360.0);
+      if (w == -180.0) w = 180.0;
+      v = w;
+    }
+  }
+  return clip;
+}
+
+inline google::protobuf::RepeatedPtrField<v1::Operation> WrapOperations(int count = 1) {
+  google::protobuf::RepeatedPtrField<v1::Operation> operations;
+  for (int i = 0; i < count; ++i) operations.Add()->mutable_convert()->set_wrap_rotations(true);
+  return operations;
+}
+
+// ---- a real server ------------------------------------------------------------------------------
+
+// Options for a test server: loopback port 0, small pool, short grace.
+inline server::ServerOptions TestServerOptions() {
+  server::ServerOptions options;
+  options.address = "127.0.0.1:0";
+  options.workers = 2;
+  options.queue_capacity = 16;
+  options.drain_grace = std::chrono::seconds(20);
+  return options;
+}
+
+inline std::unique_ptr<server::Server> StartServer(server::ServerOptions options) {
+  absl::StatusOr<std::unique_ptr<server::Server>> server = server::Server::Start(std::move(options));
+  EXPECT_TRUE(server.ok()) << server.status();
+  return server.ok() ? *std::move(server) : nullptr;
+}
+
+// A plaintext channel to `target` with gRPC's default limits (4 MiB receive).
+inline std::shared_ptr<grpc::Channel> Connect(const std::string& target) {
+  return grpc::CreateChannel(target, grpc::InsecureChannelCredentials());
+}
+
+// grpc.health.v1.Health/Check for `service` (messages encoded by hand: Debian ships no health
+// stubs): the ServingStatus number (1 SERVING, 2 NOT_SERVING) or the call's error.
+inline absl::StatusOr<int> CheckHealth(const std::shared_ptr<grpc::Channel>& channel,
+                                       const std::string& service) {
+  grpc::GenericStub stub(channel);
+  std::string request;
+  if (!service.empty()) {  // HealthCheckRequest { string service = 1; } (short names only)
+    request.push_back('\x0a');
+    request.push_back(static_cast<char>(service.size()));
+    request += service;
+  }
+  grpc::Slice slice(request);
+  grpc::ByteBuffer in(&slice, 1);
+  grpc::ByteBuffer out;
+  grpc::ClientContext context;
+  SetDeadline(context);
+  std::promise<grpc::Status> done;
+  stub.UnaryCall(&context, "/grpc.health.v1.Health/Check", grpc::StubOptions(), &in, &out,
+                 [&done](grpc::Status status) { done.set_value(std::move(status)); });
+  const grpc::Status status = done.get_future().get();
+  if (!status.ok()) {
+    return absl::Status(static_cast<absl::StatusCode>(status.error_code()), status.error_message());
+  }
+  std::vector<grpc::Slice> slices;
+  if (!out.Dump(&slices).ok()) return absl::InternalError("cannot read the health response");
+  std::string bytes;
+  for (const grpc::Slice& s : slices) bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
+  if (bytes.empty()) return 0;  // proto3 default: UNKNOWN
+  if (bytes.size() != 2 || bytes[0] != '\x08') {
+    return absl::InternalError("unexpected health response bytes");
+  }
+  return static_cast<int>(bytes[1]);
+}
+
+// ---- calls --------------------------------------------------------------------------------------
+
+struct UploadOutcome {
+  grpc::Status status;
+  v1::UploadClipResponse response;
+};
+
+// Streams `requests` as one UploadClip call.
+inline UploadOutcome UploadMessages(v1::MotionService::Stub& stub,
+                                    const std::vector<v1::UploadClipRequest>& requests) {
+  grpc::ClientContext context;
+  SetDeadline(context);
+  UploadOutcome outcome;
+  auto writer = stub.UploadClip(&context, &outcome.response);
+  for (const v1::UploadClipRequest& request : requests) {
+    if (!writer->Write(request)) break;  // the server ended the call; Finish() says why
+  }
+  writer->WritesDone();
+  outcome.status = writer->Finish();
+  return outcome;
+}
+
+// Header then slices of `slice_bytes`, in channel order unless `reverse_slices`.
+inline std::vector<v1::UploadClipRequest> UploadRequests(const core::Clip& clip,
+                                                         std::int64_t slice_bytes,
+                                                         bool reverse_slices = false) {
+  std::vector<v1::UploadClipRequest> requests(1);
+  *requests[0].mutable_header() = wire::ClipHeaderToProto(clip);
+  absl::Status sliced = wire::ForEachSamplesSlice(
+      clip, slice_bytes, [&](v1::ChannelSamples&& samples) {
+        v1::UploadClipRequest request;
+        *request.mutable_samples() = std::move(samples);
+        requests.push_back(std::move(request));
+        return absl::OkStatus();
+      });
+  EXPECT_TRUE(sliced.ok()) << sliced;
+  if (reverse_slices) std::reverse(requests.begin() + 1, requests.end());
+  return requests;
+}
+
+inline UploadOutcome UploadClip(v1::MotionService::Stub& stub, const core::Clip& clip,
+                                std::int64_t slice_bytes = wire::kDefaultSliceBytes) {
+  return UploadMessages(stub, UploadRequests(clip, slice_bytes));
+}
+
+struct JobOutcome {
+  grpc::Status status;
+  v1::Job job;
+};
+
+inline JobOutcome Submit(v1::MotionService::Stub& stub, const v1::SubmitJobRequest& request) {
+  grpc::ClientContext context;
+  SetDeadline(context);
+  JobOutcome outcome;
+  outcome.status = stub.SubmitJob(&context, request, &outcome.job);
+  return outcome;
+}
+
+inline v1::SubmitJobRequest SubmitRequest(
+    const std::string& clip_id,
+    const google::protobuf::RepeatedPtrField<v1::Operation>& operations = WrapOperations()) {
+  v1::SubmitJobRequest request;
+  request.set_clip_id(clip_id);
+  *request.mutable_operations() = operations;
+  return request;
+}
+
+inline JobOutcome GetJob(v1::MotionService::Stub& stub, const std::string& job_id) {
+  grpc::ClientContext context;
+  SetDeadline(context);
+  v1::GetJobRequest request;
+  request.set_job_id(job_id);
+  JobOutcome outcome;
+  outcome.status = stub.GetJob(&context, request, &outcome.job);
+  return outcome;
+}
+
+struct WatchOutcome {
+  grpc::Status status;
+  std::vector<v1::Job> updates;
+};
+
+// Reads a whole WatchJob stream; `on_update` (optional) sees each update as it arrives.
+inline WatchOutcome WatchJob(v1::MotionService::Stub& stub, const std::string& job_id,
+                             const std::function<void(const v1::Job&)>& on_update = {}) {
+  grpc::ClientContext context;
+  SetDeadline(context);
+  v1::WatchJobRequest request;
+  request.set_job_id(job_id);
+  WatchOutcome outcome;
+  auto reader = stub.WatchJob(&context, request);
+  v1::Job job;
+  while (reader->Read(&job)) {
+    outcome.updates.push_back(job);
+    if (on_update) on_update(job);
+  }
+  outcome.status = reader->Finish();
+  return outcome;
+}
+
+// Watches until the job is terminal and returns the last snapshot.
+inline v1::Job WaitForJob(v1::MotionService::Stub& stub, const std::string& job_id) {
+  WatchOutcome watch = WatchJob(stub, job_id);
+  EXPECT_TRUE(watch.status.ok()) << watch.status.error_message();
+  return watch.updates.empty() ? v1::Job() : watch.updates.back();
+}
+
+struct ResultOutcome {
+  grpc::Status status;
+  std::vector<v1::ResultPart> parts;
+  std::int64_t largest_part_bytes = 0;
+};
+
+inline ResultOutcome GetResult(v1::MotionService::Stub& stub, const std::string& job_id,
+                               std::int32_t slice_bytes = 0) {
+  grpc::ClientContext context;
+  SetDeadline(context);
+  v1::GetJobResultRequest request;
+  request.set_job_id(job_id);
+  request.set_slice_bytes(slice_bytes);
+  ResultOutcome outcome;
+  auto reader = stub.GetJobResult(&context, request);
+  v1::ResultPart part;
+  while (reader->Read(&part)) {
+    outcome.largest_part_bytes =
+        std::max<std::int64_t>(outcome.largest_part_bytes, static_cast<std::int64_t>(part.ByteSizeLong()));
+    outcome.parts.push_back(part);
+  }
+  outcome.status = reader->Finish();
+  return outcome;
+}
+
+// Rebuilds the sampled clip of a result stream (header first, then samples).
+inline absl::StatusOr<core::Clip> AssembleClipResult(const std::vector<v1::ResultPart>& parts,
+                                                     core::ClipLimits limits = {}) {
+  wire::ClipAssembler assembler(limits);
+  for (std::size_t i = 0; i < parts.size(); ++i) {
+    const v1::ResultPart& part = parts[i];
+    absl::Status status;
+    if (part.has_header()) {
+      if (i != 0) return absl::InvalidArgumentError("header not first");
+      if (!part.header().has_clip()) return absl::InvalidArgumentError("not a sampled clip");
+      status = assembler.AddHeader(part.header().clip());
+    } else if (part.has_samples()) {
+      status = assembler.AddSamples(part.samples());
+    } else {
+      return absl::InvalidArgumentError("unexpected part");
+    }
+    if (!status.ok()) return status;
+  }
+  return std::move(assembler).Finish();
+}
+
+// Reads /proc/self/status VmHWM (peak resident set), in KiB; 0 when unavailable.
+inline std::int64_t PeakRssKiB(const std::string& status_path = "/proc/self/status") {
+  FILE* file = std::fopen(status_path.c_str(), "r");
+  if (file == nullptr) return 0;
+  char line[256];
+  std::int64_t kib = 0;
+  while (std::fgets(line, sizeof line, file) != nullptr) {
+    if (std::sscanf(line, "VmHWM: %ld kB", &kib) == 1) break;
+  }
+  std::fclose(file);
+  return kib;
+}
+
+}  // namespace tempokey::testing
+
+#endif  // TEMPOKEY_TESTS_SERVER_SERVER_TEST_UTIL_H_
