@@ -16,7 +16,8 @@
 namespace tempokey::core {
 namespace {
 
-const char kDanceFile[] = TEMPOKEY_SHARED_DIR "/data/bvh/bandai/dataset-1_dance-short_normal_001.bvh";
+const char kDanceFile[] =
+    TEMPOKEY_SHARED_DIR "/data/bvh/bandai/dataset-1_dance-short_normal_001.bvh";
 const char kCmuFile[] = TEMPOKEY_SHARED_DIR "/data/bvh/cmu/131_01.bvh";
 
 std::string ReadOrDie(benchmark::State& state, const char* path) {

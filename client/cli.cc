@@ -2,6 +2,8 @@
 
 #include <unistd.h>
 
+#include <cstdlib>
+
 #include <algorithm>
 #include <iostream>
 #include <vector>
@@ -9,6 +11,7 @@
 #include "absl/strings/str_cat.h"
 #include "client/cli_errors.h"
 #include "client/command.h"
+#include "grpc/support/log.h"
 #include "tempokey/core/status.h"
 
 namespace tempokey::client {
@@ -33,7 +36,8 @@ std::string FlagLine(const FlagSpec& flag) {
   if (!flag.short_name.empty()) absl::StrAppend(&left, AsAbsl(flag.short_name), ", ");
   absl::StrAppend(&left, AsAbsl(flag.name));
   if (!flag.value_name.empty()) absl::StrAppend(&left, " ", AsAbsl(flag.value_name));
-  return absl::StrCat(PadTo(std::move(left), kHelpColumn), AsAbsl(flag.help), "\n");
+  return absl::StrCat(PadTo(std::move(left), kHelpColumn), AsAbsl(flag.help),
+                      flag.repeatable ? " (repeatable)" : "", "\n");
 }
 
 std::string ToolHelp() {
@@ -224,6 +228,11 @@ int RunCli(std::span<const std::string> args, const CliIo& io) {
 }
 
 int Main(int argc, char** argv) {
+  // gRPC logs connection failures to stderr on its own ("Handshake failed ..."); the CLI reports
+  // every failure as one line of its own, so the runtime's log stays off unless asked for.
+  if (std::getenv("GRPC_VERBOSITY") == nullptr && std::getenv("GRPC_TRACE") == nullptr) {
+    gpr_set_log_function([](gpr_log_func_args*) {});
+  }
   std::vector<std::string> args(argv + std::min(argc, 1), argv + argc);
   const CliIo io{.out = std::cout, .err = std::cerr, .show_progress = isatty(STDERR_FILENO) == 1};
   return RunCli(args, io);

@@ -10,6 +10,7 @@
 #include "client/cli_errors.h"
 #include "tempokey/core/bvh.h"
 #include "tempokey/core/csv.h"
+#include "tempokey/core/keyed_io.h"
 #include "tempokey/core/status.h"
 
 namespace tempokey::client {
@@ -89,12 +90,11 @@ absl::Status WriteClipFile(const std::string& path, FileFormat format, const cor
 
 absl::Status WriteKeyedClipFile(const std::string& path, FileFormat format,
                                 const core::KeyedClip& keyed) {
-  (void)keyed;
   switch (format) {
     case FileFormat::kKeyedJson:
+      return core::WriteKeyedClipJsonFile(path, keyed);
     case FileFormat::kMayaAnim:
-      return absl::UnimplementedError(absl::StrCat(
-          path, ": writing ", AsAbsl(ExtensionOf(format)), " keyed exports is not implemented yet"));
+      return core::WriteMayaAnimFile(path, keyed);
     case FileFormat::kBvh:
     case FileFormat::kCsv:
       break;

@@ -21,8 +21,7 @@ using core::AsAbsl;
 
 constexpr FlagSpec kGlobalFlags[] = {
     {"--server", "", "TARGET",
-     "gRPC target: host:port, dns:///host:port, or ipv4:H:P,H:P (round-robin); "
-     "default 127.0.0.1:50051"},
+     "host:port, dns:///host:port or ipv4:H:P,H:P (default 127.0.0.1:50051)"},
     {"--timeout", "", "SECONDS", "deadline of each server call, retries included (default 60; 0: none)"},
     {"--tls", "", "", "connect with TLS (system roots unless --ca)"},
     {"--ca", "", "FILE", "PEM roots that sign the server's certificate (implies --tls)"},
@@ -30,7 +29,7 @@ constexpr FlagSpec kGlobalFlags[] = {
     {"--key", "", "FILE", "PEM private key of --cert"},
     {"--tls-server-name", "", "NAME", "name expected in the server's certificate (implies --tls)"},
     {"--token-file", "", "FILE",
-     "send the bearer token in FILE with every call (default: $TEMPOKEY_TOKEN)"},
+     "bearer token for every call (default: $TEMPOKEY_TOKEN)"},
 };
 
 // A token file holds the token and maybe a trailing newline.

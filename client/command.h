@@ -111,13 +111,12 @@ absl::StatusOr<ExecutionMode> ExecutionModeFromFlags(const ParsedArgs& args);
 
 // The flag specs of ExecutionModeFromFlags(), for commands that offer them.
 inline constexpr FlagSpec kJobFlag{"--job", "", "",
-                                   "run as a stored job (upload, submit, watch, fetch the result) "
-                                   "instead of one Process call"};
+                                   "run as a stored job (upload, submit, watch, fetch)"};
 inline constexpr FlagSpec kDetachFlag{"--detach", "", "",
                                       "submit the job, print its id and exit without waiting "
                                       "(implies --job)"};
 inline constexpr FlagSpec kLabelFlag{"--label", "", "KEY=VALUE",
-                                     "label the job (with --job/--detach; repeatable)", true};
+                                     "label the job (with --job or --detach)", true};
 inline constexpr FlagSpec kInputFpsFlag{"--input-fps", "", "RATE",
                                         "frame rate of a .csv input (CSV files do not store it)"};
 inline constexpr FlagSpec kOutputFlag{"--output", "-o", "FILE",

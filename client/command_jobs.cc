@@ -20,9 +20,9 @@ constexpr std::string_view kJobArgument[] = {"JOB"};
 constexpr std::string_view kStates[] = {"queued", "running", "succeeded", "failed", "cancelled"};
 
 constexpr FlagSpec kListFlags[] = {
-    {"--state", "", "STATE", "only jobs in STATE: queued, running, succeeded, failed, cancelled "
-                             "(repeatable)", true},
-    {"--label", "", "KEY=VALUE", "only jobs carrying this label (repeatable)", true},
+    {"--state", "", "STATE",
+     "only jobs in STATE: queued, running, succeeded, failed, cancelled", true},
+    {"--label", "", "KEY=VALUE", "only jobs carrying this label", true},
     {"--limit", "", "N", "list at most N jobs (default: all)"},
 };
 constexpr FlagSpec kResultFlags[] = {kOutputFlag};

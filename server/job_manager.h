@@ -38,10 +38,10 @@ using SystemTime = std::chrono::system_clock::time_point;
 
 // What a job runs. Immutable once submitted.
 struct JobSpec {
-  std::string clip_id;                          // "sha256:..." of the input clip
-  std::vector<core::PipelineStep> steps;        // validated by the caller (ValidatePipeline)
-  std::map<std::string, std::string> labels;
-  std::string request_id;                       // idempotency key; empty: none
+  std::string clip_id{};                        // "sha256:..." of the input clip
+  std::vector<core::PipelineStep> steps{};      // validated by the caller (ValidatePipeline)
+  std::map<std::string, std::string> labels{};
+  std::string request_id{};                     // idempotency key; empty: none
 };
 
 // A consistent copy of one job at one version.
@@ -91,9 +91,9 @@ struct JobManagerOptions {
 
 struct ListJobsQuery {
   int page_size = 0;                            // 0: kDefaultPageSize; capped at kMaxPageSize
-  std::string page_token;
-  std::vector<JobState> states;                 // empty: every state
-  std::map<std::string, std::string> labels;    // jobs carrying all of them
+  std::string page_token{};
+  std::vector<JobState> states{};               // empty: every state
+  std::map<std::string, std::string> labels{};  // jobs carrying all of them
 };
 
 struct ListJobsPage {

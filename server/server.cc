@@ -210,6 +210,8 @@ Server::~Server() {
   grpc_server_.reset();  // before the service and context its calls use
 }
 
+int Server::open_streams() const { return context_->open_streams.load(); }
+
 int Server::metrics_port() const { return metrics_ == nullptr ? 0 : metrics_->port(); }
 
 std::string Server::target() const { return absl::StrCat("127.0.0.1:", port_); }

@@ -55,6 +55,8 @@ class Server {
   const ServerOptions& options() const;
   const std::vector<std::string>& operations() const;
   JobManager& jobs() { return *jobs_; }
+  // Streaming calls open now (uploads, watches, results, Process); tests check nothing leaks.
+  int open_streams() const;
   JobPool& pool() { return *pool_; }
 
   // Graceful stop (SPEC 5): readiness goes NOT_SERVING; new jobs, uploads, watches and Process

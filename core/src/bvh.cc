@@ -591,7 +591,9 @@ absl::Status CheckWritableJointName(const Clip& clip, int index) {
   return absl::OkStatus();
 }
 
-void AppendIndent(std::string& out, int depth) { out.append(static_cast<std::size_t>(depth), '\t'); }
+void AppendIndent(std::string& out, int depth) {
+  out.append(static_cast<std::size_t>(depth), '\t');
+}
 
 void AppendOffset(std::string& out, int depth, const Vec3& offset) {
   AppendIndent(out, depth);

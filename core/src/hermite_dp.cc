@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <memory>
 #include <numeric>
@@ -237,11 +238,11 @@ class ShapeCache {
   // Room for `doubles` values that stays put (entries point into it).
   double* Allocate(std::size_t doubles) {
     if (doubles > kBlockDoubles) {
-      blocks_.push_back(std::make_unique<double[]>(doubles));
+      blocks_.push_back(std::make_unique_for_overwrite<double[]>(doubles));
       return blocks_.back().get();
     }
     if (block_used_ + doubles > kBlockDoubles) {
-      blocks_.push_back(std::make_unique<double[]>(kBlockDoubles));
+      blocks_.push_back(std::make_unique_for_overwrite<double[]>(kBlockDoubles));
       block_used_ = 0;
       current_ = blocks_.back().get();
     }
@@ -355,6 +356,41 @@ SegmentForm BuildSegmentForm(std::span<const double> samples, ShapeCache& cache,
   return form;
 }
 
+// The inner loop of the DP pass (DpPass::UpdateMinima): for 12 target lanes (9 used) and the
+// nine predecessor y-states of one row, candidate = a[sy] + ((b + u) + v) with u, v in
+// {-z, 0, +z}, folded into the smallest, second smallest and arg-smallest per lane. Written
+// with vector extensions and cloned for AVX, where the machine has it; both clones compute the
+// same values (no contraction into FMA: -ffp-contract follows -std=c++20).
+__attribute__((target_clones("avx", "default"))) void UpdateLaneMinima(
+    const double* a, const double* b_lanes, const double* z0_lanes, const double* z1_lanes,
+    double state_base, double* least_lanes, double* second_lanes, double* state_lanes) {
+  using V = double __attribute__((vector_size(32)));
+  for (int lane = 0; lane < 12; lane += 4) {
+    V least, second, state, b, z0, z1;
+    std::memcpy(&least, least_lanes + lane, sizeof(V));
+    std::memcpy(&second, second_lanes + lane, sizeof(V));
+    std::memcpy(&state, state_lanes + lane, sizeof(V));
+    std::memcpy(&b, b_lanes + lane, sizeof(V));
+    std::memcpy(&z0, z0_lanes + lane, sizeof(V));
+    std::memcpy(&z1, z1_lanes + lane, sizeof(V));
+    const V zero = {0.0, 0.0, 0.0, 0.0};
+    const V with_u[3] = {b + (zero - z0), b + zero, b + z0};
+    const V with_v[3] = {zero - z1, zero, z1};
+    for (int sy = 0; sy < 9; ++sy) {
+      const V c = a[sy] + (with_u[sy / 3] + with_v[sy % 3]);
+      const V larger = c > least ? c : least;
+      second = larger < second ? larger : second;
+      const double s = state_base + static_cast<double>(sy);
+      const auto smaller = c < least;
+      state = smaller ? V{s, s, s, s} : state;
+      least = smaller ? c : least;
+    }
+    std::memcpy(least_lanes + lane, &least, sizeof(V));
+    std::memcpy(second_lanes + lane, &second, sizeof(V));
+    std::memcpy(state_lanes + lane, &state, sizeof(V));
+  }
+}
+
 // Viterbi tables of one pass.
 class DpPass {
  public:
@@ -402,52 +438,27 @@ class DpPass {
     return {grid.x[XIndex(sx)], grid.y[sy / 3], grid.tx[TxIndex(sx)], grid.ty[sy % 3]};
   }
 
-  // The candidates of one target state that can still be chosen: every evaluated candidate
-  // within the tie window of the smallest seen so far. The window only shrinks as that minimum
-  // falls, so the set at the end is exactly the candidates within the final window, and those
-  // skipped by a lower bound above the window at the time could never have joined it.
-  struct TargetChoice {
-    double minimum = kInf;
-    double window = kInf;
-    int count = 0;
-    std::array<double, kStates> value;
-    std::array<std::int8_t, kStates> state;
+  // One predecessor x-state's contribution to the nine targets of one target x-state:
+  //   candidate(sy, ty) = a[sy] + ((b[ty] + dy_a(sy) * z0[ty]) + dty_a(sy) * z1[ty])
+  // with a = in + alpha (terms of key a alone), b = e0 + beta (key b alone) and z the cross
+  // terms; the offsets are -1, 0, +1, so the products are exact and the fast pass and the tie
+  // fallback below compute every candidate bit for bit alike. Lanes 9..11 pad to 3 x 4.
+  struct PredecessorRow {
+    int sx = 0;
+    std::array<double, 9> a;
+    alignas(32) std::array<double, 12> b, z0, z1;
+  };
 
+  // Per target y-state (lane): smallest candidate, second smallest, and the state of the
+  // smallest. A target whose second smallest lies outside the tie window of the smallest has one
+  // candidate in the window, which the tie rule must choose; otherwise the window is rebuilt
+  // exactly from the rows (rare: real ties).
+  struct LaneMinima {
+    alignas(32) std::array<double, 12> least, second, state;
     void Reset() {
-      minimum = kInf;
-      window = kInf;
-      count = 0;
-    }
-
-    void Offer(double c, int s, double scale) {
-      if (!(c <= window)) return;
-      if (c < minimum) {
-        minimum = c;
-        window = c + TieTolerance(c, scale);
-        int kept = 0;
-        for (int k = 0; k < count; ++k) {
-          if (value[k] <= window) {
-            value[kept] = value[k];
-            state[kept] = state[k];
-            ++kept;
-          }
-        }
-        count = kept;
-      }
-      value[count] = c;
-      state[count] = static_cast<std::int8_t>(s);
-      ++count;
-    }
-
-    // The tie rule: state 40 if it is in the window, else the lowest state.
-    std::pair<double, int> Choose() const {
-      if (count == 0) return {kInf, -1};
-      int pick = 0;
-      for (int k = 0; k < count; ++k) {
-        if (state[k] == kCenterState) return {value[k], kCenterState};
-        if (state[k] < state[pick]) pick = k;
-      }
-      return {value[pick], state[pick]};
+      least.fill(kInf);
+      second.fill(kInf);
+      state.fill(-1.0);
     }
   };
 
@@ -463,7 +474,8 @@ class DpPass {
         samples_[static_cast<std::size_t>(std::clamp(std::ceil(ga.x[1]), 0.0, last_frame))];
 
     // Predecessor x-states by their cheapest state: the good ones first tighten the windows,
-    // and the rest can stop at the first that cannot reach any target's window.
+    // and the rest stop at the first whose cheapest state is above every target's window (its
+    // candidates can only be larger, segment errors being sums of squares).
     std::array<double, 9> cheapest;
     std::array<int, 9> order;
     for (int sx = 0; sx < 9; ++sx) {
@@ -473,14 +485,17 @@ class DpPass {
     std::stable_sort(order.begin(), order.end(),
                      [&](int l, int r) { return cheapest[l] < cheapest[r]; });
 
-    std::array<TargetChoice, 9>& targets = targets_;
     for (int tx = 0; tx < 9; ++tx) {
-      for (TargetChoice& target : targets) target.Reset();
+      minima_.Reset();
+      row_count_ = 0;
       const bool allowed = !gb.x_fixed || XIndex(tx) == 1;
       for (int sx : order) {
         if (!allowed || cheapest[sx] == kInf) break;
         double widest = 0.0;
-        for (const TargetChoice& target : targets) widest = std::max(widest, target.window);
+        for (int ty = 0; ty < 9; ++ty) {
+          const double m = minima_.least[ty];
+          widest = std::max(widest, m + TieTolerance(m, scale_));
+        }
         if (cheapest[sx] > widest) break;
         const double ax = ga.x[XIndex(sx)];
         const double atx = ga.tx[TxIndex(sx)];
@@ -489,23 +504,20 @@ class DpPass {
         if (!SegmentIsFeasible(ax, atx, bx, btx)) continue;
         const SegmentForm form =
             BuildSegmentForm(samples_, cache_, ax, atx, bx, btx, last, y_ref, centre_y, steps_);
-        OfferCandidates(form, in.data() + sx * 9, sx, targets);
+        PredecessorRow& row = rows_[row_count_++];
+        FillRow(form, in.data() + sx * 9, sx, row);
+        UpdateMinima(row, minima_);
       }
       for (int ty = 0; ty < 9; ++ty) {
-        const auto [value, state] = targets[ty].Choose();
+        const auto [value, state] = ChooseForTarget(ty);
         cost_[i + 1][tx * 9 + ty] = value;
         predecessor_[i + 1][tx * 9 + ty] = static_cast<std::int8_t>(state);
       }
     }
   }
 
-  // Offers in_row[sy] + E(sy, ty) for one x-combination to the nine targets, with
-  //   E(sy, ty) = alpha(sy) + beta(ty) + dy_a * z0(ty) + dty_a * z1(ty)
-  // split by key. A candidate is at least A(sy) + beta - |z0| - |z1| (A = in + alpha), so
-  // predecessors are visited by increasing A and a target stops at the first whose bound is
-  // above its window.
-  void OfferCandidates(const SegmentForm& form, const double* in_row, int sx,
-                       std::array<TargetChoice, 9>& targets) const {
+  static void FillRow(const SegmentForm& form, const double* in_row, int sx,
+                      PredecessorRow& row) {
     const auto& h = form.h;
     // alpha(d0, d1) = g0 d0 + g1 d1 + H00 d0^2 + 2 H01 d0 d1 + H11 d1^2, d in {-1, 0, 1}.
     const double a_minus = h[0][0] - form.g[0];
@@ -516,14 +528,6 @@ class DpPass {
     const std::array<double, 9> alpha = {a_minus + b_minus + ab, a_minus, a_minus + b_plus - ab,
                                          b_minus,                0.0,     b_plus,
                                          a_plus + b_minus - ab,  a_plus,  a_plus + b_plus + ab};
-    std::array<double, 9> a_value;
-    double a_least = kInf;
-    for (int sy = 0; sy < 9; ++sy) {
-      a_value[sy] = in_row[sy] + alpha[sy];
-      a_least = std::min(a_least, a_value[sy]);
-    }
-    if (a_least == kInf) return;
-
     const double c_minus = h[2][2] - form.g[2];
     const double c_plus = h[2][2] + form.g[2];
     const double d_minus = h[3][3] - form.g[3];
@@ -532,22 +536,65 @@ class DpPass {
     const std::array<double, 9> beta = {c_minus + d_minus + cd, c_minus, c_minus + d_plus - cd,
                                         d_minus,                0.0,     d_plus,
                                         c_plus + d_minus - cd,  c_plus,  c_plus + d_plus + cd};
+    row.sx = sx;
+    for (int sy = 0; sy < 9; ++sy) row.a[sy] = in_row[sy] + alpha[sy];
+    // z0 = 2 (H02 d2 + H03 d3), z1 = 2 (H12 d2 + H13 d3) over the nine (d2, d3).
+    const double p0 = 2.0 * h[0][2];
+    const double q0 = 2.0 * h[0][3];
+    const double p1 = 2.0 * h[1][2];
+    const double q1 = 2.0 * h[1][3];
+    const std::array<double, 9> z0 = {-p0 - q0, -p0, -p0 + q0, -q0, 0.0, q0, p0 - q0, p0, p0 + q0};
+    const std::array<double, 9> z1 = {-p1 - q1, -p1, -p1 + q1, -q1, 0.0, q1, p1 - q1, p1, p1 + q1};
     for (int ty = 0; ty < 9; ++ty) {
-      TargetChoice& target = targets[ty];
-      const double d2 = kOffsetHigh[ty];
-      const double d3 = kOffsetLow[ty];
-      const double b = form.e0 + beta[ty];
-      const double z0 = 2.0 * (h[0][2] * d2 + h[0][3] * d3);
-      const double z1 = 2.0 * (h[1][2] * d2 + h[1][3] * d3);
-      if (a_least + b - (std::abs(z0) + std::abs(z1)) > target.window) continue;
-      const std::array<double, 9> terms = {b - z0 - z1, b - z0, b - z0 + z1, b - z1,     b,
-                                           b + z1,      b + z0 - z1, b + z0, b + z0 + z1};
-      std::array<double, 9> c;
-      for (int sy = 0; sy < 9; ++sy) c[sy] = a_value[sy] + terms[sy];
+      row.b[ty] = form.e0 + beta[ty];
+      row.z0[ty] = z0[ty];
+      row.z1[ty] = z1[ty];
+    }
+    for (int ty = 9; ty < 12; ++ty) {
+      row.b[ty] = kInf;
+      row.z0[ty] = 0.0;
+      row.z1[ty] = 0.0;
+    }
+  }
+
+  // The candidate of `row` for (sy, ty), exactly as UpdateMinima() computes it.
+  static double Candidate(const PredecessorRow& row, int sy, int ty) {
+    const double d0 = kOffsetHigh[sy];
+    const double d1 = kOffsetLow[sy];
+    const double u = d0 < 0.0 ? -row.z0[ty] : (d0 > 0.0 ? row.z0[ty] : 0.0);
+    const double v = d1 < 0.0 ? -row.z1[ty] : (d1 > 0.0 ? row.z1[ty] : 0.0);
+    return row.a[sy] + ((row.b[ty] + u) + v);
+  }
+
+  static void UpdateMinima(const PredecessorRow& row, LaneMinima& minima) {
+    UpdateLaneMinima(row.a.data(), row.b.data(), row.z0.data(), row.z1.data(),
+                     static_cast<double>(row.sx * 9), minima.least.data(), minima.second.data(),
+                     minima.state.data());
+  }
+
+  // The tie rule for target y-state `ty` over the rows of the current target x-state.
+  std::pair<double, int> ChooseForTarget(int ty) const {
+    const double m = minima_.least[ty];
+    if (m == kInf) return {kInf, -1};
+    const double window = m + TieTolerance(m, scale_);
+    if (minima_.second[ty] > window) return {m, static_cast<int>(minima_.state[ty])};
+    // Several candidates in the window: state 40 if among them, else the lowest state.
+    double best_value = kInf;
+    int best_state = -1;
+    for (int r = 0; r < row_count_; ++r) {
+      const PredecessorRow& row = rows_[r];
       for (int sy = 0; sy < 9; ++sy) {
-        if (c[sy] <= target.window) target.Offer(c[sy], sx * 9 + sy, scale_);
+        const double c = Candidate(row, sy, ty);
+        if (!(c <= window)) continue;
+        const int state = row.sx * 9 + sy;
+        if (state == kCenterState) return {c, state};
+        if (best_state < 0 || state < best_state) {
+          best_state = state;
+          best_value = c;
+        }
       }
     }
+    return {best_value, best_state};
   }
 
   std::span<const double> samples_;
@@ -558,7 +605,9 @@ class DpPass {
   std::vector<std::array<double, kStates>> cost_;
   std::vector<std::array<std::int8_t, kStates>> predecessor_;
   ShapeCache& cache_;
-  std::array<TargetChoice, 9> targets_;
+  LaneMinima minima_;
+  std::array<PredecessorRow, 9> rows_;
+  int row_count_ = 0;
 };
 
 absl::Status CheckStep(const char* name, double value) {

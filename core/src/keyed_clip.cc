@@ -60,8 +60,12 @@ double EvaluateSegment(const Key& a, const Key& b, double time_seconds) {
   const double y1 = a.value + a.out_tangent * wa;
   const double y2 = b.value - b.in_tangent * wb;
   const double y3 = b.value;
-  const double u = 1.0 - s;
-  return u * u * u * y0 + 3.0 * u * u * s * y1 + 3.0 * u * s * s * y2 + s * s * s * y3;
+  // de Casteljau with a + s (b - a) steps: equal controls give exactly their value.
+  auto lerp = [s](double p, double q) { return p + s * (q - p); };
+  const double y01 = lerp(y0, y1);
+  const double y12 = lerp(y1, y2);
+  const double y23 = lerp(y2, y3);
+  return lerp(lerp(y01, y12), lerp(y12, y23));
 }
 
 }  // namespace

@@ -157,7 +157,9 @@ absl::Status ValidateReduceOptions(const ReduceOptions& options) {
     case ReduceMethod::kPaper:
       return ValidatePaperParams(options.paper);
     case ReduceMethod::kTolerance:
-      return ValidateToleranceParams(options.tolerance);
+      TEMPOKEY_RETURN_IF_ERROR(ValidateToleranceParams(options.tolerance));
+      return absl::UnimplementedError(
+          "reduce method 'tolerance' is not implemented yet; use method 'paper'");
   }
   return absl::InvalidArgumentError(
       absl::StrCat("reduce method ", static_cast<int>(options.method), " is not a known method"));
@@ -167,10 +169,6 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
                                         const ProgressFn& progress, std::stop_token stop) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateClip(clip));
   TEMPOKEY_RETURN_IF_ERROR(ValidateReduceOptions(options));
-  if (options.method == ReduceMethod::kTolerance) {
-    return absl::UnimplementedError(
-        "reduce method 'tolerance' is not implemented yet; use method 'paper'");
-  }
 
   ReduceResult result;
   result.keyed.layout = clip;

@@ -44,6 +44,7 @@ class PlanWriter {
   explicit PlanWriter(ResamplePlan& plan) : plan_(plan) {}
 
   void Copy(std::int64_t index) {
+    ++plan_.copy_count;
     Begin(SampleKind::kCopy, index);
     plan_.weights.push_back(1.0);
     End();
@@ -149,9 +150,7 @@ void Unwrap(std::span<const double> degrees, Unwrapped& out) {
 
 // `angle` moved by whole turns to within 180 degrees of `source_value`: results keep the
 // source's own convention (wrapped into ±180, or unwrapped, whatever the file uses).
-double InSourceTurn(double angle, double source_value) {
-  return angle - 360.0 * std::round((angle - source_value) / 360.0);
-}
+double InSourceTurn(double angle, double source_value) { return NearestTurn(angle, source_value); }
 
 std::int64_t NearestIndex(double x, std::int64_t last) {
   return std::clamp(static_cast<std::int64_t>(std::llround(x)), std::int64_t{0}, last);
@@ -334,33 +333,45 @@ void ResampleRotation(const ResamplePlan& plan, const EulerOrder& order,
                       const std::array<std::span<double>, 3>& out) {
   const auto n = static_cast<std::size_t>(plan.source_count);
   const std::int64_t last = plan.source_count - 1;
-  std::vector<Quat> quats(n);
-  for (std::size_t i = 0; i < n; ++i) {
-    quats[i] = EulerToQuat(order, {source[0][i], source[1][i], source[2][i]});
+  const std::size_t m = plan.position.size();
+  if (plan.copy_count == plan.output_count()) {
+    for (std::size_t j = 0; j < m; ++j) {
+      const auto i = static_cast<std::size_t>(plan.first[j]);
+      for (int c = 0; c < 3; ++c) out[c][j] = source[c][i];
+    }
+    return;
   }
-  MakeSignContinuous(quats);
+
+  // Source quaternions, converted only when an output reads them (a copy never does). No
+  // global sign continuity is imposed: each use aligns signs locally (slerp takes the short
+  // arc, the weighted mean aligns to its pivot, squad aligns its four inputs).
+  std::vector<Quat> quats(n);
+  std::vector<unsigned char> converted(n, 0);
+  auto quat = [&](std::size_t i) -> const Quat& {
+    if (!converted[i]) {
+      quats[i] = EulerToQuat(order, {source[0][i], source[1][i], source[2][i]});
+      converted[i] = 1;
+    }
+    return quats[i];
+  };
   std::array<Unwrapped, 3> unwrapped;
   for (int c = 0; c < 3; ++c) Unwrap(source[c], unwrapped[c]);
   auto reference_values = [&](int c) -> std::span<const double> {
     return unwrapped[c].wraps ? std::span<const double>(unwrapped[c].values) : source[c];
   };
-
-  // Phantom neighbours past the ends by reflection (q0·q1*·q0), matching the scalar path's odd
+  auto aligned = [](const Quat& q, const Quat& to) { return Dot(q, to) < 0.0 ? Negated(q) : q; };
+  // Neighbours past the ends by reflection (q0·q1*·q0), matching the scalar path's odd
   // reflection.
   auto quat_at = [&](std::int64_t i) -> Quat {
-    if (i < 0) {
-      Quat q = Multiply(Multiply(quats[0], Conjugate(quats[1])), quats[0]);
-      return Dot(q, quats[0]) < 0.0 ? Negated(q) : q;
-    }
+    if (i < 0) return Multiply(Multiply(quat(0), Conjugate(quat(1))), quat(0));
     if (i > last) {
       const auto l = static_cast<std::size_t>(last);
-      Quat q = Multiply(Multiply(quats[l], Conjugate(quats[l - 1])), quats[l]);
-      return Dot(q, quats[l]) < 0.0 ? Negated(q) : q;
+      return Multiply(Multiply(quat(l), Conjugate(quat(l - 1))), quat(l));
     }
-    return quats[static_cast<std::size_t>(i)];
+    return quat(static_cast<std::size_t>(i));
   };
+  std::vector<Quat> taps;
 
-  const std::size_t m = plan.position.size();
   for (std::size_t j = 0; j < m; ++j) {
     const double x = plan.position[j];
     const std::int64_t first = plan.first[j];
@@ -376,24 +387,32 @@ void ResampleRotation(const ResamplePlan& plan, const EulerOrder& order,
         const std::int64_t i0 = std::min(static_cast<std::int64_t>(std::floor(x)), last - 1);
         const auto i = static_cast<std::size_t>(i0);
         const double t = x - static_cast<double>(i0);
-        if (std::abs(Dot(quats[i], quats[i + 1])) < kDiscontinuityDot) {
+        const Quat& q1 = quat(i);
+        const Quat q2 = aligned(quat(i + 1), q1);
+        if (Dot(q1, q2) < kDiscontinuityDot) {
           for (int c = 0; c < 3; ++c) out[c][j] = source[c][k];
           continue;
         }
-        const bool smooth_neighbours =
-            std::abs(Dot(quat_at(i0 - 1), quats[i])) >= kDiscontinuityDot &&
-            std::abs(Dot(quats[i + 1], quat_at(i0 + 2))) >= kDiscontinuityDot;
-        q = plan.kind[j] == SampleKind::kCubic && smooth_neighbours
-                ? Squad(quat_at(i0 - 1), quats[i], quats[i + 1], quat_at(i0 + 2), t)
-                : Slerp(quats[i], quats[i + 1], t);
+        if (plan.kind[j] == SampleKind::kLerp) {
+          q = Slerp(q1, q2, t);
+          break;
+        }
+        const Quat q0 = aligned(quat_at(i0 - 1), q1);
+        const Quat q3 = aligned(quat_at(i0 + 2), q2);
+        const bool smooth = Dot(q0, q1) >= kDiscontinuityDot && Dot(q2, q3) >= kDiscontinuityDot;
+        q = smooth ? Squad(q0, q1, q2, q3, t) : Slerp(q1, q2, t);
         break;
       }
       default: {
         const std::int64_t count = plan.offset[j + 1] - plan.offset[j];
-        const std::span<const Quat> taps(quats.data() + first, static_cast<std::size_t>(count));
+        taps.resize(static_cast<std::size_t>(count));
+        for (std::int64_t tap = 0; tap < count; ++tap) {
+          taps[static_cast<std::size_t>(tap)] = quat(static_cast<std::size_t>(first + tap));
+        }
         const std::span<const double> w(plan.weights.data() + plan.offset[j],
                                         static_cast<std::size_t>(count));
-        const std::int64_t pivot = std::clamp(NearestIndex(x, last) - first, std::int64_t{0}, count - 1);
+        const std::int64_t pivot =
+            std::clamp(static_cast<std::int64_t>(k) - first, std::int64_t{0}, count - 1);
         q = WeightedMeanRotation(taps, w, static_cast<std::size_t>(pivot));
         break;
       }

@@ -18,13 +18,20 @@ constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 // it the closed form is accurate to rounding in the rotation it reconstructs.
 constexpr double kGimbalCos = 1e-12;
 
-// Below this angle (radians) between two quaternions, slerp's sin ratios are replaced by their
-// limit (1 - t, t); the difference is below 1e-16 relative.
-constexpr double kSlerpLinearAngle = 1e-8;
+// Rounds to the nearest integer (ties to even) for |x| < 2^51 without a libm call: adding
+// 1.5·2^52 leaves no fraction bits. Plain IEEE arithmetic; the compiler may not fold it.
+inline double RoundSmall(double x) {
+  constexpr double kShifter = 6755399441055744.0;  // 1.5 · 2^52
+  return (x + kShifter) - kShifter;
+}
 
-// `angle` plus the multiple of 360 that brings it nearest `reference` (degrees).
-double NearestTurn(double angle, double reference) {
-  return angle + 360.0 * std::round((reference - angle) / 360.0);
+// sin(x) / x by its Taylor series, for |x| <= kSinRatioSeriesLimit: the first omitted term
+// (x^16 / 17!) is below 1e-19.
+constexpr double kSinRatioSeriesLimit = 0.5;
+double SinRatio(double x) {
+  const double x2 = x * x;
+  return 1.0 + x2 * (-1.0 / 6 + x2 * (1.0 / 120 + x2 * (-1.0 / 5040 + x2 * (1.0 / 362880 +
+         x2 * (-1.0 / 39916800 + x2 * (1.0 / 6227020800 + x2 * (-1.0 / 1307674368000.0)))))));
 }
 
 double Norm(const Quat& q) { return std::sqrt(Dot(q, q)); }
@@ -98,6 +105,10 @@ std::array<double, 4> PrincipalEigenvector(std::array<std::array<double, 4>, 4> 
 }
 
 }  // namespace
+
+double NearestTurn(double angle, double reference) {
+  return angle + 360.0 * RoundSmall((reference - angle) * (1.0 / 360.0));
+}
 
 void UnwrapDegrees(std::span<double> degrees) {
   double shift = 0.0;
@@ -220,7 +231,8 @@ Vec3 QuatToEulerNearest(const Quat& q, const EulerOrder& order, const Vec3& refe
   // tan(c) = -s·R[i][j] / R[i][i].
   const double s = ((j - i + 3) % 3 == 1) ? 1.0 : -1.0;
   const double sin_b = std::clamp(s * r[i][k], -1.0, 1.0);
-  const double cos_b = std::hypot(r[i][i], r[i][j]);
+  // Matrix entries are at most 1 in size: no overflow for hypot to guard against.
+  const double cos_b = std::sqrt(r[i][i] * r[i][i] + r[i][j] * r[i][j]);
   const double b = std::atan2(sin_b, cos_b);
 
   if (cos_b < kGimbalCos) {
@@ -260,7 +272,13 @@ Quat Slerp(const Quat& a, Quat b, double t) {
   const double angle = 2.0 * std::atan2(Norm(diff), Norm(sum));
   double wa = 1.0 - t;
   double wb = t;
-  if (angle > kSlerpLinearAngle) {
+  if (angle <= kSinRatioSeriesLimit) {
+    // sin(kθ)/sin(θ) = k·S(kθ)/S(θ) with S(x) = sin(x)/x: no cancellation, no libm calls for
+    // the small steps between neighbouring capture frames.
+    const double inv = 1.0 / SinRatio(angle);
+    wa *= SinRatio(wa * angle) * inv;
+    wb *= SinRatio(wb * angle) * inv;
+  } else {
     const double inv_sin = 1.0 / std::sin(angle);
     wa = std::sin((1.0 - t) * angle) * inv_sin;
     wb = std::sin(t * angle) * inv_sin;

@@ -58,7 +58,8 @@ TEST(ValidateClipTest, SampleCountMustMatchFrameCount) {
   Clip clip = ValidClip();
   clip.channels[1].samples.pop_back();
 
-  EXPECT_EQ(ValidateMessage(clip), "channel 1 (Hips.Yrotation): has 2 samples, the clip has 3 frames");
+  EXPECT_EQ(ValidateMessage(clip),
+            "channel 1 (Hips.Yrotation): has 2 samples, the clip has 3 frames");
 }
 
 TEST(ValidateClipTest, ScalarChannelIsLabelledByItsName) {

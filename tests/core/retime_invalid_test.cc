@@ -146,7 +146,7 @@ TEST_P(RetimeInvalidTest, RefusedWithItsExactMessage) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Table, RetimeInvalidTest, ::testing::ValuesIn(BadRetimes()),
-                         [](const ::testing::TestParamInfo<BadRetime>& info) { return info.param.name; });
+                         [](const ::testing::TestParamInfo<BadRetime>& row) { return row.param.name; });
 
 TEST(RetimeInvalidTest, OutputOverTheSampleCapIsRefusedBeforeAllocating) {
   Clip clip;

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "gtest/gtest.h"
 #include "tempokey/core/time_map.h"
 
@@ -39,7 +40,7 @@ Clip PlainClip(double frame_time, const std::vector<std::vector<double>>& column
   clip.frame_time_seconds = frame_time;
   clip.frame_count = static_cast<std::int64_t>(columns.front().size());
   for (std::size_t c = 0; c < columns.size(); ++c) {
-    clip.channels.push_back({.joint = -1, .kind = kind, .name = "c" + std::to_string(c),
+    clip.channels.push_back({.joint = -1, .kind = kind, .name = absl::StrCat("c", c),
                              .samples = columns[c]});
   }
   return clip;
@@ -158,7 +159,9 @@ TEST_P(ConstantSpeedTest, ConstantSpeedReproducesLinearSignalExactly) {
                 kLinearTolerance)
         << j;
   }
-  if (p.fit_to_grid) EXPECT_EQ(r.clip.channels[0].samples.back(), clip.channels[0].samples.back());
+  if (p.fit_to_grid) {
+    EXPECT_EQ(r.clip.channels[0].samples.back(), clip.channels[0].samples.back());
+  }
   EXPECT_NEAR(r.report.fit_factor, p.fit_to_grid ? effective / p.speed : 1.0, 1e-15);
 }
 
@@ -483,7 +486,7 @@ TEST(RetimeTest, MixedRotationOrdersMatchAnIndependentForwardKinematicsReference
   clip.frame_time_seconds = 1.0 / 30;
   clip.frame_count = static_cast<std::int64_t>(frames);
   for (std::size_t j = 0; j < joints.size(); ++j) {
-    clip.skeleton.joints.push_back({.name = "joint" + std::to_string(j),
+    clip.skeleton.joints.push_back({.name = absl::StrCat("joint", j),
                                     .parent = joints[j].parent,
                                     .offset = joints[j].offset});
     for (K kind : joints[j].kinds) {
@@ -639,6 +642,121 @@ TEST(RetimeTest, LanczosKeepsConstantsAndAttenuatesWhenCompressing) {
   EXPECT_LT(worst, 0.05);  // a 20 Hz tone at 30 fps is removed, not aliased to 10 Hz
 }
 
+TEST(RetimeTest, BoxFilterAttenuatesAsItsAnalyticResponse) {
+  // Box of half-width b = ρ/2 = 2 source samples at 120 -> 30: the response of hat ⊛ box is
+  // sinc²(ω/2)·sinc(bω).
+  const double dt = 1.0 / 120;
+  const double omega = 2.0 * std::numbers::pi * 10.0 * dt;
+  std::vector<double> samples(1201);
+  for (std::size_t i = 0; i < samples.size(); ++i) samples[i] = std::sin(omega * static_cast<double>(i));
+  const Clip clip = PlainClip(dt, {samples});
+  const double expected = std::pow(Sinc(omega / 2), 2) * Sinc(2.0 * omega);
+
+  const RetimeResult r = RetimeOrDie(clip, {}, {.output_rate = FrameRate{30, 1},
+                                                .filter = ResampleFilter::kBox});
+
+  const double amplitude = FittedAmplitude(r.clip.channels[0].samples, 4 * omega, 2);
+  EXPECT_NEAR(amplitude / expected, 1.0, 0.02) << amplitude << " vs " << expected;
+}
+
+TEST(RetimeTest, CubicRotationsFollowAQuadraticAngleProfileExactly) {
+  // About one axis squad's inner control points shift each angle by a quarter of its second
+  // difference, which makes it exact for angles quadratic in time (θ_i = 0.5·i²).
+  std::vector<double> z(13);
+  for (std::size_t i = 0; i < z.size(); ++i) z[i] = 0.5 * static_cast<double>(i * i);
+  const std::vector<double> zero(z.size(), 0.0);
+  const Clip clip = JointClip(1.0 / 30, {ChannelKind::kZRotation, ChannelKind::kXRotation,
+                                         ChannelKind::kYRotation}, {z, zero, zero});
+
+  const RetimeResult cubic =
+      RetimeOrDie(clip, OverSource({Knot(0, 0.25)}), {.filter = ResampleFilter::kCubic});
+
+  ASSERT_EQ(cubic.clip.frame_count, 49);
+  for (std::size_t j = 4; j + 4 < 49; ++j) {
+    const double x = static_cast<double>(j) / 4.0;
+    EXPECT_NEAR(cubic.clip.channels[0].samples[j], 0.5 * x * x, kAngleTolerance) << j;
+  }
+}
+
+TEST(RetimeTest, SpeedOverOutputTimeSamplesTheQuadraticMap) {
+  // s(t) = 1 + t for t <= 1 s, then 2: τ(t) = t + t²/2 up to 1 s.
+  const double dt = 1.0 / 120;
+  const Clip clip = PlainClip(dt, {Linear(361, dt, 0.0, 1.0)});
+  const TimeWarpSpec warp = {.domain = WarpDomain::kSpeedOverOutput,
+                             .speed = {Knot(0, 1.0), Knot(1, 2.0)}};
+
+  const RetimeResult r = RetimeOrDie(clip, warp, {.fit_to_grid = false});
+
+  ASSERT_EQ(r.clip.frame_count, 211);  // T_o = 1.75 s
+  for (std::size_t j = 0; j <= 120; ++j) {
+    const double t = static_cast<double>(j) * dt;
+    EXPECT_NEAR(r.clip.channels[0].samples[j], t + t * t / 2, kLinearTolerance) << j;
+  }
+  for (std::size_t j = 121; j < 211; ++j) {
+    const double t = static_cast<double>(j) * dt;
+    EXPECT_NEAR(r.clip.channels[0].samples[j], 1.5 + 2.0 * (t - 1.0), kLinearTolerance) << j;
+  }
+}
+
+TEST(RetimeTest, TimeMapKeysPlayHoldAndPlayOn) {
+  const double dt = 1.0 / 32;
+  const Clip clip = PlainClip(dt, {Linear(65, dt, 0.0, 1.0)});
+  const TimeWarpSpec warp = {
+      .domain = WarpDomain::kTimeMapKeys,
+      .keys = {{{0, false}, {0, false}}, {{1, false}, {0.5, false}}, {{2, false}, {0.5, false}},
+               {{3, false}, {2.0, false}}}};
+
+  const RetimeResult r = RetimeOrDie(clip, warp, {});
+
+  ASSERT_EQ(r.clip.frame_count, 97);
+  const std::vector<double>& out = r.clip.channels[0].samples;
+  for (std::size_t j = 0; j < 97; ++j) {
+    const double t = static_cast<double>(j) * dt;
+    const double tau = t <= 1.0 ? 0.5 * t : t <= 2.0 ? 0.5 : 0.5 + 1.5 * (t - 2.0);
+    EXPECT_NEAR(out[j], tau, kLinearTolerance) << j;
+  }
+}
+
+TEST(RetimeTest, PinnedSourceTimesLandOnTheirOutputFrames) {
+  const double dt = 1.0 / 32;
+  const Clip clip = PlainClip(dt, {Linear(129, dt, 0.0, 1.0)});
+  RetimeOptions options;
+  options.pins = {{.source = {1.0, false}, .output_frame = 64},
+                  {.source = {3.0, false}, .output_frame = 80}};
+
+  const RetimeResult r = RetimeOrDie(clip, {}, options);
+
+  ASSERT_EQ(r.clip.frame_count, 113);
+  EXPECT_NEAR(r.clip.channels[0].samples[64], 1.0, kLinearTolerance);
+  EXPECT_NEAR(r.clip.channels[0].samples[80], 3.0, kLinearTolerance);  // filtered (c = 4) side
+  EXPECT_NEAR(r.clip.channels[0].samples[32], 0.5, kLinearTolerance);
+  EXPECT_NEAR(r.clip.channels[0].samples[72], 2.0, kLinearTolerance);
+  EXPECT_EQ(r.clip.channels[0].samples.back(), 4.0);
+}
+
+TEST(RetimeTest, ValidateRetimeNeedsOnlyTheClipsTiming) {
+  // The pipeline validates later steps against a probe with a frame time and count only.
+  Clip probe;
+  probe.frame_time_seconds = 1.0 / 30;
+  probe.frame_count = 2;
+
+  EXPECT_TRUE(ValidateRetime(probe, OverSource({Knot(0, 0.5)}), {}).ok());
+  EXPECT_TRUE(ValidateRetime(probe, OverSource({Knot(0, 0.5)}), {.method = RetimeMethod::kPaper}).ok());
+}
+
+TEST(RetimeTest, SingleFrameClipRetimesToItsPoseAndHolds) {
+  const Clip clip = PlainClip(1.0 / 30, {{4.5}});
+
+  const RetimeResult plain = RetimeOrDie(clip, OverSource({Knot(0, 0.5)}), {});
+  const RetimeResult held =
+      RetimeOrDie(clip, {.holds = {{.at = {0.0, false}, .duration_seconds = 0.5}}}, {});
+
+  ASSERT_EQ(plain.clip.frame_count, 1);
+  EXPECT_EQ(plain.clip.channels[0].samples[0], 4.5);
+  ASSERT_EQ(held.clip.frame_count, 16);
+  for (double v : held.clip.channels[0].samples) EXPECT_EQ(v, 4.5);
+}
+
 // ---- markers, progress, report, paper ---------------------------------------------------------
 
 TEST(RetimeTest, MarkersAreMappedThroughTheTimeMap) {
@@ -686,6 +804,26 @@ TEST(RetimeTest, PaperMethodAgreesWithTheExactMapAtConstantSpeed) {
   for (std::size_t j = 0; j < 241; ++j) {
     EXPECT_NEAR(paper.clip.channels[0].samples[j], exact.clip.channels[0].samples[j], 1e-12);
   }
+}
+
+TEST(RetimeTest, PaperMethodReverseMirrorsItsForwardOutputAndMapsMarkers) {
+  const double dt = 1.0 / 120;
+  Clip clip = PlainClip(dt, {Linear(121, dt, 0.0, 1.0)});
+  clip.markers = {{"hit", 0.5, 0.0}};
+  TimeWarpSpec forward = OverSource({Knot(0, 0.5), Knot(1, 2.0)});
+  TimeWarpSpec backward = forward;
+  backward.reverse = true;
+
+  const RetimeResult f = RetimeOrDie(clip, forward, {.method = RetimeMethod::kPaper});
+  const RetimeResult b = RetimeOrDie(clip, backward, {.method = RetimeMethod::kPaper});
+  const RetimeResult half = RetimeOrDie(clip, OverSource({Knot(0, 0.5)}), {.method = RetimeMethod::kPaper});
+
+  ASSERT_EQ(f.clip.frame_count, b.clip.frame_count);
+  const auto m = static_cast<std::size_t>(f.clip.frame_count);
+  for (std::size_t j = 0; j < m; ++j) {
+    EXPECT_EQ(b.clip.channels[0].samples[j], f.clip.channels[0].samples[m - 1 - j]);
+  }
+  EXPECT_NEAR(half.clip.markers[0].time_seconds, 1.0, kLinearTolerance);
 }
 
 TEST(RetimeTest, PaperMethodCountsARampByItsArithmeticMeanSpeed) {

@@ -137,6 +137,27 @@ TEST(RotationTest, SlerpHalfwayIsTheHalfAngleAndEndpointsAreExact) {
   EXPECT_EQ(Slerp(a, b, 1.0), b);
 }
 
+TEST(RotationTest, SlerpOfSmallStepsIsTheUniformRotationToRounding) {
+  // Below half a radian the sin ratios come from a series; it must agree with the uniform
+  // rotation to rounding, as the large-angle formula does.
+  for (double degrees : {1e-7, 0.01, 3.0, 20.0, 28.0, 29.0, 60.0, 170.0}) {
+    for (double t : {0.1, 0.37, 0.5, 0.93}) {
+      const Quat q = Slerp(AxisRotation(1, 10.0), AxisRotation(1, 10.0 + degrees), t);
+      const Quat expected = AxisRotation(1, 10.0 + t * degrees);
+
+      EXPECT_NEAR(q.w, expected.w, 1e-15) << degrees << " " << t;
+      EXPECT_NEAR(q.y, expected.y, 1e-15) << degrees << " " << t;
+    }
+  }
+}
+
+TEST(RotationTest, NearestTurnMovesByWholeTurnsToWithinHalfATurn) {
+  EXPECT_EQ(NearestTurn(190.0, 0.0), -170.0);
+  EXPECT_EQ(NearestTurn(-170.0, 185.0), 190.0);
+  EXPECT_EQ(NearestTurn(10.0, 725.0), 730.0);
+  EXPECT_EQ(NearestTurn(42.5, 42.0), 42.5);
+}
+
 TEST(RotationTest, SquadOnEvenlySpacedRotationsKeepsConstantAngularSpeed) {
   // Rotations 10 degrees apart about one axis: the spherical cubic is the uniform rotation.
   const Quat q0 = AxisRotation(0, 0.0);

@@ -485,7 +485,7 @@ INSTANTIATE_TEST_SUITE_P(
         BadOperationCase{"ZeroFitFrames",
                          [](auto& ops) { ops.Add()->mutable_retime()->set_fit_frames(0); },
                          "operation 2: retime.fit_frames must be >= 1, got 0"}),
-    [](const ::testing::TestParamInfo<BadOperationCase>& info) { return info.param.name; });
+    [](const ::testing::TestParamInfo<BadOperationCase>& p) { return p.param.name; });
 
 TEST(OperationConvertTest, EveryStepRoundTripsThroughProto) {
   core::RetimeStep retime;

@@ -29,6 +29,7 @@
 #include "tempokey/core/clip.h"
 #include "tempokey/core/pipeline.h"
 #include "tempokey/v1/motion_service.grpc.pb.h"
+#include "tests/server/test_clips.h"
 
 namespace tempokey::testing {
 
@@ -55,10 +56,17 @@ MATCHER_P2(GrpcStatusIs, code, message_matcher,
   return ::testing::ExplainMatchResult(message_matcher, arg.error_message(), result_listener);
 }
 
+inline const absl::Status& StatusOf(const absl::Status& status) { return status; }
+template <typename T>
+const absl::Status& StatusOf(const absl::StatusOr<T>& status_or) {
+  return status_or.status();
+}
+
+// Matches an absl::Status or absl::StatusOr<T> by code and message.
 MATCHER_P2(StatusIs, code, message_matcher,
            "status " + ::testing::PrintToString(code) + " whose message " +
                ::testing::DescribeMatcher<std::string>(message_matcher)) {
-  const absl::Status& status = arg;
+  const absl::Status& status = StatusOf(arg);
   if (status.code() != code) {
     *result_listener << "status " << status.ToString();
     return false;
@@ -80,63 +88,6 @@ MATCHER_P2(StatusIs, code, message_matcher,
         << tempokey_assert_status_.error_code() << ": "                            \
         << tempokey_assert_status_.error_message();                                 \
   } while (false)
-
-// ---- clips --------------------------------------------------------------------------------------
-
-// A clip of `joints` joints with 3 rotation channels each (Z, X, Y order) plus 3 root position
-// channels, `frames` frames at 120 Hz. Values are smooth, distinct per channel and frame, and
-// some rotations leave (-180, 180] so ConvertStep{wrap_rotations} changes them.
-inline core::Clip MakeClip(int joints, std::int64_t frames, double seed = 0.0) {
-  core::Clip clip;
-  clip.name = "synthetic";
-  clip.frame_time_seconds = 1.0 / 120.0;
-  clip.frame_count = frames;
-  for (int j = 0; j < joints; ++j) {
-    core::Joint joint;
-    joint.name = "joint" + std::to_string(j);
-    joint.parent = j - 1;
-    joint.offset = {0.0, 1.0 + j, 0.0};
-    const std::vector<core::ChannelKind> kinds =
-        j == 0 ? std::vector<core::ChannelKind>{core::ChannelKind::kXPosition,
-                                                core::ChannelKind::kYPosition,
-                                                core::ChannelKind::kZPosition,
-                                                core::ChannelKind::kZRotation,
-                                                core::ChannelKind::kXRotation,
-                                                core::ChannelKind::kYRotation}
-               : std::vector<core::ChannelKind>{core::ChannelKind::kZRotation,
-                                                core::ChannelKind::kXRotation,
-                                                core::ChannelKind::kYRotation};
-    for (core::ChannelKind kind : kinds) {
-      const int c = static_cast<int>(clip.channels.size());
-      core::Channel channel;
-      channel.joint = j;
-      channel.kind = kind;
-      channel.samples.resize(static_cast<std::size_t>(frames));
-      for (std::int64_t f = 0; f < frames; ++f) {
-        const double t = static_cast<double>(f) / 120.0;
-        channel.samples[f] = 170.0 * std::sin(0.7 * t + 0.1 * c + seed) + 30.0 * std::cos(3.0 * t) +
-                             0.001 * c;
-      }
-      joint.channels.push_back(c);
-      clip.channels.push_back(std::move(channel));
-    }
-    clip.skeleton.joints.push_back(std::move(joint));
-  }
-  return clip;
-}
-
-// What ConvertStep{wrap_rotations = true} must produce: rotations wrapped into (-180, 180].
-inline core::Clip WrappedCopy(core::Clip clip) {
-  for (core::Channel& channel : clip.channels) {
-    if (!core::IsRotation(channel.kind)) continue;
-    for (double& v : channel.samples) {
-      double w = std::remainder(v, 360.0);
-      if (w == -180.0) w = 180.0;
-      v = w;
-    }
-  }
-  return clip;
-}
 
 inline google::protobuf::RepeatedPtrField<v1::Operation> WrapOperations(int count = 1) {
   google::protobuf::RepeatedPtrField<v1::Operation> operations;
@@ -354,18 +305,41 @@ inline absl::StatusOr<core::Clip> AssembleClipResult(const std::vector<v1::Resul
   return std::move(assembler).Finish();
 }
 
-// Reads /proc/self/status VmHWM (peak resident set), in KiB; 0 when unavailable.
-inline std::int64_t PeakRssKiB(const std::string& status_path = "/proc/self/status") {
-  FILE* file = std::fopen(status_path.c_str(), "r");
-  if (file == nullptr) return 0;
-  char line[256];
-  std::int64_t kib = 0;
-  while (std::fgets(line, sizeof line, file) != nullptr) {
-    if (std::sscanf(line, "VmHWM: %ld kB", &kib) == 1) break;
+// Rebuilds the keyed clip of a result stream (header first, then curve pieces).
+inline absl::StatusOr<core::KeyedClip> AssembleKeyedResult(const std::vector<v1::ResultPart>& parts) {
+  v1::KeyedClip keyed;
+  for (std::size_t i = 0; i < parts.size(); ++i) {
+    const v1::ResultPart& part = parts[i];
+    if (part.has_header()) {
+      if (i != 0 || !part.header().has_keyed_clip()) {
+        return absl::InvalidArgumentError("expected a keyed-clip header first");
+      }
+      *keyed.mutable_header() = part.header().keyed_clip();
+    } else if (part.has_curve()) {
+      *keyed.add_curves() = part.curve();
+    } else {
+      return absl::InvalidArgumentError("unexpected part in a keyed result");
+    }
   }
-  std::fclose(file);
-  return kib;
+  return wire::KeyedClipFromProto(keyed);
 }
+
+// A server whose workers stop at job start until the test opens the gate.
+struct GatedServer {
+  std::shared_ptr<StartGate> gate = std::make_shared<StartGate>();
+  std::unique_ptr<server::Server> server;
+  std::unique_ptr<v1::MotionService::Stub> stub;
+
+  explicit GatedServer(server::ServerOptions options = TestServerOptions()) {
+    options.test_hooks.on_job_start = [g = gate](std::string_view id) { g->Arrive(id); };
+    server = StartServer(std::move(options));
+    if (server != nullptr) stub = v1::MotionService::NewStub(Connect(server->target()));
+  }
+  ~GatedServer() {
+    gate->Open();
+    server.reset();
+  }
+};
 
 }  // namespace tempokey::testing
 

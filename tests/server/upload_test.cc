@@ -218,7 +218,7 @@ INSTANTIATE_TEST_SUITE_P(
                       },
                       grpc::StatusCode::INVALID_ARGUMENT,
                       "header.channels[1]: kind is CHANNEL_KIND_UNSPECIFIED"}),
-    [](const ::testing::TestParamInfo<MalformedCase>& info) { return info.param.name; });
+    [](const ::testing::TestParamInfo<MalformedCase>& p) { return p.param.name; });
 
 TEST(UploadLimitTest, OversizedMessageIsRefusedAndTheServerKeepsServing) {
   server::ServerOptions options = TestServerOptions();

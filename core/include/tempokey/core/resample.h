@@ -65,6 +65,7 @@ struct ResamplePlan {
   std::vector<std::int64_t> offset;   // weights of sample j: [offset[j], offset[j + 1])
   std::vector<double> weights;
   std::int64_t filtered_count = 0;    // samples with width > 0
+  std::int64_t copy_count = 0;        // samples of kind kCopy
   double max_ratio = 0.0;             // max ρ_j
 
   std::int64_t output_count() const { return static_cast<std::int64_t>(position.size()); }

@@ -53,23 +53,46 @@ struct Pin {
 };
 
 // Which timeline the speed knots are drawn over. Users confuse them, so the API names it.
+// Speeds are ratios: source seconds played per output second (1 normal, 0.5 half speed).
 enum class WarpDomain {
   kIdentity,         // no speed change (frame-rate change, fit or reverse alone)
-  kSpeedOverSource,  // the paper's velocity curve: v(τ), t(τ) = ∫ dσ / v(σ)
-  kSpeedOverOutput,  // NLE / Unreal style ramps: s(t), τ(t) = ∫ s
-  kTimeMapKeys,      // direct (t_k, τ_k) keys, linear between
+  kSpeedOverSource,  // the paper's velocity curve: v(τ), t(τ) = ∫ dσ / v(σ); knot times (and
+                     // "f" frames) are source times
+  kSpeedOverOutput,  // NLE / Unreal style ramps: s(t), τ(t) = ∫ s; knot times are output times
+                     // ("f" = output frames); integrated from t = 0 until the clip ends. A fit
+                     // scaling speeds by c also compresses this curve in time by c (each
+                     // segment keeps the source span it covers).
+  kTimeMapKeys,      // direct (t_k, τ_k) keys, linear between; τ non-decreasing (equal τ is a
+                     // hold), t increasing; must cover source 0..T_s (the part inside the clip
+                     // is used, shifted to start at output 0)
 };
 
 struct TimeWarpSpec {
   WarpDomain domain = WarpDomain::kIdentity;
   std::vector<SpeedKnot> speed;   // kSpeedOverSource / kSpeedOverOutput
   std::vector<TimeMapKey> keys;   // kTimeMapKeys
+  // Freeze frames at source times inside the clip; they add their duration to the output and
+  // keep it under fits.
   std::vector<Hold> holds;
+  // Play the whole retimed result backwards: output time t shows τ(T_o - t).
   bool reverse = false;
 };
 
-enum class ResampleFilter { kTent, kLinear, kBox, kCubic, kLanczos3 };
+// How each channel is resampled (SPEC 3.3; see resample.h for the kernels).
+enum class ResampleFilter {
+  kTent,      // default: linear interpolation where ρ <= 1, exact triangle filter when compressing
+  kLinear,    // point sampling of the linear reconstruction, no anti-aliasing
+  kBox,       // area average over the output footprint
+  kCubic,     // Catmull-Rom (squad for rotations) where a = 0, the tent elsewhere
+  kLanczos3,  // Lanczos-3 scaled by max(1, ρ)
+};
+// kExact: the one exact time map (default). kPaper: the published region / ratio-of-areas
+// procedure, for comparison (speed over source time only; no holds, pins, fit or output rate;
+// fit_to_grid and filter are ignored: it rounds per region and averages with the box).
 enum class RetimeMethod { kExact, kPaper };
+// kQuaternion: a joint's three rotation channels are resampled as one rotation (default).
+// kEuler: every angle is unwrapped and resampled as a scalar. Joints with fewer than three
+// rotation channels always take the Euler path.
 enum class RotationMode { kQuaternion, kEuler };
 
 // An exact frame rate numerator / denominator in Hz (30000/1001 for 29.97).
@@ -81,26 +104,35 @@ struct FrameRate {
 };
 
 struct RetimeOptions {
-  // At most one of the two: scale every speed by one constant so the output lasts this long.
+  // At most one of the two: scale every speed by one constant c so the output lasts this long
+  // (holds keep their length). fit_seconds > 0; with fit_to_grid on it is rounded to a whole
+  // number of output frames. fit_frames >= 2 is the exact output frame count.
   std::optional<double> fit_seconds;
   std::optional<std::int64_t> fit_frames;
-  // Scale speeds by c ≈ 1 so the last output sample is exactly the last source pose.
+  // Scale speeds by c ≈ 1 so T_o is a whole number of output frames and the last output sample
+  // is exactly the last source pose.
   bool fit_to_grid = true;
-  // Output rate; unset keeps the source's frame time exactly.
+  // Output rate; unset keeps the source's frame time exactly. Output sample j is at
+  // t_j = j·denominator/numerator seconds.
   std::optional<FrameRate> output_rate;
   ResampleFilter filter = ResampleFilter::kTent;
   RetimeMethod method = RetimeMethod::kExact;
   RotationMode rotation_mode = RotationMode::kQuaternion;
+  // Source times that must land exactly on output frames, increasing in both; each interval
+  // between pins is scaled by its own constant, the part after the last pin by the fit (or
+  // fit to grid). Not combinable with reverse.
   std::vector<Pin> pins;
+  // Allowed speeds (after any fit scaling), 0 < min_speed <= max_speed.
   double min_speed = 0.01;
   double max_speed = 100.0;
 };
 
 struct RetimeReport {
-  double output_duration_seconds = 0.0;
-  std::int64_t output_frame_count = 0;
-  double fit_factor = 1.0;            // c: the constant all speeds were scaled by
-  double max_decimation_ratio = 0.0;  // max ρ over output samples
+  double output_duration_seconds = 0.0;    // T_o
+  std::int64_t output_frame_count = 0;     // M = floor(T_o·f_o + 1e-9) + 1
+  double fit_factor = 1.0;                 // c: the constant the (last pin interval's) speeds
+                                           // were scaled by; 1 without fit or grid
+  double max_decimation_ratio = 0.0;       // max ρ over output samples
   std::int64_t filtered_sample_count = 0;  // output samples whose kernel had a > 0
 };
 
@@ -109,13 +141,21 @@ struct RetimeResult {
   RetimeReport report;
 };
 
-// Resamples every channel of `clip` along the time map of `warp` (SPEC 3).
+// Resamples every channel of `clip` along the time map of `warp` (SPEC 3): the warp, fit,
+// pins and output rate compile into one exact map (time_map.h), the kernels are planned once
+// for all channels (resample.h), then every channel is resampled: positions and scalars as
+// scalars, each joint's three rotation channels as one rotation (RotationMode), other angles
+// unwrapped. Markers are mapped through t(τ). The result keeps the clip's name, skeleton and
+// channel layout, with the output frame time and frame count. The identity warp returns the
+// samples bit for bit.
 //
 // Errors:
 //   kInvalidArgument  `clip` fails ValidateClip(); `warp` or `options` are invalid (speed <= 0 or
 //                     outside [min_speed, max_speed], times decreasing, NaN, both fits set, a fit
-//                     needing a speed outside the range, ...): the message names the knot.
-//   kCancelled        `stop` was requested; checked between channels.
+//                     needing a speed outside the range, ...): the message names the knot; the
+//                     output would exceed 10,000,000 frames or ClipLimits' sample cap.
+//   kCancelled        `stop` was requested; checked between channels (and joints).
+// Progress: `progress` is called after each channel (or joint) with the fraction done.
 //
 // Thread-safe: a pure function of its arguments.
 absl::StatusOr<RetimeResult> Retime(const Clip& clip, const TimeWarpSpec& warp,
@@ -128,8 +168,12 @@ absl::Status ValidateRetime(const Clip& clip, const TimeWarpSpec& warp,
                             const RetimeOptions& options);
 
 // Parses the CLI / pipeline speed syntax: comma-separated `time:speed` knots, time in seconds or
-// frames ("2.5s", "75f"), e.g. "0s:1,2s:1,2s:0.5,4s:0.5,4s:1".
+// frames ("2.5s", "75f"), e.g. "0s:1,2s:1,2s:0.5,4s:0.5,4s:1" (2 s to 4 s at half speed);
+// "0s:1" alone is the identity. Spaces around tokens are allowed; numbers as std::from_chars
+// reads them (exponents allowed). Only the syntax is checked here (finite numbers, a unit):
+// speed ranges and ordering are Retime()'s, whose messages name the knot the same way.
 // Errors: kInvalidArgument naming the knot ("speed knot 3 '2x:0.5': time needs a unit, s or f").
+// Thread-safe.
 absl::StatusOr<std::vector<SpeedKnot>> ParseSpeedKnots(std::string_view text);
 
 }  // namespace tempokey::core

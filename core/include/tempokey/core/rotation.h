@@ -70,6 +70,10 @@ Mat3 AxisMatrix(int axis, double degrees);
 Mat3 MatMul(const Mat3& a, const Mat3& b);
 Vec3 MatVec(const Mat3& m, const Vec3& v);
 
+// `angle` moved by whole turns (multiples of 360) to within 180 of `reference`, degrees. Exact
+// for |angle - reference| below 2^51 turns.
+double NearestTurn(double angle, double reference);
+
 // Euler angles in `order` (degrees) of the rotation `q`, choosing among all solutions (the two
 // Tait-Bryan branches, each angle shifted by any multiple of 360) the one nearest `reference`
 // (sum of squared differences). At gimbal lock (middle angle at ±90°, where only the sum or

@@ -1,0 +1,205 @@
+#include "tempokey/core/reduce.h"
+
+#include <cmath>
+#include <stop_token>
+#include <string>
+#include <vector>
+
+#include "gtest/gtest.h"
+
+namespace tempokey::core {
+namespace {
+
+// Channels below are written with designated initializers naming only what matters.
+#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
+
+Clip ScalarClip(std::vector<std::vector<double>> channels, double frame_time = 1.0 / 30.0) {
+  Clip clip;
+  clip.name = "test";
+  clip.frame_time_seconds = frame_time;
+  clip.frame_count = static_cast<std::int64_t>(channels.front().size());
+  for (std::size_t c = 0; c < channels.size(); ++c) {
+    clip.channels.push_back(Channel{.joint = -1, .kind = ChannelKind::kScalar,
+                                    .name = "c" + std::to_string(c),
+                                    .samples = std::move(channels[c])});
+  }
+  return clip;
+}
+
+ReduceOptions PaperOptions() {
+  ReduceOptions options;
+  options.method = ReduceMethod::kPaper;
+  return options;
+}
+
+TEST(ValidateReduceOptionsTest, MalformedPaperParamsAreNamed) {
+  struct Case {
+    void (*mutate)(PaperParams&);
+    const char* message;
+  } cases[] = {
+      {[](PaperParams& p) { p.step_y = -1; }, "paper.step_y must be > 0, got -1"},
+      {[](PaperParams& p) { p.step_x_frames = 0; }, "paper.step_x_frames must be > 0, got 0"},
+      {[](PaperParams& p) { p.step_tangent_x = NAN; }, "paper.step_tangent_x must be > 0, got NaN"},
+      {[](PaperParams& p) { p.step_tangent_y = INFINITY; },
+       "paper.step_tangent_y must be <= 1e+06, got +infinity"},
+      {[](PaperParams& p) { p.accuracy = 0; }, "paper.accuracy must be > 0, got 0"},
+      {[](PaperParams& p) { p.accuracy = -0.5; }, "paper.accuracy must be > 0, got -0.5"},
+      {[](PaperParams& p) { p.max_iterations = 0; },
+       "paper.max_iterations must be in [1, 1000], got 0"},
+      {[](PaperParams& p) { p.max_iterations = 1'000'000; },
+       "paper.max_iterations must be in [1, 1000], got 1000000"},
+      {[](PaperParams& p) { p.smoothing_sigma_frames = NAN; },
+       "paper.smoothing_sigma_frames must be in [0, 1000], got NaN"},
+      {[](PaperParams& p) { p.smoothing_sigma_frames = -1; },
+       "paper.smoothing_sigma_frames must be in [0, 1000], got -1"},
+      {[](PaperParams& p) { p.min_key_spacing_frames = 0; },
+       "paper.min_key_spacing_frames must be in [1, 1000000], got 0"},
+  };
+  for (const Case& c : cases) {
+    ReduceOptions options = PaperOptions();
+    c.mutate(options.paper);
+
+    const absl::Status status = ValidateReduceOptions(options);
+
+    EXPECT_EQ(status.code(), absl::StatusCode::kInvalidArgument) << c.message;
+    EXPECT_EQ(status.message(), c.message);
+  }
+}
+
+TEST(ValidateReduceOptionsTest, MalformedToleranceParamsAreNamed) {
+  ReduceOptions zero_bound;
+  zero_bound.tolerance.max_rotation_error_degrees = 0;
+  ReduceOptions nan_bound;
+  nan_bound.tolerance.max_position_error = NAN;
+  ReduceOptions infinite_bound;
+  infinite_bound.tolerance.max_scalar_error = INFINITY;
+  ReduceOptions tiny_budget;
+  tiny_budget.tolerance.key_budget = 1;
+
+  EXPECT_EQ(ValidateReduceOptions(zero_bound).message(),
+            "tolerance.max_rotation_error_degrees must be > 0, got 0");
+  EXPECT_EQ(ValidateReduceOptions(nan_bound).message(),
+            "tolerance.max_position_error must be > 0, got NaN");
+  EXPECT_EQ(ValidateReduceOptions(infinite_bound).message(),
+            "tolerance.max_scalar_error must be finite, got +infinity");
+  EXPECT_EQ(ValidateReduceOptions(tiny_budget).message(),
+            "tolerance.key_budget must be >= 2 when set, got 1");
+  EXPECT_EQ(ValidateReduceOptions(ReduceOptions{}).code(), absl::StatusCode::kUnimplemented);
+  EXPECT_TRUE(ValidateReduceOptions(PaperOptions()).ok());
+}
+
+TEST(ReduceKeysTest, ToleranceMethodIsNotImplementedYet) {
+  const Clip clip = ScalarClip({{0, 1, 2, 3}});
+
+  const absl::StatusOr<ReduceResult> result = ReduceKeys(clip, ReduceOptions{});
+
+  EXPECT_EQ(result.status().code(), absl::StatusCode::kUnimplemented);
+  EXPECT_EQ(result.status().message(),
+            "reduce method 'tolerance' is not implemented yet; use method 'paper'");
+}
+
+TEST(ReduceKeysTest, BadClipsAreRefusedWithTheirChannel) {
+  Clip with_nan = ScalarClip({{0, 1, 2, 3}, {0, 1, NAN, 3}});
+  Clip empty = ScalarClip({{0.0}});
+  empty.channels.clear();
+  Clip huge = ScalarClip({{0, 1e200, 2}});
+
+  EXPECT_EQ(ReduceKeys(with_nan, PaperOptions()).status().message(),
+            "channel 1 (c1): sample 2 is NaN");
+  EXPECT_EQ(ReduceKeys(empty, PaperOptions()).status().message(), "clip has no channels");
+  EXPECT_EQ(ReduceKeys(huge, PaperOptions()).status().message(),
+            "channel 0 (c0): sample 1 is 1e+200, beyond the +-1e100 that curve fitting supports");
+}
+
+TEST(ReduceKeysTest, ConstantChannelsGetTwoFlatKeys) {
+  const Clip constant = ScalarClip({std::vector<double>(50, 4.25)}, 0.5);
+  const Clip one_frame = ScalarClip({{7.0}});
+
+  absl::StatusOr<ReduceResult> flat = ReduceKeys(constant, PaperOptions());
+  absl::StatusOr<ReduceResult> single = ReduceKeys(one_frame, PaperOptions());
+
+  ASSERT_TRUE(single.ok()) << single.status();
+  EXPECT_EQ(single->keyed.curves[0].keys.size(), 1u);
+  ASSERT_TRUE(flat.ok()) << flat.status();
+  const Curve& curve = flat->keyed.curves[0];
+  ASSERT_EQ(curve.keys.size(), 2u);
+  EXPECT_EQ(curve.keys[0].time_seconds, 0.0);
+  EXPECT_EQ(curve.keys[1].time_seconds, 24.5);
+  EXPECT_EQ(curve.keys[0].value, 4.25);
+  EXPECT_EQ(curve.keys[1].value, 4.25);
+  EXPECT_EQ(curve.keys[0].out_tangent, 0.0);
+  EXPECT_EQ(flat->report.max_error, 0.0);
+  EXPECT_TRUE(flat->squared_error_history[0].empty());
+}
+
+TEST(ReduceKeysTest, RotationSeamIsFittedUnwrapped) {
+  // 150 -> 180 -> -170 ... wrapped: a steady 2 degrees per frame once unwrapped.
+  Clip clip;
+  clip.frame_time_seconds = 1.0 / 30.0;
+  clip.frame_count = 60;
+  clip.skeleton.joints = {Joint{.name = "Hips", .parent = -1, .channels = {0}}};
+  std::vector<double> samples(60);
+  for (int f = 0; f < 60; ++f) samples[f] = std::remainder(120.0 + 2.0 * f, 360.0);
+  clip.channels = {Channel{.joint = 0, .kind = ChannelKind::kZRotation, .samples = samples}};
+
+  absl::StatusOr<ReduceResult> result = ReduceKeys(clip, PaperOptions());
+
+  ASSERT_TRUE(result.ok()) << result.status();
+  EXPECT_LT(result->report.max_error, 0.5);
+  EXPECT_NEAR(EvaluateCurve(result->keyed.curves[0], 59.0 / 30.0), 238.0, 0.5);
+}
+
+TEST(ReduceKeysTest, ReportsProgressPerChannelAndStopsWhenCancelled) {
+  std::vector<double> wave(40);
+  for (int f = 0; f < 40; ++f) wave[f] = std::sin(f / 4.0);
+  const Clip clip = ScalarClip({wave, wave, wave});
+  std::vector<std::string> stages;
+  std::stop_source stop;
+
+  absl::StatusOr<ReduceResult> done =
+      ReduceKeys(clip, PaperOptions(),
+                 [&](double, std::string_view stage) { stages.emplace_back(stage); });
+  absl::StatusOr<ReduceResult> cancelled = ReduceKeys(
+      clip, PaperOptions(), [&](double, std::string_view) { stop.request_stop(); },
+      stop.get_token());
+
+  ASSERT_TRUE(done.ok());
+  EXPECT_EQ(stages, (std::vector<std::string>{"reduce 1/3", "reduce 2/3", "reduce 3/3"}));
+  EXPECT_EQ(cancelled.status().code(), absl::StatusCode::kCancelled);
+}
+
+TEST(MeasureReductionTest, ReportsRmsMaxAndWorstFrame) {
+  // A flat curve at 1 against samples 1, 1, 4, 1: errors 0, 0, 3, 0.
+  const Clip clip = ScalarClip({{1, 1, 4, 1}, {2, 2, 2, 2}});
+  KeyedClip keyed;
+  keyed.layout = clip;
+  for (Channel& channel : keyed.layout.channels) channel.samples.clear();
+  keyed.curves = {Curve{{Key{.value = 1.0}}}, Curve{{Key{.value = 2.0}}}};
+
+  absl::StatusOr<ReductionReport> report = MeasureReduction(clip, keyed);
+
+  ASSERT_TRUE(report.ok()) << report.status();
+  EXPECT_EQ(report->channels[0].max_error, 3.0);
+  EXPECT_EQ(report->channels[0].max_error_frame, 2);
+  EXPECT_DOUBLE_EQ(report->channels[0].rms_error, 1.5);
+  EXPECT_EQ(report->channels[1].max_error, 0.0);
+  EXPECT_EQ(report->key_count, 2);
+  EXPECT_EQ(report->sample_count, 8);
+  EXPECT_DOUBLE_EQ(report->key_percent(), 25.0);
+  EXPECT_DOUBLE_EQ(report->rms_error, std::sqrt(9.0 / 8.0));
+  EXPECT_EQ(report->worst_channel_index, 0);
+  EXPECT_EQ(report->worst_frame, 2);
+}
+
+TEST(MeasureReductionTest, ChannelMismatchIsRefused) {
+  const Clip clip = ScalarClip({{1, 2}});
+  KeyedClip keyed;
+  keyed.layout = ScalarClip({{1, 2}, {3, 4}});
+  keyed.curves = {Curve{{Key{}}}, Curve{{Key{}}}};
+
+  EXPECT_EQ(MeasureReduction(clip, keyed).status().message(),
+            "keyed clip has 2 channels, the clip has 1");
+}
+
+}  // namespace
+}  // namespace tempokey::core

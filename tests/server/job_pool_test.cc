@@ -1,0 +1,181 @@
+// JobPool: fixed workers, bounded queue, drain behaviour. No gRPC: runs under ThreadSanitizer.
+#include "server/job_pool.h"
+
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <latch>
+#include <mutex>
+#include <set>
+#include <thread>
+#include <vector>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "server/retry_hint.h"
+
+namespace tempokey::server {
+namespace {
+
+using ::testing::HasSubstr;
+
+// Deadline for waits that succeed on a working pool; reaching it fails the test, not CI.
+constexpr auto kHangGuard = std::chrono::seconds(60);
+
+auto Deadline() { return std::chrono::steady_clock::now() + kHangGuard; }
+
+// A gate tasks block on until the test opens it.
+class Gate {
+ public:
+  void Wait() {
+    std::unique_lock lock(mu_);
+    cv_.wait(lock, [&] { return open_; });
+  }
+  void Open() {
+    {
+      std::lock_guard lock(mu_);
+      open_ = true;
+    }
+    cv_.notify_all();
+  }
+
+ private:
+  std::mutex mu_;
+  std::condition_variable cv_;
+  bool open_ = false;
+};
+
+TEST(JobPoolTest, RunsEveryTaskOnItsOwnWorkers) {
+  JobPool pool(3, 100);
+  std::atomic<int> ran{0};
+  std::mutex mu;
+  std::set<std::thread::id> threads;
+
+  for (int i = 0; i < 100; ++i) {
+    ASSERT_TRUE(pool.TrySubmit([&](std::stop_token) {
+                      ran.fetch_add(1);
+                      std::lock_guard lock(mu);
+                      threads.insert(std::this_thread::get_id());
+                    })
+                    .ok());
+  }
+  ASSERT_TRUE(pool.WaitIdle(Deadline()));
+
+  EXPECT_EQ(ran.load(), 100);
+  EXPECT_EQ(pool.workers(), 3);
+  EXPECT_LE(threads.size(), 3u);
+  EXPECT_FALSE(threads.contains(std::this_thread::get_id()));
+}
+
+TEST(JobPoolTest, FullQueueRefusesWithRetryHintAndRecovers) {
+  JobPool pool(1, 2);
+  Gate gate;
+  std::latch started(1);
+  ASSERT_TRUE(pool.TrySubmit([&](std::stop_token) {
+                    started.count_down();
+                    gate.Wait();
+                  })
+                  .ok());
+  started.wait();  // the worker holds task 1; the queue is empty
+  ASSERT_TRUE(pool.TrySubmit([](std::stop_token) {}).ok());
+  ASSERT_TRUE(pool.TrySubmit([](std::stop_token) {}).ok());
+
+  absl::Status full = pool.TrySubmit([](std::stop_token) {});
+
+  EXPECT_EQ(full.code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_THAT(std::string(full.message()), HasSubstr("the job queue is full (2 waiting for 1 workers)"));
+  ASSERT_TRUE(GetRetryAfter(full).has_value());
+  EXPECT_GE(GetRetryAfter(full)->count(), 10);
+  EXPECT_EQ(pool.queue_depth(), 2);
+  EXPECT_EQ(pool.running(), 1);
+  gate.Open();
+  ASSERT_TRUE(pool.WaitIdle(Deadline()));
+  EXPECT_TRUE(pool.TrySubmit([](std::stop_token) {}).ok());
+}
+
+TEST(JobPoolTest, ShutdownRunsQueuedTasksThenRefusesNewOnes) {
+  std::atomic<int> ran{0};
+  auto pool = std::make_unique<JobPool>(1, 10);
+  Gate gate;
+  ASSERT_TRUE(pool->TrySubmit([&](std::stop_token) { gate.Wait(); }).ok());
+  for (int i = 0; i < 5; ++i) ASSERT_TRUE(pool->TrySubmit([&](std::stop_token) { ran++; }).ok());
+
+  std::thread opener([&] { gate.Open(); });
+  pool->Shutdown();
+  opener.join();
+
+  EXPECT_EQ(ran.load(), 5);
+  EXPECT_EQ(pool->TrySubmit([](std::stop_token) {}).code(), absl::StatusCode::kUnavailable);
+}
+
+TEST(JobPoolTest, RequestStopAllReachesRunningAndLaterTasks) {
+  JobPool pool(1, 10);
+  std::latch started(1);
+  std::atomic<bool> running_saw_stop{false};
+  std::atomic<bool> later_saw_stop{false};
+  ASSERT_TRUE(pool.TrySubmit([&](std::stop_token stop) {
+                    started.count_down();
+                    while (!stop.stop_requested()) std::this_thread::yield();
+                    running_saw_stop = true;
+                  })
+                  .ok());
+  ASSERT_TRUE(pool.TrySubmit([&](std::stop_token stop) { later_saw_stop = stop.stop_requested(); })
+                  .ok());
+  started.wait();
+
+  pool.RequestStopAll();
+  ASSERT_TRUE(pool.WaitIdle(Deadline()));
+
+  EXPECT_TRUE(running_saw_stop.load());
+  EXPECT_TRUE(later_saw_stop.load());
+}
+
+TEST(JobPoolTest, ConcurrentSubmittersNeverExceedTheQueueAndLoseNothing) {
+  constexpr int kThreads = 8;
+  constexpr int kPerThread = 500;
+  JobPool pool(2, 16);
+  std::atomic<int> accepted{0};
+  std::atomic<int> refused{0};
+  std::atomic<int> ran{0};
+  std::atomic<int> max_depth{0};
+
+  std::vector<std::thread> threads;
+  for (int t = 0; t < kThreads; ++t) {
+    threads.emplace_back([&] {
+      for (int i = 0; i < kPerThread; ++i) {
+        absl::Status status = pool.TrySubmit([&](std::stop_token) { ran++; });
+        if (status.ok()) {
+          accepted++;
+        } else {
+          EXPECT_EQ(status.code(), absl::StatusCode::kResourceExhausted);
+          refused++;
+        }
+        int depth = pool.queue_depth();
+        int seen = max_depth.load();
+        while (depth > seen && !max_depth.compare_exchange_weak(seen, depth)) {
+        }
+      }
+    });
+  }
+  for (std::thread& t : threads) t.join();
+  ASSERT_TRUE(pool.WaitIdle(Deadline()));
+
+  EXPECT_EQ(accepted.load() + refused.load(), kThreads * kPerThread);
+  EXPECT_EQ(ran.load(), accepted.load());
+  EXPECT_LE(max_depth.load(), 16);
+}
+
+TEST(JobPoolTest, WaitIdleTimesOutWhileATaskRuns) {
+  JobPool pool(1, 1);
+  Gate gate;
+  ASSERT_TRUE(pool.TrySubmit([&](std::stop_token) { gate.Wait(); }).ok());
+
+  const bool idle = pool.WaitIdle(std::chrono::steady_clock::now());
+
+  EXPECT_FALSE(idle);
+  gate.Open();
+  EXPECT_TRUE(pool.WaitIdle(Deadline()));
+}
+
+}  // namespace
+}  // namespace tempokey::server

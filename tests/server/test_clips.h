@@ -1,0 +1,123 @@
+// Synthetic clips, a start gate and process figures for server tests; no gRPC in here, so the job pool and
+// job manager tests (run under ThreadSanitizer) use it too.
+#ifndef TEMPOKEY_TESTS_SERVER_TEST_CLIPS_H_
+#define TEMPOKEY_TESTS_SERVER_TEST_CLIPS_H_
+
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <mutex>
+#include <string_view>
+#include <cstdint>
+#include <cstdio>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "tempokey/core/clip.h"
+
+namespace tempokey::testing {
+
+// ---- clips --------------------------------------------------------------------------------------
+
+// A clip of `joints` joints with 3 rotation channels each (Z, X, Y order) plus 3 root position
+// channels, `frames` frames at 120 Hz. Values are smooth, distinct per channel and frame, and
+// some rotations leave (-180, 180] so ConvertStep{wrap_rotations} changes them.
+inline core::Clip MakeClip(int joints, std::int64_t frames, double seed = 0.0) {
+  core::Clip clip;
+  clip.name = "synthetic";
+  clip.frame_time_seconds = 1.0 / 120.0;
+  clip.frame_count = frames;
+  for (int j = 0; j < joints; ++j) {
+    core::Joint joint;
+    joint.name = "joint" + std::to_string(j);
+    joint.parent = j - 1;
+    joint.offset = {0.0, 1.0 + j, 0.0};
+    const std::vector<core::ChannelKind> kinds =
+        j == 0 ? std::vector<core::ChannelKind>{core::ChannelKind::kXPosition,
+                                                core::ChannelKind::kYPosition,
+                                                core::ChannelKind::kZPosition,
+                                                core::ChannelKind::kZRotation,
+                                                core::ChannelKind::kXRotation,
+                                                core::ChannelKind::kYRotation}
+               : std::vector<core::ChannelKind>{core::ChannelKind::kZRotation,
+                                                core::ChannelKind::kXRotation,
+                                                core::ChannelKind::kYRotation};
+    for (core::ChannelKind kind : kinds) {
+      const int c = static_cast<int>(clip.channels.size());
+      core::Channel channel;
+      channel.joint = j;
+      channel.kind = kind;
+      channel.samples.resize(static_cast<std::size_t>(frames));
+      for (std::int64_t f = 0; f < frames; ++f) {
+        const double t = static_cast<double>(f) / 120.0;
+        channel.samples[f] = 170.0 * std::sin(0.7 * t + 0.1 * c + seed) + 30.0 * std::cos(3.0 * t) +
+                             0.001 * c;
+      }
+      joint.channels.push_back(c);
+      clip.channels.push_back(std::move(channel));
+    }
+    clip.skeleton.joints.push_back(std::move(joint));
+  }
+  return clip;
+}
+
+// What ConvertStep{wrap_rotations = true} must produce: rotations wrapped into (-180, 180].
+inline core::Clip WrappedCopy(core::Clip clip) {
+  for (core::Channel& channel : clip.channels) {
+    if (!core::IsRotation(channel.kind)) continue;
+    for (double& v : channel.samples) {
+      double w = std::remainder(v, 360.0);
+      if (w == -180.0) w = 180.0;
+      v = w;
+    }
+  }
+  return clip;
+}
+
+// Reads /proc/self/status VmHWM (peak resident set), in KiB; 0 when unavailable.
+inline std::int64_t PeakRssKiB(const std::string& status_path = "/proc/self/status") {
+  FILE* file = std::fopen(status_path.c_str(), "r");
+  if (file == nullptr) return 0;
+  char line[256];
+  std::int64_t kib = 0;
+  while (std::fgets(line, sizeof line, file) != nullptr) {
+    if (std::sscanf(line, "VmHWM: %ld kB", &kib) == 1) break;
+  }
+  std::fclose(file);
+  return kib;
+}
+
+// Holds workers in the on_job_start hook until released; counts arrivals.
+class StartGate {
+ public:
+  void Arrive(std::string_view) {
+    std::unique_lock lock(mu_);
+    ++arrived_;
+    cv_.notify_all();
+    cv_.wait(lock, [&] { return open_; });
+  }
+  bool WaitArrivals(int n) {
+    std::unique_lock lock(mu_);
+    return cv_.wait_for(lock, std::chrono::seconds(60), [&] { return arrived_ >= n; });
+  }
+  void Open() {
+    std::lock_guard lock(mu_);
+    open_ = true;
+    cv_.notify_all();
+  }
+  int arrived() {
+    std::lock_guard lock(mu_);
+    return arrived_;
+  }
+
+ private:
+  std::mutex mu_;
+  std::condition_variable cv_;
+  int arrived_ = 0;
+  bool open_ = false;
+};
+
+}  // namespace tempokey::testing
+
+#endif  // TEMPOKEY_TESTS_SERVER_TEST_CLIPS_H_
