@@ -196,6 +196,18 @@ namespace {
 
 // Runs `attempt` until it succeeds, fails with another code than UNAVAILABLE, fails after a
 // response arrived, runs out of attempts, or the next backoff would pass the deadline.
+// Carries the server's retry hint (trailing metadata) over to `status` as its payload.
+absl::Status WithRetryHint(absl::Status status, const grpc::ClientContext& context) {
+  const auto& trailers = context.GetServerTrailingMetadata();
+  const auto hint = trailers.find(wire::kRetryAfterMetadataKey);
+  if (hint == trailers.end()) return status;
+  if (std::optional<std::chrono::milliseconds> delay =
+          wire::ParseRetryAfter(std::string_view(hint->second.data(), hint->second.size()))) {
+    wire::SetRetryAfter(status, *delay);
+  }
+  return status;
+}
+
 template <class AttemptFn>
 absl::Status RetryWhileUnavailable(const ClientOptions& options,
                                    std::optional<Clock::time_point> deadline, AttemptFn attempt) {
@@ -223,7 +235,7 @@ absl::StatusOr<Response> CallUnary(
     grpc::ClientContext& context, const Request& request) {
   Response response;
   grpc::Status status = (stub.*method)(&context, request, &response);
-  if (!status.ok()) return FromGrpcStatus(status);
+  if (!status.ok()) return WithRetryHint(FromGrpcStatus(status), context);
   return response;
 }
 

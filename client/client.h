@@ -20,6 +20,7 @@
 #include "grpcpp/channel.h"
 #include "grpcpp/support/status.h"
 #include "proto/convert.h"
+#include "proto/retry_hint.h"
 #include "tempokey/core/clip.h"
 #include "tempokey/core/pipeline.h"
 #include "tempokey/core/progress.h"
@@ -126,7 +127,8 @@ class Client {
 
   // Queues `steps` on the uploaded clip `clip_id` / on `clip` sent inline.
   // Errors: kNotFound unknown clip id; kInvalidArgument bad pipeline; kResourceExhausted queue
-  // full; kUnimplemented an operation the server lacks; any call error.
+  // full, carrying the server's hint of when to try again (wire::GetRetryAfter()); kUnimplemented
+  // an operation the server lacks; any call error.
   absl::StatusOr<v1::Job> SubmitJob(const std::string& clip_id,
                                     std::span<const core::PipelineStep> steps,
                                     const SubmitOptions& submit = {}) const;

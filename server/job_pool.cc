@@ -4,7 +4,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
-#include "server/retry_hint.h"
+#include "proto/retry_hint.h"
 
 namespace tempokey::server {
 
@@ -24,7 +24,7 @@ absl::Status JobPool::TrySubmit(Task task) {
       absl::Status full = absl::ResourceExhaustedError(absl::StrCat(
           "the job queue is full (", queue_.size(), " waiting for ", threads_.size(),
           " workers); retry later"));
-      SetRetryAfter(full, RetryAfterHintLocked());
+      wire::SetRetryAfter(full, RetryAfterHintLocked());
       return full;
     }
     queue_.push_back(std::move(task));

@@ -119,6 +119,7 @@ int Run(int argc, char** argv) {
   std::string host = options.address.substr(0, options.address.rfind(':'));
   auto announce = spdlog::stdout_logger_mt("announce");
   announce->set_pattern("%v");
+  announce->set_level(spdlog::level::info);  // the announcement is not subject to --log_level
   announce->info("tempokey-server listening on {}:{}", host, port);
   announce->flush();
   spdlog::info("listening on {}:{}", host, port);

@@ -7,8 +7,8 @@ namespace tempokey::server {
 grpc::Status ToGrpcStatus(const absl::Status& status, grpc::ServerContextBase* context) {
   if (status.ok()) return grpc::Status::OK;
   if (context != nullptr) {
-    if (std::optional<std::chrono::milliseconds> retry = GetRetryAfter(status)) {
-      context->AddTrailingMetadata(kRetryAfterMetadataKey, std::to_string(retry->count()));
+    if (std::optional<std::chrono::milliseconds> retry = wire::GetRetryAfter(status)) {
+      context->AddTrailingMetadata(wire::kRetryAfterMetadataKey, std::to_string(retry->count()));
     }
   }
   return grpc::Status(static_cast<grpc::StatusCode>(status.code()), std::string(status.message()));

@@ -5,15 +5,13 @@
 #include "absl/status/status.h"
 #include "grpcpp/server_context.h"
 #include "grpcpp/support/status.h"
-#include "server/retry_hint.h"
+#include "proto/retry_hint.h"
 
 namespace tempokey::server {
 
-// Trailing metadata key of the retry hint, in milliseconds ("retry-after-ms: 250").
-inline constexpr char kRetryAfterMetadataKey[] = "retry-after-ms";
-
 // Same code and message (absl codes are the gRPC codes). When `context` is given and `status`
-// carries a retry hint (SetRetryAfter()), adds it as trailing metadata kRetryAfterMetadataKey.
+// carries a retry hint (wire::SetRetryAfter()), adds it as trailing metadata
+// wire::kRetryAfterMetadataKey.
 // Call before the call is finished.
 grpc::Status ToGrpcStatus(const absl::Status& status,
                           grpc::ServerContextBase* context = nullptr);

@@ -17,7 +17,7 @@
 #include "tempokey/core/keyed_clip.h"
 #include "tempokey/core/keyed_io.h"
 #include "tempokey/core/reduce.h"
-#include "tests/client/process_util.h"
+#include "tests/testing/process_util.h"
 #include "tests/testing/test_paths.h"
 
 namespace tempokey::testing {

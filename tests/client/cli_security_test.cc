@@ -10,7 +10,7 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tempokey/core/file_io.h"
-#include "tests/client/process_util.h"
+#include "tests/testing/process_util.h"
 #include "tests/testing/test_paths.h"
 
 namespace tempokey::testing {

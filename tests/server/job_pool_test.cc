@@ -12,7 +12,7 @@
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "server/retry_hint.h"
+#include "proto/retry_hint.h"
 
 namespace tempokey::server {
 namespace {
@@ -84,8 +84,8 @@ TEST(JobPoolTest, FullQueueRefusesWithRetryHintAndRecovers) {
 
   EXPECT_EQ(full.code(), absl::StatusCode::kResourceExhausted);
   EXPECT_THAT(std::string(full.message()), HasSubstr("the job queue is full (2 waiting for 1 workers)"));
-  ASSERT_TRUE(GetRetryAfter(full).has_value());
-  EXPECT_GE(GetRetryAfter(full)->count(), 10);
+  ASSERT_TRUE(wire::GetRetryAfter(full).has_value());
+  EXPECT_GE(wire::GetRetryAfter(full)->count(), 10);
   EXPECT_EQ(pool.queue_depth(), 2);
   EXPECT_EQ(pool.running(), 1);
   gate.Open();

@@ -1,8 +1,8 @@
 // Running the real binaries from tests: the `tempokey` CLI as a child process with its output
 // captured to files, and a real `tempokey-server` child on 127.0.0.1 with a free port. Every wait
 // is bounded, and only the processes started here are ever signalled.
-#ifndef TEMPOKEY_TESTS_CLIENT_PROCESS_UTIL_H_
-#define TEMPOKEY_TESTS_CLIENT_PROCESS_UTIL_H_
+#ifndef TEMPOKEY_TESTS_TESTING_PROCESS_UTIL_H_
+#define TEMPOKEY_TESTS_TESTING_PROCESS_UTIL_H_
 
 #include <fcntl.h>
 #include <signal.h>
@@ -128,22 +128,25 @@ inline ProcessResult RunTempokey(const std::vector<std::string>& args, const std
 }
 
 // A tempokey-server child listening on 127.0.0.1 at a free port. Stopped with SIGTERM (its
-// graceful drain) when destroyed; SIGKILL only if it does not exit in time.
+// graceful drain) when destroyed; SIGKILL only if it does not exit in time. Later flags override
+// the defaults (--drain_grace_seconds 2, --log_level warn).
 class ServerProcess {
  public:
   // Starts the server with `flags` added and waits (bounded) until it has written its port.
+  // Errors: kInternal with the server's log when it exits first (bad flags, a bind failure).
   static absl::StatusOr<std::unique_ptr<ServerProcess>> Start(
       const std::string& dir, const std::vector<std::string>& flags = {}) {
     static std::atomic<int> counter{0};
     auto server = std::unique_ptr<ServerProcess>(new ServerProcess());
     const std::string stem = absl::StrCat(dir, "/server-", getpid(), "-", counter++);
     server->log_path_ = stem + ".err";
+    server->stdout_path_ = stem + ".out";
     const std::string port_file = stem + ".port";
     std::vector<std::string> argv = {ServerBinary(), "--address", "127.0.0.1:0", "--port_file",
                                      port_file, "--drain_grace_seconds", "2", "--log_level",
                                      "warn"};
     argv.insert(argv.end(), flags.begin(), flags.end());
-    absl::StatusOr<pid_t> pid = Spawn(argv, stem + ".out", server->log_path_);
+    absl::StatusOr<pid_t> pid = Spawn(argv, server->stdout_path_, server->log_path_);
     if (!pid.ok()) return pid.status();
     server->pid_ = *pid;
 
@@ -168,21 +171,39 @@ class ServerProcess {
   ServerProcess& operator=(const ServerProcess&) = delete;
 
   int port() const { return port_; }
+  // The child's pid while it runs, -1 once it has been reaped.
+  pid_t pid() const { return pid_; }
   std::string target() const { return absl::StrCat("127.0.0.1:", port_); }
   std::string log() const { return ReadOrEmpty(log_path_); }
+  std::string output() const { return ReadOrEmpty(stdout_path_); }
+
+  // Sends `signal` to the running child (no effect once it has exited).
+  void Signal(int signal) const {
+    if (pid_ > 0) kill(pid_, signal);
+  }
+
+  // Waits at most `timeout` for the child to exit by itself; its exit code (-1 for a signal),
+  // nullopt while it still runs.
+  std::optional<int> WaitExit(std::chrono::milliseconds timeout) {
+    if (pid_ <= 0) return exit_code_;
+    std::optional<int> code = WaitFor(pid_, timeout);
+    if (code) {
+      pid_ = -1;
+      exit_code_ = *code;
+    }
+    return code;
+  }
 
   // SIGTERM, then a bounded wait; returns the exit code (-1 for a signal or a kill).
   int Stop() {
     if (pid_ <= 0) return exit_code_;
-    kill(pid_, SIGTERM);
-    std::optional<int> code = WaitFor(pid_, std::chrono::seconds(30));
-    if (!code) {
+    Signal(SIGTERM);
+    if (!WaitExit(std::chrono::seconds(30))) {
       kill(pid_, SIGKILL);
       WaitFor(pid_, std::chrono::seconds(10));
-      code = -1;
+      pid_ = -1;
+      exit_code_ = -1;
     }
-    pid_ = -1;
-    exit_code_ = *code;
     return exit_code_;
   }
 
@@ -193,8 +214,9 @@ class ServerProcess {
   int port_ = 0;
   int exit_code_ = -1;
   std::string log_path_;
+  std::string stdout_path_;
 };
 
 }  // namespace tempokey::testing
 
-#endif  // TEMPOKEY_TESTS_CLIENT_PROCESS_UTIL_H_
+#endif  // TEMPOKEY_TESTS_TESTING_PROCESS_UTIL_H_

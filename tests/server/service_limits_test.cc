@@ -1,0 +1,199 @@
+// Admission, size limits and metrics of a real server on 127.0.0.1:0: a full queue answers
+// RESOURCE_EXHAUSTED with a retry hint and the server keeps serving; a 50 MB clip goes up and its
+// result comes back with gRPC's default client limits; the Prometheus port is scraped over HTTP.
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_split.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "server/job_manager.h"
+#include "server/server.h"
+#include "proto/retry_hint.h"
+#include "tests/server/server_test_util.h"
+
+namespace tempokey::testing {
+namespace {
+
+using ::testing::HasSubstr;
+
+// ---- queue full ---------------------------------------------------------------------------------
+
+TEST(QueueFullTest, SubmitBeyondTheQueueIsResourceExhaustedWithARetryHintAndServingGoesOn) {
+  server::ServerOptions options = TestServerOptions();
+  options.workers = 1;
+  options.queue_capacity = 3;
+  GatedServer gated(options);
+  ASSERT_NE(gated.server, nullptr);
+  const std::string clip_id = UploadClip(*gated.stub, MakeClip(1, 40)).response.clip_id();
+  std::vector<std::string> accepted;
+  const JobOutcome running = Submit(*gated.stub, SubmitRequest(clip_id));
+  TEMPOKEY_ASSERT_GRPC_OK(running.status);
+  accepted.push_back(running.job.job_id());
+  ASSERT_TRUE(gated.gate->WaitArrivals(1));  // the one worker holds the first job
+  for (int i = 0; i < 3; ++i) {
+    const JobOutcome queued = Submit(*gated.stub, SubmitRequest(clip_id));
+    TEMPOKEY_ASSERT_GRPC_OK(queued.status);
+    accepted.push_back(queued.job.job_id());
+  }
+
+  grpc::ClientContext context;
+  SetDeadline(context);
+  v1::Job refused_job;
+  const grpc::Status refused =
+      gated.stub->SubmitJob(&context, SubmitRequest(clip_id), &refused_job);
+  const auto& trailers = context.GetServerTrailingMetadata();
+  const auto hint = trailers.find(wire::kRetryAfterMetadataKey);
+  gated.gate->Open();
+  std::vector<v1::JobState> final_states;
+  for (const std::string& id : accepted) final_states.push_back(WaitForJob(*gated.stub, id).state());
+  const JobOutcome after = Submit(*gated.stub, SubmitRequest(clip_id));
+  const v1::Job after_done = WaitForJob(*gated.stub, after.job.job_id());
+
+  EXPECT_THAT(refused, GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                                    HasSubstr("queue is full")));
+  ASSERT_NE(hint, trailers.end());
+  int hint_ms = 0;
+  ASSERT_TRUE(absl::SimpleAtoi(std::string(hint->second.data(), hint->second.size()), &hint_ms));
+  EXPECT_GT(hint_ms, 0);
+  EXPECT_THAT(final_states, ::testing::Each(v1::JOB_STATE_SUCCEEDED));
+  TEMPOKEY_ASSERT_GRPC_OK(after.status);
+  EXPECT_EQ(after_done.state(), v1::JOB_STATE_SUCCEEDED);
+  EXPECT_EQ(gated.server->jobs().job_count(), 5);  // the refused submit left nothing behind
+}
+
+// ---- a 50 MB clip -------------------------------------------------------------------------------
+
+TEST(LargeClipTest, FiftyMegabyteClipUploadsAndItsResultDownloadsWithDefaultClientLimits) {
+  std::unique_ptr<server::Server> server = StartServer(TestServerOptions());
+  ASSERT_NE(server, nullptr);
+  auto stub = v1::MotionService::NewStub(Connect(server->target()));  // default 4 MiB receive
+  const core::Clip clip = MakeClip(44, 48'000);  // 135 channels x 48000 frames = 51.8 MB
+  ASSERT_GT(clip.sample_count() * 8, 50'000'000);
+
+  const UploadOutcome upload = UploadClip(*stub, clip);
+  TEMPOKEY_ASSERT_GRPC_OK(upload.status);
+  const JobOutcome submitted = Submit(*stub, SubmitRequest(upload.response.clip_id()));
+  TEMPOKEY_ASSERT_GRPC_OK(submitted.status);
+  const v1::Job done = WaitForJob(*stub, submitted.job.job_id());
+  const ResultOutcome result = GetResult(*stub, submitted.job.job_id());
+  TEMPOKEY_ASSERT_GRPC_OK(result.status);
+  absl::StatusOr<core::Clip> rebuilt = AssembleClipResult(result.parts);
+
+  EXPECT_EQ(done.state(), v1::JOB_STATE_SUCCEEDED);
+  EXPECT_LT(result.largest_part_bytes, 4 << 20);
+  EXPECT_GT(result.parts.size(), 50u);
+  ASSERT_TRUE(rebuilt.ok()) << rebuilt.status();
+  const core::Clip expected = WrappedCopy(clip);
+  ASSERT_EQ(rebuilt->channels.size(), expected.channels.size());
+  for (std::size_t c = 0; c < expected.channels.size(); ++c) {
+    ASSERT_EQ(rebuilt->channels[c].samples, expected.channels[c].samples) << "channel " << c;
+  }
+}
+
+// ---- metrics ------------------------------------------------------------------------------------
+
+// GET `path` from 127.0.0.1:`port` over a plain socket; the whole response, headers included.
+std::optional<std::string> HttpGet(int port, const std::string& path) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  if (fd < 0) return std::nullopt;
+  timeval timeout{.tv_sec = 30, .tv_usec = 0};
+  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_port = htons(static_cast<std::uint16_t>(port));
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  if (::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) {
+    ::close(fd);
+    return std::nullopt;
+  }
+  const std::string request =
+      "GET " + path + " HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n";
+  if (::send(fd, request.data(), request.size(), 0) != static_cast<ssize_t>(request.size())) {
+    ::close(fd);
+    return std::nullopt;
+  }
+  std::string response;
+  char buffer[8192];
+  for (;;) {
+    const ssize_t n = ::recv(fd, buffer, sizeof buffer, 0);
+    if (n <= 0) break;
+    response.append(buffer, static_cast<std::size_t>(n));
+  }
+  ::close(fd);
+  return response;
+}
+
+// Sample lines of a Prometheus text exposition: "name{labels}" -> value.
+std::map<std::string, double> ParseSamples(const std::string& text) {
+  std::map<std::string, double> samples;
+  for (absl::string_view line : absl::StrSplit(text, '\n')) {
+    if (line.empty() || line.front() == '#') continue;
+    const std::size_t space = line.rfind(' ');
+    if (space == absl::string_view::npos) continue;
+    double value = 0.0;
+    if (absl::SimpleAtod(line.substr(space + 1), &value)) {
+      samples[std::string(line.substr(0, space))] = value;
+    }
+  }
+  return samples;
+}
+
+double Sample(const std::map<std::string, double>& samples, const std::string& name) {
+  const auto it = samples.find(name);
+  return it == samples.end() ? 0.0 : it->second;
+}
+
+TEST(MetricsTest, ScrapeShowsJobsBytesAndLatencyMoving) {
+  server::ServerOptions options = TestServerOptions();
+  options.metrics_address = "127.0.0.1:0";
+  std::unique_ptr<server::Server> server = StartServer(options);
+  ASSERT_NE(server, nullptr);
+  ASSERT_GT(server->metrics_port(), 0);
+  auto stub = v1::MotionService::NewStub(Connect(server->target()));
+  const std::optional<std::string> before = HttpGet(server->metrics_port(), "/metrics");
+  ASSERT_TRUE(before.has_value());
+
+  const std::string clip_id = UploadClip(*stub, MakeClip(2, 100)).response.clip_id();
+  for (int i = 0; i < 3; ++i) {
+    const JobOutcome job = Submit(*stub, SubmitRequest(clip_id));
+    TEMPOKEY_ASSERT_GRPC_OK(job.status);
+    WaitForJob(*stub, job.job.job_id());
+    TEMPOKEY_ASSERT_GRPC_OK(GetResult(*stub, job.job.job_id()).status);
+  }
+  const std::optional<std::string> after = HttpGet(server->metrics_port(), "/metrics");
+  ASSERT_TRUE(after.has_value());
+  const auto was = ParseSamples(*before);
+  const auto now = ParseSamples(*after);
+
+  EXPECT_THAT(*after, HasSubstr("HTTP/1.1 200"));
+  EXPECT_THAT(*after, HasSubstr("# TYPE tempokey_jobs_total counter"));
+  EXPECT_THAT(*after, HasSubstr("# TYPE tempokey_job_latency_seconds histogram"));
+  const std::string succeeded = R"(tempokey_jobs_total{kind="job",outcome="succeeded"})";
+  EXPECT_EQ(Sample(now, succeeded) - Sample(was, succeeded), 3.0);
+  const std::string latency_count = R"(tempokey_job_latency_seconds_count{kind="job"})";
+  EXPECT_EQ(Sample(now, latency_count) - Sample(was, latency_count), 3.0);
+  const std::string bytes_in = R"(tempokey_bytes_total{direction="in"})";
+  const std::string bytes_out = R"(tempokey_bytes_total{direction="out"})";
+  constexpr double kClipSampleBytes = 100 * 9 * 8;  // 100 frames x 9 channels of doubles
+  EXPECT_GE(Sample(now, bytes_in) - Sample(was, bytes_in), kClipSampleBytes);
+  EXPECT_GE(Sample(now, bytes_out) - Sample(was, bytes_out), 3 * kClipSampleBytes);
+  EXPECT_EQ(Sample(now, "tempokey_queue_depth"), 0.0);
+  EXPECT_EQ(Sample(now, "tempokey_running_jobs"), 0.0);
+  EXPECT_EQ(Sample(now, "tempokey_stored_jobs"), 3.0);
+  EXPECT_EQ(Sample(now, "tempokey_stored_clips"), 1.0);
+}
+
+}  // namespace
+}  // namespace tempokey::testing
