@@ -102,9 +102,27 @@ Basis HermiteBasis(double s) {
   return {2.0 * s3 - 3.0 * s2 + 1.0, s3 - 2.0 * s2 + s, -2.0 * s3 + 3.0 * s2, s3 - s2};
 }
 
-double SolveSegmentParameter(double ax, double atx, double bx, double btx, double frame) {
-  return SolveBezierParameter(ax, ax + atx / 3.0, bx - btx / 3.0, bx, frame);
-}
+// x(s) - ax of a segment in power form, ((a s + b) s + c) s, from its Bezier x-controls
+// ax, ax + atx / 3, bx - btx / 3, bx, measured from ax.
+struct SegmentCubic {
+  double a, b, c, span;
+
+  static SegmentCubic Of(double length, double atx, double btx) {
+    const double d1 = atx / 3.0;
+    const double d2 = length - btx / 3.0;
+    return {length - 3.0 * d2 + 3.0 * d1, 3.0 * d2 - 6.0 * d1, 3.0 * d1, length};
+  }
+
+  // The s of `target` (measured from ax), starting from a Newton step off `previous`, the
+  // solution of a nearby target: frames advance by one, so it lands close.
+  double SolveFrom(double previous, double target) const {
+    const double slope = (3.0 * a * previous + 2.0 * b) * previous + c;
+    const double guess =
+        slope > 0.0 ? previous + (target - ((a * previous + b) * previous + c) * previous) / slope
+                    : 0.5;
+    return SolveMonotonicCubic(a, b, c, span, target, guess);
+  }
+};
 
 // [first, end) frames of a segment from x = ax to x = bx.
 std::pair<std::int64_t, std::int64_t> SegmentFrames(double ax, double bx, bool last) {
@@ -169,31 +187,6 @@ struct SegmentForm {
   std::array<std::array<double, 4>, 4> h{};
 };
 
-// Solves x(s) = target on [0, 1] for the power-basis cubic ((a s + b) s + c) s (x measured from
-// the segment start), starting from `guess`; safeguarded Newton as SolveBezierParameter().
-inline double SolveCubic(double a, double b, double c, double span, double target, double guess) {
-  if (!(target > 0.0)) return 0.0;
-  if (!(target < span)) return 1.0;
-  double lo = 0.0;
-  double hi = 1.0;
-  double s = guess;
-  for (int iteration = 0; iteration < 200; ++iteration) {
-    const double f = ((a * s + b) * s + c) * s - target;
-    if (f == 0.0) return s;
-    if (f < 0.0) {
-      lo = s;
-    } else {
-      hi = s;
-    }
-    const double slope = (3.0 * a * s + 2.0 * b) * s + c;
-    double next = slope > 0.0 ? s - f / slope : lo - 1.0;
-    if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
-    if (std::abs(next - s) <= 1e-15 || hi - lo <= 1e-15) return next;
-    s = next;
-  }
-  return s;
-}
-
 // The Hermite basis at every frame of one x-shape, shared by every segment and x-combination
 // with that shape. A segment's x(s) depends only on its length L = bx - ax, the two tangent
 // x-components and where the first frame falls (t0 = first frame - ax): the frames sit at
@@ -208,43 +201,78 @@ struct ShapeKey {
   }
 };
 
-// Per shape: count entries of basis (4 doubles) and running Gram sums (10 doubles).
+// Per shape: `count` rows of the basis (h00, h10, h01, h11) at its frames, and the Gram sums
+// sum h h^T (10 distinct entries) over all rows and over all but the last. A segment's frames are
+// the shape's first `count` or `count - 1` targets (the last one is the segment end, which only
+// the last segment of a channel takes), so those two sums are the only ones ever read.
 struct ShapeEntry {
-  const double* data;
-  int count;
-};
-constexpr int kShapeStride = 14;
+  // gram_but_last[10], gram_all[10], then `count` basis rows of kBasisStride.
+  const double* record = nullptr;
+  int count = 0;
 
+  const double* gram_but_last() const { return record; }
+  const double* gram_all() const { return record + 10; }
+  const double* basis() const { return record + 20; }
+};
+constexpr int kBasisStride = 4;
+constexpr int kGramSize = 10;
+
+// Adds row `h` to the Gram sums `gram` (the order of additions is fixed: results are exact
+// functions of the shape).
+inline void AddToGram(const double* h, double* gram) {
+  gram[0] += h[0] * h[0];
+  gram[1] += h[0] * h[1];
+  gram[2] += h[0] * h[2];
+  gram[3] += h[0] * h[3];
+  gram[4] += h[1] * h[1];
+  gram[5] += h[1] * h[2];
+  gram[6] += h[1] * h[3];
+  gram[7] += h[2] * h[2];
+  gram[8] += h[2] * h[3];
+  gram[9] += h[3] * h[3];
+}
+
+// Shapes seen by one thread's fits. Entries are exact functions of their key, so a cache that
+// lives across passes, channels and calls changes no result; it keeps its memory blocks when it
+// is cleared, so a long fit does not fault fresh pages in over and over.
 class ShapeCache {
  public:
-  // The entry of `key`, computed on first use.
-  const ShapeEntry& Get(const ShapeKey& key) {
-    auto [it, inserted] = entries_.try_emplace(key, ShapeEntry{nullptr, 0});
+  // The entry of `key`, computed on first use. Its pointers stay valid until the next trim.
+  ShapeEntry Get(const ShapeKey& key) {
+    auto [it, inserted] = entries_.try_emplace(key, ShapeEntry{});
     if (inserted) it->second = Compute(key);
     return it->second;
   }
-  // Keeps memory bounded across long fits; entries are recomputed on demand.
+  // Starts loading the hash slot of `key` (a hint; no effect on results).
+  void Prefetch(const ShapeKey& key) const { entries_.prefetch(key); }
+  // Bounds memory: past kMaxBlocks blocks (or a few oversized tables), forgets every entry and
+  // reuses the blocks.
   void TrimIfLarge() {
-    if (blocks_.size() > 64) {
-      blocks_.clear();
-      block_used_ = kBlockDoubles;
+    if (next_block_ > kMaxBlocks || oversized_.size() > kMaxOversized) {
       entries_.clear();
+      oversized_.clear();
+      next_block_ = 0;
+      block_used_ = kBlockDoubles;
     }
   }
 
  private:
-  static constexpr std::size_t kBlockDoubles = std::size_t{1} << 16;
+  static constexpr std::size_t kBlockDoubles = std::size_t{1} << 16;  // 512 KiB
+  static constexpr std::size_t kMaxBlocks = 64;
+  static constexpr std::size_t kMaxOversized = 4;
 
-  // Room for `doubles` values that stays put (entries point into it).
+  // Room for `doubles` values that stays put until the next trim (entries point into it).
   double* Allocate(std::size_t doubles) {
     if (doubles > kBlockDoubles) {
-      blocks_.push_back(std::make_unique_for_overwrite<double[]>(doubles));
-      return blocks_.back().get();
+      oversized_.push_back(std::make_unique_for_overwrite<double[]>(doubles));
+      return oversized_.back().get();
     }
     if (block_used_ + doubles > kBlockDoubles) {
-      blocks_.push_back(std::make_unique_for_overwrite<double[]>(kBlockDoubles));
+      if (next_block_ == blocks_.size()) {
+        blocks_.push_back(std::make_unique_for_overwrite<double[]>(kBlockDoubles));
+      }
+      current_ = blocks_[next_block_++].get();
       block_used_ = 0;
-      current_ = blocks_.back().get();
     }
     double* out = current_ + block_used_;
     block_used_ += doubles;
@@ -253,85 +281,102 @@ class ShapeCache {
 
   ShapeEntry Compute(const ShapeKey& key) {
     const double length = key.length;
-    const double d1 = key.atx / 3.0;
-    const double d2 = length - key.btx / 3.0;
-    const double pa = length - 3.0 * d2 + 3.0 * d1;
-    const double pb = 3.0 * d2 - 6.0 * d1;
-    const double pc = 3.0 * d1;
+    const SegmentCubic cubic = SegmentCubic::Of(length, key.atx, key.btx);
     // The slack keeps a target that rounds a hair above the segment end (s = 1) in the table.
     const double last = std::floor(length - key.t0 + 1e-9);
     const int count = last >= 0.0 ? static_cast<int>(last) + 1 : 0;
-    double* out = Allocate(static_cast<std::size_t>(count) * kShapeStride + 1);
-    ShapeEntry entry{out, 0};
-    std::array<double, 10> gram{};
+    // One contiguous record, Gram sums first: a lookup reads it front to back.
+    static_assert(kGramSize == 10, "ShapeEntry's accessors assume 10 Gram sums");
+    double* record = Allocate(2 * kGramSize + static_cast<std::size_t>(count) * kBasisStride);
+    double* gram_but_last = record;
+    double* gram_all = record + kGramSize;
+    double* out = record + 2 * kGramSize;
+    ShapeEntry entry;
+    entry.record = record;
+    entry.count = count;
+    std::fill(gram_but_last, gram_all + kGramSize, 0.0);
     double s = 0.0;
     for (int k = 0; k < count; ++k) {
-      const double target = key.t0 + static_cast<double>(k);
-      // Frames advance by one: a Newton step from the previous solution is a close first guess.
-      const double slope = (3.0 * pa * s + 2.0 * pb) * s + pc;
-      double guess = slope > 0.0 ? s + (target - ((pa * s + pb) * s + pc) * s) / slope : 0.5;
-      if (!(guess > 0.0 && guess < 1.0)) guess = target / length;
-      s = SolveCubic(pa, pb, pc, length, target, guess);
+      s = cubic.SolveFrom(s, key.t0 + static_cast<double>(k));
       const Basis h = HermiteBasis(s);
-      gram[0] += h.h00 * h.h00;
-      gram[1] += h.h00 * h.h10;
-      gram[2] += h.h00 * h.h01;
-      gram[3] += h.h00 * h.h11;
-      gram[4] += h.h10 * h.h10;
-      gram[5] += h.h10 * h.h01;
-      gram[6] += h.h10 * h.h11;
-      gram[7] += h.h01 * h.h01;
-      gram[8] += h.h01 * h.h11;
-      gram[9] += h.h11 * h.h11;
-      double* row = out + static_cast<std::size_t>(k) * kShapeStride;
+      double* row = out + static_cast<std::size_t>(k) * kBasisStride;
       row[0] = h.h00;
       row[1] = h.h10;
       row[2] = h.h01;
       row[3] = h.h11;
-      std::copy(gram.begin(), gram.end(), row + 4);
-      ++entry.count;
+      if (k + 1 < count) AddToGram(row, gram_but_last);
     }
+    std::copy(gram_but_last, gram_but_last + kGramSize, gram_all);
+    if (count > 0) AddToGram(out + static_cast<std::size_t>(count - 1) * kBasisStride, gram_all);
     return entry;
   }
 
   absl::flat_hash_map<ShapeKey, ShapeEntry> entries_;
   std::vector<std::unique_ptr<double[]>> blocks_;
+  std::vector<std::unique_ptr<double[]>> oversized_;
+  std::size_t next_block_ = 0;
   double* current_ = nullptr;
   std::size_t block_used_ = kBlockDoubles;
 };
 
+// The calling thread's shape cache.
+ShapeCache& ThreadShapeCache() {
+  thread_local ShapeCache cache;
+  return cache;
+}
+
+// One x-combination's frames and their shape.
+struct SegmentShape {
+  ShapeEntry entry;
+  std::int64_t first = 0;  // first frame
+  int n = 0;               // frames, 0 for none
+  double squares = 0.0;    // sum of (sample - y_ref)^2 over the frames
+};
+
+// b += (sample[k] - y_ref) * basis row k over k < n: the data terms of a segment's form. Cloned
+// for AVX like UpdateLaneMinima(); every component is summed in the same order by both clones,
+// so they agree bit for bit.
+__attribute__((target_clones("avx", "default"))) void SumDataTerms(const double* sample,
+                                                                    const double* basis, int n,
+                                                                    double y_ref, double* b) {
+  using V = double __attribute__((vector_size(32)));
+  V sum = {0.0, 0.0, 0.0, 0.0};
+  for (int k = 0; k < n; ++k) {
+    V h;
+    std::memcpy(&h, basis + k * kBasisStride, sizeof(V));
+    sum += (sample[k] - y_ref) * h;
+  }
+  std::memcpy(b, &sum, sizeof(V));
+}
+
+// Sum of (sample[k] - y_ref)^2 over k < n.
+double SumSquares(const double* sample, int n, double y_ref) {
+  double squares = 0.0;
+  for (int k = 0; k < n; ++k) {
+    const double d = sample[k] - y_ref;
+    squares += d * d;
+  }
+  return squares;
+}
+
 // Builds the form of one x-combination from its shape: the Gram matrix of the basis over the
 // segment's frames comes from the cache, the data terms are summed here in coordinates relative
 // to `y_ref` (a sample near the segment) so the quadratic form does not cancel large sums.
-SegmentForm BuildSegmentForm(std::span<const double> samples, ShapeCache& cache, double ax,
-                             double atx, double bx, double btx, bool last, double y_ref,
-                             const std::array<double, 4>& centre_y, const HermiteSteps& steps) {
+SegmentForm BuildSegmentForm(std::span<const double> samples, const SegmentShape& shape,
+                             double y_ref, const std::array<double, 4>& centre_y,
+                             const HermiteSteps& steps) {
   SegmentForm form;
-  const auto [first, end] = SegmentFrames(ax, bx, last);
-  const int n = static_cast<int>(end - first);
-  if (n <= 0) {
-    return form;
-  }
-  const ShapeKey key{bx - ax, atx, btx, static_cast<double>(first) - ax};
-  const ShapeEntry& entry = cache.Get(key);
-  const double* data = entry.data;
-  if (entry.count < n) {  // unreachable: the table covers every frame up to bx
+  const int n = shape.n;
+  if (n <= 0) return form;
+  const ShapeEntry& entry = shape.entry;
+  if (n < entry.count - 1 || n > entry.count) {  // unreachable: see ShapeEntry
     form.e0 = kInf;
     return form;
   }
-  std::array<double, 4> b{};
-  double c = 0.0;
-  const double* sample = samples.data() + first;
-  for (int k = 0; k < n; ++k) {
-    const double* h = data + k * kShapeStride;
-    const double d = sample[k] - y_ref;
-    b[0] += d * h[0];
-    b[1] += d * h[1];
-    b[2] += d * h[2];
-    b[3] += d * h[3];
-    c += d * d;
-  }
-  const double* g = data + (n - 1) * kShapeStride + 4;
+  alignas(32) std::array<double, 4> b;
+  SumDataTerms(samples.data() + shape.first, entry.basis(), n, y_ref, b.data());
+  const double c = shape.squares;
+  const double* g = n == entry.count ? entry.gram_all() : entry.gram_but_last();
   const std::array<double, 4> w = {centre_y[0] - y_ref, centre_y[1], centre_y[2] - y_ref,
                                    centre_y[3]};
   // E(w + D delta) = e0 + 2 (G w - b)^T D delta + delta^T D G D delta.
@@ -485,25 +530,79 @@ class DpPass {
     std::stable_sort(order.begin(), order.end(),
                      [&](int l, int r) { return cheapest[l] < cheapest[r]; });
 
+    // Every shape the segment may need, looked up before any is used, in two sweeps (keys and
+    // slot prefetches, then lookups and record prefetches), so the memory accesses overlap
+    // instead of stalling one by one. Visiting the combinations by the difference of their x
+    // offsets puts equal shapes next to each other (same length, same tangents): about half of
+    // them reuse the previous key.
+    std::array<SegmentShape, kStates> shapes;
+    // The frames, and so the sum of squares, depend on the x offsets alone.
+    std::array<double, 9> squares;
+    squares.fill(-1.0);
+    std::array<ShapeKey, kStates> keys;
+    std::array<std::int8_t, kStates> key_of_combo;
+    std::array<std::int8_t, kStates> combos;
+    int combo_count = 0;
+    int key_count = 0;
+    for (int itx_a = 0; itx_a < 3; ++itx_a) {
+      for (int itx_b = 0; itx_b < 3; ++itx_b) {
+        for (int difference = -2; difference <= 2; ++difference) {
+          for (int ix_a = std::max(0, -difference); ix_a < std::min(3, 3 - difference); ++ix_a) {
+            const int ix_b = ix_a + difference;
+            const int sx = ix_a * 3 + itx_a;
+            const int tx = ix_b * 3 + itx_b;
+            if (cheapest[sx] == kInf || (gb.x_fixed && ix_b != 1)) continue;
+            const double ax = ga.x[ix_a];
+            const double atx = ga.tx[itx_a];
+            const double bx = gb.x[ix_b];
+            const double btx = gb.tx[itx_b];
+            if (!SegmentIsFeasible(ax, atx, bx, btx)) continue;
+            const int combo = tx * 9 + sx;
+            SegmentShape& shape = shapes[combo];
+            const auto [first, end] = SegmentFrames(ax, bx, last);
+            shape.first = first;
+            shape.n = static_cast<int>(std::max<std::int64_t>(0, end - first));
+            if (shape.n == 0) continue;
+            double& offsets_squares = squares[ix_a * 3 + ix_b];
+            if (offsets_squares < 0.0) {
+              offsets_squares = SumSquares(samples_.data() + first, shape.n, y_ref);
+            }
+            shape.squares = offsets_squares;
+            const ShapeKey key{bx - ax, atx, btx, static_cast<double>(first) - ax};
+            if (key_count == 0 || !(key == keys[key_count - 1])) {
+              keys[key_count++] = key;
+              cache_.Prefetch(key);
+            }
+            key_of_combo[combo_count] = static_cast<std::int8_t>(key_count - 1);
+            combos[combo_count++] = static_cast<std::int8_t>(combo);
+          }
+        }
+      }
+    }
+    std::array<ShapeEntry, kStates> entries;
+    for (int k = 0; k < key_count; ++k) {
+      entries[k] = cache_.Get(keys[k]);
+      __builtin_prefetch(entries[k].record);
+    }
+    for (int c = 0; c < combo_count; ++c) shapes[combos[c]].entry = entries[key_of_combo[c]];
+
     for (int tx = 0; tx < 9; ++tx) {
       minima_.Reset();
       row_count_ = 0;
       const bool allowed = !gb.x_fixed || XIndex(tx) == 1;
       for (int sx : order) {
         if (!allowed || cheapest[sx] == kInf) break;
-        double widest = 0.0;
-        for (int ty = 0; ty < 9; ++ty) {
-          const double m = minima_.least[ty];
-          widest = std::max(widest, m + TieTolerance(m, scale_));
-        }
-        if (cheapest[sx] > widest) break;
+        // The widest tie window of the nine targets; TieTolerance() rounds monotonically, so
+        // it is the window of the largest smallest candidate.
+        const double largest = *std::max_element(minima_.least.begin(), minima_.least.begin() + 9);
+        if (cheapest[sx] > largest + TieTolerance(largest, scale_)) break;
         const double ax = ga.x[XIndex(sx)];
         const double atx = ga.tx[TxIndex(sx)];
         const double bx = gb.x[XIndex(tx)];
         const double btx = gb.tx[TxIndex(tx)];
         if (!SegmentIsFeasible(ax, atx, bx, btx)) continue;
         const SegmentForm form =
-            BuildSegmentForm(samples_, cache_, ax, atx, bx, btx, last, y_ref, centre_y, steps_);
+            BuildSegmentForm(samples_, shapes[tx * 9 + sx], y_ref, centre_y, steps_);
         PredecessorRow& row = rows_[row_count_++];
         FillRow(form, in.data() + sx * 9, sx, row);
         UpdateMinima(row, minima_);
@@ -659,26 +758,45 @@ std::vector<HermiteKey2D> InitialHermiteKeys(std::span<const double> samples, do
 }
 
 double HermiteValueAtFrame(const HermiteKey2D& a, const HermiteKey2D& b, double frame) {
-  const double s = SolveSegmentParameter(a.x, a.tx, b.x, b.tx, frame);
+  const double s = SolveBezierParameter(a.x, a.x + a.tx / 3.0, b.x - b.tx / 3.0, b.x, frame);
   const Basis h = HermiteBasis(s);
   return h.h00 * a.y + h.h10 * a.ty + h.h01 * b.y + h.h11 * b.ty;
 }
 
-double SegmentSquaredError(std::span<const double> samples, const HermiteKey2D& a,
-                           const HermiteKey2D& b, bool last) {
+namespace {
+
+// SegmentSquaredError() on `cache`'s basis rows: the same x(s) = frame solutions the DP's forms
+// are built from.
+double SegmentErrorOnShape(std::span<const double> samples, ShapeCache& cache,
+                           const HermiteKey2D& a, const HermiteKey2D& b, bool last) {
   const auto [first, end] = SegmentFrames(a.x, b.x, last);
+  const int n = static_cast<int>(std::max<std::int64_t>(0, end - first));
+  if (n == 0) return 0.0;
+  const ShapeEntry entry = cache.Get({b.x - a.x, a.tx, b.tx, static_cast<double>(first) - a.x});
   double sum = 0.0;
-  for (std::int64_t f = first; f < end; ++f) {
-    const double r = HermiteValueAtFrame(a, b, static_cast<double>(f)) - samples[f];
+  for (int k = 0; k < n; ++k) {
+    const double* h = entry.basis() + k * kBasisStride;
+    const double r = h[0] * a.y + h[1] * a.ty + h[2] * b.y + h[3] * b.ty - samples[first + k];
     sum += r * r;
   }
   return sum;
 }
 
+}  // namespace
+
+double SegmentSquaredError(std::span<const double> samples, const HermiteKey2D& a,
+                           const HermiteKey2D& b, bool last) {
+  ShapeCache& cache = ThreadShapeCache();
+  cache.TrimIfLarge();
+  return SegmentErrorOnShape(samples, cache, a, b, last);
+}
+
 double CurveSquaredError(std::span<const double> samples, std::span<const HermiteKey2D> keys) {
+  ShapeCache& cache = ThreadShapeCache();
+  cache.TrimIfLarge();
   double sum = 0.0;
   for (std::size_t i = 0; i + 1 < keys.size(); ++i) {
-    sum += SegmentSquaredError(samples, keys[i], keys[i + 1], i + 2 == keys.size());
+    sum += SegmentErrorOnShape(samples, cache, keys[i], keys[i + 1], i + 2 == keys.size());
   }
   return sum;
 }
@@ -733,7 +851,8 @@ absl::Status ValidateHermiteKeys(std::span<const double> samples,
 
 HermiteDpPass RunHermiteDpPass(std::span<const double> samples,
                                std::span<const HermiteKey2D> keys, const HermiteSteps& steps) {
-  ShapeCache cache;
+  ShapeCache& cache = ThreadShapeCache();
+  cache.TrimIfLarge();
   return DpPass(samples, keys, steps, cache).Run();
 }
 
@@ -760,13 +879,13 @@ absl::StatusOr<HermiteFitResult> FitHermiteDp(std::span<const double> samples,
   result.squared_error = CurveSquaredError(samples, result.keys);
   result.squared_error_history.push_back(result.squared_error);
   HermiteSteps steps = options.steps;
-  ShapeCache cache;
+  ShapeCache& cache = ThreadShapeCache();
   for (int iteration = 0; iteration < options.max_iterations; ++iteration) {
     const double largest =
         std::max({steps.x, steps.y, steps.tangent_x, steps.tangent_y});
     if (largest < options.accuracy) break;
-    HermiteDpPass pass = DpPass(samples, result.keys, steps, cache).Run();
     cache.TrimIfLarge();
+    HermiteDpPass pass = DpPass(samples, result.keys, steps, cache).Run();
     ++result.iterations;
     bool taken = false;
     if (pass.moved) {

@@ -70,9 +70,8 @@ double EvaluateSegment(const Key& a, const Key& b, double time_seconds) {
 
 }  // namespace
 
-double SolveBezierParameter(double x0, double x1, double x2, double x3, double x) {
-  if (!(x > x0)) return 0.0;
-  if (!(x < x3)) return 1.0;
+double SolveBezierParameter(double x0, double x1, double x2, double x3, double x,
+                            std::optional<double> guess) {
   // x(s) - x0 = ((a s + b) s + c) s with the power-basis coefficients of the Bezier.
   const double d1 = x1 - x0;
   const double d2 = x2 - x0;
@@ -81,26 +80,7 @@ double SolveBezierParameter(double x0, double x1, double x2, double x3, double x
   const double b = 3.0 * d2 - 6.0 * d1;
   const double c = 3.0 * d1;
   const double target = x - x0;
-  double lo = 0.0;
-  double hi = 1.0;
-  double s = target / d3;
-  for (int iteration = 0; iteration < 200; ++iteration) {
-    const double f = ((a * s + b) * s + c) * s - target;
-    if (f == 0.0) return s;
-    if (f < 0.0) {
-      lo = s;
-    } else {
-      hi = s;
-    }
-    const double slope = (3.0 * a * s + 2.0 * b) * s + c;
-    double next = slope > 0.0 ? s - f / slope : lo - 1.0;
-    // Newton leaving the bracket (or a flat spot) falls back to bisection, so the loop always
-    // converges on a monotonic cubic.
-    if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
-    if (std::abs(next - s) <= 1e-15 || hi - lo <= 1e-15) return next;
-    s = next;
-  }
-  return s;
+  return SolveMonotonicCubic(a, b, c, d3, target, guess.value_or(target / d3));
 }
 
 absl::Status ValidateCurve(const Curve& curve, std::string_view label) {

@@ -116,8 +116,12 @@ inline bool SegmentIsFeasible(double ax, double atx, double bx, double btx) {
 // The curve's value at `frame`, which must lie in [a.x, b.x] of a feasible segment.
 double HermiteValueAtFrame(const HermiteKey2D& a, const HermiteKey2D& b, double frame);
 
-// Segment error (definition above) evaluated directly, frame by frame. `last` marks the last
-// segment. Precondition: feasible segment inside the samples.
+// Segment error (definition above). x(s_f) = f is solved frame by frame, each solve starting
+// from a Newton step off the previous frame's solution, and the solutions are kept per segment
+// shape in a per-thread table that the DP passes share, so the error of a path is evaluated on
+// exactly the basis values its DP costs were built from. The table is bounded and changes no
+// value: results depend on the arguments alone. `last` marks the last segment.
+// Precondition: feasible segment inside the samples.
 double SegmentSquaredError(std::span<const double> samples, const HermiteKey2D& a,
                            const HermiteKey2D& b, bool last);
 

@@ -13,6 +13,7 @@
 #ifndef TEMPOKEY_CORE_KEYED_CLIP_H_
 #define TEMPOKEY_CORE_KEYED_CLIP_H_
 
+#include <cmath>
 #include <optional>
 #include <string_view>
 #include <vector>
@@ -72,9 +73,41 @@ absl::Status ValidateCurve(const Curve& curve, std::string_view label);
 // The parameter s in [0, 1] at which the cubic Bezier with controls x0 <= x1 <= x2 <= x3 reaches
 // `x` (0 at or below x0, 1 at or above x3). Safeguarded Newton on the cubic: the result is the
 // root to within a few ulps of s wherever the curve is not flat (|s - s*| <= 1e-12 for the
-// weights ValidateCurve() admits). Precondition: the controls are non-decreasing; they are not
-// checked here. Thread-safe.
-double SolveBezierParameter(double x0, double x1, double x2, double x3, double x);
+// weights ValidateCurve() admits). `guess` in (0, 1), when given, starts the search there (a
+// neighbouring solution); otherwise it starts at the chord's estimate. Precondition: the
+// controls are non-decreasing; they are not checked here. Thread-safe.
+double SolveBezierParameter(double x0, double x1, double x2, double x3, double x,
+                            std::optional<double> guess = std::nullopt);
+
+// The same for a cubic already in power form measured from its start: the s in [0, 1] with
+// ((a s + b) s + c) s = target, 0 for target <= 0, 1 for target >= span = a + b + c, starting
+// from `guess` in (0, 1). Precondition: the cubic is non-decreasing on [0, 1]. Thread-safe.
+// Inline: it is the innermost loop of curve fitting.
+inline double SolveMonotonicCubic(double a, double b, double c, double span, double target,
+                                  double guess) {
+  if (!(target > 0.0)) return 0.0;
+  if (!(target < span)) return 1.0;
+  double lo = 0.0;
+  double hi = 1.0;
+  double s = guess > 0.0 && guess < 1.0 ? guess : target / span;
+  for (int iteration = 0; iteration < 200; ++iteration) {
+    const double f = ((a * s + b) * s + c) * s - target;
+    if (f == 0.0) return s;
+    if (f < 0.0) {
+      lo = s;
+    } else {
+      hi = s;
+    }
+    const double slope = (3.0 * a * s + 2.0 * b) * s + c;
+    double next = slope > 0.0 ? s - f / slope : lo - 1.0;
+    // Newton leaving the bracket (or a flat spot) falls back to bisection, so the loop always
+    // converges on a monotonic cubic.
+    if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+    if (std::abs(next - s) <= 1e-15 || hi - lo <= 1e-15) return next;
+    s = next;
+  }
+  return s;
+}
 
 // The curve's value at `time_seconds` (semantics above); constant before the first and after the
 // last key. Precondition: ValidateCurve() passed (an empty curve gives 0). O(log keys).
