@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The README's two commands. Each does its own set-up on a fresh Debian 12 machine (as root):
 #
-#   deploy/quickstart.sh demo   install, build, start tempokey-server on loopback, run the main job
-#                               with the CLI on a real clip from ../shared/data, stop the server
+#   deploy/quickstart.sh demo   install, build, start tempokey-server on loopback, run the main jobs
+#                               (retime, key reduction) with the CLI on a real clip from
+#                               ../shared/data, write the results to build/demo, stop the server
 #   deploy/quickstart.sh test   install, build, run the whole test suite (what .ci/run calls)
 #
 # Environment: TEMPOKEY_BUILD_DIR (default: build), TEMPOKEY_JOBS (default: nproc),
@@ -28,29 +29,41 @@ build() {
 demo() {
   build -DTEMPOKEY_BUILD_BENCH=OFF
   local clip="${1:-$shared_dir/data/bvh/cmu/131_01.bvh}"
+  local out="$build_dir/demo"
   local work
   work="$(mktemp -d)"
+  mkdir -p "$out"
   log "starting tempokey-server on 127.0.0.1 (free port)"
   "$build_dir/server/tempokey-server" --address 127.0.0.1:0 --port_file "$work/port" \
     >"$work/server.log" 2>&1 &
   local server_pid=$!
-  trap 'kill -TERM "$server_pid" 2>/dev/null || true' EXIT
+  trap 'kill -TERM "$server_pid" 2>/dev/null || true; rm -rf "$work"' EXIT
   for _ in $(seq 1 100); do [[ -s "$work/port" ]] && break; sleep 0.1; done
   [[ -s "$work/port" ]] || { cat "$work/server.log"; echo "error: server did not start" >&2; exit 1; }
   local target="127.0.0.1:$(cat "$work/port")"
+  local cli=("$build_dir/client/tempokey" --server "$target")
+  local stem
+  stem="$(basename "${clip%.*}")"
 
-  log "tempokey health --server $target"
-  "$build_dir/client/tempokey" --server "$target" health
-  log "tempokey run $clip -o $work/$(basename "$clip")"
-  "$build_dir/client/tempokey" --server "$target" run "$clip" -o "$work/$(basename "$clip")"
-  log "tempokey info $work/$(basename "$clip")"
-  "$build_dir/client/tempokey" info "$work/$(basename "$clip")"
+  log "tempokey health"
+  "${cli[@]}" health
+  log "tempokey info $clip"
+  "${cli[@]}" info "$clip"
+  log "retime: half speed from 2 s to 4 s (slow motion in the middle of the clip)"
+  "${cli[@]}" retime "$clip" -o "$out/$stem-slow.bvh" --speed "0s:1,2s:1,2s:0.5,4s:0.5,4s:1"
+  log "reduce: the paper's Hermite DP fit, keys as Maya .anim and as JSON, and baked back to BVH"
+  "${cli[@]}" reduce "$clip" -o "$out/$stem-keys.anim" --method paper
+  "${cli[@]}" reduce "$clip" -o "$out/$stem-keys.json" --method paper >/dev/null
+  "${cli[@]}" reduce "$clip" -o "$out/$stem-filtered.bvh" --method paper >/dev/null
+  log "outputs in $out"
+  ls -l "$out"
 
   log "stopping the server (SIGTERM drain)"
   kill -TERM "$server_pid"
   local status=0
   wait "$server_pid" || status=$?
   trap - EXIT
+  rm -rf "$work"
   echo "tempokey-server exited with status $status"
   return "$status"
 }

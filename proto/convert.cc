@@ -75,17 +75,6 @@ std::string FrameRange(std::int64_t begin, std::int64_t end) {
 // Error prefix for operation `index` (0-based): "operation 2: ".
 std::string OpPrefix(int index) { return absl::StrCat("operation ", index + 1, ": "); }
 
-absl::Status CheckFinite(int op, const std::string& field, double value) {
-  if (std::isfinite(value)) return absl::OkStatus();
-  return Invalid(absl::StrCat(OpPrefix(op), field, " must be finite, got ", DescribeNonFinite(value)));
-}
-
-absl::Status CheckPositive(int op, const std::string& field, double value) {
-  if (std::isfinite(value) && value > 0) return absl::OkStatus();
-  return Invalid(absl::StrCat(OpPrefix(op), field, " must be > 0, got ",
-                              std::isfinite(value) ? absl::StrCat(value) : DescribeNonFinite(value)));
-}
-
 absl::Status UnknownEnum(int op, const std::string& field, int value) {
   return Invalid(absl::StrCat(OpPrefix(op), field, " has unknown value ", value));
 }
@@ -94,10 +83,8 @@ absl::StatusOr<core::TimePoint> TimePointFromProto(int op, const std::string& fi
                                                    const v1::TimePoint& tp) {
   switch (tp.unit_case()) {
     case v1::TimePoint::kSeconds:
-      TEMPOKEY_RETURN_IF_ERROR(CheckFinite(op, field + ".seconds", tp.seconds()));
       return core::TimePoint{.value = tp.seconds(), .in_frames = false};
     case v1::TimePoint::kFrames:
-      TEMPOKEY_RETURN_IF_ERROR(CheckFinite(op, field + ".frames", tp.frames()));
       return core::TimePoint{.value = tp.frames(), .in_frames = true};
     case v1::TimePoint::UNIT_NOT_SET:
       break;
@@ -115,19 +102,12 @@ v1::TimePoint TimePointToProto(const core::TimePoint& tp) {
   return out;
 }
 
-// A rate given as numerator/denominator where 0/0 means "keep the source's".
-absl::StatusOr<std::optional<core::FrameRate>> RateFromProto(int op, const std::string& numerator_field,
-                                                             const std::string& denominator_field,
-                                                             std::int64_t numerator,
-                                                             std::int64_t denominator) {
-  if (numerator == 0 && denominator == 0) return std::optional<core::FrameRate>();
-  if (numerator <= 0 || denominator <= 0) {
-    return Invalid(absl::StrCat(OpPrefix(op), numerator_field, "/", denominator_field,
-                                " must both be 0 (keep the source rate) or both be > 0, got ",
-                                numerator, "/", denominator));
-  }
-  return std::optional<core::FrameRate>(
-      core::FrameRate{.numerator = numerator, .denominator = denominator});
+// A rate given as numerator/denominator where 0/0 means "keep the source's"; any other pair is
+// the caller's rate, which core validates ("output rate 30/0 must have a positive numerator and
+// denominator").
+std::optional<core::FrameRate> RateFromProto(std::int64_t numerator, std::int64_t denominator) {
+  if (numerator == 0 && denominator == 0) return std::nullopt;
+  return core::FrameRate{.numerator = numerator, .denominator = denominator};
 }
 
 absl::StatusOr<std::vector<core::SpeedKnot>> KnotsFromProto(
@@ -139,7 +119,6 @@ absl::StatusOr<std::vector<core::SpeedKnot>> KnotsFromProto(
     const std::string name = absl::StrCat(field, "[", k, "]");
     TEMPOKEY_ASSIGN_OR_RETURN(core::TimePoint time,
                               TimePointFromProto(op, name + ".time", knots[k].time()));
-    TEMPOKEY_RETURN_IF_ERROR(CheckFinite(op, name + ".speed", knots[k].speed()));
     out.push_back(core::SpeedKnot{.time = time, .speed = knots[k].speed()});
   }
   return out;
@@ -179,32 +158,22 @@ absl::StatusOr<core::RetimeStep> RetimeFromProto(int op, const v1::RetimeOperati
   for (int h = 0; h < r.holds_size(); ++h) {
     const std::string name = absl::StrCat("retime.holds[", h, "]");
     TEMPOKEY_ASSIGN_OR_RETURN(core::TimePoint at, TimePointFromProto(op, name + ".at", r.holds(h).at()));
-    TEMPOKEY_RETURN_IF_ERROR(
-        CheckFinite(op, name + ".duration_seconds", r.holds(h).duration_seconds()));
     step.warp.holds.push_back(core::Hold{.at = at, .duration_seconds = r.holds(h).duration_seconds()});
   }
   step.warp.reverse = r.reverse();
 
   switch (r.fit_case()) {
     case v1::RetimeOperation::kFitSeconds:
-      TEMPOKEY_RETURN_IF_ERROR(CheckPositive(op, "retime.fit_seconds", r.fit_seconds()));
       step.options.fit_seconds = r.fit_seconds();
       break;
     case v1::RetimeOperation::kFitFrames:
-      if (r.fit_frames() < 1) {
-        return Invalid(absl::StrCat(OpPrefix(op), "retime.fit_frames must be >= 1, got ",
-                                    r.fit_frames()));
-      }
       step.options.fit_frames = r.fit_frames();
       break;
     case v1::RetimeOperation::FIT_NOT_SET:
       break;
   }
   step.options.fit_to_grid = !r.disable_fit_to_grid();
-  TEMPOKEY_ASSIGN_OR_RETURN(step.options.output_rate,
-                            RateFromProto(op, "retime.output_rate_numerator",
-                                          "retime.output_rate_denominator",
-                                          r.output_rate_numerator(), r.output_rate_denominator()));
+  step.options.output_rate = RateFromProto(r.output_rate_numerator(), r.output_rate_denominator());
   switch (r.filter()) {
     case v1::RESAMPLE_FILTER_UNSPECIFIED:
     case v1::RESAMPLE_FILTER_TENT:
@@ -255,14 +224,8 @@ absl::StatusOr<core::RetimeStep> RetimeFromProto(int op, const v1::RetimeOperati
         core::Pin{.source = source, .output_frame = r.pins(p).output_frame()});
   }
   // 0 selects the default range; anything else is the caller's and core checks it.
-  if (r.min_speed() != 0.0) {
-    TEMPOKEY_RETURN_IF_ERROR(CheckPositive(op, "retime.min_speed", r.min_speed()));
-    step.options.min_speed = r.min_speed();
-  }
-  if (r.max_speed() != 0.0) {
-    TEMPOKEY_RETURN_IF_ERROR(CheckPositive(op, "retime.max_speed", r.max_speed()));
-    step.options.max_speed = r.max_speed();
-  }
+  if (r.min_speed() != 0.0) step.options.min_speed = r.min_speed();
+  if (r.max_speed() != 0.0) step.options.max_speed = r.max_speed();
   return step;
 }
 
@@ -281,73 +244,25 @@ absl::StatusOr<core::ReduceStep> ReduceFromProto(int op, const v1::ReduceOperati
       return UnknownEnum(op, "reduce.method", r.method());
   }
 
+  // Set fields replace the defaults; ValidateReduceOptions() (run on the whole pipeline before
+  // anything is queued) checks every value and names it.
   const v1::PaperParams& p = r.paper();
-  if (p.has_step_x_frames()) {
-    TEMPOKEY_RETURN_IF_ERROR(CheckPositive(op, "reduce.paper.step_x_frames", p.step_x_frames()));
-    o.paper.step_x_frames = p.step_x_frames();
-  }
-  if (p.has_step_y()) {
-    TEMPOKEY_RETURN_IF_ERROR(CheckPositive(op, "reduce.paper.step_y", p.step_y()));
-    o.paper.step_y = p.step_y();
-  }
-  if (p.has_step_tangent_x()) {
-    TEMPOKEY_RETURN_IF_ERROR(CheckPositive(op, "reduce.paper.step_tangent_x", p.step_tangent_x()));
-    o.paper.step_tangent_x = p.step_tangent_x();
-  }
-  if (p.has_step_tangent_y()) {
-    TEMPOKEY_RETURN_IF_ERROR(CheckPositive(op, "reduce.paper.step_tangent_y", p.step_tangent_y()));
-    o.paper.step_tangent_y = p.step_tangent_y();
-  }
-  if (p.has_accuracy()) {
-    TEMPOKEY_RETURN_IF_ERROR(CheckPositive(op, "reduce.paper.accuracy", p.accuracy()));
-    o.paper.accuracy = p.accuracy();
-  }
-  if (p.has_max_iterations()) {
-    if (p.max_iterations() < 1 || p.max_iterations() > 1000) {
-      return Invalid(absl::StrCat(OpPrefix(op), "reduce.paper.max_iterations must be in 1..1000, got ",
-                                  p.max_iterations()));
-    }
-    o.paper.max_iterations = p.max_iterations();
-  }
-  if (p.has_smoothing_sigma_frames()) {
-    const double sigma = p.smoothing_sigma_frames();
-    if (!std::isfinite(sigma) || sigma < 0) {
-      return Invalid(absl::StrCat(OpPrefix(op), "reduce.paper.smoothing_sigma_frames must be >= 0, got ",
-                                  std::isfinite(sigma) ? absl::StrCat(sigma) : DescribeNonFinite(sigma)));
-    }
-    o.paper.smoothing_sigma_frames = sigma;
-  }
-  if (p.has_min_key_spacing_frames()) {
-    if (p.min_key_spacing_frames() < 1) {
-      return Invalid(absl::StrCat(OpPrefix(op), "reduce.paper.min_key_spacing_frames must be >= 1, got ",
-                                  p.min_key_spacing_frames()));
-    }
-    o.paper.min_key_spacing_frames = p.min_key_spacing_frames();
-  }
+  if (p.has_step_x_frames()) o.paper.step_x_frames = p.step_x_frames();
+  if (p.has_step_y()) o.paper.step_y = p.step_y();
+  if (p.has_step_tangent_x()) o.paper.step_tangent_x = p.step_tangent_x();
+  if (p.has_step_tangent_y()) o.paper.step_tangent_y = p.step_tangent_y();
+  if (p.has_accuracy()) o.paper.accuracy = p.accuracy();
+  if (p.has_max_iterations()) o.paper.max_iterations = p.max_iterations();
+  if (p.has_smoothing_sigma_frames()) o.paper.smoothing_sigma_frames = p.smoothing_sigma_frames();
+  if (p.has_min_key_spacing_frames()) o.paper.min_key_spacing_frames = p.min_key_spacing_frames();
 
   const v1::ToleranceParams& t = r.tolerance();
   if (t.has_max_rotation_error_degrees()) {
-    TEMPOKEY_RETURN_IF_ERROR(CheckPositive(op, "reduce.tolerance.max_rotation_error_degrees",
-                                           t.max_rotation_error_degrees()));
     o.tolerance.max_rotation_error_degrees = t.max_rotation_error_degrees();
   }
-  if (t.has_max_position_error()) {
-    TEMPOKEY_RETURN_IF_ERROR(
-        CheckPositive(op, "reduce.tolerance.max_position_error", t.max_position_error()));
-    o.tolerance.max_position_error = t.max_position_error();
-  }
-  if (t.has_max_scalar_error()) {
-    TEMPOKEY_RETURN_IF_ERROR(
-        CheckPositive(op, "reduce.tolerance.max_scalar_error", t.max_scalar_error()));
-    o.tolerance.max_scalar_error = t.max_scalar_error();
-  }
-  if (t.has_key_budget()) {
-    if (t.key_budget() < 1) {
-      return Invalid(absl::StrCat(OpPrefix(op), "reduce.tolerance.key_budget must be >= 1, got ",
-                                  t.key_budget()));
-    }
-    o.tolerance.key_budget = t.key_budget();
-  }
+  if (t.has_max_position_error()) o.tolerance.max_position_error = t.max_position_error();
+  if (t.has_max_scalar_error()) o.tolerance.max_scalar_error = t.max_scalar_error();
+  if (t.has_key_budget()) o.tolerance.key_budget = t.key_budget();
   switch (t.pose_alignment()) {
     case v1::POSE_ALIGNMENT_UNSPECIFIED:
     case v1::POSE_ALIGNMENT_NONE:
@@ -959,14 +874,10 @@ absl::StatusOr<std::vector<core::PipelineStep>> PipelineFromProto(
         steps.emplace_back(std::move(step));
         break;
       }
-      case v1::Operation::kBake: {
-        TEMPOKEY_ASSIGN_OR_RETURN(
-            std::optional<core::FrameRate> rate,
-            RateFromProto(i, "bake.rate_numerator", "bake.rate_denominator",
-                          op.bake().rate_numerator(), op.bake().rate_denominator()));
-        steps.emplace_back(core::BakeStep{.rate = rate});
+      case v1::Operation::kBake:
+        steps.emplace_back(core::BakeStep{
+            .rate = RateFromProto(op.bake().rate_numerator(), op.bake().rate_denominator())});
         break;
-      }
       case v1::Operation::kConvert:
         steps.emplace_back(core::ConvertStep{.wrap_rotations = op.convert().wrap_rotations()});
         break;

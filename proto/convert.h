@@ -132,11 +132,13 @@ absl::StatusOr<core::KeyedClip> KeyedClipFromProto(const v1::KeyedClip& keyed,
 
 // ---- operations ---------------------------------------------------------------------------------
 
-// Each Operation as a core pipeline step. Checks the messages themselves (an empty oneof, two warp
-// domains at once, an enum value out of range, a proto3 `optional` field set to an invalid value);
-// the steps' own validation is core::ValidatePipeline()'s.
-// Errors: kInvalidArgument "operation 2: reduce.paper.step_y must be > 0, got -1";
-//         kUnimplemented for an operation or method this build does not implement.
+// Each Operation as a core pipeline step. Checks only what the encoding itself can get wrong (an
+// empty oneof, two warp domains at once, a time point without a unit, an enum value out of
+// range); every value is core::ValidatePipeline()'s to check, with the one set of limits and
+// messages core has ("operation 2 (reduce): paper.step_y must be > 0, got -1"). Unset proto3
+// `optional` fields and 0 speeds or 0/0 rates take core's defaults.
+// Errors: kInvalidArgument "operation 2: retime takes at most one of speed_over_source,
+//         speed_over_output and time_map, got speed_over_source and time_map".
 absl::StatusOr<std::vector<core::PipelineStep>> PipelineFromProto(
     const google::protobuf::RepeatedPtrField<v1::Operation>& operations);
 

@@ -15,6 +15,15 @@
 #include "absl/strings/str_cat.h"
 #include "tempokey/core/status.h"
 
+// The innermost kernels are cloned for AVX and picked at load time by an ifunc resolver. Sanitizer
+// builds keep the portable clone only: an instrumented resolver runs before the sanitizer's
+// runtime is up (TSan crashes there).
+#if defined(TEMPOKEY_SANITIZED)
+#define TEMPOKEY_AVX_CLONES
+#else
+#define TEMPOKEY_AVX_CLONES __attribute__((target_clones("avx", "default")))
+#endif
+
 namespace tempokey::core {
 namespace {
 
@@ -336,9 +345,8 @@ struct SegmentShape {
 // b += (sample[k] - y_ref) * basis row k over k < n: the data terms of a segment's form. Cloned
 // for AVX like UpdateLaneMinima(); every component is summed in the same order by both clones,
 // so they agree bit for bit.
-__attribute__((target_clones("avx", "default"))) void SumDataTerms(const double* sample,
-                                                                    const double* basis, int n,
-                                                                    double y_ref, double* b) {
+TEMPOKEY_AVX_CLONES void SumDataTerms(const double* sample, const double* basis, int n,
+                                      double y_ref, double* b) {
   using V = double __attribute__((vector_size(32)));
   V sum = {0.0, 0.0, 0.0, 0.0};
   for (int k = 0; k < n; ++k) {
@@ -406,7 +414,7 @@ SegmentForm BuildSegmentForm(std::span<const double> samples, const SegmentShape
 // {-z, 0, +z}, folded into the smallest, second smallest and arg-smallest per lane. Written
 // with vector extensions and cloned for AVX, where the machine has it; both clones compute the
 // same values (no contraction into FMA: -ffp-contract follows -std=c++20).
-__attribute__((target_clones("avx", "default"))) void UpdateLaneMinima(
+TEMPOKEY_AVX_CLONES void UpdateLaneMinima(
     const double* a, const double* b_lanes, const double* z0_lanes, const double* z1_lanes,
     double state_base, double* least_lanes, double* second_lanes, double* state_lanes) {
   using V = double __attribute__((vector_size(32)));

@@ -17,6 +17,7 @@
 #include "tempokey/core/keyed_clip.h"
 #include "tempokey/core/keyed_io.h"
 #include "tempokey/core/reduce.h"
+#include "tests/testing/angle_jumps.h"
 #include "tests/testing/process_util.h"
 #include "tests/testing/test_paths.h"
 
@@ -362,6 +363,18 @@ TEST_F(CliEndToEndTest, RetimeAtHalfSpeedBetweenTwoAndFourSecondsAddsTwoSeconds)
   for (std::size_t c = 0; c < source.channels.size(); ++c) {
     EXPECT_NEAR(slow.channels[c].samples.front(), source.channels[c].samples.front(), kPoseTolerance);
     EXPECT_NEAR(slow.channels[c].samples.back(), source.channels[c].samples.back(), kPoseTolerance);
+  }
+  // The joints move continuously: no output step over 20 degrees that the source lacks.
+  absl::StatusOr<std::vector<core::SpeedKnot>> knots =
+      core::ParseSpeedKnots("0s:1,2s:1,2s:0.5,4s:0.5,4s:1");
+  ASSERT_TRUE(knots.ok()) << knots.status();
+  core::TimeWarpSpec warp;
+  warp.domain = core::WarpDomain::kSpeedOverSource;
+  warp.speed = *knots;
+  for (const Jump& jump : JumpsTheSourceLacks(source, slow, warp, {})) {
+    ADD_FAILURE() << "channel " << jump.channel << " output frame " << jump.output_frame
+                  << ": step " << jump.output_step << " where the source moves "
+                  << jump.source_variation;
   }
 }
 

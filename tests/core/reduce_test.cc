@@ -1,4 +1,5 @@
 #include "tempokey/core/reduce.h"
+#include "tests/core/reduce_invalid_cases.h"
 
 #include <cmath>
 #include <stop_token>
@@ -33,29 +34,7 @@ ReduceOptions PaperOptions() {
 }
 
 TEST(ValidateReduceOptionsTest, MalformedPaperParamsAreNamed) {
-  struct Case {
-    void (*mutate)(PaperParams&);
-    const char* message;
-  } cases[] = {
-      {[](PaperParams& p) { p.step_y = -1; }, "paper.step_y must be > 0, got -1"},
-      {[](PaperParams& p) { p.step_x_frames = 0; }, "paper.step_x_frames must be > 0, got 0"},
-      {[](PaperParams& p) { p.step_tangent_x = NAN; }, "paper.step_tangent_x must be > 0, got NaN"},
-      {[](PaperParams& p) { p.step_tangent_y = INFINITY; },
-       "paper.step_tangent_y must be <= 1e+06, got +infinity"},
-      {[](PaperParams& p) { p.accuracy = 0; }, "paper.accuracy must be > 0, got 0"},
-      {[](PaperParams& p) { p.accuracy = -0.5; }, "paper.accuracy must be > 0, got -0.5"},
-      {[](PaperParams& p) { p.max_iterations = 0; },
-       "paper.max_iterations must be in [1, 1000], got 0"},
-      {[](PaperParams& p) { p.max_iterations = 1'000'000; },
-       "paper.max_iterations must be in [1, 1000], got 1000000"},
-      {[](PaperParams& p) { p.smoothing_sigma_frames = NAN; },
-       "paper.smoothing_sigma_frames must be in [0, 1000], got NaN"},
-      {[](PaperParams& p) { p.smoothing_sigma_frames = -1; },
-       "paper.smoothing_sigma_frames must be in [0, 1000], got -1"},
-      {[](PaperParams& p) { p.min_key_spacing_frames = 0; },
-       "paper.min_key_spacing_frames must be in [1, 1000000], got 0"},
-  };
-  for (const Case& c : cases) {
+  for (const reduce_cases::BadPaperParams& c : reduce_cases::BadPaperParamsTable()) {
     ReduceOptions options = PaperOptions();
     c.mutate(options.paper);
 

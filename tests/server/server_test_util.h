@@ -11,6 +11,7 @@
 #include <functional>
 #include <future>
 #include <memory>
+#include <ostream>
 #include <string>
 #include <utility>
 #include <vector>
@@ -30,6 +31,14 @@
 #include "tempokey/core/pipeline.h"
 #include "tempokey/v1/motion_service.grpc.pb.h"
 #include "tests/server/test_clips.h"
+
+namespace grpc {
+// gtest prints a grpc::Status by its code and message.
+inline void PrintTo(const Status& status, std::ostream* os) {
+  *os << "gRPC status " << static_cast<int>(status.error_code()) << " \"" << status.error_message()
+      << "\"";
+}
+}  // namespace grpc
 
 namespace tempokey::testing {
 

@@ -1,6 +1,7 @@
 // UploadClip, GetServerInfo and health over a real server on 127.0.0.1:0 with real stubs.
 #include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "gmock/gmock.h"
@@ -248,7 +249,13 @@ TEST(UploadLimitTest, StreamsBeyondTheLimitAreRefused) {
   auto open = stub->UploadClip(&open_context, &open_response);
   v1::UploadClipRequest header;
   *header.mutable_header() = wire::ClipHeaderToProto(MakeClip(1, 10));
-  ASSERT_TRUE(open->Write(header));  // once the server has read it, the stream is surely open
+  ASSERT_TRUE(open->Write(header));
+  // Write() returning means sent, not registered: wait until the server counts the stream.
+  const auto deadline = std::chrono::steady_clock::now() + kCallDeadline;
+  while (server->open_streams() < 1 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  ASSERT_EQ(server->open_streams(), 1);
 
   UploadOutcome refused;
   for (int attempt = 0; attempt < 100; ++attempt) {
