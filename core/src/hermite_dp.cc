@@ -14,15 +14,7 @@
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
 #include "tempokey/core/status.h"
-
-// The innermost kernels are cloned for AVX and picked at load time by an ifunc resolver. Sanitizer
-// builds keep the portable clone only: an instrumented resolver runs before the sanitizer's
-// runtime is up (TSan crashes there).
-#if defined(TEMPOKEY_SANITIZED)
-#define TEMPOKEY_AVX_CLONES
-#else
-#define TEMPOKEY_AVX_CLONES __attribute__((target_clones("avx", "default")))
-#endif
+#include "simd.h"
 
 namespace tempokey::core {
 namespace {

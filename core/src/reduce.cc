@@ -10,6 +10,7 @@
 #include "tempokey/core/hermite_dp.h"
 #include "tempokey/core/rotation.h"
 #include "tempokey/core/status.h"
+#include "tempokey/core/tolerance_fit.h"
 
 namespace tempokey::core {
 namespace {
@@ -150,6 +151,167 @@ absl::StatusOr<ChannelFit> PaperFit(const std::vector<double>& samples, double f
                     std::move(fit.squared_error_history), fit.iterations};
 }
 
+// ---- tolerance ----------------------------------------------------------------------------------
+
+// Bounds below this fraction of the requested ones are not searched for a key budget: the fit
+// would key every frame long before.
+constexpr double kMinBudgetScale = 1e-6;
+// Bounds beyond this multiple cannot lower the key count further (two keys per channel).
+constexpr double kMaxBudgetScale = 1e12;
+// Bisection steps of the budget search on the bounds' scale (a factor 2^-12 apart at the end).
+constexpr int kBudgetBisections = 12;
+
+double BoundOf(const ToleranceParams& t, ChannelKind kind) {
+  if (IsRotation(kind)) return t.max_rotation_error_degrees;
+  if (kind == ChannelKind::kScalar) return t.max_scalar_error;
+  return t.max_position_error;
+}
+
+// Channels whose keys share frames: each alone, a joint's (channels off joints alone), or all.
+std::vector<std::vector<int>> AlignmentGroups(const Clip& clip, PoseAlignment alignment) {
+  const int count = static_cast<int>(clip.channels.size());
+  std::vector<std::vector<int>> groups;
+  if (alignment == PoseAlignment::kClip) {
+    groups.emplace_back(static_cast<std::size_t>(count));
+    for (int c = 0; c < count; ++c) groups.back()[c] = c;
+    return groups;
+  }
+  std::vector<int> group_of_joint(clip.skeleton.joints.size(), -1);
+  for (int c = 0; c < count; ++c) {
+    const int joint = clip.channels[c].joint;
+    if (alignment == PoseAlignment::kJoint && joint >= 0) {
+      int& group = group_of_joint[joint];
+      if (group < 0) {
+        group = static_cast<int>(groups.size());
+        groups.emplace_back();
+      }
+      groups[group].push_back(c);
+    } else {
+      groups.push_back({c});
+    }
+  }
+  return groups;
+}
+
+// The keys of channel `index` of `fit` as a curve in seconds: non-weighted Hermite keys whose
+// tangents are the slopes per second.
+Curve SplineCurve(const SplineFit& fit, std::size_t index, double frame_time) {
+  Curve curve;
+  curve.keys.reserve(fit.frames.size());
+  for (std::size_t k = 0; k < fit.frames.size(); ++k) {
+    const double slope = fit.slopes[index][k] / frame_time;
+    Key key;
+    key.time_seconds = static_cast<double>(fit.frames[k]) * frame_time;
+    key.value = fit.values[index][k];
+    key.in_tangent = slope;
+    key.out_tangent = slope;
+    curve.keys.push_back(key);
+  }
+  return curve;
+}
+
+// The tolerance fit of every group with every bound multiplied by `scale`; curves in channel order.
+absl::StatusOr<std::vector<Curve>> ToleranceCurves(
+    const Clip& clip, const std::vector<std::vector<double>>& inputs,
+    const std::vector<std::vector<int>>& groups, const ToleranceParams& params, double scale,
+    const ProgressFn& progress, std::stop_token stop) {
+  std::vector<Curve> curves(clip.channels.size());
+  for (std::size_t g = 0; g < groups.size(); ++g) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+    const std::vector<int>& group = groups[g];
+    if (group.size() == 1 && IsConstant(inputs[group[0]])) {
+      curves[group[0]] = FlatFit(inputs[group[0]], clip.frame_time_seconds).curve;
+      continue;
+    }
+    std::vector<std::span<const double>> channels;
+    std::vector<double> bounds;
+    for (int c : group) {
+      channels.emplace_back(inputs[c]);
+      bounds.push_back(scale * BoundOf(params, clip.channels[c].kind));
+    }
+    absl::StatusOr<SplineFit> fit = FitWithinTolerance(channels, bounds, {}, stop);
+    if (!fit.ok()) return Annotate(fit.status(), ChannelLabel(clip, group.front()));
+    for (std::size_t k = 0; k < group.size(); ++k) {
+      curves[group[k]] = SplineCurve(*fit, k, clip.frame_time_seconds);
+    }
+    ReportProgress(progress, static_cast<double>(g + 1) / static_cast<double>(groups.size()),
+                   absl::StrCat("reduce ", group.back() + 1, "/", clip.channels.size()));
+  }
+  return curves;
+}
+
+std::int64_t KeyCount(const std::vector<Curve>& curves) {
+  std::int64_t keys = 0;
+  for (const Curve& curve : curves) keys += static_cast<std::int64_t>(curve.keys.size());
+  return keys;
+}
+
+// Curves within the bounds, or, with a key budget, within the smallest common scale of the bounds
+// whose fit keeps at most that many keys (bisection on the scale, in ratio).
+absl::StatusOr<std::vector<Curve>> ToleranceFit(const Clip& clip,
+                                                const std::vector<std::vector<double>>& inputs,
+                                                const ToleranceParams& params,
+                                                const ProgressFn& progress, std::stop_token stop) {
+  const std::vector<std::vector<int>> groups = AlignmentGroups(clip, params.pose_alignment);
+  if (!params.key_budget) return ToleranceCurves(clip, inputs, groups, params, 1.0, progress, stop);
+
+  const std::int64_t budget = *params.key_budget;
+  const std::int64_t minimum =
+      static_cast<std::int64_t>(clip.channels.size()) * (clip.frame_count > 1 ? 2 : 1);
+  if (budget < minimum) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "tolerance.key_budget ", budget, " is below the ", minimum, " keys any fit of ",
+        clip.channels.size(), " channels needs (", clip.frame_count > 1 ? 2 : 1, " per channel)"));
+  }
+  const ProgressFn quiet;
+  auto fit = [&](double scale) {
+    return ToleranceCurves(clip, inputs, groups, params, scale, quiet, stop);
+  };
+  // Bracket: `within` keeps to the budget, `over` does not.
+  double within = 1.0;
+  double over = 0.0;
+  TEMPOKEY_ASSIGN_OR_RETURN(std::vector<Curve> best, fit(1.0));
+  if (KeyCount(best) <= budget) {
+    for (double scale = 0.5; scale >= kMinBudgetScale; scale *= 0.5) {
+      TEMPOKEY_ASSIGN_OR_RETURN(std::vector<Curve> curves, fit(scale));
+      if (KeyCount(curves) > budget) {
+        over = scale;
+        break;
+      }
+      within = scale;
+      best = std::move(curves);
+    }
+    if (over == 0.0) return best;  // even the tightest bound searched fits the budget
+  } else {
+    over = 1.0;
+    for (double scale = 2.0;; scale *= 2.0) {
+      if (scale > kMaxBudgetScale) {
+        return absl::InternalError(absl::StrCat("no bound fits ", budget, " keys"));
+      }
+      TEMPOKEY_ASSIGN_OR_RETURN(std::vector<Curve> curves, fit(scale));
+      if (KeyCount(curves) <= budget) {
+        within = scale;
+        best = std::move(curves);
+        break;
+      }
+      over = scale;
+    }
+  }
+  for (int step = 0; step < kBudgetBisections; ++step) {
+    const double scale = std::sqrt(within * over);
+    TEMPOKEY_ASSIGN_OR_RETURN(std::vector<Curve> curves, fit(scale));
+    if (KeyCount(curves) <= budget) {
+      within = scale;
+      best = std::move(curves);
+    } else {
+      over = scale;
+    }
+  }
+  ReportProgress(progress, 1.0, absl::StrCat("reduce ", clip.channels.size(), "/",
+                                             clip.channels.size()));
+  return best;
+}
+
 }  // namespace
 
 absl::Status ValidateReduceOptions(const ReduceOptions& options) {
@@ -157,9 +319,7 @@ absl::Status ValidateReduceOptions(const ReduceOptions& options) {
     case ReduceMethod::kPaper:
       return ValidatePaperParams(options.paper);
     case ReduceMethod::kTolerance:
-      TEMPOKEY_RETURN_IF_ERROR(ValidateToleranceParams(options.tolerance));
-      return absl::UnimplementedError(
-          "reduce method 'tolerance' is not implemented yet; use method 'paper'");
+      return ValidateToleranceParams(options.tolerance);
   }
   return absl::InvalidArgumentError(
       absl::StrCat("reduce method ", static_cast<int>(options.method), " is not a known method"));
@@ -171,26 +331,44 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
   TEMPOKEY_RETURN_IF_ERROR(ValidateReduceOptions(options));
 
   ReduceResult result;
-  result.keyed.layout = clip;
-  for (Channel& channel : result.keyed.layout.channels) {
-    channel.samples.clear();
-    channel.samples.shrink_to_fit();
+  Clip& layout = result.keyed.layout;  // the clip without its samples
+  layout.name = clip.name;
+  layout.frame_time_seconds = clip.frame_time_seconds;
+  layout.frame_count = clip.frame_count;
+  layout.skeleton = clip.skeleton;
+  layout.markers = clip.markers;
+  layout.channels.reserve(clip.channels.size());
+  for (const Channel& channel : clip.channels) {
+    Channel& empty = layout.channels.emplace_back();
+    empty.joint = channel.joint;
+    empty.kind = channel.kind;
+    empty.name = channel.name;
   }
   const int channel_count = static_cast<int>(clip.channels.size());
-  result.keyed.curves.reserve(clip.channels.size());
-  result.squared_error_history.reserve(clip.channels.size());
-  int iterations = 0;
+  std::vector<std::vector<double>> inputs;
+  inputs.reserve(clip.channels.size());
   for (int c = 0; c < channel_count; ++c) {
-    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
-    const std::vector<double> samples = FitInput(clip.channels[c]);
-    TEMPOKEY_RETURN_IF_ERROR(CheckMagnitudes(clip, c, samples));
-    absl::StatusOr<ChannelFit> fit = PaperFit(samples, clip.frame_time_seconds, options.paper);
-    if (!fit.ok()) return Annotate(fit.status(), ChannelLabel(clip, c));
-    iterations = std::max(iterations, fit->iterations);
-    result.keyed.curves.push_back(std::move(fit->curve));
-    result.squared_error_history.push_back(std::move(fit->history));
-    ReportProgress(progress, static_cast<double>(c + 1) / channel_count,
-                   absl::StrCat("reduce ", c + 1, "/", channel_count));
+    inputs.push_back(FitInput(clip.channels[c]));
+    TEMPOKEY_RETURN_IF_ERROR(CheckMagnitudes(clip, c, inputs.back()));
+  }
+  int iterations = 0;
+  if (options.method == ReduceMethod::kTolerance) {
+    TEMPOKEY_ASSIGN_OR_RETURN(result.keyed.curves,
+                              ToleranceFit(clip, inputs, options.tolerance, progress, stop));
+  } else {
+    result.keyed.curves.reserve(clip.channels.size());
+    result.squared_error_history.reserve(clip.channels.size());
+    for (int c = 0; c < channel_count; ++c) {
+      TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+      absl::StatusOr<ChannelFit> fit =
+          PaperFit(inputs[c], clip.frame_time_seconds, options.paper);
+      if (!fit.ok()) return Annotate(fit.status(), ChannelLabel(clip, c));
+      iterations = std::max(iterations, fit->iterations);
+      result.keyed.curves.push_back(std::move(fit->curve));
+      result.squared_error_history.push_back(std::move(fit->history));
+      ReportProgress(progress, static_cast<double>(c + 1) / channel_count,
+                     absl::StrCat("reduce ", c + 1, "/", channel_count));
+    }
   }
   TEMPOKEY_ASSIGN_OR_RETURN(result.report, MeasureReduction(clip, result.keyed));
   result.report.iterations = iterations;

@@ -18,14 +18,6 @@ namespace {
 
 using ::testing::StartsWith;
 
-constexpr char kHealthyOutput[] =
-    "overall:         SERVING\n"
-    "tempokey.v1.MotionService: SERVING\n";
-
-MATCHER(IsOneErrorLine, "is exactly one line starting with \"error: \"") {
-  return arg.rfind("error: ", 0) == 0 && arg.find('\n') == arg.size() - 1;
-}
-
 constexpr char kOpenssl[] = "/usr/bin/openssl";
 
 // A CA, a server certificate for localhost / 127.0.0.1 and a client certificate, all signed by
@@ -69,7 +61,7 @@ class CliSecurityTest : public ::testing::Test {
   void SetUp() override {
     dir_ = MakeTempDir();
     struct stat info;
-    if (stat(kOpenssl, &info) != 0) GTEST_SKIP() << "needs " << kOpenssl << " to make certificates";
+    ASSERT_EQ(stat(kOpenssl, &info), 0) << "needs " << kOpenssl << " (deploy/install-deps.sh)";
   }
 
   void StartServer(const std::vector<std::string>& flags) {

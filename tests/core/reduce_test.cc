@@ -63,18 +63,134 @@ TEST(ValidateReduceOptionsTest, MalformedToleranceParamsAreNamed) {
             "tolerance.max_scalar_error must be finite, got +infinity");
   EXPECT_EQ(ValidateReduceOptions(tiny_budget).message(),
             "tolerance.key_budget must be >= 2 when set, got 1");
-  EXPECT_EQ(ValidateReduceOptions(ReduceOptions{}).code(), absl::StatusCode::kUnimplemented);
+  EXPECT_TRUE(ValidateReduceOptions(ReduceOptions{}).ok());
   EXPECT_TRUE(ValidateReduceOptions(PaperOptions()).ok());
 }
 
-TEST(ReduceKeysTest, ToleranceMethodIsNotImplementedYet) {
-  const Clip clip = ScalarClip({{0, 1, 2, 3}});
+// A joint "Arm" with a position and two rotations, and a plain scalar channel: 300 frames of
+// smooth motion at 30 fps.
+Clip MixedClip() {
+  Clip clip;
+  clip.name = "mixed";
+  clip.frame_time_seconds = 1.0 / 30.0;
+  clip.frame_count = 300;
+  clip.skeleton.joints = {Joint{.name = "Arm", .parent = -1, .channels = {0, 1, 2}}};
+  std::vector<double> position(300), rotation_z(300), rotation_x(300), scalar(300);
+  for (int f = 0; f < 300; ++f) {
+    const double t = f / 30.0;
+    position[f] = 12.0 * std::sin(0.9 * t) + 0.3 * t * t;
+    rotation_z[f] = 80.0 * std::sin(2.1 * t + 0.3) + 20.0 * std::cos(5.0 * t);
+    rotation_x[f] = 35.0 * std::sin(0.7 * t);
+    scalar[f] = std::exp(-0.2 * t) * std::cos(3.0 * t);
+  }
+  clip.channels = {Channel{.joint = 0, .kind = ChannelKind::kXPosition, .samples = position},
+                   Channel{.joint = 0, .kind = ChannelKind::kZRotation, .samples = rotation_z},
+                   Channel{.joint = 0, .kind = ChannelKind::kXRotation, .samples = rotation_x},
+                   Channel{.joint = -1, .kind = ChannelKind::kScalar, .name = "blend",
+                           .samples = scalar}};
+  return clip;
+}
 
-  const absl::StatusOr<ReduceResult> result = ReduceKeys(clip, ReduceOptions{});
+ReduceOptions ToleranceOptions(double rotation, double position, double scalar) {
+  ReduceOptions options;
+  options.tolerance.max_rotation_error_degrees = rotation;
+  options.tolerance.max_position_error = position;
+  options.tolerance.max_scalar_error = scalar;
+  return options;
+}
 
-  EXPECT_EQ(result.status().code(), absl::StatusCode::kUnimplemented);
+TEST(ReduceKeysTest, ToleranceKeepsEachKindWithinItsOwnBound) {
+  const Clip clip = MixedClip();
+  const ReduceOptions options = ToleranceOptions(0.2, 0.05, 0.001);
+
+  const absl::StatusOr<ReduceResult> result = ReduceKeys(clip, options);
+
+  ASSERT_TRUE(result.ok()) << result.status();
+  const std::vector<double> bounds = {0.05, 0.2, 0.2, 0.001};
+  for (const ChannelReduction& channel : result->report.channels) {
+    EXPECT_LE(channel.max_error, bounds[channel.channel_index]) << channel.channel_index;
+    EXPECT_LT(channel.key_count, 300 / 3) << channel.channel_index;
+  }
+  // Keys sit on frames, with one slope per key (C1) and no weights.
+  for (const Curve& curve : result->keyed.curves) {
+    for (const Key& key : curve.keys) {
+      const double frame = key.time_seconds * 30.0;
+      EXPECT_NEAR(frame, std::round(frame), 1e-9);
+      EXPECT_EQ(key.in_tangent, key.out_tangent);
+      EXPECT_FALSE(key.in_weight.has_value());
+    }
+  }
+}
+
+TEST(ReduceKeysTest, PoseAlignmentSharesKeyTimesPerJointOrClip) {
+  const Clip clip = MixedClip();
+  ReduceOptions joint = ToleranceOptions(0.2, 0.05, 0.001);
+  joint.tolerance.pose_alignment = PoseAlignment::kJoint;
+  ReduceOptions whole = joint;
+  whole.tolerance.pose_alignment = PoseAlignment::kClip;
+  auto times = [](const Curve& curve) {
+    std::vector<double> t;
+    for (const Key& key : curve.keys) t.push_back(key.time_seconds);
+    return t;
+  };
+
+  const absl::StatusOr<ReduceResult> per_joint = ReduceKeys(clip, joint);
+  const absl::StatusOr<ReduceResult> per_clip = ReduceKeys(clip, whole);
+  const absl::StatusOr<ReduceResult> free = ReduceKeys(clip, ToleranceOptions(0.2, 0.05, 0.001));
+
+  ASSERT_TRUE(per_joint.ok()) << per_joint.status();
+  ASSERT_TRUE(per_clip.ok()) << per_clip.status();
+  ASSERT_TRUE(free.ok()) << free.status();
+  // The joint's three channels share times; the scalar channel has its own.
+  EXPECT_EQ(times(per_joint->keyed.curves[0]), times(per_joint->keyed.curves[1]));
+  EXPECT_EQ(times(per_joint->keyed.curves[0]), times(per_joint->keyed.curves[2]));
+  EXPECT_NE(times(per_joint->keyed.curves[0]), times(per_joint->keyed.curves[3]));
+  for (int c = 1; c < 4; ++c) {
+    EXPECT_EQ(times(per_clip->keyed.curves[0]), times(per_clip->keyed.curves[c]));
+  }
+  const std::vector<double> bounds = {0.05, 0.2, 0.2, 0.001};
+  for (const ReduceResult* result : {&*per_joint, &*per_clip}) {
+    for (const ChannelReduction& channel : result->report.channels) {
+      EXPECT_LE(channel.max_error, bounds[channel.channel_index]);
+    }
+  }
+  // Sharing costs keys: never fewer than each channel alone.
+  EXPECT_GE(per_joint->report.key_count, free->report.key_count);
+  EXPECT_GE(per_clip->report.key_count, per_joint->report.key_count);
+}
+
+TEST(ReduceKeysTest, KeyBudgetIsKeptWithTheTightestBoundsThatFit) {
+  const Clip clip = MixedClip();
+  ReduceOptions unlimited = ToleranceOptions(0.2, 0.05, 0.001);
+  const absl::StatusOr<ReduceResult> reference = ReduceKeys(clip, unlimited);
+  ASSERT_TRUE(reference.ok()) << reference.status();
+  ReduceOptions half = unlimited;
+  half.tolerance.key_budget = reference->report.key_count / 2;
+  ReduceOptions generous = unlimited;
+  generous.tolerance.key_budget = reference->report.key_count * 4;
+
+  const absl::StatusOr<ReduceResult> tight = ReduceKeys(clip, half);
+  const absl::StatusOr<ReduceResult> loose = ReduceKeys(clip, generous);
+
+  ASSERT_TRUE(tight.ok()) << tight.status();
+  ASSERT_TRUE(loose.ok()) << loose.status();
+  EXPECT_LE(tight->report.key_count, *half.tolerance.key_budget);
+  EXPECT_GT(tight->report.max_error, reference->report.max_error);  // fewer keys, looser fit
+  EXPECT_LE(loose->report.key_count, *generous.tolerance.key_budget);
+  EXPECT_GT(loose->report.key_count, reference->report.key_count);  // more keys, tighter fit
+  EXPECT_LT(loose->report.max_error, reference->report.max_error);
+}
+
+TEST(ReduceKeysTest, KeyBudgetBelowTwoKeysPerChannelIsRefused) {
+  ReduceOptions options;
+  options.tolerance.key_budget = 5;
+
+  const absl::StatusOr<ReduceResult> result = ReduceKeys(MixedClip(), options);
+
+  EXPECT_EQ(result.status().code(), absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(result.status().message(),
-            "reduce method 'tolerance' is not implemented yet; use method 'paper'");
+            "tolerance.key_budget 5 is below the 8 keys any fit of 4 channels needs (2 per "
+            "channel)");
 }
 
 TEST(ReduceKeysTest, BadClipsAreRefusedWithTheirChannel) {
@@ -94,21 +210,22 @@ TEST(ReduceKeysTest, ConstantChannelsGetTwoFlatKeys) {
   const Clip constant = ScalarClip({std::vector<double>(50, 4.25)}, 0.5);
   const Clip one_frame = ScalarClip({{7.0}});
 
-  absl::StatusOr<ReduceResult> flat = ReduceKeys(constant, PaperOptions());
-  absl::StatusOr<ReduceResult> single = ReduceKeys(one_frame, PaperOptions());
+  for (const ReduceOptions& options : {PaperOptions(), ReduceOptions{}}) {
+    absl::StatusOr<ReduceResult> flat = ReduceKeys(constant, options);
+    absl::StatusOr<ReduceResult> single = ReduceKeys(one_frame, options);
 
-  ASSERT_TRUE(single.ok()) << single.status();
-  EXPECT_EQ(single->keyed.curves[0].keys.size(), 1u);
-  ASSERT_TRUE(flat.ok()) << flat.status();
-  const Curve& curve = flat->keyed.curves[0];
-  ASSERT_EQ(curve.keys.size(), 2u);
-  EXPECT_EQ(curve.keys[0].time_seconds, 0.0);
-  EXPECT_EQ(curve.keys[1].time_seconds, 24.5);
-  EXPECT_EQ(curve.keys[0].value, 4.25);
-  EXPECT_EQ(curve.keys[1].value, 4.25);
-  EXPECT_EQ(curve.keys[0].out_tangent, 0.0);
-  EXPECT_EQ(flat->report.max_error, 0.0);
-  EXPECT_TRUE(flat->squared_error_history[0].empty());
+    ASSERT_TRUE(single.ok()) << single.status();
+    EXPECT_EQ(single->keyed.curves[0].keys.size(), 1u);
+    ASSERT_TRUE(flat.ok()) << flat.status();
+    const Curve& curve = flat->keyed.curves[0];
+    ASSERT_EQ(curve.keys.size(), 2u);
+    EXPECT_EQ(curve.keys[0].time_seconds, 0.0);
+    EXPECT_EQ(curve.keys[1].time_seconds, 24.5);
+    EXPECT_EQ(curve.keys[0].value, 4.25);
+    EXPECT_EQ(curve.keys[1].value, 4.25);
+    EXPECT_EQ(curve.keys[0].out_tangent, 0.0);
+    EXPECT_EQ(flat->report.max_error, 0.0);
+  }
 }
 
 TEST(ReduceKeysTest, RotationSeamIsFittedUnwrapped) {
@@ -121,11 +238,13 @@ TEST(ReduceKeysTest, RotationSeamIsFittedUnwrapped) {
   for (int f = 0; f < 60; ++f) samples[f] = std::remainder(120.0 + 2.0 * f, 360.0);
   clip.channels = {Channel{.joint = 0, .kind = ChannelKind::kZRotation, .samples = samples}};
 
-  absl::StatusOr<ReduceResult> result = ReduceKeys(clip, PaperOptions());
+  for (const ReduceOptions& options : {PaperOptions(), ReduceOptions{}}) {
+    absl::StatusOr<ReduceResult> result = ReduceKeys(clip, options);
 
-  ASSERT_TRUE(result.ok()) << result.status();
-  EXPECT_LT(result->report.max_error, 0.5);
-  EXPECT_NEAR(EvaluateCurve(result->keyed.curves[0], 59.0 / 30.0), 238.0, 0.5);
+    ASSERT_TRUE(result.ok()) << result.status();
+    EXPECT_LT(result->report.max_error, 0.5);
+    EXPECT_NEAR(EvaluateCurve(result->keyed.curves[0], 59.0 / 30.0), 238.0, 0.5);
+  }
 }
 
 TEST(ReduceKeysTest, ReportsProgressPerChannelAndStopsWhenCancelled) {

@@ -23,10 +23,6 @@ using ::testing::ElementsAre;
 using ::testing::HasSubstr;
 using ::testing::SizeIs;
 
-bool Offers(const server::Server& server, const std::string& operation) {
-  const auto& ops = server.operations();
-  return std::find(ops.begin(), ops.end(), operation) != ops.end();
-}
 
 class JobsTest : public ::testing::Test {
  protected:
@@ -356,32 +352,10 @@ TEST_F(JobsTest, BadSubmitsGetPreciseErrors) {
   EXPECT_EQ(server_->jobs().job_count(), 0);
 }
 
-TEST_F(JobsTest, OperationCoreDoesNotImplementAnswersUnimplemented) {
-  struct Candidate {
-    std::string name;
-    v1::Operation operation;
-  };
-  std::vector<Candidate> candidates(3);
-  candidates[0].name = "retime";
-  candidates[0].operation.mutable_retime();
-  candidates[1].name = "reduce/tolerance";
-  candidates[1].operation.mutable_reduce()->set_method(v1::REDUCE_METHOD_TOLERANCE);
-  candidates[2].name = "reduce/paper";
-  candidates[2].operation.mutable_reduce()->set_method(v1::REDUCE_METHOD_PAPER);
-  const std::string clip_id = Upload(MakeClip(1, 40));
-  int checked = 0;
-
-  for (const Candidate& candidate : candidates) {
-    if (Offers(*server_, candidate.name)) continue;
-    google::protobuf::RepeatedPtrField<v1::Operation> ops;
-    *ops.Add() = candidate.operation;
-    EXPECT_THAT(Submit(*stub_, SubmitRequest(clip_id, ops)).status,
-                GrpcStatusIs(grpc::StatusCode::UNIMPLEMENTED, HasSubstr("not implemented")))
-        << candidate.name;
-    ++checked;
-  }
-
-  if (checked == 0) GTEST_SKIP() << "core implements every operation now";
+TEST_F(JobsTest, ServerOffersEveryOperation) {
+  EXPECT_THAT(server_->operations(),
+              ElementsAre("convert", "retime", "retime/paper", "reduce", "reduce/tolerance",
+                          "reduce/paper", "bake"));
 }
 
 TEST_F(JobsTest, LookupsOfUnknownJobsAreNotFound) {
@@ -484,7 +458,6 @@ TEST(JobsGatedTest, WatchDeadlineReleasesServerState) {
 // ---- operations other engineers implement in core -----------------------------------------------
 
 TEST_F(JobsTest, IdentityRetimeThroughTheServiceIsBitExact) {
-  if (!Offers(*server_, "retime")) GTEST_SKIP() << "core does not implement retime yet";
   absl::StatusOr<core::Clip> clip = core::ReadBvhFile(SharedBvh("cmu/131_01.bvh"));
   ASSERT_TRUE(clip.ok()) << clip.status();
   google::protobuf::RepeatedPtrField<v1::Operation> ops;
@@ -507,7 +480,6 @@ TEST_F(JobsTest, IdentityRetimeThroughTheServiceIsBitExact) {
 }
 
 TEST_F(JobsTest, HalfSpeedRetimeThroughTheServiceDoublesTheDuration) {
-  if (!Offers(*server_, "retime")) GTEST_SKIP() << "core does not implement retime yet";
   const core::Clip clip = MakeClip(2, 121);
   google::protobuf::RepeatedPtrField<v1::Operation> ops;
   v1::SpeedKnot* knot = ops.Add()->mutable_retime()->add_speed_over_source();
@@ -529,7 +501,6 @@ TEST_F(JobsTest, HalfSpeedRetimeThroughTheServiceDoublesTheDuration) {
 }
 
 TEST_F(JobsTest, InvalidRetimeIsRefusedBeforeQueueing) {
-  if (!Offers(*server_, "retime")) GTEST_SKIP() << "core does not implement retime yet";
   google::protobuf::RepeatedPtrField<v1::Operation> ops;
   v1::SpeedKnot* knot = ops.Add()->mutable_retime()->add_speed_over_source();
   knot->mutable_time()->set_seconds(0);
@@ -542,14 +513,9 @@ TEST_F(JobsTest, InvalidRetimeIsRefusedBeforeQueueing) {
 }
 
 TEST_F(JobsTest, ReductionThroughTheServiceStreamsAKeyedClip) {
-  const bool tolerance = Offers(*server_, "reduce/tolerance");
-  if (!tolerance && !Offers(*server_, "reduce/paper")) {
-    GTEST_SKIP() << "core does not implement reduction yet";
-  }
   const core::Clip clip = MakeClip(1, 90);
   google::protobuf::RepeatedPtrField<v1::Operation> ops;
-  ops.Add()->mutable_reduce()->set_method(tolerance ? v1::REDUCE_METHOD_TOLERANCE
-                                                    : v1::REDUCE_METHOD_PAPER);
+  ops.Add()->mutable_reduce()->set_method(v1::REDUCE_METHOD_TOLERANCE);
 
   JobOutcome submitted = Submit(*stub_, SubmitRequest(Upload(clip), ops));
   TEMPOKEY_ASSERT_GRPC_OK(submitted.status);

@@ -72,6 +72,61 @@ TEST_F(ReduceServiceTest, EveryMalformedPaperParameterIsRefusedWithItsCoreMessag
   ExpectServingAndNothingQueued();
 }
 
+TEST_F(ReduceServiceTest, MalformedToleranceParametersAreRefusedNamingTheField) {
+  const v1::Clip clip = wire::ClipToProto(MakeClip(1, 60));
+  struct Case {
+    void (*set)(v1::ToleranceParams&);
+    const char* message;
+  } cases[] = {
+      {[](v1::ToleranceParams& t) { t.set_max_rotation_error_degrees(0); },
+       "operation 1 (reduce): tolerance.max_rotation_error_degrees must be > 0, got 0"},
+      {[](v1::ToleranceParams& t) { t.set_max_position_error(std::nan("")); },
+       "operation 1 (reduce): tolerance.max_position_error must be > 0, got NaN"},
+      {[](v1::ToleranceParams& t) { t.set_max_scalar_error(-2); },
+       "operation 1 (reduce): tolerance.max_scalar_error must be > 0, got -2"},
+      {[](v1::ToleranceParams& t) { t.set_key_budget(1); },
+       "operation 1 (reduce): tolerance.key_budget must be >= 2 when set, got 1"},
+      {[](v1::ToleranceParams& t) { t.set_pose_alignment(static_cast<v1::PoseAlignment>(7)); },
+       "operation 1: reduce.tolerance.pose_alignment has unknown value 7"},
+  };
+
+  for (const Case& c : cases) {
+    v1::Operation operation;
+    operation.mutable_reduce()->set_method(v1::REDUCE_METHOD_TOLERANCE);
+    c.set(*operation.mutable_reduce()->mutable_tolerance());
+
+    EXPECT_THAT(SubmitInline(clip, operation).status,
+                GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, c.message));
+  }
+  ExpectServingAndNothingQueued();
+}
+
+TEST_F(ReduceServiceTest, ToleranceJobKeepsEveryChannelWithinItsBound) {
+  const core::Clip clip = MakeClip(3, 400);
+  v1::Operation operation;
+  operation.mutable_reduce()->set_method(v1::REDUCE_METHOD_TOLERANCE);
+  operation.mutable_reduce()->mutable_tolerance()->set_max_rotation_error_degrees(0.25);
+  operation.mutable_reduce()->mutable_tolerance()->set_max_position_error(0.1);
+
+  const JobOutcome submitted = SubmitInline(wire::ClipToProto(clip), operation);
+  TEMPOKEY_ASSERT_GRPC_OK(submitted.status);
+  const v1::Job done = WaitForJob(*stub_, submitted.job.job_id());
+  const ResultOutcome result = GetResult(*stub_, submitted.job.job_id());
+  TEMPOKEY_ASSERT_GRPC_OK(result.status);
+  const absl::StatusOr<core::KeyedClip> keyed = AssembleKeyedResult(result.parts);
+  ASSERT_TRUE(keyed.ok()) << keyed.status();
+  const absl::StatusOr<core::ReductionReport> measured = core::MeasureReduction(clip, *keyed);
+
+  ASSERT_EQ(done.state(), v1::JOB_STATE_SUCCEEDED) << done.error_message();
+  ASSERT_TRUE(measured.ok()) << measured.status();
+  for (const core::ChannelReduction& channel : measured->channels) {
+    const double bound = core::IsRotation(clip.channels[channel.channel_index].kind) ? 0.25 : 0.1;
+    EXPECT_LE(channel.max_error, bound) << channel.channel_index;
+  }
+  EXPECT_EQ(done.reports(0).reduction().key_count(), measured->key_count);
+  EXPECT_LT(measured->key_count, clip.sample_count() / 5);
+}
+
 TEST_F(ReduceServiceTest, MalformedClipsAreRefusedNamingTheProblem) {
   const v1::Operation reduce = PaperReduce({});
   v1::Clip nan_clip = wire::ClipToProto(MakeClip(1, 60));

@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "gmock/gmock.h"
 #include "absl/strings/str_cat.h"
 #include "tempokey/core/file_io.h"
 #include "tests/testing/test_paths.h"
@@ -38,6 +39,16 @@ struct ProcessResult {
   std::string out;
   std::string err;
 };
+
+// What `tempokey health` prints for a server that is live and ready.
+inline constexpr char kHealthyOutput[] =
+    "overall:         SERVING\n"
+    "tempokey.v1.MotionService: SERVING\n";
+
+// "error: ..." and nothing else: exactly one line on stderr, as the CLI reports every failure.
+MATCHER(IsOneErrorLine, "is exactly one line starting with \"error: \"") {
+  return arg.rfind("error: ", 0) == 0 && arg.find('\n') == arg.size() - 1;
+}
 
 inline std::string TempokeyBinary() { return BinaryDir() + "/client/tempokey"; }
 inline std::string ServerBinary() { return BinaryDir() + "/server/tempokey-server"; }

@@ -102,17 +102,25 @@ absl::Status ValidateReduceOptions(const ReduceOptions& options);
 
 // Fits every channel of `clip` and reports the error against the input (MeasureReduction()).
 // Rotation channels are unwrapped first (UnwrapDegrees()), so the curves carry unwrapped angles;
-// re-wrap after baking if wanted. Channels whose samples are all equal get two flat keys at the
-// first and last frame (one key for a one-frame clip). `paper`: initial keys, DP passes and the
-// conversion to weighted keys as in hermite_dp.h; keys land at fractional frames.
+// re-wrap after baking if wanted.
+//   `tolerance`: FitWithinTolerance() (tolerance_fit.h) with the bound of each channel's kind:
+//     every channel stays within it at every source frame; keys on integer frames, non-weighted,
+//     C1 (in and out tangents equal). Channels share key frames per pose_alignment (each alone, a
+//     joint's channels, or all). With key_budget, every bound is scaled by one common factor,
+//     the smallest (to a ratio of 2^-12) whose fit keeps at most that many keys in all.
+//   `paper`: initial keys, DP passes and the conversion to weighted keys as in hermite_dp.h;
+//     keys land at fractional frames.
+// A lone channel whose samples are all equal gets two flat keys at the first and last frame (one
+// key for a one-frame clip).
 //
 // Errors:
-//   kInvalidArgument  `clip` fails ValidateClip(), `options` fail ValidateReduceOptions(), or a
-//                     sample's magnitude exceeds 1e100 (its square would overflow the error).
-//   kUnimplemented    method `tolerance` (a later issue): "reduce method 'tolerance' is not
-//                     implemented yet; use method 'paper'".
-//   kCancelled        `stop` was requested; checked between channels.
-// Progress: once per channel, "reduce 12/96".
+//   kInvalidArgument  `clip` fails ValidateClip(), `options` fail ValidateReduceOptions(), a
+//                     sample's magnitude exceeds 1e100 (its square would overflow the error), or
+//                     a key budget below 2 keys per channel ("tolerance.key_budget 5 is below the
+//                     18 keys any fit of 9 channels needs (2 per channel)").
+//   kCancelled        `stop` was requested; checked between channels (between groups of
+//                     pose-aligned channels).
+// Progress: once per channel or group, "reduce 12/96".
 //
 // Thread-safe: a pure function of its arguments.
 absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& options,
