@@ -852,11 +852,8 @@ std::vector<double> EvaluateSplineFit(const SplineFit& fit, std::size_t channel)
     const std::int64_t length = fit.frames[j + 1] - fa;
     const auto l = static_cast<double>(length);
     for (std::int64_t k = 0; k < length; ++k) {
-      const double t = static_cast<double>(k) / l;
-      const double t2 = t * t;
-      const double t3 = t2 * t;
-      out[fa + k] = (2.0 * t3 - 3.0 * t2 + 1.0) * v[j] + (t3 - 2.0 * t2 + t) * l * m[j] +
-                    (-2.0 * t3 + 3.0 * t2) * v[j + 1] + (t3 - t2) * l * m[j + 1];
+      out[fa + k] = SegmentValue(Coefficients(static_cast<double>(k) / l, l), v[j], m[j],
+                                 v[j + 1], m[j + 1]);
     }
   }
   out[last] = v.back();
