@@ -42,32 +42,39 @@ std::string CgroupV2Dir() {
   return "/sys/fs/cgroup";
 }
 
-// CPUs allowed by the cgroup quota, or 0 when there is no quota.
+// CPUs allowed by this process's cgroup quota, or 0 when there is none.
 int CgroupCpuLimit() {
-  // v2: "max 100000" or "<quota> <period>", in the process's own cgroup or the root mount.
-  for (const std::string& dir : {CgroupV2Dir(), std::string("/sys/fs/cgroup")}) {
-    std::istringstream in(ReadSmallFile(dir + "/cpu.max"));
-    std::string quota;
-    double period = 0;
-    if (in >> quota >> period) {
-      if (quota == "max" || period <= 0) return 0;
-      const double q = std::strtod(quota.c_str(), nullptr);
-      if (q > 0) return std::max(1, static_cast<int>(std::ceil(q / period)));
-      return 0;
-    }
-  }
-  // v1.
-  std::istringstream quota_in(ReadSmallFile("/sys/fs/cgroup/cpu/cpu.cfs_quota_us"));
-  std::istringstream period_in(ReadSmallFile("/sys/fs/cgroup/cpu/cpu.cfs_period_us"));
-  double quota = 0;
-  double period = 0;
-  if ((quota_in >> quota) && (period_in >> period) && quota > 0 && period > 0) {
-    return std::max(1, static_cast<int>(std::ceil(quota / period)));
-  }
-  return 0;
+  std::string cpu_max = ReadSmallFile(CgroupV2Dir() + "/cpu.max");
+  if (cpu_max.empty()) cpu_max = ReadSmallFile("/sys/fs/cgroup/cpu.max");
+  return CpuQuotaLimit(cpu_max, ReadSmallFile("/sys/fs/cgroup/cpu/cpu.cfs_quota_us"),
+                       ReadSmallFile("/sys/fs/cgroup/cpu/cpu.cfs_period_us"));
 }
 
 }  // namespace
+
+int CpuQuotaLimit(std::string_view v2_cpu_max, std::string_view v1_quota_us,
+                  std::string_view v1_period_us) {
+  auto ceil_ratio = [](double quota, double period) {
+    return std::max(1, static_cast<int>(std::ceil(quota / period)));
+  };
+  // v2: "max 100000" (no quota) or "<quota> <period>".
+  std::istringstream v2{std::string(v2_cpu_max)};
+  std::string quota;
+  double period = 0;
+  if (v2 >> quota >> period) {
+    if (quota == "max" || !(period > 0)) return 0;
+    char* end = nullptr;
+    const double q = std::strtod(quota.c_str(), &end);
+    return end != quota.c_str() && q > 0 ? ceil_ratio(q, period) : 0;
+  }
+  // v1: a quota of -1 means none.
+  std::istringstream quota_in{std::string(v1_quota_us)};
+  std::istringstream period_in{std::string(v1_period_us)};
+  double q = 0;
+  double p = 0;
+  if ((quota_in >> q) && (period_in >> p) && q > 0 && p > 0) return ceil_ratio(q, p);
+  return 0;
+}
 
 int DefaultWorkerCount() {
   int cpus = 0;

@@ -68,6 +68,12 @@ struct ServerOptions {
 // quota (cgroup v2 cpu.max, or v1 cpu.cfs_quota_us / cpu.cfs_period_us), rounded up; >= 1.
 int DefaultWorkerCount();
 
+// CPUs a cgroup CPU quota allows, from the text of cgroup v2's cpu.max ("150000 100000" -> 2,
+// rounded up; "max 100000" -> no quota) or, when that is empty or unreadable, cgroup v1's
+// cpu.cfs_quota_us and cpu.cfs_period_us (a quota of -1 is none). 0 means no quota.
+int CpuQuotaLimit(std::string_view v2_cpu_max, std::string_view v1_quota_us,
+                  std::string_view v1_period_us);
+
 // Reads bearer tokens from `path`: one per line, blank lines and lines starting with '#'
 // ignored, surrounding whitespace trimmed.
 // Errors: kNotFound / kUnavailable reading the file; kInvalidArgument when it holds no token.

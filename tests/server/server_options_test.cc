@@ -1,0 +1,127 @@
+// Server settings: the worker count a container's CPU quota allows, loopback detection, token
+// files, and the values no server can run with.
+#include "server/server_options.h"
+
+#include <sched.h>
+
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "gtest/gtest.h"
+#include "tempokey/core/file_io.h"
+#include "tests/testing/test_paths.h"
+
+namespace tempokey::server {
+namespace {
+
+TEST(CpuQuotaLimitTest, ReadsCgroupV2AndFallsBackToV1) {
+  struct Case {
+    const char* v2;
+    const char* v1_quota;
+    const char* v1_period;
+    int cpus;
+  } cases[] = {
+      {"max 100000\n", "", "", 0},                // no quota
+      {"200000 100000\n", "", "", 2},
+      {"150000 100000\n", "", "", 2},             // 1.5 CPUs: rounded up
+      {"50000 100000\n", "", "", 1},              // half a CPU still runs one worker
+      {"", "300000\n", "100000\n", 3},            // v1
+      {"", "-1\n", "100000\n", 0},                // v1 without quota
+      {"", "", "", 0},                            // no cgroup files at all
+      {"garbage here\n", "", "", 0},
+      {"100000 0\n", "", "", 0},                  // a zero period is no quota
+      {"max 100000\n", "400000\n", "100000\n", 0},  // v2 says none: v1 is not consulted
+  };
+  for (const Case& c : cases) {
+    EXPECT_EQ(CpuQuotaLimit(c.v2, c.v1_quota, c.v1_period), c.cpus)
+        << "v2 \"" << c.v2 << "\" v1 \"" << c.v1_quota << "\"/\"" << c.v1_period << "\"";
+  }
+}
+
+TEST(DefaultWorkerCountTest, FollowsTheCpusThisThreadMayUse) {
+  int workers_with_one_cpu = 0;
+  bool pinned = false;
+  // A thread of its own, so the test's main thread keeps its affinity.
+  std::thread probe([&] {
+    cpu_set_t one;
+    CPU_ZERO(&one);
+    CPU_SET(0, &one);
+    pinned = sched_setaffinity(0, sizeof one, &one) == 0;
+    workers_with_one_cpu = DefaultWorkerCount();
+  });
+  probe.join();
+
+  ASSERT_TRUE(pinned);
+  EXPECT_EQ(workers_with_one_cpu, 1);
+  EXPECT_GE(DefaultWorkerCount(), 1);
+}
+
+TEST(IsLoopbackAddressTest, KnowsLoopbackHostsAndUnixSockets) {
+  for (const char* address : {"127.0.0.1:50051", "127.8.9.10:1", "localhost:50051", "[::1]:50051",
+                              "unix:/tmp/tempokey.sock", "unix-abstract:tempokey"}) {
+    EXPECT_TRUE(IsLoopbackAddress(address)) << address;
+  }
+  for (const char* address : {"0.0.0.0:50051", "[::]:50051", "10.0.0.7:50051",
+                              "tempokey.example:443", "128.0.0.1:1"}) {
+    EXPECT_FALSE(IsLoopbackAddress(address)) << address;
+  }
+}
+
+TEST(ReadTokenFileTest, SkipsCommentsAndBlankLinesAndTrims) {
+  const std::string dir = testing::MakeTempDir();
+  ASSERT_TRUE(core::WriteFileAtomically(dir + "/tokens",
+                                        "# pipeline tokens\n\n  first-token  \nsecond\n")
+                  .ok());
+  ASSERT_TRUE(core::WriteFileAtomically(dir + "/empty", "# nothing here\n\n").ok());
+
+  const absl::StatusOr<std::vector<std::string>> tokens = ReadTokenFile(dir + "/tokens");
+  const absl::StatusOr<std::vector<std::string>> none = ReadTokenFile(dir + "/empty");
+  const absl::StatusOr<std::vector<std::string>> missing = ReadTokenFile(dir + "/missing");
+
+  ASSERT_TRUE(tokens.ok()) << tokens.status();
+  EXPECT_EQ(*tokens, (std::vector<std::string>{"first-token", "second"}));
+  EXPECT_EQ(none.status().message(), dir + "/empty: holds no token");
+  EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
+}
+
+TEST(ValidateServerOptionsTest, RefusesWhatNoServerCanRunWith) {
+  struct Case {
+    void (*edit)(ServerOptions&);
+    const char* message;
+  } cases[] = {
+      {[](ServerOptions& o) { o.address.clear(); }, "--address must not be empty"},
+      {[](ServerOptions& o) { o.queue_capacity = 0; }, "--queue_capacity must be > 0, got 0"},
+      {[](ServerOptions& o) { o.max_message_bytes = std::int64_t{3} << 30; },
+       "--max_message_bytes must be below 2 GiB, got 3221225472"},
+      {[](ServerOptions& o) { o.max_stored_results = -5; },
+       "--max_stored_results must be > 0, got -5"},
+      {[](ServerOptions& o) { o.drain_grace = std::chrono::seconds(-1); },
+       "--drain_grace_seconds must be >= 0, got -1"},
+      {[](ServerOptions& o) { o.tls_cert_file = "cert.pem"; },
+       "--tls_cert and --tls_key must be given together"},
+      {[](ServerOptions& o) { o.tls_client_ca_file = "ca.pem"; },
+       "--tls_client_ca needs --tls_cert and --tls_key (mutual TLS is TLS first)"},
+      {[](ServerOptions& o) { o.auth_tokens = {"ok", ""}; }, "an auth token is empty"},
+      {[](ServerOptions& o) { o.address = "0.0.0.0:50051"; },
+       "refusing to listen on non-loopback address 0.0.0.0:50051 without TLS: give --tls_cert "
+       "and --tls_key, or --allow_insecure_remote"},
+  };
+  for (const Case& c : cases) {
+    ServerOptions options;
+    c.edit(options);
+
+    const absl::Status status = ValidateServerOptions(options);
+
+    EXPECT_EQ(status.code(), absl::StatusCode::kInvalidArgument) << c.message;
+    EXPECT_EQ(status.message(), c.message);
+  }
+  ServerOptions remote;
+  remote.address = "0.0.0.0:50051";
+  remote.allow_insecure_remote = true;
+  EXPECT_TRUE(ValidateServerOptions(remote).ok());
+  EXPECT_TRUE(ValidateServerOptions(ServerOptions{}).ok());
+}
+
+}  // namespace
+}  // namespace tempokey::server
