@@ -180,7 +180,7 @@ void JobManager::Run(const std::shared_ptr<JobRecord>& record, std::stop_token p
       [this, &record](double fraction, std::string_view stage) {
         PublishProgress(record, fraction, stage);
       },
-      record->stop.get_token());
+      record->stop.get_token(), options_.output_limits);
   clip.reset();
 
   std::shared_ptr<const core::PipelineResult> shared_result;

@@ -78,6 +78,8 @@ struct JobManagerOptions {
   std::int64_t max_stored_result_bytes = std::int64_t{2} << 30;
   // A finished job is removed this long after it ended (unless watched at that moment).
   std::chrono::seconds job_ttl{3600};
+  // What a pipeline may produce (a retime's or bake's frames and samples).
+  core::ClipLimits output_limits;
   // Wall clock for timestamps and retention; tests substitute their own.
   std::function<SystemTime()> clock;
   // Test hook: called on the worker with the job id right before the pipeline runs; may block.

@@ -64,10 +64,11 @@ absl::Status CheckLabels(const google::protobuf::Map<std::string, std::string>& 
 }  // namespace
 
 absl::StatusOr<std::vector<core::PipelineStep>> PrepareSteps(
-    const google::protobuf::RepeatedPtrField<v1::Operation>& operations, const core::Clip& clip) {
+    const google::protobuf::RepeatedPtrField<v1::Operation>& operations, const core::Clip& clip,
+    const core::ClipLimits& limits) {
   TEMPOKEY_ASSIGN_OR_RETURN(std::vector<core::PipelineStep> steps,
                             wire::PipelineFromProto(operations));
-  TEMPOKEY_RETURN_IF_ERROR(core::ValidatePipeline(clip, steps));
+  TEMPOKEY_RETURN_IF_ERROR(core::ValidatePipeline(clip, steps, limits));
   return steps;
 }
 
@@ -144,7 +145,7 @@ grpc::ServerUnaryReactor* MotionService::SubmitJob(grpc::CallbackServerContext* 
         return absl::InvalidArgumentError("the job has no clip: set clip_id or inline_clip");
     }
     TEMPOKEY_ASSIGN_OR_RETURN(std::vector<core::PipelineStep> steps,
-                              PrepareSteps(request->operations(), *clip));
+                              PrepareSteps(request->operations(), *clip, context_->clip_limits));
 
     JobSpec spec{.clip_id = clip_id,
                  .steps = std::move(steps),

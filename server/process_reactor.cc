@@ -50,9 +50,10 @@ class ProcessLink final {
     if (service_->options.test_hooks.on_job_start) service_->options.test_hooks.on_job_start("");
     std::stop_callback forward(pool_stop, [this] { stop_.request_stop(); });
     absl::StatusOr<core::PipelineResult> result = core::RunPipeline(
-        std::move(clip_), steps_,
+        clip_, steps_,
         [this](double fraction, std::string_view stage) { OnProgress(fraction, stage); },
-        stop_.get_token());
+        stop_.get_token(), service_->clip_limits);
+    clip_ = core::Clip();  // the input is no longer needed while the result streams out
     const auto ended = std::chrono::steady_clock::now();
     const std::string outcome = result.ok()                                             ? "succeeded"
                                 : result.status().code() == absl::StatusCode::kCancelled ? "cancelled"
@@ -246,7 +247,7 @@ class ProcessReactor final : public ProcessReactorBase {
     }
     TEMPOKEY_ASSIGN_OR_RETURN(core::Clip clip, std::move(assembler_).Finish());
     TEMPOKEY_ASSIGN_OR_RETURN(std::vector<core::PipelineStep> steps,
-                              PrepareSteps(start.operations(), clip));
+                              PrepareSteps(start.operations(), clip, service_->clip_limits));
     link_->Prepare(std::move(clip), std::move(steps), start.slice_bytes());
     absl::Status queued = service_->pool->TrySubmit(
         [link = link_](std::stop_token pool_stop) { link->Run(std::move(pool_stop)); });

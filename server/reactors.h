@@ -26,11 +26,12 @@ grpc::ServerWriteReactor<v1::ResultPart>* NewResultReactor(ServiceContext* servi
 grpc::ServerBidiReactor<v1::ProcessRequest, v1::ProcessResponse>* NewProcessReactor(
     ServiceContext* service, grpc::CallbackServerContext* call);
 
-// Operations off the wire, checked against `clip` (wire::PipelineFromProto() then
-// core::ValidatePipeline()), before anything is queued.
-// Errors: kInvalidArgument; kUnimplemented for operations core does not implement yet.
+// Operations off the wire, checked against `clip` and what the server lets a pipeline produce
+// (wire::PipelineFromProto() then core::ValidatePipeline()), before anything is queued.
+// Errors: kInvalidArgument naming the operation, field and value.
 absl::StatusOr<std::vector<core::PipelineStep>> PrepareSteps(
-    const google::protobuf::RepeatedPtrField<v1::Operation>& operations, const core::Clip& clip);
+    const google::protobuf::RepeatedPtrField<v1::Operation>& operations, const core::Clip& clip,
+    const core::ClipLimits& limits);
 
 // "retime+reduce" for log lines.
 std::string DescribeSteps(const std::vector<core::PipelineStep>& steps);

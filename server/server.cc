@@ -142,6 +142,7 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(ServerOptions options) {
   job_options.max_stored_results = options.max_stored_results;
   job_options.max_stored_result_bytes = options.max_stored_result_bytes;
   job_options.job_ttl = options.job_ttl;
+  job_options.output_limits = context->clip_limits;
   job_options.on_job_start = options.test_hooks.on_job_start;
   job_options.on_job_end = [context](const JobSnapshot& job, std::chrono::duration<double> wait,
                                      std::chrono::duration<double> run) {

@@ -141,18 +141,19 @@ double EvaluateCurve(const Curve& curve, double time_seconds) {
   return EvaluateSegment(a, b, time_seconds);
 }
 
-absl::StatusOr<Clip> Bake(const KeyedClip& keyed, std::optional<double> frame_time_seconds) {
+absl::StatusOr<Clip> Bake(const KeyedClip& keyed, std::optional<double> frame_time_seconds,
+                          const ClipLimits& limits) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateKeyedClip(keyed));
   const double frame_time = frame_time_seconds.value_or(keyed.layout.frame_time_seconds);
   if (!std::isfinite(frame_time) || frame_time <= 0.0) {
     return absl::InvalidArgumentError(
         absl::StrCat("bake frame time must be finite and > 0 seconds, got ", Describe(frame_time)));
   }
-  const ClipLimits limits;
   const double duration = keyed.layout.duration_seconds();
   const double last_index = std::floor(duration / frame_time + 1e-9);
   const auto channel_count = static_cast<double>(keyed.layout.channels.size());
-  if (last_index + 1.0 > static_cast<double>(limits.max_samples) / channel_count) {
+  if (last_index + 1.0 > static_cast<double>(limits.max_frames) ||
+      last_index + 1.0 > static_cast<double>(limits.max_samples) / channel_count) {
     return absl::InvalidArgumentError(absl::StrCat(
         "bake at ", frame_time, " s per frame gives ", last_index + 1.0, " frames x ",
         keyed.layout.channels.size(), " channels, over the limit of ", limits.max_samples,

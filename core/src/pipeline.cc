@@ -65,7 +65,8 @@ std::string_view StepName(const PipelineStep& step) {
                     step);
 }
 
-absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> steps) {
+absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> steps,
+                              const ClipLimits& limits) {
   if (steps.empty()) return absl::InvalidArgumentError("the pipeline has no operations");
   if (steps.size() > 64) {
     return absl::InvalidArgumentError(
@@ -84,11 +85,11 @@ absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> st
             [&](const RetimeStep& s) {
               // Later retimes see a clip whose timing is only known at run time; the first is
               // checked fully here, the rest again when they run.
-              if (i == 0) return ValidateRetime(clip, s.warp, s.options);
+              if (i == 0) return ValidateRetime(clip, s.warp, s.options, limits);
               Clip probe;
               probe.frame_time_seconds = clip.frame_time_seconds;
               probe.frame_count = 2;
-              return ValidateRetime(probe, s.warp, s.options);
+              return ValidateRetime(probe, s.warp, s.options, limits);
             },
             [](const ReduceStep& s) { return ValidateReduceOptions(s.options); },
             [](const BakeStep& s) { return ValidateRate(s.rate); },
@@ -102,13 +103,21 @@ absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> st
   return absl::OkStatus();
 }
 
-absl::StatusOr<PipelineResult> RunPipeline(Clip clip, std::span<const PipelineStep> steps,
-                                           const ProgressFn& progress, std::stop_token stop) {
+absl::StatusOr<PipelineResult> RunPipeline(const Clip& clip, std::span<const PipelineStep> steps,
+                                           const ProgressFn& progress, std::stop_token stop,
+                                           const ClipLimits& limits) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateClip(clip));
-  TEMPOKEY_RETURN_IF_ERROR(ValidatePipeline(clip, steps));
+  TEMPOKEY_RETURN_IF_ERROR(ValidatePipeline(clip, steps, limits));
 
   PipelineResult result;
-  result.output = std::move(clip);
+  // The sampled clip the next step reads: the caller's until a step makes one of its own, so the
+  // input is copied only if a step must change it in place (convert first).
+  const Clip* input = &clip;
+  auto own_input = [&]() -> Clip& {
+    if (input != std::get_if<Clip>(&result.output)) result.output = *input;
+    input = std::get_if<Clip>(&result.output);
+    return std::get<Clip>(result.output);
+  };
   const double step_share = 1.0 / static_cast<double>(steps.size());
   for (std::size_t i = 0; i < steps.size(); ++i) {
     TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
@@ -123,17 +132,19 @@ absl::StatusOr<PipelineResult> RunPipeline(Clip clip, std::span<const PipelineSt
         Overloaded{
             [&](const RetimeStep& s) -> absl::Status {
               TEMPOKEY_ASSIGN_OR_RETURN(
-                  RetimeResult r, Retime(std::get<Clip>(result.output), s.warp, s.options,
-                                         step_progress, stop));
+                  RetimeResult r,
+                  Retime(*input, s.warp, s.options, step_progress, stop, limits));
               result.output = std::move(r.clip);
+              input = std::get_if<Clip>(&result.output);
               result.reports.emplace_back(r.report);
               return absl::OkStatus();
             },
             [&](const ReduceStep& s) -> absl::Status {
               TEMPOKEY_ASSIGN_OR_RETURN(
                   ReduceResult r,
-                  ReduceKeys(std::get<Clip>(result.output), s.options, step_progress, stop));
+                  ReduceKeys(*input, s.options, step_progress, stop));
               result.output = std::move(r.keyed);
+              input = nullptr;
               result.reports.emplace_back(std::move(r.report));
               return absl::OkStatus();
             },
@@ -143,15 +154,15 @@ absl::StatusOr<PipelineResult> RunPipeline(Clip clip, std::span<const PipelineSt
                 frame_time = static_cast<double>(s.rate->denominator) /
                              static_cast<double>(s.rate->numerator);
               }
-              TEMPOKEY_ASSIGN_OR_RETURN(Clip baked,
-                                        Bake(std::get<KeyedClip>(result.output), frame_time));
+              TEMPOKEY_ASSIGN_OR_RETURN(
+                  Clip baked, Bake(std::get<KeyedClip>(result.output), frame_time, limits));
               result.output = std::move(baked);
+              input = std::get_if<Clip>(&result.output);
               return absl::OkStatus();
             },
             [&](const ConvertStep& s) -> absl::Status {
-              if (s.wrap_rotations) {
-                result.output = WrapRotations(std::move(std::get<Clip>(result.output)));
-              }
+              Clip& owned = own_input();
+              if (s.wrap_rotations) owned = WrapRotations(std::move(owned));
               return absl::OkStatus();
             },
         },

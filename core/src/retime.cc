@@ -141,8 +141,14 @@ absl::Status ValidateEnums(const RetimeOptions& options) {
   return absl::OkStatus();
 }
 
-absl::Status CheckOutputSize(std::int64_t frames, std::size_t channels) {
-  const std::int64_t limit = ClipLimits{}.max_samples;
+// The output's size against `limits` (a server passes its own, tighter than core's).
+absl::Status CheckOutputSize(std::int64_t frames, std::size_t channels, const ClipLimits& limits) {
+  if (frames > limits.max_frames) {
+    return absl::InvalidArgumentError(absl::StrCat("the retimed clip would have ", frames,
+                                                   " frames, over the limit of ",
+                                                   limits.max_frames, " frames"));
+  }
+  const std::int64_t limit = limits.max_samples;
   if (channels > 0 && frames > limit / static_cast<std::int64_t>(channels)) {
     return absl::InvalidArgumentError(absl::StrCat("the retimed clip would have ", frames,
                                                    " frames x ", channels,
@@ -242,7 +248,7 @@ absl::StatusOr<std::vector<Marker>> MapMarkers(const Clip& clip, const Schedule&
 }  // namespace
 
 absl::Status ValidateRetime(const Clip& clip, const TimeWarpSpec& warp,
-                            const RetimeOptions& options) {
+                            const RetimeOptions& options, const ClipLimits& limits) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateEnums(options));
   std::int64_t frames = 0;
   if (options.method == RetimeMethod::kPaper) {
@@ -255,17 +261,17 @@ absl::Status ValidateRetime(const Clip& clip, const TimeWarpSpec& warp,
         TimeMap map, TimeMap::Compile(clip.frame_time_seconds, clip.frame_count, warp, options));
     frames = map.output_frame_count();
   }
-  return CheckOutputSize(frames, clip.channels.size());
+  return CheckOutputSize(frames, clip.channels.size(), limits);
 }
 
 absl::StatusOr<RetimeResult> Retime(const Clip& clip, const TimeWarpSpec& warp,
                                     const RetimeOptions& options, const ProgressFn& progress,
-                                    std::stop_token stop) {
+                                    std::stop_token stop, const ClipLimits& limits) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateClip(clip));
   TEMPOKEY_RETURN_IF_ERROR(ValidateEnums(options));
   TEMPOKEY_ASSIGN_OR_RETURN(Schedule schedule, MakeSchedule(clip, warp, options));
   const auto m = static_cast<std::int64_t>(schedule.positions.size());
-  TEMPOKEY_RETURN_IF_ERROR(CheckOutputSize(m, clip.channels.size()));
+  TEMPOKEY_RETURN_IF_ERROR(CheckOutputSize(m, clip.channels.size(), limits));
   TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
   TEMPOKEY_ASSIGN_OR_RETURN(ResamplePlan plan, MakeResamplePlan(schedule.positions, schedule.ratios,
                                                                 clip.frame_count, schedule.filter));

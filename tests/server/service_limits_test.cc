@@ -102,6 +102,40 @@ TEST(LargeClipTest, FiftyMegabyteClipUploadsAndItsResultDownloadsWithDefaultClie
   }
 }
 
+// ---- output limits -------------------------------------------------------------------------------
+
+TEST(OutputLimitTest, RetimeOrBakeBeyondTheServersClipLimitIsRefusedBeforeQueueing) {
+  server::ServerOptions options = TestServerOptions();
+  options.max_clip_samples = 100'000;
+  std::unique_ptr<server::Server> server = StartServer(options);
+  ASSERT_NE(server, nullptr);
+  auto stub = v1::MotionService::NewStub(Connect(server->target()));
+  const core::Clip clip = MakeClip(1, 1000);  // 6 channels x 1000 frames: well within the limit
+  const std::string clip_id = UploadClip(*stub, clip).response.clip_id();
+  google::protobuf::RepeatedPtrField<v1::Operation> stretch;
+  v1::RetimeOperation* retime = stretch.Add()->mutable_retime();
+  retime->set_fit_frames(20'000);  // 120 000 samples out of 6 000 in
+  retime->set_min_speed(0.001);
+  google::protobuf::RepeatedPtrField<v1::Operation> fine_bake;
+  fine_bake.Add()->mutable_reduce()->set_method(v1::REDUCE_METHOD_TOLERANCE);
+  v1::BakeOperation* bake = fine_bake.Add()->mutable_bake();
+  bake->set_rate_numerator(2400);  // 20x the clip's 120 Hz
+  bake->set_rate_denominator(1);
+
+  const JobOutcome refused = Submit(*stub, SubmitRequest(clip_id, stretch));
+  const JobOutcome baked = Submit(*stub, SubmitRequest(clip_id, fine_bake));
+  const v1::Job bake_done = WaitForJob(*stub, baked.job.job_id());
+
+  EXPECT_THAT(refused.status,
+              GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT,
+                           "operation 1 (retime): the retimed clip would have 20000 frames x 6 "
+                           "channels, over the limit of 100000 samples"));
+  // A bake's length is known only once the keys exist: it fails when it runs, with the reason.
+  TEMPOKEY_ASSERT_GRPC_OK(baked.status);
+  EXPECT_EQ(bake_done.state(), v1::JOB_STATE_FAILED);
+  EXPECT_THAT(bake_done.error_message(), HasSubstr("over the limit of 100000 samples"));
+}
+
 // ---- metrics ------------------------------------------------------------------------------------
 
 // GET `path` from 127.0.0.1:`port` over a plain socket; the whole response, headers included.

@@ -120,11 +120,12 @@ double EvaluateCurve(const Curve& curve, double time_seconds);
 // channels (with samples), name and markers.
 //
 // Errors: kInvalidArgument from ValidateKeyedClip(), a frame time that is not finite and > 0, or
-// a result over ClipLimits' sample cap ("bake at 1e-09 s per frame gives 1000000001 frames x
-// 96 channels, over the limit of 200000000 samples").
+// a result over `limits` ("bake at 1e-09 s per frame gives 1000000001 frames x 96 channels,
+// over the limit of 200000000 samples").
 // Thread-safe.
 absl::StatusOr<Clip> Bake(const KeyedClip& keyed,
-                          std::optional<double> frame_time_seconds = std::nullopt);
+                          std::optional<double> frame_time_seconds = std::nullopt,
+                          const ClipLimits& limits = {});
 
 }  // namespace tempokey::core
 

@@ -52,14 +52,18 @@ std::string_view StepName(const PipelineStep& step);
 // take a sampled clip; bake takes a keyed clip), that each step's options are valid, and the
 // first step against `clip`'s timing (ValidateRetime()).
 // Errors: kInvalidArgument "operation 2 (bake): needs a keyed clip, got a sampled clip".
-absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> steps);
+// `limits` caps what the steps may produce (a retime's or bake's frames and samples).
+absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> steps,
+                              const ClipLimits& limits = {});
 
-// Runs `steps` in order on `clip`. Progress is reported over the whole pipeline; cancellation is
-// checked between steps and, inside them, between channels.
+// Runs `steps` in order on `clip` (read, not copied, unless a step must change it in place).
+// Progress is reported over the whole pipeline; cancellation is checked between steps and,
+// inside them, between channels. Outputs are held to `limits`.
 // Errors: those of ValidatePipeline() and of each step, prefixed "operation 1 (retime): ".
-absl::StatusOr<PipelineResult> RunPipeline(Clip clip, std::span<const PipelineStep> steps,
+absl::StatusOr<PipelineResult> RunPipeline(const Clip& clip, std::span<const PipelineStep> steps,
                                            const ProgressFn& progress = {},
-                                           std::stop_token stop = {});
+                                           std::stop_token stop = {},
+                                           const ClipLimits& limits = {});
 
 }  // namespace tempokey::core
 

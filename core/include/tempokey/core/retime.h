@@ -153,19 +153,19 @@ struct RetimeResult {
 //   kInvalidArgument  `clip` fails ValidateClip(); `warp` or `options` are invalid (speed <= 0 or
 //                     outside [min_speed, max_speed], times decreasing, NaN, both fits set, a fit
 //                     needing a speed outside the range, ...): the message names the knot; the
-//                     output would exceed 10,000,000 frames or ClipLimits' sample cap.
+//                     output would exceed `limits` (frames, or frames x channels).
 //   kCancelled        `stop` was requested; checked between channels (and joints).
 // Progress: `progress` is called after each channel (or joint) with the fraction done.
 //
 // Thread-safe: a pure function of its arguments.
 absl::StatusOr<RetimeResult> Retime(const Clip& clip, const TimeWarpSpec& warp,
                                     const RetimeOptions& options, const ProgressFn& progress = {},
-                                    std::stop_token stop = {});
+                                    std::stop_token stop = {}, const ClipLimits& limits = {});
 
 // Everything Retime() would refuse before resampling, checked against `clip`'s timing only
 // (frame time and frame count; samples are not read): cheap enough to run before queueing.
 absl::Status ValidateRetime(const Clip& clip, const TimeWarpSpec& warp,
-                            const RetimeOptions& options);
+                            const RetimeOptions& options, const ClipLimits& limits = {});
 
 // Parses the CLI / pipeline speed syntax: comma-separated `time:speed` knots, time in seconds or
 // frames ("2.5s", "75f"), e.g. "0s:1,2s:1,2s:0.5,4s:0.5,4s:1" (2 s to 4 s at half speed);
