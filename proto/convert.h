@@ -1,5 +1,8 @@
-// Conversions between tempokey.v1 messages and core types. Everything that comes off the wire is
-// validated here, so the server and the client share one set of rules and messages.
+// Conversions between tempokey.v1 messages and core types, shared by the server and the client.
+// They check what the encoding itself can get wrong (missing headers, indices out of range,
+// overlapping or missing slices, unknown enum values) and hand the values to core, whose
+// validators are the one set of rules and messages (core::ValidateClipLayout(),
+// core::ValidatePipeline()).
 #ifndef TEMPOKEY_PROTO_CONVERT_H_
 #define TEMPOKEY_PROTO_CONVERT_H_
 
@@ -80,11 +83,7 @@ class ClipAssembler {
   // allocated (frame_count values) when its first slice arrives, so frames not received yet
   // read as 0. Meant for callers that digest or inspect the accepted data incrementally.
   const core::Clip& clip() const { return clip_; }
-  // Samples declared by the header (frame_count x channels); 0 before it.
-  std::int64_t samples_expected() const { return samples_expected_; }
-  // Bytes of samples received so far.
-  std::int64_t bytes_received() const { return samples_received_ * 8; }
-  // The clip, once every sample of every channel has arrived; ValidateClip() passed.
+  // The clip, once every sample of every channel has arrived (valid: ValidateClip() holds).
   // Errors: kInvalidArgument "channel 3 (Hips.Zrotation): frames 512..993 never arrived".
   absl::StatusOr<core::Clip> Finish() &&;
 
@@ -93,9 +92,7 @@ class ClipAssembler {
   bool has_header_ = false;
   core::Clip clip_;
   std::vector<std::vector<std::pair<std::int64_t, std::int64_t>>> received_;  // per channel
-  std::int64_t samples_received_ = 0;
   std::int64_t messages_ = 0;
-  std::int64_t samples_expected_ = 0;
 };
 
 // ClipAssembler over a whole Clip message.

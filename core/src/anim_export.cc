@@ -4,8 +4,13 @@
 // segment's duration; unset weights are 1/3) and dv = slope * dt value units. Maya describes a
 // tangent by the vector (x, y) = (3 dt, 3 dv), time in seconds: angle = atan2(y, x) in degrees
 // and weight = hypot(x, y). The first key's in side and the last key's out side have no segment;
-// they mirror the other side. Times are written in frames of the clip's rate.
+// they mirror the other side. Times are written in frames of the declared timeUnit, the Maya unit
+// nearest the clip's rate, so they play at the right time whatever that rate is.
+#include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <iterator>
+#include <limits>
 #include <numbers>
 #include <string>
 
@@ -20,19 +25,72 @@ namespace {
 
 constexpr double kDefaultWeight = 1.0 / 3.0;
 
-// Maya's name for a frame rate: the classic names, else "<n>fps".
-std::string TimeUnit(double frame_rate) {
-  struct Named {
-    double rate;
-    const char* name;
-  };
-  static constexpr Named kNames[] = {{15, "game"}, {24, "film"},  {25, "pal"},  {30, "ntsc"},
-                                     {48, "show"}, {50, "palf"},  {60, "ntscf"}};
-  for (const Named& named : kNames) {
-    if (std::abs(frame_rate - named.rate) < 1e-3) return named.name;
+// A Maya time unit: its .anim name and its frames per second.
+struct TimeUnit {
+  const char* name;
+  double rate;
+};
+
+// The units Maya's .anim reader knows (MTime): the named ones, the NTSC fractional rates
+// (N * 1000/1001) and the numbered "<N>fps" ones, lowest rate to highest.
+constexpr TimeUnit kTimeUnits[] = {
+    {"2fps", 2.0},       {"3fps", 3.0},       {"4fps", 4.0},
+    {"5fps", 5.0},       {"6fps", 6.0},       {"8fps", 8.0},
+    {"10fps", 10.0},     {"12fps", 12.0},     {"game", 15.0},
+    {"16fps", 16.0},     {"20fps", 20.0},     {"23.976fps", 24000.0 / 1001.0},
+    {"film", 24.0},      {"pal", 25.0},       {"29.97fps", 30000.0 / 1001.0},
+    {"ntsc", 30.0},      {"40fps", 40.0},     {"47.952fps", 48000.0 / 1001.0},
+    {"show", 48.0},      {"palf", 50.0},      {"59.94fps", 60000.0 / 1001.0},
+    {"ntscf", 60.0},     {"75fps", 75.0},     {"80fps", 80.0},
+    {"100fps", 100.0},   {"120fps", 120.0},   {"125fps", 125.0},
+    {"150fps", 150.0},   {"200fps", 200.0},   {"240fps", 240.0},
+    {"250fps", 250.0},   {"300fps", 300.0},   {"375fps", 375.0},
+    {"400fps", 400.0},   {"500fps", 500.0},   {"600fps", 600.0},
+    {"750fps", 750.0},   {"1200fps", 1200.0}, {"1500fps", 1500.0},
+    {"2000fps", 2000.0}, {"3000fps", 3000.0}, {"6000fps", 6000.0},
+};
+
+// The unit whose rate is nearest `frame_rate` in ratio (rates beyond the table take its ends; an
+// infinite rate from a subnormal frame time takes the fastest).
+const TimeUnit& NearestTimeUnit(double frame_rate) {
+  const double rate = std::clamp(frame_rate, kTimeUnits[0].rate, std::end(kTimeUnits)[-1].rate);
+  const TimeUnit* nearest = &kTimeUnits[0];
+  double nearest_distance = std::numeric_limits<double>::infinity();
+  for (const TimeUnit& unit : kTimeUnits) {
+    const double distance = std::abs(std::log(rate / unit.rate));
+    if (distance < nearest_distance) {
+      nearest = &unit;
+      nearest_distance = distance;
+    }
   }
-  return absl::StrCat(std::llround(frame_rate), "fps");
+  return *nearest;
 }
+
+// Converts seconds to frames of the declared unit: time * unit rate. When the clip's frame time
+// is exactly one unit frame (to rounding), time / frame time gives the clip's own frame numbers
+// without the rounding of the rate.
+class UnitFrames {
+ public:
+  UnitFrames(double frame_time_seconds, const TimeUnit& unit)
+      : frame_time_(frame_time_seconds),
+        rate_(unit.rate),
+        same_rate_(frame_time_seconds * unit.rate == 1.0) {}
+
+  double operator()(double seconds) const {
+    return same_rate_ ? seconds / frame_time_ : seconds * rate_;
+  }
+
+  // The unit frame of the clip's frame `frame`.
+  double OfClipFrame(std::int64_t frame) const {
+    const auto f = static_cast<double>(frame);
+    return same_rate_ ? f : f * frame_time_ * rate_;
+  }
+
+ private:
+  double frame_time_;
+  double rate_;
+  bool same_rate_;
+};
 
 struct Tangent {
   double angle_degrees;
@@ -58,7 +116,7 @@ std::string Attribute(const Clip& layout, int c) {
   return absl::StrCat(name, " ", name);
 }
 
-void AppendCurve(std::string& out, const KeyedClip& keyed, int c) {
+void AppendCurve(std::string& out, const KeyedClip& keyed, int c, const UnitFrames& frames) {
   const Clip& layout = keyed.layout;
   const Channel& channel = layout.channels[c];
   const std::string node = channel.joint >= 0 ? layout.skeleton.joints[channel.joint].name
@@ -82,7 +140,7 @@ void AppendCurve(std::string& out, const KeyedClip& keyed, int c) {
     const Tangent in = MayaTangent(key.in_tangent, in_weight, before);
     const Tangent tangent_out = MayaTangent(key.out_tangent, out_weight, after);
     out += "    ";
-    AppendDouble(out, key.time_seconds / layout.frame_time_seconds);
+    AppendDouble(out, frames(key.time_seconds));
     out += ' ';
     AppendDouble(out, key.value);
     absl::StrAppend(&out, " fixed fixed ", key.in_tangent == key.out_tangent ? 1 : 0, " 0 0 ");
@@ -103,12 +161,15 @@ void AppendCurve(std::string& out, const KeyedClip& keyed, int c) {
 absl::StatusOr<std::string> FormatMayaAnim(const KeyedClip& keyed) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateKeyedClip(keyed));
   const Clip& layout = keyed.layout;
+  const TimeUnit& unit = NearestTimeUnit(layout.frame_rate());
+  const UnitFrames frames(layout.frame_time_seconds, unit);
   std::string out = "animVersion 1.1;\nmayaVersion 2020;\n";
-  absl::StrAppend(&out, "timeUnit ", TimeUnit(layout.frame_rate()), ";\n",
-                  "linearUnit cm;\nangularUnit deg;\nstartTime 0;\nendTime ", layout.frame_count - 1,
-                  ";\n");
+  absl::StrAppend(&out, "timeUnit ", unit.name, ";\n",
+                  "linearUnit cm;\nangularUnit deg;\nstartTime 0;\nendTime ");
+  AppendDouble(out, frames.OfClipFrame(layout.frame_count - 1));
+  out += ";\n";
   for (std::size_t c = 0; c < layout.channels.size(); ++c) {
-    AppendCurve(out, keyed, static_cast<int>(c));
+    AppendCurve(out, keyed, static_cast<int>(c), frames);
   }
   return out;
 }

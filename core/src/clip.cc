@@ -8,6 +8,7 @@
 #include "absl/container/flat_hash_set.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "tempokey/core/numbers.h"
 #include "tempokey/core/status.h"
 
 namespace tempokey::core {
@@ -15,11 +16,6 @@ namespace {
 
 constexpr std::array<std::string_view, 7> kKindNames = {
     "Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation", "scalar"};
-
-std::string DescribeValue(double value) {
-  if (std::isnan(value)) return "NaN";
-  return value > 0 ? "+infinity" : "-infinity";
-}
 
 }  // namespace
 
@@ -148,14 +144,14 @@ absl::Status ValidateClipLayout(const Clip& clip, const ClipLimits& limits) {
     for (double v : joint.offset) {
       if (!std::isfinite(v)) {
         return absl::InvalidArgumentError(
-            absl::StrCat("joint ", j, " (", joint.name, "): offset is ", DescribeValue(v)));
+            absl::StrCat("joint ", j, " (", joint.name, "): offset is ", DescribeDouble(v)));
       }
     }
     for (const Vec3& end_site : joint.end_sites) {
       for (double v : end_site) {
         if (!std::isfinite(v)) {
           return absl::InvalidArgumentError(absl::StrCat(
-              "joint ", j, " (", joint.name, "): end site offset is ", DescribeValue(v)));
+              "joint ", j, " (", joint.name, "): end site offset is ", DescribeDouble(v)));
         }
       }
     }
@@ -200,6 +196,22 @@ absl::Status ValidateClipLayout(const Clip& clip, const ClipLimits& limits) {
       }
     }
   }
+
+  for (std::size_t m = 0; m < clip.markers.size(); ++m) {
+    const Marker& marker = clip.markers[m];
+    if (!std::isfinite(marker.time_seconds)) {
+      return absl::InvalidArgumentError(absl::StrCat("marker ", m, " (",
+                                                     QuoteForMessage(marker.name),
+                                                     "): time_seconds is ",
+                                                     DescribeDouble(marker.time_seconds)));
+    }
+    if (!(marker.duration_seconds >= 0.0) || !std::isfinite(marker.duration_seconds)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "marker ", m, " (", QuoteForMessage(marker.name),
+          "): duration_seconds must be finite and >= 0, got ",
+          DescribeDouble(marker.duration_seconds)));
+    }
+  }
   return absl::OkStatus();
 }
 
@@ -217,7 +229,7 @@ absl::Status ValidateClip(const Clip& clip, const ClipLimits& limits) {
       if (!std::isfinite(samples[i])) {
         return absl::InvalidArgumentError(absl::StrCat(ChannelLabel(clip, static_cast<int>(c)),
                                                        ": sample ", i, " is ",
-                                                       DescribeValue(samples[i])));
+                                                       DescribeDouble(samples[i])));
       }
     }
   }

@@ -127,14 +127,16 @@ absl::StatusOr<std::string> ReadFile(const std::string& path, std::int64_t max_b
   }
 
   // Read to the end rather than trusting st_size: pipes and /proc files report 0, and a file
-  // may grow while we read it. The cap is enforced on what actually arrives.
+  // may grow while we read it. The cap is enforced on what actually arrives. A regular file's
+  // buffer is its size plus one byte, so the read that meets the end needs no more room and a
+  // file that grew shows at once; the buffer grows (doubling) only when more bytes arrive.
   std::string contents;
-  if (S_ISREG(info.st_mode)) contents.reserve(static_cast<std::size_t>(info.st_size));
+  contents.resize(S_ISREG(info.st_mode) && info.st_size > 0
+                      ? static_cast<std::size_t>(info.st_size) + 1
+                      : kReadChunk);
   std::size_t used = 0;
   for (;;) {
-    if (contents.size() - used < kReadChunk) {
-      contents.resize(std::max(contents.size() * 2, used + kReadChunk));
-    }
+    if (used == contents.size()) contents.resize(std::max(2 * used, used + kReadChunk));
     const ssize_t n = ::read(fd, contents.data() + used, contents.size() - used);
     if (n < 0) {
       if (errno == EINTR) continue;
@@ -148,6 +150,9 @@ absl::StatusOr<std::string> ReadFile(const std::string& path, std::int64_t max_b
     }
   }
   contents.resize(used);
+  // Give back what growing reserved (a stream, a file that grew); the spare byte of a regular
+  // file is not worth a copy of the whole file.
+  if (contents.capacity() > used + 1) contents.shrink_to_fit();
   return contents;
 }
 

@@ -717,13 +717,11 @@ absl::Status CheckStep(const char* name, double value) {
   return absl::OkStatus();
 }
 
-}  // namespace
-
-std::vector<int> InitialKeyFrames(std::span<const double> samples, double sigma_frames,
-                                  int min_spacing_frames) {
-  const int n = static_cast<int>(samples.size());
+// InitialKeyFrames() from the smoothed copy of the samples (InitialHermiteKeys() needs that copy
+// too, so it is smoothed once).
+std::vector<int> KeyFramesOfSmoothed(const std::vector<double>& smooth, int min_spacing_frames) {
+  const int n = static_cast<int>(smooth.size());
   if (n <= 1) return {0};
-  const std::vector<double> smooth = GaussianSmooth(samples, sigma_frames);
   const auto [first, second] = Differences(smooth);
   std::vector<int> kept = {0, n - 1};
   if (n - 1 < min_spacing_frames) return kept;
@@ -740,10 +738,18 @@ std::vector<int> InitialKeyFrames(std::span<const double> samples, double sigma_
   return sorted;
 }
 
+}  // namespace
+
+std::vector<int> InitialKeyFrames(std::span<const double> samples, double sigma_frames,
+                                  int min_spacing_frames) {
+  if (samples.size() <= 1) return {0};
+  return KeyFramesOfSmoothed(GaussianSmooth(samples, sigma_frames), min_spacing_frames);
+}
+
 std::vector<HermiteKey2D> InitialHermiteKeys(std::span<const double> samples, double sigma_frames,
                                              int min_spacing_frames) {
-  const std::vector<int> frames = InitialKeyFrames(samples, sigma_frames, min_spacing_frames);
   const std::vector<double> smooth = GaussianSmooth(samples, sigma_frames);
+  const std::vector<int> frames = KeyFramesOfSmoothed(smooth, min_spacing_frames);
   std::vector<HermiteKey2D> keys;
   keys.reserve(frames.size());
   for (std::size_t k = 0; k < frames.size(); ++k) {
@@ -765,8 +771,8 @@ double HermiteValueAtFrame(const HermiteKey2D& a, const HermiteKey2D& b, double 
 
 namespace {
 
-// SegmentSquaredError() on `cache`'s basis rows: the same x(s) = frame solutions the DP's forms
-// are built from.
+// The segment error (hermite_dp.h) on `cache`'s basis rows: the same x(s) = frame solutions the
+// DP's forms are built from.
 double SegmentErrorOnShape(std::span<const double> samples, ShapeCache& cache,
                            const HermiteKey2D& a, const HermiteKey2D& b, bool last) {
   const auto [first, end] = SegmentFrames(a.x, b.x, last);
@@ -783,13 +789,6 @@ double SegmentErrorOnShape(std::span<const double> samples, ShapeCache& cache,
 }
 
 }  // namespace
-
-double SegmentSquaredError(std::span<const double> samples, const HermiteKey2D& a,
-                           const HermiteKey2D& b, bool last) {
-  ShapeCache& cache = ThreadShapeCache();
-  cache.TrimIfLarge();
-  return SegmentErrorOnShape(samples, cache, a, b, last);
-}
 
 double CurveSquaredError(std::span<const double> samples, std::span<const HermiteKey2D> keys) {
   ShapeCache& cache = ThreadShapeCache();

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "absl/strings/str_cat.h"
+#include "tempokey/core/numbers.h"
 #include "tempokey/core/status.h"
 
 namespace tempokey::core {
@@ -13,17 +14,11 @@ namespace {
 
 constexpr double kDefaultWeight = 1.0 / 3.0;
 
-std::string Describe(double value) {
-  if (std::isnan(value)) return "NaN";
-  if (std::isinf(value)) return value > 0 ? "+infinity" : "-infinity";
-  return absl::StrCat(value);
-}
-
 absl::Status CheckFinite(std::string_view label, std::size_t key, std::string_view field,
                          double value) {
   if (std::isfinite(value)) return absl::OkStatus();
   return absl::InvalidArgumentError(absl::StrCat(AsAbsl(label), ": key ", key, ": ",
-                                                 AsAbsl(field), " is ", Describe(value)));
+                                                 AsAbsl(field), " is ", DescribeDouble(value)));
 }
 
 absl::Status CheckWeight(std::string_view label, std::size_t key, std::string_view field,
@@ -146,8 +141,8 @@ absl::StatusOr<Clip> Bake(const KeyedClip& keyed, std::optional<double> frame_ti
   TEMPOKEY_RETURN_IF_ERROR(ValidateKeyedClip(keyed));
   const double frame_time = frame_time_seconds.value_or(keyed.layout.frame_time_seconds);
   if (!std::isfinite(frame_time) || frame_time <= 0.0) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("bake frame time must be finite and > 0 seconds, got ", Describe(frame_time)));
+    return absl::InvalidArgumentError(absl::StrCat(
+        "bake frame time must be finite and > 0 seconds, got ", DescribeDouble(frame_time)));
   }
   const double duration = keyed.layout.duration_seconds();
   const double last_index = std::floor(duration / frame_time + 1e-9);

@@ -1,8 +1,10 @@
 // JSON reading and writing of keyed clips (schema in keyed_io.h).
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -53,6 +55,14 @@ void AppendVec3(std::string& out, const Vec3& v) {
   out += ']';
 }
 
+void AppendWeight(std::string& out, const std::optional<double>& weight) {
+  if (weight) {
+    AppendDouble(out, *weight);
+  } else {
+    out += "null";
+  }
+}
+
 void AppendKey(std::string& out, const Key& key) {
   out += '[';
   AppendDouble(out, key.time_seconds);
@@ -63,11 +73,12 @@ void AppendKey(std::string& out, const Key& key) {
   out += ", ";
   AppendDouble(out, key.out_tangent);
   if (key.in_weight || key.out_weight) {
-    // A key weighted on one side only keeps the other side's default 1/3 explicitly.
+    // A key weighted on one side only writes null for the other, which reads back unset (an
+    // explicit 1/3 would evaluate the same but read back set).
     out += ", ";
-    AppendDouble(out, key.in_weight.value_or(1.0 / 3.0));
+    AppendWeight(out, key.in_weight);
     out += ", ";
-    AppendDouble(out, key.out_weight.value_or(1.0 / 3.0));
+    AppendWeight(out, key.out_weight);
   }
   out += ']';
 }
@@ -101,11 +112,18 @@ class JsonReader {
   }
 
  private:
-  absl::Status Error(std::string_view what) const {
-    std::string found = pos_ < text_.size() ? QuoteForMessage(text_.substr(pos_, 1))
-                                            : std::string("the end of the text");
-    return absl::InvalidArgumentError(absl::StrCat(AsAbsl(source_), ":", line_, ":", column_,
-                                                   ": ", AsAbsl(what), ", got ", found));
+  // "<source>:<line>:<column>: <expected>, got <the character here>".
+  absl::Status Error(std::string_view expected) const {
+    const std::string found = pos_ < text_.size() ? QuoteForMessage(text_.substr(pos_, 1))
+                                                  : std::string("the end of the text");
+    return ErrorHere(absl::StrCat(AsAbsl(expected), ", got ", found));
+  }
+
+  // "<source>:<line>:<column>: <what>", for messages that already say what was found (a number
+  // error quotes its whole token).
+  absl::Status ErrorHere(std::string_view what) const {
+    return absl::InvalidArgumentError(
+        absl::StrCat(AsAbsl(source_), ":", line_, ":", column_, ": ", AsAbsl(what)));
   }
 
   void Advance() {
@@ -166,7 +184,7 @@ class JsonReader {
     if (end == pos_) return Error("expected a value");
     const std::string_view token = text_.substr(pos_, end - pos_);
     const NumberError error = ParseDoubleToken(token, value.number);
-    if (error != NumberError::kNone) return Error(DescribeNumberError(error, token));
+    if (error != NumberError::kNone) return ErrorHere(DescribeNumberError(error, token));
     value.type = Value::Type::kNumber;
     while (pos_ < end) Advance();
     return value;
@@ -308,6 +326,15 @@ class Decoder {
     return value.number;
   }
 
+  // A key weight: a number, or null for an unset one.
+  absl::StatusOr<std::optional<double>> Weight(const Value& value, std::string_view what) {
+    if (value.type == Value::Type::kNull) return std::optional<double>();
+    if (value.type != Value::Type::kNumber) {
+      return Fail(value, absl::StrCat(AsAbsl(what), " weight must be a number or null"));
+    }
+    return std::optional<double>(value.number);
+  }
+
   absl::StatusOr<std::int64_t> Integer(const Value& value, std::string_view what) {
     TEMPOKEY_ASSIGN_OR_RETURN(double number, Number(value, what));
     if (number != std::floor(number) || std::abs(number) > 9e15) {
@@ -376,14 +403,14 @@ class Decoder {
       return Fail(value, absl::StrCat(AsAbsl(what), " must have 4 or 6 numbers, got ",
                                       fields->size()));
     }
-    std::array<double, 6> numbers{};
-    for (std::size_t i = 0; i < fields->size(); ++i) {
+    std::array<double, 4> numbers{};
+    for (std::size_t i = 0; i < 4; ++i) {
       TEMPOKEY_ASSIGN_OR_RETURN(numbers[i], Number((*fields)[i], what));
     }
     Key key{numbers[0], numbers[1], numbers[2], numbers[3], std::nullopt, std::nullopt};
     if (fields->size() == 6) {
-      key.in_weight = numbers[4];
-      key.out_weight = numbers[5];
+      TEMPOKEY_ASSIGN_OR_RETURN(key.in_weight, Weight((*fields)[4], what));
+      TEMPOKEY_ASSIGN_OR_RETURN(key.out_weight, Weight((*fields)[5], what));
     }
     return key;
   }

@@ -74,6 +74,12 @@ absl::StatusOr<double> ParseDouble(std::string_view text) {
   return value;
 }
 
+std::string DescribeDouble(double value) {
+  if (std::isnan(value)) return "NaN";
+  if (std::isinf(value)) return value > 0 ? "+infinity" : "-infinity";
+  return absl::StrCat(value);
+}
+
 std::string QuoteForMessage(std::string_view text) {
   const bool cut = text.size() > kMaxQuotedBytes;
   if (cut) text = text.substr(0, kMaxQuotedBytes);

@@ -3,11 +3,15 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <span>
 #include <string>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "reduction_internal.h"
 #include "tempokey/core/hermite_dp.h"
+#include "tempokey/core/numbers.h"
 #include "tempokey/core/rotation.h"
 #include "tempokey/core/status.h"
 #include "tempokey/core/tolerance_fit.h"
@@ -22,21 +26,15 @@ constexpr int kMaxSpacingFrames = 1'000'000;
 // Squares of larger samples overflow the squared error.
 constexpr double kMaxSampleMagnitude = 1e100;
 
-std::string Describe(double value) {
-  if (std::isnan(value)) return "NaN";
-  if (std::isinf(value)) return value > 0 ? "+infinity" : "-infinity";
-  return absl::StrCat(value);
-}
-
 // "paper.step_y must be > 0, got -1" for a value that must lie in (0, max].
 absl::Status CheckPositive(std::string_view field, double value, double max) {
   if (!(value > 0.0)) {
     return absl::InvalidArgumentError(
-        absl::StrCat(AsAbsl(field), " must be > 0, got ", Describe(value)));
+        absl::StrCat(AsAbsl(field), " must be > 0, got ", DescribeDouble(value)));
   }
   if (!(value <= max)) {
     return absl::InvalidArgumentError(
-        absl::StrCat(AsAbsl(field), " must be <= ", max, ", got ", Describe(value)));
+        absl::StrCat(AsAbsl(field), " must be <= ", max, ", got ", DescribeDouble(value)));
   }
   return absl::OkStatus();
 }
@@ -54,7 +52,7 @@ absl::Status ValidatePaperParams(const PaperParams& p) {
   if (!(p.smoothing_sigma_frames >= 0.0 && p.smoothing_sigma_frames <= kMaxSigmaFrames)) {
     return absl::InvalidArgumentError(
         absl::StrCat("paper.smoothing_sigma_frames must be in [0, ", kMaxSigmaFrames, "], got ",
-                     Describe(p.smoothing_sigma_frames)));
+                     DescribeDouble(p.smoothing_sigma_frames)));
   }
   if (p.min_key_spacing_frames < 1 || p.min_key_spacing_frames > kMaxSpacingFrames) {
     return absl::InvalidArgumentError(
@@ -67,11 +65,11 @@ absl::Status ValidatePaperParams(const PaperParams& p) {
 absl::Status CheckBound(std::string_view field, double value) {
   if (!(value > 0.0)) {
     return absl::InvalidArgumentError(
-        absl::StrCat(AsAbsl(field), " must be > 0, got ", Describe(value)));
+        absl::StrCat(AsAbsl(field), " must be > 0, got ", DescribeDouble(value)));
   }
   if (!std::isfinite(value)) {
     return absl::InvalidArgumentError(
-        absl::StrCat(AsAbsl(field), " must be finite, got ", Describe(value)));
+        absl::StrCat(AsAbsl(field), " must be finite, got ", DescribeDouble(value)));
   }
   return absl::OkStatus();
 }
@@ -96,14 +94,7 @@ absl::Status ValidateToleranceParams(const ToleranceParams& t) {
                                                  " is not a known alignment"));
 }
 
-// The samples a channel is fitted to: unwrapped when it is a rotation.
-std::vector<double> FitInput(const Channel& channel) {
-  std::vector<double> samples = channel.samples;
-  if (IsRotation(channel.kind)) UnwrapDegrees(samples);
-  return samples;
-}
-
-absl::Status CheckMagnitudes(const Clip& clip, int c, const std::vector<double>& samples) {
+absl::Status CheckMagnitudes(const Clip& clip, int c, std::span<const double> samples) {
   for (std::size_t f = 0; f < samples.size(); ++f) {
     if (std::abs(samples[f]) > kMaxSampleMagnitude) {
       return absl::InvalidArgumentError(absl::StrCat(
@@ -114,7 +105,7 @@ absl::Status CheckMagnitudes(const Clip& clip, int c, const std::vector<double>&
   return absl::OkStatus();
 }
 
-bool IsConstant(const std::vector<double>& samples) {
+bool IsConstant(std::span<const double> samples) {
   return std::all_of(samples.begin(), samples.end(),
                      [&](double v) { return v == samples.front(); });
 }
@@ -125,17 +116,17 @@ struct ChannelFit {
   int iterations = 0;
 };
 
-// Two flat keys at the ends (one for a single frame).
-ChannelFit FlatFit(const std::vector<double>& samples, double frame_time) {
-  const double last = static_cast<double>(samples.size() - 1);
-  std::vector<HermiteKey2D> keys = {{0.0, samples.front(), last, 0.0}};
-  if (samples.size() > 1) keys.push_back({last, samples.front(), last, 0.0});
+// Two flat keys at `value` at the ends of `frame_count` frames (one for a single frame).
+ChannelFit FlatFit(std::size_t frame_count, double value, double frame_time) {
+  const double last = static_cast<double>(frame_count - 1);
+  std::vector<HermiteKey2D> keys = {{0.0, value, last, 0.0}};
+  if (frame_count > 1) keys.push_back({last, value, last, 0.0});
   return {HermiteKeysToCurve(keys, frame_time), {}, 0};
 }
 
-absl::StatusOr<ChannelFit> PaperFit(const std::vector<double>& samples, double frame_time,
+absl::StatusOr<ChannelFit> PaperFit(std::span<const double> samples, double frame_time,
                                     const PaperParams& params) {
-  if (IsConstant(samples)) return FlatFit(samples, frame_time);
+  if (IsConstant(samples)) return FlatFit(samples.size(), samples.front(), frame_time);
   HermiteFitOptions options;
   options.steps = {params.step_x_frames, params.step_y, params.step_tangent_x,
                    params.step_tangent_y};
@@ -156,8 +147,6 @@ absl::StatusOr<ChannelFit> PaperFit(const std::vector<double>& samples, double f
 // Bounds below this fraction of the requested ones are not searched for a key budget: the fit
 // would key every frame long before.
 constexpr double kMinBudgetScale = 1e-6;
-// Bounds beyond this multiple cannot lower the key count further (two keys per channel).
-constexpr double kMaxBudgetScale = 1e12;
 // Bisection steps of the budget search on the bounds' scale (a factor 2^-12 apart at the end).
 constexpr int kBudgetBisections = 12;
 
@@ -210,9 +199,35 @@ Curve SplineCurve(const SplineFit& fit, std::size_t index, double frame_time) {
   return curve;
 }
 
+// The scale at which every channel's bound covers the range (max - min) of its fitted samples:
+// there two flat keys at mid-range keep every channel within half its bound, so every group fits
+// with two keys. At least 1; at most the largest double (for absurdly small bounds).
+double CoveringScale(const Clip& clip, std::span<const std::span<const double>> inputs,
+                     const ToleranceParams& params) {
+  double scale = 1.0;
+  for (std::size_t c = 0; c < inputs.size(); ++c) {
+    const auto [low, high] = std::minmax_element(inputs[c].begin(), inputs[c].end());
+    scale = std::max(scale, (*high - *low) / BoundOf(params, clip.channels[c].kind));
+  }
+  return std::min(scale, std::numeric_limits<double>::max());
+}
+
+// Two flat keys per channel at the middle of its range: within every bound at CoveringScale().
+std::vector<Curve> MidRangeCurves(const Clip& clip,
+                                  std::span<const std::span<const double>> inputs) {
+  std::vector<Curve> curves;
+  curves.reserve(inputs.size());
+  for (std::span<const double> samples : inputs) {
+    const auto [low, high] = std::minmax_element(samples.begin(), samples.end());
+    curves.push_back(
+        FlatFit(samples.size(), *low + 0.5 * (*high - *low), clip.frame_time_seconds).curve);
+  }
+  return curves;
+}
+
 // The tolerance fit of every group with every bound multiplied by `scale`; curves in channel order.
 absl::StatusOr<std::vector<Curve>> ToleranceCurves(
-    const Clip& clip, const std::vector<std::vector<double>>& inputs,
+    const Clip& clip, std::span<const std::span<const double>> inputs,
     const std::vector<std::vector<int>>& groups, const ToleranceParams& params, double scale,
     const ProgressFn& progress, std::stop_token stop) {
   std::vector<Curve> curves(clip.channels.size());
@@ -220,14 +235,18 @@ absl::StatusOr<std::vector<Curve>> ToleranceCurves(
     TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
     const std::vector<int>& group = groups[g];
     if (group.size() == 1 && IsConstant(inputs[group[0]])) {
-      curves[group[0]] = FlatFit(inputs[group[0]], clip.frame_time_seconds).curve;
+      curves[group[0]] =
+          FlatFit(inputs[group[0]].size(), inputs[group[0]].front(), clip.frame_time_seconds)
+              .curve;
       continue;
     }
     std::vector<std::span<const double>> channels;
     std::vector<double> bounds;
     for (int c : group) {
       channels.emplace_back(inputs[c]);
-      bounds.push_back(scale * BoundOf(params, clip.channels[c].kind));
+      // Capped: a huge bound times a huge scale must not become infinite (the fit refuses it).
+      bounds.push_back(std::min(scale * BoundOf(params, clip.channels[c].kind),
+                                std::numeric_limits<double>::max()));
     }
     absl::StatusOr<SplineFit> fit = FitWithinTolerance(channels, bounds, {}, stop);
     if (!fit.ok()) return Annotate(fit.status(), ChannelLabel(clip, group.front()));
@@ -249,7 +268,7 @@ std::int64_t KeyCount(const std::vector<Curve>& curves) {
 // Curves within the bounds, or, with a key budget, within the smallest common scale of the bounds
 // whose fit keeps at most that many keys (bisection on the scale, in ratio).
 absl::StatusOr<std::vector<Curve>> ToleranceFit(const Clip& clip,
-                                                const std::vector<std::vector<double>>& inputs,
+                                                std::span<const std::span<const double>> inputs,
                                                 const ToleranceParams& params,
                                                 const ProgressFn& progress, std::stop_token stop) {
   const std::vector<std::vector<int>> groups = AlignmentGroups(clip, params.pose_alignment);
@@ -283,18 +302,29 @@ absl::StatusOr<std::vector<Curve>> ToleranceFit(const Clip& clip,
     }
     if (over == 0.0) return best;  // even the tightest bound searched fits the budget
   } else {
+    // Doubling, up to the scale whose bounds cover every channel's range: the fit there keeps
+    // two keys per channel, which the budget allows (checked above).
     over = 1.0;
-    for (double scale = 2.0;; scale *= 2.0) {
-      if (scale > kMaxBudgetScale) {
-        return absl::InternalError(absl::StrCat("no bound fits ", budget, " keys"));
-      }
-      TEMPOKEY_ASSIGN_OR_RETURN(std::vector<Curve> curves, fit(scale));
+    const double ceiling = CoveringScale(clip, inputs, params);
+    bool found = false;
+    for (double scale = 2.0; !found && over < ceiling; scale *= 2.0) {
+      const double capped = std::min(scale, ceiling);
+      TEMPOKEY_ASSIGN_OR_RETURN(std::vector<Curve> curves, fit(capped));
       if (KeyCount(curves) <= budget) {
-        within = scale;
+        within = capped;
         best = std::move(curves);
-        break;
+        found = true;
+      } else {
+        over = capped;
       }
-      over = scale;
+    }
+    if (!found) {
+      // The fit kept more than two keys per channel even where two flat keys are within every
+      // bound (not seen in practice): take those.
+      best = MidRangeCurves(clip, inputs);
+      ReportProgress(progress, 1.0, absl::StrCat("reduce ", clip.channels.size(), "/",
+                                                 clip.channels.size()));
+      return best;
     }
   }
   for (int step = 0; step < kBudgetBisections; ++step) {
@@ -345,11 +375,11 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
     empty.name = channel.name;
   }
   const int channel_count = static_cast<int>(clip.channels.size());
-  std::vector<std::vector<double>> inputs;
-  inputs.reserve(clip.channels.size());
+  // Rotations unwrapped into copies, every other channel read in place.
+  const reduce_internal::FittedSamples fitted(clip);
+  const std::span<const std::span<const double>> inputs = fitted.channels();
   for (int c = 0; c < channel_count; ++c) {
-    inputs.push_back(FitInput(clip.channels[c]));
-    TEMPOKEY_RETURN_IF_ERROR(CheckMagnitudes(clip, c, inputs.back()));
+    TEMPOKEY_RETURN_IF_ERROR(CheckMagnitudes(clip, c, inputs[c]));
   }
   int iterations = 0;
   if (options.method == ReduceMethod::kTolerance) {
@@ -370,7 +400,10 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
                      absl::StrCat("reduce ", c + 1, "/", channel_count));
     }
   }
-  TEMPOKEY_ASSIGN_OR_RETURN(result.report, MeasureReduction(clip, result.keyed));
+  // The clip was validated above and the curves are ours: measure without MeasureReduction()'s
+  // checks and copies.
+  result.report =
+      reduce_internal::MeasureFitted(inputs, result.keyed.curves, clip.frame_time_seconds);
   result.report.iterations = iterations;
   return result;
 }

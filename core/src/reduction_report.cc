@@ -1,15 +1,19 @@
 // The one error metric of key reduction (SPEC 4, STYLE: one metric for reduction, tests and
 // benchmarks): keyed curves evaluated at every source frame against the unwrapped samples.
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "reduction_internal.h"
 #include "tempokey/core/reduce.h"
 #include "tempokey/core/rotation.h"
 #include "tempokey/core/status.h"
 
 namespace tempokey::core {
+namespace reduce_internal {
 namespace {
 
 struct ChannelErrors {
@@ -17,15 +21,14 @@ struct ChannelErrors {
   double squared_sum = 0.0;
 };
 
-ChannelErrors MeasureChannel(const Clip& clip, int c, const Curve& curve) {
-  std::vector<double> samples = clip.channels[c].samples;
-  if (IsRotation(clip.channels[c].kind)) UnwrapDegrees(samples);
+ChannelErrors MeasureChannel(std::span<const double> samples, int c, const Curve& curve,
+                             double frame_time_seconds) {
   ChannelErrors out;
   out.summary.channel_index = c;
   out.summary.key_count = static_cast<std::int64_t>(curve.keys.size());
   out.summary.sample_count = static_cast<std::int64_t>(samples.size());
   for (std::size_t f = 0; f < samples.size(); ++f) {
-    const double t = static_cast<double>(f) * clip.frame_time_seconds;
+    const double t = static_cast<double>(f) * frame_time_seconds;
     const double error = std::abs(EvaluateCurve(curve, t) - samples[f]);
     out.squared_sum += error * error;
     if (error > out.summary.max_error) {
@@ -39,6 +42,49 @@ ChannelErrors MeasureChannel(const Clip& clip, int c, const Curve& curve) {
 }
 
 }  // namespace
+
+FittedSamples::FittedSamples(const Clip& clip) {
+  unwrapped_.reserve(static_cast<std::size_t>(std::count_if(
+      clip.channels.begin(), clip.channels.end(),
+      [](const Channel& channel) { return IsRotation(channel.kind); })));
+  channels_.reserve(clip.channels.size());
+  for (const Channel& channel : clip.channels) {
+    if (IsRotation(channel.kind)) {
+      // Reserved above: the buffers the earlier spans point into never move.
+      std::vector<double>& copy = unwrapped_.emplace_back(channel.samples);
+      UnwrapDegrees(copy);
+      channels_.emplace_back(copy);
+    } else {
+      channels_.emplace_back(channel.samples);
+    }
+  }
+}
+
+ReductionReport MeasureFitted(std::span<const std::span<const double>> samples,
+                              std::span<const Curve> curves, double frame_time_seconds) {
+  ReductionReport report;
+  double squared_sum = 0.0;
+  for (std::size_t c = 0; c < samples.size(); ++c) {
+    const ChannelErrors errors =
+        MeasureChannel(samples[c], static_cast<int>(c), curves[c], frame_time_seconds);
+    const ChannelReduction& channel = errors.summary;
+    report.key_count += channel.key_count;
+    report.sample_count += channel.sample_count;
+    squared_sum += errors.squared_sum;
+    if (channel.max_error > report.max_error) {
+      report.max_error = channel.max_error;
+      report.worst_channel_index = channel.channel_index;
+      report.worst_frame = channel.max_error_frame;
+    }
+    report.channels.push_back(channel);
+  }
+  report.rms_error = report.sample_count > 0
+                         ? std::sqrt(squared_sum / static_cast<double>(report.sample_count))
+                         : 0.0;
+  return report;
+}
+
+}  // namespace reduce_internal
 
 absl::StatusOr<ReductionReport> MeasureReduction(const Clip& clip, const KeyedClip& keyed) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateClip(clip));
@@ -56,26 +102,9 @@ absl::StatusOr<ReductionReport> MeasureReduction(const Clip& clip, const KeyedCl
           AsAbsl(ChannelKindName(clip.channels[c].kind))));
     }
   }
-
-  ReductionReport report;
-  double squared_sum = 0.0;
-  for (std::size_t c = 0; c < clip.channels.size(); ++c) {
-    const ChannelErrors errors = MeasureChannel(clip, static_cast<int>(c), keyed.curves[c]);
-    const ChannelReduction& channel = errors.summary;
-    report.key_count += channel.key_count;
-    report.sample_count += channel.sample_count;
-    squared_sum += errors.squared_sum;
-    if (channel.max_error > report.max_error) {
-      report.max_error = channel.max_error;
-      report.worst_channel_index = channel.channel_index;
-      report.worst_frame = channel.max_error_frame;
-    }
-    report.channels.push_back(channel);
-  }
-  report.rms_error = report.sample_count > 0
-                         ? std::sqrt(squared_sum / static_cast<double>(report.sample_count))
-                         : 0.0;
-  return report;
+  const reduce_internal::FittedSamples samples(clip);
+  return reduce_internal::MeasureFitted(samples.channels(), keyed.curves,
+                                        clip.frame_time_seconds);
 }
 
 }  // namespace tempokey::core

@@ -3,10 +3,8 @@
 #include "tempokey/core/retime.h"
 
 #include <algorithm>
-#include <charconv>
 #include <cmath>
 #include <string>
-#include <system_error>
 #include <utility>
 #include <vector>
 
@@ -15,6 +13,7 @@
 #include "retime_internal.h"
 #include "retime_paper.h"
 #include "tempokey/core/kinematics.h"
+#include "tempokey/core/numbers.h"
 #include "tempokey/core/resample.h"
 #include "tempokey/core/status.h"
 #include "tempokey/core/time_map.h"
@@ -23,11 +22,6 @@ namespace tempokey::core {
 namespace retime_internal {
 
 std::string FormatNumber(double value) { return absl::StrFormat("%g", value); }
-
-std::string DescribeNonFinite(double value) {
-  if (std::isnan(value)) return "NaN";
-  return value > 0 ? "+infinity" : "-infinity";
-}
 
 std::string DescribeTimePoint(const TimePoint& time) {
   return absl::StrCat(FormatNumber(time.value), time.in_frames ? "f" : "s");
@@ -90,11 +84,11 @@ absl::Status ValidateSpeedKnots(std::span<const SpeedKnot> knots, double frame_t
     const SpeedKnot& knot = knots[k];
     if (!std::isfinite(knot.time.value)) {
       return absl::InvalidArgumentError(absl::StrCat("speed knot ", k + 1, ": time is ",
-                                                     DescribeNonFinite(knot.time.value)));
+                                                     DescribeDouble(knot.time.value)));
     }
     if (!std::isfinite(knot.speed)) {
       return absl::InvalidArgumentError(absl::StrCat("speed knot ", k + 1, ": speed is ",
-                                                     DescribeNonFinite(knot.speed)));
+                                                     DescribeDouble(knot.speed)));
     }
     if (knot.speed <= 0.0) {
       return absl::InvalidArgumentError(
@@ -223,18 +217,11 @@ double MapTime(const Schedule& schedule, double source_frame_time, double second
   return frame * schedule.output_frame_time;
 }
 
-absl::StatusOr<std::vector<Marker>> MapMarkers(const Clip& clip, const Schedule& schedule) {
+// Markers are finite with durations >= 0: ValidateClip() checked them.
+std::vector<Marker> MapMarkers(const Clip& clip, const Schedule& schedule) {
   std::vector<Marker> out;
   out.reserve(clip.markers.size());
-  for (std::size_t i = 0; i < clip.markers.size(); ++i) {
-    const Marker& marker = clip.markers[i];
-    if (!std::isfinite(marker.time_seconds) || !std::isfinite(marker.duration_seconds) ||
-        marker.duration_seconds < 0.0) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "marker ", i + 1, " (", marker.name, "): time ", FormatNumber(marker.time_seconds),
-          " s and duration ", FormatNumber(marker.duration_seconds),
-          " s must be finite, the duration >= 0"));
-    }
+  for (const Marker& marker : clip.markers) {
     const double a = MapTime(schedule, clip.frame_time_seconds, marker.time_seconds);
     const double b = marker.duration_seconds > 0.0
                          ? MapTime(schedule, clip.frame_time_seconds,
@@ -289,7 +276,7 @@ absl::StatusOr<RetimeResult> Retime(const Clip& clip, const TimeWarpSpec& warp,
     out.channels[c].name = clip.channels[c].name;
     out.channels[c].samples.resize(static_cast<std::size_t>(m));
   }
-  TEMPOKEY_ASSIGN_OR_RETURN(out.markers, MapMarkers(clip, schedule));
+  out.markers = MapMarkers(clip, schedule);
 
   // Channels resampled as one rotation (three rotation channels of a joint, quaternion mode);
   // every other channel is a scalar, rotation angles unwrapped first.
@@ -349,11 +336,6 @@ absl::StatusOr<std::vector<SpeedKnot>> ParseSpeedKnots(std::string_view text) {
     while (!s.empty() && is_space(s.back())) s.remove_suffix(1);
     return s;
   };
-  auto parse_double = [](std::string_view s, double& value) {
-    if (s.empty()) return false;
-    const auto [end, ec] = std::from_chars(s.data(), s.data() + s.size(), value);
-    return ec == std::errc() && end == s.data() + s.size();
-  };
   text = trim(text);
   if (text.empty()) {
     return absl::InvalidArgumentError(
@@ -369,6 +351,13 @@ absl::StatusOr<std::vector<SpeedKnot>> ParseSpeedKnots(std::string_view text) {
     auto fail = [&](std::string_view what) {
       return absl::InvalidArgumentError(
           absl::StrCat("speed knot ", index, " '", AsAbsl(part), "': ", AsAbsl(what)));
+    };
+    // The one number parser of the file formats: finite, whole token, optional leading '+'.
+    auto parse_number = [&](std::string_view field, std::string_view token,
+                            double& value) -> absl::Status {
+      const NumberError error = ParseDoubleToken(token, value);
+      if (error == NumberError::kNone) return absl::OkStatus();
+      return fail(absl::StrCat(AsAbsl(field), ": ", DescribeNumberError(error, token)));
     };
     if (index > retime_internal::kMaxWarpItems) {
       return absl::InvalidArgumentError(absl::StrCat("too many speed knots: over the limit of ",
@@ -388,15 +377,9 @@ absl::StatusOr<std::vector<SpeedKnot>> ParseSpeedKnots(std::string_view text) {
     const char unit = time.back();
     if (unit != 's' && unit != 'f') return fail("time needs a unit, s or f");
     const std::string_view number = trim(time.substr(0, time.size() - 1));
-    if (!parse_double(number, knot.time.value)) {
-      return fail(absl::StrCat("time '", AsAbsl(number), "' is not a number"));
-    }
+    TEMPOKEY_RETURN_IF_ERROR(parse_number("time", number, knot.time.value));
     knot.time.in_frames = unit == 'f';
-    if (!std::isfinite(knot.time.value)) return fail("time must be finite");
-    if (!parse_double(speed, knot.speed)) {
-      return fail(absl::StrCat("speed '", AsAbsl(speed), "' is not a number"));
-    }
-    if (!std::isfinite(knot.speed)) return fail("speed must be finite");
+    TEMPOKEY_RETURN_IF_ERROR(parse_number("speed", speed, knot.speed));
     knots.push_back(knot);
     if (comma == std::string_view::npos) break;
     text = text.substr(comma + 1);

@@ -21,8 +21,6 @@ inline constexpr double kMaxOutputRateHz = 100'000.0;
 
 // "%g" of a double: 2 -> "2", 0.5 -> "0.5", 8275.3 -> "8275.3".
 std::string FormatNumber(double value);
-// "NaN", "+infinity" or "-infinity".
-std::string DescribeNonFinite(double value);
 // "2.5s" or "75f".
 std::string DescribeTimePoint(const TimePoint& time);
 // "speed knot 3 (2s:-0.5)"; `index` is 0-based, printed 1-based.

@@ -10,13 +10,13 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "retime_internal.h"
+#include "tempokey/core/numbers.h"
 #include "tempokey/core/status.h"
 
 namespace tempokey::core {
 
 using retime_internal::DescribeHold;
 using retime_internal::DescribeKey;
-using retime_internal::DescribeNonFinite;
 using retime_internal::DescribePin;
 using retime_internal::DescribeSpeedKnot;
 using retime_internal::DescribeTimePoint;
@@ -415,11 +415,11 @@ absl::Status TimeMapBuilder::BuildTimeMapKeys() {
     const TimeMapKey& key = keys[k];
     if (!std::isfinite(key.output.value)) {
       return absl::InvalidArgumentError(absl::StrCat("time-map key ", k + 1, ": output time is ",
-                                                     DescribeNonFinite(key.output.value)));
+                                                     DescribeDouble(key.output.value)));
     }
     if (!std::isfinite(key.source.value)) {
       return absl::InvalidArgumentError(absl::StrCat("time-map key ", k + 1, ": source time is ",
-                                                     DescribeNonFinite(key.source.value)));
+                                                     DescribeDouble(key.source.value)));
     }
     y[k] = OutputFrames(key.output);
     x[k] = SourceFrames(key.source);
@@ -525,7 +525,7 @@ absl::Status TimeMapBuilder::InsertHolds() {
     const Hold& hold = warp_.holds[i];
     if (!std::isfinite(hold.at.value)) {
       return absl::InvalidArgumentError(absl::StrCat("hold ", i + 1, ": source time is ",
-                                                     DescribeNonFinite(hold.at.value)));
+                                                     DescribeDouble(hold.at.value)));
     }
     if (!std::isfinite(hold.duration_seconds) || hold.duration_seconds <= 0.0) {
       return absl::InvalidArgumentError(absl::StrCat(DescribeHold(i, hold),
@@ -590,7 +590,7 @@ absl::Status TimeMapBuilder::SplitAtPins() {
     const Pin& pin = pins[i];
     if (!std::isfinite(pin.source.value)) {
       return absl::InvalidArgumentError(absl::StrCat("pin ", i + 1, ": source time is ",
-                                                     DescribeNonFinite(pin.source.value)));
+                                                     DescribeDouble(pin.source.value)));
     }
     if (pin.output_frame < 0) {
       return absl::InvalidArgumentError(

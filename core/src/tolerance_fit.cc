@@ -30,8 +30,10 @@ constexpr double kRidge = 1e-9;
 constexpr int kMaxInsertionRounds = 64;
 // A removal whose window misses the bound by up to this factor is worth reweighting.
 constexpr double kLawsonReach = 1.5;
-// Window of a removal: up to three keys on each side of the removed one.
-constexpr int kWindow = 6;
+// Window of a removal: up to kWindowSide keys on each side of the removed one (fewer at the
+// clip's ends), the removed key itself not among them.
+constexpr int kWindowSide = 2;
+constexpr int kWindowKeys = 2 * kWindowSide;
 
 using Mat2 = std::array<double, 4>;  // row-major 2 x 2
 using Vec2 = std::array<double, 2>;
@@ -500,25 +502,23 @@ class Fitter {
         // The channel most over its bound decides where the new key goes: at its worst frame,
         // or mid-segment when it is a key frame that is over (it is its segments' problem too).
         double ratio = 0.0;
-        std::int64_t at = -1;
+        std::size_t worst_channel = 0;
         for (std::size_t c = 0; c < channels_.size(); ++c) {
           const KeyRun run = RunOf(fit, c);
           const double interior = SegmentMax(channels_[c], run, j) / bounds_[c];
           const double r = std::max({interior, KeyRatio(fit, c, j), KeyRatio(fit, c, j + 1)});
           if (r > ratio) {
             ratio = r;
-            at = c;
+            worst_channel = c;
           }
         }
         if (ratio > 1.0) {
-          const auto c = static_cast<std::size_t>(at);
-          const KeyRun run = RunOf(fit, c);
-          at = SegmentMax(channels_[c], run, j) / bounds_[c] >= ratio
-                   ? WorstFrame(channels_[c], run, j)
-                   : fit.frames[j] + length / 2;
-        }
-        if (ratio > 1.0) {
-          next.push_back(at);
+          const std::span<const double> s = channels_[worst_channel];
+          const KeyRun run = RunOf(fit, worst_channel);
+          const std::int64_t frame = SegmentMax(s, run, j) / bounds_[worst_channel] >= ratio
+                                         ? WorstFrame(s, run, j)
+                                         : fit.frames[j] + length / 2;
+          next.push_back(frame);
           inserted = true;
         }
       }
@@ -549,14 +549,13 @@ class Fitter {
 
   // ---- 2. removal -------------------------------------------------------------------------------
 
-  // A window of keys: up to kWindow frames, per channel values and slopes.
+  // A window of keys: up to kWindowKeys frames, per channel values and slopes.
   struct Window {
-    std::array<std::int64_t, kWindow> frames{};
-    std::vector<std::array<double, kWindow>> values, slopes;
+    std::array<std::int64_t, kWindowKeys> frames{};
+    std::vector<std::array<double, kWindowKeys>> values, slopes;
     int count = 0;
     int free_first = 0;
     int free_last = 0;
-    int slid = -1;  // the key that may move, -1 for none
 
     KeyRun Run(std::size_t c) {
       return {frames.data(), values[c].data(), slopes[c].data(), count};
@@ -649,9 +648,9 @@ class Fitter {
     Window base = trial;
     Window miss = trial;
     for (int i = 1; i + 1 < count; ++i) {
-      // Keys around the candidate: up to three accepted ones before, three remaining after.
-      const int before = std::min<int>(2, static_cast<int>(out.frames.size()));
-      const int after = std::min(2, count - 1 - i);
+      // Keys around the candidate: up to two accepted ones before, two remaining after.
+      const int before = std::min<int>(kWindowSide, static_cast<int>(out.frames.size()));
+      const int after = std::min(kWindowSide, count - 1 - i);
       base.count = before + after;
       for (int k = 0; k < before; ++k) {
         const std::size_t o = out.frames.size() - before + k;
@@ -669,8 +668,8 @@ class Fitter {
         }
       }
       // The outermost keys stay fixed unless they are the clip's first or last.
-      base.free_first = before == 2 ? 1 : 0;
-      base.free_last = after == 2 ? base.count - 2 : base.count - 1;
+      base.free_first = before == kWindowSide ? 1 : 0;
+      base.free_last = after == kWindowSide ? base.count - 2 : base.count - 1;
       // The key after the removed one may slide, unless it is the clip's last.
       const bool can_slide = i + 1 < count - 1;
 

@@ -178,6 +178,47 @@ TEST(ValidateClipTest, PositionAndRotationOnOneAxisMayCoexist) {
   EXPECT_EQ(ValidateMessage(clip), "ok");
 }
 
+TEST(ValidateClipTest, MarkerTimesMustBeFinite) {
+  Clip nan = ValidClip();
+  nan.markers = {Marker{"start", 0.0, 0.0}, Marker{"step", 0.5, 0.0},
+                 Marker{"contact", std::nan(""), 0.0}};
+  Clip infinite = ValidClip();
+  infinite.markers = {Marker{"end", -std::numeric_limits<double>::infinity(), 0.0}};
+
+  EXPECT_EQ(ValidateMessage(nan), "marker 2 (\"contact\"): time_seconds is NaN");
+  EXPECT_EQ(ValidateMessage(infinite), "marker 0 (\"end\"): time_seconds is -infinity");
+}
+
+TEST(ValidateClipTest, MarkerDurationsMustBeFiniteAndNotNegative) {
+  Clip negative = ValidClip();
+  negative.markers = {Marker{"contact", 0.5, -0.25}};
+  Clip nan = ValidClip();
+  nan.markers = {Marker{"contact", 0.5, std::nan("")}};
+  Clip infinite = ValidClip();
+  infinite.markers = {Marker{"contact", 0.5, std::numeric_limits<double>::infinity()}};
+  Clip fine = ValidClip();
+  fine.markers = {Marker{"contact", -1.0, 0.0}, Marker{"hold", 0.5, 2.0}};
+
+  EXPECT_EQ(ValidateMessage(negative),
+            "marker 0 (\"contact\"): duration_seconds must be finite and >= 0, got -0.25");
+  EXPECT_EQ(ValidateMessage(nan),
+            "marker 0 (\"contact\"): duration_seconds must be finite and >= 0, got NaN");
+  EXPECT_EQ(ValidateMessage(infinite),
+            "marker 0 (\"contact\"): duration_seconds must be finite and >= 0, got +infinity");
+  EXPECT_EQ(ValidateMessage(fine), "ok");
+}
+
+TEST(ValidateClipLayoutTest, ChecksMarkers) {
+  Clip header = ValidClip();
+  for (Channel& channel : header.channels) channel.samples.clear();
+  header.markers = {Marker{"contact", std::nan(""), 0.0}};
+
+  const absl::Status status = ValidateClipLayout(header);
+
+  EXPECT_EQ(status.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(std::string(status.message()), "marker 0 (\"contact\"): time_seconds is NaN");
+}
+
 TEST(ValidateClipLayoutTest, IgnoresSamplesButChecksEverythingElse) {
   Clip header = ValidClip();
   for (Channel& channel : header.channels) channel.samples.clear();

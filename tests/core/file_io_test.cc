@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "gtest/gtest.h"
@@ -59,6 +60,34 @@ TEST(ReadFileTest, ReadsLargerThanOneChunk) {
 
   ASSERT_TRUE(read.ok()) << read.status();
   EXPECT_EQ(*read, contents);
+}
+
+TEST(ReadFileTest, RegularFileBufferIsSizedOnceToTheFile) {
+  // Growing by doubling would leave twice the capacity (and copy the file on the way).
+  const std::string path = testing::MakeTempDir() + "/sized";
+  const std::string contents(300000, 'x');
+  WritePlain(path, contents);
+
+  absl::StatusOr<std::string> read = ReadFile(path);
+
+  ASSERT_TRUE(read.ok()) << read.status();
+  EXPECT_EQ(*read, contents);
+  EXPECT_LE(read->capacity(), contents.size() + 1);
+}
+
+TEST(ReadFileTest, StreamLargerThanOneChunkIsReadWholeWithoutSpareCapacity) {
+  const std::string path = testing::MakeTempDir() + "/fifo";
+  ASSERT_EQ(::mkfifo(path.c_str(), 0600), 0);
+  std::string contents;
+  for (int i = 0; i < 200000; ++i) contents += static_cast<char>('a' + i % 26);
+  std::thread writer([&] { WritePlain(path, contents); });
+
+  absl::StatusOr<std::string> read = ReadFile(path);
+  writer.join();
+
+  ASSERT_TRUE(read.ok()) << read.status();
+  EXPECT_EQ(*read, contents);
+  EXPECT_LE(read->capacity(), contents.size() + 1);
 }
 
 TEST(ReadFileTest, MissingFileIsNotFoundAndNamesThePath) {

@@ -103,6 +103,29 @@ TEST(InitialHermiteKeysTest, StartIsFeasibleWithTangentXTheShorterGap) {
   }
 }
 
+TEST(InitialHermiteKeysTest, KeysSitAtTheInitialKeyFramesWithSmoothedSlopes) {
+  // A sine with jitter that flips the raw differences' sign at many frames.
+  std::vector<double> samples(120);
+  for (std::size_t f = 0; f < samples.size(); ++f) {
+    samples[f] = 20.0 * std::sin(static_cast<double>(f) / 11.0) + (f % 3 == 0 ? 0.8 : -0.4);
+  }
+
+  const std::vector<HermiteKey2D> keys = InitialHermiteKeys(samples, 2.0, 4);
+  const std::vector<int> frames = InitialKeyFrames(samples, 2.0, 4);
+
+  ASSERT_EQ(keys.size(), frames.size());
+  for (std::size_t k = 0; k < keys.size(); ++k) {
+    EXPECT_EQ(keys[k].x, static_cast<double>(frames[k])) << k;
+    EXPECT_EQ(keys[k].y, samples[static_cast<std::size_t>(frames[k])]) << k;
+    // The smoothed slope: the sine's (20/11 cos) give or take what smoothing leaves of the
+    // jitter and of the sine's own curvature, far below the raw differences' +-1.2 swings.
+    const double slope = 20.0 / 11.0 * std::cos(static_cast<double>(frames[k]) / 11.0);
+    if (frames[k] >= 6 && frames[k] + 6 < 120) {
+      EXPECT_NEAR(keys[k].ty / keys[k].tx, slope, 0.15) << frames[k];
+    }
+  }
+}
+
 TEST(HermiteDpTest, CurveOnTheGridIsAFixedPointWithZeroError) {
   // Samples drawn from a 2D Hermite whose keys are the initial estimate: nothing can improve.
   const std::vector<HermiteKey2D> truth = {

@@ -90,6 +90,17 @@ TEST(ParseDoubleTokenTest, LeavesValueUntouchedOnError) {
   EXPECT_EQ(value, 42.0);
 }
 
+TEST(DescribeDoubleTest, NamesNonFiniteValuesAndWritesFiniteOnesInSixDigits) {
+  EXPECT_EQ(DescribeDouble(std::numeric_limits<double>::quiet_NaN()), "NaN");
+  EXPECT_EQ(DescribeDouble(-std::numeric_limits<double>::quiet_NaN()), "NaN");
+  EXPECT_EQ(DescribeDouble(std::numeric_limits<double>::infinity()), "+infinity");
+  EXPECT_EQ(DescribeDouble(-std::numeric_limits<double>::infinity()), "-infinity");
+  EXPECT_EQ(DescribeDouble(-0.5), "-0.5");
+  EXPECT_EQ(DescribeDouble(0.0), "0");
+  EXPECT_EQ(DescribeDouble(1e6), "1e+06");
+  EXPECT_EQ(DescribeDouble(0.1 + 0.2), "0.3");
+}
+
 TEST(QuoteForMessageTest, EscapesControlBytesAndCutsLongText) {
   EXPECT_EQ(QuoteForMessage(std::string("a\0z", 3)), "\"a\\x00z\"");
   // A hex digit after an escape is escaped too, so the escape cannot swallow it.

@@ -1,6 +1,7 @@
 #include "tempokey/core/reduce.h"
 #include "tests/core/reduce_invalid_cases.h"
 
+#include <algorithm>
 #include <cmath>
 #include <stop_token>
 #include <string>
@@ -179,6 +180,65 @@ TEST(ReduceKeysTest, KeyBudgetIsKeptWithTheTightestBoundsThatFit) {
   EXPECT_LE(loose->report.key_count, *generous.tolerance.key_budget);
   EXPECT_GT(loose->report.key_count, reference->report.key_count);  // more keys, tighter fit
   EXPECT_LT(loose->report.max_error, reference->report.max_error);
+}
+
+// A scalar channel of magnitude 1e6 under a 1e-9 bound: the budget's scale must reach about
+// 2e15 (the channel's range over its bound), far beyond any fixed cap.
+Clip HugeScalarClip() {
+  std::vector<double> huge(200), small(200);
+  for (int f = 0; f < 200; ++f) {
+    huge[f] = 1e6 * std::sin(f / 7.0) + 3e5 * std::cos(f / 2.3);
+    small[f] = 0.25 * std::sin(f / 5.0);
+  }
+  return ScalarClip({huge, small});
+}
+
+TEST(ReduceKeysTest, KeyBudgetOfTwoKeysPerChannelIsMetHoweverSmallTheBound) {
+  const Clip clip = HugeScalarClip();
+  ReduceOptions options = ToleranceOptions(0.5, 0.5, 1e-9);
+  options.tolerance.key_budget = 4;
+  ReduceOptions aligned = options;
+  aligned.tolerance.pose_alignment = PoseAlignment::kClip;
+
+  const absl::StatusOr<ReduceResult> result = ReduceKeys(clip, options);
+  const absl::StatusOr<ReduceResult> shared = ReduceKeys(clip, aligned);
+
+  for (const absl::StatusOr<ReduceResult>* r : {&result, &shared}) {
+    ASSERT_TRUE(r->ok()) << r->status();
+    EXPECT_EQ((*r)->report.key_count, 4);
+    // Two keys are within the scale at which the bound covers the range: 2.6e6 or so.
+    const auto [low, high] =
+        std::minmax_element(clip.channels[0].samples.begin(), clip.channels[0].samples.end());
+    EXPECT_LE((*r)->report.max_error, *high - *low);
+  }
+}
+
+TEST(ReduceKeysTest, ReportIsMeasureReductionOfTheKeysItReturns) {
+  const Clip clip = MixedClip();
+  ReduceOptions tolerance = ToleranceOptions(0.2, 0.05, 0.001);
+  tolerance.tolerance.pose_alignment = PoseAlignment::kJoint;
+
+  for (const ReduceOptions& options : {tolerance, PaperOptions()}) {
+    const absl::StatusOr<ReduceResult> result = ReduceKeys(clip, options);
+    ASSERT_TRUE(result.ok()) << result.status();
+    const absl::StatusOr<ReductionReport> measured = MeasureReduction(clip, result->keyed);
+
+    ASSERT_TRUE(measured.ok()) << measured.status();
+    const ReductionReport& report = result->report;
+    EXPECT_EQ(report.key_count, measured->key_count);
+    EXPECT_EQ(report.sample_count, measured->sample_count);
+    EXPECT_EQ(report.rms_error, measured->rms_error);
+    EXPECT_EQ(report.max_error, measured->max_error);
+    EXPECT_EQ(report.worst_channel_index, measured->worst_channel_index);
+    EXPECT_EQ(report.worst_frame, measured->worst_frame);
+    ASSERT_EQ(report.channels.size(), measured->channels.size());
+    for (std::size_t c = 0; c < report.channels.size(); ++c) {
+      EXPECT_EQ(report.channels[c].key_count, measured->channels[c].key_count) << c;
+      EXPECT_EQ(report.channels[c].rms_error, measured->channels[c].rms_error) << c;
+      EXPECT_EQ(report.channels[c].max_error, measured->channels[c].max_error) << c;
+      EXPECT_EQ(report.channels[c].max_error_frame, measured->channels[c].max_error_frame) << c;
+    }
+  }
 }
 
 TEST(ReduceKeysTest, KeyBudgetBelowTwoKeysPerChannelIsRefused) {

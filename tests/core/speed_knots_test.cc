@@ -64,6 +64,15 @@ TEST(SpeedKnotsTest, AcceptsFramesExponentsNegativeTimesAndSpaces) {
   EXPECT_EQ((*knots)[2].speed, 0.1);
 }
 
+TEST(SpeedKnotsTest, AcceptsALeadingPlusLikeEveryNumberReader) {
+  const absl::StatusOr<std::vector<SpeedKnot>> knots = ParseSpeedKnots("0s:1,+2s:+0.5");
+
+  ASSERT_TRUE(knots.ok()) << knots.status();
+  ASSERT_EQ(knots->size(), 2u);
+  EXPECT_EQ((*knots)[1].time.value, 2.0);
+  EXPECT_EQ((*knots)[1].speed, 0.5);
+}
+
 struct BadText {
   std::string text;
   std::string message;
@@ -91,13 +100,19 @@ INSTANTIATE_TEST_SUITE_P(
         BadText{"2:0.5", "speed knot 1 '2:0.5': time needs a unit, s or f"},
         BadText{"0s:1:2", "speed knot 1 '0s:1:2': expected one ':' between time and speed"},
         BadText{":1", "speed knot 1 ':1': time is missing"},
-        BadText{"abcs:1", "speed knot 1 'abcs:1': time 'abc' is not a number"},
-        BadText{"s:1", "speed knot 1 's:1': time '' is not a number"},
-        BadText{"0s:fast", "speed knot 1 '0s:fast': speed 'fast' is not a number"},
-        BadText{"0s:", "speed knot 1 '0s:': speed '' is not a number"},
-        BadText{"0s:1x", "speed knot 1 '0s:1x': speed '1x' is not a number"},
-        BadText{"infs:1", "speed knot 1 'infs:1': time must be finite"},
-        BadText{"0s:nan", "speed knot 1 '0s:nan': speed must be finite"}));
+        BadText{"abcs:1", "speed knot 1 'abcs:1': time: expected a number, got \"abc\""},
+        BadText{"s:1", "speed knot 1 's:1': time: expected a number, got an empty field"},
+        BadText{"0s:fast", "speed knot 1 '0s:fast': speed: expected a number, got \"fast\""},
+        BadText{"0s:", "speed knot 1 '0s:': speed: expected a number, got an empty field"},
+        BadText{"0s:1x", "speed knot 1 '0s:1x': speed: malformed number \"1x\""},
+        BadText{"0s:1,1.2.3s:1", "speed knot 2 '1.2.3s:1': time: malformed number \"1.2.3\""},
+        BadText{"infs:1", "speed knot 1 'infs:1': time: expected a finite number, got \"inf\""},
+        BadText{"0s:nan", "speed knot 1 '0s:nan': speed: expected a finite number, got \"nan\""},
+        BadText{"1e999s:1",
+                "speed knot 1 '1e999s:1': time: number \"1e999\" is out of range for a double"},
+        BadText{"0s:1e-400",
+                "speed knot 1 '0s:1e-400': speed: number \"1e-400\" is out of range for a "
+                "double"}));
 
 TEST(SpeedKnotsTest, ParsedNegativeSpeedIsRefusedByRetimeNamingTheKnot) {
   Clip clip;

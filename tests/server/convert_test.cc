@@ -266,7 +266,7 @@ TEST_F(AssemblerErrorTest, NanMarkerTime) {
 
   EXPECT_THAT(ClipLayoutFromProto(header),
               StatusIs(absl::StatusCode::kInvalidArgument,
-                       "header.markers[0] (step): time_seconds is NaN"));
+                       "marker 0 (\"step\"): time_seconds is NaN"));
 }
 
 TEST(ClipConvertTest, ClipWithoutHeaderIsRefused) {

@@ -113,14 +113,17 @@ struct ClipLimits {
 // Checks every invariant of SPEC 1: frame time finite and > 0; frame_count >= 1; every channel
 // has frame_count finite samples; joint indices valid, parents before children, joint names
 // non-empty and unique; each joint's channel list names channels of that joint, and every joint
-// channel is in its joint's list; rotation channels of one joint name distinct axes.
+// channel is in its joint's list; rotation channels of one joint name distinct axes; every
+// marker has a finite time and a finite duration >= 0.
 //
-// Errors: kInvalidArgument naming the channel, joint, frame and value, e.g.
-//   "channel 14 (LeftKnee.Xrotation): sample 40 is NaN".
+// Errors: kInvalidArgument naming the channel, joint, marker (0-based index and quoted name),
+// frame and value, e.g.
+//   "channel 14 (LeftKnee.Xrotation): sample 40 is NaN",
+//   "marker 2 (\"contact\"): duration_seconds must be finite and >= 0, got -0.5".
 absl::Status ValidateClip(const Clip& clip, const ClipLimits& limits = {});
 
-// Same checks as ValidateClip() on the layout only (everything but the sample values), for a
-// header received before its samples.
+// Same checks as ValidateClip() on the layout only (everything but the sample values, markers
+// included), for a header received before its samples.
 absl::Status ValidateClipLayout(const Clip& clip, const ClipLimits& limits = {});
 
 }  // namespace tempokey::core

@@ -29,7 +29,7 @@
 //     then not split a tie differently in two implementations. The last key's state is chosen by
 //     the same rule, and the path is read back through the kept predecessors.
 //   Iteration: a pass whose path differs from the estimate and whose error does not exceed the
-//     estimate's (recomputed with SegmentSquaredError) becomes the new estimate; otherwise every
+//     estimate's (recomputed with CurveSquaredError) becomes the new estimate; otherwise every
 //     step is halved. Iterations stop when every step is below `accuracy` or after
 //     `max_iterations` passes. The recorded error therefore never increases.
 #ifndef TEMPOKEY_CORE_HERMITE_DP_H_
@@ -116,16 +116,12 @@ inline bool SegmentIsFeasible(double ax, double atx, double bx, double btx) {
 // The curve's value at `frame`, which must lie in [a.x, b.x] of a feasible segment.
 double HermiteValueAtFrame(const HermiteKey2D& a, const HermiteKey2D& b, double frame);
 
-// Segment error (definition above). x(s_f) = f is solved frame by frame, each solve starting
-// from a Newton step off the previous frame's solution, and the solutions are kept per segment
-// shape in a per-thread table that the DP passes share, so the error of a path is evaluated on
-// exactly the basis values its DP costs were built from. The table is bounded and changes no
-// value: results depend on the arguments alone. `last` marks the last segment.
-// Precondition: feasible segment inside the samples.
-double SegmentSquaredError(std::span<const double> samples, const HermiteKey2D& a,
-                           const HermiteKey2D& b, bool last);
-
-// Sum of SegmentSquaredError() over all segments: the error of the whole curve at every frame.
+// Sum of the segment errors (definition above) over all segments: the error of the whole curve
+// at every frame. x(s_f) = f is solved frame by frame, each solve starting from a Newton step off
+// the previous frame's solution, and the solutions are kept per segment shape in a per-thread
+// table that the DP passes share, so the error of a path is evaluated on exactly the basis values
+// its DP costs were built from. The table is bounded and changes no value: results depend on the
+// arguments alone. Precondition: every segment feasible and inside the samples.
 double CurveSquaredError(std::span<const double> samples, std::span<const HermiteKey2D> keys);
 
 // The tie scale of the definition above.

@@ -18,24 +18,34 @@
 //        "kind": "Xrotation",            // Xposition..Zrotation or "scalar"
 //        "name": "",                     // for plain channels
 //        "keys": [[0, 1.5, 0.25, 0.25],  // [time_seconds, value, in_tangent, out_tangent]
-//                 [0.5, 2, 0, 0, 0.3, 0.2]]}  // + [in_weight, out_weight] when weighted
+//                 [0.5, 2, 0, 0, 0.3, 0.2],   // + [in_weight, out_weight] when weighted
+//                 [1, 3, 0, 0, null, 0.2]]}   // null: that side's weight is unset
 //     ],
 //     "markers": [{"name": "contact", "time_seconds": 0.5, "duration_seconds": 0}]
 //   }
 // Tangents are slopes in value units per second; rotations are degrees (unwrapped as fitted);
 // weights are fractions of the segment's duration (keyed_clip.h). Unknown members are refused.
 //
-// A key weighted on one side only is written with 1/3 (the unset default) on the other.
+// A key weighted on one side only is written with null for the unset side (which evaluates as
+// 1/3 but stays unset), so the round trip is exact for every combination of weights. Reading
+// accepts null for either weight.
 //
 // Maya .anim (ASCII, animVersion 1.1): one `anim` block per channel, attribute
 // rotate.rotateX / translate.translateX ... (plain channels use their name), node = the joint
-// name; time in frames of the clip's rate (timeUnit ntsc for 30 Hz, film 24, pal 25, ntscf 60,
-// game 15, show 48, palf 50, otherwise "<rate>fps"); `weighted 1`; every key has fixed in and
-// out tangents as angle and weight. A key side's Bezier handle spans dt = weight * T seconds (T
-// the segment's duration, unset weights 1/3) and dv = slope * dt; Maya's tangent vector is
-// (x, y) = (3 dt, 3 dv), time in seconds: angle = atan2(y, x) in degrees, weight = hypot(x, y).
-// tanLock is 1 when in and out slopes are equal. Angular curves are degrees (angularUnit deg),
-// linear ones the file's units written as linearUnit cm.
+// name; `weighted 1`.
+// Time: timeUnit is the Maya unit whose rate is nearest the clip's (in ratio): game 15, film 24,
+// pal 25, ntsc 30, show 48, palf 50, ntscf 60, 23.976fps / 29.97fps / 47.952fps / 59.94fps (24,
+// 30, 48, 60 x 1000/1001), or "<N>fps" for N in 2, 3, 4, 5, 6, 8, 10, 12, 16, 20, 40, 75, 80,
+// 100, 120, 125, 150, 200, 240, 250, 300, 375, 400, 500, 600, 750, 1200, 1500, 2000, 3000, 6000
+// (so 30000/1001 Hz is 29.97fps, and a BVH's 0.0083333 s frames are 120fps). Key times and
+// endTime are in frames of that unit, time_seconds * unit rate, so Maya plays every key at its
+// time whatever the clip's rate; keys of a clip off the unit's rate land between whole frames.
+// Tangents: every key has fixed in and out tangents as angle and weight. A key side's Bezier
+// handle spans dt = weight * T seconds (T the segment's duration, unset weights 1/3) and
+// dv = slope * dt; Maya's tangent vector is (x, y) = (3 dt, 3 dv), time in seconds:
+// angle = atan2(y, x) in degrees, weight = hypot(x, y). tanLock is 1 when in and out slopes are
+// equal. Angular curves are degrees (angularUnit deg), linear ones the file's units written as
+// linearUnit cm.
 #ifndef TEMPOKEY_CORE_KEYED_IO_H_
 #define TEMPOKEY_CORE_KEYED_IO_H_
 

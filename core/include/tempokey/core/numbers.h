@@ -1,5 +1,6 @@
 // Number text for the file formats (BVH, CSV, JSON): shortest round-trip formatting of doubles
-// and a strict parser that accepts a whole token or nothing.
+// and a strict parser that accepts a whole token or nothing; and how error messages show
+// numbers and text.
 #ifndef TEMPOKEY_CORE_NUMBERS_H_
 #define TEMPOKEY_CORE_NUMBERS_H_
 
@@ -54,6 +55,10 @@ std::string DescribeNumberError(NumberError error, std::string_view token);
 // ParseDoubleToken() with its error as a status.
 // Errors: kInvalidArgument with DescribeNumberError()'s message.
 absl::StatusOr<double> ParseDouble(std::string_view text);
+
+// How messages name a double: "NaN", "+infinity" or "-infinity" when it is not finite, else as
+// absl::StrCat() writes it (6 significant digits: "0.5", "-1", "1e+06"). Thread-safe.
+std::string DescribeDouble(double value);
 
 // `text` in double quotes for an error message, with control and non-ASCII bytes escaped
 // (C style: "\x00", "\t") and cut to its first 40 bytes ("..." marks the cut).

@@ -107,7 +107,11 @@ absl::Status ValidateReduceOptions(const ReduceOptions& options);
 //     every channel stays within it at every source frame; keys on integer frames, non-weighted,
 //     C1 (in and out tangents equal). Channels share key frames per pose_alignment (each alone, a
 //     joint's channels, or all). With key_budget, every bound is scaled by one common factor,
-//     the smallest (to a ratio of 2^-12) whose fit keeps at most that many keys in all.
+//     the smallest (to a ratio of 2^-12) whose fit keeps at most that many keys in all. The
+//     search doubles the factor from 1 up to the one at which every channel's bound covers the
+//     range (max - min) of its fitted samples; there two keys per channel always suffice (if the
+//     fit keeps more, each channel takes two flat keys at the middle of its range), so every
+//     budget of at least 2 keys per channel is met.
 //   `paper`: initial keys, DP passes and the conversion to weighted keys as in hermite_dp.h;
 //     keys land at fractional frames.
 // A lone channel whose samples are all equal gets two flat keys at the first and last frame (one

@@ -169,10 +169,12 @@ absl::Status ValidateRetime(const Clip& clip, const TimeWarpSpec& warp,
 
 // Parses the CLI / pipeline speed syntax: comma-separated `time:speed` knots, time in seconds or
 // frames ("2.5s", "75f"), e.g. "0s:1,2s:1,2s:0.5,4s:0.5,4s:1" (2 s to 4 s at half speed);
-// "0s:1" alone is the identity. Spaces around tokens are allowed; numbers as std::from_chars
-// reads them (exponents allowed). Only the syntax is checked here (finite numbers, a unit):
-// speed ranges and ordering are Retime()'s, whose messages name the knot the same way.
-// Errors: kInvalidArgument naming the knot ("speed knot 3 '2x:0.5': time needs a unit, s or f").
+// "0s:1" alone is the identity. Spaces around tokens are allowed; numbers as ParseDoubleToken()
+// reads them (numbers.h: finite, exponents and a leading '+' allowed). Only the syntax is checked
+// here (finite numbers, a unit): speed ranges and ordering are Retime()'s, whose messages name
+// the knot too.
+// Errors: kInvalidArgument naming the knot ("speed knot 3 '2x:0.5': time needs a unit, s or f",
+// "speed knot 1 '0s:1x': speed: malformed number \"1x\"").
 // Thread-safe.
 absl::StatusOr<std::vector<SpeedKnot>> ParseSpeedKnots(std::string_view text);
 

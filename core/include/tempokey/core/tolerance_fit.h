@@ -13,11 +13,12 @@
 //   1. Insertion. Keys every `initial_spacing_frames`; fit all values and slopes by least squares
 //      (one block-tridiagonal solve); insert a key at the worst frame of every segment over the
 //      bound; repeat until none is.
-//   2. Removal, left to right. Try to drop each key: refit the two keys on each side by least
-//      squares (their outer neighbours fixed); if a frame of the window is over the bound but
-//      within twice it, reweight the fit towards the worst frames (Lawson's iteration towards
-//      the minimax fit) for up to `lawson_iterations` rounds; if it still fails, also try moving
-//      the next key by up to `slide_frames` frames either way. Keep the first trial that fits.
+//   2. Removal, left to right. Try to drop each key: in a window of up to two keys on each side,
+//      refit the nearest key on each side by least squares (the outer ones fixed unless they are
+//      the clip's first or last), as it is and with the next key moved by up to `slide_frames`
+//      frames (the way the unmoved fit misses); if none fits but the closest misses the bound by
+//      at most 1.5 times, reweight that one towards its worst frames (Lawson's iteration towards
+//      the minimax fit) for up to `lawson_iterations` rounds. Keep the first trial that fits.
 //   3. Verification of every frame; a region that cannot be fitted (only possible with keys on
 //      consecutive frames) is keyed at every frame with the samples' values.
 // Channels fitted together (a joint's, or a whole clip's: pose-aligned keys) share key frames and
