@@ -9,6 +9,8 @@
 //   a file    "walk.bvh:12:7: expected '{' after joint name, got \"OFFSET\""      exit 1
 //   a flag    "--speed: speed knot 3 '2x:0.5': time needs a unit, s or f"         exit 2 for bad
 //             syntax, 1 when the feature itself fails (e.g. not implemented)
+//   a step    "operation 1 (retime): speed knot 2 (1s:1000): speed 1000 is ..."   exit 1
+//             (refused before anything is sent: core's check of the steps against the clip)
 //   server    "server: INVALID_ARGUMENT: operation 1 (retime): ..."               exit 1
 //             (gRPC code name, then the server's message; also for UNAVAILABLE /
 //             DEADLINE_EXCEEDED when the server cannot be reached in time)

@@ -194,8 +194,6 @@ void Client::PrepareContext(const CallScope& scope, grpc::ClientContext& context
 
 namespace {
 
-// Runs `attempt` until it succeeds, fails with another code than UNAVAILABLE, fails after a
-// response arrived, runs out of attempts, or the next backoff would pass the deadline.
 // Carries the server's retry hint (trailing metadata) over to `status` as its payload.
 absl::Status WithRetryHint(absl::Status status, const grpc::ClientContext& context) {
   const auto& trailers = context.GetServerTrailingMetadata();
@@ -208,6 +206,8 @@ absl::Status WithRetryHint(absl::Status status, const grpc::ClientContext& conte
   return status;
 }
 
+// Runs `attempt` until it succeeds, fails with another code than UNAVAILABLE, fails after a
+// response arrived, runs out of attempts, or the next backoff would pass the deadline.
 template <class AttemptFn>
 absl::Status RetryWhileUnavailable(const ClientOptions& options,
                                    std::optional<Clock::time_point> deadline, AttemptFn attempt) {
@@ -309,7 +309,7 @@ absl::StatusOr<v1::UploadClipResponse> Client::UploadClip(const core::Clip& clip
       open = sent.ok();
     }
     if (open) writer->WritesDone();
-    return Attempt{FromGrpcStatus(writer->Finish()), false};
+    return Attempt{WithRetryHint(FromGrpcStatus(writer->Finish()), context), false};
   }));
   return response;
 }
@@ -392,7 +392,7 @@ absl::StatusOr<v1::Job> Client::WatchJob(const std::string& job_id,
       last = std::move(job);
       job.Clear();
     }
-    return Attempt{FromGrpcStatus(reader->Finish()), any};
+    return Attempt{WithRetryHint(FromGrpcStatus(reader->Finish()), context), any};
   }));
   if (!any) return absl::InternalError("the watch ended without sending the job");
   return last;
@@ -420,7 +420,7 @@ absl::StatusOr<core::PipelineResult> Client::GetJobResult(const std::string& job
         break;
       }
     }
-    absl::Status status = FromGrpcStatus(reader->Finish());
+    absl::Status status = WithRetryHint(FromGrpcStatus(reader->Finish()), context);
     if (!assembled.ok()) return Attempt{assembled, true};
     return Attempt{status, received};
   }));
@@ -475,7 +475,7 @@ absl::StatusOr<core::PipelineResult> Client::Process(const core::Clip& clip,
         }
       }
     }
-    absl::Status status = FromGrpcStatus(stream->Finish());
+    absl::Status status = WithRetryHint(FromGrpcStatus(stream->Finish()), context);
     if (!assembled.ok()) return Attempt{assembled, true};
     return Attempt{status, received};
   }));

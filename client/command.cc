@@ -168,14 +168,20 @@ absl::StatusOr<core::Clip> ReadInputClip(const CommandContext& context, const st
   return ReadClipFile(path, csv_frame_time);
 }
 
+absl::StatusOr<std::map<std::string, std::string>> LabelsFromFlags(const ParsedArgs& args) {
+  std::map<std::string, std::string> labels;
+  for (const std::string& label : args.Values("--label")) {
+    TEMPOKEY_ASSIGN_OR_RETURN(auto pair, ParseLabel("--label", label));
+    labels[pair.first] = pair.second;
+  }
+  return labels;
+}
+
 absl::StatusOr<ExecutionMode> ExecutionModeFromFlags(const ParsedArgs& args) {
   ExecutionMode mode;
   mode.detach = args.Has("--detach");
   mode.as_job = args.Has("--job") || mode.detach;
-  for (const std::string& label : args.Values("--label")) {
-    TEMPOKEY_ASSIGN_OR_RETURN(auto pair, ParseLabel("--label", label));
-    mode.labels[pair.first] = pair.second;
-  }
+  TEMPOKEY_ASSIGN_OR_RETURN(mode.labels, LabelsFromFlags(args));
   if (!mode.labels.empty() && !mode.as_job) {
     return UsageError("--label applies to jobs: add --job or --detach");
   }
@@ -215,6 +221,9 @@ absl::Status JobOutcome(const v1::Job& job) {
 absl::StatusOr<std::optional<core::PipelineResult>> ExecutePipeline(
     CommandContext& context, const core::Clip& clip, std::span<const core::PipelineStep> steps,
     const ExecutionMode& mode) {
+  // What core can tell from the clip and the steps is refused here, before any upload; the
+  // server checks again against its own limits.
+  TEMPOKEY_RETURN_IF_ERROR(core::ValidatePipeline(clip, steps));
   TEMPOKEY_ASSIGN_OR_RETURN(const Client* client, context.Connect());
   ProgressLine progress(context);
   if (!mode.as_job) {

@@ -109,6 +109,9 @@ struct ExecutionMode {
 // --job, --detach and --label from the command's flags.
 absl::StatusOr<ExecutionMode> ExecutionModeFromFlags(const ParsedArgs& args);
 
+// Every --label KEY=VALUE given. Errors: a usage error naming the malformed label.
+absl::StatusOr<std::map<std::string, std::string>> LabelsFromFlags(const ParsedArgs& args);
+
 // The flag specs of ExecutionModeFromFlags(), for commands that offer them.
 inline constexpr FlagSpec kJobFlag{"--job", "", "",
                                    "run as a stored job (upload, submit, watch, fetch)"};

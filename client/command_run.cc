@@ -30,10 +30,7 @@ absl::Status Run(CommandContext& context) {
   mode.as_job = !context.args().Has("--process");
   mode.detach = context.args().Has("--detach");
   if (mode.detach && !mode.as_job) return UsageError("--detach and --process exclude each other");
-  for (const std::string& label : context.args().Values("--label")) {
-    TEMPOKEY_ASSIGN_OR_RETURN(auto pair, ParseLabel("--label", label));
-    mode.labels[pair.first] = pair.second;
-  }
+  TEMPOKEY_ASSIGN_OR_RETURN(mode.labels, LabelsFromFlags(context.args()));
   if (!mode.labels.empty() && !mode.as_job) return UsageError("--label applies to jobs, not --process");
   TEMPOKEY_ASSIGN_OR_RETURN(core::Clip clip, ReadInputClip(context, inputs[0]));
 

@@ -61,11 +61,6 @@ void JobPool::Shutdown() {
   });
 }
 
-std::chrono::milliseconds JobPool::RetryAfterHint() const {
-  std::lock_guard lock(mu_);
-  return RetryAfterHintLocked();
-}
-
 std::chrono::milliseconds JobPool::RetryAfterHintLocked() const {
   // A full queue drains at about workers / average_task per second; half of it is a fair wait.
   const double ms = average_task_ms_ * static_cast<double>(queue_capacity_) /

@@ -49,10 +49,6 @@ class JobPool {
   // Refuses new tasks, lets the workers run every queued task, joins them. Idempotent.
   void Shutdown();
 
-  // Suggested wait before retrying a refused submit: about the time for the queue to move,
-  // from the average task duration (10 ms .. 10 s).
-  std::chrono::milliseconds RetryAfterHint() const;
-
   // Thread-safety: every method may be called from any thread, except that Shutdown() and the
   // destructor must not run on a worker.
 

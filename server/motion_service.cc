@@ -30,17 +30,6 @@ grpc::ServerUnaryReactor* FinishUnary(grpc::CallbackServerContext* call,
   return reactor;
 }
 
-absl::Status CheckId(std::string_view field, const std::string& id) {
-  if (id.empty()) {
-    return absl::InvalidArgumentError(absl::StrCat(core::AsAbsl(field), " is empty"));
-  }
-  if (id.size() > kMaxIdBytes) {
-    return absl::InvalidArgumentError(absl::StrCat(core::AsAbsl(field), " is ", id.size(),
-                                                   " bytes, over the limit of ", kMaxIdBytes));
-  }
-  return absl::OkStatus();
-}
-
 absl::Status CheckLabels(const google::protobuf::Map<std::string, std::string>& labels) {
   if (labels.size() > kMaxLabels) {
     return absl::InvalidArgumentError(
@@ -62,6 +51,17 @@ absl::Status CheckLabels(const google::protobuf::Map<std::string, std::string>& 
 }
 
 }  // namespace
+
+absl::Status CheckId(std::string_view field, const std::string& id) {
+  if (id.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat(core::AsAbsl(field), " is empty"));
+  }
+  if (id.size() > kMaxIdBytes) {
+    return absl::InvalidArgumentError(absl::StrCat(core::AsAbsl(field), " is ", id.size(),
+                                                   " bytes, over the limit of ", kMaxIdBytes));
+  }
+  return absl::OkStatus();
+}
 
 absl::StatusOr<std::vector<core::PipelineStep>> PrepareSteps(
     const google::protobuf::RepeatedPtrField<v1::Operation>& operations, const core::Clip& clip,

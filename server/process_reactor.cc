@@ -245,6 +245,11 @@ class ProcessReactor final : public ProcessReactorBase {
     if (!assembler_.has_header()) {
       return absl::InvalidArgumentError("ProcessStart arrived before the clip header");
     }
+    // A call opened before the drain began starts no new work during it: clients retry
+    // UNAVAILABLE elsewhere, where they would not retry a CANCELLED at the grace period's end.
+    if (service_->draining.load()) {
+      return absl::UnavailableError("the server is shutting down and accepts no new jobs");
+    }
     TEMPOKEY_ASSIGN_OR_RETURN(core::Clip clip, std::move(assembler_).Finish());
     TEMPOKEY_ASSIGN_OR_RETURN(std::vector<core::PipelineStep> steps,
                               PrepareSteps(start.operations(), clip, service_->clip_limits));

@@ -33,6 +33,10 @@ absl::StatusOr<std::vector<core::PipelineStep>> PrepareSteps(
     const google::protobuf::RepeatedPtrField<v1::Operation>& operations, const core::Clip& clip,
     const core::ClipLimits& limits);
 
+// Checks an id field of a request (job_id, clip_id): not empty, at most 256 bytes.
+// Errors: kInvalidArgument "job_id is empty", "job_id is 300 bytes, over the limit of 256".
+absl::Status CheckId(std::string_view field, const std::string& id);
+
 // "retime+reduce" for log lines.
 std::string DescribeSteps(const std::vector<core::PipelineStep>& steps);
 

@@ -9,6 +9,7 @@
 #include "server/job_proto.h"
 #include "server/reactors.h"
 #include "server/status_util.h"
+#include "tempokey/core/status.h"
 
 namespace tempokey::server {
 namespace {
@@ -43,7 +44,7 @@ class ResultReactor final : public grpc::ServerWriteReactor<v1::ResultPart> {
  private:
   absl::Status Open(const grpc::CallbackServerContext& call, const v1::GetJobResultRequest& request) {
     if (absl::Status auth = service_->CheckAuth(call); !auth.ok()) return auth;
-    if (request.job_id().empty()) return absl::InvalidArgumentError("job_id is empty");
+    TEMPOKEY_RETURN_IF_ERROR(CheckId("job_id", request.job_id()));
     if (request.slice_bytes() < 0) {
       return absl::InvalidArgumentError(
           absl::StrCat("slice_bytes must be >= 0 (0: 1 MiB), got ", request.slice_bytes()));

@@ -49,6 +49,7 @@ class WatchReactor final : public grpc::ServerWriteReactor<v1::Job> {
                const v1::WatchJobRequest* request)
       : service_(service), job_id_(request->job_id()), link_(std::make_shared<WatchLink>(this)) {
     absl::Status admitted = service_->CheckAuth(*call);
+    if (admitted.ok()) admitted = CheckId("job_id", job_id_);
     if (admitted.ok()) admitted = service_->AdmitStream();
     if (!admitted.ok()) {
       link_->FinishNow(admitted);

@@ -303,15 +303,31 @@ TEST_F(CliEndToEndTest, StoppedServerIsReportedByHealth) {
 }
 
 TEST_F(CliEndToEndTest, ServerRefusalIsOneLineWithTheCodeAndLeavesTheOldOutput) {
-  const std::string output = Path("keep.bvh");
+  const std::string output = Path("keep.json");
   ASSERT_TRUE(core::WriteFileAtomically(output, "old contents").ok());
 
-  ProcessResult run = Tempokey({"retime", CmuClip(), "-o", output, "--speed", "0s:1,1s:1000"});
+  // Only the fit itself can tell that 100 keys cannot cover 132 channels.
+  ProcessResult run = Tempokey({"reduce", BandaiClip(), "-o", output, "--key-budget", "100"});
 
   EXPECT_EQ(run.exit_code, 1);
   EXPECT_EQ(run.out, "");
   EXPECT_THAT(run.err, IsOneErrorLine());
-  EXPECT_THAT(run.err, StartsWith("error: server: INVALID_ARGUMENT: operation 1 (retime): "));
+  EXPECT_THAT(run.err, StartsWith("error: server: INVALID_ARGUMENT: operation 1 (reduce): "));
+  EXPECT_EQ(*core::ReadFile(output), "old contents");
+}
+
+TEST_F(CliEndToEndTest, InvalidStepsAreRefusedBeforeAnythingIsSentAndLeaveTheOldOutput) {
+  const std::string output = Path("keep.bvh");
+  ASSERT_TRUE(core::WriteFileAtomically(output, "old contents").ok());
+
+  ProcessResult run =
+      Tempokey({"retime", CmuClip(), "-o", output, "--speed", "0s:1,1s:1000", "--job"});
+
+  EXPECT_EQ(run.exit_code, 1);
+  EXPECT_EQ(run.out, "");  // no "clip id:" line: nothing was uploaded
+  EXPECT_EQ(run.err,
+            "error: operation 1 (retime): speed knot 2 (1s:1000): speed 1000 is outside the "
+            "allowed range [0.01, 100]\n");
   EXPECT_EQ(*core::ReadFile(output), "old contents");
 }
 
@@ -505,14 +521,12 @@ TEST_F(CliEndToEndTest, ReduceRefusesAKeyBudgetBelowTwoKeysPerChannel) {
   EXPECT_FALSE(FileExists(Path("x.json")));
 }
 
-TEST_F(CliEndToEndTest, ReduceRefusesInvalidPaperParametersOnTheServer) {
+TEST_F(CliEndToEndTest, ReduceRefusesInvalidPaperParametersBeforeSending) {
   ProcessResult run = Tempokey({"reduce", BandaiClip(), "-o", Path("x.bvh"), "--method", "paper",
                                 "--step-y", "-1"});
 
   EXPECT_EQ(run.exit_code, 1);
-  EXPECT_THAT(run.err, IsOneErrorLine());
-  EXPECT_THAT(run.err, StartsWith("error: server: INVALID_ARGUMENT: "));
-  EXPECT_THAT(run.err, HasSubstr("step_y"));
+  EXPECT_EQ(run.err, "error: operation 1 (reduce): paper.step_y must be > 0, got -1\n");
   EXPECT_FALSE(FileExists(Path("x.bvh")));
 }
 

@@ -18,6 +18,7 @@
 #include "gtest/gtest.h"
 #include "server/server.h"
 #include "tempokey/core/bvh.h"
+#include "tests/testing/start_gate.h"
 #include "tests/testing/test_paths.h"
 
 namespace tempokey::client {
@@ -43,32 +44,6 @@ core::Clip BandaiWalk() {
   return clip.ok() ? *std::move(clip) : core::Clip();
 }
 
-// Holds jobs at the start of their pipeline until released (a real worker, really blocked).
-class Gate {
- public:
-  void Enter() {
-    std::unique_lock lock(mutex_);
-    ++entered_;
-    changed_.notify_all();
-    changed_.wait_for(lock, kWaitLimit, [&] { return open_; });
-  }
-  bool WaitEntered(int count) {
-    std::unique_lock lock(mutex_);
-    return changed_.wait_for(lock, kWaitLimit, [&] { return entered_ >= count; });
-  }
-  void Open() {
-    std::lock_guard lock(mutex_);
-    open_ = true;
-    changed_.notify_all();
-  }
-
- private:
-  std::mutex mutex_;
-  std::condition_variable changed_;
-  int entered_ = 0;
-  bool open_ = false;
-};
-
 class ClientTest : public ::testing::Test {
  protected:
   // Starts a server (with `tokens` accepted, if any) and a client to it.
@@ -78,7 +53,7 @@ class ClientTest : public ::testing::Test {
     options.workers = 2;
     options.drain_grace = std::chrono::seconds(5);
     options.auth_tokens = std::move(tokens);
-    if (gated) options.test_hooks.on_job_start = [this](std::string_view) { gate_.Enter(); };
+    if (gated) options.test_hooks.on_job_start = [this](std::string_view) { gate_.Arrive(); };
     absl::StatusOr<std::unique_ptr<server::Server>> server = server::Server::Start(options);
     ASSERT_TRUE(server.ok()) << server.status();
     server_ = *std::move(server);
@@ -96,7 +71,7 @@ class ClientTest : public ::testing::Test {
     if (server_) server_->Drain();
   }
 
-  Gate gate_;
+  ::tempokey::testing::StartGate gate_;
   std::unique_ptr<server::Server> server_;
 };
 
@@ -241,7 +216,7 @@ TEST_F(ClientTest, CancelStopsARunningJobAndItsResultIsRefused) {
   const core::PipelineStep steps[] = {core::ConvertStep{}};
   absl::StatusOr<v1::Job> job = client->SubmitInlineJob(BandaiWalk(), steps);
   ASSERT_TRUE(job.ok()) << job.status();
-  ASSERT_TRUE(gate_.WaitEntered(1));
+  ASSERT_TRUE(gate_.WaitArrivals(1));
 
   absl::StatusOr<v1::Job> cancelled = client->CancelJob(job->job_id());
   gate_.Open();
@@ -296,6 +271,29 @@ TEST_F(ClientTest, HealthIsServingForTheServerAndTheService) {
   EXPECT_EQ(unknown.status().code(), absl::StatusCode::kNotFound);
 }
 
+TEST_F(ClientTest, ProcessRefusedByAFullQueueCarriesTheServersRetryHint) {
+  server::ServerOptions options;
+  options.address = "127.0.0.1:0";
+  options.workers = 1;
+  options.queue_capacity = 1;
+  options.test_hooks.on_job_start = [this](std::string_view) { gate_.Arrive(); };
+  absl::StatusOr<std::unique_ptr<server::Server>> started = server::Server::Start(options);
+  ASSERT_TRUE(started.ok()) << started.status();
+  server_ = *std::move(started);
+  std::unique_ptr<Client> client = Connect();
+  const core::Clip clip = BandaiWalk();
+  const std::vector<core::PipelineStep> steps = {core::ConvertStep{}};
+  ASSERT_TRUE(client->SubmitInlineJob(clip, steps).ok());  // runs, held by the gate
+  ASSERT_TRUE(gate_.WaitArrivals(1));
+  ASSERT_TRUE(client->SubmitInlineJob(clip, steps).ok());  // fills the queue
+
+  const absl::StatusOr<core::PipelineResult> refused = client->Process(clip, steps);
+
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kResourceExhausted);
+  ASSERT_TRUE(wire::GetRetryAfter(refused.status()).has_value()) << refused.status();
+  EXPECT_GT(wire::GetRetryAfter(refused.status())->count(), 0);
+}
+
 TEST_F(ClientTest, DrainingServerIsNotReadyAndRefusesJobsWithUnavailable) {
   StartServer({}, /*gated=*/true);
   ClientOptions options;
@@ -304,7 +302,7 @@ TEST_F(ClientTest, DrainingServerIsNotReadyAndRefusesJobsWithUnavailable) {
   const core::PipelineStep steps[] = {core::ConvertStep{}};
   const core::Clip clip = BandaiWalk();
   ASSERT_TRUE(client->SubmitInlineJob(clip, steps).ok());
-  ASSERT_TRUE(gate_.WaitEntered(1));
+  ASSERT_TRUE(gate_.WaitArrivals(1));
 
   std::thread drain([&] { server_->Drain(); });
   absl::StatusOr<HealthState> readiness = HealthState::kServing;

@@ -233,6 +233,42 @@ TEST(JobsGatedTest, CancelledRunningJobEndsCancelled) {
   EXPECT_EQ(done.error_code(), static_cast<int>(grpc::StatusCode::CANCELLED));
 }
 
+TEST(JobsGatedTest, ProcessStartedDuringADrainIsRefusedWithUnavailable) {
+  GatedServer gated;
+  ASSERT_NE(gated.server, nullptr);
+  const std::string clip_id = UploadClip(*gated.stub, MakeClip(1, 50)).response.clip_id();
+  const JobOutcome running = Submit(*gated.stub, SubmitRequest(clip_id));
+  ASSERT_TRUE(gated.gate->WaitArrivals(1));  // a job holds the drain open
+  grpc::ClientContext context;
+  SetDeadline(context);
+  auto stream = gated.stub->Process(&context);
+  for (const v1::ProcessRequest& request : ProcessClipRequests(MakeClip(1, 40))) {
+    ASSERT_TRUE(stream->Write(request));
+  }
+  std::thread drain([&] { gated.server->Drain(); });
+  auto channel = Connect(gated.server->target());
+  const auto deadline = std::chrono::steady_clock::now() + kCallDeadline;
+  while (CheckHealth(channel, server::kMotionServiceName).value_or(0) != 2 &&
+         std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+
+  v1::ProcessRequest start;
+  *start.mutable_start()->mutable_operations() = WrapOperations();
+  stream->Write(start);
+  stream->WritesDone();
+  v1::ProcessResponse response;
+  int responses = 0;
+  while (stream->Read(&response)) ++responses;
+  const grpc::Status status = stream->Finish();
+  gated.gate->Open();
+  drain.join();
+
+  EXPECT_THAT(status, GrpcStatusIs(grpc::StatusCode::UNAVAILABLE, HasSubstr("shutting down")));
+  EXPECT_EQ(responses, 0);
+  TEMPOKEY_ASSERT_GRPC_OK(running.status);
+}
+
 TEST(JobsGatedTest, DuplicateRequestIdRunsOnce) {
   GatedServer gated;
   ASSERT_NE(gated.server, nullptr);
@@ -373,6 +409,20 @@ TEST_F(JobsTest, LookupsOfUnknownJobsAreNotFound) {
               GrpcStatusIs(grpc::StatusCode::NOT_FOUND, HasSubstr("not found")));
   EXPECT_THAT(GetJob(*stub_, "").status,
               GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, "job_id is empty"));
+}
+
+TEST_F(JobsTest, EveryCallTakingAJobIdRefusesAMalformedOne) {
+  const std::string too_long(300, 'j');
+
+  for (const std::string& id : {std::string(), too_long}) {
+    const std::string message =
+        id.empty() ? "job_id is empty" : "job_id is 300 bytes, over the limit of 256";
+    EXPECT_THAT(GetJob(*stub_, id).status, GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, message));
+    EXPECT_THAT(WatchJob(*stub_, id).status,
+                GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, message));
+    EXPECT_THAT(GetResult(*stub_, id).status,
+                GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, message));
+  }
 }
 
 TEST(JobsGatedTest, ResultBeforeSuccessIsAPreconditionError) {

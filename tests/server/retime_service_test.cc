@@ -82,16 +82,9 @@ TEST_P(RetimeServiceTest, ProcessIsRefusedWithTheCoreMessage) {
   grpc::ClientContext context;
   SetDeadline(context);
   auto stream = stub_->Process(&context);
-  v1::ProcessRequest header;
-  *header.mutable_header() = wire::ClipHeaderToProto(clip);
-  ASSERT_TRUE(stream->Write(header));
-  const absl::Status sliced =
-      wire::ForEachSamplesSlice(clip, wire::kDefaultSliceBytes, [&](v1::ChannelSamples&& samples) {
-        v1::ProcessRequest request;
-        *request.mutable_samples() = std::move(samples);
-        return stream->Write(request) ? absl::OkStatus() : absl::UnavailableError("closed");
-      });
-  ASSERT_TRUE(sliced.ok()) << sliced;
+  for (const v1::ProcessRequest& request : ProcessClipRequests(clip)) {
+    ASSERT_TRUE(stream->Write(request));
+  }
   v1::ProcessRequest start;
   *start.mutable_start()->add_operations() = RetimeOperation(bad);
   stream->Write(start);

@@ -206,6 +206,19 @@ inline UploadOutcome UploadClip(v1::MotionService::Stub& stub, const core::Clip&
   return UploadMessages(stub, UploadRequests(clip, slice_bytes));
 }
 
+// A Process call's input before its start message: the clip header, then its sample slices.
+inline std::vector<v1::ProcessRequest> ProcessClipRequests(const core::Clip& clip) {
+  std::vector<v1::ProcessRequest> requests(1);
+  *requests[0].mutable_header() = wire::ClipHeaderToProto(clip);
+  const absl::Status sliced = wire::ForEachSamplesSlice(
+      clip, wire::kDefaultSliceBytes, [&](v1::ChannelSamples&& samples) {
+        *requests.emplace_back().mutable_samples() = std::move(samples);
+        return absl::OkStatus();
+      });
+  EXPECT_TRUE(sliced.ok()) << sliced;
+  return requests;
+}
+
 struct JobOutcome {
   grpc::Status status;
   v1::Job job;

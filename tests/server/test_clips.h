@@ -5,8 +5,6 @@
 
 #include <chrono>
 #include <cmath>
-#include <condition_variable>
-#include <mutex>
 #include <string_view>
 #include <cstdint>
 #include <cstdio>
@@ -15,6 +13,7 @@
 #include <vector>
 
 #include "tempokey/core/clip.h"
+#include "tests/testing/start_gate.h"
 
 namespace tempokey::testing {
 
@@ -87,36 +86,6 @@ inline std::int64_t PeakRssKiB(const std::string& status_path = "/proc/self/stat
   std::fclose(file);
   return kib;
 }
-
-// Holds workers in the on_job_start hook until released; counts arrivals.
-class StartGate {
- public:
-  void Arrive(std::string_view) {
-    std::unique_lock lock(mu_);
-    ++arrived_;
-    cv_.notify_all();
-    cv_.wait(lock, [&] { return open_; });
-  }
-  bool WaitArrivals(int n) {
-    std::unique_lock lock(mu_);
-    return cv_.wait_for(lock, std::chrono::seconds(60), [&] { return arrived_ >= n; });
-  }
-  void Open() {
-    std::lock_guard lock(mu_);
-    open_ = true;
-    cv_.notify_all();
-  }
-  int arrived() {
-    std::lock_guard lock(mu_);
-    return arrived_;
-  }
-
- private:
-  std::mutex mu_;
-  std::condition_variable cv_;
-  int arrived_ = 0;
-  bool open_ = false;
-};
 
 }  // namespace tempokey::testing
 
