@@ -29,13 +29,6 @@ constexpr FormatName kFormatNames[] = {
     {FileFormat::kMayaAnim, ".anim"},
 };
 
-std::string_view ExtensionOf(FileFormat format) {
-  for (const FormatName& name : kFormatNames) {
-    if (name.format == format) return name.extension;
-  }
-  return "";
-}
-
 std::string LowerExtension(const std::string& path) {
   std::string extension = std::filesystem::path(path).extension().string();
   std::transform(extension.begin(), extension.end(), extension.begin(),
@@ -44,6 +37,13 @@ std::string LowerExtension(const std::string& path) {
 }
 
 }  // namespace
+
+std::string_view ExtensionOf(FileFormat format) {
+  for (const FormatName& name : kFormatNames) {
+    if (name.format == format) return name.extension;
+  }
+  return "";
+}
 
 bool IsKeyedFormat(FileFormat format) {
   return format == FileFormat::kKeyedJson || format == FileFormat::kMayaAnim;

@@ -34,6 +34,9 @@ inline constexpr FileFormat kSampledFormats[] = {FileFormat::kBvh, FileFormat::k
 inline constexpr FileFormat kAllFormats[] = {FileFormat::kBvh, FileFormat::kCsv,
                                              FileFormat::kKeyedJson, FileFormat::kMayaAnim};
 
+// ".bvh", ".csv", ".json" or ".anim".
+std::string_view ExtensionOf(FileFormat format);
+
 // Whether `format` holds keyed curves (.json, .anim) rather than samples.
 bool IsKeyedFormat(FileFormat format);
 

@@ -46,10 +46,10 @@ constexpr std::int64_t kMaxPemBytes = 1 << 20;
 
 std::span<const Command* const> AllCommands() {
   static const Command* const kCommands[] = {
-      &InfoCommand(),       &UploadCommand(),     &RunCommand(),        &RetimeCommand(),
-      &ReduceCommand(),     &HealthCommand(),     &ServerInfoCommand(), &JobsListCommand(),
-      &JobsGetCommand(),    &JobsWatchCommand(),  &JobsResultCommand(), &JobsCancelCommand(),
-      &JobsDeleteCommand(),
+      &InfoCommand(),        &UploadCommand(),     &RunCommand(),       &RetimeCommand(),
+      &ReduceCommand(),      &BatchCommand(),      &HealthCommand(),    &ServerInfoCommand(),
+      &JobsListCommand(),    &JobsGetCommand(),    &JobsWatchCommand(), &JobsResultCommand(),
+      &JobsCancelCommand(),  &JobsDeleteCommand(),
   };
   return kCommands;
 }
@@ -159,12 +159,16 @@ void ProgressLine::Clear() {
   last_percent_ = -1;
 }
 
+absl::StatusOr<std::optional<double>> InputFrameTimeFromFlags(const ParsedArgs& args) {
+  std::optional<std::string> fps = args.Value("--input-fps");
+  if (!fps) return std::optional<double>();
+  TEMPOKEY_ASSIGN_OR_RETURN(core::FrameRate rate, ParseFrameRate("--input-fps", *fps));
+  return static_cast<double>(rate.denominator) / static_cast<double>(rate.numerator);
+}
+
 absl::StatusOr<core::Clip> ReadInputClip(const CommandContext& context, const std::string& path) {
-  std::optional<double> csv_frame_time;
-  if (std::optional<std::string> fps = context.args().Value("--input-fps")) {
-    TEMPOKEY_ASSIGN_OR_RETURN(core::FrameRate rate, ParseFrameRate("--input-fps", *fps));
-    csv_frame_time = static_cast<double>(rate.denominator) / static_cast<double>(rate.numerator);
-  }
+  TEMPOKEY_ASSIGN_OR_RETURN(std::optional<double> csv_frame_time,
+                            InputFrameTimeFromFlags(context.args()));
   return ReadClipFile(path, csv_frame_time);
 }
 

@@ -95,6 +95,9 @@ class ProgressLine {
   std::string last_stage_;
 };
 
+// The frame time (seconds) of .csv inputs from --input-fps; nullopt when not given.
+absl::StatusOr<std::optional<double>> InputFrameTimeFromFlags(const ParsedArgs& args);
+
 // Reads the input clip of a command: `path` (.bvh, or .csv with --input-fps).
 absl::StatusOr<core::Clip> ReadInputClip(const CommandContext& context, const std::string& path);
 
@@ -154,6 +157,7 @@ const Command& JobsCancelCommand();
 const Command& JobsDeleteCommand();
 const Command& JobsWatchCommand();
 const Command& JobsResultCommand();
+const Command& BatchCommand();
 
 }  // namespace tempokey::client
 

@@ -6,6 +6,7 @@
 #include "client/clip_files.h"
 #include "client/clip_summary.h"
 #include "client/command.h"
+#include "client/step_flags.h"
 #include "tempokey/core/status.h"
 
 namespace tempokey::client {
@@ -13,14 +14,16 @@ namespace {
 
 constexpr std::string_view kInArgument[] = {"IN"};
 
-constexpr FlagSpec kRunFlags[] = {
+constexpr FlagSpec kRunCommandFlags[] = {
     kOutputFlag,
-    {"--wrap-rotations", "", "", "wrap rotation angles into (-180, 180] on the way"},
+};
+constexpr FlagSpec kRunModeFlags[] = {
     {"--process", "", "", "use one stateless Process call instead of a stored job"},
     kDetachFlag,
     kLabelFlag,
     kInputFpsFlag,
 };
+constexpr auto kRunFlags = JoinFlags(kRunCommandFlags, kConvertStepFlags, kRunModeFlags);
 
 absl::Status Run(CommandContext& context) {
   TEMPOKEY_ASSIGN_OR_RETURN(std::vector<std::string> inputs, context.Positionals(kInArgument));
@@ -34,8 +37,8 @@ absl::Status Run(CommandContext& context) {
   if (!mode.labels.empty() && !mode.as_job) return UsageError("--label applies to jobs, not --process");
   TEMPOKEY_ASSIGN_OR_RETURN(core::Clip clip, ReadInputClip(context, inputs[0]));
 
-  const core::PipelineStep steps[] = {
-      core::ConvertStep{.wrap_rotations = context.args().Has("--wrap-rotations")}};
+  TEMPOKEY_ASSIGN_OR_RETURN(core::ConvertStep convert, ConvertStepFromArgs(context.args()));
+  const core::PipelineStep steps[] = {convert};
   TEMPOKEY_ASSIGN_OR_RETURN(std::optional<core::PipelineResult> result,
                             ExecutePipeline(context, clip, steps, mode));
   if (!result) return absl::OkStatus();  // detached

@@ -15,7 +15,7 @@ build_packages=(
   prometheus-cpp-dev
   libgtest-dev libgmock-dev googletest libbenchmark-dev
   libssl-dev openssl procps curl ccache
-  python3 python3-grpcio python3-protobuf python3-grpc-tools
+  python3 python3-grpcio python3-protobuf
 )
 runtime_packages=(
   libgrpc++1.51 libgrpc29 libprotobuf32 libspdlog1.10 libfmt9

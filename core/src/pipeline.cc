@@ -65,12 +65,12 @@ std::string_view StepName(const PipelineStep& step) {
                     step);
 }
 
-absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> steps,
-                              const ClipLimits& limits) {
+absl::Status ValidateStepChain(std::span<const PipelineStep> steps) {
   if (steps.empty()) return absl::InvalidArgumentError("the pipeline has no operations");
-  if (steps.size() > 64) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("the pipeline has ", steps.size(), " operations, over the limit of 64"));
+  if (steps.size() > kMaxPipelineSteps) {
+    return absl::InvalidArgumentError(absl::StrCat("the pipeline has ", steps.size(),
+                                                   " operations, over the limit of ",
+                                                   kMaxPipelineSteps));
   }
   bool keyed = false;
   for (std::size_t i = 0; i < steps.size(); ++i) {
@@ -80,6 +80,17 @@ absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> st
           StepContext(i, step), ": needs a ", TakesKeyedClip(step) ? "keyed" : "sampled",
           " clip, got a ", keyed ? "keyed clip (add a bake operation first)" : "sampled clip"));
     }
+    if (ProducesKeyedClip(step)) keyed = true;
+    if (TakesKeyedClip(step)) keyed = false;
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> steps,
+                              const ClipLimits& limits) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateStepChain(steps));
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    const PipelineStep& step = steps[i];
     absl::Status status = std::visit(
         Overloaded{
             [&](const RetimeStep& s) {
@@ -97,10 +108,17 @@ absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> st
         },
         step);
     if (!status.ok()) return Annotate(status, StepContext(i, step));
+  }
+  return absl::OkStatus();
+}
+
+bool ProducesKeyedOutput(std::span<const PipelineStep> steps) {
+  bool keyed = false;
+  for (const PipelineStep& step : steps) {
     if (ProducesKeyedClip(step)) keyed = true;
     if (TakesKeyedClip(step)) keyed = false;
   }
-  return absl::OkStatus();
+  return keyed;
 }
 
 absl::StatusOr<PipelineResult> RunPipeline(const Clip& clip, std::span<const PipelineStep> steps,

@@ -2,6 +2,7 @@
 #ifndef TEMPOKEY_CORE_PIPELINE_H_
 #define TEMPOKEY_CORE_PIPELINE_H_
 
+#include <cstddef>
 #include <optional>
 #include <span>
 #include <stop_token>
@@ -47,6 +48,17 @@ struct PipelineResult {
 
 // "retime", "reduce", "bake" or "convert".
 std::string_view StepName(const PipelineStep& step);
+
+// At most this many operations in one pipeline.
+inline constexpr std::size_t kMaxPipelineSteps = 64;
+
+// Checks the shape of a pipeline without a clip: 1..kMaxPipelineSteps operations, each taking
+// what the one before produces (retime, reduce and convert a sampled clip, bake a keyed one).
+// Errors: kInvalidArgument "operation 2 (bake): needs a keyed clip, got a sampled clip".
+absl::Status ValidateStepChain(std::span<const PipelineStep> steps);
+
+// Whether `steps` (a valid chain) end with a keyed clip (a reduce not baked afterwards).
+bool ProducesKeyedOutput(std::span<const PipelineStep> steps);
 
 // Checks, before anything is queued, that the steps fit together (retime, reduce and convert
 // take a sampled clip; bake takes a keyed clip), that each step's options are valid, and the

@@ -1,0 +1,252 @@
+#include "client/batch.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <mutex>
+#include <random>
+#include <system_error>
+#include <thread>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "client/cli_errors.h"
+#include "proto/retry_hint.h"
+#include "tempokey/core/json.h"
+#include "tempokey/core/numbers.h"
+#include "tempokey/core/status.h"
+
+namespace tempokey::client {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+
+std::optional<FileFormat> InputFormat(const fs::path& path, bool include_csv) {
+  constexpr FileFormat kBvhOnly[] = {FileFormat::kBvh};
+  absl::StatusOr<FileFormat> format =
+      FormatForPath("", path.string(), include_csv ? std::span<const FileFormat>(kSampledFormats)
+                                                   : std::span<const FileFormat>(kBvhOnly));
+  if (!format.ok()) return std::nullopt;
+  return *format;
+}
+
+bool IsHidden(const fs::path& relative) {
+  for (const fs::path& part : relative) {
+    if (part.string().rfind('.', 0) == 0) return true;
+  }
+  return false;
+}
+
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// Whether another attempt at the same file may succeed, and after how long.
+std::optional<std::chrono::milliseconds> RetryDelay(const absl::Status& status, int attempt,
+                                                    const BatchOptions& options,
+                                                    std::mt19937& random) {
+  const std::optional<std::chrono::milliseconds> hint = wire::GetRetryAfter(status);
+  const bool retryable = status.code() == absl::StatusCode::kUnavailable ||
+                         (status.code() == absl::StatusCode::kResourceExhausted && hint);
+  if (!retryable || attempt >= options.max_attempts) return std::nullopt;
+  if (hint) return *hint;
+  // Exponential backoff with jitter, so files that failed together do not retry together.
+  const double ceiling = std::min(options.max_backoff_seconds,
+                                  options.initial_backoff_seconds * std::pow(2.0, attempt - 1));
+  std::uniform_real_distribution<double> jitter(0.5 * ceiling, ceiling);
+  return std::chrono::milliseconds(static_cast<std::int64_t>(1000.0 * jitter(random)));
+}
+
+// Frames, keys and the last reduction's max error of a finished pipeline.
+void Describe(const core::PipelineResult& result, BatchFileResult& file) {
+  if (const auto* clip = std::get_if<core::Clip>(&result.output)) {
+    file.frames = clip->frame_count;
+  } else {
+    const auto& keyed = std::get<core::KeyedClip>(result.output);
+    for (const core::Curve& curve : keyed.curves) {
+      file.keys += static_cast<std::int64_t>(curve.keys.size());
+    }
+  }
+  for (const core::StepReport& report : result.reports) {
+    if (const auto* reduction = std::get_if<core::ReductionReport>(&report)) {
+      file.keys = reduction->key_count;
+      file.max_error = reduction->max_error;
+    }
+  }
+}
+
+// Reads, processes (with retries) and writes one file. Failures come back with the file's name
+// in front unless the message already starts with its path (reader errors do).
+BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
+                            std::span<const core::PipelineStep> steps, const BatchOptions& options,
+                            std::mt19937& random) {
+  const Clock::time_point start = Clock::now();
+  BatchFileResult file;
+  file.name = item.name;
+  file.output_path = item.output_path;
+  auto finish = [&](absl::Status status) {
+    if (!status.ok() && core::AsStd(status.message()).rfind(item.input_path, 0) != 0) {
+      status = core::Annotate(status, item.name);
+    }
+    file.status = std::move(status);
+    file.seconds = SecondsSince(start);
+    return file;
+  };
+
+  absl::StatusOr<core::Clip> clip = ReadClipFile(item.input_path, options.csv_frame_time_seconds);
+  if (!clip.ok()) return finish(clip.status());
+  const std::vector<core::PipelineStep> file_steps = StepsForFormat(steps, item.output_format);
+  if (absl::Status valid = core::ValidatePipeline(*clip, file_steps); !valid.ok()) {
+    return finish(valid);
+  }
+  absl::StatusOr<core::PipelineResult> result;
+  while (true) {
+    ++file.attempts;
+    result = client.Process(*clip, file_steps);
+    if (result.ok()) break;
+    const std::optional<std::chrono::milliseconds> delay =
+        RetryDelay(result.status(), file.attempts, options, random);
+    if (!delay) return finish(ServerError(result.status()));
+    std::this_thread::sleep_for(*delay);
+  }
+  std::error_code ignored;
+  fs::create_directories(fs::path(item.output_path).parent_path(), ignored);
+  if (absl::Status written = WriteOutput(item.output_path, item.output_format, result->output);
+      !written.ok()) {
+    return finish(written);
+  }
+  Describe(*result, file);
+  return finish(absl::OkStatus());
+}
+
+}  // namespace
+
+absl::StatusOr<std::vector<BatchItem>> PlanBatch(const BatchPlanOptions& options) {
+  if (options.output_format && IsKeyedFormat(*options.output_format) && !options.keyed_output) {
+    return UsageError(absl::StrCat("--format ", core::AsAbsl(ExtensionOf(*options.output_format).substr(1)),
+                                   " needs a pipeline that ends with reduce (it ends with samples)"));
+  }
+  std::error_code error;
+  const fs::path root(options.input_dir);
+  if (!fs::exists(root, error)) {
+    return absl::NotFoundError(absl::StrCat(options.input_dir, ": no such folder"));
+  }
+  if (!fs::is_directory(root, error)) {
+    return absl::InvalidArgumentError(absl::StrCat(options.input_dir, ": is a file, not a folder"));
+  }
+  std::vector<fs::path> found;
+  auto consider = [&](const fs::directory_entry& entry) {
+    const fs::path relative = entry.path().lexically_relative(root);
+    if (entry.is_regular_file(error) && !IsHidden(relative) &&
+        InputFormat(relative, options.include_csv)) {
+      found.push_back(relative);
+    }
+  };
+  if (options.recursive) {
+    for (const auto& entry : fs::recursive_directory_iterator(root, error)) consider(entry);
+  } else {
+    for (const auto& entry : fs::directory_iterator(root, error)) consider(entry);
+  }
+  if (error) {
+    return absl::UnavailableError(absl::StrCat(options.input_dir, ": ", error.message()));
+  }
+  if (found.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        options.input_dir, ": no .bvh", options.include_csv ? " or .csv" : "", " files"));
+  }
+  std::sort(found.begin(), found.end());
+  std::vector<BatchItem> items;
+  for (const fs::path& relative : found) {
+    BatchItem item;
+    item.name = relative.generic_string();
+    item.input_path = (root / relative).string();
+    const FileFormat input_format = *InputFormat(relative, options.include_csv);
+    item.output_format = options.output_format.value_or(
+        options.keyed_output ? FileFormat::kKeyedJson : input_format);
+    fs::path output = fs::path(options.output_dir) / relative;
+    output.replace_extension(std::string(ExtensionOf(item.output_format)));
+    item.output_path = output.string();
+    items.push_back(std::move(item));
+  }
+  return items;
+}
+
+std::vector<core::PipelineStep> StepsForFormat(std::span<const core::PipelineStep> steps,
+                                               FileFormat format) {
+  std::vector<core::PipelineStep> result(steps.begin(), steps.end());
+  if (core::ProducesKeyedOutput(steps) && !IsKeyedFormat(format)) {
+    result.push_back(core::BakeStep{});
+  }
+  return result;
+}
+
+int BatchSummary::failed_count() const {
+  return static_cast<int>(std::count_if(files.begin(), files.end(),
+                                        [](const BatchFileResult& f) { return !f.status.ok(); }));
+}
+
+BatchSummary RunBatch(const Client& client, std::span<const BatchItem> items,
+                      std::span<const core::PipelineStep> steps, const BatchOptions& options,
+                      const BatchFileDoneFn& on_done) {
+  const Clock::time_point start = Clock::now();
+  BatchSummary summary;
+  summary.files.resize(items.size());
+  std::atomic<std::size_t> next{0};
+  std::mutex done_mutex;
+  int done = 0;
+  auto worker = [&](unsigned seed) {
+    std::mt19937 random(seed);
+    for (std::size_t i = next++; i < items.size(); i = next++) {
+      summary.files[i] = ProcessFile(client, items[i], steps, options, random);
+      std::lock_guard<std::mutex> lock(done_mutex);
+      ++done;
+      if (on_done) on_done(summary.files[i], done, static_cast<int>(items.size()));
+    }
+  };
+  const int threads = std::clamp<int>(options.jobs, 1, static_cast<int>(items.size()));
+  std::vector<std::jthread> pool;
+  std::random_device seeds;
+  for (int t = 1; t < threads; ++t) pool.emplace_back(worker, seeds());
+  worker(seeds());
+  pool.clear();  // joins
+  summary.seconds = SecondsSince(start);
+  return summary;
+}
+
+std::string FormatBatchSummaryJson(const BatchSummary& summary) {
+  const int failed = summary.failed_count();
+  const int total = static_cast<int>(summary.files.size());
+  std::string out = absl::StrFormat(
+      "{\"files\": %d, \"succeeded\": %d, \"failed\": %d, \"seconds\": %.3f, \"results\": [",
+      total, total - failed, failed, summary.seconds);
+  for (std::size_t i = 0; i < summary.files.size(); ++i) {
+    const BatchFileResult& file = summary.files[i];
+    out += i == 0 ? "\n  {\"input\": " : ",\n  {\"input\": ";
+    core::AppendJsonString(out, file.name);
+    if (file.status.ok()) {
+      out += ", \"output\": ";
+      core::AppendJsonString(out, file.output_path);
+      out += ", \"status\": \"ok\"";
+    } else {
+      out += ", \"status\": \"failed\", \"code\": ";
+      core::AppendJsonString(out, absl::StatusCodeToString(file.status.code()));
+      out += ", \"error\": ";
+      core::AppendJsonString(out, core::AsStd(file.status.message()));
+    }
+    absl::StrAppendFormat(&out, ", \"attempts\": %d, \"seconds\": %.3f", file.attempts,
+                          file.seconds);
+    if (file.status.ok()) {
+      if (file.frames > 0) absl::StrAppend(&out, ", \"frames\": ", file.frames);
+      if (file.keys > 0) absl::StrAppend(&out, ", \"keys\": ", file.keys);
+      if (file.max_error) absl::StrAppend(&out, ", \"max_error\": ", core::FormatDouble(*file.max_error));
+    }
+    out += '}';
+  }
+  out += summary.files.empty() ? "]}\n" : "\n]}\n";
+  return out;
+}
+
+}  // namespace tempokey::client

@@ -1,0 +1,151 @@
+// `tempokey batch DIR -o OUTDIR --ops PIPELINE.json`: one pipeline over a folder of clips, for CI
+// stages and bulk conversions. Prints a JSON summary on stdout (and to --summary FILE), a live
+// count on a terminal, and fails (exit 1) if any file failed, after trying every file.
+#include <algorithm>
+#include <mutex>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "client/batch.h"
+#include "client/cli_errors.h"
+#include "client/clip_files.h"
+#include "client/command.h"
+#include "client/pipeline_file.h"
+#include "tempokey/core/file_io.h"
+#include "tempokey/core/status.h"
+
+namespace tempokey::client {
+namespace {
+
+constexpr std::string_view kDirArgument[] = {"DIR"};
+constexpr std::string_view kFormats[] = {"bvh", "csv", "json", "anim"};
+constexpr FileFormat kFormatsByName[] = {FileFormat::kBvh, FileFormat::kCsv,
+                                         FileFormat::kKeyedJson, FileFormat::kMayaAnim};
+constexpr int kMaxJobs = 256;
+
+constexpr FlagSpec kBatchFlags[] = {
+    {"--output", "-o", "OUTDIR", "folder for the outputs (created if missing)"},
+    {"--ops", "", "FILE", "the pipeline, as JSON (see tempokey batch --help)"},
+    {"--jobs", "-j", "N", "files processed at once (default 4)"},
+    {"--format", "", "NAME", "output format: bvh, csv, json or anim (default: .json for keyed "
+                             "results, the input's own otherwise)"},
+    {"--summary", "", "FILE", "also write the JSON summary to FILE (atomically)"},
+    {"--attempts", "", "N", "tries per file when a server is unavailable or full (default 5)"},
+    {"--recursive", "-r", "", "also process the sub-folders of DIR, mirrored under OUTDIR"},
+    kInputFpsFlag,
+};
+
+// "batch  12/40  1 failed  walk.bvh" on one self-rewriting line of stderr, on a terminal only.
+class BatchProgress {
+ public:
+  explicit BatchProgress(const CommandContext& context) : line_(context) {}
+
+  void FileDone(const BatchFileResult& file, int done, int total) {
+    if (!file.status.ok()) ++failed_;
+    line_.Update(static_cast<double>(done) / total,
+                 absl::StrFormat("%d/%d files%s  %s", done, total,
+                                 failed_ > 0 ? absl::StrCat("  ", failed_, " failed") : "",
+                                 file.name));
+  }
+
+ private:
+  ProgressLine line_;
+  int failed_ = 0;
+};
+
+absl::StatusOr<BatchOptions> BatchOptionsFromFlags(const ParsedArgs& args) {
+  BatchOptions options;
+  if (std::optional<std::string> jobs = args.Value("--jobs")) {
+    TEMPOKEY_ASSIGN_OR_RETURN(std::int64_t n, ParseInt64("--jobs", *jobs));
+    if (n < 1 || n > kMaxJobs) {
+      return UsageError(absl::StrCat("--jobs: expected 1 to ", kMaxJobs, ", got ", n));
+    }
+    options.jobs = static_cast<int>(n);
+  }
+  if (std::optional<std::string> attempts = args.Value("--attempts")) {
+    TEMPOKEY_ASSIGN_OR_RETURN(std::int64_t n, ParseInt64("--attempts", *attempts));
+    if (n < 1 || n > 100) return UsageError(absl::StrCat("--attempts: expected 1 to 100, got ", n));
+    options.max_attempts = static_cast<int>(n);
+  }
+  TEMPOKEY_ASSIGN_OR_RETURN(options.csv_frame_time_seconds, InputFrameTimeFromFlags(args));
+  return options;
+}
+
+absl::StatusOr<std::optional<FileFormat>> FormatFromFlags(const ParsedArgs& args) {
+  std::optional<std::string> text = args.Value("--format");
+  if (!text) return std::optional<FileFormat>();
+  TEMPOKEY_ASSIGN_OR_RETURN(std::string name, ParseChoice("--format", *text, kFormats));
+  return kFormatsByName[std::find(std::begin(kFormats), std::end(kFormats), name) -
+                        std::begin(kFormats)];
+}
+
+absl::Status Batch(CommandContext& context) {
+  TEMPOKEY_ASSIGN_OR_RETURN(std::vector<std::string> dirs, context.Positionals(kDirArgument));
+  TEMPOKEY_ASSIGN_OR_RETURN(std::string output_dir, context.Required("--output"));
+  TEMPOKEY_ASSIGN_OR_RETURN(std::string ops_path, context.Required("--ops"));
+  TEMPOKEY_ASSIGN_OR_RETURN(BatchOptions options, BatchOptionsFromFlags(context.args()));
+  TEMPOKEY_ASSIGN_OR_RETURN(std::optional<FileFormat> format, FormatFromFlags(context.args()));
+  TEMPOKEY_ASSIGN_OR_RETURN(std::vector<core::PipelineStep> steps, ReadPipelineFile(ops_path));
+
+  BatchPlanOptions plan{
+      .input_dir = dirs[0],
+      .output_dir = output_dir,
+      .output_format = format,
+      .keyed_output = core::ProducesKeyedOutput(steps),
+      .include_csv = options.csv_frame_time_seconds.has_value(),
+      .recursive = context.args().Has("--recursive"),
+  };
+  TEMPOKEY_ASSIGN_OR_RETURN(std::vector<BatchItem> items, PlanBatch(plan));
+  TEMPOKEY_ASSIGN_OR_RETURN(const Client* client, context.Connect());
+
+  BatchSummary summary;
+  {
+    BatchProgress progress(context);
+    summary = RunBatch(*client, items, steps, options,
+                       [&](const BatchFileResult& file, int done, int total) {
+                         progress.FileDone(file, done, total);
+                       });
+  }
+  const std::string json = FormatBatchSummaryJson(summary);
+  context.out() << json;
+  if (std::optional<std::string> summary_path = context.args().Value("--summary")) {
+    TEMPOKEY_RETURN_IF_ERROR(core::WriteFileAtomically(*summary_path, json));
+  }
+  const int failed = summary.failed_count();
+  if (failed == 0) return absl::OkStatus();
+  const auto first = std::find_if(summary.files.begin(), summary.files.end(),
+                                  [](const BatchFileResult& f) { return !f.status.ok(); });
+  return absl::Status(first->status.code(),
+                      absl::StrCat(failed, " of ", summary.files.size(),
+                                   " files failed; first: ", first->status.message()));
+}
+
+}  // namespace
+
+const Command& BatchCommand() {
+  static const Command command{
+      .name = "batch",
+      .synopsis = "DIR -o OUTDIR --ops PIPELINE.json [--jobs N] [options]",
+      .summary = "run a pipeline on every clip of a folder (JSON summary, exit 1 if any failed)",
+      .description =
+          "Runs the operations of PIPELINE.json on every .bvh file of DIR (and .csv with\n"
+          "--input-fps), --jobs files at a time, each in one stateless Process call, so a\n"
+          "round-robin --server list or a load balancer spreads them over servers. A file whose\n"
+          "server goes away or is full is retried whole (--attempts). Outputs go to OUTDIR\n"
+          "under the input's name, written atomically. Prints a JSON summary of every file on\n"
+          "stdout; exits 1 if any file failed, after trying them all.\n"
+          "\n"
+          "PIPELINE.json lists operations whose options are the flags of the retime and\n"
+          "reduce commands without their dashes (bake takes fps, convert wrap-rotations):\n"
+          "  {\"operations\": [\n"
+          "    {\"retime\": {\"speed\": \"0s:1,2s:0.5,4s:1\", \"fps\": 30}},\n"
+          "    {\"reduce\": {\"tolerance\": 0.5}}]}\n"
+          "A pipeline ending with reduce writes .json (keyed curves) unless --format says\n"
+          "otherwise; bvh or csv then bake the curves back to samples.\n",
+      .flags = kBatchFlags,
+      .run = Batch,
+  };
+  return command;
+}
+
+}  // namespace tempokey::client
