@@ -53,10 +53,12 @@ Warp MakeWarp(int index) {
   Warp w;
   switch (index) {
     case 0:
-      w.warp = {.domain = WarpDomain::kSpeedOverSource, .speed = *ParseSpeedKnots("0s:1,2s:1,2s:0.5,4s:0.5,4s:1")};
+      w.warp.domain = WarpDomain::kSpeedOverSource;
+      w.warp.speed = *ParseSpeedKnots("0s:1,2s:1,2s:0.5,4s:0.5,4s:1");
       break;
     case 1:
-      w.warp = {.domain = WarpDomain::kSpeedOverSource, .speed = *ParseSpeedKnots("0s:2.5")};
+      w.warp.domain = WarpDomain::kSpeedOverSource;
+      w.warp.speed = *ParseSpeedKnots("0s:2.5");
       break;
     case 2:
       w.options.output_rate = FrameRate{30, 1};

@@ -76,8 +76,12 @@ void PrintTable() {
   std::printf("%-24s %8s %8s %7s %10s %10s %12s %12s\n", "", "frames", "frames", "frames", "s", "s",
               "ms", "");
   for (const Row& row : rows) {
-    const absl::StatusOr<RetimeResult> exact = Retime(clip, row.warp, {.fit_to_grid = false});
-    const absl::StatusOr<RetimeResult> paper = Retime(clip, row.warp, {.method = RetimeMethod::kPaper});
+    RetimeOptions exact_options;
+    exact_options.fit_to_grid = false;
+    RetimeOptions paper_options;
+    paper_options.method = RetimeMethod::kPaper;
+    const absl::StatusOr<RetimeResult> exact = Retime(clip, row.warp, exact_options);
+    const absl::StatusOr<RetimeResult> paper = Retime(clip, row.warp, paper_options);
     if (!exact.ok() || !paper.ok()) {
       std::printf("%-24s error: %s %s\n", row.name.c_str(), std::string(exact.status().message()).c_str(),
                   std::string(paper.status().message()).c_str());

@@ -5,6 +5,8 @@
 #
 #   deploy/install-deps.sh            build + test dependencies (default)
 #   deploy/install-deps.sh --runtime  only the shared libraries tempokey-server and tempokey need
+#   deploy/install-deps.sh --image    tools that build and smoke-test the container image with no
+#                                     registry (deploy/image-smoke.sh): podman, debootstrap
 set -euo pipefail
 
 build_packages=(
@@ -16,17 +18,29 @@ build_packages=(
   libgtest-dev libgmock-dev googletest libbenchmark-dev
   libssl-dev openssl procps curl ccache
   python3 python3-grpcio python3-protobuf
+  python3-yaml
 )
 runtime_packages=(
   libgrpc++1.51 libgrpc29 libprotobuf32 libspdlog1.10 libfmt9
   libabsl20220623 libprometheus-cpp-core1.0 libprometheus-cpp-pull1.0
   ca-certificates
 )
+# podman builds (through its built-in buildah) and runs the image; runc is its OCI runtime
+# (crun 1.8 refuses these machines' hybrid cgroup mounts; see image-smoke.sh).
+# debootstrap makes the bookworm base image locally, checked against debian-archive-keyring.
+# curl reads the container's metrics port from the host (the runtime image has no HTTP client).
+# No network backend (netavark, slirp4netns) is listed: image-smoke.sh uses the host network
+# for the build and the server's own network namespace for the smoke test.
+image_packages=(
+  podman runc conmon debootstrap debian-archive-keyring curl
+)
 
-packages=("${build_packages[@]}")
-if [[ "${1:-}" == "--runtime" ]]; then
-  packages=("${runtime_packages[@]}")
-fi
+case "${1:-}" in
+  "") packages=("${build_packages[@]}") ;;
+  --runtime) packages=("${runtime_packages[@]}") ;;
+  --image) packages=("${image_packages[@]}") ;;
+  *) echo "usage: deploy/install-deps.sh [--runtime | --image]" >&2; exit 2 ;;
+esac
 
 missing=()
 for p in "${packages[@]}"; do

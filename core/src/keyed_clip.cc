@@ -34,19 +34,22 @@ absl::Status CheckWeight(std::string_view label, std::size_t key, std::string_vi
 }
 
 // Value of the segment from `a` to `b` at `time_seconds`, a.time <= time <= b.time.
-double EvaluateSegment(const Key& a, const Key& b, double time_seconds) {
+// Neither side weighted: time is linear in s, the plain cubic Hermite with tangents scaled by dt.
+double EvaluatePlainSegment(const Key& a, const Key& b, double time_seconds) {
   const double dt = b.time_seconds - a.time_seconds;
-  if (!a.out_weight && !b.in_weight) {
-    // Time is linear in s: the plain cubic Hermite with tangents scaled by dt.
-    const double s = (time_seconds - a.time_seconds) / dt;
-    const double s2 = s * s;
-    const double s3 = s2 * s;
-    const double h00 = 2 * s3 - 3 * s2 + 1;
-    const double h10 = s3 - 2 * s2 + s;
-    const double h01 = -2 * s3 + 3 * s2;
-    const double h11 = s3 - s2;
-    return h00 * a.value + h10 * a.out_tangent * dt + h01 * b.value + h11 * b.in_tangent * dt;
-  }
+  const double s = (time_seconds - a.time_seconds) / dt;
+  const double s2 = s * s;
+  const double s3 = s2 * s;
+  const double h00 = 2 * s3 - 3 * s2 + 1;
+  const double h10 = s3 - 2 * s2 + s;
+  const double h01 = -2 * s3 + 3 * s2;
+  const double h11 = s3 - s2;
+  return h00 * a.value + h10 * a.out_tangent * dt + h01 * b.value + h11 * b.in_tangent * dt;
+}
+
+// A weighted side: the 2D Bezier, its parameter solved from time.
+double EvaluateWeightedSegment(const Key& a, const Key& b, double time_seconds) {
+  const double dt = b.time_seconds - a.time_seconds;
   const double wa = a.out_weight.value_or(kDefaultWeight) * dt;
   const double wb = b.in_weight.value_or(kDefaultWeight) * dt;
   // Controls relative to a.time keep the solve well conditioned far from time 0.
@@ -61,6 +64,13 @@ double EvaluateSegment(const Key& a, const Key& b, double time_seconds) {
   const double y12 = lerp(y1, y2);
   const double y23 = lerp(y2, y3);
   return lerp(lerp(y01, y12), lerp(y12, y23));
+}
+
+bool IsPlainSegment(const Key& a, const Key& b) { return !a.out_weight && !b.in_weight; }
+
+double EvaluateSegment(const Key& a, const Key& b, double time_seconds) {
+  return IsPlainSegment(a, b) ? EvaluatePlainSegment(a, b, time_seconds)
+                              : EvaluateWeightedSegment(a, b, time_seconds);
 }
 
 }  // namespace
@@ -136,6 +146,33 @@ double EvaluateCurve(const Curve& curve, double time_seconds) {
   return EvaluateSegment(a, b, time_seconds);
 }
 
+void SampleCurve(const Curve& curve, double frame_time_seconds, std::span<double> out) {
+  const std::vector<Key>& keys = curve.keys;
+  if (keys.empty()) {
+    std::fill(out.begin(), out.end(), 0.0);
+    return;
+  }
+  // `next` is the first key strictly after the current time, as EvaluateCurve()'s search finds
+  // it; times only grow, so it only moves forward.
+  std::size_t next = 1;
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    const double t = static_cast<double>(i) * frame_time_seconds;
+    if (!(t > keys.front().time_seconds)) {
+      out[i] = keys.front().value;
+      continue;
+    }
+    if (!(t < keys.back().time_seconds)) {
+      out[i] = keys.back().value;
+      continue;
+    }
+    while (!(t < keys[next].time_seconds)) ++next;
+    const Key& a = keys[next - 1];
+    const Key& b = keys[next];
+    out[i] = IsPlainSegment(a, b) ? EvaluatePlainSegment(a, b, t)
+                                  : EvaluateWeightedSegment(a, b, t);
+  }
+}
+
 absl::StatusOr<Clip> Bake(const KeyedClip& keyed, std::optional<double> frame_time_seconds,
                           const ClipLimits& limits) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateKeyedClip(keyed));
@@ -160,10 +197,7 @@ absl::StatusOr<Clip> Bake(const KeyedClip& keyed, std::optional<double> frame_ti
   for (std::size_t c = 0; c < clip.channels.size(); ++c) {
     std::vector<double>& samples = clip.channels[c].samples;
     samples.resize(static_cast<std::size_t>(clip.frame_count));
-    for (std::int64_t i = 0; i < clip.frame_count; ++i) {
-      samples[static_cast<std::size_t>(i)] =
-          EvaluateCurve(keyed.curves[c], static_cast<double>(i) * frame_time);
-    }
+    SampleCurve(keyed.curves[c], frame_time, samples);
   }
   return clip;
 }

@@ -27,9 +27,10 @@ ChannelErrors MeasureChannel(std::span<const double> samples, int c, const Curve
   out.summary.channel_index = c;
   out.summary.key_count = static_cast<std::int64_t>(curve.keys.size());
   out.summary.sample_count = static_cast<std::int64_t>(samples.size());
+  std::vector<double> fitted(samples.size());
+  SampleCurve(curve, frame_time_seconds, fitted);
   for (std::size_t f = 0; f < samples.size(); ++f) {
-    const double t = static_cast<double>(f) * frame_time_seconds;
-    const double error = std::abs(EvaluateCurve(curve, t) - samples[f]);
+    const double error = std::abs(fitted[f] - samples[f]);
     out.squared_sum += error * error;
     if (error > out.summary.max_error) {
       out.summary.max_error = error;

@@ -128,7 +128,7 @@ INSTANTIATE_TEST_SUITE_P(
                     "--method paper"},
         BadPipeline{"BakeOfSamples", "{\"operations\": [{\"retime\": {}}, {\"bake\": {}}]}",
                     "ops.json:1:16: operation 2 (bake): needs a keyed clip, got a sampled clip"}),
-    [](const ::testing::TestParamInfo<BadPipeline>& info) { return info.param.name; });
+    [](const ::testing::TestParamInfo<BadPipeline>& test) { return test.param.name; });
 
 TEST(PipelineFileTest, MissingFileIsAUsageErrorNamingIt) {
   absl::StatusOr<std::vector<core::PipelineStep>> steps =

@@ -69,6 +69,35 @@ TEST(EvaluateCurveTest, WeightedSegmentFollowsTheTwoDimensionalBezier) {
   }
 }
 
+TEST(SampleCurveTest, EqualsEvaluateCurveBitForBitOnRandomCurves) {
+  std::mt19937 random(7);
+  std::uniform_real_distribution<double> value(-100.0, 100.0);
+  std::uniform_real_distribution<double> weight(0.05, 0.45);
+  std::uniform_int_distribution<int> gap(1, 9);
+  for (int trial = 0; trial < 50; ++trial) {
+    const double frame_time = trial % 2 == 0 ? 1.0 / 30.0 : 1.0 / 120.0;
+    Curve curve;
+    double frame = trial % 3;  // sometimes the first key is after time 0
+    for (int k = 0; k < 1 + trial % 12; ++k) {
+      Key key{.time_seconds = frame * frame_time, .value = value(random),
+              .in_tangent = value(random), .out_tangent = value(random)};
+      if (trial % 4 == 1) {  // weighted tangents on some curves
+        key.in_weight = weight(random);
+        key.out_weight = weight(random);
+      }
+      curve.keys.push_back(key);
+      frame += gap(random);
+    }
+    // Past the last key too, where the curve holds its last value.
+    std::vector<double> sampled(static_cast<std::size_t>(frame) + 5);
+    SampleCurve(curve, frame_time, sampled);
+    for (std::size_t i = 0; i < sampled.size(); ++i) {
+      const double expected = EvaluateCurve(curve, static_cast<double>(i) * frame_time);
+      ASSERT_EQ(sampled[i], expected) << "trial " << trial << " sample " << i;
+    }
+  }
+}
+
 TEST(SolveBezierParameterTest, InvertsRandomMonotonicControls) {
   std::mt19937 rng(11);
   std::uniform_real_distribution<double> unit(0.0, 1.0);

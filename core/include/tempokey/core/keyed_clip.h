@@ -15,6 +15,7 @@
 
 #include <cmath>
 #include <optional>
+#include <span>
 #include <string_view>
 #include <vector>
 
@@ -113,6 +114,11 @@ inline double SolveMonotonicCubic(double a, double b, double c, double span, dou
 // last key. Precondition: ValidateCurve() passed (an empty curve gives 0). O(log keys).
 // Thread-safe.
 double EvaluateCurve(const Curve& curve, double time_seconds);
+
+// out[i] = EvaluateCurve(curve, i * frame_time_seconds) for every i, bit for bit, in one pass
+// over the keys (O(keys + out.size()) instead of a search per sample): what baking and error
+// measurement use. Precondition: ValidateCurve() passed; frame_time_seconds > 0. Thread-safe.
+void SampleCurve(const Curve& curve, double frame_time_seconds, std::span<double> out);
 
 // Samples every curve at i * frame_time_seconds for i = 0 .. floor(duration / frame_time + 1e-9),
 // where duration is the layout's ((frame_count - 1) * layout frame time); unset
