@@ -154,6 +154,10 @@ absl::StatusOr<std::unique_ptr<Client>> Client::Connect(const ClientOptions& opt
   args.SetMaxReceiveMessageSize(options.max_receive_message_bytes);
   args.SetServiceConfigJSON(ServiceConfigJson(options));
   args.SetInt(GRPC_ARG_ENABLE_RETRIES, options.max_attempts > 1 ? 1 : 0);
+  // Each Client its own connections: gRPC otherwise shares one TCP connection among all channels
+  // with equal arguments, and clients meant to work in parallel (batch workers, load tests)
+  // then queue behind each other on it (service_bench: 178 vs 308 jobs/s with 16 clients).
+  args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
   if (options.keepalive_time_seconds > 0) {
     args.SetInt(GRPC_ARG_KEEPALIVE_TIME_MS, Milliseconds(options.keepalive_time_seconds));
     args.SetInt(GRPC_ARG_KEEPALIVE_TIMEOUT_MS, Milliseconds(options.keepalive_timeout_seconds));

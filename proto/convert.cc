@@ -634,9 +634,16 @@ absl::Status ClipAssembler::AddSamples(const v1::ChannelSamples& samples) {
                                 core::DescribeDouble(data[bad])));
   }
 
+  // Slices sent in order (what every sender does) are appended, so the channel's memory is
+  // written once; the first slice out of order zero-fills the rest of the channel and copies in.
   std::vector<double>& dest = clip_.channels[c].samples;
-  if (dest.empty()) dest.resize(static_cast<std::size_t>(frames));
-  std::memcpy(dest.data() + first, data, static_cast<std::size_t>(n) * sizeof(double));
+  if (static_cast<std::int64_t>(dest.size()) == first) {
+    if (dest.empty()) dest.reserve(static_cast<std::size_t>(frames));
+    dest.insert(dest.end(), data, data + n);
+  } else {
+    if (static_cast<std::int64_t>(dest.size()) < frames) dest.resize(static_cast<std::size_t>(frames));
+    std::memcpy(dest.data() + first, data, static_cast<std::size_t>(n) * sizeof(double));
+  }
 
   const bool joins_prev = next != ranges.begin() && (next - 1)->second == first;
   const bool joins_next = next != ranges.end() && next->first == end;

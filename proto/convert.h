@@ -79,9 +79,9 @@ class ClipAssembler {
   absl::Status AddHeader(const v1::ClipHeader& header);
   absl::Status AddSamples(const v1::ChannelSamples& samples);
   bool has_header() const { return has_header_; }
-  // The clip being assembled: after AddHeader() its full layout; a channel's sample vector is
-  // allocated (frame_count values) when its first slice arrives, so frames not received yet
-  // read as 0. Meant for callers that digest or inspect the accepted data incrementally.
+  // The clip being assembled: after AddHeader() its full layout. A channel's samples hold the
+  // frames received in order so far, or frame_count values (0 where nothing arrived yet) once a
+  // slice arrived out of order. Read the layout here; take samples from the slices themselves.
   const core::Clip& clip() const { return clip_; }
   // The clip, once every sample of every channel has arrived (valid: ValidateClip() holds).
   // Errors: kInvalidArgument "channel 3 (Hips.Zrotation): frames 512..993 never arrived".

@@ -65,32 +65,56 @@ std::string_view StepName(const PipelineStep& step) {
                     step);
 }
 
-absl::Status ValidateStepChain(std::span<const PipelineStep> steps) {
+namespace {
+
+// What each step needs and leaves: whether its input clip is keyed, given the one before.
+class StepChain {
+ public:
+  // Errors: "operation 2 (bake): needs a keyed clip, got a sampled clip".
+  absl::Status Accept(std::size_t index, const PipelineStep& step) {
+    if (TakesKeyedClip(step) != keyed_) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          StepContext(index, step), ": needs a ", TakesKeyedClip(step) ? "keyed" : "sampled",
+          " clip, got a ", keyed_ ? "keyed clip (add a bake operation first)" : "sampled clip"));
+    }
+    if (ProducesKeyedClip(step)) keyed_ = true;
+    if (TakesKeyedClip(step)) keyed_ = false;
+    return absl::OkStatus();
+  }
+
+ private:
+  bool keyed_ = false;
+};
+
+absl::Status ValidateStepCount(std::span<const PipelineStep> steps) {
   if (steps.empty()) return absl::InvalidArgumentError("the pipeline has no operations");
   if (steps.size() > kMaxPipelineSteps) {
     return absl::InvalidArgumentError(absl::StrCat("the pipeline has ", steps.size(),
                                                    " operations, over the limit of ",
                                                    kMaxPipelineSteps));
   }
-  bool keyed = false;
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::Status ValidateStepChain(std::span<const PipelineStep> steps) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateStepCount(steps));
+  StepChain chain;
   for (std::size_t i = 0; i < steps.size(); ++i) {
-    const PipelineStep& step = steps[i];
-    if (TakesKeyedClip(step) != keyed) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          StepContext(i, step), ": needs a ", TakesKeyedClip(step) ? "keyed" : "sampled",
-          " clip, got a ", keyed ? "keyed clip (add a bake operation first)" : "sampled clip"));
-    }
-    if (ProducesKeyedClip(step)) keyed = true;
-    if (TakesKeyedClip(step)) keyed = false;
+    TEMPOKEY_RETURN_IF_ERROR(chain.Accept(i, steps[i]));
   }
   return absl::OkStatus();
 }
 
 absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> steps,
                               const ClipLimits& limits) {
-  TEMPOKEY_RETURN_IF_ERROR(ValidateStepChain(steps));
+  TEMPOKEY_RETURN_IF_ERROR(ValidateStepCount(steps));
+  StepChain chain;
+  // Step by step, so the first operation at fault is the one named.
   for (std::size_t i = 0; i < steps.size(); ++i) {
     const PipelineStep& step = steps[i];
+    TEMPOKEY_RETURN_IF_ERROR(chain.Accept(i, step));
     absl::Status status = std::visit(
         Overloaded{
             [&](const RetimeStep& s) {
