@@ -303,10 +303,10 @@ absl::StatusOr<v1::UploadClipResponse> Client::UploadClip(const core::Clip& clip
     // A failed Write means the server has ended the call; Finish() tells why.
     bool open = writer->Write(header_request);
     if (open) {
-      absl::Status sent = wire::ForEachSamplesSlice(
-          clip, options_.slice_bytes, [&](v1::ChannelSamples&& samples) -> absl::Status {
+      absl::Status sent = wire::ForEachSamplesBatch(
+          clip, options_.slice_bytes, [&](v1::SampleSlices&& slices) -> absl::Status {
             v1::UploadClipRequest request;
-            *request.mutable_samples() = std::move(samples);
+            *request.mutable_sample_slices() = std::move(slices);
             if (!writer->Write(request)) return absl::AbortedError("stream closed");
             return absl::OkStatus();
           });
@@ -406,6 +406,7 @@ absl::StatusOr<core::PipelineResult> Client::GetJobResult(const std::string& job
   const CallScope scope = BeginCall();
   v1::GetJobResultRequest request;
   request.set_job_id(job_id);
+  request.set_batch_parts(true);
   std::optional<ResultAssembler> assembler;
   TEMPOKEY_RETURN_IF_ERROR(RetryWhileUnavailable(options_, scope.deadline, [&]() -> Attempt {
     assembler.emplace();
@@ -442,6 +443,7 @@ absl::StatusOr<core::PipelineResult> Client::Process(const core::Clip& clip,
   for (const core::PipelineStep& step : steps) {
     *start_request.mutable_start()->add_operations() = wire::PipelineStepToProto(step);
   }
+  start_request.mutable_start()->set_batch_parts(true);
 
   std::optional<ResultAssembler> assembler;
   TEMPOKEY_RETURN_IF_ERROR(RetryWhileUnavailable(options_, scope.deadline, [&]() -> Attempt {
@@ -452,10 +454,10 @@ absl::StatusOr<core::PipelineResult> Client::Process(const core::Clip& clip,
         stub_->Process(&context);
     bool open = stream->Write(header_request);
     if (open) {
-      absl::Status sent = wire::ForEachSamplesSlice(
-          clip, options_.slice_bytes, [&](v1::ChannelSamples&& samples) -> absl::Status {
+      absl::Status sent = wire::ForEachSamplesBatch(
+          clip, options_.slice_bytes, [&](v1::SampleSlices&& slices) -> absl::Status {
             v1::ProcessRequest request;
-            *request.mutable_samples() = std::move(samples);
+            *request.mutable_sample_slices() = std::move(slices);
             if (!stream->Write(request)) return absl::AbortedError("stream closed");
             return absl::OkStatus();
           });

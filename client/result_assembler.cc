@@ -16,19 +16,28 @@ absl::Status ResultAssembler::AddPart(const wire::v1::ResultPart& part) {
     case wire::v1::ResultPart::kHeader:
       return core::Annotate(AddHeader(part.header()), where);
     case wire::v1::ResultPart::kSamples:
-      if (!header_received_) {
-        return absl::InvalidArgumentError(absl::StrCat(where, ": samples before the header"));
-      }
-      if (keyed_) {
-        return absl::InvalidArgumentError(absl::StrCat(where, ": samples in a keyed result"));
-      }
+      TEMPOKEY_RETURN_IF_ERROR(core::Annotate(CheckSamplesExpected(), where));
       return clip_.AddSamples(part.samples());
+    case wire::v1::ResultPart::kSampleSlices:
+      TEMPOKEY_RETURN_IF_ERROR(core::Annotate(CheckSamplesExpected(), where));
+      return clip_.AddSampleSlices(part.sample_slices());
     case wire::v1::ResultPart::kCurve:
       return core::Annotate(AddCurve(part.curve()), where);
+    case wire::v1::ResultPart::kCurves:
+      for (const wire::v1::KeyedCurve& curve : part.curves().curves()) {
+        TEMPOKEY_RETURN_IF_ERROR(core::Annotate(AddCurve(curve), where));
+      }
+      return absl::OkStatus();
     case wire::v1::ResultPart::PART_NOT_SET:
       break;
   }
   return absl::InvalidArgumentError(absl::StrCat(where, ": empty"));
+}
+
+absl::Status ResultAssembler::CheckSamplesExpected() const {
+  if (!header_received_) return absl::InvalidArgumentError("samples before the header");
+  if (keyed_) return absl::InvalidArgumentError("samples in a keyed result");
+  return absl::OkStatus();
 }
 
 absl::Status ResultAssembler::AddHeader(const wire::v1::ResultHeader& header) {

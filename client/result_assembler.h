@@ -35,6 +35,7 @@ class ResultAssembler {
 
  private:
   absl::Status AddHeader(const wire::v1::ResultHeader& header);
+  absl::Status CheckSamplesExpected() const;
   absl::Status AddCurve(const wire::v1::KeyedCurve& curve);
 
   core::ClipLimits limits_;

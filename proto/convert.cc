@@ -550,6 +550,29 @@ absl::Status ForEachSamplesSlice(const core::Clip& clip, std::int64_t slice_byte
   return absl::OkStatus();
 }
 
+absl::Status ForEachSamplesBatch(const core::Clip& clip, std::int64_t slice_bytes,
+                                 const std::function<absl::Status(v1::SampleSlices&&)>& emit) {
+  const std::int64_t budget = SamplesPerSlice(slice_bytes);
+  v1::SampleSlices batch;
+  std::int64_t used = 0;
+  for (std::size_t c = 0; c < clip.channels.size(); ++c) {
+    const auto total = static_cast<std::int64_t>(clip.channels[c].samples.size());
+    for (std::int64_t first = 0; first < total;) {
+      const std::int64_t n = std::min(budget - used, total - first);
+      *batch.add_slices() = SamplesSliceToProto(clip, static_cast<int>(c), first, n);
+      first += n;
+      used += n;
+      if (used == budget) {
+        TEMPOKEY_RETURN_IF_ERROR(emit(std::move(batch)));
+        batch.Clear();
+        used = 0;
+      }
+    }
+  }
+  if (batch.slices_size() > 0) return emit(std::move(batch));
+  return absl::OkStatus();
+}
+
 v1::Clip ClipToProto(const core::Clip& clip) {
   v1::Clip out;
   *out.mutable_header() = ClipHeaderToProto(clip);
@@ -575,6 +598,13 @@ absl::Status ClipAssembler::AddHeader(const v1::ClipHeader& header) {
   clip_ = *std::move(layout);
   received_.assign(clip_.channels.size(), {});
   has_header_ = true;
+  return absl::OkStatus();
+}
+
+absl::Status ClipAssembler::AddSampleSlices(const v1::SampleSlices& batch) {
+  for (const v1::ChannelSamples& slice : batch.slices()) {
+    TEMPOKEY_RETURN_IF_ERROR(AddSamples(slice));
+  }
   return absl::OkStatus();
 }
 

@@ -39,6 +39,12 @@ v1::ClipHeader ClipHeaderToProto(const core::Clip& clip);
 absl::Status ForEachSamplesSlice(const core::Clip& clip, std::int64_t slice_bytes,
                                  const std::function<absl::Status(v1::ChannelSamples&&)>& emit);
 
+// As ForEachSamplesSlice(), but packing consecutive slices into batches of at most `slice_bytes`
+// of samples in all (a channel's run split across batches where the budget ends), so a clip of
+// many short channels takes a few messages.
+absl::Status ForEachSamplesBatch(const core::Clip& clip, std::int64_t slice_bytes,
+                                 const std::function<absl::Status(v1::SampleSlices&&)>& emit);
+
 // Header plus one whole-channel slice per channel.
 v1::Clip ClipToProto(const core::Clip& clip);
 
@@ -78,6 +84,8 @@ class ClipAssembler {
 
   absl::Status AddHeader(const v1::ClipHeader& header);
   absl::Status AddSamples(const v1::ChannelSamples& samples);
+  // Each slice of `batch` in order, as if sent one by one (messages are counted per slice).
+  absl::Status AddSampleSlices(const v1::SampleSlices& batch);
   bool has_header() const { return has_header_; }
   // The clip being assembled: after AddHeader() its full layout. A channel's samples hold the
   // frames received in order so far, or frame_count values (0 where nothing arrived yet) once a

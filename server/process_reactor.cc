@@ -31,10 +31,12 @@ class ProcessLink final {
       : service_(service), reactor_(reactor), call_(call) {}
 
   // Sets what the worker runs; before the task is queued.
-  void Prepare(core::Clip clip, std::vector<core::PipelineStep> steps, std::int64_t slice_bytes) {
+  void Prepare(core::Clip clip, std::vector<core::PipelineStep> steps, std::int64_t slice_bytes,
+               bool batch_parts) {
     clip_ = std::move(clip);
     steps_ = std::move(steps);
     slice_bytes_ = slice_bytes;
+    batch_parts_ = batch_parts;
     description_ = absl::StrCat("frames=", clip_.frame_count, " channels=", clip_.channels.size(),
                                 " operations=", DescribeSteps(steps_));
     queued_at_ = std::chrono::steady_clock::now();
@@ -124,7 +126,7 @@ class ProcessLink final {
       end_status_ = result.status();
     } else {
       slicer_.emplace(std::make_shared<const core::PipelineResult>(*std::move(result)),
-                      slice_bytes_);
+                      slice_bytes_, batch_parts_);
     }
     if (writing_) return;
     if (end_status_) {
@@ -164,6 +166,7 @@ class ProcessLink final {
   core::Clip clip_;
   std::vector<core::PipelineStep> steps_;
   std::int64_t slice_bytes_ = 0;
+  bool batch_parts_ = false;
   std::string description_;
   std::chrono::steady_clock::time_point queued_at_;
   std::stop_source stop_;  // thread-safe by itself
@@ -228,6 +231,8 @@ class ProcessReactor final : public ProcessReactorBase {
         return assembler_.AddHeader(request_.header());
       case v1::ProcessRequest::kSamples:
         return assembler_.AddSamples(request_.samples());
+      case v1::ProcessRequest::kSampleSlices:
+        return assembler_.AddSampleSlices(request_.sample_slices());
       case v1::ProcessRequest::kStart:
         return Start(request_.start());
       case v1::ProcessRequest::PART_NOT_SET:
@@ -253,7 +258,7 @@ class ProcessReactor final : public ProcessReactorBase {
     TEMPOKEY_ASSIGN_OR_RETURN(core::Clip clip, std::move(assembler_).Finish());
     TEMPOKEY_ASSIGN_OR_RETURN(std::vector<core::PipelineStep> steps,
                               PrepareSteps(start.operations(), clip, service_->clip_limits));
-    link_->Prepare(std::move(clip), std::move(steps), start.slice_bytes());
+    link_->Prepare(std::move(clip), std::move(steps), start.slice_bytes(), start.batch_parts());
     absl::Status queued = service_->pool->TrySubmit(
         [link = link_](std::stop_token pool_stop) { link->Run(std::move(pool_stop)); });
     if (!queued.ok()) {

@@ -55,7 +55,7 @@ class ResultReactor final : public grpc::ServerWriteReactor<v1::ResultPart> {
     if (absl::Status admitted = service_->AdmitStream(/*allow_while_draining=*/true);
         !admitted.ok()) return admitted;
     holds_stream_ = true;
-    slicer_.emplace(*std::move(result), request.slice_bytes());
+    slicer_.emplace(*std::move(result), request.slice_bytes(), request.batch_parts());
     return absl::OkStatus();
   }
 

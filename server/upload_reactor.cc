@@ -61,19 +61,26 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadClipRequest
         TEMPOKEY_RETURN_IF_ERROR(assembler_.AddHeader(request_.header()));
         digest_.emplace(assembler_.clip());
         return absl::OkStatus();
-      case v1::UploadClipRequest::kSamples: {
-        const v1::ChannelSamples& samples = request_.samples();
-        TEMPOKEY_RETURN_IF_ERROR(assembler_.AddSamples(samples));
-        digest_->Offer(samples.channel_index(), samples.first_frame(),
-                       std::span<const double>(samples.samples().data(),
-                                               static_cast<std::size_t>(samples.samples_size())));
+      case v1::UploadClipRequest::kSamples:
+        return AcceptSlice(request_.samples());
+      case v1::UploadClipRequest::kSampleSlices:
+        for (const v1::ChannelSamples& slice : request_.sample_slices().slices()) {
+          TEMPOKEY_RETURN_IF_ERROR(AcceptSlice(slice));
+        }
         return absl::OkStatus();
-      }
       case v1::UploadClipRequest::PART_NOT_SET:
         break;
     }
     return absl::InvalidArgumentError(
         absl::StrCat("upload message ", messages_, " has neither header nor samples"));
+  }
+
+  absl::Status AcceptSlice(const v1::ChannelSamples& samples) {
+    TEMPOKEY_RETURN_IF_ERROR(assembler_.AddSamples(samples));
+    digest_->Offer(samples.channel_index(), samples.first_frame(),
+                   std::span<const double>(samples.samples().data(),
+                                           static_cast<std::size_t>(samples.samples_size())));
+    return absl::OkStatus();
   }
 
   absl::Status Complete() {

@@ -70,6 +70,50 @@ TEST(ClipConvertTest, SlicesRespectSliceBytesAndReassembleInAnyOrder) {
   EXPECT_EQ(*back, clip);
 }
 
+TEST(ClipConvertTest, BatchesFillTheSliceBudgetAcrossChannelsAndReassembleInAnyOrder) {
+  const core::Clip clip = MakeClip(4, 128);  // 15 channels x 128 frames = 1920 samples
+  constexpr std::int64_t kSliceBytes = 8 * 500;
+
+  std::vector<v1::SampleSlices> batches;
+  ASSERT_TRUE(ForEachSamplesBatch(clip, kSliceBytes, [&](v1::SampleSlices&& batch) {
+                batches.push_back(std::move(batch));
+                return absl::OkStatus();
+              }).ok());
+
+  ASSERT_EQ(batches.size(), 4u);  // ceil(1920 / 500): 15 channels in 4 messages
+  for (std::size_t b = 0; b < batches.size(); ++b) {
+    std::int64_t samples = 0;
+    for (const v1::ChannelSamples& slice : batches[b].slices()) samples += slice.samples_size();
+    EXPECT_EQ(samples, b + 1 < batches.size() ? 500 : 1920 - 3 * 500) << "batch " << b;
+  }
+  std::mt19937 rng(11);
+  std::shuffle(batches.begin(), batches.end(), rng);
+  ClipAssembler assembler;
+  ASSERT_TRUE(assembler.AddHeader(ClipHeaderToProto(clip)).ok());
+  for (const v1::SampleSlices& batch : batches) ASSERT_TRUE(assembler.AddSampleSlices(batch).ok());
+  absl::StatusOr<core::Clip> back = std::move(assembler).Finish();
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_EQ(*back, clip);
+}
+
+TEST(ClipConvertTest, ABadSliceInABatchIsNamedLikeASingleOne) {
+  const core::Clip clip = MakeClip(1, 10);
+  v1::SampleSlices batch;
+  *batch.add_slices() = SamplesSliceToProto(clip, 0, 0, 10);
+  v1::ChannelSamples* bad = batch.add_slices();
+  *bad = SamplesSliceToProto(clip, 1, 0, 10);
+  bad->set_samples(4, std::nan(""));
+  ClipAssembler assembler;
+  ASSERT_TRUE(assembler.AddHeader(ClipHeaderToProto(clip)).ok());
+
+  absl::Status status = assembler.AddSampleSlices(batch);
+
+  EXPECT_EQ(status.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(status.message()),
+              ::testing::HasSubstr("samples message 2: channel 1 ("));
+  EXPECT_THAT(std::string(status.message()), ::testing::EndsWith("sample at frame 4 is NaN"));
+}
+
 TEST(ClipConvertTest, NonPositiveSliceBytesUsesTheDefault) {
   const core::Clip clip = MakeClip(1, 10);
 
