@@ -16,8 +16,15 @@
 #   TEMPOKEY_BASE_IMAGE     the local base image [localhost/bookworm-base:latest]
 #   TEMPOKEY_ROOTFS_CACHE   the debootstrapped tree, reused when present [/var/cache/tempokey/bookworm]
 #   TEMPOKEY_DEBIAN_MIRROR  where debootstrap and the build's apt fetch from [http://deb.debian.org/debian]
+#   TEMPOKEY_SHARED_DIR     the shared folder whose data/ holds the clips [../shared]
 #   TEMPOKEY_SMOKE_CLIP     the clip, relative to ../shared/data [bvh/cmu/131_01.bvh]
 #   TEMPOKEY_PODMAN_STORAGE_DRIVER  e.g. vfs where overlay mounts are refused [podman's default]
+#
+# The image is built from the working tree as it is (uncommitted edits included; .dockerignore
+# keeps build trees, tests, benchmarks and manifests out). On the 2-core machine a cold run takes
+# about 9 minutes, most of it compiling; podman's layer cache makes a rerun with no source change
+# take seconds. Superseded build layers stay in podman's store (about 1 GB per source change):
+# `podman image prune` reclaims them, and the next build then starts from apt again.
 set -euo pipefail
 
 usage() { echo "usage: deploy/image-smoke.sh   (as root; see the header for the environment)" >&2; }
@@ -52,15 +59,18 @@ die() { echo "error: $*" >&2; exit 1; }
 
 [[ -f "$shared_dir/data/$clip" ]] || die "no clip at $shared_dir/data/$clip (../shared beside the checkout?)"
 
-log "installing podman and debootstrap (Debian packages)"
+log "installing podman, runc and debootstrap (deploy/install-deps.sh --image)"
 "$here/deploy/install-deps.sh" --image
 
-# What podman needs on these machines (found by trying; each fails without it):
-#   --runtime runc             the hosts mount cgroups "hybrid" (v1 controllers, plus a v2
-#                              hierarchy holding hugetlb), which crun 1.8 refuses outright ("cgroups
-#                              in hybrid mode not supported", even with --cgroups disabled);
+# What podman needs on these machines:
+#   --runtime runc             required (found by trying): the hosts mount cgroups "hybrid" (v1
+#                              controllers, plus a v2 hierarchy holding hugetlb), which crun 1.8
+#                              refuses outright ("cgroups in hybrid mode not supported", even with
+#                              --cgroups disabled);
 #   --cgroup-manager cgroupfs  no systemd runs as PID 1 (nor in CI): no systemd to ask for cgroups;
 #   --events-backend file      no journald either; events go to a file under /run.
+# podman 4.3 falls back to the last two by itself here; they are explicit so that a machine with
+# systemd installed but not running does not send podman looking for it.
 # Storage stays podman's default (overlay on the host's ext4 works natively as root); set
 # TEMPOKEY_PODMAN_STORAGE_DRIVER=vfs on a kernel that refuses overlay mounts.
 podman=(podman --runtime runc --cgroup-manager cgroupfs --events-backend file)
@@ -139,8 +149,11 @@ lockdown=(--read-only --read-only-tmpfs=false --cap-drop ALL --security-opt no-n
 log "starting $image as $name"
 "${podman[@]}" run --detach --name "$name" --network none "${lockdown[@]}" "$image" >/dev/null
 
+# Logs are read into a variable before grep: `podman logs | grep -q` fails under pipefail when
+# grep exits at the first match and podman gets SIGPIPE.
+server_logs() { "${podman[@]}" logs "$name" 2>&1; }
 deadline=$((SECONDS + kStartTimeout))
-until "${podman[@]}" logs "$name" 2>/dev/null | grep -q '^tempokey-server listening on'; do
+until logs="$(server_logs)" && grep -q '^tempokey-server listening on' <<<"$logs"; do
   if [[ "$("${podman[@]}" inspect --format '{{.State.Running}}' "$name")" != "true" ]]; then
     "${podman[@]}" logs "$name" >&2 || true
     die "the server exited before listening"
@@ -151,7 +164,7 @@ until "${podman[@]}" logs "$name" 2>/dev/null | grep -q '^tempokey-server listen
   fi
   sleep 0.2
 done
-"${podman[@]}" logs "$name" 2>&1 | grep -m1 'listening on'
+grep -m1 '^tempokey-server listening on' <<<"$logs"
 
 # The image's own CLI, in a second container that joins the server's network namespace, so
 # 127.0.0.1:50051 is the server. ../shared/data is mounted read-only; outputs go to $work/out.
@@ -189,9 +202,10 @@ grep -E '^tempokey_jobs_total\{' <<<"$metrics" || die "metrics have no tempokey_
 log "podman stop (SIGTERM, drain)"
 timeout $((kStopTimeout + 15)) "${podman[@]}" stop --time "$kStopTimeout" "$name" >/dev/null
 exit_code="$("${podman[@]}" inspect --format '{{.State.ExitCode}}' "$name")"
-"${podman[@]}" logs "$name" 2>&1 | tail -n 4
+logs="$(server_logs)"
+tail -n 4 <<<"$logs"
 [[ "$exit_code" == "0" ]] || die "tempokey-server exited with $exit_code after SIGTERM (want 0)"
-"${podman[@]}" logs "$name" 2>&1 | grep -q 'received SIGTERM, draining' ||
+grep -q 'received SIGTERM, draining' <<<"$logs" ||
   die "the server did not log a SIGTERM drain (was it stopped by another signal?)"
 echo "tempokey-server exited 0 after a SIGTERM drain"
 

@@ -6,7 +6,8 @@
 #   deploy/install-deps.sh            build + test dependencies (default)
 #   deploy/install-deps.sh --runtime  only the shared libraries tempokey-server and tempokey need
 #   deploy/install-deps.sh --image    tools that build and smoke-test the container image with no
-#                                     registry (deploy/image-smoke.sh): podman, debootstrap
+#                                     registry (deploy/image-smoke.sh: podman, debootstrap) and
+#                                     run deploy/compose.yaml (podman-compose)
 set -euo pipefail
 
 build_packages=(
@@ -29,10 +30,12 @@ runtime_packages=(
 # (crun 1.8 refuses these machines' hybrid cgroup mounts; see image-smoke.sh).
 # debootstrap makes the bookworm base image locally, checked against debian-archive-keyring.
 # curl reads the container's metrics port from the host (the runtime image has no HTTP client).
-# No network backend (netavark, slirp4netns) is listed: image-smoke.sh uses the host network
-# for the build and the server's own network namespace for the smoke test.
+# image-smoke.sh itself needs no container network (it builds on the host network and tests in
+# the server's own namespace); podman-compose, the CNI plugins and iptables are for
+# deploy/compose.yaml, whose three servers publish their ports through a bridge network.
 image_packages=(
   podman runc conmon debootstrap debian-archive-keyring curl
+  podman-compose containernetworking-plugins iptables
 )
 
 case "${1:-}" in
