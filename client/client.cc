@@ -198,6 +198,28 @@ void Client::PrepareContext(const CallScope& scope, grpc::ClientContext& context
 
 namespace {
 
+// Streams `clip`'s samples on `writer`, as SampleSlices batches when the server takes them,
+// otherwise one ChannelSamples per message (servers of the first v1).
+template <typename Request, typename Writer>
+absl::Status WriteSamples(const core::Clip& clip, std::int64_t slice_bytes, bool batched,
+                          Writer& writer) {
+  Request request;
+  auto write = [&]() -> absl::Status {
+    if (!writer.Write(request)) return absl::AbortedError("stream closed");
+    return absl::OkStatus();
+  };
+  if (batched) {
+    return wire::ForEachSamplesBatch(clip, slice_bytes, [&](v1::SampleSlices&& slices) {
+      *request.mutable_sample_slices() = std::move(slices);
+      return write();
+    });
+  }
+  return wire::ForEachSamplesSlice(clip, slice_bytes, [&](v1::ChannelSamples&& samples) {
+    *request.mutable_samples() = std::move(samples);
+    return write();
+  });
+}
+
 // Carries the server's retry hint (trailing metadata) over to `status` as its payload.
 absl::Status WithRetryHint(absl::Status status, const grpc::ClientContext& context) {
   const auto& trailers = context.GetServerTrailingMetadata();
@@ -252,6 +274,19 @@ absl::StatusOr<v1::ServerInfo> Client::GetServerInfo() const {
                    v1::GetServerInfoRequest());
 }
 
+bool Client::ServerTakesSampleSlices() const {
+  const int known = sample_slices_.load(std::memory_order_relaxed);
+  if (known != kFeatureUnknown) return known == kFeatureOn;
+  absl::StatusOr<v1::ServerInfo> info = GetServerInfo();
+  // Unknown stays unknown when the server cannot say now; the call sends single slices, which
+  // every server takes, and the next call asks again.
+  if (!info.ok()) return false;
+  const bool on = std::find(info->features().begin(), info->features().end(),
+                            wire::kFeatureSampleSlices) != info->features().end();
+  sample_slices_.store(on ? kFeatureOn : kFeatureOff, std::memory_order_relaxed);
+  return on;
+}
+
 absl::StatusOr<HealthState> Client::CheckHealth(const std::string& service) const {
   grpc::GenericStub generic(channel_);
   grpc::ClientContext context;
@@ -294,6 +329,7 @@ absl::StatusOr<v1::UploadClipResponse> Client::UploadClip(const core::Clip& clip
   v1::UploadClipResponse response;
   v1::UploadClipRequest header_request;
   *header_request.mutable_header() = wire::ClipHeaderToProto(clip);
+  const bool batched = ServerTakesSampleSlices();
 
   TEMPOKEY_RETURN_IF_ERROR(RetryWhileUnavailable(options_, scope.deadline, [&]() -> Attempt {
     grpc::ClientContext context;
@@ -303,13 +339,8 @@ absl::StatusOr<v1::UploadClipResponse> Client::UploadClip(const core::Clip& clip
     // A failed Write means the server has ended the call; Finish() tells why.
     bool open = writer->Write(header_request);
     if (open) {
-      absl::Status sent = wire::ForEachSamplesBatch(
-          clip, options_.slice_bytes, [&](v1::SampleSlices&& slices) -> absl::Status {
-            v1::UploadClipRequest request;
-            *request.mutable_sample_slices() = std::move(slices);
-            if (!writer->Write(request)) return absl::AbortedError("stream closed");
-            return absl::OkStatus();
-          });
+      absl::Status sent = WriteSamples<v1::UploadClipRequest>(clip, options_.slice_bytes,
+                                                              batched, *writer);
       open = sent.ok();
     }
     if (open) writer->WritesDone();
@@ -443,7 +474,8 @@ absl::StatusOr<core::PipelineResult> Client::Process(const core::Clip& clip,
   for (const core::PipelineStep& step : steps) {
     *start_request.mutable_start()->add_operations() = wire::PipelineStepToProto(step);
   }
-  start_request.mutable_start()->set_batch_parts(true);
+  start_request.mutable_start()->set_batch_parts(true);  // servers without it ignore it
+  const bool batched = ServerTakesSampleSlices();
 
   std::optional<ResultAssembler> assembler;
   TEMPOKEY_RETURN_IF_ERROR(RetryWhileUnavailable(options_, scope.deadline, [&]() -> Attempt {
@@ -454,13 +486,8 @@ absl::StatusOr<core::PipelineResult> Client::Process(const core::Clip& clip,
         stub_->Process(&context);
     bool open = stream->Write(header_request);
     if (open) {
-      absl::Status sent = wire::ForEachSamplesBatch(
-          clip, options_.slice_bytes, [&](v1::SampleSlices&& slices) -> absl::Status {
-            v1::ProcessRequest request;
-            *request.mutable_sample_slices() = std::move(slices);
-            if (!stream->Write(request)) return absl::AbortedError("stream closed");
-            return absl::OkStatus();
-          });
+      absl::Status sent =
+          WriteSamples<v1::ProcessRequest>(clip, options_.slice_bytes, batched, *stream);
       open = sent.ok() && stream->Write(start_request);
     }
     if (open) stream->WritesDone();

@@ -7,6 +7,7 @@
 #ifndef TEMPOKEY_CLIENT_CLIENT_H_
 #define TEMPOKEY_CLIENT_CLIENT_H_
 
+#include <atomic>
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -98,7 +99,8 @@ struct SubmitOptions {
 using JobUpdateFn = std::function<void(const v1::Job& job)>;
 
 // A client of one target. Thread-safe: every method may be called from several threads at once
-// (the channel and stub are thread-safe; the client holds no other mutable state).
+// (the channel and stub are thread-safe; the only other state is an atomic cache of the server's
+// wire features).
 class Client {
  public:
   // Creates the channel (no connection is made until the first call).
@@ -165,6 +167,8 @@ class Client {
  private:
   struct CallScope;  // deadline of one method call across its attempts
 
+  // Whether the server accepts SampleSlices (ServerInfo.features), asked once per Client.
+  bool ServerTakesSampleSlices() const;
   CallScope BeginCall() const;
   void PrepareContext(const CallScope& scope, grpc::ClientContext& context) const;
   absl::StatusOr<v1::Job> Submit(v1::SubmitJobRequest request,
@@ -174,6 +178,10 @@ class Client {
   std::shared_ptr<grpc::Channel> channel_;
   ClientOptions options_;
   std::unique_ptr<v1::MotionService::Stub> stub_;
+  static constexpr int kFeatureUnknown = 0;
+  static constexpr int kFeatureOn = 1;
+  static constexpr int kFeatureOff = 2;
+  mutable std::atomic<int> sample_slices_{kFeatureUnknown};
 };
 
 }  // namespace tempokey::client

@@ -53,7 +53,8 @@ absl::Status ServerInfo(CommandContext& context) {
                 << SummaryLine("max clip", absl::StrCat(info->max_clip_samples(), " samples"))
                 << SummaryLine("stored clips", absl::StrCat("up to ", info->max_stored_clips()))
                 << SummaryLine("stored results", absl::StrCat("up to ", info->max_stored_results()))
-                << SummaryLine("operations", absl::StrJoin(info->operations(), ", "));
+                << SummaryLine("operations", absl::StrJoin(info->operations(), ", "))
+                << SummaryLine("wire features", absl::StrJoin(info->features(), ", "));
   return absl::OkStatus();
 }
 
@@ -80,7 +81,8 @@ const Command& ServerInfoCommand() {
       .name = "server-info",
       .synopsis = "",
       .summary = "print the server's version, limits and operations",
-      .description = "Prints what GetServerInfo reports: version, worker pool, limits, operations.\n",
+      .description = "Prints what GetServerInfo reports: version, worker pool, limits, operations and\n"
+          "the wire features added to v1 after its first release.\n",
       .flags = {},
       .run = ServerInfo,
   };

@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <string_view>
 #include <optional>
 #include <vector>
 
@@ -27,6 +28,10 @@ namespace v1 = ::tempokey::v1;
 
 // Default size of the samples carried by one ChannelSamples / KeyedCurve message.
 inline constexpr std::int64_t kDefaultSliceBytes = 1 << 20;
+
+// ServerInfo.features of what this build speaks beyond the first v1.
+inline constexpr std::string_view kFeatureSampleSlices = "sample_slices";
+inline constexpr std::string_view kFeatureBatchParts = "batch_parts";
 
 // ---- clips --------------------------------------------------------------------------------------
 

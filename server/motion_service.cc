@@ -91,6 +91,9 @@ grpc::ServerUnaryReactor* MotionService::GetServerInfo(grpc::CallbackServerConte
   for (const std::string& operation : context_->operations) response->add_operations(operation);
   response->set_max_stored_clips(o.max_stored_clips);
   response->set_max_stored_results(o.max_stored_results);
+  for (std::string_view feature : {wire::kFeatureSampleSlices, wire::kFeatureBatchParts}) {
+    response->add_features(std::string(feature));
+  }
   return FinishUnary(call, absl::OkStatus());
 }
 

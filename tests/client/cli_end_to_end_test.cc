@@ -107,6 +107,7 @@ TEST_F(CliEndToEndTest, ServerInfoListsVersionAndOperations) {
   EXPECT_EQ(run.exit_code, 0) << run.err;
   EXPECT_EQ(Field(run.out, "version"), TEMPOKEY_VERSION);
   EXPECT_THAT(Field(run.out, "operations"), HasSubstr("convert"));
+  EXPECT_EQ(Field(run.out, "wire features"), "sample_slices, batch_parts");
   EXPECT_EQ(run.err, "");
 }
 

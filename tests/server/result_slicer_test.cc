@@ -41,10 +41,12 @@ core::KeyedClip KeyedOf(const core::Clip& clip, int keys_per_curve) {
   for (std::size_t c = 0; c < clip.channels.size(); ++c) {
     core::Curve curve;
     for (int k = 0; k < keys_per_curve; ++k) {
-      curve.keys.push_back(core::Key{.time_seconds = 0.1 * k,
-                                     .value = static_cast<double>(c) - k,
-                                     .in_tangent = 0.5 * k,
-                                     .out_tangent = 0.5 * k});
+      core::Key key;
+      key.time_seconds = 0.1 * k;
+      key.value = static_cast<double>(c) - k;
+      key.in_tangent = 0.5 * k;
+      key.out_tangent = 0.5 * k;
+      curve.keys.push_back(key);
     }
     keyed.curves.push_back(std::move(curve));
   }
@@ -53,7 +55,8 @@ core::KeyedClip KeyedOf(const core::Clip& clip, int keys_per_curve) {
 
 TEST(ResultSlicerTest, SampledResultIsOneChannelPerPartUnlessBatched) {
   const core::Clip clip = MakeClip(44, 128);  // 135 channels of 128 frames
-  const core::PipelineResult result{.output = clip};
+  core::PipelineResult result;
+  result.output = clip;
 
   const std::vector<v1::ResultPart> single = AllParts(result, 1 << 20, false);
   const std::vector<v1::ResultPart> batched = AllParts(result, 1 << 20, true);
@@ -68,7 +71,8 @@ TEST(ResultSlicerTest, SampledResultIsOneChannelPerPartUnlessBatched) {
 
 TEST(ResultSlicerTest, BatchedPartsStayWithinTheSliceSize) {
   const core::Clip clip = MakeClip(4, 1000);  // 15 channels x 1000 frames
-  const core::PipelineResult result{.output = clip};
+  core::PipelineResult result;
+  result.output = clip;
 
   const std::vector<v1::ResultPart> batched = AllParts(result, 8 * 700, true);
 
@@ -85,7 +89,8 @@ TEST(ResultSlicerTest, BatchedPartsStayWithinTheSliceSize) {
 
 TEST(ResultSlicerTest, KeyedResultBatchesCurvesAndReassemblesExactly) {
   const core::KeyedClip keyed = KeyedOf(MakeClip(10, 50), 12);  // 33 curves of 12 keys
-  const core::PipelineResult result{.output = keyed};
+  core::PipelineResult result;
+  result.output = keyed;
 
   const std::vector<v1::ResultPart> single = AllParts(result, 1 << 20, false);
   const std::vector<v1::ResultPart> batched = AllParts(result, 1 << 20, true);
