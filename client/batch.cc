@@ -140,7 +140,9 @@ absl::StatusOr<std::vector<BatchItem>> PlanBatch(const BatchPlanOptions& options
   std::vector<fs::path> found;
   auto consider = [&](const fs::directory_entry& entry) {
     const fs::path relative = entry.path().lexically_relative(root);
-    if (entry.is_regular_file(error) && !IsHidden(relative) &&
+    // An entry that cannot be examined (a dangling link) is skipped, not an error of the folder.
+    std::error_code entry_error;
+    if (entry.is_regular_file(entry_error) && !IsHidden(relative) &&
         InputFormat(relative, options.include_csv)) {
       found.push_back(relative);
     }
@@ -206,6 +208,7 @@ BatchSummary RunBatch(const Client& client, std::span<const BatchItem> items,
       if (on_done) on_done(summary.files[i], done, static_cast<int>(items.size()));
     }
   };
+  if (items.empty()) return summary;
   const int threads = std::clamp<int>(options.jobs, 1, static_cast<int>(items.size()));
   std::vector<std::jthread> pool;
   std::random_device seeds;

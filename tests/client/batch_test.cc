@@ -139,6 +139,7 @@ TEST_F(BatchTest, EveryClipOfTheFolderIsProcessedAndSummarized) {
   const std::string in = FolderOf("in", sources);
   ASSERT_TRUE(core::WriteFileAtomically(in + "/notes.txt", "not a clip").ok());
   ASSERT_TRUE(core::WriteFileAtomically(in + "/.hidden.bvh", "not read").ok());
+  fs::create_symlink(in + "/gone.bvh", in + "/dangling.bvh");  // skipped, not fatal
 
   ProcessResult run = Batch({in, "-o", Path("out"), "--ops", PipelineFile(kRetimeThenReduce),
                              "--jobs", "3", "--summary", Path("summary.json")});
