@@ -91,17 +91,8 @@ std::vector<std::string> FilesIn(const std::string& dir) {
 
 std::string Stem(const std::string& path) { return fs::path(path).stem().string(); }
 
-class BatchTest : public ::testing::Test {
+class BatchTest : public ServerProcessTest {
  protected:
-  void SetUp() override {
-    dir_ = MakeTempDir();
-    absl::StatusOr<std::unique_ptr<ServerProcess>> server = ServerProcess::Start(dir_);
-    ASSERT_TRUE(server.ok()) << server.status();
-    server_ = *std::move(server);
-  }
-
-  std::string Path(const std::string& name) const { return dir_ + "/" + name; }
-
   // A folder `name` holding copies of `sources`, each under its own file name.
   std::string FolderOf(const std::string& name, const std::vector<std::string>& sources) {
     const std::string folder = Path(name);
@@ -124,9 +115,7 @@ class BatchTest : public ::testing::Test {
     return RunTempokey(args, dir_);
   }
 
-  std::string dir_;
   int pipeline_count_ = 0;
-  std::unique_ptr<ServerProcess> server_;
 };
 
 constexpr char kRetimeThenReduce[] = R"({"operations": [

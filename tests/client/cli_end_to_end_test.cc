@@ -61,25 +61,13 @@ core::Clip ReadBvhNamed(const std::string& path, const std::string& name) {
   return *std::move(clip);
 }
 
-class CliEndToEndTest : public ::testing::Test {
+class CliEndToEndTest : public ServerProcessTest {
  protected:
-  void SetUp() override {
-    dir_ = MakeTempDir();
-    absl::StatusOr<std::unique_ptr<ServerProcess>> server = ServerProcess::Start(dir_);
-    ASSERT_TRUE(server.ok()) << server.status();
-    server_ = *std::move(server);
-  }
-
   // `tempokey --server <the server> args...`.
   ProcessResult Tempokey(std::vector<std::string> args) {
     args.insert(args.begin(), {"--server", server_->target()});
     return RunTempokey(args, dir_);
   }
-
-  std::string Path(const std::string& name) const { return dir_ + "/" + name; }
-
-  std::string dir_;
-  std::unique_ptr<ServerProcess> server_;
 };
 
 const std::string& CmuClip() {

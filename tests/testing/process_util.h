@@ -228,6 +228,23 @@ class ServerProcess {
   std::string stdout_path_;
 };
 
+// A test with its own temporary folder and a real tempokey-server child started in it.
+class ServerProcessTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = MakeTempDir();
+    absl::StatusOr<std::unique_ptr<ServerProcess>> server = ServerProcess::Start(dir_);
+    ASSERT_TRUE(server.ok()) << server.status();
+    server_ = *std::move(server);
+  }
+
+  // `name` inside the test's folder.
+  std::string Path(const std::string& name) const { return dir_ + "/" + name; }
+
+  std::string dir_;
+  std::unique_ptr<ServerProcess> server_;
+};
+
 }  // namespace tempokey::testing
 
 #endif  // TEMPOKEY_TESTS_TESTING_PROCESS_UTIL_H_
