@@ -259,6 +259,30 @@ def _sample_slices(clip: clip_pb2.Clip, slice_bytes: int) -> Iterator[clip_pb2.C
                                           samples=values[start:start + per_slice])
 
 
+def _sample_batches(clip: clip_pb2.Clip, slice_bytes: int) -> Iterator[clip_pb2.SampleSlices]:
+    """The slices of _sample_slices() packed into SampleSlices messages of at most `slice_bytes`
+    of samples in all, for servers that list the "sample_slices" feature: a clip of many short
+    channels then takes a few messages instead of one per channel."""
+    budget = _samples_per_slice(slice_bytes)
+    batch = clip_pb2.SampleSlices()
+    used = 0
+    for run in clip.samples:
+        values = run.samples
+        start = 0
+        while start < len(values):
+            count = min(budget - used, len(values) - start)
+            batch.slices.add(channel_index=run.channel_index, first_frame=run.first_frame + start,
+                             samples=values[start:start + count])
+            start += count
+            used += count
+            if used == budget:
+                yield batch
+                batch = clip_pb2.SampleSlices()
+                used = 0
+    if batch.slices:
+        yield batch
+
+
 # ---- operations ---------------------------------------------------------------------------------
 
 TimeLike = Union[float, int, str]
@@ -532,8 +556,14 @@ class _ResultAssembler:
         keyed = self._header.WhichOneof("kind") == "keyed_clip"
         if kind == "samples" and not keyed:
             self._add_samples(part.samples)
+        elif kind == "sample_slices" and not keyed:
+            for samples in part.sample_slices.slices:
+                self._add_samples(samples)
         elif kind == "curve" and keyed:
             self._add_curve(part.curve)
+        elif kind == "curves" and keyed:
+            for piece in part.curves.curves:
+                self._add_curve(piece)
         else:
             raise _malformed_result("a %s part in a %s result"
                                     % (kind, "keyed" if keyed else "sampled"))
@@ -777,6 +807,22 @@ class Client:
             backoff = min(backoff * 2.0, 1.0)
         raise AssertionError("unreachable")
 
+    def _sends_batches(self) -> bool:
+        """Whether the server takes SampleSlices (its "sample_slices" feature); servers of the
+        first v1 get one slice per message."""
+        if self._server_info is None:
+            self._server_info = self.server_info()
+        return "sample_slices" in self._server_info.features
+
+    def _sample_requests(self, clip: clip_pb2.Clip, slice_bytes: int, request_type):
+        """The sample messages of `clip` as `request_type` (UploadClipRequest, ProcessRequest)."""
+        if self._sends_batches():
+            for batch in _sample_batches(clip, slice_bytes):
+                yield request_type(sample_slices=batch)
+        else:
+            for samples in _sample_slices(clip, slice_bytes):
+                yield request_type(samples=samples)
+
     def _effective_slice_bytes(self) -> int:
         """Bytes of samples per sent message: slice_bytes, held to half the server's message
         limit so a slice and its framing always fit (asked once, then remembered)."""
@@ -810,8 +856,8 @@ class Client:
 
         def requests():
             yield motion_service_pb2.UploadClipRequest(header=clip.header)
-            for samples in _sample_slices(clip, slice_bytes):
-                yield motion_service_pb2.UploadClipRequest(samples=samples)
+            yield from self._sample_requests(clip, slice_bytes,
+                                             motion_service_pb2.UploadClipRequest)
 
         return self._with_retries(lambda timeout, received: self._stub.UploadClip(
             requests(), timeout=timeout, metadata=self._metadata))
@@ -825,12 +871,12 @@ class Client:
         Raises: TempokeyError as upload_clip, plus the pipeline's own errors
         ("operation 1 (retime): ..."), and INTERNAL for a malformed result."""
         slice_bytes = self._effective_slice_bytes()
-        start = motion_service_pb2.ProcessStart(operations=operations)
+        # Batched result parts; servers without the feature ignore the field.
+        start = motion_service_pb2.ProcessStart(operations=operations, batch_parts=True)
 
         def requests():
             yield motion_service_pb2.ProcessRequest(header=clip.header)
-            for samples in _sample_slices(clip, slice_bytes):
-                yield motion_service_pb2.ProcessRequest(samples=samples)
+            yield from self._sample_requests(clip, slice_bytes, motion_service_pb2.ProcessRequest)
             yield motion_service_pb2.ProcessRequest(start=start)
 
         def attempt(timeout, received):
@@ -918,7 +964,8 @@ class Client:
         """The result of a succeeded job, reassembled (see PipelineResult), reports first.
         `slice_bytes` bounds the samples per message (0: the server's 1 MiB).
         Raises: TempokeyError FAILED_PRECONDITION the job has not succeeded, NOT_FOUND."""
-        request = motion_service_pb2.GetJobResultRequest(job_id=job_id, slice_bytes=slice_bytes)
+        request = motion_service_pb2.GetJobResultRequest(job_id=job_id, slice_bytes=slice_bytes,
+                                                          batch_parts=True)
 
         def attempt(timeout, received):
             assembler = _ResultAssembler()

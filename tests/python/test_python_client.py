@@ -204,6 +204,28 @@ class HealthAndInfoTest(ServerTestCase):
         self.assertEqual(info.max_clip_samples, 32 << 20)
         self.assertIn("retime", info.operations)
         self.assertIn("reduce", info.operations)
+        self.assertEqual(list(info.features), ["sample_slices", "batch_parts"])
+
+
+class SampleBatchTest(unittest.TestCase):
+    """Packing of slices for servers with the "sample_slices" feature (no server needed)."""
+
+    def test_batches_fill_the_budget_across_channels_and_keep_every_sample(self):
+        clip = tk.make_clip("many", 1.0 / 30, channels=["a", "b", "c"],
+                            samples=[[float(c * 1000 + i) for i in range(130)] for c in range(3)])
+
+        batches = list(tk._sample_batches(clip, slice_bytes=8 * 100))
+
+        self.assertEqual([sum(len(s.samples) for s in b.slices) for b in batches],
+                         [100, 100, 100, 90])
+        rebuilt = {}
+        for batch in batches:
+            for piece in batch.slices:
+                rebuilt.setdefault(piece.channel_index, {}).update(
+                    {piece.first_frame + i: v for i, v in enumerate(piece.samples)})
+        for c in range(3):
+            self.assertEqual([rebuilt[c][i] for i in range(130)],
+                             [float(c * 1000 + i) for i in range(130)])
 
 
 class UploadTest(ServerTestCase):
