@@ -61,15 +61,9 @@ std::optional<std::chrono::milliseconds> RetryDelay(const absl::Status& status, 
 }
 
 // Frames, keys and the last reduction's max error of a finished pipeline.
+// A keyed output always comes from a reduction, whose report counts its keys.
 void Describe(const core::PipelineResult& result, BatchFileResult& file) {
-  if (const auto* clip = std::get_if<core::Clip>(&result.output)) {
-    file.frames = clip->frame_count;
-  } else {
-    const auto& keyed = std::get<core::KeyedClip>(result.output);
-    for (const core::Curve& curve : keyed.curves) {
-      file.keys += static_cast<std::int64_t>(curve.keys.size());
-    }
-  }
+  if (const auto* clip = std::get_if<core::Clip>(&result.output)) file.frames = clip->frame_count;
   for (const core::StepReport& report : result.reports) {
     if (const auto* reduction = std::get_if<core::ReductionReport>(&report)) {
       file.keys = reduction->key_count;

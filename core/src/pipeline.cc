@@ -137,12 +137,8 @@ absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> st
 }
 
 bool ProducesKeyedOutput(std::span<const PipelineStep> steps) {
-  bool keyed = false;
-  for (const PipelineStep& step : steps) {
-    if (ProducesKeyedClip(step)) keyed = true;
-    if (TakesKeyedClip(step)) keyed = false;
-  }
-  return keyed;
+  // In a valid chain every step's output kind is its own: only a reduce leaves a keyed clip.
+  return !steps.empty() && ProducesKeyedClip(steps.back());
 }
 
 absl::StatusOr<PipelineResult> RunPipeline(const Clip& clip, std::span<const PipelineStep> steps,
