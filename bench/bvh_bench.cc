@@ -9,9 +9,9 @@
 #include <cstdlib>
 #include <string>
 
-#include "tempokey/core/bvh.h"
-#include "tempokey/core/csv.h"
-#include "tempokey/core/file_io.h"
+#include "tempokey/core/io/bvh.h"
+#include "tempokey/core/io/csv.h"
+#include "tempokey/core/io/file_io.h"
 
 namespace tempokey::core {
 namespace {

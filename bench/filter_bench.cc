@@ -22,11 +22,11 @@
 #include <string>
 #include <vector>
 
-#include "tempokey/core/bvh.h"
-#include "tempokey/core/keyed_clip.h"
-#include "tempokey/core/reduce.h"
-#include "tempokey/core/retime.h"
-#include "tempokey/core/rotation.h"
+#include "tempokey/core/io/bvh.h"
+#include "tempokey/core/model/keyed_clip.h"
+#include "tempokey/core/reduce/reduce.h"
+#include "tempokey/core/retime/retime.h"
+#include "tempokey/core/model/rotation.h"
 
 namespace tempokey::core {
 namespace {

@@ -4,11 +4,11 @@
 #include <vector>
 
 #include "benchmark/benchmark.h"
-#include "tempokey/core/bvh.h"
-#include "tempokey/core/hermite_dp.h"
-#include "tempokey/core/reduce.h"
-#include "tempokey/core/rotation.h"
-#include "tests/core/hermite_reference.h"
+#include "tempokey/core/io/bvh.h"
+#include "tempokey/core/reduce/hermite_dp.h"
+#include "tempokey/core/reduce/reduce.h"
+#include "tempokey/core/model/rotation.h"
+#include "tests/core/reduce/hermite_reference.h"
 
 namespace tempokey::core {
 namespace {

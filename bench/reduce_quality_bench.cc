@@ -16,8 +16,8 @@
 #include <string>
 #include <vector>
 
-#include "tempokey/core/bvh.h"
-#include "tempokey/core/reduce.h"
+#include "tempokey/core/io/bvh.h"
+#include "tempokey/core/reduce/reduce.h"
 
 namespace tempokey::core {
 namespace {

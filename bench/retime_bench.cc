@@ -15,11 +15,11 @@
 #include <vector>
 
 #include "benchmark/benchmark.h"
-#include "tempokey/core/bvh.h"
-#include "tempokey/core/kinematics.h"
-#include "tempokey/core/resample.h"
-#include "tempokey/core/retime.h"
-#include "tempokey/core/time_map.h"
+#include "tempokey/core/io/bvh.h"
+#include "tempokey/core/model/kinematics.h"
+#include "tempokey/core/retime/resample.h"
+#include "tempokey/core/retime/retime.h"
+#include "tempokey/core/retime/time_map.h"
 
 namespace tempokey::core {
 namespace {

@@ -15,8 +15,8 @@
 #include <vector>
 
 #include "benchmark/benchmark.h"
-#include "tempokey/core/bvh.h"
-#include "tempokey/core/retime.h"
+#include "tempokey/core/io/bvh.h"
+#include "tempokey/core/retime/retime.h"
 
 namespace tempokey::core {
 namespace {

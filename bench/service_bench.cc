@@ -56,8 +56,8 @@
 #include "grpcpp/security/credentials.h"
 #include "grpcpp/support/channel_arguments.h"
 #include "proto/retry_hint.h"
-#include "tempokey/core/bvh.h"
-#include "tempokey/core/pipeline.h"
+#include "tempokey/core/io/bvh.h"
+#include "tempokey/core/pipeline/pipeline.h"
 
 extern char** environ;
 

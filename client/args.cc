@@ -8,8 +8,8 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "client/cli_errors.h"
-#include "tempokey/core/numbers.h"
-#include "tempokey/core/status.h"
+#include "tempokey/core/model/numbers.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
 namespace {

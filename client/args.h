@@ -16,7 +16,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
-#include "tempokey/core/retime.h"
+#include "tempokey/core/retime/retime.h"
 
 namespace tempokey::client {
 

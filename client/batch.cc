@@ -14,9 +14,9 @@
 #include "absl/strings/str_format.h"
 #include "client/cli_errors.h"
 #include "proto/retry_hint.h"
-#include "tempokey/core/json.h"
-#include "tempokey/core/numbers.h"
-#include "tempokey/core/status.h"
+#include "tempokey/core/io/json.h"
+#include "tempokey/core/model/numbers.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
 namespace {

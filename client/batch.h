@@ -16,7 +16,7 @@
 #include "absl/status/statusor.h"
 #include "client/client.h"
 #include "client/clip_files.h"
-#include "tempokey/core/pipeline.h"
+#include "tempokey/core/pipeline/pipeline.h"
 
 namespace tempokey::client {
 

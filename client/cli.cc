@@ -12,7 +12,7 @@
 #include "client/cli_errors.h"
 #include "client/command.h"
 #include "grpc/support/log.h"
-#include "tempokey/core/status.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
 namespace {

@@ -22,7 +22,7 @@
 #include "grpcpp/security/credentials.h"
 #include "grpcpp/support/byte_buffer.h"
 #include "grpcpp/support/channel_arguments.h"
-#include "tempokey/core/status.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
 namespace {

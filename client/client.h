@@ -22,9 +22,9 @@
 #include "grpcpp/support/status.h"
 #include "proto/convert.h"
 #include "proto/retry_hint.h"
-#include "tempokey/core/clip.h"
-#include "tempokey/core/pipeline.h"
-#include "tempokey/core/progress.h"
+#include "tempokey/core/model/clip.h"
+#include "tempokey/core/pipeline/pipeline.h"
+#include "tempokey/core/model/progress.h"
 #include "tempokey/v1/motion_service.grpc.pb.h"
 
 namespace tempokey::client {

@@ -8,10 +8,11 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "client/cli_errors.h"
-#include "tempokey/core/bvh.h"
-#include "tempokey/core/csv.h"
-#include "tempokey/core/keyed_io.h"
-#include "tempokey/core/status.h"
+#include "tempokey/core/io/bvh.h"
+#include "tempokey/core/io/csv.h"
+#include "tempokey/core/io/keyed_json.h"
+#include "tempokey/core/io/maya_anim.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
 namespace {

@@ -12,8 +12,8 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "tempokey/core/clip.h"
-#include "tempokey/core/keyed_clip.h"
+#include "tempokey/core/model/clip.h"
+#include "tempokey/core/model/keyed_clip.h"
 
 namespace tempokey::client {
 

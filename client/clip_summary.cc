@@ -9,8 +9,8 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
-#include "tempokey/core/numbers.h"
-#include "tempokey/core/status.h"
+#include "tempokey/core/model/numbers.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
 namespace {

@@ -6,10 +6,10 @@
 #include <string>
 #include <string_view>
 
-#include "tempokey/core/clip.h"
-#include "tempokey/core/keyed_clip.h"
-#include "tempokey/core/reduce.h"
-#include "tempokey/core/retime.h"
+#include "tempokey/core/model/clip.h"
+#include "tempokey/core/model/keyed_clip.h"
+#include "tempokey/core/reduce/reduce.h"
+#include "tempokey/core/retime/retime.h"
 
 namespace tempokey::client {
 

@@ -11,8 +11,8 @@
 #include "client/cli_errors.h"
 #include "client/clip_files.h"
 #include "client/clip_summary.h"
-#include "tempokey/core/file_io.h"
-#include "tempokey/core/status.h"
+#include "tempokey/core/io/file_io.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
 namespace {

@@ -16,8 +16,8 @@
 #include "client/args.h"
 #include "client/cli.h"
 #include "client/client.h"
-#include "tempokey/core/clip.h"
-#include "tempokey/core/pipeline.h"
+#include "tempokey/core/model/clip.h"
+#include "tempokey/core/pipeline/pipeline.h"
 
 namespace tempokey::client {
 

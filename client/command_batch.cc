@@ -11,8 +11,8 @@
 #include "client/clip_files.h"
 #include "client/command.h"
 #include "client/pipeline_file.h"
-#include "tempokey/core/file_io.h"
-#include "tempokey/core/status.h"
+#include "tempokey/core/io/file_io.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
 namespace {

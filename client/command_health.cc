@@ -4,7 +4,7 @@
 #include "client/cli_errors.h"
 #include "client/clip_summary.h"
 #include "client/command.h"
-#include "tempokey/core/status.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
 namespace {

@@ -7,7 +7,7 @@
 #include "client/clip_summary.h"
 #include "client/command.h"
 #include "client/step_flags.h"
-#include "tempokey/core/status.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
 namespace {

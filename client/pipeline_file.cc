@@ -9,9 +9,9 @@
 #include "client/args.h"
 #include "client/cli_errors.h"
 #include "client/step_flags.h"
-#include "tempokey/core/file_io.h"
-#include "tempokey/core/json.h"
-#include "tempokey/core/status.h"
+#include "tempokey/core/io/file_io.h"
+#include "tempokey/core/io/json.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
 namespace {

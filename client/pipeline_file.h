@@ -19,7 +19,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
-#include "tempokey/core/pipeline.h"
+#include "tempokey/core/pipeline/pipeline.h"
 
 namespace tempokey::client {
 

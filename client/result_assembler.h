@@ -9,8 +9,8 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "proto/convert.h"
-#include "tempokey/core/clip.h"
-#include "tempokey/core/pipeline.h"
+#include "tempokey/core/model/clip.h"
+#include "tempokey/core/pipeline/pipeline.h"
 #include "tempokey/v1/motion_service.pb.h"
 
 namespace tempokey::client {

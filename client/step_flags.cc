@@ -9,7 +9,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "client/cli_errors.h"
-#include "tempokey/core/status.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
 namespace {

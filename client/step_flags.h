@@ -11,7 +11,7 @@
 
 #include "absl/status/statusor.h"
 #include "client/args.h"
-#include "tempokey/core/pipeline.h"
+#include "tempokey/core/pipeline/pipeline.h"
 
 namespace tempokey::client {
 

@@ -8,8 +8,8 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
-#include "tempokey/core/numbers.h"
-#include "tempokey/core/status.h"
+#include "tempokey/core/model/numbers.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::wire {
 namespace {

@@ -13,7 +13,7 @@
 #include <span>
 #include <string>
 
-#include "tempokey/core/clip.h"
+#include "tempokey/core/model/clip.h"
 
 namespace tempokey::server {
 

@@ -14,7 +14,7 @@
 
 #include "absl/base/thread_annotations.h"
 #include "absl/status/statusor.h"
-#include "tempokey/core/clip.h"
+#include "tempokey/core/model/clip.h"
 
 namespace tempokey::server {
 

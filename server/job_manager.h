@@ -23,8 +23,8 @@
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "server/job_pool.h"
-#include "tempokey/core/clip.h"
-#include "tempokey/core/pipeline.h"
+#include "tempokey/core/model/clip.h"
+#include "tempokey/core/pipeline/pipeline.h"
 
 namespace tempokey::server {
 

@@ -6,7 +6,7 @@
 #include <memory>
 
 #include "server/job_manager.h"
-#include "tempokey/core/pipeline.h"
+#include "tempokey/core/pipeline/pipeline.h"
 #include "tempokey/v1/motion_service.pb.h"
 
 namespace tempokey::server {

@@ -19,8 +19,8 @@
 #include "server/server.h"
 #include "spdlog/sinks/stdout_sinks.h"
 #include "spdlog/spdlog.h"
-#include "tempokey/core/file_io.h"
-#include "tempokey/core/status.h"
+#include "tempokey/core/io/file_io.h"
+#include "tempokey/core/model/status.h"
 
 ABSL_FLAG(std::string, address, "127.0.0.1:50051",
           "Address to listen on; port 0 picks a free port (see --port_file).");

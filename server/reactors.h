@@ -8,7 +8,7 @@
 #include "absl/status/statusor.h"
 #include "grpcpp/support/server_callback.h"
 #include "server/service_context.h"
-#include "tempokey/core/pipeline.h"
+#include "tempokey/core/pipeline/pipeline.h"
 #include "tempokey/v1/motion_service.pb.h"
 
 namespace tempokey::server {

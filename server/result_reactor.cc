@@ -9,7 +9,7 @@
 #include "server/job_proto.h"
 #include "server/reactors.h"
 #include "server/status_util.h"
-#include "tempokey/core/status.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::server {
 namespace {

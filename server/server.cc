@@ -20,8 +20,8 @@
 #include "server/reactors.h"
 #include "server/service_context.h"
 #include "spdlog/spdlog.h"
-#include "tempokey/core/file_io.h"
-#include "tempokey/core/status.h"
+#include "tempokey/core/io/file_io.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::server {
 namespace {

@@ -11,7 +11,7 @@
 
 #include "absl/status/statusor.h"
 #include "absl/strings/str_cat.h"
-#include "tempokey/core/status.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::server {
 namespace {

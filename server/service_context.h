@@ -15,7 +15,7 @@
 #include "server/job_pool.h"
 #include "server/metrics.h"
 #include "server/server_options.h"
-#include "tempokey/core/clip.h"
+#include "tempokey/core/model/clip.h"
 
 namespace tempokey::server {
 

@@ -12,7 +12,7 @@
 #include "server/reactors.h"
 #include "server/status_util.h"
 #include "spdlog/spdlog.h"
-#include "tempokey/core/status.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::server {
 namespace {

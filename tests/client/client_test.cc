@@ -17,7 +17,7 @@
 #include "grpcpp/support/validate_service_config.h"
 #include "gtest/gtest.h"
 #include "server/server.h"
-#include "tempokey/core/bvh.h"
+#include "tempokey/core/io/bvh.h"
 #include "tests/testing/start_gate.h"
 #include "tests/testing/test_paths.h"
 

@@ -7,7 +7,7 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "proto/convert.h"
-#include "tempokey/core/bvh.h"
+#include "tempokey/core/io/bvh.h"
 #include "tests/testing/test_paths.h"
 
 namespace tempokey::client {

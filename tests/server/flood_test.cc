@@ -18,7 +18,7 @@
 #include "client/client.h"
 #include "gtest/gtest.h"
 #include "proto/retry_hint.h"
-#include "tempokey/core/pipeline.h"
+#include "tempokey/core/pipeline/pipeline.h"
 #include "tests/server/test_clips.h"
 #include "tests/testing/process_util.h"
 #include "tests/testing/test_paths.h"

@@ -12,7 +12,7 @@
 #include "server/job_manager.h"
 #include "server/job_pool.h"
 #include "server/server.h"
-#include "tempokey/core/bvh.h"
+#include "tempokey/core/io/bvh.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/test_paths.h"
 

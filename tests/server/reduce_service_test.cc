@@ -1,5 +1,5 @@
 // The paper's reduction through a real server: every malformed parameter of the core table
-// (tests/core/reduce_invalid_cases.h) and every malformed clip is refused with INVALID_ARGUMENT
+// (tests/core/reduce/reduce_invalid_cases.h) and every malformed clip is refused with INVALID_ARGUMENT
 // and a precise message before anything is queued, the server keeps serving, and a constant
 // channel comes back as two flat keys.
 #include <cmath>
@@ -12,7 +12,7 @@
 #include "proto/convert.h"
 #include "server/job_manager.h"
 #include "server/server.h"
-#include "tests/core/reduce_invalid_cases.h"
+#include "tests/core/reduce/reduce_invalid_cases.h"
 #include "tests/server/server_test_util.h"
 
 namespace tempokey::testing {

@@ -1,4 +1,4 @@
-// Every bad warp of the core table (tests/core/retime_invalid_cases.h) that v1 can express, sent to
+// Every bad warp of the core table (tests/core/retime/retime_invalid_cases.h) that v1 can express, sent to
 // a real server as an inline-clip job and as a Process call: each is refused with INVALID_ARGUMENT
 // and the core's exact message behind "operation 1 (retime): ", nothing is queued, and the server
 // keeps serving.
@@ -11,7 +11,7 @@
 #include "proto/convert.h"
 #include "server/job_manager.h"
 #include "server/server.h"
-#include "tests/core/retime_invalid_cases.h"
+#include "tests/core/retime/retime_invalid_cases.h"
 #include "tests/server/server_test_util.h"
 
 namespace tempokey::testing {

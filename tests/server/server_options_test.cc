@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "gtest/gtest.h"
-#include "tempokey/core/file_io.h"
+#include "tempokey/core/io/file_io.h"
 #include "tests/testing/test_paths.h"
 
 namespace tempokey::server {

@@ -27,8 +27,8 @@
 #include "gtest/gtest.h"
 #include "proto/convert.h"
 #include "server/server.h"
-#include "tempokey/core/clip.h"
-#include "tempokey/core/pipeline.h"
+#include "tempokey/core/model/clip.h"
+#include "tempokey/core/pipeline/pipeline.h"
 #include "tempokey/v1/motion_service.grpc.pb.h"
 #include "tests/server/test_clips.h"
 

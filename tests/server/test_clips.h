@@ -12,7 +12,7 @@
 #include <utility>
 #include <vector>
 
-#include "tempokey/core/clip.h"
+#include "tempokey/core/model/clip.h"
 #include "tests/testing/start_gate.h"
 
 namespace tempokey::testing {

@@ -7,7 +7,7 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "server/server.h"
-#include "tempokey/core/bvh.h"
+#include "tempokey/core/io/bvh.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/test_paths.h"
 

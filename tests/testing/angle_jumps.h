@@ -9,10 +9,10 @@
 #include <vector>
 
 #include "gtest/gtest.h"
-#include "tempokey/core/clip.h"
-#include "tempokey/core/resample.h"
-#include "tempokey/core/retime.h"
-#include "tempokey/core/time_map.h"
+#include "tempokey/core/model/clip.h"
+#include "tempokey/core/retime/resample.h"
+#include "tempokey/core/retime/retime.h"
+#include "tempokey/core/retime/time_map.h"
 
 namespace tempokey::testing {
 

@@ -22,7 +22,7 @@
 #include "absl/status/statusor.h"
 #include "gmock/gmock.h"
 #include "absl/strings/str_cat.h"
-#include "tempokey/core/file_io.h"
+#include "tempokey/core/io/file_io.h"
 #include "tests/testing/test_paths.h"
 
 extern char** environ;

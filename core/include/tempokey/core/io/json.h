@@ -1,0 +1,49 @@
+// A small, strict JSON reader for tempokey's own files (keyed clips, batch pipelines), with the
+// line and column of every value so that callers can point at what they refuse, and the string
+// quoting its writers share.
+#ifndef TEMPOKEY_CORE_IO_JSON_H_
+#define TEMPOKEY_CORE_IO_JSON_H_
+
+#include <memory>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+#include "absl/status/statusor.h"
+
+namespace tempokey::core {
+
+struct JsonValue;
+using JsonArray = std::vector<JsonValue>;
+// Members in document order; repeated names are kept (callers refuse them where it matters).
+using JsonObject = std::vector<std::pair<std::string, JsonValue>>;
+
+struct JsonValue {
+  enum class Type { kNull, kBool, kNumber, kString, kArray, kObject } type = Type::kNull;
+  double number = 0.0;  // kNumber: the value (finite; see ParseJson())
+  bool boolean = false;  // kBool
+  // kString: the decoded string; kNumber: the number exactly as written ("29.97", "1e-3").
+  std::string text;
+  std::shared_ptr<JsonArray> array;    // kArray
+  std::shared_ptr<JsonObject> object;  // kObject
+  int line = 1;    // where the value starts in the document, 1-based
+  int column = 1;
+
+  // The first member called `name` of an object; nullptr when absent or not an object.
+  const JsonValue* Find(std::string_view name) const;
+};
+
+// Parses one JSON document. `source` names it in messages.
+// Accepts RFC 8259 JSON with these limits: nesting at most 64 levels, numbers must be finite
+// doubles, \u escapes only for ASCII.
+// Errors: kInvalidArgument "<source>:<line>:<column>: expected ',' or '}', got 'x'".
+// Thread-safe: a pure function.
+absl::StatusOr<JsonValue> ParseJson(std::string_view text, std::string_view source);
+
+// Appends `text` to `out` as a JSON string literal (quotes, escapes of '"', '\\' and controls).
+void AppendJsonString(std::string& out, std::string_view text);
+
+}  // namespace tempokey::core
+
+#endif  // TEMPOKEY_CORE_IO_JSON_H_

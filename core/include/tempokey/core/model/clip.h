@@ -1,0 +1,131 @@
+// The motion data model (SPEC 1): clips of sampled channels over an optional skeleton.
+#ifndef TEMPOKEY_CORE_MODEL_CLIP_H_
+#define TEMPOKEY_CORE_MODEL_CLIP_H_
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "absl/status/status.h"
+
+namespace tempokey::core {
+
+using Vec3 = std::array<double, 3>;
+
+// What a channel animates. Rotations are Euler angles in degrees.
+enum class ChannelKind {
+  kXPosition,
+  kYPosition,
+  kZPosition,
+  kXRotation,
+  kYRotation,
+  kZRotation,
+  kScalar,
+};
+
+bool IsRotation(ChannelKind kind);
+bool IsPosition(ChannelKind kind);
+// Axis 0, 1, 2 for X, Y, Z position or rotation; -1 for kScalar.
+int Axis(ChannelKind kind);
+// The BVH spelling: "Xposition" ... "Zrotation"; "scalar" for kScalar.
+std::string_view ChannelKindName(ChannelKind kind);
+// Parses a BVH channel name (case-sensitive as BVH files write them, e.g. "Xrotation").
+std::optional<ChannelKind> ParseChannelKind(std::string_view name);
+
+// One joint in a flat skeleton. Joints are in file order and a parent always precedes its
+// children, so `parent < own index`. No pointers: relations are indices.
+struct Joint {
+  std::string name;
+  int parent = -1;                  // index into Skeleton::joints, -1 for a root
+  Vec3 offset{};                    // from the parent, in file units
+  std::vector<int> channels;        // indices into Clip::channels, in the joint's file order
+  std::vector<Vec3> end_sites;      // End Site offsets below this joint
+
+  friend bool operator==(const Joint&, const Joint&) = default;
+};
+
+struct Skeleton {
+  std::vector<Joint> joints;
+
+  bool empty() const { return joints.empty(); }
+  // Index of the joint named `name`, or -1.
+  int FindJoint(std::string_view name) const;
+
+  friend bool operator==(const Skeleton&, const Skeleton&) = default;
+};
+
+// One sampled channel: one value per frame.
+struct Channel {
+  int joint = -1;                   // index into Skeleton::joints, -1 for none
+  ChannelKind kind = ChannelKind::kScalar;
+  std::string name;                 // for scalar channels; joint channels derive theirs
+  std::vector<double> samples;
+
+  friend bool operator==(const Channel&, const Channel&) = default;
+};
+
+// A timed annotation (foot contact, event); retiming maps it through the time map.
+struct Marker {
+  std::string name;
+  double time_seconds = 0.0;
+  double duration_seconds = 0.0;    // 0 for an instant
+
+  friend bool operator==(const Marker&, const Marker&) = default;
+};
+
+// A uniformly sampled clip. Sample i of every channel is at time i * frame_time_seconds.
+struct Clip {
+  std::string name;
+  // Seconds between samples, exactly as read (BVH "Frame Time: 0.0083333"); never snapped.
+  double frame_time_seconds = 1.0 / 30.0;
+  std::int64_t frame_count = 0;
+  Skeleton skeleton;                // may be empty: then channels are plain named channels
+  std::vector<Channel> channels;    // in motion-column (file) order
+  std::vector<Marker> markers;
+
+  double frame_rate() const { return 1.0 / frame_time_seconds; }
+  // Time of the last sample: (frame_count - 1) * frame_time_seconds (not frame_count * ...).
+  double duration_seconds() const;
+  std::int64_t sample_count() const;
+
+  friend bool operator==(const Clip&, const Clip&) = default;
+};
+
+// "Hips.Xrotation" for a joint channel, the channel's name for a scalar one, "channel 7" when
+// it has neither.
+std::string ChannelName(const Clip& clip, int channel_index);
+// "channel 14 (LeftKnee.Xrotation)": how messages refer to a channel.
+std::string ChannelLabel(const Clip& clip, int channel_index);
+
+// Limits on untrusted input (server uploads, files). Defaults suit the largest real captures
+// many times over.
+struct ClipLimits {
+  std::int64_t max_frames = 10'000'000;
+  std::int64_t max_channels = 100'000;
+  std::int64_t max_samples = 200'000'000;   // frames x channels (1.6 GB of doubles)
+  int max_joints = 10'000;
+  int max_depth = 256;                       // joint nesting
+};
+
+// Checks every invariant of SPEC 1: frame time finite and > 0; frame_count >= 1; every channel
+// has frame_count finite samples; joint indices valid, parents before children, joint names
+// non-empty and unique; each joint's channel list names channels of that joint, and every joint
+// channel is in its joint's list; rotation channels of one joint name distinct axes; every
+// marker has a finite time and a finite duration >= 0.
+//
+// Errors: kInvalidArgument naming the channel, joint, marker (0-based index and quoted name),
+// frame and value, e.g.
+//   "channel 14 (LeftKnee.Xrotation): sample 40 is NaN",
+//   "marker 2 (\"contact\"): duration_seconds must be finite and >= 0, got -0.5".
+absl::Status ValidateClip(const Clip& clip, const ClipLimits& limits = {});
+
+// Same checks as ValidateClip() on the layout only (everything but the sample values, markers
+// included), for a header received before its samples.
+absl::Status ValidateClipLayout(const Clip& clip, const ClipLimits& limits = {});
+
+}  // namespace tempokey::core
+
+#endif  // TEMPOKEY_CORE_MODEL_CLIP_H_

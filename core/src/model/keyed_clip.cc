@@ -1,0 +1,205 @@
+#include "tempokey/core/model/keyed_clip.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <string>
+
+#include "absl/strings/str_cat.h"
+#include "tempokey/core/model/numbers.h"
+#include "tempokey/core/model/status.h"
+
+namespace tempokey::core {
+namespace {
+
+constexpr double kDefaultWeight = 1.0 / 3.0;
+
+absl::Status CheckFinite(std::string_view label, std::size_t key, std::string_view field,
+                         double value) {
+  if (std::isfinite(value)) return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrCat(AsAbsl(label), ": key ", key, ": ",
+                                                 AsAbsl(field), " is ", DescribeDouble(value)));
+}
+
+absl::Status CheckWeight(std::string_view label, std::size_t key, std::string_view field,
+                         const std::optional<double>& weight) {
+  if (!weight) return absl::OkStatus();
+  TEMPOKEY_RETURN_IF_ERROR(CheckFinite(label, key, field, *weight));
+  if (*weight <= 0.0 || *weight > 1.0) {
+    return absl::InvalidArgumentError(absl::StrCat(AsAbsl(label), ": key ", key, ": ",
+                                                   AsAbsl(field), " must be in (0, 1], got ",
+                                                   *weight));
+  }
+  return absl::OkStatus();
+}
+
+// Value of the segment from `a` to `b` at `time_seconds`, a.time <= time <= b.time.
+// Neither side weighted: time is linear in s, the plain cubic Hermite with tangents scaled by dt.
+double EvaluatePlainSegment(const Key& a, const Key& b, double time_seconds) {
+  const double dt = b.time_seconds - a.time_seconds;
+  const double s = (time_seconds - a.time_seconds) / dt;
+  const double s2 = s * s;
+  const double s3 = s2 * s;
+  const double h00 = 2 * s3 - 3 * s2 + 1;
+  const double h10 = s3 - 2 * s2 + s;
+  const double h01 = -2 * s3 + 3 * s2;
+  const double h11 = s3 - s2;
+  return h00 * a.value + h10 * a.out_tangent * dt + h01 * b.value + h11 * b.in_tangent * dt;
+}
+
+// A weighted side: the 2D Bezier, its parameter solved from time.
+double EvaluateWeightedSegment(const Key& a, const Key& b, double time_seconds) {
+  const double dt = b.time_seconds - a.time_seconds;
+  const double wa = a.out_weight.value_or(kDefaultWeight) * dt;
+  const double wb = b.in_weight.value_or(kDefaultWeight) * dt;
+  // Controls relative to a.time keep the solve well conditioned far from time 0.
+  const double s = SolveBezierParameter(0.0, wa, dt - wb, dt, time_seconds - a.time_seconds);
+  const double y0 = a.value;
+  const double y1 = a.value + a.out_tangent * wa;
+  const double y2 = b.value - b.in_tangent * wb;
+  const double y3 = b.value;
+  // de Casteljau with a + s (b - a) steps: equal controls give exactly their value.
+  auto lerp = [s](double p, double q) { return p + s * (q - p); };
+  const double y01 = lerp(y0, y1);
+  const double y12 = lerp(y1, y2);
+  const double y23 = lerp(y2, y3);
+  return lerp(lerp(y01, y12), lerp(y12, y23));
+}
+
+bool IsPlainSegment(const Key& a, const Key& b) { return !a.out_weight && !b.in_weight; }
+
+double EvaluateSegment(const Key& a, const Key& b, double time_seconds) {
+  return IsPlainSegment(a, b) ? EvaluatePlainSegment(a, b, time_seconds)
+                              : EvaluateWeightedSegment(a, b, time_seconds);
+}
+
+}  // namespace
+
+double SolveBezierParameter(double x0, double x1, double x2, double x3, double x,
+                            std::optional<double> guess) {
+  // x(s) - x0 = ((a s + b) s + c) s with the power-basis coefficients of the Bezier.
+  const double d1 = x1 - x0;
+  const double d2 = x2 - x0;
+  const double d3 = x3 - x0;
+  const double a = d3 - 3.0 * d2 + 3.0 * d1;
+  const double b = 3.0 * d2 - 6.0 * d1;
+  const double c = 3.0 * d1;
+  const double target = x - x0;
+  return SolveMonotonicCubic(a, b, c, d3, target, guess.value_or(target / d3));
+}
+
+absl::Status ValidateCurve(const Curve& curve, std::string_view label) {
+  if (curve.keys.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat(AsAbsl(label), ": the curve has no keys"));
+  }
+  for (std::size_t k = 0; k < curve.keys.size(); ++k) {
+    const Key& key = curve.keys[k];
+    TEMPOKEY_RETURN_IF_ERROR(CheckFinite(label, k, "time", key.time_seconds));
+    TEMPOKEY_RETURN_IF_ERROR(CheckFinite(label, k, "value", key.value));
+    TEMPOKEY_RETURN_IF_ERROR(CheckFinite(label, k, "in tangent", key.in_tangent));
+    TEMPOKEY_RETURN_IF_ERROR(CheckFinite(label, k, "out tangent", key.out_tangent));
+    TEMPOKEY_RETURN_IF_ERROR(CheckWeight(label, k, "in weight", key.in_weight));
+    TEMPOKEY_RETURN_IF_ERROR(CheckWeight(label, k, "out weight", key.out_weight));
+    if (k == 0) continue;
+    const Key& previous = curve.keys[k - 1];
+    if (!(key.time_seconds > previous.time_seconds)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          AsAbsl(label), ": key ", k, ": time ", key.time_seconds,
+          " s is not after the previous key's ", previous.time_seconds, " s"));
+    }
+    const double weight_sum =
+        previous.out_weight.value_or(kDefaultWeight) + key.in_weight.value_or(kDefaultWeight);
+    if (weight_sum > 1.0 + kWeightSumSlack) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          AsAbsl(label), ": key ", k, ": in weight plus the previous key's out weight is ",
+          weight_sum, ", over 1 (time would run backwards)"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ValidateKeyedClip(const KeyedClip& keyed) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateClipLayout(keyed.layout));
+  if (keyed.curves.size() != keyed.layout.channels.size()) {
+    return absl::InvalidArgumentError(absl::StrCat("keyed clip has ", keyed.curves.size(),
+                                                   " curves for ", keyed.layout.channels.size(),
+                                                   " channels"));
+  }
+  for (std::size_t c = 0; c < keyed.curves.size(); ++c) {
+    TEMPOKEY_RETURN_IF_ERROR(
+        ValidateCurve(keyed.curves[c], ChannelLabel(keyed.layout, static_cast<int>(c))));
+  }
+  return absl::OkStatus();
+}
+
+double EvaluateCurve(const Curve& curve, double time_seconds) {
+  const std::vector<Key>& keys = curve.keys;
+  if (keys.empty()) return 0.0;
+  if (!(time_seconds > keys.front().time_seconds)) return keys.front().value;
+  if (!(time_seconds < keys.back().time_seconds)) return keys.back().value;
+  // First key strictly after the query; the segment starts one before it.
+  const auto next = std::upper_bound(
+      keys.begin(), keys.end(), time_seconds,
+      [](double t, const Key& key) { return t < key.time_seconds; });
+  const Key& b = *next;
+  const Key& a = *(next - 1);
+  return EvaluateSegment(a, b, time_seconds);
+}
+
+void SampleCurve(const Curve& curve, double frame_time_seconds, std::span<double> out) {
+  const std::vector<Key>& keys = curve.keys;
+  if (keys.empty()) {
+    std::fill(out.begin(), out.end(), 0.0);
+    return;
+  }
+  // `next` is the first key strictly after the current time, as EvaluateCurve()'s search finds
+  // it; times only grow, so it only moves forward.
+  std::size_t next = 1;
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    const double t = static_cast<double>(i) * frame_time_seconds;
+    if (!(t > keys.front().time_seconds)) {
+      out[i] = keys.front().value;
+      continue;
+    }
+    if (!(t < keys.back().time_seconds)) {
+      out[i] = keys.back().value;
+      continue;
+    }
+    while (!(t < keys[next].time_seconds)) ++next;
+    const Key& a = keys[next - 1];
+    const Key& b = keys[next];
+    out[i] = IsPlainSegment(a, b) ? EvaluatePlainSegment(a, b, t)
+                                  : EvaluateWeightedSegment(a, b, t);
+  }
+}
+
+absl::StatusOr<Clip> Bake(const KeyedClip& keyed, std::optional<double> frame_time_seconds,
+                          const ClipLimits& limits) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateKeyedClip(keyed));
+  const double frame_time = frame_time_seconds.value_or(keyed.layout.frame_time_seconds);
+  if (!std::isfinite(frame_time) || frame_time <= 0.0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "bake frame time must be finite and > 0 seconds, got ", DescribeDouble(frame_time)));
+  }
+  const double duration = keyed.layout.duration_seconds();
+  const double last_index = std::floor(duration / frame_time + 1e-9);
+  const auto channel_count = static_cast<double>(keyed.layout.channels.size());
+  if (last_index + 1.0 > static_cast<double>(limits.max_frames) ||
+      last_index + 1.0 > static_cast<double>(limits.max_samples) / channel_count) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "bake at ", frame_time, " s per frame gives ", last_index + 1.0, " frames x ",
+        keyed.layout.channels.size(), " channels, over the limit of ", limits.max_samples,
+        " samples"));
+  }
+  Clip clip = keyed.layout;
+  clip.frame_time_seconds = frame_time;
+  clip.frame_count = static_cast<std::int64_t>(last_index) + 1;
+  for (std::size_t c = 0; c < clip.channels.size(); ++c) {
+    std::vector<double>& samples = clip.channels[c].samples;
+    samples.resize(static_cast<std::size_t>(clip.frame_count));
+    SampleCurve(keyed.curves[c], frame_time, samples);
+  }
+  return clip;
+}
+
+}  // namespace tempokey::core

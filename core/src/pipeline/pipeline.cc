@@ -1,0 +1,214 @@
+#include "tempokey/core/pipeline/pipeline.h"
+
+#include <cmath>
+#include <string>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "tempokey/core/model/status.h"
+
+namespace tempokey::core {
+namespace {
+
+template <class... Ts>
+struct Overloaded : Ts... {
+  using Ts::operator()...;
+};
+template <class... Ts>
+Overloaded(Ts...) -> Overloaded<Ts...>;
+
+bool TakesKeyedClip(const PipelineStep& step) { return std::holds_alternative<BakeStep>(step); }
+bool ProducesKeyedClip(const PipelineStep& step) {
+  return std::holds_alternative<ReduceStep>(step);
+}
+
+std::string StepContext(std::size_t index, const PipelineStep& step) {
+  return absl::StrCat("operation ", index + 1, " (", AsAbsl(StepName(step)), ")");
+}
+
+absl::Status ValidateRate(const std::optional<FrameRate>& rate) {
+  if (!rate) return absl::OkStatus();
+  if (rate->numerator <= 0 || rate->denominator <= 0) {
+    return absl::InvalidArgumentError(absl::StrCat("frame rate ", rate->numerator, "/",
+                                                   rate->denominator,
+                                                   " must have a positive numerator and denominator"));
+  }
+  if (rate->hz() > 100'000.0) {
+    return absl::InvalidArgumentError(absl::StrCat("frame rate ", rate->hz(),
+                                                   " Hz is over the limit of 100000 Hz"));
+  }
+  return absl::OkStatus();
+}
+
+// Wraps every rotation angle into (-180, 180].
+Clip WrapRotations(Clip clip) {
+  for (Channel& channel : clip.channels) {
+    if (!IsRotation(channel.kind)) continue;
+    for (double& v : channel.samples) {
+      double w = std::remainder(v, 360.0);  // [-180, 180]
+      if (w == -180.0) w = 180.0;
+      v = w;
+    }
+  }
+  return clip;
+}
+
+}  // namespace
+
+std::string_view StepName(const PipelineStep& step) {
+  return std::visit(Overloaded{
+                        [](const RetimeStep&) { return std::string_view("retime"); },
+                        [](const ReduceStep&) { return std::string_view("reduce"); },
+                        [](const BakeStep&) { return std::string_view("bake"); },
+                        [](const ConvertStep&) { return std::string_view("convert"); },
+                    },
+                    step);
+}
+
+namespace {
+
+// What each step needs and leaves: whether its input clip is keyed, given the one before.
+class StepChain {
+ public:
+  // Errors: "operation 2 (bake): needs a keyed clip, got a sampled clip".
+  absl::Status Accept(std::size_t index, const PipelineStep& step) {
+    if (TakesKeyedClip(step) != keyed_) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          StepContext(index, step), ": needs a ", TakesKeyedClip(step) ? "keyed" : "sampled",
+          " clip, got a ", keyed_ ? "keyed clip (add a bake operation first)" : "sampled clip"));
+    }
+    if (ProducesKeyedClip(step)) keyed_ = true;
+    if (TakesKeyedClip(step)) keyed_ = false;
+    return absl::OkStatus();
+  }
+
+ private:
+  bool keyed_ = false;
+};
+
+absl::Status ValidateStepCount(std::span<const PipelineStep> steps) {
+  if (steps.empty()) return absl::InvalidArgumentError("the pipeline has no operations");
+  if (steps.size() > kMaxPipelineSteps) {
+    return absl::InvalidArgumentError(absl::StrCat("the pipeline has ", steps.size(),
+                                                   " operations, over the limit of ",
+                                                   kMaxPipelineSteps));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::Status ValidateStepChain(std::span<const PipelineStep> steps) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateStepCount(steps));
+  StepChain chain;
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    TEMPOKEY_RETURN_IF_ERROR(chain.Accept(i, steps[i]));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> steps,
+                              const ClipLimits& limits) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateStepCount(steps));
+  StepChain chain;
+  // Step by step, so the first operation at fault is the one named.
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    const PipelineStep& step = steps[i];
+    TEMPOKEY_RETURN_IF_ERROR(chain.Accept(i, step));
+    absl::Status status = std::visit(
+        Overloaded{
+            [&](const RetimeStep& s) {
+              // Later retimes see a clip whose timing is only known at run time; the first is
+              // checked fully here, the rest again when they run.
+              if (i == 0) return ValidateRetime(clip, s.warp, s.options, limits);
+              Clip probe;
+              probe.frame_time_seconds = clip.frame_time_seconds;
+              probe.frame_count = 2;
+              return ValidateRetime(probe, s.warp, s.options, limits);
+            },
+            [](const ReduceStep& s) { return ValidateReduceOptions(s.options); },
+            [](const BakeStep& s) { return ValidateRate(s.rate); },
+            [](const ConvertStep&) { return absl::OkStatus(); },
+        },
+        step);
+    if (!status.ok()) return Annotate(status, StepContext(i, step));
+  }
+  return absl::OkStatus();
+}
+
+bool ProducesKeyedOutput(std::span<const PipelineStep> steps) {
+  // In a valid chain every step's output kind is its own: only a reduce leaves a keyed clip.
+  return !steps.empty() && ProducesKeyedClip(steps.back());
+}
+
+absl::StatusOr<PipelineResult> RunPipeline(const Clip& clip, std::span<const PipelineStep> steps,
+                                           const ProgressFn& progress, std::stop_token stop,
+                                           const ClipLimits& limits) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateClip(clip));
+  TEMPOKEY_RETURN_IF_ERROR(ValidatePipeline(clip, steps, limits));
+
+  PipelineResult result;
+  // The sampled clip the next step reads: the caller's until a step makes one of its own, so the
+  // input is copied only if a step must change it in place (convert first).
+  const Clip* input = &clip;
+  auto own_input = [&]() -> Clip& {
+    if (input != std::get_if<Clip>(&result.output)) result.output = *input;
+    input = std::get_if<Clip>(&result.output);
+    return std::get<Clip>(result.output);
+  };
+  const double step_share = 1.0 / static_cast<double>(steps.size());
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+    const PipelineStep& step = steps[i];
+    const double base = static_cast<double>(i) * step_share;
+    ProgressFn step_progress = [&](double fraction, std::string_view stage) {
+      ReportProgress(progress, base + fraction * step_share, stage);
+    };
+    ReportProgress(progress, base, StepName(step));
+
+    absl::Status status = std::visit(
+        Overloaded{
+            [&](const RetimeStep& s) -> absl::Status {
+              TEMPOKEY_ASSIGN_OR_RETURN(
+                  RetimeResult r,
+                  Retime(*input, s.warp, s.options, step_progress, stop, limits));
+              result.output = std::move(r.clip);
+              input = std::get_if<Clip>(&result.output);
+              result.reports.emplace_back(r.report);
+              return absl::OkStatus();
+            },
+            [&](const ReduceStep& s) -> absl::Status {
+              TEMPOKEY_ASSIGN_OR_RETURN(
+                  ReduceResult r,
+                  ReduceKeys(*input, s.options, step_progress, stop));
+              result.output = std::move(r.keyed);
+              input = nullptr;
+              result.reports.emplace_back(std::move(r.report));
+              return absl::OkStatus();
+            },
+            [&](const BakeStep& s) -> absl::Status {
+              std::optional<double> frame_time;
+              if (s.rate) {
+                frame_time = static_cast<double>(s.rate->denominator) /
+                             static_cast<double>(s.rate->numerator);
+              }
+              TEMPOKEY_ASSIGN_OR_RETURN(
+                  Clip baked, Bake(std::get<KeyedClip>(result.output), frame_time, limits));
+              result.output = std::move(baked);
+              input = std::get_if<Clip>(&result.output);
+              return absl::OkStatus();
+            },
+            [&](const ConvertStep& s) -> absl::Status {
+              Clip& owned = own_input();
+              if (s.wrap_rotations) owned = WrapRotations(std::move(owned));
+              return absl::OkStatus();
+            },
+        },
+        step);
+    if (!status.ok()) return Annotate(status, StepContext(i, step));
+  }
+  ReportProgress(progress, 1.0, "done");
+  return result;
+}
+
+}  // namespace tempokey::core

@@ -1,0 +1,111 @@
+// The one error metric of key reduction (SPEC 4, STYLE: one metric for reduction, tests and
+// benchmarks): keyed curves evaluated at every source frame against the unwrapped samples.
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "reduction_internal.h"
+#include "tempokey/core/reduce/reduce.h"
+#include "tempokey/core/model/rotation.h"
+#include "tempokey/core/model/status.h"
+
+namespace tempokey::core {
+namespace reduce_internal {
+namespace {
+
+struct ChannelErrors {
+  ChannelReduction summary;
+  double squared_sum = 0.0;
+};
+
+ChannelErrors MeasureChannel(std::span<const double> samples, int c, const Curve& curve,
+                             double frame_time_seconds) {
+  ChannelErrors out;
+  out.summary.channel_index = c;
+  out.summary.key_count = static_cast<std::int64_t>(curve.keys.size());
+  out.summary.sample_count = static_cast<std::int64_t>(samples.size());
+  std::vector<double> fitted(samples.size());
+  SampleCurve(curve, frame_time_seconds, fitted);
+  for (std::size_t f = 0; f < samples.size(); ++f) {
+    const double error = std::abs(fitted[f] - samples[f]);
+    out.squared_sum += error * error;
+    if (error > out.summary.max_error) {
+      out.summary.max_error = error;
+      out.summary.max_error_frame = static_cast<std::int64_t>(f);
+    }
+  }
+  out.summary.rms_error =
+      samples.empty() ? 0.0 : std::sqrt(out.squared_sum / static_cast<double>(samples.size()));
+  return out;
+}
+
+}  // namespace
+
+FittedSamples::FittedSamples(const Clip& clip) {
+  unwrapped_.reserve(static_cast<std::size_t>(std::count_if(
+      clip.channels.begin(), clip.channels.end(),
+      [](const Channel& channel) { return IsRotation(channel.kind); })));
+  channels_.reserve(clip.channels.size());
+  for (const Channel& channel : clip.channels) {
+    if (IsRotation(channel.kind)) {
+      // Reserved above: the buffers the earlier spans point into never move.
+      std::vector<double>& copy = unwrapped_.emplace_back(channel.samples);
+      UnwrapDegrees(copy);
+      channels_.emplace_back(copy);
+    } else {
+      channels_.emplace_back(channel.samples);
+    }
+  }
+}
+
+ReductionReport MeasureFitted(std::span<const std::span<const double>> samples,
+                              std::span<const Curve> curves, double frame_time_seconds) {
+  ReductionReport report;
+  double squared_sum = 0.0;
+  for (std::size_t c = 0; c < samples.size(); ++c) {
+    const ChannelErrors errors =
+        MeasureChannel(samples[c], static_cast<int>(c), curves[c], frame_time_seconds);
+    const ChannelReduction& channel = errors.summary;
+    report.key_count += channel.key_count;
+    report.sample_count += channel.sample_count;
+    squared_sum += errors.squared_sum;
+    if (channel.max_error > report.max_error) {
+      report.max_error = channel.max_error;
+      report.worst_channel_index = channel.channel_index;
+      report.worst_frame = channel.max_error_frame;
+    }
+    report.channels.push_back(channel);
+  }
+  report.rms_error = report.sample_count > 0
+                         ? std::sqrt(squared_sum / static_cast<double>(report.sample_count))
+                         : 0.0;
+  return report;
+}
+
+}  // namespace reduce_internal
+
+absl::StatusOr<ReductionReport> MeasureReduction(const Clip& clip, const KeyedClip& keyed) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateClip(clip));
+  TEMPOKEY_RETURN_IF_ERROR(ValidateKeyedClip(keyed));
+  if (keyed.layout.channels.size() != clip.channels.size()) {
+    return absl::InvalidArgumentError(absl::StrCat("keyed clip has ", keyed.layout.channels.size(),
+                                                   " channels, the clip has ",
+                                                   clip.channels.size()));
+  }
+  for (std::size_t c = 0; c < clip.channels.size(); ++c) {
+    if (keyed.layout.channels[c].kind != clip.channels[c].kind) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          ChannelLabel(clip, static_cast<int>(c)), ": the keyed clip's channel is ",
+          AsAbsl(ChannelKindName(keyed.layout.channels[c].kind)), ", not ",
+          AsAbsl(ChannelKindName(clip.channels[c].kind))));
+    }
+  }
+  const reduce_internal::FittedSamples samples(clip);
+  return reduce_internal::MeasureFitted(samples.channels(), keyed.curves,
+                                        clip.frame_time_seconds);
+}
+
+}  // namespace tempokey::core

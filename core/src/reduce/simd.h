@@ -1,0 +1,55 @@
+// Small vector kernels: 4-lane double vectors (GCC vector extensions) and the AVX clone macro.
+//
+// Kernels written with 4-lane vectors compute every lane with the same operations in the same
+// order whether the compiler emits one AVX instruction or two SSE2 ones, and contraction into FMA
+// is off (-ffp-contract follows -std=c++20), so the AVX and portable clones agree bit for bit:
+// results do not depend on the machine.
+#ifndef TEMPOKEY_CORE_SRC_REDUCE_SIMD_H_
+#define TEMPOKEY_CORE_SRC_REDUCE_SIMD_H_
+
+#include <cstring>
+
+// The innermost kernels are cloned for AVX and picked at load time by an ifunc resolver. Sanitizer
+// builds keep the portable clone only: an instrumented resolver runs before the sanitizer's
+// runtime is up (TSan crashes there).
+#if defined(TEMPOKEY_SANITIZED)
+#define TEMPOKEY_AVX_CLONES
+#else
+#define TEMPOKEY_AVX_CLONES __attribute__((target_clones("avx", "default")))
+#endif
+
+namespace tempokey::core::simd {
+
+// The helpers return 4-lane vectors by value; they are always inlined into the kernels, so the
+// ABI of such a return without AVX (-Wpsabi's note) never comes into play.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"
+
+using V4 = double __attribute__((vector_size(32)));
+
+[[gnu::always_inline]] inline V4 Load(const double* p) {
+  V4 v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+
+[[gnu::always_inline]] inline void Store(double* p, V4 v) { std::memcpy(p, &v, sizeof v); }
+
+[[gnu::always_inline]] inline V4 Broadcast(double x) { return V4{x, x, x, x}; }
+
+// Lanes summed in a fixed order.
+[[gnu::always_inline]] inline double Sum(V4 v) { return (v[0] + v[1]) + (v[2] + v[3]); }
+
+[[gnu::always_inline]] inline V4 Abs(V4 v) { return v < 0.0 ? -v : v; }
+
+[[gnu::always_inline]] inline double Max(V4 v) {
+  const double a = v[0] > v[1] ? v[0] : v[1];
+  const double b = v[2] > v[3] ? v[2] : v[3];
+  return a > b ? a : b;
+}
+
+#pragma GCC diagnostic pop
+
+}  // namespace tempokey::core::simd
+
+#endif  // TEMPOKEY_CORE_SRC_REDUCE_SIMD_H_

@@ -1,0 +1,862 @@
+// The error-bounded spline fit (SPEC 4.2); the method is described in tolerance_fit.h.
+#include "tempokey/core/reduce/tolerance_fit.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <utility>
+
+#include "absl/strings/str_cat.h"
+#include "tempokey/core/model/progress.h"
+#include "tempokey/core/model/status.h"
+#include "simd.h"
+
+// The kernels below use simd::V4 values; helpers that return them are always inlined (simd.h).
+#pragma GCC diagnostic ignored "-Wpsabi"
+
+namespace tempokey::core {
+namespace {
+
+// Fits aim a hair inside the bound, so that evaluating the same curve another way (keyed curves
+// in seconds, EvaluateCurve()) rounds to within the bound too.
+constexpr double kBoundMargin = 1e-9;
+// Pulls each key's slope towards the samples' central difference and its value towards its
+// sample, with this weight against 1 per fitted frame: negligible wherever frames determine the
+// fit, and it keeps the normal equations regular where they do not (keys on consecutive frames).
+constexpr double kRidge = 1e-9;
+// Insertion rounds at most; each round at least halves every segment over the bound.
+constexpr int kMaxInsertionRounds = 64;
+// A removal whose window misses the bound by up to this factor is worth reweighting.
+constexpr double kLawsonReach = 1.5;
+// Window of a removal: up to kWindowSide keys on each side of the removed one (fewer at the
+// clip's ends), the removed key itself not among them.
+constexpr int kWindowSide = 2;
+constexpr int kWindowKeys = 2 * kWindowSide;
+
+using Mat2 = std::array<double, 4>;  // row-major 2 x 2
+using Vec2 = std::array<double, 2>;
+
+// The coefficients of (v_a, m_a, v_b, m_b) at t in a segment of length L:
+// (h00, h10 L, h01, h11 L).
+inline std::array<double, 4> Coefficients(double t, double length) {
+  const double t2 = t * t;
+  const double t3 = t2 * t;
+  return {2.0 * t3 - 3.0 * t2 + 1.0, (t3 - 2.0 * t2 + t) * length, -2.0 * t3 + 3.0 * t2,
+          (t3 - t2) * length};
+}
+
+// Coefficients() at every frame k = 0..L of a segment, column by column (the coefficient of v_a
+// at every frame, then of m_a, ...), so the per-frame loops run several frames per step.
+struct BasisColumns {
+  std::array<std::vector<double>, 4> column;
+
+  void Fill(std::int64_t length) {
+    const auto l = static_cast<double>(length);
+    for (std::vector<double>& c : column) c.resize(static_cast<std::size_t>(length) + 1);
+    for (std::int64_t k = 0; k <= length; ++k) {
+      const std::array<double, 4> c = Coefficients(static_cast<double>(k) / l, l);
+      for (int r = 0; r < 4; ++r) column[r][k] = c[r];
+    }
+  }
+};
+
+// Where a fit gets its basis columns: segments up to kTabledLength frames long from a table
+// computed once per thread (about 1 MB) and fetched once per fit; longer ones, rare, from a few
+// recently computed lengths. A returned reference stays valid until the next Get().
+constexpr std::int64_t kTabledLength = 256;
+
+class BasisSource {
+ public:
+  BasisSource() : tables_(ThreadTables()) {}
+
+  const BasisColumns& Get(std::int64_t length) {
+    if (length <= kTabledLength) {
+      BasisColumns& table = tables_[static_cast<std::size_t>(length)];
+      if (table.column[0].empty()) table.Fill(length);
+      return table;
+    }
+    for (LongEntry& entry : long_) {
+      if (entry.length == length) return entry.basis;
+    }
+    LongEntry& entry = long_[next_long_++ % long_.size()];
+    entry.length = length;
+    entry.basis.Fill(length);
+    return entry.basis;
+  }
+
+ private:
+  using Tables = std::array<BasisColumns, kTabledLength + 1>;
+  struct LongEntry {
+    std::int64_t length = -1;
+    BasisColumns basis;
+  };
+
+  static Tables& ThreadTables() {
+    thread_local Tables tables;
+    return tables;
+  }
+
+  Tables& tables_;
+  std::array<LongEntry, 4> long_;
+  std::size_t next_long_ = 0;
+};
+
+// ---- kernels over the interior frames k = 1 .. n-1 of a segment --------------------------------
+
+// moments[r] = sum of data[k] * column r at k.
+TEMPOKEY_AVX_CLONES void DataMoments(const double* data, const BasisColumns& basis,
+                                     std::int64_t n, double* moments) {
+  using simd::V4;
+  const double* c0 = basis.column[0].data();
+  const double* c1 = basis.column[1].data();
+  const double* c2 = basis.column[2].data();
+  const double* c3 = basis.column[3].data();
+  V4 m0 = simd::Broadcast(0.0), m1 = m0, m2 = m0, m3 = m0;
+  std::int64_t k = 1;
+  for (; k + 4 <= n; k += 4) {
+    const V4 d = simd::Load(data + k);
+    m0 += d * simd::Load(c0 + k);
+    m1 += d * simd::Load(c1 + k);
+    m2 += d * simd::Load(c2 + k);
+    m3 += d * simd::Load(c3 + k);
+  }
+  double t0 = 0.0, t1 = 0.0, t2 = 0.0, t3 = 0.0;
+  for (; k < n; ++k) {
+    t0 += data[k] * c0[k];
+    t1 += data[k] * c1[k];
+    t2 += data[k] * c2[k];
+    t3 += data[k] * c3[k];
+  }
+  moments[0] = simd::Sum(m0) + t0;
+  moments[1] = simd::Sum(m1) + t1;
+  moments[2] = simd::Sum(m2) + t2;
+  moments[3] = simd::Sum(m3) + t3;
+}
+
+// moments[r] = sum of w[k] data[k] c_r(k); gram[4 r + q] = sum of w[k] c_r(k) c_q(k).
+TEMPOKEY_AVX_CLONES void WeightedSums(const double* data, const double* w,
+                                      const BasisColumns& basis, std::int64_t n, double* moments,
+                                      double* gram) {
+  using simd::V4;
+  std::array<V4, 4> m;
+  std::array<V4, 16> g;
+  m.fill(simd::Broadcast(0.0));
+  g.fill(simd::Broadcast(0.0));
+  std::array<double, 4> mt{};
+  std::array<double, 16> gt{};
+  std::int64_t k = 1;
+  for (; k + 4 <= n; k += 4) {
+    const V4 wk = simd::Load(w + k);
+    const V4 wd = wk * simd::Load(data + k);
+    std::array<V4, 4> c;
+    for (int r = 0; r < 4; ++r) c[r] = simd::Load(basis.column[r].data() + k);
+    for (int r = 0; r < 4; ++r) {
+      m[r] += wd * c[r];
+      const V4 wc = wk * c[r];
+      for (int q = r; q < 4; ++q) g[4 * r + q] += wc * c[q];
+    }
+  }
+  for (; k < n; ++k) {
+    const double wd = w[k] * data[k];
+    for (int r = 0; r < 4; ++r) {
+      const double cr = basis.column[r][k];
+      mt[r] += wd * cr;
+      for (int q = r; q < 4; ++q) gt[4 * r + q] += w[k] * cr * basis.column[q][k];
+    }
+  }
+  for (int r = 0; r < 4; ++r) {
+    moments[r] = simd::Sum(m[r]) + mt[r];
+    for (int q = r; q < 4; ++q) {
+      gram[4 * r + q] = simd::Sum(g[4 * r + q]) + gt[4 * r + q];
+      gram[4 * q + r] = gram[4 * r + q];
+    }
+  }
+}
+
+// The largest |curve - data| over the interior frames, the curve's coefficients `x` =
+// (v_a, m_a, v_b, m_b); returns as soon as a block of frames exceeds `limit`.
+TEMPOKEY_AVX_CLONES double MaxError(const double* data, const BasisColumns& basis,
+                                    std::int64_t n, const double* x, double limit) {
+  using simd::V4;
+  const V4 x0 = simd::Broadcast(x[0]), x1 = simd::Broadcast(x[1]);
+  const V4 x2 = simd::Broadcast(x[2]), x3 = simd::Broadcast(x[3]);
+  V4 worst = simd::Broadcast(0.0);
+  std::int64_t k = 1;
+  for (; k + 4 <= n; k += 4) {
+    const V4 y = ((simd::Load(basis.column[0].data() + k) * x0 +
+                   simd::Load(basis.column[1].data() + k) * x1) +
+                  (simd::Load(basis.column[2].data() + k) * x2 +
+                   simd::Load(basis.column[3].data() + k) * x3));
+    const V4 e = simd::Abs(y - simd::Load(data + k));
+    worst = e > worst ? e : worst;
+    if ((k & 15) == 13 && simd::Max(worst) > limit) return simd::Max(worst);
+  }
+  double tail = simd::Max(worst);
+  for (; k < n; ++k) {
+    const double y = (basis.column[0][k] * x[0] + basis.column[1][k] * x[1]) +
+                     (basis.column[2][k] * x[2] + basis.column[3][k] * x[3]);
+    const double e = std::abs(y - data[k]);
+    if (e > tail) tail = e;
+  }
+  return tail;
+}
+
+// Sum of c c^T over the interior frames k = 1 .. L-1 of a segment of length L (c as
+// Coefficients() at t = k / L), in closed form: each product is a polynomial of degree 6 in t,
+// summed with the power sums of k (Faulhaber), so the cost does not grow with L.
+std::array<double, 16> InteriorGram(std::int64_t length) {
+  const auto l = static_cast<double>(length);
+  const double n = l - 1.0;
+  // p[e] = sum over k = 1..n of (k / L)^e.
+  const double n1 = n + 1.0;
+  const double s1 = n * n1 / 2.0;
+  std::array<double, 7> p = {
+      n,
+      s1,
+      n * n1 * (2.0 * n + 1.0) / 6.0,
+      s1 * s1,
+      n * n1 * (2.0 * n + 1.0) * (3.0 * n * n + 3.0 * n - 1.0) / 30.0,
+      n * n * n1 * n1 * (2.0 * n * n + 2.0 * n - 1.0) / 12.0,
+      n * n1 * (2.0 * n + 1.0) * (3.0 * n * n * n * n + 6.0 * n * n * n - 3.0 * n + 1.0) / 42.0};
+  double scale = 1.0;
+  for (double& sum : p) {
+    sum /= scale;
+    scale *= l;
+  }
+  // The four coefficients as cubics in t (constant term first).
+  const std::array<std::array<double, 4>, 4> poly = {{{1.0, 0.0, -3.0, 2.0},
+                                                      {0.0, l, -2.0 * l, l},
+                                                      {0.0, 0.0, 3.0, -2.0},
+                                                      {0.0, 0.0, -l, l}}};
+  std::array<double, 16> gram{};
+  for (int r = 0; r < 4; ++r) {
+    for (int q = r; q < 4; ++q) {
+      double sum = 0.0;
+      for (int i = 0; i < 4; ++i) {
+        for (int j = 0; j < 4; ++j) sum += poly[r][i] * poly[q][j] * p[i + j];
+      }
+      gram[r * 4 + q] = sum;
+      gram[q * 4 + r] = sum;
+    }
+  }
+  return gram;
+}
+
+Mat2 Inverse(const Mat2& m) {
+  const double inverse_det = 1.0 / (m[0] * m[3] - m[1] * m[2]);
+  return {m[3] * inverse_det, -m[1] * inverse_det, -m[2] * inverse_det, m[0] * inverse_det};
+}
+Mat2 Multiply(const Mat2& a, const Mat2& b) {
+  return {a[0] * b[0] + a[1] * b[2], a[0] * b[1] + a[1] * b[3], a[2] * b[0] + a[3] * b[2],
+          a[2] * b[1] + a[3] * b[3]};
+}
+Vec2 Apply(const Mat2& a, const Vec2& v) {
+  return {a[0] * v[0] + a[1] * v[1], a[2] * v[0] + a[3] * v[1]};
+}
+
+// The curve of one segment at interior frame k.
+inline double SegmentValue(const std::array<double, 4>& c, double va, double ma, double vb,
+                           double mb) {
+  return c[0] * va + c[1] * ma + c[2] * vb + c[3] * mb;
+}
+
+double CentralDifference(std::span<const double> s, std::int64_t f) {
+  const auto n = static_cast<std::int64_t>(s.size());
+  if (n < 2) return 0.0;
+  if (f == 0) return s[1] - s[0];
+  if (f == n - 1) return s[n - 1] - s[n - 2];
+  return 0.5 * (s[f + 1] - s[f - 1]);
+}
+
+// A run of keys of one channel: frames shared, values and slopes its own.
+struct KeyRun {
+  const std::int64_t* frames;
+  double* values;
+  double* slopes;
+  int count;
+};
+
+class GramCache {
+ public:
+  const std::array<double, 16>& Get(std::int64_t length) {
+    Entry& entry = entries_[static_cast<std::size_t>(length) % entries_.size()];
+    if (entry.length != length) entry = {length, InteriorGram(length)};
+    return entry.gram;
+  }
+
+ private:
+  struct Entry {
+    std::int64_t length = -1;
+    std::array<double, 16> gram{};
+  };
+  std::array<Entry, 512> entries_;
+};
+
+class Fitter {
+ public:
+  Fitter(std::span<const std::span<const double>> channels, std::span<const double> max_errors,
+         const ToleranceFitOptions& options)
+      : channels_(channels), options_(options), frame_count_(channels.front().size()) {
+    bounds_.reserve(max_errors.size());
+    for (double bound : max_errors) bounds_.push_back(bound * (1.0 - kBoundMargin));
+  }
+
+  absl::StatusOr<SplineFit> Run(std::stop_token stop) {
+    SplineFit fit;
+    const std::size_t c_count = channels_.size();
+    fit.values.resize(c_count);
+    fit.slopes.resize(c_count);
+    if (frame_count_ == 1) {
+      fit.frames = {0};
+      for (std::size_t c = 0; c < c_count; ++c) {
+        fit.values[c] = {channels_[c][0]};
+        fit.slopes[c] = {0.0};
+      }
+      return fit;
+    }
+    Insert(fit);
+    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+    Remove(fit);
+    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+    Repair(fit);
+    return fit;
+  }
+
+ private:
+  // ---- least squares ---------------------------------------------------------------------------
+
+  // Fits the values and slopes of keys [first, last] of `run` to channel `s` by least squares, the
+  // other keys fixed: the key frames themselves, the interior frames of every segment that touches
+  // a free key, and the ridge. `weights` (optional) weighs each frame, indexed from
+  // weights_origin. Block-tridiagonal elimination over the free keys.
+  void Solve(std::span<const double> s, const KeyRun& run, int first, int last,
+             const double* weights = nullptr, std::int64_t weights_origin = 0) {
+    const int n = last - first + 1;
+    diag_.assign(static_cast<std::size_t>(n), Mat2{});
+    upper_.assign(static_cast<std::size_t>(n), Mat2{});
+    rhs_.assign(static_cast<std::size_t>(n), Vec2{});
+    auto weight = [&](std::int64_t f) { return weights ? weights[f - weights_origin] : 1.0; };
+    for (int i = 0; i < n; ++i) {
+      const std::int64_t f = run.frames[first + i];
+      const double w = weight(f) + kRidge;
+      diag_[i][0] += w;
+      rhs_[i][0] += w * s[f];
+      diag_[i][3] += kRidge;
+      rhs_[i][1] += kRidge * CentralDifference(s, f);
+    }
+    const int seg_first = std::max(first - 1, 0);
+    const int seg_last = std::min(last, run.count - 2);
+    for (int j = seg_first; j <= seg_last; ++j) {
+      const std::int64_t fa = run.frames[j];
+      const std::int64_t length = run.frames[j + 1] - fa;
+      if (length < 2) continue;
+      const BasisColumns& basis = basis_.Get(length);
+      const bool a_free = j >= first;
+      const bool b_free = j + 1 <= last;
+      const double* data = s.data() + fa;
+      std::array<double, 4> moment;
+      const double* gram;
+      if (weights == nullptr) {
+        gram = grams_.Get(length).data();
+        DataMoments(data, basis, length, moment.data());
+      } else {
+        WeightedSums(data, weights + (fa - weights_origin), basis, length, moment.data(),
+                     weighted_gram_.data());
+        gram = weighted_gram_.data();
+      }
+      // What a fixed end contributes comes off the right-hand side: the moments of
+      // (data - c . x_fixed) are the data's moments minus gram x_fixed.
+      if (!a_free) {
+        const double v = run.values[j];
+        const double m = run.slopes[j];
+        for (int r = 0; r < 4; ++r) moment[r] -= gram[4 * r] * v + gram[4 * r + 1] * m;
+      }
+      if (!b_free) {
+        const double v = run.values[j + 1];
+        const double m = run.slopes[j + 1];
+        for (int r = 0; r < 4; ++r) moment[r] -= gram[4 * r + 2] * v + gram[4 * r + 3] * m;
+      }
+      if (a_free) {
+        const int ia = j - first;
+        diag_[ia] = {diag_[ia][0] + gram[0], diag_[ia][1] + gram[1], diag_[ia][2] + gram[4],
+                     diag_[ia][3] + gram[5]};
+        rhs_[ia] = {rhs_[ia][0] + moment[0], rhs_[ia][1] + moment[1]};
+      }
+      if (b_free) {
+        const int ib = j + 1 - first;
+        diag_[ib] = {diag_[ib][0] + gram[10], diag_[ib][1] + gram[11], diag_[ib][2] + gram[14],
+                     diag_[ib][3] + gram[15]};
+        rhs_[ib] = {rhs_[ib][0] + moment[2], rhs_[ib][1] + moment[3]};
+      }
+      if (a_free && b_free) {
+        const int ia = j - first;
+        upper_[ia] = {upper_[ia][0] + gram[2], upper_[ia][1] + gram[3],
+                      upper_[ia][2] + gram[6], upper_[ia][3] + gram[7]};
+      }
+    }
+    // Forward elimination (eliminated_[i] = D'_i^-1 U_i, with D'_i = D_i - U_{i-1}^T
+    // eliminated_[i-1]), then back substitution.
+    eliminated_.resize(static_cast<std::size_t>(n));
+    for (int i = 0; i < n; ++i) {
+      if (i > 0) {
+        const Mat2& u = upper_[i - 1];
+        const Mat2 lower = {u[0], u[2], u[1], u[3]};  // U_{i-1} transposed
+        const Mat2 lc = Multiply(lower, eliminated_[i - 1]);
+        diag_[i] = {diag_[i][0] - lc[0], diag_[i][1] - lc[1], diag_[i][2] - lc[2],
+                    diag_[i][3] - lc[3]};
+        const Vec2 ld = Apply(lower, rhs_[i - 1]);
+        rhs_[i] = {rhs_[i][0] - ld[0], rhs_[i][1] - ld[1]};
+      }
+      const Mat2 inverse = Inverse(diag_[i]);
+      eliminated_[i] = Multiply(inverse, upper_[i]);
+      rhs_[i] = Apply(inverse, rhs_[i]);
+    }
+    Vec2 x = rhs_[n - 1];
+    run.values[last] = x[0];
+    run.slopes[last] = x[1];
+    for (int i = n - 2; i >= 0; --i) {
+      const Vec2 next = Apply(eliminated_[i], x);
+      x = {rhs_[i][0] - next[0], rhs_[i][1] - next[1]};
+      run.values[first + i] = x[0];
+      run.slopes[first + i] = x[1];
+    }
+  }
+
+  // ---- errors ----------------------------------------------------------------------------------
+
+  // `limit`: stop at the first frame whose error exceeds it (the caller only needs to know).
+  // The largest interior error of segment j of `run` (exact up to `limit`).
+  double SegmentMax(std::span<const double> s, const KeyRun& run, int j,
+                    double limit = std::numeric_limits<double>::infinity()) {
+    const std::int64_t fa = run.frames[j];
+    const std::int64_t length = run.frames[j + 1] - fa;
+    if (length < 2) return 0.0;
+    const std::array<double, 4> x = {run.values[j], run.slopes[j], run.values[j + 1],
+                                     run.slopes[j + 1]};
+    return MaxError(s.data() + fa, basis_.Get(length), length, x.data(), limit);
+  }
+
+  // The interior frame of segment j where the error is largest.
+  std::int64_t WorstFrame(std::span<const double> s, const KeyRun& run, int j) {
+    const std::int64_t fa = run.frames[j];
+    const std::int64_t length = run.frames[j + 1] - fa;
+    std::int64_t at = fa + length / 2;
+    double worst = -1.0;
+    ForEachResidual(s, run, j, [&](std::int64_t f, double residual) {
+      if (f != fa && f != fa + length && std::abs(residual) > worst) {
+        worst = std::abs(residual);
+        at = f;
+      }
+    });
+    return at;
+  }
+
+  // Worst error, relative to the bound, over the keys [key_first, key_last] and the interior of
+  // the segments between them, for channel c of `run`; stops early once it exceeds `limit`.
+  // `worst_key` (optional) receives the window position of the worst key frame or the start of
+  // the worst segment.
+  double WindowRatio(std::size_t c, const KeyRun& run, int key_first, int key_last,
+                     double limit = std::numeric_limits<double>::infinity(),
+                     int* worst_key = nullptr) {
+    const std::span<const double> s = channels_[c];
+    const double error_limit = limit * bounds_[c];
+    double worst = 0.0;
+    int where = key_first;
+    for (int i = key_first; i <= key_last; ++i) {
+      const double e = std::abs(run.values[i] - s[run.frames[i]]);
+      if (e > worst) {
+        worst = e;
+        where = i;
+      }
+    }
+    for (int j = key_first; j < key_last && worst <= error_limit; ++j) {
+      const double e = SegmentMax(s, run, j, error_limit);
+      if (e > worst) {
+        worst = e;
+        where = j;
+      }
+    }
+    if (worst_key != nullptr) *worst_key = where;
+    return worst / bounds_[c];
+  }
+
+  // ---- 1. insertion -----------------------------------------------------------------------------
+
+  void Insert(SplineFit& fit) {
+    const auto last = static_cast<std::int64_t>(frame_count_ - 1);
+    const std::int64_t spacing = options_.initial_spacing_frames;
+    for (std::int64_t f = 0; f < last; f += spacing) fit.frames.push_back(f);
+    fit.frames.push_back(last);
+    std::vector<std::int64_t> next;
+    for (int round = 0; round < kMaxInsertionRounds; ++round) {
+      const int count = static_cast<int>(fit.frames.size());
+      FitAll(fit);
+      next.clear();
+      bool inserted = false;
+      for (int j = 0; j + 1 < count; ++j) {
+        next.push_back(fit.frames[j]);
+        const std::int64_t length = fit.frames[j + 1] - fit.frames[j];
+        if (length < 2) continue;
+        // The channel most over its bound decides where the new key goes: at its worst frame,
+        // or mid-segment when it is a key frame that is over (it is its segments' problem too).
+        double ratio = 0.0;
+        std::size_t worst_channel = 0;
+        for (std::size_t c = 0; c < channels_.size(); ++c) {
+          const KeyRun run = RunOf(fit, c);
+          const double interior = SegmentMax(channels_[c], run, j) / bounds_[c];
+          const double r = std::max({interior, KeyRatio(fit, c, j), KeyRatio(fit, c, j + 1)});
+          if (r > ratio) {
+            ratio = r;
+            worst_channel = c;
+          }
+        }
+        if (ratio > 1.0) {
+          const std::span<const double> s = channels_[worst_channel];
+          const KeyRun run = RunOf(fit, worst_channel);
+          const std::int64_t frame = SegmentMax(s, run, j) / bounds_[worst_channel] >= ratio
+                                         ? WorstFrame(s, run, j)
+                                         : fit.frames[j] + length / 2;
+          next.push_back(frame);
+          inserted = true;
+        }
+      }
+      next.push_back(fit.frames.back());
+      fit.frames.swap(next);
+      if (!inserted) return;
+    }
+    FitAll(fit);
+  }
+
+  double KeyRatio(const SplineFit& fit, std::size_t c, int i) const {
+    return std::abs(fit.values[c][i] - channels_[c][fit.frames[i]]) / bounds_[c];
+  }
+
+  void FitAll(SplineFit& fit) {
+    const int count = static_cast<int>(fit.frames.size());
+    for (std::size_t c = 0; c < channels_.size(); ++c) {
+      fit.values[c].assign(fit.frames.size(), 0.0);
+      fit.slopes[c].assign(fit.frames.size(), 0.0);
+      Solve(channels_[c], RunOf(fit, c), 0, count - 1);
+    }
+  }
+
+  static KeyRun RunOf(SplineFit& fit, std::size_t c) {
+    return {fit.frames.data(), fit.values[c].data(), fit.slopes[c].data(),
+            static_cast<int>(fit.frames.size())};
+  }
+
+  // ---- 2. removal -------------------------------------------------------------------------------
+
+  // A window of keys: up to kWindowKeys frames, per channel values and slopes.
+  struct Window {
+    std::array<std::int64_t, kWindowKeys> frames{};
+    std::vector<std::array<double, kWindowKeys>> values, slopes;
+    int count = 0;
+    int free_first = 0;
+    int free_last = 0;
+
+    KeyRun Run(std::size_t c) {
+      return {frames.data(), values[c].data(), slopes[c].data(), count};
+    }
+  };
+
+  // Least-squares fit of the free keys of every channel of `w`; returns the worst error relative
+  // to the bound over the window and all channels, exact up to `limit` (beyond it, some value
+  // above it).
+  double FitWindow(Window& w, double limit, int* worst_key = nullptr) {
+    double worst = 0.0;
+    for (std::size_t c = 0; c < channels_.size() && worst <= limit; ++c) {
+      KeyRun run = w.Run(c);
+      Solve(channels_[c], run, w.free_first, w.free_last);
+      int where = 0;
+      const double ratio = WindowRatio(c, run, 0, w.count - 1, limit, &where);
+      if (ratio > worst) {
+        worst = ratio;
+        if (worst_key != nullptr) *worst_key = where;
+      }
+    }
+    return worst;
+  }
+
+  // Lawson's iteration on the channels of `w` that are over their bound: each round multiplies
+  // every frame's weight by its error and refits, so the fit leans towards the minimax one. True
+  // once every channel is within its bound.
+  bool LawsonWindow(Window& w) {
+    const std::int64_t origin = w.frames[0];
+    const std::int64_t span = w.frames[w.count - 1] - origin + 1;
+    for (std::size_t c = 0; c < channels_.size(); ++c) {
+      const std::span<const double> s = channels_[c];
+      KeyRun run = w.Run(c);
+      double ratio = WindowRatio(c, run, 0, w.count - 1);
+      lawson_.assign(static_cast<std::size_t>(span), 1.0);
+      for (int round = 0; round < options_.lawson_iterations && ratio > 1.0; ++round) {
+        double total = 0.0;
+        for (int j = 0; j + 1 < w.count; ++j) {
+          ForEachResidual(s, run, j, [&](std::int64_t f, double residual) {
+            double& weight = lawson_[f - origin];
+            weight *= std::abs(residual) + 1e-3 * bounds_[c];
+            total += weight;
+          });
+        }
+        const double scale = static_cast<double>(span) / total;
+        for (double& weight : lawson_) weight *= scale;
+        Solve(s, run, w.free_first, w.free_last, lawson_.data(), origin);
+        ratio = WindowRatio(c, run, 0, w.count - 1);
+      }
+      if (ratio > 1.0) return false;
+    }
+    return true;
+  }
+
+  // Calls fn(frame, curve - sample) for the frames [a, b) of segment j of `run`, and b too when
+  // it is the run's last segment.
+  template <typename Fn>
+  void ForEachResidual(std::span<const double> s, const KeyRun& run, int j, Fn fn) {
+    const std::int64_t fa = run.frames[j];
+    const std::int64_t length = run.frames[j + 1] - fa;
+    const BasisColumns& basis = basis_.Get(length);
+    fn(fa, run.values[j] - s[fa]);
+    for (std::int64_t k = 1; k < length; ++k) {
+      const double y = (basis.column[0][k] * run.values[j] + basis.column[1][k] * run.slopes[j]) +
+                       (basis.column[2][k] * run.values[j + 1] +
+                        basis.column[3][k] * run.slopes[j + 1]);
+      fn(fa + k, y - s[fa + k]);
+    }
+    if (j + 2 == run.count) fn(fa + length, run.values[j + 1] - s[fa + length]);
+  }
+
+  void Remove(SplineFit& fit) {
+    const std::size_t c_count = channels_.size();
+    const int count = static_cast<int>(fit.frames.size());
+    if (count <= 2) return;
+    SplineFit out;
+    out.values.resize(c_count);
+    out.slopes.resize(c_count);
+    auto push = [&](int i) {
+      out.frames.push_back(fit.frames[i]);
+      for (std::size_t c = 0; c < c_count; ++c) {
+        out.values[c].push_back(fit.values[c][i]);
+        out.slopes[c].push_back(fit.slopes[c][i]);
+      }
+    };
+    push(0);
+    Window trial;
+    trial.values.resize(c_count);
+    trial.slopes.resize(c_count);
+    Window base = trial;
+    Window miss = trial;
+    for (int i = 1; i + 1 < count; ++i) {
+      // Keys around the candidate: up to two accepted ones before, two remaining after.
+      const int before = std::min<int>(kWindowSide, static_cast<int>(out.frames.size()));
+      const int after = std::min(kWindowSide, count - 1 - i);
+      base.count = before + after;
+      for (int k = 0; k < before; ++k) {
+        const std::size_t o = out.frames.size() - before + k;
+        base.frames[k] = out.frames[o];
+        for (std::size_t c = 0; c < c_count; ++c) {
+          base.values[c][k] = out.values[c][o];
+          base.slopes[c][k] = out.slopes[c][o];
+        }
+      }
+      for (int k = 0; k < after; ++k) {
+        base.frames[before + k] = fit.frames[i + 1 + k];
+        for (std::size_t c = 0; c < c_count; ++c) {
+          base.values[c][before + k] = fit.values[c][i + 1 + k];
+          base.slopes[c][before + k] = fit.slopes[c][i + 1 + k];
+        }
+      }
+      // The outermost keys stay fixed unless they are the clip's first or last.
+      base.free_first = before == kWindowSide ? 1 : 0;
+      base.free_last = after == kWindowSide ? base.count - 2 : base.count - 1;
+      // The key after the removed one may slide, unless it is the clip's last.
+      const bool can_slide = i + 1 < count - 1;
+
+      // Least squares on the window as it is and with the next key slid; the first that fits is
+      // taken, else Lawson's iteration on the closest miss.
+      const double reach = options_.lawson_iterations > 0 ? kLawsonReach : 1.0;
+      bool removed = false;
+      double closest = std::numeric_limits<double>::infinity();
+      // Slides go the way the unslid fit misses: towards the removed key when the worst error
+      // lies before the key that slides (the merged segment is too long), away from it when it
+      // lies after.
+      int direction = 0;
+      for (int d = 0; !removed && d <= (can_slide ? options_.slide_frames : 0); ++d) {
+        const std::int64_t moved = base.frames[before] + direction * d;
+        if (d > 0 && (moved <= base.frames[before - 1] || moved >= fit.frames[i + 2])) break;
+        trial = base;
+        trial.frames[before] = moved;
+        int worst_key = 0;
+        const double ratio = FitWindow(trial, reach, &worst_key);
+        if (ratio <= 1.0) {
+          removed = true;
+          break;
+        }
+        if (ratio < closest) {
+          closest = ratio;
+          miss = trial;
+        }
+        if (d == 0) direction = worst_key < before ? -1 : 1;
+      }
+      if (!removed && closest <= reach && options_.lawson_iterations > 0 && LawsonWindow(miss)) {
+        trial = miss;
+        removed = true;
+      }
+      if (!removed) {
+        push(i);
+        continue;
+      }
+      // Write the refitted window back: accepted keys in `out`, the remaining ones in `fit`.
+      for (int k = 0; k < before; ++k) {
+        const std::size_t o = out.frames.size() - before + k;
+        for (std::size_t c = 0; c < c_count; ++c) {
+          out.values[c][o] = trial.values[c][k];
+          out.slopes[c][o] = trial.slopes[c][k];
+        }
+      }
+      for (int k = 0; k < after; ++k) {
+        fit.frames[i + 1 + k] = trial.frames[before + k];
+        for (std::size_t c = 0; c < c_count; ++c) {
+          fit.values[c][i + 1 + k] = trial.values[c][before + k];
+          fit.slopes[c][i + 1 + k] = trial.slopes[c][before + k];
+        }
+      }
+    }
+    push(count - 1);
+    fit = std::move(out);
+  }
+
+  // ---- 3. verification ---------------------------------------------------------------------------
+
+  // Keys every frame of any segment (or at any key) still over the bound, with the samples'
+  // values and central differences, until every frame is within it. Nothing is over the bound
+  // after insertion and removal unless keys sit on consecutive frames; this is the guarantee.
+  void Repair(SplineFit& fit) {
+    for (;;) {
+      std::vector<std::pair<std::int64_t, std::int64_t>> bad;
+      const int count = static_cast<int>(fit.frames.size());
+      for (std::size_t c = 0; c < channels_.size(); ++c) {
+        const KeyRun run = RunOf(fit, c);
+        for (int j = 0; j + 1 < count; ++j) {
+          const bool over = SegmentMax(channels_[c], run, j) > bounds_[c] ||
+                            KeyRatio(fit, c, j) > 1.0 || KeyRatio(fit, c, j + 1) > 1.0;
+          if (over) bad.emplace_back(fit.frames[j], fit.frames[j + 1]);
+        }
+      }
+      if (bad.empty()) return;
+      std::vector<char> exact(frame_count_, 0);
+      std::vector<char> keyed(frame_count_, 0);
+      for (std::int64_t f : fit.frames) keyed[f] = 1;
+      for (const auto& [a, b] : bad) {
+        for (std::int64_t f = a; f <= b; ++f) exact[f] = keyed[f] = 1;
+      }
+      SplineFit repaired;
+      repaired.values.resize(channels_.size());
+      repaired.slopes.resize(channels_.size());
+      std::size_t old = 0;
+      for (std::size_t f = 0; f < frame_count_; ++f) {
+        if (!keyed[f]) continue;
+        while (old < fit.frames.size() && fit.frames[old] < static_cast<std::int64_t>(f)) ++old;
+        const bool had = old < fit.frames.size() && fit.frames[old] == static_cast<std::int64_t>(f);
+        repaired.frames.push_back(static_cast<std::int64_t>(f));
+        for (std::size_t c = 0; c < channels_.size(); ++c) {
+          const bool take_sample = exact[f] || !had;
+          repaired.values[c].push_back(take_sample ? channels_[c][f] : fit.values[c][old]);
+          repaired.slopes[c].push_back(take_sample ? CentralDifference(channels_[c], f)
+                                                   : fit.slopes[c][old]);
+        }
+      }
+      fit = std::move(repaired);
+    }
+  }
+
+  std::span<const std::span<const double>> channels_;
+  std::vector<double> bounds_;
+  ToleranceFitOptions options_;
+  std::size_t frame_count_;
+  std::vector<Mat2> diag_, upper_, eliminated_;
+  std::vector<Vec2> rhs_;
+  std::vector<double> lawson_;
+  GramCache grams_;
+  BasisSource basis_;
+  std::array<double, 16> weighted_gram_;
+};
+
+absl::Status ValidateInputs(std::span<const std::span<const double>> channels,
+                            std::span<const double> max_errors,
+                            const ToleranceFitOptions& options) {
+  if (channels.empty()) return absl::InvalidArgumentError("a fit needs at least one channel");
+  if (max_errors.size() != channels.size()) {
+    return absl::InvalidArgumentError(absl::StrCat("got ", max_errors.size(), " bounds for ",
+                                                   channels.size(), " channels"));
+  }
+  const std::size_t n = channels.front().size();
+  for (std::size_t c = 0; c < channels.size(); ++c) {
+    if (channels[c].empty()) {
+      return absl::InvalidArgumentError(absl::StrCat("channel ", c, " has no samples"));
+    }
+    if (channels[c].size() != n) {
+      return absl::InvalidArgumentError(absl::StrCat("channel ", c, " has ", channels[c].size(),
+                                                     " samples, channel 0 has ", n));
+    }
+    for (std::size_t f = 0; f < n; ++f) {
+      if (!std::isfinite(channels[c][f])) {
+        return absl::InvalidArgumentError(
+            absl::StrCat("channel ", c, ": sample ", f, " is ",
+                         std::isnan(channels[c][f]) ? "NaN" : "infinite"));
+      }
+    }
+    if (!(max_errors[c] > 0.0) || !std::isfinite(max_errors[c])) {
+      return absl::InvalidArgumentError(absl::StrCat("channel ", c, ": the bound must be finite and > 0, got ", max_errors[c]));
+    }
+  }
+  if (options.initial_spacing_frames < 1 || options.initial_spacing_frames > 1'000'000) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "initial_spacing_frames must be in [1, 1000000], got ", options.initial_spacing_frames));
+  }
+  if (options.lawson_iterations < 0 || options.lawson_iterations > 100) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("lawson_iterations must be in [0, 100], got ", options.lawson_iterations));
+  }
+  if (options.slide_frames < 0 || options.slide_frames > 1000) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("slide_frames must be in [0, 1000], got ", options.slide_frames));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::StatusOr<SplineFit> FitWithinTolerance(std::span<const std::span<const double>> channels,
+                                             std::span<const double> max_errors,
+                                             const ToleranceFitOptions& options,
+                                             std::stop_token stop) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateInputs(channels, max_errors, options));
+  TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+  return Fitter(channels, max_errors, options).Run(stop);
+}
+
+std::vector<double> EvaluateSplineFit(const SplineFit& fit, std::size_t channel) {
+  const std::int64_t last = fit.frames.back();
+  std::vector<double> out(static_cast<std::size_t>(last) + 1);
+  const std::vector<double>& v = fit.values[channel];
+  const std::vector<double>& m = fit.slopes[channel];
+  if (fit.frames.size() == 1) {
+    out[0] = v[0];
+    return out;
+  }
+  for (std::size_t j = 0; j + 1 < fit.frames.size(); ++j) {
+    const std::int64_t fa = fit.frames[j];
+    const std::int64_t length = fit.frames[j + 1] - fa;
+    const auto l = static_cast<double>(length);
+    for (std::int64_t k = 0; k < length; ++k) {
+      out[fa + k] = SegmentValue(Coefficients(static_cast<double>(k) / l, l), v[j], m[j],
+                                 v[j + 1], m[j + 1]);
+    }
+  }
+  out[last] = v.back();
+  return out;
+}
+
+}  // namespace tempokey::core

@@ -1,0 +1,228 @@
+// Whole-file reads with a cap; atomic writes that leave the old file or the new one.
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "gtest/gtest.h"
+#include "tempokey/core/io/file_io.h"
+#include "tests/testing/test_paths.h"
+
+namespace tempokey::core {
+namespace {
+
+std::vector<std::string> DirectoryEntries(const std::string& directory) {
+  std::vector<std::string> names;
+  for (const auto& entry : std::filesystem::directory_iterator(directory)) {
+    names.push_back(entry.path().filename().string());
+  }
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+void WritePlain(const std::string& path, const std::string& contents) {
+  std::ofstream out(path, std::ios::binary);
+  out << contents;
+}
+
+TEST(ReadFileTest, ReadsEveryByte) {
+  const std::string path = testing::MakeTempDir() + "/data.bin";
+  const std::string contents("a\0b\r\nc\xff", 7);
+  WritePlain(path, contents);
+
+  absl::StatusOr<std::string> read = ReadFile(path);
+
+  ASSERT_TRUE(read.ok()) << read.status();
+  EXPECT_EQ(*read, contents);
+}
+
+TEST(ReadFileTest, ReadsEmptyFile) {
+  const std::string path = testing::MakeTempDir() + "/empty";
+  WritePlain(path, "");
+
+  absl::StatusOr<std::string> read = ReadFile(path);
+
+  ASSERT_TRUE(read.ok()) << read.status();
+  EXPECT_EQ(*read, "");
+}
+
+TEST(ReadFileTest, ReadsLargerThanOneChunk) {
+  const std::string path = testing::MakeTempDir() + "/big";
+  std::string contents;
+  for (int i = 0; i < 300000; ++i) contents += static_cast<char>('a' + i % 26);
+  WritePlain(path, contents);
+
+  absl::StatusOr<std::string> read = ReadFile(path);
+
+  ASSERT_TRUE(read.ok()) << read.status();
+  EXPECT_EQ(*read, contents);
+}
+
+TEST(ReadFileTest, RegularFileBufferIsSizedOnceToTheFile) {
+  // Growing by doubling would leave twice the capacity (and copy the file on the way).
+  const std::string path = testing::MakeTempDir() + "/sized";
+  const std::string contents(300000, 'x');
+  WritePlain(path, contents);
+
+  absl::StatusOr<std::string> read = ReadFile(path);
+
+  ASSERT_TRUE(read.ok()) << read.status();
+  EXPECT_EQ(*read, contents);
+  EXPECT_LE(read->capacity(), contents.size() + 1);
+}
+
+TEST(ReadFileTest, StreamLargerThanOneChunkIsReadWholeWithoutSpareCapacity) {
+  const std::string path = testing::MakeTempDir() + "/fifo";
+  ASSERT_EQ(::mkfifo(path.c_str(), 0600), 0);
+  std::string contents;
+  for (int i = 0; i < 200000; ++i) contents += static_cast<char>('a' + i % 26);
+  std::thread writer([&] { WritePlain(path, contents); });
+
+  absl::StatusOr<std::string> read = ReadFile(path);
+  writer.join();
+
+  ASSERT_TRUE(read.ok()) << read.status();
+  EXPECT_EQ(*read, contents);
+  EXPECT_LE(read->capacity(), contents.size() + 1);
+}
+
+TEST(ReadFileTest, MissingFileIsNotFoundAndNamesThePath) {
+  const std::string path = testing::MakeTempDir() + "/missing.bvh";
+
+  absl::StatusOr<std::string> read = ReadFile(path);
+
+  EXPECT_EQ(read.status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(std::string(read.status().message()), path + ": no such file");
+}
+
+TEST(ReadFileTest, DirectoryIsInvalidArgument) {
+  const std::string directory = testing::MakeTempDir();
+
+  absl::StatusOr<std::string> read = ReadFile(directory);
+
+  EXPECT_EQ(read.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(std::string(read.status().message()), directory + ": is a directory, not a file");
+}
+
+TEST(ReadFileTest, FileOverTheCapIsRefusedWithItsSize) {
+  const std::string path = testing::MakeTempDir() + "/walk.bvh";
+  WritePlain(path, std::string(101, 'x'));
+
+  absl::StatusOr<std::string> read = ReadFile(path, 100);
+
+  EXPECT_EQ(read.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(std::string(read.status().message()),
+            path + ": file is 101 bytes, over the limit of 100");
+}
+
+TEST(ReadFileTest, FileExactlyAtTheCapIsRead) {
+  const std::string path = testing::MakeTempDir() + "/walk.bvh";
+  WritePlain(path, std::string(100, 'x'));
+
+  absl::StatusOr<std::string> read = ReadFile(path, 100);
+
+  ASSERT_TRUE(read.ok()) << read.status();
+  EXPECT_EQ(read->size(), 100u);
+}
+
+TEST(ReadFileTest, StreamWithoutSizeIsCappedOnWhatArrives) {
+  // /proc files report size 0, so the cap must hold on the bytes actually read.
+  absl::StatusOr<std::string> read = ReadFile("/proc/self/maps", 10);
+
+  EXPECT_EQ(read.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(std::string(read.status().message()),
+            "/proc/self/maps: file is over the limit of 10 bytes");
+}
+
+TEST(WriteFileAtomicallyTest, WritesNewFileAndLeavesNoTemporary) {
+  const std::string directory = testing::MakeTempDir();
+  const std::string path = directory + "/out.bvh";
+
+  absl::Status written = WriteFileAtomically(path, "hello\n");
+
+  ASSERT_TRUE(written.ok()) << written;
+  EXPECT_EQ(*ReadFile(path), "hello\n");
+  EXPECT_EQ(DirectoryEntries(directory), std::vector<std::string>{"out.bvh"});
+}
+
+TEST(WriteFileAtomicallyTest, ReplacesExistingFileAndKeepsItsPermissions) {
+  const std::string directory = testing::MakeTempDir();
+  const std::string path = directory + "/out.bvh";
+  WritePlain(path, "old contents that are longer than the new ones\n");
+  ASSERT_EQ(::chmod(path.c_str(), 0640), 0);
+
+  absl::Status written = WriteFileAtomically(path, "new\n");
+
+  ASSERT_TRUE(written.ok()) << written;
+  EXPECT_EQ(*ReadFile(path), "new\n");
+  struct stat info {};
+  ASSERT_EQ(::stat(path.c_str(), &info), 0);
+  EXPECT_EQ(info.st_mode & 07777, 0640u);
+  EXPECT_EQ(DirectoryEntries(directory), std::vector<std::string>{"out.bvh"});
+}
+
+TEST(WriteFileAtomicallyTest, WritesEmptyContents) {
+  const std::string path = testing::MakeTempDir() + "/empty";
+
+  absl::Status written = WriteFileAtomically(path, "");
+
+  ASSERT_TRUE(written.ok()) << written;
+  EXPECT_EQ(*ReadFile(path), "");
+}
+
+TEST(WriteFileAtomicallyTest, MissingDirectoryFailsClearlyAndCreatesNothing) {
+  const std::string parent = testing::MakeTempDir();
+  const std::string path = parent + "/no/such/dir/out.bvh";
+
+  absl::Status written = WriteFileAtomically(path, "data");
+
+  EXPECT_EQ(written.code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(std::string(written.message()),
+            path + ": cannot create a temporary file in " + parent +
+                "/no/such/dir: no such file or directory");
+  EXPECT_TRUE(DirectoryEntries(parent).empty());
+}
+
+TEST(WriteFileAtomicallyTest, DirectoryThatIsAFileFailsClearly) {
+  const std::string parent = testing::MakeTempDir();
+  WritePlain(parent + "/plain", "x");
+  const std::string path = parent + "/plain/out.bvh";
+
+  absl::Status written = WriteFileAtomically(path, "data");
+
+  EXPECT_EQ(written.code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(std::string(written.message()),
+            path + ": cannot create a temporary file in " + parent + "/plain: not a directory");
+  EXPECT_EQ(DirectoryEntries(parent), std::vector<std::string>{"plain"});
+}
+
+TEST(WriteFileAtomicallyTest, TargetThatIsADirectoryFailsAndRemovesTheTemporary) {
+  const std::string parent = testing::MakeTempDir();
+  const std::string path = parent + "/taken";
+  std::filesystem::create_directory(path);
+
+  absl::Status written = WriteFileAtomically(path, "data");
+
+  EXPECT_FALSE(written.ok());
+  EXPECT_EQ(std::string(written.message()), path + ": cannot replace the file: is a directory");
+  EXPECT_EQ(DirectoryEntries(parent), std::vector<std::string>{"taken"});
+}
+
+TEST(WriteFileAtomicallyTest, PathWithoutDirectoryWritesInTheWorkingDirectory) {
+  const std::string directory = testing::MakeTempDir();
+  const std::filesystem::path previous = std::filesystem::current_path();
+  std::filesystem::current_path(directory);
+
+  absl::Status written = WriteFileAtomically("bare.txt", "x");
+  std::filesystem::current_path(previous);
+
+  ASSERT_TRUE(written.ok()) << written;
+  EXPECT_EQ(DirectoryEntries(directory), std::vector<std::string>{"bare.txt"});
+}
+
+}  // namespace
+}  // namespace tempokey::core

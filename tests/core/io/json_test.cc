@@ -1,0 +1,65 @@
+#include "tempokey/core/io/json.h"
+
+#include <string>
+
+#include "gtest/gtest.h"
+
+namespace tempokey::core {
+namespace {
+
+TEST(JsonTest, ReadsNestedValuesWithTheirPositions) {
+  absl::StatusOr<JsonValue> root =
+      ParseJson("{\"ops\": [\n  {\"fps\": 29.97, \"on\": true, \"n\": null}\n]}", "p.json");
+  ASSERT_TRUE(root.ok()) << root.status();
+  const JsonValue* ops = root->Find("ops");
+  ASSERT_NE(ops, nullptr);
+  ASSERT_EQ(ops->type, JsonValue::Type::kArray);
+  ASSERT_EQ(ops->array->size(), 1u);
+  const JsonValue& op = (*ops->array)[0];
+  EXPECT_EQ(op.line, 2);
+  EXPECT_EQ(op.column, 3);
+  const JsonValue* fps = op.Find("fps");
+  ASSERT_NE(fps, nullptr);
+  EXPECT_EQ(fps->number, 29.97);
+  EXPECT_EQ(fps->text, "29.97");  // the token as written, for parsers with their own rules
+  EXPECT_EQ(fps->column, 11);
+  EXPECT_TRUE(op.Find("on")->boolean);
+  EXPECT_EQ(op.Find("n")->type, JsonValue::Type::kNull);
+  EXPECT_EQ(op.Find("missing"), nullptr);
+  EXPECT_EQ(fps->Find("x"), nullptr);  // not an object
+}
+
+TEST(JsonTest, DecodesStringEscapes) {
+  absl::StatusOr<JsonValue> root = ParseJson(R"("a\"b\\c\n\u0041")", "s.json");
+  ASSERT_TRUE(root.ok()) << root.status();
+  EXPECT_EQ(root->text, "a\"b\\c\nA");
+}
+
+struct BadJson {
+  const char* text;
+  const char* message;
+};
+
+class JsonErrorTest : public ::testing::TestWithParam<BadJson> {};
+
+TEST_P(JsonErrorTest, NamesLineAndColumn) {
+  absl::StatusOr<JsonValue> root = ParseJson(GetParam().text, "p.json");
+  ASSERT_FALSE(root.ok());
+  EXPECT_EQ(root.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(std::string(root.status().message()), GetParam().message);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Cases, JsonErrorTest,
+    ::testing::Values(
+        BadJson{"", "p.json:1:1: expected a value, got the end of the text"},
+        BadJson{"{\"a\": 1,\n \"b\" 2}", R"(p.json:2:6: expected ':', got "2")"},
+        BadJson{"[1, 2", "p.json:1:6: expected ',' or ']', got the end of the text"},
+        BadJson{"{\"a\": 1e999}", R"(p.json:1:7: number "1e999" is out of range for a double)"},
+        BadJson{"{} x", R"(p.json:1:4: expected the end of the document, got "x")"},
+        BadJson{"\"abc", "p.json:1:5: expected '\"' to end the string, got the end of the text"},
+        BadJson{"[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[[1]]]",
+                "p.json:1:66: nesting deeper than 64 levels"}));
+
+}  // namespace
+}  // namespace tempokey::core

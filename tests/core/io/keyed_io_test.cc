@@ -1,0 +1,293 @@
+#include "tempokey/core/io/keyed_json.h"
+#include "tempokey/core/io/maya_anim.h"
+
+#include <cmath>
+#include <cstdlib>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "gtest/gtest.h"
+#include "tempokey/core/io/bvh.h"
+#include "tempokey/core/reduce/reduce.h"
+#include "tests/testing/test_paths.h"
+
+namespace tempokey::core {
+namespace {
+
+KeyedClip ReducedCmu() {
+  absl::StatusOr<Clip> clip = ReadBvhFile(testing::SharedBvh("cmu/131_01.bvh"));
+  EXPECT_TRUE(clip.ok()) << clip.status();
+  ReduceOptions options;
+  options.method = ReduceMethod::kPaper;
+  options.paper.max_iterations = 1;
+  absl::StatusOr<ReduceResult> result = ReduceKeys(*clip, options);
+  EXPECT_TRUE(result.ok()) << result.status();
+  return result->keyed;
+}
+
+KeyedClip SmallKeyed() {
+  KeyedClip keyed;
+  keyed.layout.name = "walk \"quoted\"";
+  keyed.layout.frame_time_seconds = 1.0 / 30.0;
+  keyed.layout.frame_count = 31;
+  Channel channel;
+  channel.kind = ChannelKind::kScalar;
+  channel.name = "blend";
+  keyed.layout.channels = {channel};
+  keyed.layout.markers = {Marker{"contact", 0.5, 0.25}};
+  Key a;
+  a.value = 0.1;
+  a.out_tangent = 0.30000000000000004;
+  Key b;
+  b.time_seconds = 1.0;
+  b.value = -2.5e-300;
+  b.in_tangent = 1e300;
+  b.in_weight = 0.2;
+  b.out_weight = 0.7;
+  keyed.curves = {Curve{{a, b}}};
+  return keyed;
+}
+
+TEST(KeyedJsonTest, RoundTripIsBitExactOnAReducedClip) {
+  const KeyedClip keyed = ReducedCmu();
+
+  absl::StatusOr<std::string> text = FormatKeyedClipJson(keyed);
+  ASSERT_TRUE(text.ok()) << text.status();
+  absl::StatusOr<KeyedClip> back = ParseKeyedClipJson(*text, "cmu.json");
+
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_TRUE(*back == keyed);
+}
+
+TEST(KeyedJsonTest, RoundTripKeepsMarkersNamesAndExtremeNumbers) {
+  const KeyedClip keyed = SmallKeyed();
+
+  absl::StatusOr<KeyedClip> back = ParseKeyedClipJson(*FormatKeyedClipJson(keyed), "small.json");
+
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_EQ(*back, keyed);
+}
+
+TEST(KeyedJsonTest, RoundTripKeepsOneSidedWeightsUnset) {
+  KeyedClip keyed = SmallKeyed();
+  Curve& curve = keyed.curves[0];
+  curve.keys[0].out_weight = 0.5;  // in weight unset
+  curve.keys[1].in_weight = 0.25;
+  curve.keys[1].out_weight.reset();
+  Key last;
+  last.time_seconds = 2.0;
+  last.value = 4.0;
+  curve.keys.push_back(last);
+  keyed.layout.frame_count = 61;
+
+  const absl::StatusOr<std::string> text = FormatKeyedClipJson(keyed);
+  ASSERT_TRUE(text.ok()) << text.status();
+  const absl::StatusOr<KeyedClip> back = ParseKeyedClipJson(*text, "one_sided.json");
+
+  EXPECT_NE(text->find("[0, 0.1, 0, 0.30000000000000004, null, 0.5]"), std::string::npos)
+      << *text;
+  EXPECT_NE(text->find("[1, -2.5e-300, 1e+300, 0, 0.25, null]"), std::string::npos) << *text;
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_EQ(*back, keyed);
+  EXPECT_FALSE(back->curves[0].keys[0].in_weight.has_value());
+  EXPECT_FALSE(back->curves[0].keys[1].out_weight.has_value());
+}
+
+TEST(KeyedJsonTest, ClipWithABadMarkerIsRefusedBeforeWriting) {
+  KeyedClip nan_time = SmallKeyed();
+  nan_time.layout.markers[0].time_seconds = std::nan("");
+  KeyedClip negative = SmallKeyed();
+  negative.layout.markers[0].duration_seconds = -0.5;
+
+  const absl::StatusOr<std::string> nan_text = FormatKeyedClipJson(nan_time);
+  const absl::StatusOr<std::string> negative_text = FormatKeyedClipJson(negative);
+
+  EXPECT_EQ(nan_text.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(nan_text.status().message(), "marker 0 (\"contact\"): time_seconds is NaN");
+  EXPECT_EQ(negative_text.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(negative_text.status().message(),
+            "marker 0 (\"contact\"): duration_seconds must be finite and >= 0, got -0.5");
+}
+
+TEST(KeyedJsonTest, MalformedDocumentsAreRefusedWithPlaceAndReason) {
+  const std::string good = *FormatKeyedClipJson(SmallKeyed());
+  auto replaced = [&](const std::string& from, const std::string& to) {
+    std::string text = good;
+    text.replace(text.find(from), from.size(), to);
+    return text;
+  };
+  struct Case {
+    std::string text;
+    const char* message;
+  } cases[] = {
+      {"", "k.json:1:1: expected a value, got the end of the text"},
+      {"{\"format\": 1,}", "k.json:1:14: expected a member name, got \"}\""},
+      {"{\"format\": 1}", "k.json:1:12: format must be a string"},
+      {"[1, 2", "k.json:1:6: expected ',' or ']', got the end of the text"},
+      {replaced("\"version\": 1", "\"version\": 2"),
+       "k.json:3:14: version 2 is not supported (1 is)"},
+      {replaced("\"frame_count\": 31", "\"frame_count\": 31, \"extra\": 0"),
+       "k.json:6:31: keyed clip has an unknown member \"extra\""},
+      {replaced("[1, -2.5e-300", "[1, nan"),
+       "k.json:9:101: expected a value, got \"n\""},
+      {replaced("[1, -2.5e-300", "[1, 1.2.3"), "k.json:9:101: malformed number \"1.2.3\""},
+      {replaced("[1, -2.5e-300", "[1, -1e999"),
+       "k.json:9:101: number \"-1e999\" is out of range for a double"},
+      {replaced("0.2, 0.7]", "0.2, true]"),
+       "k.json:9:128: channel 0 key 1 weight must be a number or null"},
+      {replaced("\"duration_seconds\": 0.25", "\"duration_seconds\": -1"),
+       "k.json: marker 0 (\"contact\"): duration_seconds must be finite and >= 0, got -1"},
+      {replaced("\"kind\": \"scalar\"", "\"kind\": \"Wrotation\""),
+       "k.json:9:27: channel 0 kind \"Wrotation\" is not a channel kind"},
+      {replaced("0.2, 0.7]", "0.2]"), "k.json:9:97: channel 0 key 1 must have 4 or 6 numbers, got 5"},
+      {replaced("\"frame_time_seconds\": 0.03333333333333333", "\"frame_time_seconds\": -1"),
+       "k.json: frame time must be finite and > 0 seconds, got -1"},
+      {replaced("[1, -2.5e-300", "[0, -2.5e-300"),
+       "k.json: channel 0 (blend): key 1: time 0 s is not after the previous key's 0 s"},
+  };
+  for (const Case& c : cases) {
+    const absl::StatusOr<KeyedClip> result = ParseKeyedClipJson(c.text, "k.json");
+
+    EXPECT_EQ(result.status().code(), absl::StatusCode::kInvalidArgument) << c.message;
+    EXPECT_EQ(std::string(result.status().message()), c.message);
+  }
+}
+
+TEST(MayaAnimTest, WritesOneWeightedBlockPerChannelWithMayaNames) {
+  const KeyedClip keyed = ReducedCmu();
+
+  absl::StatusOr<std::string> text = FormatMayaAnim(keyed);
+
+  ASSERT_TRUE(text.ok()) << text.status();
+  EXPECT_EQ(text->rfind("animVersion 1.1;\nmayaVersion 2020;\ntimeUnit 120fps;\n", 0), 0u);
+  std::size_t blocks = 0;
+  for (std::size_t at = text->find("animData {"); at != std::string::npos;
+       at = text->find("animData {", at + 1)) {
+    ++blocks;
+  }
+  EXPECT_EQ(blocks, keyed.curves.size());
+  EXPECT_NE(text->find("anim translate.translateX translateX Hips 0 0 0;\n"), std::string::npos);
+  EXPECT_NE(text->find("anim rotate.rotateZ rotateZ Hips 0 0 0;\n"), std::string::npos);
+  EXPECT_NE(text->find("  output angular;\n  weighted 1;\n"), std::string::npos);
+}
+
+TEST(MayaAnimTest, TangentAnglesAndWeightsFollowTheHandle) {
+  // Key 0: slope 0.3 /s, out weight 1/3 of a 1 s segment: handle (1/3 s, 0.1), so Maya's
+  // vector is (1, 0.3): angle atan(0.3) = 16.69924423399362 degrees, weight hypot(1, 0.3).
+  KeyedClip keyed = SmallKeyed();
+  keyed.curves[0].keys[0].out_tangent = 0.3;
+  keyed.curves[0].keys[0].in_tangent = 0.3;
+
+  absl::StatusOr<std::string> text = FormatMayaAnim(keyed);
+
+  ASSERT_TRUE(text.ok()) << text.status();
+  EXPECT_NE(text->find("timeUnit ntsc;"), std::string::npos);
+  EXPECT_NE(text->find("    0 0.1 fixed fixed 1 0 0 16.69924423399362 1.044030650891055 "
+                       "16.69924423399362 1.044030650891055;\n"),
+            std::string::npos)
+      << *text;
+  EXPECT_NE(text->find("    30 -2.5e-300 fixed fixed 0 0 0 "), std::string::npos) << *text;
+}
+
+// A scalar channel at `frame_time` with flat keys at `times`.
+KeyedClip KeyedAtRate(double frame_time, std::int64_t frame_count,
+                      const std::vector<double>& times) {
+  KeyedClip keyed;
+  keyed.layout.frame_time_seconds = frame_time;
+  keyed.layout.frame_count = frame_count;
+  Channel channel;
+  channel.name = "blend";
+  keyed.layout.channels = {channel};
+  Curve curve;
+  for (double t : times) {
+    Key key;
+    key.time_seconds = t;
+    curve.keys.push_back(key);
+  }
+  keyed.curves = {curve};
+  return keyed;
+}
+
+// The time (first number) of every key line of a .anim text, and its endTime.
+struct AnimTimes {
+  std::vector<double> keys;
+  double end = -1.0;
+};
+
+AnimTimes ParseAnimTimes(const std::string& text) {
+  AnimTimes times;
+  std::istringstream lines(text);
+  for (std::string line; std::getline(lines, line);) {
+    if (line.rfind("endTime ", 0) == 0) times.end = std::strtod(line.c_str() + 8, nullptr);
+    if (line.find(" fixed fixed ") != std::string::npos) {
+      times.keys.push_back(std::strtod(line.c_str(), nullptr));
+    }
+  }
+  return times;
+}
+
+// Key times go through one multiplication (or division) each: a few ulps.
+constexpr double kFrameTolerance = 1e-9;
+
+TEST(MayaAnimTest, NtscFractionalRateDeclares2997AndWritesTimesInItsFrames) {
+  const double frame_time = 1001.0 / 30000.0;
+  const std::vector<double> times = {0.0, 1.5, 2.0, 99.0 * frame_time};
+  const KeyedClip keyed = KeyedAtRate(frame_time, 100, times);
+
+  const absl::StatusOr<std::string> text = FormatMayaAnim(keyed);
+
+  ASSERT_TRUE(text.ok()) << text.status();
+  EXPECT_NE(text->find("\ntimeUnit 29.97fps;\n"), std::string::npos) << *text;
+  const AnimTimes written = ParseAnimTimes(*text);
+  ASSERT_EQ(written.keys.size(), times.size());
+  for (std::size_t k = 0; k < times.size(); ++k) {
+    EXPECT_NEAR(written.keys[k], times[k] * 30000.0 / 1001.0, kFrameTolerance) << k;
+  }
+  EXPECT_NEAR(written.end, 99.0, kFrameTolerance);
+}
+
+TEST(MayaAnimTest, BvhRateOffTheUnitDeclares120fpsWithTimesIn120HzFrames) {
+  // 0.0083333 s is 120.0005 Hz: declared 120fps, so times are scaled into 120 Hz frames rather
+  // than written as the clip's frame numbers (which would play 0.0004% slow).
+  const double frame_time = 0.0083333;
+  const std::vector<double> times = {0.0, 500.0 * frame_time, 993.0 * frame_time};
+  const KeyedClip keyed = KeyedAtRate(frame_time, 994, times);
+
+  const absl::StatusOr<std::string> text = FormatMayaAnim(keyed);
+
+  ASSERT_TRUE(text.ok()) << text.status();
+  EXPECT_NE(text->find("\ntimeUnit 120fps;\n"), std::string::npos) << *text;
+  const AnimTimes written = ParseAnimTimes(*text);
+  ASSERT_EQ(written.keys.size(), times.size());
+  for (std::size_t k = 0; k < times.size(); ++k) {
+    EXPECT_NEAR(written.keys[k], times[k] * 120.0, kFrameTolerance) << k;
+  }
+  EXPECT_NE(written.keys[2], 993.0);
+  EXPECT_NEAR(written.end, 993.0 * frame_time * 120.0, kFrameTolerance);
+}
+
+TEST(MayaAnimTest, TimeUnitIsTheNearestMayaUnit) {
+  struct Case {
+    double frame_time;
+    const char* unit;
+  } cases[] = {
+      {1.0 / 24.0, "film"},   {1001.0 / 24000.0, "23.976fps"}, {1.0 / 25.0, "pal"},
+      {1.0 / 30.0, "ntsc"},   {1001.0 / 60000.0, "59.94fps"},  {1.0 / 60.0, "ntscf"},
+      {1.0 / 90.0, "100fps"}, {1.0 / 1000.0, "1200fps"},       {1.0 / 7.0, "8fps"},
+      {10.0, "2fps"},         {1e-300, "6000fps"},             {5e-324, "6000fps"},
+  };
+  for (const Case& c : cases) {
+    const KeyedClip keyed = KeyedAtRate(c.frame_time, 2, {0.0, c.frame_time});
+
+    const absl::StatusOr<std::string> text = FormatMayaAnim(keyed);
+
+    ASSERT_TRUE(text.ok()) << text.status();
+    EXPECT_NE(text->find(std::string("\ntimeUnit ") + c.unit + ";\n"), std::string::npos)
+        << c.frame_time << "\n"
+        << *text;
+  }
+}
+
+}  // namespace
+}  // namespace tempokey::core

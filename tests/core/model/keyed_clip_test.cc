@@ -1,0 +1,186 @@
+#include "tempokey/core/model/keyed_clip.h"
+
+#include <cmath>
+#include <random>
+
+#include "gtest/gtest.h"
+
+// Keys and channels below are written with designated initializers naming only what matters.
+#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
+
+namespace tempokey::core {
+namespace {
+
+// Evaluations of the same cubic along two formulas agree to rounding of values of order 10.
+constexpr double kRounding = 1e-12;
+
+Clip TwoChannelLayout() {
+  Clip layout;
+  layout.name = "layout";
+  layout.frame_time_seconds = 0.1;
+  layout.frame_count = 11;
+  layout.channels = {Channel{.joint = -1, .kind = ChannelKind::kScalar, .name = "a"},
+                     Channel{.joint = -1, .kind = ChannelKind::kScalar, .name = "b"}};
+  return layout;
+}
+
+TEST(EvaluateCurveTest, NonWeightedSegmentIsTheCubicHermiteInTime) {
+  const Curve curve{{Key{.time_seconds = 1.0, .value = 2.0, .in_tangent = 0, .out_tangent = 3.0},
+                     Key{.time_seconds = 3.0, .value = -1.0, .in_tangent = 0.5, .out_tangent = 0}}};
+
+  // s = 0.25, dt = 2: h00 = 0.84375, h10 = 0.140625, h01 = 0.15625, h11 = -0.046875.
+  const double expected = 0.84375 * 2.0 + 0.140625 * 3.0 * 2.0 + 0.15625 * -1.0 +
+                          -0.046875 * 0.5 * 2.0;
+
+  EXPECT_NEAR(EvaluateCurve(curve, 1.5), expected, kRounding);
+  EXPECT_EQ(EvaluateCurve(curve, 1.0), 2.0);
+  EXPECT_EQ(EvaluateCurve(curve, 3.0), -1.0);
+  EXPECT_EQ(EvaluateCurve(curve, 0.0), 2.0);
+  EXPECT_EQ(EvaluateCurve(curve, 9.0), -1.0);
+}
+
+TEST(EvaluateCurveTest, WeightsOfOneThirdMatchNonWeightedKeys) {
+  Curve plain{{Key{.time_seconds = 0.0, .value = 1.0, .in_tangent = 0, .out_tangent = -4.0},
+               Key{.time_seconds = 0.5, .value = 3.0, .in_tangent = 2.0, .out_tangent = 0}}};
+  Curve weighted = plain;
+  for (Key& key : weighted.keys) {
+    key.in_weight = 1.0 / 3.0;
+    key.out_weight = 1.0 / 3.0;
+  }
+
+  for (int i = 0; i <= 50; ++i) {
+    const double t = 0.01 * i;
+    EXPECT_NEAR(EvaluateCurve(weighted, t), EvaluateCurve(plain, t), kRounding) << t;
+  }
+}
+
+TEST(EvaluateCurveTest, WeightedSegmentFollowsTheTwoDimensionalBezier) {
+  // Handles at 0.1 and 0.6 of a 1 s segment: time x(s) and value y(s) are Beziers with controls
+  // (0, 0.1, 0.4, 1) and (0, 0.1 * 2, 5 - 0.6 * 1, 5); the curve passes through (x(s), y(s)).
+  const Curve curve{
+      {Key{.time_seconds = 0, .value = 0, .out_tangent = 2.0, .out_weight = 0.1},
+       Key{.time_seconds = 1, .value = 5, .in_tangent = 1.0, .in_weight = 0.6}}};
+  for (double s : {0.1, 0.3, 0.5, 0.77, 0.95}) {
+    const double u = 1 - s;
+    const double x = 3 * u * u * s * 0.1 + 3 * u * s * s * 0.4 + s * s * s;
+    const double y = 3 * u * u * s * 0.2 + 3 * u * s * s * 4.4 + s * s * s * 5.0;
+
+    EXPECT_NEAR(EvaluateCurve(curve, x), y, 1e-10) << "s " << s;
+  }
+}
+
+TEST(SampleCurveTest, EqualsEvaluateCurveBitForBitOnRandomCurves) {
+  std::mt19937 random(7);
+  std::uniform_real_distribution<double> value(-100.0, 100.0);
+  std::uniform_real_distribution<double> weight(0.05, 0.45);
+  std::uniform_int_distribution<int> gap(1, 9);
+  for (int trial = 0; trial < 50; ++trial) {
+    const double frame_time = trial % 2 == 0 ? 1.0 / 30.0 : 1.0 / 120.0;
+    Curve curve;
+    double frame = trial % 3;  // sometimes the first key is after time 0
+    for (int k = 0; k < 1 + trial % 12; ++k) {
+      Key key{.time_seconds = frame * frame_time, .value = value(random),
+              .in_tangent = value(random), .out_tangent = value(random)};
+      if (trial % 4 == 1) {  // weighted tangents on some curves
+        key.in_weight = weight(random);
+        key.out_weight = weight(random);
+      }
+      curve.keys.push_back(key);
+      frame += gap(random);
+    }
+    // Past the last key too, where the curve holds its last value.
+    std::vector<double> sampled(static_cast<std::size_t>(frame) + 5);
+    SampleCurve(curve, frame_time, sampled);
+    for (std::size_t i = 0; i < sampled.size(); ++i) {
+      const double expected = EvaluateCurve(curve, static_cast<double>(i) * frame_time);
+      ASSERT_EQ(sampled[i], expected) << "trial " << trial << " sample " << i;
+    }
+  }
+}
+
+TEST(SolveBezierParameterTest, InvertsRandomMonotonicControls) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  for (int trial = 0; trial < 1000; ++trial) {
+    const double x1 = unit(rng);
+    const double x2 = x1 + (1.0 - x1) * unit(rng);
+    const double s = unit(rng);
+    const double u = 1 - s;
+    const double x = 3 * u * u * s * x1 + 3 * u * s * s * x2 + s * s * s * 1.0;
+
+    const double solved = SolveBezierParameter(0.0, x1, x2, 1.0, x);
+
+    const double v = 1 - solved;
+    EXPECT_NEAR(3 * v * v * solved * x1 + 3 * v * solved * solved * x2 + solved * solved * solved,
+                x, 1e-14);
+  }
+}
+
+TEST(ValidateKeyedClipTest, MalformedCurvesAreNamed) {
+  const Key a{.time_seconds = 0.0, .value = 1.0};
+  const Key b{.time_seconds = 0.5, .value = 1.0};
+  struct Case {
+    Curve curve;
+    const char* message;
+  } cases[] = {
+      {Curve{}, "channel 1 (b): the curve has no keys"},
+      {Curve{{a, a}}, "channel 1 (b): key 1: time 0 s is not after the previous key's 0 s"},
+      {Curve{{a, Key{.time_seconds = 1, .value = NAN}}}, "channel 1 (b): key 1: value is NaN"},
+      {Curve{{a, Key{.time_seconds = 1, .out_tangent = INFINITY}}},
+       "channel 1 (b): key 1: out tangent is +infinity"},
+      {Curve{{Key{.out_weight = 0.0}, b}},
+       "channel 1 (b): key 0: out weight must be in (0, 1], got 0"},
+      {Curve{{Key{.out_weight = 0.8}, Key{.time_seconds = 1, .in_weight = 0.5}}},
+       "channel 1 (b): key 1: in weight plus the previous key's out weight is 1.3, over 1 (time "
+       "would run backwards)"},
+  };
+  for (const Case& c : cases) {
+    KeyedClip keyed{TwoChannelLayout(), {Curve{{a, b}}, c.curve}};
+
+    const absl::Status status = ValidateKeyedClip(keyed);
+
+    EXPECT_EQ(status.code(), absl::StatusCode::kInvalidArgument) << c.message;
+    EXPECT_EQ(status.message(), c.message);
+  }
+}
+
+TEST(ValidateKeyedClipTest, CurveCountMustMatchChannels) {
+  const KeyedClip keyed{TwoChannelLayout(), {Curve{{Key{}}}}};
+
+  EXPECT_EQ(ValidateKeyedClip(keyed).message(), "keyed clip has 1 curves for 2 channels");
+}
+
+TEST(BakeTest, SamplesEveryFrameOfTheLayoutDuration) {
+  const Curve line{{Key{.time_seconds = 0, .value = 0, .out_tangent = 2.0},
+                    Key{.time_seconds = 1, .value = 2, .in_tangent = 2.0}}};
+  const KeyedClip keyed{TwoChannelLayout(), {line, Curve{{Key{.value = 7.0}}}}};
+
+  absl::StatusOr<Clip> same_rate = Bake(keyed);
+  absl::StatusOr<Clip> fourth_rate = Bake(keyed, 0.25);
+
+  ASSERT_TRUE(same_rate.ok()) << same_rate.status();
+  EXPECT_EQ(same_rate->frame_count, 11);
+  for (int i = 0; i <= 10; ++i) {
+    EXPECT_NEAR(same_rate->channels[0].samples[i], 0.2 * i, kRounding);
+    EXPECT_EQ(same_rate->channels[1].samples[i], 7.0);
+  }
+  ASSERT_TRUE(fourth_rate.ok());
+  EXPECT_EQ(fourth_rate->frame_count, 5);
+  EXPECT_EQ(fourth_rate->frame_time_seconds, 0.25);
+  EXPECT_TRUE(ValidateClip(*fourth_rate).ok());
+}
+
+TEST(BakeTest, RefusesBadFrameTimesAndHugeResults) {
+  const KeyedClip keyed{TwoChannelLayout(), {Curve{{Key{}}}, Curve{{Key{}}}}};
+
+  EXPECT_EQ(Bake(keyed, 0.0).status().message(),
+            "bake frame time must be finite and > 0 seconds, got 0");
+  EXPECT_EQ(Bake(keyed, NAN).status().message(),
+            "bake frame time must be finite and > 0 seconds, got NaN");
+  EXPECT_EQ(Bake(keyed, 1e-10).status().message(),
+            "bake at 1e-10 s per frame gives 1e+10 frames x 2 channels, over the limit of "
+            "200000000 samples");
+}
+
+}  // namespace
+}  // namespace tempokey::core

@@ -1,0 +1,93 @@
+#include "tempokey/core/model/kinematics.h"
+
+#include <vector>
+
+#include "gtest/gtest.h"
+
+// g++ 12 warns (-Wmissing-field-initializers) about designated initializers that leave members
+// at their defaults, which is how STYLE.md builds options structs.
+#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
+
+namespace tempokey::core {
+namespace {
+
+// A handful of products of exact axis matrices: rounding of a few ulps.
+constexpr double kTolerance = 1e-12;
+
+// Root "R" (positions + Zrotation Xrotation Yrotation) with a child "C" (Xrotation) at offset
+// (1, 0, 0) and a grandchild "T" (no channels) at offset (0, 2, 0).
+Clip Chain(double root_z, double root_x, double child_x) {
+  Clip clip;
+  clip.frame_time_seconds = 1.0 / 30;
+  clip.frame_count = 1;
+  clip.skeleton.joints = {{.name = "R", .parent = -1, .offset = {9, 9, 9}},
+                          {.name = "C", .parent = 0, .offset = {1, 0, 0}},
+                          {.name = "T", .parent = 1, .offset = {0, 2, 0}}};
+  const std::vector<std::pair<ChannelKind, double>> root = {
+      {ChannelKind::kXPosition, 1}, {ChannelKind::kYPosition, 2}, {ChannelKind::kZPosition, 3},
+      {ChannelKind::kZRotation, root_z}, {ChannelKind::kXRotation, root_x},
+      {ChannelKind::kYRotation, 0}};
+  for (const auto& [kind, value] : root) {
+    clip.skeleton.joints[0].channels.push_back(static_cast<int>(clip.channels.size()));
+    clip.channels.push_back({.joint = 0, .kind = kind, .samples = {value}});
+  }
+  clip.skeleton.joints[1].channels.push_back(static_cast<int>(clip.channels.size()));
+  clip.channels.push_back({.joint = 1, .kind = ChannelKind::kXRotation, .samples = {child_x}});
+  return clip;
+}
+
+void ExpectPosition(const Vec3& got, const Vec3& expected) {
+  for (int k = 0; k < 3; ++k) EXPECT_NEAR(got[k], expected[k], kTolerance) << k;
+}
+
+TEST(KinematicsTest, PositionChannelsReplaceTheOffsetAndRotationsTurnTheChildren) {
+  // Root at (1, 2, 3) (its offset 9, 9, 9 replaced); Rz(90) turns the child's +X offset to +Y,
+  // so C is at (1, 3, 3); C's Rx(90) turns T's +Y offset to +Z, then Rz(90) leaves +Z: T at
+  // (1, 3, 5).
+  const Clip clip = Chain(90, 0, 90);
+
+  const absl::StatusOr<std::vector<Vec3>> world = JointWorldPositions(clip, 0);
+
+  ASSERT_TRUE(world.ok()) << world.status();
+  ExpectPosition((*world)[0], {1, 2, 3});
+  ExpectPosition((*world)[1], {1, 3, 3});
+  ExpectPosition((*world)[2], {1, 3, 5});
+}
+
+TEST(KinematicsTest, RotationChannelsComposeInListedOrder) {
+  // Root ZXY = Rz(90)·Rx(90): the child's +X offset goes to +Y under Rz (Rx first leaves +X
+  // alone). With the opposite order, Rx(90)·Rz(90), +X -> +Y -> +Z.
+  const Clip zxy = Chain(90, 90, 0);
+
+  const absl::StatusOr<std::vector<Vec3>> world = JointWorldPositions(zxy, 0);
+
+  ASSERT_TRUE(world.ok());
+  ExpectPosition((*world)[1], {1, 3, 3});
+  // T's offset +Y: Rz(90)·Rx(90)·(0, 2, 0) = Rz(90)·(0, 0, 2) = (0, 0, 2).
+  ExpectPosition((*world)[2], {1, 3, 5});
+}
+
+TEST(KinematicsTest, RefusesFramesOutsideTheClipAndClipsWithoutSkeleton) {
+  Clip plain;
+  plain.frame_count = 1;
+  plain.channels.push_back({.name = "x", .samples = {1.0}});
+
+  EXPECT_EQ(JointWorldPositions(Chain(0, 0, 0), 1).status().message(),
+            "frame 1 is outside the clip's 1 frames");
+  EXPECT_EQ(JointWorldPositions(plain, 0).status().message(),
+            "forward kinematics needs a skeleton, the clip has none");
+}
+
+TEST(KinematicsTest, JointRotationsListRotationChannelsAndTheirOrder) {
+  const Clip clip = Chain(0, 0, 0);
+
+  const std::vector<JointRotation> rotations = JointRotations(clip);
+
+  ASSERT_EQ(rotations.size(), 2u);
+  EXPECT_EQ(rotations[0].channels, (std::vector<int>{3, 4, 5}));
+  EXPECT_EQ(rotations[0].order, (EulerOrder{2, 0, 1}));
+  EXPECT_EQ(rotations[1].channels, (std::vector<int>{6}));
+}
+
+}  // namespace
+}  // namespace tempokey::core

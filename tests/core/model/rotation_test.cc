@@ -1,0 +1,244 @@
+#include "tempokey/core/model/rotation.h"
+
+#include <cmath>
+#include <numbers>
+#include <random>
+#include <vector>
+
+#include "gtest/gtest.h"
+
+// g++ 12 warns (-Wmissing-field-initializers) about designated initializers that leave members
+// at their defaults, which is how STYLE.md builds options structs.
+#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
+
+namespace tempokey::core {
+namespace {
+
+// Products of a few rotation matrices / quaternions in doubles agree to a few ulps of 1.
+constexpr double kRoundingTolerance = 1e-13;
+// Euler angles recovered through atan2 of matrix entries: a few ulps of 180 degrees, amplified
+// by 1 / cos(middle angle) for middle angles up to 80 degrees.
+constexpr double kAngleTolerance = 1e-9;
+
+const EulerOrder kAllOrders[] = {{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}};
+
+double MaxMatrixDifference(const Mat3& a, const Mat3& b) {
+  double worst = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) worst = std::max(worst, std::abs(a[i][j] - b[i][j]));
+  }
+  return worst;
+}
+
+TEST(RotationTest, EulerOrderIsComposedLeftToRightLikeBvh) {
+  // ZXY with (90, 90, 0) is Rz(90)·Rx(90): +Y goes to +Z under Rx(90), which Rz leaves alone.
+  const Vec3 y_axis = {0.0, 1.0, 0.0};
+
+  const Vec3 zxy = MatVec(EulerToMatrix({2, 0, 1}, {90.0, 90.0, 0.0}), y_axis);
+  // XZY with (90, 90, 0) is Rx(90)·Rz(90): +Y goes to -X under Rz(90), which Rx leaves alone.
+  const Vec3 xzy = MatVec(EulerToMatrix({0, 2, 1}, {90.0, 90.0, 0.0}), y_axis);
+
+  EXPECT_NEAR(zxy[0], 0.0, kRoundingTolerance);
+  EXPECT_NEAR(zxy[1], 0.0, kRoundingTolerance);
+  EXPECT_NEAR(zxy[2], 1.0, kRoundingTolerance);
+  EXPECT_NEAR(xzy[0], -1.0, kRoundingTolerance);
+  EXPECT_NEAR(xzy[1], 0.0, kRoundingTolerance);
+  EXPECT_NEAR(xzy[2], 0.0, kRoundingTolerance);
+}
+
+TEST(RotationTest, QuaternionOfEulerAnglesMatchesMatrixForAllSixOrders) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> angle(-180.0, 180.0);
+
+  for (const EulerOrder& order : kAllOrders) {
+    for (int trial = 0; trial < 200; ++trial) {
+      const Vec3 degrees = {angle(rng), angle(rng), angle(rng)};
+
+      const Mat3 from_quat = QuatToMatrix(EulerToQuat(order, degrees));
+      const Mat3 direct = EulerToMatrix(order, degrees);
+
+      ASSERT_LT(MaxMatrixDifference(from_quat, direct), kRoundingTolerance)
+          << EulerOrderName(order);
+    }
+  }
+}
+
+TEST(RotationTest, EulerAnglesRoundTripThroughQuaternionsForAllSixOrders) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> outer(-179.0, 179.0);
+  std::uniform_real_distribution<double> middle(-80.0, 80.0);
+
+  for (const EulerOrder& order : kAllOrders) {
+    for (int trial = 0; trial < 200; ++trial) {
+      const Vec3 degrees = {outer(rng), middle(rng), outer(rng)};
+
+      const Vec3 back = QuatToEulerNearest(EulerToQuat(order, degrees), order, degrees);
+
+      for (int k = 0; k < 3; ++k) {
+        ASSERT_NEAR(back[k], degrees[k], kAngleTolerance) << EulerOrderName(order) << " " << k;
+      }
+    }
+  }
+}
+
+TEST(RotationTest, NearestSolutionKeepsTheReferencesTurn) {
+  const EulerOrder zxy = {2, 0, 1};
+  const Quat q = EulerToQuat(zxy, {190.0, 10.0, -5.0});
+
+  const Vec3 unwrapped = QuatToEulerNearest(q, zxy, {185.0, 12.0, 0.0});
+  const Vec3 wrapped = QuatToEulerNearest(q, zxy, {-175.0, 12.0, 0.0});
+  const Vec3 two_turns = QuatToEulerNearest(q, zxy, {900.0, 12.0, 0.0});
+
+  EXPECT_NEAR(unwrapped[0], 190.0, kAngleTolerance);
+  EXPECT_NEAR(wrapped[0], -170.0, kAngleTolerance);
+  EXPECT_NEAR(two_turns[0], 910.0, kAngleTolerance);
+  EXPECT_NEAR(unwrapped[1], 10.0, kAngleTolerance);
+  EXPECT_NEAR(unwrapped[2], -5.0, kAngleTolerance);
+}
+
+TEST(RotationTest, NearestSolutionPicksTheOtherBranchWhenTheReferenceIsThere) {
+  // (a, b, c) and (a + 180, 180 - b, c + 180) are the same rotation for every Tait-Bryan order.
+  const EulerOrder xyz = {0, 1, 2};
+  const Vec3 first = {20.0, 30.0, 40.0};
+  const Vec3 second = {200.0, 150.0, 220.0};
+  ASSERT_LT(MaxMatrixDifference(EulerToMatrix(xyz, first), EulerToMatrix(xyz, second)),
+            kRoundingTolerance);
+
+  const Vec3 near_second = QuatToEulerNearest(EulerToQuat(xyz, first), xyz, {195.0, 155.0, 215.0});
+
+  EXPECT_NEAR(near_second[0], 200.0, kAngleTolerance);
+  EXPECT_NEAR(near_second[1], 150.0, kAngleTolerance);
+  EXPECT_NEAR(near_second[2], 220.0, kAngleTolerance);
+}
+
+TEST(RotationTest, GimbalLockKeepsTheReferenceFirstAngleAndSolvesTheLast) {
+  // At a middle angle of 90 degrees only a + c (XYZ) is defined.
+  const EulerOrder xyz = {0, 1, 2};
+  const Quat q = EulerToQuat(xyz, {30.0, 90.0, 40.0});
+
+  const Vec3 angles = QuatToEulerNearest(q, xyz, {50.0, 90.0, 0.0});
+
+  EXPECT_NEAR(angles[0], 50.0, kAngleTolerance);
+  EXPECT_NEAR(angles[1], 90.0, kAngleTolerance);
+  EXPECT_NEAR(angles[2], 20.0, kAngleTolerance);
+  EXPECT_LT(MaxMatrixDifference(EulerToMatrix(xyz, angles), QuatToMatrix(q)), kAngleTolerance);
+}
+
+TEST(RotationTest, SlerpHalfwayIsTheHalfAngleAndEndpointsAreExact) {
+  const Quat a = AxisRotation(2, 0.0);
+  const Quat b = AxisRotation(2, 90.0);
+
+  const Quat half = Slerp(a, b, 0.5);
+  const Quat from_negated = Slerp(a, Negated(b), 0.5);
+
+  EXPECT_LT(AngleBetweenDegrees(half, AxisRotation(2, 45.0)), kAngleTolerance);
+  EXPECT_LT(AngleBetweenDegrees(from_negated, AxisRotation(2, 45.0)), kAngleTolerance);
+  EXPECT_EQ(Slerp(a, b, 0.0), a);
+  EXPECT_EQ(Slerp(a, b, 1.0), b);
+}
+
+TEST(RotationTest, SlerpOfSmallStepsIsTheUniformRotationToRounding) {
+  // Below half a radian the sin ratios come from a series; it must agree with the uniform
+  // rotation to rounding, as the large-angle formula does.
+  for (double degrees : {1e-7, 0.01, 3.0, 20.0, 28.0, 29.0, 60.0, 170.0}) {
+    for (double t : {0.1, 0.37, 0.5, 0.93}) {
+      const Quat q = Slerp(AxisRotation(1, 10.0), AxisRotation(1, 10.0 + degrees), t);
+      const Quat expected = AxisRotation(1, 10.0 + t * degrees);
+
+      EXPECT_NEAR(q.w, expected.w, 1e-15) << degrees << " " << t;
+      EXPECT_NEAR(q.y, expected.y, 1e-15) << degrees << " " << t;
+    }
+  }
+}
+
+TEST(RotationTest, NearestTurnMovesByWholeTurnsToWithinHalfATurn) {
+  EXPECT_EQ(NearestTurn(190.0, 0.0), -170.0);
+  EXPECT_EQ(NearestTurn(-170.0, 185.0), 190.0);
+  EXPECT_EQ(NearestTurn(10.0, 725.0), 730.0);
+  EXPECT_EQ(NearestTurn(42.5, 42.0), 42.5);
+}
+
+TEST(RotationTest, SquadOnEvenlySpacedRotationsKeepsConstantAngularSpeed) {
+  // Rotations 10 degrees apart about one axis: the spherical cubic is the uniform rotation.
+  const Quat q0 = AxisRotation(0, 0.0);
+  const Quat q1 = AxisRotation(0, 10.0);
+  const Quat q2 = AxisRotation(0, 20.0);
+  const Quat q3 = AxisRotation(0, 30.0);
+
+  for (double t : {0.0, 0.25, 0.5, 0.9, 1.0}) {
+    const Quat q = Squad(q0, q1, q2, q3, t);
+
+    EXPECT_LT(AngleBetweenDegrees(q, AxisRotation(0, 10.0 + 10.0 * t)), kAngleTolerance) << t;
+  }
+}
+
+TEST(RotationTest, WeightedMeanOfSymmetricRotationsIsTheCentre) {
+  const std::vector<Quat> quats = {AxisRotation(1, -10.0), AxisRotation(1, 0.0),
+                                   Negated(AxisRotation(1, 10.0))};
+  const std::vector<double> weights = {0.25, 0.5, 0.25};
+
+  const Quat mean = WeightedMeanRotation(quats, weights, 1);
+
+  EXPECT_LT(AngleBetweenDegrees(mean, Quat{}), kAngleTolerance);
+  EXPECT_GT(mean.w, 0.0);
+}
+
+TEST(RotationTest, WidelySpreadRotationsUseMarkleysMean) {
+  // 80 degrees either side: beyond the 30-degree spread, so the eigenvector mean is used; by
+  // symmetry it is the identity, and it agrees with the direct eigen-solution.
+  const std::vector<Quat> quats = {AxisRotation(2, -80.0), AxisRotation(2, 80.0)};
+  const std::vector<double> weights = {0.5, 0.5};
+
+  const Quat mean = WeightedMeanRotation(quats, weights, 0);
+  const Quat markley = MarkleyMean(quats, weights, 0);
+
+  EXPECT_LT(AngleBetweenDegrees(mean, Quat{}), kAngleTolerance);
+  EXPECT_LT(AngleBetweenDegrees(markley, Quat{}), kAngleTolerance);
+}
+
+TEST(RotationTest, MarkleyMeanOfUnevenWeightsLiesOnTheGeodesic) {
+  // Markley maximizes Σ w (q·m)²; for unit 4-vectors at angles 0 and θ in one plane (θ the
+  // half-angle of the second rotation) the maximizer is at φ with
+  // tan(2φ) = w1 sin 2θ / (w0 + w1 cos 2θ), i.e. the rotation by 2φ about the same axis.
+  const double theta = 50.0 * std::numbers::pi / 180.0;
+  const std::vector<Quat> quats = {AxisRotation(0, 0.0), AxisRotation(0, 100.0)};
+  const std::vector<double> weights = {0.7, 0.3};
+  const double phi =
+      0.5 * std::atan(0.3 * std::sin(2 * theta) / (0.7 + 0.3 * std::cos(2 * theta)));
+  const Quat expected = AxisRotation(0, 2.0 * phi * 180.0 / std::numbers::pi);
+
+  const Quat mean = MarkleyMean(quats, weights, 0);
+
+  EXPECT_LT(AngleBetweenDegrees(mean, expected), kAngleTolerance);
+}
+
+TEST(RotationTest, SignContinuityNegatesOnlyFlippedNeighbours) {
+  std::vector<Quat> quats = {AxisRotation(2, 170.0), Negated(AxisRotation(2, 190.0)),
+                             AxisRotation(2, 200.0)};
+  // AxisRotation(2, 190) has w = cos(95°) < 0; its negation is the nearer sign already.
+
+  MakeSignContinuous(quats);
+
+  EXPECT_GE(Dot(quats[0], quats[1]), 0.0);
+  EXPECT_GE(Dot(quats[1], quats[2]), 0.0);
+}
+
+TEST(RotationTest, UnwrapDegreesRemovesSeamsAndKeepsTheFirstSample) {
+  std::vector<double> angles = {170.0, 179.0, -179.0, -170.0, 175.0};
+
+  UnwrapDegrees(angles);
+
+  EXPECT_EQ(angles, (std::vector<double>{170.0, 179.0, 181.0, 190.0, 175.0}));
+}
+
+TEST(RotationTest, ParseEulerOrderAcceptsDistinctAxesOnly) {
+  const absl::StatusOr<EulerOrder> zxy = ParseEulerOrder("ZXY");
+  const absl::StatusOr<EulerOrder> bad = ParseEulerOrder("XXY");
+
+  ASSERT_TRUE(zxy.ok());
+  EXPECT_EQ(*zxy, (EulerOrder{2, 0, 1}));
+  EXPECT_EQ(bad.status().message(), "euler order 'XXY': needs three distinct axes from X, Y, Z");
+}
+
+}  // namespace
+}  // namespace tempokey::core

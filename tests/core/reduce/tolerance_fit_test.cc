@@ -1,0 +1,238 @@
+// The error-bounded spline fit (SPEC 4.2) on signals with known answers.
+#include "tempokey/core/reduce/tolerance_fit.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <random>
+#include <span>
+#include <stop_token>
+#include <string>
+#include <vector>
+
+#include "gtest/gtest.h"
+
+// g++ 12 warns (-Wmissing-field-initializers) about designated initializers that leave members
+// at their defaults, which is how STYLE.md builds options structs.
+#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
+
+namespace tempokey::core {
+namespace {
+
+using Samples = std::vector<double>;
+
+absl::StatusOr<SplineFit> Fit(const std::vector<Samples>& channels, std::vector<double> bounds,
+                              const ToleranceFitOptions& options = {}) {
+  std::vector<std::span<const double>> spans(channels.begin(), channels.end());
+  return FitWithinTolerance(spans, bounds, options);
+}
+
+absl::StatusOr<SplineFit> FitOne(const Samples& samples, double bound) {
+  return Fit({samples}, {bound});
+}
+
+double MaxError(const SplineFit& fit, std::size_t channel, const Samples& samples) {
+  const Samples curve = EvaluateSplineFit(fit, channel);
+  double worst = 0.0;
+  for (std::size_t f = 0; f < samples.size(); ++f) {
+    worst = std::max(worst, std::abs(curve[f] - samples[f]));
+  }
+  return worst;
+}
+
+double Rms(const Samples& a, const Samples& b) {
+  double sum = 0.0;
+  for (std::size_t f = 0; f < a.size(); ++f) sum += (a[f] - b[f]) * (a[f] - b[f]);
+  return std::sqrt(sum / static_cast<double>(a.size()));
+}
+
+Samples Sine(int frames, double amplitude, double period_frames, double phase = 0.0) {
+  Samples s(static_cast<std::size_t>(frames));
+  for (int f = 0; f < frames; ++f) {
+    s[f] = amplitude * std::sin(2.0 * M_PI * f / period_frames + phase);
+  }
+  return s;
+}
+
+TEST(ToleranceFitTest, CubicIsTwoKeysThatReproduceIt) {
+  Samples cubic(200);
+  for (int f = 0; f < 200; ++f) {
+    const double x = f / 199.0;
+    cubic[f] = 3.0 - 40.0 * x + 90.0 * x * x - 55.0 * x * x * x;
+  }
+  // A cubic on the whole clip is one Hermite segment; only rounding separates them.
+  constexpr double kRounding = 1e-9;
+
+  const absl::StatusOr<SplineFit> fit = FitOne(cubic, 0.01);
+
+  ASSERT_TRUE(fit.ok()) << fit.status();
+  EXPECT_EQ(fit->frames, (std::vector<std::int64_t>{0, 199}));
+  EXPECT_LT(MaxError(*fit, 0, cubic), kRounding);
+}
+
+TEST(ToleranceFitTest, SineStaysWithinEveryBoundAndNeedsFewerKeysForLooserOnes) {
+  const Samples sine = Sine(2000, 45.0, 240.0);
+  std::vector<std::size_t> keys;
+
+  for (double bound : {0.01, 0.1, 0.5, 2.0}) {
+    const absl::StatusOr<SplineFit> fit = FitOne(sine, bound);
+
+    ASSERT_TRUE(fit.ok()) << fit.status();
+    EXPECT_LE(MaxError(*fit, 0, sine), bound) << "bound " << bound;
+    EXPECT_EQ(fit->frames.front(), 0);
+    EXPECT_EQ(fit->frames.back(), 1999);
+    EXPECT_TRUE(std::is_sorted(fit->frames.begin(), fit->frames.end()));
+    keys.push_back(fit->frames.size());
+  }
+
+  // A cubic piece covers a quarter period within 0.5 of a 45-amplitude sine, and its error
+  // shrinks with the 4th power of its length: the counts fall steeply and stay modest.
+  EXPECT_GT(keys[0], keys[1]);
+  EXPECT_GT(keys[1], keys[2]);
+  EXPECT_GT(keys[2], keys[3]);
+  EXPECT_LT(keys[2], 2000u / 20);  // fewer than one key per 20 frames at 0.5
+}
+
+TEST(ToleranceFitTest, NoiseUnderTheBoundAddsNoKeysAndTheCurveFollowsTheMotion) {
+  const Samples truth = Sine(1200, 30.0, 300.0, 0.4);
+  Samples noisy = truth;
+  std::mt19937 rng(7);
+  std::normal_distribution<double> noise(0.0, 0.3);
+  for (double& v : noisy) v += noise(rng);
+  // Three sigmas: the bound sits at the jitter's reach, so the curve need not chase it.
+  constexpr double kBound = 0.9;
+
+  const absl::StatusOr<SplineFit> clean_fit = FitOne(truth, kBound);
+  const absl::StatusOr<SplineFit> noisy_fit = FitOne(noisy, kBound);
+
+  ASSERT_TRUE(clean_fit.ok()) << clean_fit.status();
+  ASSERT_TRUE(noisy_fit.ok()) << noisy_fit.status();
+  EXPECT_LE(MaxError(*noisy_fit, 0, noisy), kBound);
+  EXPECT_LE(noisy_fit->frames.size(), clean_fit->frames.size() + 4);
+  EXPECT_LT(Rms(EvaluateSplineFit(*noisy_fit, 0), truth), 0.85 * Rms(noisy, truth));
+}
+
+TEST(ToleranceFitTest, ChannelsOfAGroupShareKeyFramesAndEachKeepsItsBound) {
+  const Samples slow = Sine(600, 20.0, 400.0);
+  const Samples fast = Sine(600, 5.0, 60.0, 1.0);
+  const Samples flat(600, 7.25);
+
+  const absl::StatusOr<SplineFit> together = Fit({slow, fast, flat}, {0.1, 0.05, 0.5});
+  const absl::StatusOr<SplineFit> slow_alone = FitOne(slow, 0.1);
+
+  ASSERT_TRUE(together.ok()) << together.status();
+  ASSERT_TRUE(slow_alone.ok()) << slow_alone.status();
+  ASSERT_EQ(together->values.size(), 3u);
+  for (std::size_t c = 0; c < 3; ++c) {
+    EXPECT_EQ(together->values[c].size(), together->frames.size());
+    EXPECT_EQ(together->slopes[c].size(), together->frames.size());
+  }
+  EXPECT_LE(MaxError(*together, 0, slow), 0.1);
+  EXPECT_LE(MaxError(*together, 1, fast), 0.05);
+  EXPECT_LE(MaxError(*together, 2, flat), 0.5);
+  // The fast channel sets the pace: the slow one alone needs far fewer keys.
+  EXPECT_LT(slow_alone->frames.size() * 2, together->frames.size());
+}
+
+TEST(ToleranceFitTest, ConstantChannelIsTwoFlatKeys) {
+  const Samples flat(500, -3.5);
+
+  const absl::StatusOr<SplineFit> fit = FitOne(flat, 0.1);
+
+  ASSERT_TRUE(fit.ok()) << fit.status();
+  EXPECT_EQ(fit->frames, (std::vector<std::int64_t>{0, 499}));
+  EXPECT_LT(MaxError(*fit, 0, flat), 1e-12);
+}
+
+TEST(ToleranceFitTest, OneFrameIsOneKeyAndTwoFramesAreTwoExactKeys) {
+  const absl::StatusOr<SplineFit> one = FitOne({4.0}, 0.1);
+  const absl::StatusOr<SplineFit> two = FitOne({1.0, 9.0}, 0.1);
+
+  ASSERT_TRUE(one.ok()) << one.status();
+  ASSERT_TRUE(two.ok()) << two.status();
+  EXPECT_EQ(one->frames, (std::vector<std::int64_t>{0}));
+  EXPECT_EQ(one->values[0], (std::vector<double>{4.0}));
+  EXPECT_EQ(two->frames, (std::vector<std::int64_t>{0, 1}));
+  EXPECT_LE(MaxError(*two, 0, {1.0, 9.0}), 0.1);
+}
+
+TEST(ToleranceFitTest, AlternatingSamplesAreFollowedWithinTheBound) {
+  // +-10 on alternate frames with a bound of 0.1: a segment over two frames can swing through the
+  // middle sample with opposite slopes at its ends, so about every other frame needs a key.
+  Samples zigzag(64);
+  for (int f = 0; f < 64; ++f) zigzag[f] = f % 2 == 0 ? 10.0 : -10.0;
+
+  const absl::StatusOr<SplineFit> fit = FitOne(zigzag, 0.1);
+
+  ASSERT_TRUE(fit.ok()) << fit.status();
+  EXPECT_LE(MaxError(*fit, 0, zigzag), 0.1);
+  EXPECT_GE(fit->frames.size(), 32u);
+  EXPECT_LE(fit->frames.size(), 64u);
+}
+
+TEST(ToleranceFitTest, LongSegmentsBeyondTheTabledLengthsFitToo) {
+  // A slow sine over 200 000 frames: segments run far past the 256-frame basis tables.
+  const Samples slow = Sine(200'000, 10.0, 150'000.0);
+
+  const absl::StatusOr<SplineFit> fit = FitOne(slow, 0.05);
+
+  ASSERT_TRUE(fit.ok()) << fit.status();
+  EXPECT_LE(MaxError(*fit, 0, slow), 0.05);
+  EXPECT_LT(fit->frames.size(), 200u);
+  std::int64_t longest = 0;
+  for (std::size_t k = 1; k < fit->frames.size(); ++k) {
+    longest = std::max(longest, fit->frames[k] - fit->frames[k - 1]);
+  }
+  EXPECT_GT(longest, 256);
+}
+
+TEST(ToleranceFitTest, EveryOptionSettingKeepsTheBound) {
+  const Samples sine = Sine(900, 60.0, 170.0);
+  for (const ToleranceFitOptions options :
+       {ToleranceFitOptions{.initial_spacing_frames = 1, .lawson_iterations = 0, .slide_frames = 0},
+        ToleranceFitOptions{.initial_spacing_frames = 900, .lawson_iterations = 5,
+                            .slide_frames = 6}}) {
+    const absl::StatusOr<SplineFit> fit = Fit({sine}, {0.2}, options);
+
+    ASSERT_TRUE(fit.ok()) << fit.status();
+    EXPECT_LE(MaxError(*fit, 0, sine), 0.2);
+  }
+}
+
+TEST(ToleranceFitTest, InvalidInputsAreRefusedWithReasons) {
+  const Samples good = Sine(50, 1.0, 20.0);
+  Samples with_nan = good;
+  with_nan[17] = std::numeric_limits<double>::quiet_NaN();
+
+  EXPECT_EQ(Fit({}, {}).status().message(), "a fit needs at least one channel");
+  EXPECT_EQ(Fit({good}, {0.1, 0.1}).status().message(), "got 2 bounds for 1 channels");
+  EXPECT_EQ(Fit({good, Samples(49, 0.0)}, {0.1, 0.1}).status().message(),
+            "channel 1 has 49 samples, channel 0 has 50");
+  EXPECT_EQ(Fit({Samples{}}, {0.1}).status().message(), "channel 0 has no samples");
+  EXPECT_EQ(Fit({with_nan}, {0.1}).status().message(), "channel 0: sample 17 is NaN");
+  EXPECT_EQ(Fit({good}, {0.0}).status().message(),
+            "channel 0: the bound must be finite and > 0, got 0");
+  EXPECT_EQ(Fit({good}, {std::numeric_limits<double>::infinity()}).status().message(),
+            "channel 0: the bound must be finite and > 0, got inf");
+  EXPECT_EQ(Fit({good}, {0.1}, {.initial_spacing_frames = 0}).status().message(),
+            "initial_spacing_frames must be in [1, 1000000], got 0");
+  EXPECT_EQ(Fit({good}, {0.1}, {.lawson_iterations = -1}).status().message(),
+            "lawson_iterations must be in [0, 100], got -1");
+  EXPECT_EQ(Fit({good}, {0.1}, {.slide_frames = 5000}).status().message(),
+            "slide_frames must be in [0, 1000], got 5000");
+}
+
+TEST(ToleranceFitTest, StopRequestCancels) {
+  std::stop_source stop;
+  stop.request_stop();
+  const Samples sine = Sine(100, 1.0, 30.0);
+  const std::vector<std::span<const double>> channels = {sine};
+  const std::vector<double> bounds = {0.1};
+
+  const absl::StatusOr<SplineFit> fit = FitWithinTolerance(channels, bounds, {}, stop.get_token());
+
+  EXPECT_EQ(fit.status().code(), absl::StatusCode::kCancelled);
+}
+
+}  // namespace
+}  // namespace tempokey::core
