@@ -15,7 +15,8 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
-#include "client/result_assembler.h"
+#include "proto/jobs_convert.h"
+#include "proto/operations_convert.h"
 #include "grpcpp/client_context.h"
 #include "grpcpp/create_channel.h"
 #include "grpcpp/generic/generic_stub.h"
@@ -438,7 +439,7 @@ absl::StatusOr<core::PipelineResult> Client::GetJobResult(const std::string& job
   v1::GetJobResultRequest request;
   request.set_job_id(job_id);
   request.set_batch_parts(true);
-  std::optional<ResultAssembler> assembler;
+  std::optional<wire::ResultAssembler> assembler;
   TEMPOKEY_RETURN_IF_ERROR(RetryWhileUnavailable(options_, scope.deadline, [&]() -> Attempt {
     assembler.emplace();
     grpc::ClientContext context;
@@ -477,7 +478,7 @@ absl::StatusOr<core::PipelineResult> Client::Process(const core::Clip& clip,
   start_request.mutable_start()->set_batch_parts(true);  // servers without it ignore it
   const bool batched = ServerTakesSampleSlices();
 
-  std::optional<ResultAssembler> assembler;
+  std::optional<wire::ResultAssembler> assembler;
   TEMPOKEY_RETURN_IF_ERROR(RetryWhileUnavailable(options_, scope.deadline, [&]() -> Attempt {
     assembler.emplace();
     grpc::ClientContext context;

@@ -9,6 +9,7 @@
 #include "client/clip_summary.h"
 #include "client/command.h"
 #include "google/protobuf/util/time_util.h"
+#include "proto/operations_convert.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::client {

@@ -6,7 +6,9 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
-#include "proto/convert.h"
+#include "proto/clip_convert.h"
+#include "proto/operations_convert.h"
+#include "proto/jobs_convert.h"
 #include "server/clip_digest.h"
 #include "server/job_proto.h"
 #include "server/reactors.h"

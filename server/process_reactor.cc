@@ -10,7 +10,8 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
-#include "proto/convert.h"
+#include "proto/clip_convert.h"
+#include "proto/jobs_convert.h"
 #include "server/job_proto.h"
 #include "server/reactors.h"
 #include "server/status_util.h"
@@ -180,7 +181,7 @@ class ProcessLink final {
   std::string last_stage_ ABSL_GUARDED_BY(mu_);
   double last_fraction_ ABSL_GUARDED_BY(mu_) = -1.0;
   std::optional<v1::Progress> pending_progress_ ABSL_GUARDED_BY(mu_);
-  std::optional<ResultSlicer> slicer_ ABSL_GUARDED_BY(mu_);
+  std::optional<wire::ResultSlicer> slicer_ ABSL_GUARDED_BY(mu_);
   std::optional<absl::Status> end_status_ ABSL_GUARDED_BY(mu_);
   v1::ProcessResponse message_ ABSL_GUARDED_BY(mu_);  // the write in flight
 };

@@ -6,6 +6,7 @@
 
 #include "absl/strings/str_cat.h"
 
+#include "proto/jobs_convert.h"
 #include "server/job_proto.h"
 #include "server/reactors.h"
 #include "server/status_util.h"
@@ -70,7 +71,7 @@ class ResultReactor final : public grpc::ServerWriteReactor<v1::ResultPart> {
 
   ServiceContext* const service_;
   bool holds_stream_ = false;
-  std::optional<ResultSlicer> slicer_;
+  std::optional<wire::ResultSlicer> slicer_;
   v1::ResultPart part_;
 };
 

@@ -7,7 +7,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
-#include "proto/convert.h"
+#include "proto/clip_convert.h"
 #include "server/clip_digest.h"
 #include "server/reactors.h"
 #include "server/status_util.h"

@@ -8,7 +8,8 @@
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "proto/convert.h"
+#include "proto/clip_convert.h"
+#include "proto/operations_convert.h"
 #include "server/job_manager.h"
 #include "server/server.h"
 #include "tests/core/retime/retime_invalid_cases.h"

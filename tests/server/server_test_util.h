@@ -25,7 +25,7 @@
 #include "grpcpp/support/byte_buffer.h"
 #include "grpcpp/security/credentials.h"
 #include "gtest/gtest.h"
-#include "proto/convert.h"
+#include "proto/clip_convert.h"
 #include "server/server.h"
 #include "tempokey/core/model/clip.h"
 #include "tempokey/core/pipeline/pipeline.h"

@@ -1,37 +1,31 @@
-// Conversions between tempokey.v1 messages and core types, shared by the server and the client.
-// They check what the encoding itself can get wrong (missing headers, indices out of range,
-// overlapping or missing slices, unknown enum values) and hand the values to core, whose
+// Clips, sample slices and keyed curves as tempokey.v1 messages (clip.proto), shared by the server
+// and the client. They check what the encoding itself can get wrong (missing headers, indices out
+// of range, overlapping or missing slices, unknown enum values) and hand the values to core, whose
 // validators are the one set of rules and messages (core::ValidateClipLayout(),
-// core::ValidatePipeline()).
-#ifndef TEMPOKEY_PROTO_CONVERT_H_
-#define TEMPOKEY_PROTO_CONVERT_H_
+// core::ValidateKeyedClip()).
+#ifndef TEMPOKEY_PROTO_CLIP_CONVERT_H_
+#define TEMPOKEY_PROTO_CLIP_CONVERT_H_
 
 #include <cstdint>
 #include <functional>
 #include <string_view>
-#include <optional>
+#include <utility>
 #include <vector>
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
-#include "google/protobuf/repeated_field.h"
 #include "tempokey/core/model/clip.h"
 #include "tempokey/core/model/keyed_clip.h"
-#include "tempokey/core/pipeline/pipeline.h"
 #include "tempokey/v1/clip.pb.h"
-#include "tempokey/v1/motion_service.pb.h"
-#include "tempokey/v1/operations.pb.h"
 
 namespace tempokey::wire {
 
 namespace v1 = ::tempokey::v1;
 
+
 // Default size of the samples carried by one ChannelSamples / KeyedCurve message.
 inline constexpr std::int64_t kDefaultSliceBytes = 1 << 20;
 
-// ServerInfo.features of what this build speaks beyond the first v1.
-inline constexpr std::string_view kFeatureSampleSlices = "sample_slices";
-inline constexpr std::string_view kFeatureBatchParts = "batch_parts";
 
 // ---- clips --------------------------------------------------------------------------------------
 
@@ -140,24 +134,6 @@ absl::Status ForEachKeyedCurveSlice(const core::KeyedClip& keyed, std::int64_t s
 absl::StatusOr<core::KeyedClip> KeyedClipFromProto(const v1::KeyedClip& keyed,
                                                    const core::ClipLimits& limits = {});
 
-// ---- operations ---------------------------------------------------------------------------------
-
-// Each Operation as a core pipeline step. Checks only what the encoding itself can get wrong (an
-// empty oneof, two warp domains at once, a time point without a unit, an enum value out of
-// range); every value is core::ValidatePipeline()'s to check, with the one set of limits and
-// messages core has ("operation 2 (reduce): paper.step_y must be > 0, got -1"). Unset proto3
-// `optional` fields and 0 speeds or 0/0 rates take core's defaults.
-// Errors: kInvalidArgument "operation 2: retime takes at most one of speed_over_source,
-//         speed_over_output and time_map, got speed_over_source and time_map".
-absl::StatusOr<std::vector<core::PipelineStep>> PipelineFromProto(
-    const google::protobuf::RepeatedPtrField<v1::Operation>& operations);
-
-// The inverse, for clients that build steps in core terms (the CLI).
-v1::Operation PipelineStepToProto(const core::PipelineStep& step);
-
-v1::OperationReport StepReportToProto(const core::StepReport& report);
-core::StepReport StepReportFromProto(const v1::OperationReport& report);
-
 }  // namespace tempokey::wire
 
-#endif  // TEMPOKEY_PROTO_CONVERT_H_
+#endif  // TEMPOKEY_PROTO_CLIP_CONVERT_H_
