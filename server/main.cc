@@ -9,6 +9,7 @@
 #include <chrono>
 #include <cstdio>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -17,6 +18,7 @@
 #include "absl/flags/usage.h"
 #include "absl/strings/str_cat.h"
 #include "server/server.h"
+#include "server/server_usage.h"
 #include "spdlog/sinks/stdout_sinks.h"
 #include "spdlog/spdlog.h"
 #include "tempokey/core/io/file_io.h"
@@ -68,6 +70,10 @@ int Run(int argc, char** argv) {
   sigaddset(&stop_signals, SIGINT);
   pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
 
+  if (tempokey::server::WantsUsage(std::span<char* const>(argv, static_cast<std::size_t>(argc)))) {
+    std::fputs(tempokey::server::ServerUsage().c_str(), stdout);
+    return 0;
+  }
   absl::SetProgramUsageMessage("tempokey-server [--address host:port] [flags]");
   std::vector<char*> positional = absl::ParseCommandLine(argc, argv);
   spdlog::set_default_logger(spdlog::stderr_logger_mt("tempokey"));
