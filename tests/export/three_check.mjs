@@ -67,11 +67,15 @@ async function main() {
   }
   result.animated_joints = result.rotation_tracks;
   const source = new THREE.Quaternion();
+  const played = new THREE.Quaternion();
   for (let frame = 0; frame < bvh.frames; ++frame) {
     mixer.setTime(frame * bvh.frameTime);
     bvh.joints.forEach((joint, j) => {
       source.copy(localRotation(bvh, joint, frame));
-      const angle = (nodes[j].quaternion.angleTo(source) * 180) / Math.PI;
+      // The node's rotation is its quaternion's direction: LINEAR keys are float32 quaternions
+      // whose norm is 1 only to ~1e-7, and angleTo's acos would turn that into ~0.05 degrees.
+      played.copy(nodes[j].quaternion).normalize();
+      const angle = (played.angleTo(source) * 180) / Math.PI;
       if (angle > result.max_rotation_error_degrees) {
         result.max_rotation_error_degrees = angle;
         result.worst_rotation = { joint: joint.name, frame };
