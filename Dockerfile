@@ -5,7 +5,7 @@ ARG BASE=debian:bookworm
 FROM ${BASE} AS build
 WORKDIR /src
 COPY deploy/install-deps.sh deploy/install-deps.sh
-RUN deploy/install-deps.sh
+RUN deploy/install-deps.sh --build
 COPY . .
 RUN cmake -S . -B /build -G Ninja -DCMAKE_BUILD_TYPE=Release \
       -DTEMPOKEY_BUILD_TESTS=OFF -DTEMPOKEY_BUILD_BENCH=OFF \

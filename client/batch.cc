@@ -96,19 +96,43 @@ BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
   if (absl::Status valid = core::ValidatePipeline(*clip, file_steps); !valid.ok()) {
     return finish(valid);
   }
-  absl::StatusOr<core::PipelineResult> result;
-  while (true) {
-    ++file.attempts;
-    result = client.Process(*clip, file_steps);
-    if (result.ok()) break;
-    const std::optional<std::chrono::milliseconds> delay =
-        RetryDelay(result.status(), file.attempts, options, random);
-    if (!delay) return finish(ServerError(result.status()));
-    std::this_thread::sleep_for(*delay);
+  auto process = [&](const core::Clip& input, std::span<const core::PipelineStep> part)
+      -> absl::StatusOr<core::PipelineResult> {
+    while (true) {
+      ++file.attempts;
+      absl::StatusOr<core::PipelineResult> result = client.Process(input, part);
+      if (result.ok()) return result;
+      const std::optional<std::chrono::milliseconds> delay =
+          RetryDelay(result.status(), file.attempts, options, random);
+      if (!delay) return ServerError(result.status());
+      std::this_thread::sleep_for(*delay);
+    }
+  };
+  // A keyed glTF fits its rotations against the clip the final reduce took: the input, or what
+  // the steps before that reduce make of it (fetched first, then reduced in a second call).
+  GltfExportSource gltf;
+  std::span<const core::PipelineStep> remaining(file_steps);
+  core::Clip reduce_input;
+  if (IsGltfFormat(item.output_format) && core::ProducesKeyedOutput(file_steps)) {
+    const std::size_t last = file_steps.size() - 1;
+    const auto& reduce = std::get<core::ReduceStep>(file_steps[last]);
+    gltf.max_rotation_error_degrees = reduce.options.tolerance.max_rotation_error_degrees;
+    gltf.source = &*clip;
+    if (last > 0) {
+      absl::StatusOr<core::PipelineResult> before = process(*clip, remaining.first(last));
+      if (!before.ok()) return finish(before.status());
+      reduce_input = std::get<core::Clip>(std::move(before->output));
+      gltf.source = &reduce_input;
+      remaining = remaining.subspan(last);
+    }
   }
+  absl::StatusOr<core::PipelineResult> result =
+      process(gltf.source != nullptr ? *gltf.source : *clip, remaining);
+  if (!result.ok()) return finish(result.status());
   std::error_code ignored;
   fs::create_directories(fs::path(item.output_path).parent_path(), ignored);
-  if (absl::Status written = WriteOutput(item.output_path, item.output_format, result->output);
+  if (absl::Status written =
+          WriteOutput(item.output_path, item.output_format, result->output, gltf);
       !written.ok()) {
     return finish(written);
   }
@@ -173,7 +197,7 @@ absl::StatusOr<std::vector<BatchItem>> PlanBatch(const BatchPlanOptions& options
 std::vector<core::PipelineStep> StepsForFormat(std::span<const core::PipelineStep> steps,
                                                FileFormat format) {
   std::vector<core::PipelineStep> result(steps.begin(), steps.end());
-  if (core::ProducesKeyedOutput(steps) && !IsKeyedFormat(format)) {
+  if (core::ProducesKeyedOutput(steps) && !IsKeyedFormat(format) && !IsGltfFormat(format)) {
     result.push_back(core::BakeStep{});
   }
   return result;

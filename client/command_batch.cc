@@ -18,17 +18,18 @@ namespace tempokey::client {
 namespace {
 
 constexpr std::string_view kDirArgument[] = {"DIR"};
-constexpr std::string_view kFormats[] = {"bvh", "csv", "json", "anim"};
-constexpr FileFormat kFormatsByName[] = {FileFormat::kBvh, FileFormat::kCsv,
-                                         FileFormat::kKeyedJson, FileFormat::kMayaAnim};
+constexpr std::string_view kFormats[] = {"bvh", "csv", "json", "anim", "gltf", "glb"};
+constexpr FileFormat kFormatsByName[] = {FileFormat::kBvh,       FileFormat::kCsv,
+                                         FileFormat::kKeyedJson, FileFormat::kMayaAnim,
+                                         FileFormat::kGltf,      FileFormat::kGlb};
 constexpr int kMaxJobs = 256;
 
 constexpr FlagSpec kBatchFlags[] = {
     {"--output", "-o", "OUTDIR", "folder for the outputs (created if missing)"},
     {"--ops", "", "FILE", "the pipeline, as JSON (see tempokey batch --help)"},
     {"--jobs", "-j", "N", "files processed at once (default 4)"},
-    {"--format", "", "NAME", "output format: bvh, csv, json or anim (default: .json for keyed "
-                             "results, the input's own otherwise)"},
+    {"--format", "", "NAME", "output format: bvh, csv, json, anim, gltf or glb (default: .json "
+                             "for keyed results, the input's own otherwise)"},
     {"--summary", "", "FILE", "also write the JSON summary to FILE (atomically)"},
     {"--attempts", "", "N", "tries per file when a server is unavailable or full (default 5)"},
     {"--recursive", "-r", "", "also process the sub-folders of DIR, mirrored under OUTDIR"},
@@ -141,7 +142,8 @@ const Command& BatchCommand() {
           "    {\"retime\": {\"speed\": \"0s:1,2s:0.5,4s:1\", \"fps\": 30}},\n"
           "    {\"reduce\": {\"tolerance\": 0.5}}]}\n"
           "A pipeline ending with reduce writes .json (keyed curves) unless --format says\n"
-          "otherwise; bvh or csv then bake the curves back to samples.\n",
+          "otherwise; bvh or csv then bake the curves back to samples; gltf or glb keep them\n"
+          "(CUBICSPLINE) for keyed results and hold samples (LINEAR) for sampled ones.\n",
       .flags = kBatchFlags,
       .run = Batch,
   };

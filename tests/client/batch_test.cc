@@ -255,7 +255,7 @@ TEST_F(BatchTest, UsageMistakesExitTwoWithOneLine) {
       {{in, "-o", Path("out"), "--ops", retime_only, "--jobs", "0"},
        "error: --jobs: expected 1 to 256, got 0"},
       {{in, "-o", Path("out"), "--ops", retime_only, "--format", "fbx"},
-       "error: --format: expected one of bvh, csv, json, anim, got 'fbx'"},
+       "error: --format: expected one of bvh, csv, json, anim, gltf, glb, got 'fbx'"},
       {{in, "-o", Path("out"), "--ops", Path("missing.json")},
        "error: " + Path("missing.json") + ": no such file"},
   };

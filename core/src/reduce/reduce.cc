@@ -116,12 +116,19 @@ struct ChannelFit {
   int iterations = 0;
 };
 
-// Two flat keys at `value` at the ends of `frame_count` frames (one for a single frame).
+// Two flat keys at `value` at the ends of `frame_count` frames (one for a single frame), with no
+// weights: a constant needs none, and the files say so (README: unweighted curves carry none).
 ChannelFit FlatFit(std::size_t frame_count, double value, double frame_time) {
-  const double last = static_cast<double>(frame_count - 1);
-  std::vector<HermiteKey2D> keys = {{0.0, value, last, 0.0}};
-  if (frame_count > 1) keys.push_back({last, value, last, 0.0});
-  return {HermiteKeysToCurve(keys, frame_time), {}, 0};
+  Curve curve;
+  Key first;
+  first.value = value;
+  curve.keys.push_back(first);
+  if (frame_count > 1) {
+    Key last = first;
+    last.time_seconds = static_cast<double>(frame_count - 1) * frame_time;
+    curve.keys.push_back(last);
+  }
+  return {std::move(curve), {}, 0};
 }
 
 absl::StatusOr<ChannelFit> PaperFit(std::span<const double> samples, double frame_time,
