@@ -19,6 +19,8 @@ build_packages=(
   libgtest-dev libgmock-dev googletest libbenchmark-dev
   libssl-dev openssl procps curl ccache
   python3 python3-grpcio python3-protobuf
+  # `pip install client/python` into a virtual environment, offline (tests/python)
+  python3-venv python3-pip python3-setuptools python3-wheel
   python3-yaml
 )
 runtime_packages=(
