@@ -12,7 +12,9 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "client/batch_manifest.h"
 #include "client/cli_errors.h"
+#include "proto/clip_digest.h"
 #include "proto/retry_hint.h"
 #include "tempokey/core/io/json.h"
 #include "tempokey/core/model/numbers.h"
@@ -93,6 +95,21 @@ BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
   absl::StatusOr<core::Clip> clip = ReadClipFile(item.input_path, options.csv_frame_time_seconds);
   if (!clip.ok()) return finish(clip.status());
   const std::vector<core::PipelineStep> file_steps = StepsForFormat(steps, item.output_format);
+  std::string input_id;
+  std::string pipeline;
+  if (options.manifest != nullptr) {
+    input_id = wire::ClipContentId(*clip);
+    pipeline = PipelineDigest(file_steps, item.output_format);
+    if (std::optional<ManifestRecord> record =
+            options.manifest->FindUpToDate(item, input_id, pipeline)) {
+      options.manifest->Keep(*record);
+      file.skipped = true;
+      file.frames = record->frames;
+      file.keys = record->keys;
+      file.max_error = record->max_error;
+      return finish(absl::OkStatus());
+    }
+  }
   if (absl::Status valid = core::ValidatePipeline(*clip, file_steps); !valid.ok()) {
     return finish(valid);
   }
@@ -137,6 +154,9 @@ BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
     return finish(written);
   }
   Describe(*result, file);
+  if (options.manifest != nullptr) {
+    return finish(options.manifest->RecordWritten(item, input_id, pipeline, file));
+  }
   return finish(absl::OkStatus());
 }
 
@@ -208,6 +228,16 @@ int BatchSummary::failed_count() const {
                                         [](const BatchFileResult& f) { return !f.status.ok(); }));
 }
 
+int BatchSummary::skipped_count() const {
+  return static_cast<int>(std::count_if(files.begin(), files.end(), [](const BatchFileResult& f) {
+    return f.status.ok() && f.skipped;
+  }));
+}
+
+int BatchSummary::done_count() const {
+  return static_cast<int>(files.size()) - failed_count() - skipped_count();
+}
+
 BatchSummary RunBatch(const Client& client, std::span<const BatchItem> items,
                       std::span<const core::PipelineStep> steps, const BatchOptions& options,
                       const BatchFileDoneFn& on_done) {
@@ -221,6 +251,9 @@ BatchSummary RunBatch(const Client& client, std::span<const BatchItem> items,
     std::mt19937 random(seed);
     for (std::size_t i = next++; i < items.size(); i = next++) {
       summary.files[i] = ProcessFile(client, items[i], steps, options, random);
+      if (options.manifest != nullptr && !summary.files[i].status.ok()) {
+        options.manifest->Forget(items[i]);
+      }
       std::lock_guard<std::mutex> lock(done_mutex);
       ++done;
       if (on_done) on_done(summary.files[i], done, static_cast<int>(items.size()));
@@ -241,8 +274,24 @@ std::string FormatBatchSummaryJson(const BatchSummary& summary) {
   const int failed = summary.failed_count();
   const int total = static_cast<int>(summary.files.size());
   std::string out = absl::StrFormat(
-      "{\"files\": %d, \"succeeded\": %d, \"failed\": %d, \"seconds\": %.3f, \"results\": [",
-      total, total - failed, failed, summary.seconds);
+      "{\"files\": %d, \"succeeded\": %d, \"done\": %d, \"skipped\": %d, \"failed\": %d, "
+      "\"seconds\": %.3f",
+      total, total - failed, summary.done_count(), summary.skipped_count(), failed,
+      summary.seconds);
+  if (summary.shard) absl::StrAppend(&out, ", \"shard\": \"", summary.shard->Name(), "\"");
+  if (summary.merged_shards > 0) {
+    absl::StrAppend(&out, ", \"shards\": ", summary.merged_shards, ", \"missing_shards\": [");
+    for (std::size_t i = 0; i < summary.missing_shards.size(); ++i) {
+      absl::StrAppend(&out, i == 0 ? "\"" : ", \"", summary.missing_shards[i], "/",
+                      summary.merged_shards, "\"");
+    }
+    out += ']';
+  }
+  if (!summary.pipeline.empty()) {
+    out += ", \"pipeline\": ";
+    core::AppendJsonString(out, summary.pipeline);
+  }
+  out += ", \"results\": [";
   for (std::size_t i = 0; i < summary.files.size(); ++i) {
     const BatchFileResult& file = summary.files[i];
     out += i == 0 ? "\n  {\"input\": " : ",\n  {\"input\": ";
@@ -250,7 +299,7 @@ std::string FormatBatchSummaryJson(const BatchSummary& summary) {
     if (file.status.ok()) {
       out += ", \"output\": ";
       core::AppendJsonString(out, file.output_path);
-      out += ", \"status\": \"ok\"";
+      out += file.skipped ? ", \"status\": \"skipped\"" : ", \"status\": \"ok\"";
     } else {
       out += ", \"status\": \"failed\", \"code\": ";
       core::AppendJsonString(out, absl::StatusCodeToString(file.status.code()));

@@ -20,6 +20,8 @@ build_packages=(
   libgtest-dev libgmock-dev googletest libbenchmark-dev
   libssl-dev openssl procps curl ccache
   python3 python3-grpcio python3-protobuf
+  # `pip install client/python` into a virtual environment, offline (tests/python)
+  python3-venv python3-pip python3-setuptools python3-wheel
   python3-yaml
 )
 # Export checks (ctest -L export): a real browser for the glTF page, and tools that are not ours

@@ -9,7 +9,7 @@
 #include "proto/clip_convert.h"
 #include "proto/operations_convert.h"
 #include "proto/jobs_convert.h"
-#include "server/clip_digest.h"
+#include "proto/clip_digest.h"
 #include "server/job_proto.h"
 #include "server/reactors.h"
 #include "server/status_util.h"
@@ -142,7 +142,7 @@ grpc::ServerUnaryReactor* MotionService::SubmitJob(grpc::CallbackServerContext* 
         absl::StatusOr<core::Clip> inline_clip =
             wire::ClipFromProto(request->inline_clip(), context_->clip_limits);
         if (!inline_clip.ok()) return core::Annotate(inline_clip.status(), "inline_clip");
-        clip_id = ClipContentId(*inline_clip);
+        clip_id = wire::ClipContentId(*inline_clip);
         clip = std::make_shared<const core::Clip>(*std::move(inline_clip));
         break;
       }

@@ -8,7 +8,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "proto/clip_convert.h"
-#include "server/clip_digest.h"
+#include "proto/clip_digest.h"
 #include "server/reactors.h"
 #include "server/status_util.h"
 #include "spdlog/spdlog.h"
@@ -110,7 +110,7 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadClipRequest
   bool holds_stream_ = false;
   v1::UploadClipRequest request_;
   wire::ClipAssembler assembler_;
-  std::optional<IncrementalClipDigest> digest_;
+  std::optional<wire::IncrementalClipDigest> digest_;
   std::int64_t messages_ = 0;
 };
 

@@ -1,7 +1,8 @@
-"""Tests of the Python example client (client/python) against the real tempokey-server.
+"""Tests of the tempokey Python package (client/python) against the real tempokey-server.
 
-Run by CTest (label `python`); tests/python/CMakeLists.txt sets the environment:
-  PYTHONPATH            the generated tempokey.v1 stubs and client/python
+Run by CTest (label `python`) with the interpreter of the virtual environment the package was
+installed into (tests/python/install_package.py); tests/python/CMakeLists.txt sets:
+  PYTHONPATH            this folder only: `tempokey` comes from the installed package
   TEMPOKEY_SERVER       the tempokey-server binary; TEMPOKEY_CLI the tempokey binary
   TEMPOKEY_SHARED_DIR   ../shared (captures under data/bvh)
   TEMPOKEY_CLIENT_DIR   client/python (the example script); TEMPOKEY_PYTHON the interpreter
@@ -25,9 +26,7 @@ import unittest
 
 import grpc
 
-import bvh
-import example_pipeline
-import tempokey_client as tk
+import tempokey as tk
 
 # Bounds, generous for a loaded 2-core CI machine; none of them is a performance assertion.
 STARTUP_TIMEOUT_SECONDS = 60
@@ -128,7 +127,7 @@ class RunningServer:
 def cmu_clip():
     """CMU 131_01 (994 frames, 96 channels) read and converted as the example does, so the tests
     send exactly what the example sends. Shared: callers do not modify it."""
-    return example_pipeline.clip_from_bvh(bvh.read_bvh(CMU_BVH))
+    return tk.read_bvh_clip(CMU_BVH)
 
 
 def ramp_clip(frames, fps=30):
@@ -214,7 +213,7 @@ class SampleBatchTest(unittest.TestCase):
         clip = tk.make_clip("many", 1.0 / 30, channels=["a", "b", "c"],
                             samples=[[float(c * 1000 + i) for i in range(130)] for c in range(3)])
 
-        batches = list(tk._sample_batches(clip, slice_bytes=8 * 100))
+        batches = list(tk.sample_batches(clip, slice_bytes=8 * 100))
 
         self.assertEqual([sum(len(s.samples) for s in b.slices) for b in batches],
                          [100, 100, 100, 90])
@@ -392,6 +391,39 @@ class InvalidRequestTest(ServerTestCase):
             tk.parse_speed("0s:1,2x:1")
         with self.assertRaisesRegex(ValueError, "channel 1 has 2 samples, channel 0 has 3"):
             tk.make_clip("ragged", 0.1, ["a", "b"], [[1, 2, 3], [1, 2]])
+
+
+class ReduceOptionsTest(ServerTestCase):
+    """reduce_operation() builds ReduceOperation from its keyword table, REDUCE_OPTIONS."""
+
+    def test_every_option_lands_in_its_field_and_the_server_takes_it(self):
+        values = {"tolerance": 0.75, "position_tolerance": 0.25, "scalar_tolerance": 0.125,
+                  "key_budget": 400, "pose_alignment": "joint"}
+        self.assertEqual(set(values), set(tk.REDUCE_OPTIONS), "a new option needs a value here")
+
+        for keyword, value in values.items():
+            with self.subTest(option=keyword):
+                option = tk.REDUCE_OPTIONS[keyword]
+                operation = tk.reduce_operation(**{keyword: value})
+                found = operation.reduce
+                for part in option.field.split("."):
+                    found = getattr(found, part)
+                self.assertEqual(found, option.convert(value), option.field)
+                result = self.client.process(cmu_clip(), [operation])
+                self.assertIsNotNone(result.keyed_clip)
+
+    def test_unknown_keywords_and_options_of_another_method_are_refused(self):
+        with self.assertRaisesRegex(TypeError, r"unexpected keyword argument 'tolerence' "
+                                               r"\(options: tolerance, position_tolerance"):
+            tk.reduce_operation(tolerence=0.5)
+        with self.assertRaisesRegex(ValueError, "key_budget belongs to method 'tolerance', "
+                                                "not 'paper'"):
+            tk.reduce_operation(method="paper", key_budget=10)
+        with self.assertRaisesRegex(ValueError, "paper parameter 'no_such_field'"):
+            tk.reduce_operation(method="paper", paper={"no_such_field": 1})
+
+    def test_none_leaves_an_option_at_the_servers_default(self):
+        self.assertEqual(tk.reduce_operation(tolerance=None), tk.reduce_operation())
 
 
 class StoredJobTest(ServerTestCase):
@@ -582,14 +614,14 @@ class ExampleScriptTest(unittest.TestCase):
 
 
 class BvhReaderTest(unittest.TestCase):
-    """The example's BVH reader on inputs the C++ reader also accepts."""
+    """The package's BVH reader on inputs the C++ reader also accepts."""
 
     def test_line_endings_exponents_and_end_sites(self):
         text = ("\ufeffHIERARCHY\r\nROOT Hips\r{\n OFFSET 0 +1 -2.5e-1\n CHANNELS 2 Zrotation "
                 "Xposition\n End Site\n {\n  OFFSET 0 1 0\n }\n}\nMOTION\nFrames:2\n"
                 "Frame Time:\t0.0083333\n1e1 2\n\n3 4.5\n")
 
-        clip = bvh.parse_bvh(text, "dir/walk.bvh")
+        clip = tk.parse_bvh(text, "dir/walk.bvh")
 
         self.assertEqual(clip.name, "walk")
         self.assertEqual(clip.frame_time_seconds, 0.0083333)
@@ -612,8 +644,8 @@ class BvhReaderTest(unittest.TestCase):
         ]
         for text, message in cases:
             with self.subTest(message=message):
-                with self.assertRaises(bvh.BvhError) as caught:
-                    bvh.parse_bvh(text, "x.bvh")
+                with self.assertRaises(tk.BvhError) as caught:
+                    tk.parse_bvh(text, "x.bvh")
                 self.assertEqual(str(caught.exception), message)
 
 
