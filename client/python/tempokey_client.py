@@ -18,6 +18,7 @@ The studio-pipeline call, one stateless ``Process`` call (safe through a load ba
                                        tk.reduce_operation(tolerance=0.5)])
     result.keyed_clip        # tempokey.v1.KeyedClip: the header and one curve per channel
     result.reduction_report  # keys kept, RMS and max error, worst channel and frame
+    result.world_error       # joints' world-position error: max, RMS, worst joint and frame
 
 Stored jobs go through ``upload_clip``, ``submit``, ``watch`` and ``result``.
 
@@ -454,6 +455,7 @@ def reduce_operation(*, method: str = "tolerance", tolerance: Optional[float] = 
                      scalar_tolerance: Optional[float] = None,
                      key_budget: Optional[int] = None,
                      pose_alignment: Optional[str] = None,
+                     joint_tolerance: Union[float, str, None] = None,
                      paper: Optional[dict] = None) -> operations_pb2.Operation:
     """A key-reduction step (SPEC 4): the sampled clip becomes key-frame curves.
 
@@ -461,10 +463,14 @@ def reduce_operation(*, method: str = "tolerance", tolerance: Optional[float] = 
       method: "tolerance" (fewest keys keeping every channel within its bound at every source
         frame) or "paper" (the published Hermite DP fit; bounds nothing).
       tolerance: rotation bound in degrees (server default 0.5).
-      position_tolerance: position bound in file units (default 0.5).
+      position_tolerance: position bound in file units (default 0.3 % of the figure's height:
+        the vertical extent of every joint and end site at the first frame).
       scalar_tolerance: plain-channel bound (default 0.5).
       key_budget: at most this many keys in all (replaces the bounds by one scale of them).
       pose_alignment: "none" (default), "joint" or "clip": channels share key times.
+      joint_tolerance: a world-space bound: every joint and end site within it of its source
+        position at every frame, in file units (1 or "1") or in percent of the figure's height
+        ("0.5%"). Unset rotation and position bounds then leave each channel's bound to it.
       paper: fields of tempokey.v1.PaperParams for method "paper", e.g. {"step_y": 0.25}.
 
     Raises: ValueError for an unknown method, alignment or paper field, or tolerance settings
@@ -474,8 +480,9 @@ def reduce_operation(*, method: str = "tolerance", tolerance: Optional[float] = 
     bounds = {"max_rotation_error_degrees": tolerance, "max_position_error": position_tolerance,
               "max_scalar_error": scalar_tolerance, "key_budget": key_budget}
     given = {field: value for field, value in bounds.items() if value is not None}
-    if method == "paper" and (given or pose_alignment is not None):
-        raise ValueError("tolerances, key_budget and pose_alignment belong to method 'tolerance'")
+    if method == "paper" and (given or pose_alignment is not None or joint_tolerance is not None):
+        raise ValueError("tolerances, key_budget, pose_alignment and joint_tolerance belong to "
+                         "method 'tolerance'")
     if method == "tolerance" and paper:
         raise ValueError("paper parameters belong to method 'paper'")
     for field, value in given.items():
@@ -483,12 +490,34 @@ def reduce_operation(*, method: str = "tolerance", tolerance: Optional[float] = 
     if pose_alignment is not None:
         reduce.tolerance.pose_alignment = _choice(_POSE_ALIGNMENTS, pose_alignment,
                                                   "pose alignment")
+    if joint_tolerance is not None:
+        value, percent = parse_joint_tolerance(joint_tolerance)
+        if percent:
+            reduce.tolerance.max_joint_error_percent_of_height = value
+        else:
+            reduce.tolerance.max_joint_error = value
     for field, value in (paper or {}).items():
         try:
             setattr(reduce.paper, field, value)
         except (AttributeError, TypeError) as error:
             raise ValueError("paper parameter %r: %s" % (field, error)) from None
     return operations_pb2.Operation(reduce=reduce)
+
+
+def parse_joint_tolerance(value: Union[float, str]) -> Tuple[float, bool]:
+    """(value, in percent of the figure's height) of a joint tolerance: 1, "1" (file units) or
+    "0.5%", as the CLI's --joint-tolerance reads it. Range checks are the server's.
+
+    Raises: ValueError for anything else ("1cm")."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return float(value), False
+    text = str(value).strip()
+    percent = text.endswith("%")
+    try:
+        return float(text[:-1] if percent else text), percent
+    except ValueError:
+        raise ValueError("joint tolerance: expected a distance in file units or a percentage of "
+                         "the figure's height (1, \"0.5%%\"), got %r" % (value,)) from None
 
 
 def bake_operation(fps=None) -> operations_pb2.Operation:
@@ -529,6 +558,34 @@ class PipelineResult:
     def reduction_report(self) -> Optional[operations_pb2.ReductionReport]:
         """The last reduction's report (keys, samples, RMS and max error), or None."""
         return self._last_report("reduction")
+
+    @property
+    def world_error(self) -> Optional[operations_pb2.WorldErrorReport]:
+        """The last reduction's joint world-position error (file units; percentages of
+        figure_height_units), or None without a reduction or a skeleton."""
+        report = self.reduction_report
+        return report.world_error if report is not None and report.HasField("world_error") \
+            else None
+
+
+def world_error_lines(world: operations_pb2.WorldErrorReport) -> List[str]:
+    """The CLI's lines for a world error report ("joint max error: 0.9850 (0.707% of height) at
+    Toes_R, frame 94", ...)."""
+    height = world.figure_height_units
+
+    def percent(distance: float) -> float:
+        return 100.0 * distance / height if height > 0 else 0.0
+
+    lines = ["figure height:   %.4g (first frame)" % height,
+             "joint max error: %.4f (%.3f%% of height) at %s, frame %d"
+             % (world.max_error_units, percent(world.max_error_units), world.worst_point,
+                world.worst_frame),
+             "joint rms error: %.4f (%.3f%% of height)"
+             % (world.rms_error_units, percent(world.rms_error_units))]
+    if world.joint_tolerance_units > 0:
+        lines.append("joint bound:     %.4g (%.3f%% of height)"
+                     % (world.joint_tolerance_units, percent(world.joint_tolerance_units)))
+    return lines
 
 
 class _ResultAssembler:
