@@ -70,6 +70,7 @@ void Describe(const core::PipelineResult& result, BatchFileResult& file) {
     if (const auto* reduction = std::get_if<core::ReductionReport>(&report)) {
       file.keys = reduction->key_count;
       file.max_error = reduction->max_error;
+      if (reduction->world) file.max_joint_error = reduction->world->max_error;
     }
   }
 }
@@ -312,6 +313,9 @@ std::string FormatBatchSummaryJson(const BatchSummary& summary) {
       if (file.frames > 0) absl::StrAppend(&out, ", \"frames\": ", file.frames);
       if (file.keys > 0) absl::StrAppend(&out, ", \"keys\": ", file.keys);
       if (file.max_error) absl::StrAppend(&out, ", \"max_error\": ", core::FormatDouble(*file.max_error));
+      if (file.max_joint_error) {
+        absl::StrAppend(&out, ", \"max_joint_error\": ", core::FormatDouble(*file.max_joint_error));
+      }
     }
     out += '}';
   }

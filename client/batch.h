@@ -77,6 +77,8 @@ struct BatchFileResult {
   std::int64_t frames = 0;      // sampled output: frames written
   std::int64_t keys = 0;        // keyed output or reduction: keys kept
   std::optional<double> max_error{};  // the last reduction's max error, if the pipeline reduced
+  // Its joint world-position error (file units), when the clip has a skeleton.
+  std::optional<double> max_joint_error{};
 };
 
 struct BatchSummary {
@@ -108,8 +110,8 @@ BatchSummary RunBatch(const Client& client, std::span<const BatchItem> items,
 // {"files": 3, "succeeded": 2, "done": 1, "skipped": 1, "failed": 1, "seconds": 1.25,
 //  "shard": "0/4", "pipeline": "sha256:...", "results": [{"input": "a.bvh",
 //  "output": "out/a.json", "status": "ok", "attempts": 1, "seconds": 0.4, "keys": 310,
-//  "max_error": 0.49}, {"input": "c.bvh", "output": "out/c.json", "status": "skipped", ...},
-//  {"input": "b.bvh", "status": "failed", "code": "INVALID_ARGUMENT",
+//  "max_error": 0.49, "max_joint_error": 0.98}, {"input": "c.bvh", "output": "out/c.json",
+//  "status": "skipped", ...}, {"input": "b.bvh", "status": "failed", "code": "INVALID_ARGUMENT",
 //  "error": "b.bvh:3:1: ...", "attempts": 0, "seconds": 0.01}, ...]}
 // "succeeded" = done + skipped (every output is right); "shard" only for a sharded run,
 // "pipeline" only when known; a merge (batch_summary.h) has "shards": N and

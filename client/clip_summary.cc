@@ -137,6 +137,25 @@ std::string FormatReductionReport(const core::ReductionReport& report, const cor
       SummaryLine("max error", absl::StrFormat("%.4f", report.max_error)),
       SummaryLine("worst", absl::StrCat(worst, " at frame ", report.worst_frame)));
   if (report.iterations > 0) absl::StrAppend(&out, SummaryLine("iterations", absl::StrCat(report.iterations)));
+  if (report.world) absl::StrAppend(&out, FormatWorldErrorReport(*report.world));
+  return out;
+}
+
+std::string FormatWorldErrorReport(const core::WorldErrorReport& world) {
+  std::string out = absl::StrCat(
+      SummaryLine("figure height", absl::StrFormat("%.4g (first frame)", world.figure_height)),
+      SummaryLine("joint max error",
+                  absl::StrFormat("%.4f (%.3f%% of height) at %s, frame %d", world.max_error,
+                                  world.max_error_percent(), world.worst_point_name,
+                                  world.worst_frame)),
+      SummaryLine("joint rms error", absl::StrFormat("%.4f (%.3f%% of height)", world.rms_error,
+                                                     world.rms_error_percent())));
+  if (world.joint_tolerance > 0.0) {
+    absl::StrAppend(&out, SummaryLine("joint bound",
+                                      absl::StrFormat("%.4g (%.3f%% of height)",
+                                                      world.joint_tolerance,
+                                                      world.Percent(world.joint_tolerance))));
+  }
   return out;
 }
 

@@ -58,7 +58,11 @@ const Command& ReduceCommand() {
           "as quaternions within --tolerance degrees of IN) keep the keys; .bvh or .csv bake\n"
           "the curves back to samples at the source rate (a filtered clip). Prints the quality\n"
           "report: keys kept, RMS and max error (degrees for rotations, file units for\n"
-          "positions) and the worst channel and frame.\n",
+          "positions) and the worst channel and frame, then the joints' world-position error\n"
+          "through the skeleton (max with its joint and frame, RMS; file units and % of the\n"
+          "figure's height, the vertical extent of every joint and end site at the first frame).\n"
+          "--joint-tolerance 1 keeps every joint and end site within 1 file unit of its source\n"
+          "position at every frame, --joint-tolerance 0.5% within 0.5% of the figure's height.\n",
       .flags = kReduceFlags,
       .run = Reduce,
   };

@@ -122,8 +122,9 @@ absl::Status RetimeOptionsFromArgs(const ParsedArgs& args, core::RetimeOptions& 
 constexpr std::string_view kReduceMethods[] = {"tolerance", "paper"};
 constexpr std::string_view kAlignments[] = {"none", "joint", "clip"};
 
-constexpr std::string_view kToleranceOnly[] = {"--tolerance", "--position-tolerance",
-                                               "--scalar-tolerance", "--key-budget", "--pose-align"};
+constexpr std::string_view kToleranceOnly[] = {"--tolerance",      "--position-tolerance",
+                                               "--scalar-tolerance", "--key-budget",
+                                               "--pose-align",       "--joint-tolerance"};
 constexpr std::string_view kPaperOnly[] = {"--step-x",     "--step-y",     "--step-tangent-x",
                                            "--step-tangent-y", "--accuracy", "--iterations",
                                            "--smoothing-sigma", "--min-key-spacing"};
@@ -134,6 +135,33 @@ absl::Status SetDouble(const ParsedArgs& args, std::string_view flag, double& fi
     TEMPOKEY_ASSIGN_OR_RETURN(field, ParseDouble(flag, *v));
   }
   return absl::OkStatus();
+}
+
+absl::Status SetOptionalDouble(const ParsedArgs& args, std::string_view flag,
+                               std::optional<double>& field) {
+  if (std::optional<std::string> v = args.Value(flag)) {
+    TEMPOKEY_ASSIGN_OR_RETURN(field, ParseDouble(flag, *v));
+  }
+  return absl::OkStatus();
+}
+
+// "1" (file units) or "0.5%" (of the figure's height). The value's range is core's to check.
+absl::StatusOr<core::JointTolerance> ParseJointTolerance(std::string_view text) {
+  core::JointTolerance tolerance;
+  std::string_view number = text;
+  if (!number.empty() && number.back() == '%') {
+    tolerance.percent_of_height = true;
+    number.remove_suffix(1);
+  }
+  absl::StatusOr<double> value = ParseDouble("--joint-tolerance", number);
+  if (!value.ok()) {
+    return UsageError(absl::StrCat(
+        "--joint-tolerance: expected a distance in file units or a percentage of the figure's "
+        "height (1, 0.5%), got '",
+        core::AsAbsl(text), "'"));
+  }
+  tolerance.value = *value;
+  return tolerance;
 }
 
 absl::Status SetInt(const ParsedArgs& args, std::string_view flag, int& field) {
@@ -163,9 +191,14 @@ absl::StatusOr<core::ReduceOptions> ReduceOptionsFromArgs(const ParsedArgs& args
   }
 
   core::ToleranceParams& tolerance = options.tolerance;
-  TEMPOKEY_RETURN_IF_ERROR(SetDouble(args, "--tolerance", tolerance.max_rotation_error_degrees));
-  TEMPOKEY_RETURN_IF_ERROR(SetDouble(args, "--position-tolerance", tolerance.max_position_error));
+  TEMPOKEY_RETURN_IF_ERROR(
+      SetOptionalDouble(args, "--tolerance", tolerance.max_rotation_error_degrees));
+  TEMPOKEY_RETURN_IF_ERROR(
+      SetOptionalDouble(args, "--position-tolerance", tolerance.max_position_error));
   TEMPOKEY_RETURN_IF_ERROR(SetDouble(args, "--scalar-tolerance", tolerance.max_scalar_error));
+  if (std::optional<std::string> v = args.Value("--joint-tolerance")) {
+    TEMPOKEY_ASSIGN_OR_RETURN(tolerance.joint_tolerance, ParseJointTolerance(*v));
+  }
   if (std::optional<std::string> v = args.Value("--key-budget")) {
     TEMPOKEY_ASSIGN_OR_RETURN(tolerance.key_budget, ParseInt64("--key-budget", *v));
   }

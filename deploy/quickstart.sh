@@ -52,10 +52,12 @@ demo() {
   "${cli[@]}" info "$clip"
   log "retime: half speed from 2 s to 4 s (slow motion in the middle of the clip)"
   "${cli[@]}" retime "$clip" -o "$out/$stem-slow.bvh" --speed "0s:1,2s:1,2s:0.5,4s:0.5,4s:1"
-  log "reduce: fewest keys within 0.5 degrees / 0.5 units, as Maya .anim, as JSON, baked to BVH"
+  log "reduce: fewest keys within 0.5 degrees / 0.3 % of the figure's height, as Maya .anim, as JSON, baked to BVH"
   "${cli[@]}" reduce "$clip" -o "$out/$stem-keys.anim"
   "${cli[@]}" reduce "$clip" -o "$out/$stem-keys.json" >/dev/null
   "${cli[@]}" reduce "$clip" -o "$out/$stem-reduced.bvh" >/dev/null
+  log "reduce: every joint within 0.5 % of the figure's height of its source position"
+  "${cli[@]}" reduce "$clip" -o "$out/$stem-joints.json" --joint-tolerance 0.5%
   log "reduce: the paper's Hermite DP fit, for comparison"
   "${cli[@]}" reduce "$clip" -o "$out/$stem-paper.anim" --method paper
   log "outputs in $out"

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <optional>
 #include <string>
 #include <utility>
 
@@ -217,6 +218,17 @@ absl::StatusOr<core::ReduceStep> ReduceFromProto(int op, const v1::ReduceOperati
   if (t.has_max_position_error()) o.tolerance.max_position_error = t.max_position_error();
   if (t.has_max_scalar_error()) o.tolerance.max_scalar_error = t.max_scalar_error();
   if (t.has_key_budget()) o.tolerance.key_budget = t.key_budget();
+  switch (t.joint_tolerance_case()) {
+    case v1::ToleranceParams::kMaxJointError:
+      o.tolerance.joint_tolerance = core::JointTolerance{.value = t.max_joint_error()};
+      break;
+    case v1::ToleranceParams::kMaxJointErrorPercentOfHeight:
+      o.tolerance.joint_tolerance = core::JointTolerance{
+          .value = t.max_joint_error_percent_of_height(), .percent_of_height = true};
+      break;
+    case v1::ToleranceParams::JOINT_TOLERANCE_NOT_SET:
+      break;
+  }
   switch (t.pose_alignment()) {
     case v1::POSE_ALIGNMENT_UNSPECIFIED:
     case v1::POSE_ALIGNMENT_NONE:
@@ -323,9 +335,21 @@ v1::ReduceOperation ReduceToProto(const core::ReduceStep& step) {
   } else {
     r.set_method(v1::REDUCE_METHOD_TOLERANCE);
     v1::ToleranceParams* t = r.mutable_tolerance();
-    t->set_max_rotation_error_degrees(o.tolerance.max_rotation_error_degrees);
-    t->set_max_position_error(o.tolerance.max_position_error);
+    // Unset bounds stay unset: the server resolves the scale-aware defaults against the clip.
+    if (o.tolerance.max_rotation_error_degrees) {
+      t->set_max_rotation_error_degrees(*o.tolerance.max_rotation_error_degrees);
+    }
+    if (o.tolerance.max_position_error) {
+      t->set_max_position_error(*o.tolerance.max_position_error);
+    }
     t->set_max_scalar_error(o.tolerance.max_scalar_error);
+    if (const std::optional<core::JointTolerance>& joint = o.tolerance.joint_tolerance) {
+      if (joint->percent_of_height) {
+        t->set_max_joint_error_percent_of_height(joint->value);
+      } else {
+        t->set_max_joint_error(joint->value);
+      }
+    }
     if (o.tolerance.key_budget) {
       t->set_key_budget(static_cast<std::int32_t>(std::min<std::int64_t>(
           *o.tolerance.key_budget, std::numeric_limits<std::int32_t>::max())));
@@ -343,6 +367,30 @@ v1::ReduceOperation ReduceToProto(const core::ReduceStep& step) {
     }
   }
   return r;
+}
+
+v1::WorldErrorReport WorldErrorToProto(const core::WorldErrorReport& w) {
+  v1::WorldErrorReport out;
+  out.set_figure_height_units(w.figure_height);
+  out.set_max_error_units(w.max_error);
+  out.set_rms_error_units(w.rms_error);
+  out.set_worst_point(w.worst_point_name);
+  out.set_worst_joint_index(w.worst_point.joint);
+  out.set_worst_end_site_index(w.worst_point.end_site);
+  out.set_worst_frame(w.worst_frame);
+  out.set_joint_tolerance_units(w.joint_tolerance);
+  return out;
+}
+
+core::WorldErrorReport WorldErrorFromProto(const v1::WorldErrorReport& w) {
+  return core::WorldErrorReport{
+      .figure_height = w.figure_height_units(),
+      .max_error = w.max_error_units(),
+      .worst_point = {.joint = w.worst_joint_index(), .end_site = w.worst_end_site_index()},
+      .worst_point_name = w.worst_point(),
+      .worst_frame = w.worst_frame(),
+      .rms_error = w.rms_error_units(),
+      .joint_tolerance = w.joint_tolerance_units()};
 }
 
 }  // namespace
@@ -431,6 +479,7 @@ v1::OperationReport StepReportToProto(const core::StepReport& report) {
                    o->set_worst_channel_index(r.worst_channel_index);
                    o->set_worst_frame(r.worst_frame);
                    o->set_iterations(r.iterations);
+                   if (r.world) *o->mutable_world_error() = WorldErrorToProto(*r.world);
                  },
              },
              report);
@@ -457,6 +506,7 @@ core::StepReport StepReportFromProto(const v1::OperationReport& report) {
     out.worst_channel_index = r.worst_channel_index();
     out.worst_frame = r.worst_frame();
     out.iterations = r.iterations();
+    if (r.has_world_error()) out.world = WorldErrorFromProto(r.world_error());
     return out;
   }
   const v1::RetimeReport& r = report.retime();

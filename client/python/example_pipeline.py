@@ -4,7 +4,8 @@
 Reads a BVH file, sends it to tempokey-server in one stateless Process call with two operations
 (a retime, by default half speed between 2 s and 4 s of the source, then a key reduction by the
 error-bounded `tolerance` method), and writes the keyed result in the "tempokey.keyed_clip" JSON
-schema the C++ tools use. Prints one summary line: source and output frames, keys kept, max error.
+schema the C++ tools use. Prints one summary line: source and output frames, keys kept, max error,
+and the joints' world-position error (file units and percent of the figure's height).
 
     python3 -m venv --system-site-packages .venv
     .venv/bin/pip install --no-index --no-build-isolation client/python
@@ -32,6 +33,15 @@ def speed_argument(text: str) -> list:
         raise argparse.ArgumentTypeError(str(error)) from None
 
 
+def joint_tolerance_argument(text: str) -> str:
+    """--joint-tolerance as the CLI reads it: 1 (file units) or 0.5% (of the figure's height)."""
+    try:
+        tk.parse_joint_tolerance(text)
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(str(error)) from None
+    return text
+
+
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(
         description="Retime and key-reduce a BVH clip on tempokey-server; write keyed JSON.")
@@ -45,10 +55,15 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     parser.add_argument("--speed", default=DEFAULT_SPEED, type=speed_argument,
                         help="speed knots time:speed over source time, times in s or f "
                              "(default %s: half speed from 2 s to 4 s)" % DEFAULT_SPEED)
-    parser.add_argument("--tolerance", type=float, default=0.5,
-                        help="largest rotation error kept, degrees (default %(default)s)")
-    parser.add_argument("--position-tolerance", type=float, default=0.5,
-                        help="largest position error kept, file units (default %(default)s)")
+    parser.add_argument("--tolerance", type=float, default=None,
+                        help="largest rotation error kept, degrees (default: the server's, 0.5; "
+                             "none with --joint-tolerance)")
+    parser.add_argument("--position-tolerance", type=float, default=None,
+                        help="largest position error kept, file units (default: the server's, "
+                             "0.3 %% of the figure's height)")
+    parser.add_argument("--joint-tolerance", type=joint_tolerance_argument, default=None,
+                        help="keep every joint within D file units, or D%% of the figure's "
+                             "height, of its source position (e.g. 1 or 0.5%%)")
     return parser.parse_args(argv)
 
 
@@ -77,21 +92,31 @@ def progress_printer() -> Optional[Callable[[float, str], None]]:
 
 def summary_line(source: tk.BvhClip, result: tk.PipelineResult) -> str:
     """"131_01: 994 -> 1234 frames, 3456 of 118464 keys kept (2.92 %), max error 0.4987 at
-    LeftHand.Zrotation frame 812"."""
+    LeftHand.Zrotation frame 812, joint error 0.1033 (0.409 % of height) at Head end site frame
+    409"."""
     retime = result.retime_report
     reduction = result.reduction_report
     header = result.keyed_clip.header
     worst = tk.channel_label(header, reduction.worst_channel_index)
     share = 100.0 * reduction.key_count / max(1, reduction.sample_count)
-    return ("%s: %d -> %d frames, %d of %d keys kept (%.2f %%), max error %.4g at %s frame %d"
+    line = ("%s: %d -> %d frames, %d of %d keys kept (%.2f %%), max error %.4g at %s frame %d"
             % (source.name, source.frame_count, retime.output_frame_count, reduction.key_count,
                reduction.sample_count, share, reduction.max_error, worst, reduction.worst_frame))
+    world = result.world_error
+    if world is not None:
+        height = world.figure_height_units
+        line += (", joint error %.4g (%.3f %% of height) at %s frame %d"
+                 % (world.max_error_units,
+                    100.0 * world.max_error_units / height if height > 0 else 0.0,
+                    world.worst_point, world.worst_frame))
+    return line
 
 
 def run(args: argparse.Namespace) -> None:
     operations = [tk.retime_operation(speed=args.speed),
                   tk.reduce_operation(tolerance=args.tolerance,
-                                      position_tolerance=args.position_tolerance)]
+                                      position_tolerance=args.position_tolerance,
+                                      joint_tolerance=args.joint_tolerance)]
     parsed = tk.read_bvh(args.input)
     clip = tk.clip_from_bvh(parsed)
     with tk.connect(args.server, timeout=args.timeout, token=read_token(args.token_file)) as client:

@@ -522,6 +522,52 @@ class SmallMessageLimitTest(unittest.TestCase):
         self.assertEqual(caught.exception.code, grpc.StatusCode.UNAVAILABLE)
 
 
+class WorldErrorTest(ServerTestCase):
+    """Joints' world-position error (SPEC 4.4) in the report, and the joint tolerance."""
+
+    def cli_report(self, *args):
+        with tempfile.TemporaryDirectory() as directory:
+            cli = run_cli("--server", _server.address, "reduce", CMU_BVH, "-o",
+                          os.path.join(directory, "cli.json"), *args)
+        self.assertEqual(cli.returncode, 0, cli.stderr)
+        return [line for line in cli.stdout.splitlines()
+                if line.startswith(("figure height:", "joint "))]
+
+    def test_default_reduction_reports_what_the_cli_prints(self):
+        result = self.client.process(cmu_clip(), [tk.reduce_operation()])
+
+        world = result.world_error
+        self.assertIsNotNone(world)
+        self.assertGreater(world.max_error_units, world.rms_error_units)
+        self.assertEqual(world.joint_tolerance_units, 0.0)
+        self.assertEqual(tk.world_error_lines(world), self.cli_report())
+
+    def test_joint_tolerance_in_percent_bounds_every_joint(self):
+        result = self.client.process(cmu_clip(), [tk.reduce_operation(joint_tolerance="0.5%")])
+
+        world = result.world_error
+        bound = 0.005 * world.figure_height_units
+        self.assertAlmostEqual(world.joint_tolerance_units, bound, delta=1e-12 * bound)
+        self.assertLessEqual(world.max_error_units, world.joint_tolerance_units)
+        self.assertEqual(tk.world_error_lines(world), self.cli_report("--joint-tolerance", "0.5%"))
+
+    def test_joint_tolerance_in_file_units_travels_as_its_own_field(self):
+        units = tk.reduce_operation(joint_tolerance=0.25)
+        text = tk.reduce_operation(joint_tolerance="0.25")
+        percent = tk.reduce_operation(joint_tolerance="1%")
+
+        self.assertEqual(units.reduce.tolerance.max_joint_error, 0.25)
+        self.assertEqual(text, units)
+        self.assertEqual(percent.reduce.tolerance.max_joint_error_percent_of_height, 1.0)
+        with self.assertRaisesRegex(ValueError, "got '1cm'"):
+            tk.reduce_operation(joint_tolerance="1cm")
+        with self.assertRaises(ValueError):
+            tk.reduce_operation(method="paper", joint_tolerance=1)
+        result = self.client.process(cmu_clip(), [units])
+        self.assertEqual(result.world_error.joint_tolerance_units, 0.25)
+        self.assertLessEqual(result.world_error.max_error_units, 0.25)
+
+
 class ExampleScriptTest(unittest.TestCase):
     """example_pipeline.py as a user runs it: a subprocess, its exit code, stdout and file."""
 
@@ -554,7 +600,9 @@ class ExampleScriptTest(unittest.TestCase):
         lines = run.stdout.splitlines()
         self.assertEqual(len(lines), 1, run.stdout)
         summary = re.fullmatch(r"131_01: 994 -> (\d+) frames, (\d+) of (\d+) keys kept "
-                               r"\([0-9.]+ %\), max error ([0-9.e+-]+) at \S+ frame \d+", lines[0])
+                               r"\([0-9.]+ %\), max error ([0-9.e+-]+) at \S+ frame \d+, "
+                               r"joint error [0-9.e+-]+ \([0-9.]+ % of height\) at [^,]+ frame "
+                               r"\d+", lines[0])
         self.assertIsNotNone(summary, lines[0])
         frames, keys, samples, max_error = summary.groups()
         self.assertEqual(int(frames), expected_frames)

@@ -126,7 +126,7 @@ absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> st
               probe.frame_count = 2;
               return ValidateRetime(probe, s.warp, s.options, limits);
             },
-            [](const ReduceStep& s) { return ValidateReduceOptions(s.options); },
+            [&](const ReduceStep& s) { return ValidateReduceOptionsForClip(clip, s.options); },
             [](const BakeStep& s) { return ValidateRate(s.rate); },
             [](const ConvertStep&) { return absl::OkStatus(); },
         },

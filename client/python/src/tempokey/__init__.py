@@ -41,8 +41,9 @@ from tempokey.formats import (clip_from_bvh, keyed_clip_to_dict, read_bvh_clip,
                               write_json_atomically, write_keyed_clip_json)
 from tempokey.pipelines import (REDUCE_OPTIONS, PipelineResult, RateLike, ReduceOption,
                                 SpeedLike, TimeLike, bake_operation, convert_operation,
-                                frame_rate, parse_speed, reduce_operation, retime_operation,
-                                speed_knot, time_point)
+                                frame_rate, parse_joint_tolerance, parse_speed,
+                                reduce_operation, retime_operation, speed_knot, time_point,
+                                world_error_lines)
 
 try:
     from importlib.metadata import PackageNotFoundError, version as _version
@@ -57,7 +58,8 @@ __all__ = [
     "RateLike", "ReduceOption", "SpeedLike", "TempokeyError", "TimeLike", "bake_operation",
     "channel_label", "clip_from_bvh", "clip_pb2", "connect", "convert_operation", "frame_rate",
     "keyed_clip_to_dict", "make_clip", "motion_service_pb2", "motion_service_pb2_grpc",
-    "operations_pb2", "parse_bvh", "parse_speed", "read_bvh", "read_bvh_clip", "reduce_operation",
+    "operations_pb2", "parse_bvh", "parse_joint_tolerance", "parse_speed", "read_bvh", "read_bvh_clip", "reduce_operation",
     "retime_operation", "sample_batches", "sample_slices", "speed_knot", "time_point",
+    "world_error_lines",
     "write_json_atomically", "write_keyed_clip_json",
 ]

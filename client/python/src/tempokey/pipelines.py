@@ -23,8 +23,8 @@ from tempokey.v1 import operations_pb2
 
 __all__ = [
     "PipelineResult", "REDUCE_OPTIONS", "RateLike", "ReduceOption", "SpeedLike", "TimeLike",
-    "bake_operation", "convert_operation", "frame_rate", "parse_speed", "reduce_operation",
-    "retime_operation", "speed_knot", "time_point",
+    "bake_operation", "convert_operation", "frame_rate", "parse_joint_tolerance", "parse_speed",
+    "reduce_operation", "retime_operation", "speed_knot", "time_point", "world_error_lines",
 ]
 
 TimeLike = Union[float, int, str]
@@ -207,10 +207,38 @@ class ReduceOption:
     convert: Callable[[Any], Any]
     methods: Tuple[str, ...]
     doc: str
+    # For an option that chooses its field from its value: sets it on the ReduceOperation
+    # (then `field` only documents where it goes and `convert` is not used).
+    apply: Optional[Callable[[operations_pb2.ReduceOperation, Any], None]] = None
 
 
 def _pose_alignment(value: str) -> int:
     return _choice(_POSE_ALIGNMENTS, value, "pose alignment")
+
+
+def parse_joint_tolerance(value: Union[float, int, str]) -> Tuple[float, bool]:
+    """(value, in percent of the figure's height) of a joint tolerance: 1, "1" (file units) or
+    "0.5%", as the CLI's --joint-tolerance reads it. Range checks are the server's.
+
+    Raises: ValueError for anything else ("1cm")."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return float(value), False
+    text = str(value).strip()
+    percent = text.endswith("%")
+    try:
+        return float(text[:-1] if percent else text), percent
+    except ValueError:
+        raise ValueError("joint tolerance: expected a distance in file units or a percentage of "
+                         "the figure's height (1, \"0.5%%\"), got %r" % (value,)) from None
+
+
+def _set_joint_tolerance(reduce: operations_pb2.ReduceOperation,
+                         value: Union[float, int, str]) -> None:
+    distance, percent = parse_joint_tolerance(value)
+    if percent:
+        reduce.tolerance.max_joint_error_percent_of_height = distance
+    else:
+        reduce.tolerance.max_joint_error = distance
 
 
 # The keywords of reduce_operation(), in the order its documentation lists them. A new option of
@@ -219,7 +247,9 @@ REDUCE_OPTIONS: Dict[str, ReduceOption] = {
     "tolerance": ReduceOption("tolerance.max_rotation_error_degrees", float, ("tolerance",),
                               "rotation bound in degrees (server default 0.5)"),
     "position_tolerance": ReduceOption("tolerance.max_position_error", float, ("tolerance",),
-                                       "position bound in file units (default 0.5)"),
+                                       "position bound in file units (default 0.3 % of the "
+                                       "figure's height: the vertical extent of every joint and "
+                                       "end site at the first frame)"),
     "scalar_tolerance": ReduceOption("tolerance.max_scalar_error", float, ("tolerance",),
                                      "plain-channel bound (default 0.5)"),
     "key_budget": ReduceOption("tolerance.key_budget", int, ("tolerance",),
@@ -228,6 +258,13 @@ REDUCE_OPTIONS: Dict[str, ReduceOption] = {
     "pose_alignment": ReduceOption("tolerance.pose_alignment", _pose_alignment, ("tolerance",),
                                    '"none" (default), "joint" or "clip": channels share key '
                                    "times"),
+    "joint_tolerance": ReduceOption("tolerance.max_joint_error[_percent_of_height]", float,
+                                    ("tolerance",),
+                                    "a world-space bound: every joint and end site within it of "
+                                    'its source position at every frame, in file units (1) or '
+                                    'percent of the figure\'s height ("0.5%"); unset rotation and '
+                                    "position bounds then leave each channel's bound to it",
+                                    apply=_set_joint_tolerance),
 }
 
 
@@ -266,7 +303,10 @@ def reduce_operation(*, method: str = "tolerance", paper: Optional[Mapping[str, 
         if method not in option.methods:
             raise ValueError("%s belongs to method %s, not %r"
                              % (keyword, " or ".join(repr(m) for m in option.methods), method))
-        _set_field(reduce, option.field, option.convert(value))
+        if option.apply is not None:
+            option.apply(reduce, value)
+        else:
+            _set_field(reduce, option.field, option.convert(value))
     if method != "paper" and paper:
         raise ValueError("paper parameters belong to method 'paper'")
     for field, value in (paper or {}).items():
@@ -321,3 +361,32 @@ class PipelineResult:
     def reduction_report(self) -> Optional[operations_pb2.ReductionReport]:
         """The last reduction's report (keys, samples, RMS and max error), or None."""
         return self._last_report("reduction")
+
+    @property
+    def world_error(self) -> Optional[operations_pb2.WorldErrorReport]:
+        """The last reduction's joint world-position error (file units; percentages of
+        figure_height_units), or None without a reduction or a skeleton."""
+        report = self.reduction_report
+        if report is None or not report.HasField("world_error"):
+            return None
+        return report.world_error
+
+
+def world_error_lines(world: operations_pb2.WorldErrorReport) -> List[str]:
+    """The CLI's lines for a world error report ("joint max error: 0.9850 (0.707% of height) at
+    Toes_R, frame 94", ...)."""
+    height = world.figure_height_units
+
+    def percent(distance: float) -> float:
+        return 100.0 * distance / height if height > 0 else 0.0
+
+    lines = ["figure height:   %.4g (first frame)" % height,
+             "joint max error: %.4f (%.3f%% of height) at %s, frame %d"
+             % (world.max_error_units, percent(world.max_error_units), world.worst_point,
+                world.worst_frame),
+             "joint rms error: %.4f (%.3f%% of height)"
+             % (world.rms_error_units, percent(world.rms_error_units))]
+    if world.joint_tolerance_units > 0:
+        lines.append("joint bound:     %.4g (%.3f%% of height)"
+                     % (world.joint_tolerance_units, percent(world.joint_tolerance_units)))
+    return lines

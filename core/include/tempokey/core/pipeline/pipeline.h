@@ -61,9 +61,11 @@ absl::Status ValidateStepChain(std::span<const PipelineStep> steps);
 bool ProducesKeyedOutput(std::span<const PipelineStep> steps);
 
 // Checks, before anything is queued, that the steps fit together (retime, reduce and convert
-// take a sampled clip; bake takes a keyed clip), that each step's options are valid, and the
-// first step against `clip`'s timing (ValidateRetime()).
-// Errors: kInvalidArgument "operation 2 (bake): needs a keyed clip, got a sampled clip".
+// take a sampled clip; bake takes a keyed clip), that each step's options are valid (a reduce's
+// against `clip`'s layout: ValidateReduceOptionsForClip()), and the first step against `clip`'s
+// timing (ValidateRetime()).
+// Errors: kInvalidArgument "operation 2 (bake): needs a keyed clip, got a sampled clip";
+// kFailedPrecondition for a joint tolerance on a clip without a skeleton.
 // `limits` caps what the steps may produce (a retime's or bake's frames and samples).
 absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> steps,
                               const ClipLimits& limits = {});
