@@ -152,4 +152,9 @@ absl::Status WriteOutput(const std::string& path, FileFormat format,
   return WriteKeyedClipFile(path, format, std::get<core::KeyedClip>(output));
 }
 
+double GltfRotationBoundDegrees(const core::ReduceStep& reduce) {
+  return reduce.options.tolerance.max_rotation_error_degrees.value_or(
+      core::kDefaultMaxRotationErrorDegrees);
+}
+
 }  // namespace tempokey::client

@@ -14,6 +14,8 @@
 #include "absl/status/statusor.h"
 #include "tempokey/core/model/clip.h"
 #include "tempokey/core/model/keyed_clip.h"
+#include "tempokey/core/pipeline/pipeline.h"
+#include "tempokey/core/reduce/reduce.h"
 
 namespace tempokey::client {
 
@@ -54,8 +56,13 @@ bool IsGltfFormat(FileFormat format);
 // fitted again in glTF's quaternion semantics, core/io/gltf.h) and the rotation bound.
 struct GltfExportSource {
   const core::Clip* source = nullptr;
-  double max_rotation_error_degrees = 0.5;
+  double max_rotation_error_degrees = core::kDefaultMaxRotationErrorDegrees;
 };
+
+// The rotation bound a keyed glTF of `reduce`'s result is fitted to: its rotation tolerance, or
+// the default 0.5 degrees when unset (also under a joint tolerance: the glTF's rotations then
+// stay within 0.5 degrees of the source's, whatever budgets the Euler curves were given).
+double GltfRotationBoundDegrees(const core::ReduceStep& reduce);
 
 // Reads a .bvh, or a .csv at `csv_frame_time_seconds` (the rate is not in the file).
 // Errors: a usage error for another extension, or a .csv without a frame time; the readers'

@@ -27,7 +27,7 @@ absl::Status Reduce(CommandContext& context) {
   // glTF keeps the curves too, its rotations fitted against this clip within the rotation bound.
   const GltfExportSource gltf{
       .source = &clip,
-      .max_rotation_error_degrees = reduce.options.tolerance.max_rotation_error_degrees};
+      .max_rotation_error_degrees = GltfRotationBoundDegrees(reduce)};
   std::vector<core::PipelineStep> steps = {std::move(reduce)};
   // Sampled outputs are the curves baked back at the source rate.
   if (!IsKeyedFormat(format) && !IsGltfFormat(format)) steps.push_back(core::BakeStep{});
