@@ -50,6 +50,12 @@ def parse_args(argv):
                         help="largest rotation error kept, degrees (default %(default)s)")
     parser.add_argument("--position-tolerance", type=float, default=0.5,
                         help="largest position error kept, file units (default %(default)s)")
+    parser.add_argument("--method", choices=("tolerance", "noise"), default="tolerance",
+                        help="reduction: tolerance (within the bounds) or noise (noise-aware, "
+                             "levels from --noise)")
+    parser.add_argument("--noise", default="auto",
+                        help="method noise: rotation noise level in degrees or auto "
+                             "(default %(default)s: estimated per channel)")
     return parser.parse_args(argv)
 
 
@@ -115,8 +121,10 @@ def summary_line(source, result):
 
 def run(args):
     operations = [tk.retime_operation(speed=args.speed),
-                  tk.reduce_operation(tolerance=args.tolerance,
-                                      position_tolerance=args.position_tolerance)]
+                  (tk.reduce_operation(method="noise", noise=args.noise)
+                   if args.method == "noise" else
+                   tk.reduce_operation(tolerance=args.tolerance,
+                                       position_tolerance=args.position_tolerance))]
     parsed = bvh.read_bvh(args.input)
     clip = clip_from_bvh(parsed)
     with tk.connect(args.server, timeout=args.timeout, token=read_token(args.token_file)) as client:

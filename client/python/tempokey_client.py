@@ -300,7 +300,8 @@ _RETIME_METHODS = {"exact": operations_pb2.RETIME_METHOD_EXACT,
 _ROTATION_MODES = {"quaternion": operations_pb2.ROTATION_MODE_QUATERNION,
                    "euler": operations_pb2.ROTATION_MODE_EULER}
 _REDUCE_METHODS = {"tolerance": operations_pb2.REDUCE_METHOD_TOLERANCE,
-                   "paper": operations_pb2.REDUCE_METHOD_PAPER}
+                   "paper": operations_pb2.REDUCE_METHOD_PAPER,
+                   "noise": operations_pb2.REDUCE_METHOD_NOISE}
 _POSE_ALIGNMENTS = {"none": operations_pb2.POSE_ALIGNMENT_NONE,
                     "joint": operations_pb2.POSE_ALIGNMENT_JOINT,
                     "clip": operations_pb2.POSE_ALIGNMENT_CLIP}
@@ -398,7 +399,8 @@ def retime_operation(speed=None, *, speed_over: str = "source", holds=(),
                      fit_frames: Optional[int] = None, fit_to_grid: bool = True, fps=None,
                      filter: Optional[str] = None, method: Optional[str] = None,
                      rotation: Optional[str] = None, pins=(),
-                     min_speed: float = 0.0, max_speed: float = 0.0) -> operations_pb2.Operation:
+                     min_speed: float = 0.0, max_speed: float = 0.0,
+                     euler_filter: bool = False) -> operations_pb2.Operation:
     """A retime step (SPEC 3).
 
     Args:
@@ -417,6 +419,7 @@ def retime_operation(speed=None, *, speed_over: str = "source", holds=(),
       rotation: "quaternion" (default) or "euler".
       pins: (source_time, output_frame) pairs: source time lands exactly on that output frame.
       min_speed / max_speed: allowed speed range; 0 keeps the server's (0.01 and 100).
+      euler_filter: rewrite Euler flips of the output as the nearest equivalent angles.
 
     Raises: ValueError for what cannot be encoded (unknown names, both fits, a time without a
     unit); values are checked by the server (INVALID_ARGUMENT naming the knot).
@@ -426,7 +429,7 @@ def retime_operation(speed=None, *, speed_over: str = "source", holds=(),
         filter=_choice(_FILTERS, filter, "filter"),
         method=_choice(_RETIME_METHODS, method, "retime method"),
         rotation_mode=_choice(_ROTATION_MODES, rotation, "rotation mode"),
-        min_speed=float(min_speed), max_speed=float(max_speed))
+        min_speed=float(min_speed), max_speed=float(max_speed), euler_filter=bool(euler_filter))
     if speed is not None:
         if speed_over == "source":
             retime.speed_over_source.extend(_speed_knots(speed))
@@ -454,7 +457,9 @@ def reduce_operation(*, method: str = "tolerance", tolerance: Optional[float] = 
                      scalar_tolerance: Optional[float] = None,
                      key_budget: Optional[int] = None,
                      pose_alignment: Optional[str] = None,
-                     paper: Optional[dict] = None) -> operations_pb2.Operation:
+                     paper: Optional[dict] = None,
+                     noise="auto", position_noise="auto",
+                     euler_filter: Optional[bool] = None) -> operations_pb2.Operation:
     """A key-reduction step (SPEC 4): the sampled clip becomes key-frame curves.
 
     Args:
@@ -466,9 +471,14 @@ def reduce_operation(*, method: str = "tolerance", tolerance: Optional[float] = 
       key_budget: at most this many keys in all (replaces the bounds by one scale of them).
       pose_alignment: "none" (default), "joint" or "clip": channels share key times.
       paper: fields of tempokey.v1.PaperParams for method "paper", e.g. {"step_y": 0.25}.
+      noise: method "noise": the noise level of rotation channels in degrees, or "auto"
+        (default: estimated per channel from the data).
+      position_noise: method "noise": the same for position and scalar channels (file units).
+      euler_filter: the Euler filter on the input (True/False); None takes the method's
+        default (on for "noise", off for the others).
 
-    Raises: ValueError for an unknown method, alignment or paper field, or tolerance settings
-    with method "paper"; values are checked by the server.
+    Raises: ValueError for an unknown method, alignment or paper field, or settings of another
+    method; values are checked by the server.
     """
     reduce = operations_pb2.ReduceOperation(method=_choice(_REDUCE_METHODS, method, "method"))
     bounds = {"max_rotation_error_degrees": tolerance, "max_position_error": position_tolerance,
@@ -476,8 +486,19 @@ def reduce_operation(*, method: str = "tolerance", tolerance: Optional[float] = 
     given = {field: value for field, value in bounds.items() if value is not None}
     if method == "paper" and (given or pose_alignment is not None):
         raise ValueError("tolerances, key_budget and pose_alignment belong to method 'tolerance'")
-    if method == "tolerance" and paper:
+    if method != "tolerance" and (given or pose_alignment is not None):
+        raise ValueError("tolerances, key_budget and pose_alignment belong to method 'tolerance'")
+    if method != "paper" and paper:
         raise ValueError("paper parameters belong to method 'paper'")
+    levels = {"rotation_sigma_degrees": noise, "position_sigma": position_noise}
+    for field, value in levels.items():
+        if value == "auto":
+            continue
+        if method != "noise":
+            raise ValueError("noise levels belong to method 'noise'")
+        setattr(reduce.noise, field, float(value))
+    if euler_filter is not None:
+        reduce.euler_filter = bool(euler_filter)
     for field, value in given.items():
         setattr(reduce.tolerance, field, int(value) if field == "key_budget" else float(value))
     if pose_alignment is not None:
