@@ -119,7 +119,8 @@ absl::Status RetimeOptionsFromArgs(const ParsedArgs& args, core::RetimeOptions& 
 
 // ---- reduce -------------------------------------------------------------------------------------
 
-constexpr std::string_view kReduceMethods[] = {"tolerance", "paper"};
+constexpr std::string_view kReduceMethods[] = {"tolerance", "paper", "noise"};
+constexpr std::string_view kOnOff[] = {"on", "off"};
 constexpr std::string_view kAlignments[] = {"none", "joint", "clip"};
 
 constexpr std::string_view kToleranceOnly[] = {"--tolerance",      "--position-tolerance",
@@ -128,6 +129,20 @@ constexpr std::string_view kToleranceOnly[] = {"--tolerance",      "--position-t
 constexpr std::string_view kPaperOnly[] = {"--step-x",     "--step-y",     "--step-tangent-x",
                                            "--step-tangent-y", "--accuracy", "--iterations",
                                            "--smoothing-sigma", "--min-key-spacing"};
+constexpr std::string_view kNoiseOnly[] = {"--noise", "--position-noise"};
+
+// "auto" (nullopt: estimated) or a noise level; the range is core's to check.
+absl::Status SetNoise(const ParsedArgs& args, std::string_view flag,
+                      std::optional<double>& field) {
+  if (std::optional<std::string> v = args.Value(flag)) {
+    if (*v == "auto") {
+      field.reset();
+    } else {
+      TEMPOKEY_ASSIGN_OR_RETURN(field, ParseDouble(flag, *v));
+    }
+  }
+  return absl::OkStatus();
+}
 
 // Sets `field` from `flag` when given.
 absl::Status SetDouble(const ParsedArgs& args, std::string_view flag, double& field) {
@@ -181,14 +196,26 @@ absl::StatusOr<core::ReduceOptions> ReduceOptionsFromArgs(const ParsedArgs& args
   if (std::optional<std::string> v = args.Value("--method")) {
     TEMPOKEY_ASSIGN_OR_RETURN(method, ParseChoice("--method", *v, kReduceMethods));
   }
-  options.method = method == "paper" ? core::ReduceMethod::kPaper : core::ReduceMethod::kTolerance;
-  const auto& other_flags = method == "paper" ? std::span<const std::string_view>(kToleranceOnly)
-                                              : std::span<const std::string_view>(kPaperOnly);
-  for (std::string_view flag : other_flags) {
-    if (args.Has(flag)) {
-      return UsageError(absl::StrCat(core::AsAbsl(flag), " does not apply to --method ", method));
+  options.method = method == "paper"   ? core::ReduceMethod::kPaper
+                   : method == "noise" ? core::ReduceMethod::kNoise
+                                       : core::ReduceMethod::kTolerance;
+  for (const auto& [flags, owner] :
+       {std::pair{std::span<const std::string_view>(kToleranceOnly), "tolerance"},
+        std::pair{std::span<const std::string_view>(kPaperOnly), "paper"},
+        std::pair{std::span<const std::string_view>(kNoiseOnly), "noise"}}) {
+    if (method == owner) continue;
+    for (std::string_view flag : flags) {
+      if (args.Has(flag)) {
+        return UsageError(absl::StrCat(core::AsAbsl(flag), " does not apply to --method ", method));
+      }
     }
   }
+  if (std::optional<std::string> v = args.Value("--euler-filter")) {
+    TEMPOKEY_ASSIGN_OR_RETURN(std::string on, ParseChoice("--euler-filter", *v, kOnOff));
+    options.euler_filter = on == "on";
+  }
+  TEMPOKEY_RETURN_IF_ERROR(SetNoise(args, "--noise", options.noise.rotation_sigma_degrees));
+  TEMPOKEY_RETURN_IF_ERROR(SetNoise(args, "--position-noise", options.noise.position_sigma));
 
   core::ToleranceParams& tolerance = options.tolerance;
   TEMPOKEY_RETURN_IF_ERROR(
@@ -227,6 +254,7 @@ absl::StatusOr<core::RetimeStep> RetimeStepFromArgs(const ParsedArgs& args) {
   core::RetimeStep step;
   TEMPOKEY_RETURN_IF_ERROR(RetimeOptionsFromArgs(args, step.options));
   TEMPOKEY_RETURN_IF_ERROR(WarpFromFlags(args, step.warp));
+  step.euler_filter = args.Has("--euler-filter");
   return step;
 }
 
@@ -244,7 +272,8 @@ absl::StatusOr<core::BakeStep> BakeStepFromArgs(const ParsedArgs& args) {
 }
 
 absl::StatusOr<core::ConvertStep> ConvertStepFromArgs(const ParsedArgs& args) {
-  return core::ConvertStep{.wrap_rotations = args.Has("--wrap-rotations")};
+  return core::ConvertStep{.wrap_rotations = args.Has("--wrap-rotations"),
+                           .euler_filter = args.Has("--euler-filter")};
 }
 
 }  // namespace tempokey::client

@@ -181,6 +181,7 @@ absl::StatusOr<core::RetimeStep> RetimeFromProto(int op, const v1::RetimeOperati
   // 0 selects the default range; anything else is the caller's and core checks it.
   if (r.min_speed() != 0.0) step.options.min_speed = r.min_speed();
   if (r.max_speed() != 0.0) step.options.max_speed = r.max_speed();
+  step.euler_filter = r.euler_filter();
   return step;
 }
 
@@ -195,9 +196,19 @@ absl::StatusOr<core::ReduceStep> ReduceFromProto(int op, const v1::ReduceOperati
     case v1::REDUCE_METHOD_PAPER:
       o.method = core::ReduceMethod::kPaper;
       break;
+    case v1::REDUCE_METHOD_NOISE:
+      o.method = core::ReduceMethod::kNoise;
+      break;
     default:
       return UnknownEnum(op, "reduce.method", r.method());
   }
+  if (r.has_euler_filter()) o.euler_filter = r.euler_filter();
+  const v1::NoiseParams& n = r.noise();
+  if (n.has_rotation_sigma_degrees()) o.noise.rotation_sigma_degrees = n.rotation_sigma_degrees();
+  if (n.has_position_sigma()) o.noise.position_sigma = n.position_sigma();
+  if (n.has_min_sigma()) o.noise.min_sigma = n.min_sigma();
+  if (n.has_guard_sigmas()) o.noise.guard_sigmas = n.guard_sigmas();
+  if (n.has_key_sigmas()) o.noise.key_sigmas = n.key_sigmas();
 
   // Set fields replace the defaults; ValidateReduceOptions() (run on the whole pipeline before
   // anything is queued) checks every value and names it.
@@ -315,13 +326,25 @@ v1::RetimeOperation RetimeToProto(const core::RetimeStep& step) {
   }
   r.set_min_speed(o.min_speed);
   r.set_max_speed(o.max_speed);
+  r.set_euler_filter(step.euler_filter);
   return r;
 }
 
 v1::ReduceOperation ReduceToProto(const core::ReduceStep& step) {
   v1::ReduceOperation r;
   const core::ReduceOptions& o = step.options;
-  if (o.method == core::ReduceMethod::kPaper) {
+  if (o.euler_filter) r.set_euler_filter(*o.euler_filter);
+  if (o.method == core::ReduceMethod::kNoise) {
+    r.set_method(v1::REDUCE_METHOD_NOISE);
+    v1::NoiseParams* n = r.mutable_noise();
+    if (o.noise.rotation_sigma_degrees) {
+      n->set_rotation_sigma_degrees(*o.noise.rotation_sigma_degrees);
+    }
+    if (o.noise.position_sigma) n->set_position_sigma(*o.noise.position_sigma);
+    n->set_min_sigma(o.noise.min_sigma);
+    n->set_guard_sigmas(o.noise.guard_sigmas);
+    n->set_key_sigmas(o.noise.key_sigmas);
+  } else if (o.method == core::ReduceMethod::kPaper) {
     r.set_method(v1::REDUCE_METHOD_PAPER);
     v1::PaperParams* p = r.mutable_paper();
     p->set_step_x_frames(o.paper.step_x_frames);
@@ -419,7 +442,8 @@ absl::StatusOr<std::vector<core::PipelineStep>> PipelineFromProto(
             .rate = RateFromProto(op.bake().rate_numerator(), op.bake().rate_denominator())});
         break;
       case v1::Operation::kConvert:
-        steps.emplace_back(core::ConvertStep{.wrap_rotations = op.convert().wrap_rotations()});
+        steps.emplace_back(core::ConvertStep{.wrap_rotations = op.convert().wrap_rotations(),
+                                             .euler_filter = op.convert().euler_filter()});
         break;
       case v1::Operation::KIND_NOT_SET:
         return Invalid(absl::StrCat(OpPrefix(i),
@@ -443,6 +467,7 @@ v1::Operation PipelineStepToProto(const core::PipelineStep& step) {
                  },
                  [&](const core::ConvertStep& s) {
                    op.mutable_convert()->set_wrap_rotations(s.wrap_rotations);
+                   op.mutable_convert()->set_euler_filter(s.euler_filter);
                  },
              },
              step);
@@ -471,6 +496,8 @@ v1::OperationReport StepReportToProto(const core::StepReport& report) {
                      c->set_rms_error(ch.rms_error);
                      c->set_max_error(ch.max_error);
                      c->set_max_error_frame(ch.max_error_frame);
+                     c->set_noise_sigma(ch.noise_sigma);
+                     c->set_noise_sigma_estimated(ch.noise_sigma_estimated);
                    }
                    o->set_key_count(r.key_count);
                    o->set_sample_count(r.sample_count);
@@ -480,6 +507,7 @@ v1::OperationReport StepReportToProto(const core::StepReport& report) {
                    o->set_worst_frame(r.worst_frame);
                    o->set_iterations(r.iterations);
                    if (r.world) *o->mutable_world_error() = WorldErrorToProto(*r.world);
+                   o->set_euler_filtered_frames(r.euler_filtered_frames);
                  },
              },
              report);
@@ -497,7 +525,10 @@ core::StepReport StepReportFromProto(const v1::OperationReport& report) {
                                                     .sample_count = c.sample_count(),
                                                     .rms_error = c.rms_error(),
                                                     .max_error = c.max_error(),
-                                                    .max_error_frame = c.max_error_frame()});
+                                                    .max_error_frame = c.max_error_frame(),
+                                                    .noise_sigma = c.noise_sigma(),
+                                                    .noise_sigma_estimated =
+                                                        c.noise_sigma_estimated()});
     }
     out.key_count = r.key_count();
     out.sample_count = r.sample_count();
@@ -507,6 +538,7 @@ core::StepReport StepReportFromProto(const v1::OperationReport& report) {
     out.worst_frame = r.worst_frame();
     out.iterations = r.iterations();
     if (r.has_world_error()) out.world = WorldErrorFromProto(r.world_error());
+    out.euler_filtered_frames = r.euler_filtered_frames();
     return out;
   }
   const v1::RetimeReport& r = report.retime();

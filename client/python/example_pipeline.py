@@ -64,6 +64,12 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     parser.add_argument("--joint-tolerance", type=joint_tolerance_argument, default=None,
                         help="keep every joint within D file units, or D%% of the figure's "
                              "height, of its source position (e.g. 1 or 0.5%%)")
+    parser.add_argument("--method", choices=("tolerance", "noise"), default="tolerance",
+                        help="reduction: tolerance (within the bounds) or noise (noise-aware, "
+                             "levels from --noise)")
+    parser.add_argument("--noise", default="auto",
+                        help="method noise: rotation noise level in degrees or auto "
+                             "(default %(default)s: estimated per channel)")
     return parser.parse_args(argv)
 
 
@@ -114,9 +120,11 @@ def summary_line(source: tk.BvhClip, result: tk.PipelineResult) -> str:
 
 def run(args: argparse.Namespace) -> None:
     operations = [tk.retime_operation(speed=args.speed),
-                  tk.reduce_operation(tolerance=args.tolerance,
-                                      position_tolerance=args.position_tolerance,
-                                      joint_tolerance=args.joint_tolerance)]
+                  (tk.reduce_operation(method="noise", noise=args.noise)
+                   if args.method == "noise" else
+                   tk.reduce_operation(tolerance=args.tolerance,
+                                       position_tolerance=args.position_tolerance,
+                                       joint_tolerance=args.joint_tolerance))]
     parsed = tk.read_bvh(args.input)
     clip = tk.clip_from_bvh(parsed)
     with tk.connect(args.server, timeout=args.timeout, token=read_token(args.token_file)) as client:

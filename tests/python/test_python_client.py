@@ -334,6 +334,40 @@ class ReduceTest(ServerTestCase):
 
         self.assertGreater(tight.reduction_report.key_count, loose.reduction_report.key_count)
 
+    def test_noise_method_reports_each_channels_level_given_or_estimated(self):
+        clip = cmu_clip()
+
+        given = self.client.process(clip, [tk.reduce_operation(method="noise", noise=0.3)])
+        estimated = self.client.process(clip, [tk.reduce_operation(method="noise")])
+
+        rotation_kinds = {tk.CHANNEL_KINDS[name] for name in ("Xrotation", "Yrotation", "Zrotation")}
+        header = given.keyed_clip.header
+        rotations = [c for c in given.reduction_report.channels
+                     if header.channels[c.channel_index].kind in rotation_kinds]
+        self.assertEqual(len(rotations), 93)
+        for channel in rotations:
+            self.assertEqual(channel.noise_sigma, 0.3)
+            self.assertFalse(channel.noise_sigma_estimated)
+        for channel in estimated.reduction_report.channels:
+            self.assertGreater(channel.noise_sigma, 0.0)
+            self.assertTrue(channel.noise_sigma_estimated)
+        self.assertLess(estimated.reduction_report.key_count, estimated.reduction_report.sample_count)
+
+    def test_euler_filter_is_on_for_noise_and_asked_for_tolerance(self):
+        clip = cmu_clip()
+
+        noise = self.client.process(clip, [tk.reduce_operation(method="noise", noise=0.3)])
+        noise_off = self.client.process(clip, [tk.reduce_operation(
+            method="noise", noise=0.3, euler_filter=False)])
+        tolerance = self.client.process(clip, [tk.reduce_operation()])
+        tolerance_on = self.client.process(clip, [tk.reduce_operation(euler_filter=True)])
+
+        self.assertGreater(noise.reduction_report.euler_filtered_frames, 0)
+        self.assertEqual(noise_off.reduction_report.euler_filtered_frames, 0)
+        self.assertEqual(tolerance.reduction_report.euler_filtered_frames, 0)
+        self.assertEqual(tolerance_on.reduction_report.euler_filtered_frames,
+                         noise.reduction_report.euler_filtered_frames)
+
     def test_keyed_json_equals_the_cli_output(self):
         result = self.client.process(cmu_clip(), [tk.reduce_operation()])
 
@@ -386,6 +420,12 @@ class InvalidRequestTest(ServerTestCase):
                                 [tk.reduce_operation()], clip_id="sha256:00")
         self.assertRaisesStatus(grpc.StatusCode.NOT_FOUND, self.client.result, "no-such-job")
 
+    def test_noise_levels_belong_to_the_noise_method(self):
+        with self.assertRaises(ValueError):
+            tk.reduce_operation(noise=0.5)
+        with self.assertRaises(ValueError):
+            tk.reduce_operation(method="noise", tolerance=0.5)
+
     def test_client_side_encoding_errors_are_value_errors(self):
         with self.assertRaisesRegex(ValueError, r"speed knot 2 \('2x:1'\)"):
             tk.parse_speed("0s:1,2x:1")
@@ -398,9 +438,13 @@ class ReduceOptionsTest(ServerTestCase):
 
     def test_every_option_lands_in_its_field_and_the_server_takes_it(self):
         values = {"tolerance": 0.75, "position_tolerance": 0.25, "scalar_tolerance": 0.125,
-                  "key_budget": 400, "pose_alignment": "joint", "joint_tolerance": "0.5%"}
+                  "key_budget": 400, "pose_alignment": "joint", "joint_tolerance": "0.5%",
+                  "noise": 0.25, "position_noise": 0.5, "euler_filter": True}
         # Options that choose their field from their value: where this value must land.
-        chosen_fields = {"joint_tolerance": ("tolerance.max_joint_error_percent_of_height", 0.5)}
+        chosen_fields = {"joint_tolerance": ("tolerance.max_joint_error_percent_of_height", 0.5),
+                         "noise": ("noise.rotation_sigma_degrees", 0.25),
+                         "position_noise": ("noise.position_sigma", 0.5)}
+        methods = {"noise": "noise", "position_noise": "noise"}
         self.assertEqual(set(values), set(tk.REDUCE_OPTIONS), "a new option needs a value here")
 
         for keyword, value in values.items():
@@ -409,7 +453,8 @@ class ReduceOptionsTest(ServerTestCase):
                 field, expected = chosen_fields.get(keyword, (option.field, None))
                 if keyword not in chosen_fields:
                     expected = option.convert(value)
-                operation = tk.reduce_operation(**{keyword: value})
+                operation = tk.reduce_operation(method=methods.get(keyword, "tolerance"),
+                                                **{keyword: value})
                 found = operation.reduce
                 for part in field.split("."):
                     found = getattr(found, part)

@@ -11,13 +11,15 @@
 
 #include "absl/strings/str_cat.h"
 #include "joint_bound_fit.h"
+#include "noise_reduction.h"
 #include "reduction_internal.h"
 #include "world_error_internal.h"
-#include "tempokey/core/reduce/hermite_dp.h"
+#include "tempokey/core/model/euler_filter.h"
 #include "tempokey/core/model/kinematics.h"
 #include "tempokey/core/model/numbers.h"
 #include "tempokey/core/model/rotation.h"
 #include "tempokey/core/model/status.h"
+#include "tempokey/core/reduce/hermite_dp.h"
 #include "tempokey/core/reduce/tolerance_fit.h"
 
 namespace tempokey::core {
@@ -480,6 +482,8 @@ absl::Status ValidateReduceOptions(const ReduceOptions& options) {
       return ValidatePaperParams(options.paper);
     case ReduceMethod::kTolerance:
       return ValidateToleranceParams(options.tolerance);
+    case ReduceMethod::kNoise:
+      return reduce_internal::ValidateNoiseParams(options.noise);
   }
   return absl::InvalidArgumentError(
       absl::StrCat("reduce method ", static_cast<int>(options.method), " is not a known method"));
@@ -515,8 +519,17 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
     empty.name = channel.name;
   }
   const int channel_count = static_cast<int>(clip.channels.size());
+  // The Euler filter works on a copy; the fit reads that copy instead of the clip.
+  const bool euler_filter =
+      options.euler_filter.value_or(options.method == ReduceMethod::kNoise);
+  std::optional<Clip> filtered;
+  if (euler_filter) {
+    filtered = clip;
+    TEMPOKEY_ASSIGN_OR_RETURN(const EulerFilterReport euler, ApplyEulerFilter(*filtered));
+    result.report.euler_filtered_frames = euler.frames_changed;
+  }
   // Rotations unwrapped into copies, every other channel read in place.
-  const reduce_internal::FittedSamples fitted(clip);
+  const reduce_internal::FittedSamples fitted(filtered ? *filtered : clip);
   const std::span<const std::span<const double>> inputs = fitted.channels();
   for (int c = 0; c < channel_count; ++c) {
     TEMPOKEY_RETURN_IF_ERROR(CheckMagnitudes(clip, c, inputs[c]));
@@ -529,7 +542,12 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
   }
   int iterations = 0;
   double joint_bound = 0.0;
-  if (options.method == ReduceMethod::kTolerance) {
+  reduce_internal::NoiseCurves noise;
+  if (options.method == ReduceMethod::kNoise) {
+    TEMPOKEY_ASSIGN_OR_RETURN(
+        noise, reduce_internal::FitNoiseCurves(clip, inputs, options.noise, progress, stop));
+    result.keyed.curves = std::move(noise.curves);
+  } else if (options.method == ReduceMethod::kTolerance) {
     TEMPOKEY_ASSIGN_OR_RETURN(
         ToleranceCurves fit,
         ToleranceFit(clip, inputs, options.tolerance, meter ? &*meter : nullptr, progress, stop));
@@ -552,9 +570,15 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
   }
   // The clip was validated above and the curves are ours: measure without MeasureReduction()'s
   // checks and copies.
+  const std::int64_t euler_filtered_frames = result.report.euler_filtered_frames;
   result.report =
       reduce_internal::MeasureFitted(inputs, result.keyed.curves, clip.frame_time_seconds);
   result.report.iterations = iterations;
+  result.report.euler_filtered_frames = euler_filtered_frames;
+  for (std::size_t c = 0; c < noise.sigmas.size(); ++c) {
+    result.report.channels[c].noise_sigma = noise.sigmas[c];
+    result.report.channels[c].noise_sigma_estimated = noise.estimated[c];
+  }
   if (meter) {
     const std::vector<std::vector<double>> baked = reduce_internal::SampleCurves(
         result.keyed.curves, clip.frame_count, clip.frame_time_seconds);

@@ -46,7 +46,8 @@ _RETIME_METHODS = {"exact": operations_pb2.RETIME_METHOD_EXACT,
 _ROTATION_MODES = {"quaternion": operations_pb2.ROTATION_MODE_QUATERNION,
                    "euler": operations_pb2.ROTATION_MODE_EULER}
 _REDUCE_METHODS = {"tolerance": operations_pb2.REDUCE_METHOD_TOLERANCE,
-                   "paper": operations_pb2.REDUCE_METHOD_PAPER}
+                   "paper": operations_pb2.REDUCE_METHOD_PAPER,
+                   "noise": operations_pb2.REDUCE_METHOD_NOISE}
 _POSE_ALIGNMENTS = {"none": operations_pb2.POSE_ALIGNMENT_NONE,
                     "joint": operations_pb2.POSE_ALIGNMENT_JOINT,
                     "clip": operations_pb2.POSE_ALIGNMENT_CLIP}
@@ -146,7 +147,8 @@ def retime_operation(speed: Optional[SpeedLike] = None, *, speed_over: str = "so
                      filter: Optional[str] = None, method: Optional[str] = None,
                      rotation: Optional[str] = None,
                      pins: Sequence[Tuple[TimeLike, int]] = (),
-                     min_speed: float = 0.0, max_speed: float = 0.0) -> operations_pb2.Operation:
+                     min_speed: float = 0.0, max_speed: float = 0.0,
+                     euler_filter: bool = False) -> operations_pb2.Operation:
     """A retime step (SPEC 3).
 
     Args:
@@ -165,6 +167,7 @@ def retime_operation(speed: Optional[SpeedLike] = None, *, speed_over: str = "so
       rotation: "quaternion" (default) or "euler".
       pins: (source_time, output_frame) pairs: source time lands exactly on that output frame.
       min_speed / max_speed: allowed speed range; 0 keeps the server's (0.01 and 100).
+      euler_filter: rewrite Euler flips of the output as the nearest equivalent angles.
 
     Raises: ValueError for what cannot be encoded (unknown names, both fits, a time without a
     unit); values are checked by the server (INVALID_ARGUMENT naming the knot).
@@ -174,7 +177,7 @@ def retime_operation(speed: Optional[SpeedLike] = None, *, speed_over: str = "so
         filter=_choice(_FILTERS, filter, "filter"),
         method=_choice(_RETIME_METHODS, method, "retime method"),
         rotation_mode=_choice(_ROTATION_MODES, rotation, "rotation mode"),
-        min_speed=float(min_speed), max_speed=float(max_speed))
+        min_speed=float(min_speed), max_speed=float(max_speed), euler_filter=bool(euler_filter))
     if speed is not None:
         if speed_over == "source":
             retime.speed_over_source.extend(_speed_knots(speed))
@@ -241,6 +244,14 @@ def _set_joint_tolerance(reduce: operations_pb2.ReduceOperation,
         reduce.tolerance.max_joint_error = distance
 
 
+def _noise_level(field: str) -> Callable[[operations_pb2.ReduceOperation, Any], None]:
+    """Sets noise.<field> to a level; "auto" leaves it unset (estimated per channel)."""
+    def apply(reduce: operations_pb2.ReduceOperation, value: Any) -> None:
+        if value != "auto":
+            setattr(reduce.noise, field, float(value))
+    return apply
+
+
 # The keywords of reduce_operation(), in the order its documentation lists them. A new option of
 # the reduce step is one entry here (its field, converter, methods and description).
 REDUCE_OPTIONS: Dict[str, ReduceOption] = {
@@ -265,6 +276,16 @@ REDUCE_OPTIONS: Dict[str, ReduceOption] = {
                                     'percent of the figure\'s height ("0.5%"); unset rotation and '
                                     "position bounds then leave each channel's bound to it",
                                     apply=_set_joint_tolerance),
+    "noise": ReduceOption("noise.rotation_sigma_degrees", float, ("noise",),
+                          'rotation channels\' noise level in degrees, or "auto" (default: '
+                          "estimated per channel from the data)",
+                          apply=_noise_level("rotation_sigma_degrees")),
+    "position_noise": ReduceOption("noise.position_sigma", float, ("noise",),
+                                   'the same for position and plain channels (file units), or '
+                                   '"auto"', apply=_noise_level("position_sigma")),
+    "euler_filter": ReduceOption("euler_filter", bool, ("tolerance", "paper", "noise"),
+                                 "the Euler filter on the input (True/False); unset takes the "
+                                 'method\'s default (on for "noise", off for the others)'),
 }
 
 
@@ -282,7 +303,8 @@ def reduce_operation(*, method: str = "tolerance", paper: Optional[Mapping[str, 
 
     Args:
       method: "tolerance" (fewest keys keeping every channel within its bound at every source
-        frame) or "paper" (the published Hermite DP fit; bounds nothing).
+        frame), "noise" (noise-aware: a fit whose residual matches each channel's noise level)
+        or "paper" (the published Hermite DP fit; bounds nothing).
       paper: fields of tempokey.v1.PaperParams for method "paper", e.g. {"step_y": 0.25}.
       **options: the keywords of REDUCE_OPTIONS, listed below; None leaves one unset (the
         server's default).

@@ -22,6 +22,9 @@ namespace tempokey::core {
 struct RetimeStep {
   TimeWarpSpec warp;
   RetimeOptions options;
+  // The Euler filter (euler_filter.h) on the output. Off by default: the rotation-aware retime
+  // already keeps the source's Euler branch, and its output keeps the source's conventions.
+  bool euler_filter = false;
 };
 
 struct ReduceStep {
@@ -36,6 +39,9 @@ struct BakeStep {
 // Sampled clip -> sampled clip.
 struct ConvertStep {
   bool wrap_rotations = false;
+  // The Euler filter (euler_filter.h), before any re-wrap. Off by default: a conversion keeps the
+  // values it is given unless asked.
+  bool euler_filter = false;
 };
 
 using PipelineStep = std::variant<RetimeStep, ReduceStep, BakeStep, ConvertStep>;

@@ -16,7 +16,7 @@
 
 namespace tempokey::core {
 
-enum class ReduceMethod { kTolerance, kPaper };
+enum class ReduceMethod { kTolerance, kPaper, kNoise };
 
 // The paper's Hermite DP fit (SPEC 4.1; definitions in hermite_dp.h). Steps are in frames (x)
 // and value units (y: degrees for rotations, file units for positions); tangent steps in the 2D
@@ -65,10 +65,28 @@ struct ToleranceParams {
   std::optional<JointTolerance> joint_tolerance;
 };
 
+// The noise-aware method (SPEC 4.3; noise_fit.h). Noise levels are standard deviations in value
+// units: degrees for rotation channels, file units for position and scalar channels; unset means
+// estimated per channel from the data (EstimateNoiseSigma()).
+struct NoiseParams {
+  std::optional<double> rotation_sigma_degrees;  // finite, > 0 when set
+  std::optional<double> position_sigma;          // position and scalar channels
+  // An estimate below this is raised to it, so a noiseless channel still gets a fit (and is
+  // barely smoothed). Value units; finite, > 0.
+  double min_sigma = 1e-4;
+  double guard_sigmas = 5.0;  // [2, 100], NoiseFitOptions
+  double key_sigmas = 0.2;    // [0.01, 10], NoiseFitOptions
+};
+
 struct ReduceOptions {
   ReduceMethod method = ReduceMethod::kTolerance;
   PaperParams paper;
   ToleranceParams tolerance;
+  NoiseParams noise;
+  // The Euler filter (euler_filter.h) on the input before fitting; unset: the method's default,
+  // on for `noise` (an Euler flip is not noise and costs keys), off for `tolerance` and `paper`
+  // (their curves keep the input's angles value for value unless asked).
+  std::optional<bool> euler_filter;
 };
 
 // Quality of one channel against its input samples (ACL style: keep the worst frame).
@@ -79,6 +97,10 @@ struct ChannelReduction {
   double rms_error = 0.0;
   double max_error = 0.0;
   std::int64_t max_error_frame = 0;
+  // noise: the channel's noise level (value units) the fit used, and whether it was estimated
+  // from the data (else given); 0 and false for other methods.
+  double noise_sigma = 0.0;
+  bool noise_sigma_estimated = false;
 };
 
 // Errors are in value units (degrees for rotations, unwrapped), measured at every source frame.
@@ -93,6 +115,8 @@ struct ReductionReport {
   int iterations = 0;  // paper: the most refinement iterations any channel ran
   // Joint world-position error through the skeleton (SPEC 4.4); unset for a clip without one.
   std::optional<WorldErrorReport> world;
+  // (joint, frame) pairs the Euler filter rewrote on the input (0 when it was off).
+  std::int64_t euler_filtered_frames = 0;
 
   // Keys kept as a percentage of samples (0 for an empty report).
   double key_percent() const {
@@ -114,7 +138,9 @@ struct ReduceResult {
 // Checks `options` for the chosen method: the method is known; paper: steps and accuracy in
 // (0, 1e6], 1 <= max_iterations <= 1000, sigma in [0, 1000], 1 <= spacing <= 1000000;
 // tolerance: error bounds finite and > 0 when set, key budget >= 2 when set, a known pose
-// alignment, a joint tolerance finite and > 0 when set (ValidateJointTolerance()).
+// alignment, a joint tolerance finite and > 0 when set (ValidateJointTolerance());
+// noise: given sigmas and min_sigma finite and > 0, guard_sigmas in [2, 100], key_sigmas in
+// [0.01, 10].
 // Errors: kInvalidArgument naming the field and value, e.g.
 //   "paper.step_y must be > 0, got -1", "paper.max_iterations must be in [1, 1000], got 0".
 // Thread-safe.
@@ -145,6 +171,11 @@ absl::Status ValidateReduceOptionsForClip(const Clip& layout, const ReduceOption
 //     guaranteed budgets cover every channel's range).
 //   `paper`: initial keys, DP passes and the conversion to weighted keys as in hermite_dp.h;
 //     keys land at fractional frames.
+//   `noise`: per channel, the given noise level of its kind or EstimateNoiseSigma() of its
+//     (filtered, unwrapped) samples, at least min_sigma, then FitToNoise() (noise_fit.h); keys on
+//     integer frames, non-weighted, C1. The report carries each channel's level.
+// With the Euler filter on (ReduceOptions::euler_filter), the input is filtered first and the
+// curves and errors refer to the filtered angles (the same rotations).
 // A lone channel whose samples are all equal gets two flat keys at the first and last frame (one
 // key for a one-frame clip).
 //
