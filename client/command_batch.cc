@@ -52,7 +52,7 @@ constexpr int kDefaultTerminalWidth = 80;
 // --progress; "auto" is a bar when stderr is a terminal, a line per file otherwise.
 absl::StatusOr<ProgressMode> ProgressModeFromFlags(const CommandContext& context) {
   const std::string text = context.args().Value("--progress").value_or("auto");
-  TEMPOKEY_ASSIGN_OR_RETURN(std::string mode, ParseChoice("--progress", text, kProgressModes));
+  TEMPOKEY_ASSIGN_OR_RETURN(std::string_view mode, ParseChoice("--progress", text, kProgressModes));
   if (mode == "bar") return ProgressMode::kBar;
   if (mode == "lines") return ProgressMode::kLines;
   if (mode == "none") return ProgressMode::kNone;
@@ -86,7 +86,7 @@ absl::StatusOr<BatchOptions> BatchOptionsFromFlags(const ParsedArgs& args) {
 absl::StatusOr<std::optional<FileFormat>> FormatFromFlags(const ParsedArgs& args) {
   std::optional<std::string> text = args.Value("--format");
   if (!text) return std::optional<FileFormat>();
-  TEMPOKEY_ASSIGN_OR_RETURN(std::string name, ParseChoice("--format", *text, kFormats));
+  TEMPOKEY_ASSIGN_OR_RETURN(std::string_view name, ParseChoice("--format", *text, kFormats));
   return kFormatsByName[std::find(std::begin(kFormats), std::end(kFormats), name) -
                         std::begin(kFormats)];
 }

@@ -52,7 +52,7 @@ absl::Status WarpFromFlags(const ParsedArgs& args, core::TimeWarpSpec& warp) {
   if (speed && time_map) return UsageError("--speed and --time-map exclude each other");
   if (domain && !speed) return UsageError("--speed-over needs --speed");
   if (speed) {
-    std::string over = "source";
+    std::string_view over = "source";
     if (domain) { TEMPOKEY_ASSIGN_OR_RETURN(over, ParseChoice("--speed-over", *domain, kDomains)); }
     warp.domain = over == "source" ? core::WarpDomain::kSpeedOverSource
                                    : core::WarpDomain::kSpeedOverOutput;
@@ -85,7 +85,7 @@ absl::Status RetimeOptionsFromArgs(const ParsedArgs& args, core::RetimeOptions& 
     TEMPOKEY_ASSIGN_OR_RETURN(options.output_rate, ParseFrameRate("--fps", *fps));
   }
   if (std::optional<std::string> filter = args.Value("--filter")) {
-    TEMPOKEY_ASSIGN_OR_RETURN(std::string name, ParseChoice("--filter", *filter, kFilters));
+    TEMPOKEY_ASSIGN_OR_RETURN(std::string_view name, ParseChoice("--filter", *filter, kFilters));
     constexpr core::ResampleFilter kByName[] = {
         core::ResampleFilter::kTent, core::ResampleFilter::kLinear, core::ResampleFilter::kBox,
         core::ResampleFilter::kCubic, core::ResampleFilter::kLanczos3};
@@ -93,11 +93,11 @@ absl::Status RetimeOptionsFromArgs(const ParsedArgs& args, core::RetimeOptions& 
                              std::begin(kFilters)];
   }
   if (std::optional<std::string> method = args.Value("--method")) {
-    TEMPOKEY_ASSIGN_OR_RETURN(std::string name, ParseChoice("--method", *method, kRetimeMethods));
+    TEMPOKEY_ASSIGN_OR_RETURN(std::string_view name, ParseChoice("--method", *method, kRetimeMethods));
     options.method = name == "exact" ? core::RetimeMethod::kExact : core::RetimeMethod::kPaper;
   }
   if (std::optional<std::string> rotation = args.Value("--rotation")) {
-    TEMPOKEY_ASSIGN_OR_RETURN(std::string name, ParseChoice("--rotation", *rotation, kRotationModes));
+    TEMPOKEY_ASSIGN_OR_RETURN(std::string_view name, ParseChoice("--rotation", *rotation, kRotationModes));
     options.rotation_mode =
         name == "quaternion" ? core::RotationMode::kQuaternion : core::RotationMode::kEuler;
   }
@@ -192,7 +192,7 @@ absl::Status SetInt(const ParsedArgs& args, std::string_view flag, int& field) {
 
 absl::StatusOr<core::ReduceOptions> ReduceOptionsFromArgs(const ParsedArgs& args) {
   core::ReduceOptions options;
-  std::string method = "tolerance";
+  std::string_view method = "tolerance";
   if (std::optional<std::string> v = args.Value("--method")) {
     TEMPOKEY_ASSIGN_OR_RETURN(method, ParseChoice("--method", *v, kReduceMethods));
   }
@@ -206,12 +206,12 @@ absl::StatusOr<core::ReduceOptions> ReduceOptionsFromArgs(const ParsedArgs& args
     if (method == owner) continue;
     for (std::string_view flag : flags) {
       if (args.Has(flag)) {
-        return UsageError(absl::StrCat(core::AsAbsl(flag), " does not apply to --method ", method));
+        return UsageError(absl::StrCat(core::AsAbsl(flag), " does not apply to --method ", core::AsAbsl(method)));
       }
     }
   }
   if (std::optional<std::string> v = args.Value("--euler-filter")) {
-    TEMPOKEY_ASSIGN_OR_RETURN(std::string on, ParseChoice("--euler-filter", *v, kOnOff));
+    TEMPOKEY_ASSIGN_OR_RETURN(std::string_view on, ParseChoice("--euler-filter", *v, kOnOff));
     options.euler_filter = on == "on";
   }
   TEMPOKEY_RETURN_IF_ERROR(SetNoise(args, "--noise", options.noise.rotation_sigma_degrees));
@@ -230,7 +230,7 @@ absl::StatusOr<core::ReduceOptions> ReduceOptionsFromArgs(const ParsedArgs& args
     TEMPOKEY_ASSIGN_OR_RETURN(tolerance.key_budget, ParseInt64("--key-budget", *v));
   }
   if (std::optional<std::string> v = args.Value("--pose-align")) {
-    TEMPOKEY_ASSIGN_OR_RETURN(std::string name, ParseChoice("--pose-align", *v, kAlignments));
+    TEMPOKEY_ASSIGN_OR_RETURN(std::string_view name, ParseChoice("--pose-align", *v, kAlignments));
     tolerance.pose_alignment = name == "none"    ? core::PoseAlignment::kNone
                                : name == "joint" ? core::PoseAlignment::kJoint
                                                  : core::PoseAlignment::kClip;
