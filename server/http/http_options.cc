@@ -1,0 +1,48 @@
+#include "server/http/http_options.h"
+
+#include <filesystem>
+#include <system_error>
+
+#include "absl/strings/str_cat.h"
+
+namespace tempokey::server::http {
+
+absl::Status ValidateHttpOptions(const HttpOptions& http, const ServerOptions& server) {
+  if (http.address.empty()) return absl::OkStatus();
+  if (http.threads < 1 || http.threads > 256) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--http_threads must be in [1, 256], got ", http.threads));
+  }
+  if (http.io_timeout.count() <= 0 || http.keep_alive_timeout.count() <= 0) {
+    return absl::InvalidArgumentError("HTTP timeouts must be > 0");
+  }
+  if (http.web_root.empty()) return absl::InvalidArgumentError("--web_root must not be empty");
+  if (http.three_root.empty()) return absl::InvalidArgumentError("--three_root must not be empty");
+  if (http.address.rfind("unix:", 0) == 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--http_address ", http.address, ": expected host:port"));
+  }
+  // The rule --address follows, by the same helper (server_options.h).
+  if (server.tls_cert_file.empty() && !server.allow_insecure_remote &&
+      !IsLoopbackAddress(http.address)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "refusing to serve HTTP on non-loopback address ", http.address,
+        " without TLS: give --tls_cert and --tls_key, or --allow_insecure_remote"));
+  }
+  return absl::OkStatus();
+}
+
+std::string DefaultWebRoot(std::string_view executable_path) {
+  namespace fs = std::filesystem;
+  std::error_code error;
+  fs::path executable = fs::canonical(fs::path(executable_path), error);
+  if (error) executable = fs::absolute(fs::path(executable_path), error);
+  const fs::path dir = executable.parent_path();
+  const fs::path candidates[] = {dir / "web", dir.parent_path() / "share" / "tempokey" / "web"};
+  for (const fs::path& candidate : candidates) {
+    if (fs::is_regular_file(candidate / "index.html", error)) return candidate.string();
+  }
+  return candidates[0].string();
+}
+
+}  // namespace tempokey::server::http
