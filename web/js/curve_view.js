@@ -169,7 +169,7 @@ export class CurveView {
         const kx = x(curve.time[k]);
         const ky = y(curve.value[k]);
         if (kx < PAD.left - 20 || kx > w + 20) continue;
-        g.strokeStyle = '#a855f7';
+        g.strokeStyle = 'rgba(168, 85, 247, 0.55)';
         g.lineWidth = 1;
         for (const [hx, hv] of this.handles(k)) {
           g.beginPath();
@@ -177,7 +177,7 @@ export class CurveView {
           g.lineTo(x(hx), y(hv));
           g.stroke();
           g.beginPath();
-          g.arc(x(hx), y(hv), 2.5, 0, 2 * Math.PI);
+          g.arc(x(hx), y(hv), 2, 0, 2 * Math.PI);
           g.stroke();
         }
         g.fillStyle = '#f59e0b';

@@ -77,7 +77,16 @@ async function openFile(file) {
   const content = await readBase64(file);
   const request = {fileName: file.name, content};
   if (/\.csv$/i.test(file.name)) request.csvFrameTimeSeconds = 1 / Number($('csv-fps').value || 30);
-  const parsed = await guarded(`${file.name}`, () => api.call('ParseClipFile', request));
+  // The server's message names the file, line and column already ("walk.bvh:12:7: ...").
+  let parsed;
+  try {
+    parsed = await api.call('ParseClipFile', request);
+  } catch (error) {
+    if (error instanceof api.ApiError && error.status === 'UNAUTHENTICATED') {
+      $('token-box').hidden = false;
+    }
+    showMessage(error instanceof api.ApiError && error.status === 'INVALID_ARGUMENT' ? error.message : describe(error));
+  }
   if (!parsed) {
     $('clip-info').dataset.state = state.clip ? 'loaded' : 'empty';
     return;
@@ -180,6 +189,7 @@ function requestPlan() {
 
 async function runPlan() {
   planInFlight = true;
+  document.body.dataset.planPending = 'true';
   while (planWanted) {
     planWanted = false;
     const editTime = state.lastEdit;
@@ -195,6 +205,7 @@ async function runPlan() {
     }
   }
   planInFlight = false;
+  document.body.dataset.planPending = 'false';
 }
 
 function applyPlan(plan, op, editTime) {
@@ -233,6 +244,7 @@ let retimeRun = 0;
 function scheduleRetime() {
   clearTimeout(retimeTimer);
   $('retime-status').dataset.state = 'pending';
+  $('retime-status').textContent = 'retiming soon…';
   retimeTimer = setTimeout(runRetime, RETIME_DELAY_MS);
 }
 
@@ -241,6 +253,7 @@ async function runRetime() {
   const clip = state.clip;
   const op = retimeOperation();
   const speedText = state.plan ? state.plan.speedText : '';
+  const command = state.plan ? retimeCommand(speedText) : '';
   $('retime-status').dataset.state = 'running';
   $('retime-status').textContent = 'retiming on the server…';
   const done = await guarded('retime', async () => {
@@ -266,6 +279,7 @@ async function runRetime() {
   status.textContent = `result: ${done.plan.report.outputFrameCount} frames, job ${done.job.jobId}`;
   status.dataset.jobId = done.job.jobId;
   status.dataset.speedText = speedText;
+  status.dataset.command = command;
   status.dataset.state = 'done';
   renderDownloads('downloads-retime', false);
 }
@@ -280,6 +294,7 @@ function showSelectedKnot() {
 }
 
 function applyKnotFields() {
+  if ($('knot-time').value.trim() === '' || $('knot-speed').value.trim() === '') return;
   const time = Number($('knot-time').value);
   const speed = Number($('knot-speed').value);
   if (!Number.isFinite(time) || !Number.isFinite(speed) || speed <= 0) return;
@@ -375,9 +390,23 @@ function fillChannels() {
     option.textContent = api.channelName(state.clip.header, i);
     select.appendChild(option);
   });
-  // A rotation of the first joint below the root is a telling first view.
-  const preferred = state.clip.header.channels.findIndex((c, i) => i > 5 && /ROTATION/.test(c.kind));
-  select.value = String(preferred >= 0 ? preferred : 0);
+  // First view: the rotation that moves most, where keys and handles have something to show.
+  let preferred = 0;
+  let widest = -1;
+  state.samples.forEach((samples, i) => {
+    if (!api.isRotation(state.clip.header, i)) return;
+    let lo = Infinity;
+    let hi = -Infinity;
+    for (const v of samples) {
+      lo = Math.min(lo, v);
+      hi = Math.max(hi, v);
+    }
+    if (hi - lo < 180 && hi - lo > widest) {
+      widest = hi - lo;
+      preferred = i;
+    }
+  });
+  select.value = String(preferred);
 }
 
 function reduceOperation() {

@@ -24,8 +24,9 @@ class Figure {
     this.helper.material.color.setHex(colour);
     this.helper.material.linewidth = 2;
     scene.add(this.helper);
+    // BVHLoader names tracks ".bones[<joint>].position" and ".bones[<joint>].quaternion".
     this.tracks = parsed.clip.tracks.map((track) => {
-      const [boneName, property] = track.name.split('.');
+      const [, boneName, property] = /^\.bones\[(.*)\]\.(position|quaternion)$/.exec(track.name) || [];
       const bone = this.bones.find((b) => b.name === boneName);
       return {bone, property, track, interpolant: track.createInterpolant()};
     });
@@ -154,7 +155,7 @@ export class Preview {
     const center = box.getCenter(new THREE.Vector3());
     center.x += this.spacing / 2;
     this.controls.target.copy(center);
-    this.camera.position.set(center.x, center.y + height * 0.3, center.z + height * 2.6);
+    this.camera.position.set(center.x + height * 0.4, center.y + height * 0.7, center.z + height * 2.4);
     this.camera.near = height / 100;
     this.camera.far = height * 100;
     this.camera.updateProjectionMatrix();
