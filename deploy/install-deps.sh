@@ -20,11 +20,14 @@ build_packages=(
   libssl-dev openssl procps curl ccache
   python3 python3-grpcio python3-protobuf
   python3-yaml
+  libcivetweb-dev libjs-three
+  chromium chromium-driver python3-selenium
 )
 runtime_packages=(
   libgrpc++1.51 libgrpc29 libprotobuf32 libspdlog1.10 libfmt9
   libabsl20220623 libprometheus-cpp-core1.0 libprometheus-cpp-pull1.0
   ca-certificates
+  libcivetweb1 libjs-three
 )
 # podman builds (through its built-in buildah) and runs the image; runc is its OCI runtime
 # (crun 1.8 refuses these machines' hybrid cgroup mounts; see image-smoke.sh).

@@ -1,9 +1,6 @@
 #include "server/http/http_front_end.h"
 
 #include <civetweb.h>
-#include <openssl/pem.h>
-#include <openssl/ssl.h>
-#include <openssl/x509.h>
 
 #include <algorithm>
 #include <cctype>
@@ -18,7 +15,6 @@
 #include "grpcpp/support/channel_arguments.h"
 #include "server/http/http_status.h"
 #include "spdlog/spdlog.h"
-#include "tempokey/core/io/file_io.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::server::http {
@@ -226,18 +222,14 @@ int HandleRequestThunk(mg_connection* connection, void* front_end) {
   return static_cast<HttpFrontEnd*>(front_end)->HandleRequest(connection);
 }
 
-int InitTlsThunk(void* ssl_context, void* front_end) {
-  return static_cast<HttpFrontEnd*>(front_end)->InitTls(ssl_context);
-}
-
 int LogMessage(const mg_connection*, const char* message) {
   spdlog::warn("http: {}", message);
   return 1;
 }
 
 // civetweb's listening_ports entry for "host:port": IPv4 literals only (Debian's civetweb is
-// built without IPv6); "localhost" is 127.0.0.1. An 's' suffix asks for TLS.
-absl::StatusOr<std::string> ListeningPort(const std::string& address, bool tls) {
+// built without IPv6); "localhost" is 127.0.0.1.
+absl::StatusOr<std::string> ListeningPort(const std::string& address) {
   const std::size_t colon = address.rfind(':');
   if (colon == std::string::npos || colon + 1 == address.size()) {
     return absl::InvalidArgumentError(
@@ -255,7 +247,7 @@ absl::StatusOr<std::string> ListeningPort(const std::string& address, bool tls) 
     return absl::InvalidArgumentError(
         absl::StrCat("--http_address ", address, ": port \"", port, "\" is not a number"));
   }
-  return absl::StrCat(host, ":", port, tls ? "s" : "");
+  return absl::StrCat(host, ":", port);
 }
 
 }  // namespace
@@ -276,19 +268,9 @@ absl::StatusOr<std::unique_ptr<HttpFrontEnd>> HttpFrontEnd::Start(const HttpOpti
   TEMPOKEY_RETURN_IF_ERROR(ValidateHttpOptions(options, server.options()));
   if (options.address.empty()) return absl::InvalidArgumentError("--http_address is empty");
   std::unique_ptr<HttpFrontEnd> front_end(new HttpFrontEnd(options, server));
-  const ServerOptions& o = server.options();
-  front_end->tls_ = !o.tls_cert_file.empty();
   front_end->loopback_only_ = IsLoopbackAddress(options.address);
   front_end->host_ = options.address.substr(0, options.address.rfind(':'));
-  if (front_end->tls_) {
-    TEMPOKEY_ASSIGN_OR_RETURN(front_end->tls_cert_pem_, core::ReadFile(o.tls_cert_file, 1 << 20));
-    TEMPOKEY_ASSIGN_OR_RETURN(front_end->tls_key_pem_, core::ReadFile(o.tls_key_file, 1 << 20));
-    if (!o.tls_client_ca_file.empty()) {
-      TEMPOKEY_ASSIGN_OR_RETURN(front_end->tls_client_ca_pem_,
-                                core::ReadFile(o.tls_client_ca_file, 1 << 20));
-    }
-  }
-  TEMPOKEY_ASSIGN_OR_RETURN(std::string ports, ListeningPort(options.address, front_end->tls_));
+  TEMPOKEY_ASSIGN_OR_RETURN(std::string ports, ListeningPort(options.address));
   const std::string threads = std::to_string(options.threads);
   const std::string io_timeout = std::to_string(options.io_timeout.count());
   const std::string keep_alive = std::to_string(options.keep_alive_timeout.count());
@@ -303,8 +285,7 @@ absl::StatusOr<std::unique_ptr<HttpFrontEnd>> HttpFrontEnd::Start(const HttpOpti
   mg_callbacks callbacks;
   std::memset(&callbacks, 0, sizeof callbacks);
   callbacks.log_message = LogMessage;
-  if (front_end->tls_) callbacks.init_ssl = InitTlsThunk;
-  mg_init_library(front_end->tls_ ? MG_FEATURES_TLS : 0);
+  mg_init_library(0);
   char error_text[256] = {0};
   mg_init_data init;
   std::memset(&init, 0, sizeof init);
@@ -327,8 +308,7 @@ absl::StatusOr<std::unique_ptr<HttpFrontEnd>> HttpFrontEnd::Start(const HttpOpti
     return absl::UnavailableError(absl::StrCat("cannot serve HTTP on ", options.address));
   }
   front_end->port_ = port.port;
-  spdlog::info("http: serving the studio on {} (threads={} tls={} mtls={})", front_end->url(),
-               options.threads, front_end->tls_, !o.tls_client_ca_file.empty());
+  spdlog::info("http: serving the studio on {} (threads={})", front_end->url(), options.threads);
   return front_end;
 }
 
@@ -342,7 +322,7 @@ void HttpFrontEnd::Stop() {
 
 std::string HttpFrontEnd::url() const {
   const std::string host = host_ == "localhost" || host_.empty() ? "127.0.0.1" : host_;
-  return absl::StrCat(tls_ ? "https" : "http", "://", host, ":", port_, "/");
+  return absl::StrCat("http://", host, ":", port_, "/");
 }
 
 int HttpFrontEnd::HandleRequest(mg_connection* connection) {
@@ -363,7 +343,7 @@ int HttpFrontEnd::HandleRequest(mg_connection* connection) {
     }
     if (absl::Status allowed = CheckApiRequest(
             HeaderOf(connection, "Content-Type"), HeaderOf(connection, "Origin"),
-            HeaderOf(connection, "Host"), info->is_ssl != 0, loopback_only_);
+            HeaderOf(connection, "Host"), loopback_only_ && server_.options().auth_tokens.empty());
         !allowed.ok()) {
       return SendApiError(connection, allowed);
     }
@@ -390,49 +370,6 @@ int HttpFrontEnd::HandleRequest(mg_connection* connection) {
   const std::string media_type(MediaTypeOf(*file));
   mg_send_mime_file2(connection, file->c_str(), media_type.c_str(), kPageHeaders);
   return 200;
-}
-
-int HttpFrontEnd::InitTls(void* ssl_context) {
-  auto* context = static_cast<SSL_CTX*>(ssl_context);
-  auto fail = [](std::string_view what) {
-    spdlog::error("http: TLS set-up failed: {}", what);
-    return -1;
-  };
-  auto read_certificates = [](const std::string& pem) {
-    std::vector<X509*> certificates;
-    BIO* bio = BIO_new_mem_buf(pem.data(), static_cast<int>(pem.size()));
-    while (X509* certificate = PEM_read_bio_X509(bio, nullptr, nullptr, nullptr)) {
-      certificates.push_back(certificate);
-    }
-    BIO_free(bio);
-    return certificates;
-  };
-  std::vector<X509*> chain = read_certificates(tls_cert_pem_);
-  if (chain.empty()) return fail("--tls_cert holds no PEM certificate");
-  if (SSL_CTX_use_certificate(context, chain[0]) != 1) return fail("--tls_cert is not usable");
-  X509_free(chain[0]);
-  for (std::size_t i = 1; i < chain.size(); ++i) SSL_CTX_add_extra_chain_cert(context, chain[i]);
-  BIO* key_bio = BIO_new_mem_buf(tls_key_pem_.data(), static_cast<int>(tls_key_pem_.size()));
-  EVP_PKEY* key = PEM_read_bio_PrivateKey(key_bio, nullptr, nullptr, nullptr);
-  BIO_free(key_bio);
-  if (key == nullptr) return fail("--tls_key holds no PEM private key");
-  const int used = SSL_CTX_use_PrivateKey(context, key);
-  EVP_PKEY_free(key);
-  if (used != 1 || SSL_CTX_check_private_key(context) != 1) {
-    return fail("--tls_key does not match --tls_cert");
-  }
-  if (!tls_client_ca_pem_.empty()) {
-    std::vector<X509*> authorities = read_certificates(tls_client_ca_pem_);
-    if (authorities.empty()) return fail("--tls_client_ca holds no PEM certificate");
-    X509_STORE* store = SSL_CTX_get_cert_store(context);
-    for (X509* authority : authorities) {
-      X509_STORE_add_cert(store, authority);
-      SSL_CTX_add_client_CA(context, authority);
-      X509_free(authority);
-    }
-    SSL_CTX_set_verify(context, SSL_VERIFY_PEER | SSL_VERIFY_FAIL_IF_NO_PEER_CERT, nullptr);
-  }
-  return 1;  // set up here: civetweb loads no certificate of its own
 }
 
 }  // namespace tempokey::server::http

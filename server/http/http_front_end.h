@@ -1,8 +1,12 @@
 // The studio's HTTP front end (`tempokey-server --http_address`): serves the page (web root and
 // three.js) and the HTTP/JSON API (json_bridge.h) on civetweb (Debian's libcivetweb), with a
-// bounded number of threads, a size cap on every request message and socket timeouts. With the
-// server's TLS flags it serves HTTPS with the same certificate, and with --tls_client_ca it
-// requires client certificates from the same CA, as the gRPC port does.
+// bounded number of threads, a size cap on every request message and socket timeouts.
+//
+// Plain HTTP only: Debian 12's civetweb 1.15 loads OpenSSL 3 at run time and its HTTPS fails
+// after the handshake (its own `civetweb` binary included; civetweb's OpenSSL 3 binding was never
+// tested, civetweb issue #1047). So the address follows --address's rule for a listener without
+// TLS (loopback, or --allow_insecure_remote), and a server that requires client certificates
+// (--tls_client_ca) refuses an HTTP front end that could not check them (http_options.h).
 //
 // Routes:
 //   POST /tempokey.v1.MotionService/<Method>   the API (README "HTTP API")
@@ -30,7 +34,7 @@ class HttpFrontEnd {
   // Starts serving `options` for `server`, which must outlive the front end (calls go through
   // its in-process channel; TLS files and limits are its options').
   // Errors: kInvalidArgument bad options (ValidateHttpOptions()); kUnavailable when the address
-  // cannot be bound or TLS cannot be set up (civetweb's message).
+  // cannot be bound (civetweb's message).
   static absl::StatusOr<std::unique_ptr<HttpFrontEnd>> Start(const HttpOptions& options,
                                                             Server& server);
   // Stop().
@@ -40,17 +44,15 @@ class HttpFrontEnd {
 
   // The bound port (the real one for port 0).
   int port() const { return port_; }
-  bool tls() const { return tls_; }
-  // "http://127.0.0.1:8080/" (https with TLS): where the page is.
+  // "http://127.0.0.1:8080/": where the page is.
   std::string url() const;
 
   // Stops accepting connections and waits for requests in flight to end. Calls in flight end
   // as the server's calls do: after Server::Drain() they have ended already. Idempotent.
   void Stop();
 
-  // civetweb's entry points (internal).
+  // civetweb's entry point (internal).
   int HandleRequest(mg_connection* connection);
-  int InitTls(void* ssl_context);
 
  private:
   HttpFrontEnd(const HttpOptions& options, Server& server);
@@ -59,12 +61,8 @@ class HttpFrontEnd {
   Server& server_;
   JsonBridge bridge_;
   bool loopback_only_ = true;
-  bool tls_ = false;
   int port_ = 0;
   std::string host_;
-  std::string tls_cert_pem_;
-  std::string tls_key_pem_;
-  std::string tls_client_ca_pem_;
   mg_context* context_ = nullptr;
 };
 

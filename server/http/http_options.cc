@@ -22,12 +22,18 @@ absl::Status ValidateHttpOptions(const HttpOptions& http, const ServerOptions& s
     return absl::InvalidArgumentError(
         absl::StrCat("--http_address ", http.address, ": expected host:port"));
   }
-  // The rule --address follows, by the same helper (server_options.h).
-  if (server.tls_cert_file.empty() && !server.allow_insecure_remote &&
-      !IsLoopbackAddress(http.address)) {
+  // The HTTP front end has no TLS (http_front_end.h): the rule --address follows for a listener
+  // without TLS, by the same helper (server_options.h).
+  if (!server.allow_insecure_remote && !IsLoopbackAddress(http.address)) {
     return absl::InvalidArgumentError(absl::StrCat(
         "refusing to serve HTTP on non-loopback address ", http.address,
-        " without TLS: give --tls_cert and --tls_key, or --allow_insecure_remote"));
+        " without TLS (the HTTP front end has none): use a loopback address behind a TLS proxy, "
+        "or --allow_insecure_remote"));
+  }
+  if (!server.tls_client_ca_file.empty()) {
+    return absl::InvalidArgumentError(
+        "--http_address cannot check client certificates, which --tls_client_ca requires: serve "
+        "the studio from a server without --tls_client_ca");
   }
   return absl::OkStatus();
 }

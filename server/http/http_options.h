@@ -27,10 +27,10 @@ struct HttpOptions {
   std::chrono::milliseconds keep_alive_timeout{2000};
 };
 
-// Checks `http` against the gRPC server's `server` options: the same loopback rule as --address
-// (a non-loopback HTTP address needs TLS, which the HTTP front end takes from the same
-// --tls_cert/--tls_key/--tls_client_ca, unless allow_insecure_remote), threads in [1, 256],
-// timeouts > 0 and folders given.
+// Checks `http` against the gRPC server's `server` options: the rule --address follows for a
+// listener without TLS (the HTTP front end has none): loopback only unless allow_insecure_remote,
+// by the same IsLoopbackAddress(); no --tls_client_ca (the HTTP front end could not check client
+// certificates); threads in [1, 256], timeouts > 0 and folders given.
 // Errors: kInvalidArgument naming the flag and value.
 absl::Status ValidateHttpOptions(const HttpOptions& http, const ServerOptions& server);
 

@@ -95,7 +95,7 @@ std::string StatusToJson(const absl::Status& status,
 }
 
 absl::Status CheckApiRequest(std::string_view content_type, std::string_view origin,
-                             std::string_view host, bool tls, bool loopback_only) {
+                             std::string_view host, bool loopback_host_only) {
   std::string type(content_type.substr(0, content_type.find(';')));
   while (!type.empty() && type.back() == ' ') type.pop_back();
   for (char& c : type) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
@@ -104,12 +104,14 @@ absl::Status CheckApiRequest(std::string_view content_type, std::string_view ori
         "API requests carry JSON: Content-Type must be application/json or "
         "application/x-ndjson, got \"", std::string(content_type.substr(0, 64)), "\""));
   }
-  if (!origin.empty() && origin != absl::StrCat(tls ? "https://" : "http://", std::string(host))) {
+  // A TLS-terminating proxy in front makes the page's origin https:// on the same Host.
+  if (!origin.empty() && origin != absl::StrCat("http://", std::string(host)) &&
+      origin != absl::StrCat("https://", std::string(host))) {
     return absl::PermissionDeniedError(absl::StrCat(
         "cross-origin API requests are refused: origin ", std::string(origin.substr(0, 128)),
         " is not this server"));
   }
-  if (loopback_only) {
+  if (loopback_host_only) {
     const std::string_view name = HostOf(host);
     if (!IsLoopbackAddress(absl::StrCat(std::string(name), ":0"))) {
       return absl::PermissionDeniedError(absl::StrCat(

@@ -25,12 +25,12 @@ std::string StatusToJson(const absl::Status& status,
 
 // The browser rules of an API request: a JSON body ("application/json" or "application/x-ndjson",
 // which a cross-site form cannot send without a CORS preflight this server never grants); an
-// Origin, when the browser sends one, that is this server's own (scheme://Host); and, when the
-// server listens on loopback only, a Host that is a loopback name or address (a DNS-rebound name
-// is refused).
+// Origin, when the browser sends one, that is this server's own (http:// or https:// and the
+// Host); and, with `loopback_host_only` (a loopback address and no bearer tokens), a Host that is
+// a loopback name or address, so a DNS-rebound name cannot reach an unprotected local server.
 // Errors: kInvalidArgument for the content type; kPermissionDenied for the origin or host.
 absl::Status CheckApiRequest(std::string_view content_type, std::string_view origin,
-                             std::string_view host, bool tls, bool loopback_only);
+                             std::string_view host, bool loopback_host_only);
 
 }  // namespace tempokey::server::http
 
