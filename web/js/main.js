@@ -303,6 +303,8 @@ function applyKnotFields() {
 
 async function applySpeedText() {
   const text = $('speed-text').value;
+  // Enter and the blur after it both fire: apply a text once, and never over newer knots.
+  if (state.plan && text === state.plan.speedText) return;
   try {
     const parsed = await api.call('ParseSpeedKnots', {text});
     const knots = parsed.knots.map((k) => ('frames' in k.time
@@ -390,18 +392,21 @@ function fillChannels() {
     option.textContent = api.channelName(state.clip.header, i);
     select.appendChild(option);
   });
-  // First view: the rotation that moves most, where keys and handles have something to show.
+  // First view: the rotation that moves most without jumping (no Euler flips), where keys and
+  // handles have something to show.
   let preferred = 0;
   let widest = -1;
   state.samples.forEach((samples, i) => {
     if (!api.isRotation(state.clip.header, i)) return;
     let lo = Infinity;
     let hi = -Infinity;
-    for (const v of samples) {
+    let jump = 0;
+    samples.forEach((v, f) => {
       lo = Math.min(lo, v);
       hi = Math.max(hi, v);
-    }
-    if (hi - lo < 180 && hi - lo > widest) {
+      if (f > 0) jump = Math.max(jump, Math.abs(v - samples[f - 1]));
+    });
+    if (jump < 15 && hi - lo > widest) {
       widest = hi - lo;
       preferred = i;
     }
@@ -439,6 +444,7 @@ let reduceRun = 0;
 function scheduleReduce(delay = REDUCE_DELAY_MS) {
   clearTimeout(reduceTimer);
   if (!state.clip) return;
+  if ($('tolerance').value.trim() === '' || $('position-tolerance').value.trim() === '') return;
   $('reduce-status').dataset.state = 'pending';
   reduceTimer = setTimeout(runReduce, delay);
 }
