@@ -202,7 +202,6 @@ class StudioBrowserTest(unittest.TestCase):
         ActionChains(self.driver).key_down(Keys.SHIFT).send_keys(Keys.ARROW_UP * 3).key_up(Keys.SHIFT).perform()
         self.settled_plan(before)
         knots = self.shown_knots()
-        print("after the step:", knots, self.el("knot-time").get_attribute("value"))
         self.assertEqual(len(knots), 6)
         self.assertEqual(knots[3][0], knots[4][0], "a step is two knots at one time")
         self.assertAlmostEqual(knots[3][1], round(dragged[1] + 0.02, 2), places=12)
@@ -339,6 +338,28 @@ class StudioBrowserTest(unittest.TestCase):
         self.el("editor").send_keys(Keys.ARROW_DOWN)
         self.settled_plan(before)
         self.driver.save_screenshot(os.path.join(ARTEFACTS, "studio-page.png"))
+
+    def test_7_a_dropped_csv_opens_at_the_rate_given(self):
+        _, _, rows = read_bvh(CMU)
+        text = "Hips.Xposition,Hips.Yposition,Hips.Zrotation\n" + "".join(
+            "%r,%r,%r\n" % (row[0], row[1], row[3]) for row in rows[:120])
+        field = self.el("csv-fps")
+        field.clear()
+        field.send_keys("24")
+
+        # A drop as the browser delivers it: a DragEvent carrying the file.
+        self.driver.execute_script(
+            "const transfer = new DataTransfer();"
+            "transfer.items.add(new File([arguments[0]], 'walk.csv', {type: 'text/csv'}));"
+            "window.dispatchEvent(new DragEvent('drop', {dataTransfer: transfer, bubbles: true, cancelable: true}));",
+            text)
+
+        wait_for(lambda: "walk.csv" in self.el("clip-info").text, "the dropped clip")
+        self.assertIn("walk.csv: 120 frames at 24 fps", self.el("clip-info").text)
+        self.assertEqual([o.text for o in Select(self.el("channel")).options],
+                         ["Hips.Xposition", "Hips.Yposition", "Hips.Zrotation"])
+        wait_for(lambda: close(float(self.data("duration", "seconds")), 119 / 24, 1e-12),
+                 "the plan of the dropped clip: 119 frame times at 24 fps")
 
 
 if __name__ == "__main__":
