@@ -383,21 +383,53 @@ function togglePlay() {
 }
 
 // ---- reduction --------------------------------------------------------------------------------
-function fillChannels() {
+// The joint list (plus "plain channels" when the clip has some) and the channels of the joint
+// picked; the two selects together pick one channel.
+function channelsOfJoint(joint) {
+  const channels = [];
+  state.clip.header.channels.forEach((c, i) => {
+    const owner = c.jointIndex === undefined || c.jointIndex === null ? -1 : c.jointIndex;
+    if (owner === joint) channels.push(i);
+  });
+  return channels;
+}
+
+function fillChannelsOf(joint, selected = null) {
   const select = $('channel');
   select.textContent = '';
-  state.clip.header.channels.forEach((_, i) => {
+  for (const i of channelsOfJoint(joint)) {
     const option = document.createElement('option');
     option.value = String(i);
-    option.textContent = api.channelName(state.clip.header, i);
+    const name = api.channelName(state.clip.header, i);
+    option.textContent = joint >= 0 ? name.slice(name.lastIndexOf('.') + 1) : name;
     select.appendChild(option);
+  }
+  if (selected !== null) select.value = String(selected);
+}
+
+function fillChannels() {
+  const header = state.clip.header;
+  const joints = $('joint');
+  joints.textContent = '';
+  header.joints.forEach((j, i) => {
+    if (!channelsOfJoint(i).length) return;
+    const option = document.createElement('option');
+    option.value = String(i);
+    option.textContent = j.name;
+    joints.appendChild(option);
   });
+  if (channelsOfJoint(-1).length) {
+    const option = document.createElement('option');
+    option.value = '-1';
+    option.textContent = '(plain channels)';
+    joints.appendChild(option);
+  }
   // First view: the rotation that moves most without jumping (no Euler flips), where keys and
   // handles have something to show.
   let preferred = 0;
   let widest = -1;
   state.samples.forEach((samples, i) => {
-    if (!api.isRotation(state.clip.header, i)) return;
+    if (!api.isRotation(header, i)) return;
     let lo = Infinity;
     let hi = -Infinity;
     let jump = 0;
@@ -411,7 +443,9 @@ function fillChannels() {
       preferred = i;
     }
   });
-  select.value = String(preferred);
+  const owner = header.channels[preferred].jointIndex;
+  joints.value = String(owner === undefined || owner === null ? -1 : owner);
+  fillChannelsOf(Number(joints.value), preferred);
 }
 
 function reduceOperation() {
@@ -627,6 +661,10 @@ new MutationObserver(() => {
   if ($('preview').dataset.playing === 'false') $('play').textContent = 'play';
 }).observe($('preview'), {attributes: true, attributeFilter: ['data-playing']});
 $('channel').addEventListener('change', showChannel);
+$('joint').addEventListener('change', () => {
+  fillChannelsOf(Number($('joint').value));
+  showChannel();
+});
 for (const id of ['reduce-method', 'tolerance', 'position-tolerance']) $(id).addEventListener('change', () => scheduleReduce());
 $('run-reduce').addEventListener('click', () => scheduleReduce(0));
 $('token').addEventListener('change', (e) => {

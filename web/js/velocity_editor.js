@@ -3,7 +3,7 @@
 // knots at one time make a step. The y axis is logarithmic, so half and double speed sit
 // symmetrically about 1.
 //
-// Mouse: double-click adds a knot, drag moves one, a click selects. Keyboard (editor focused):
+// Mouse: double-click (or Ctrl+click) adds a knot, drag moves one, a click selects. Keyboard (editor focused):
 // Delete removes the selected knot, arrows move it (a frame / 0.01; Shift: ten times), S
 // doubles it into a step, Tab selects the next. Times snap to 0.01 s (or whole frames for knots
 // given in frames) and speeds to 0.01, unless Shift is held while dragging. Speeds are held
@@ -146,7 +146,10 @@ export class VelocityEditor {
     this.canvas.focus();
     const [px, py] = this.local(e);
     const i = this.hit(px, py);
-    if (i < 0) return;
+    if (i < 0) {
+      if (e.ctrlKey || e.metaKey) this.addAt(px, py, false);
+      return;
+    }
     this.selected = i;
     this.drag = {index: i, moved: false};
     this.canvas.setPointerCapture(e.pointerId);
@@ -177,9 +180,13 @@ export class VelocityEditor {
   doubleClick(e) {
     const [px, py] = this.local(e);
     if (this.hit(px, py) >= 0) return;
+    this.addAt(px, py, e.shiftKey);
+  }
+  // A new knot at canvas point (px, py), snapped unless `free`.
+  addAt(px, py, free) {
     let seconds = Math.min(Math.max(this.timeAt(px), 0), this.duration);
     let speed = this.speedAt(py);
-    if (!e.shiftKey) {
+    if (!free) {
       seconds = Math.round(seconds * 100) / 100;
       speed = Math.round(speed * 100) / 100;
     }
