@@ -74,7 +74,6 @@ class StudioServer:
         except subprocess.TimeoutExpired:
             self.process.kill()
             self.exit_code = self.process.wait()
-        self.log.close()
         return False
 
     def server_log(self):

@@ -25,6 +25,7 @@ import unittest
 from selenium import webdriver
 from selenium.webdriver.chrome.service import Service
 from selenium.webdriver.common.action_chains import ActionChains
+from selenium.webdriver.common.actions.wheel_input import ScrollOrigin
 from selenium.webdriver.common.by import By
 from selenium.webdriver.common.keys import Keys
 from selenium.webdriver.support.ui import Select
@@ -114,6 +115,7 @@ class StudioBrowserTest(unittest.TestCase):
             cls.driver.quit()
             cls.server.__exit__(None, None, None)
             cls.work.cleanup()
+        assert cls.server.exit_code == 0, "the server did not drain cleanly:\n" + cls.server.server_log()
 
     # ---- helpers ---------------------------------------------------------------------------------
     def el(self, element_id):
@@ -300,6 +302,9 @@ class StudioBrowserTest(unittest.TestCase):
         keys = int(re.search(r"keys:\s+(\d+) of", out).group(1))
         self.assertEqual(shown, keys)
         self.assertIn("RightHip.Xrotation", self.el("reduce-report").text)
+        # Zoom the time axis (wheel) so keys, handles and the ±0.3° band are apart in the picture.
+        for _ in range(2):
+            ActionChains(self.driver).scroll_from_origin(ScrollOrigin.from_element(self.el("curves")), 0, -600).perform()
         self.screenshot("reduce", "studio-reduction.png")
 
     def test_5_downloads_are_the_bytes_the_cli_writes(self):
