@@ -329,6 +329,24 @@ class StudioBrowserTest(unittest.TestCase):
                 self.assertGreater(len(written), 1000)
                 self.assertEqual(downloaded, written)
 
+    def test_5b_speed_over_output_time_means_what_the_cli_means(self):
+        source_text = self.el("speed-text").get_attribute("value")
+        before = self.plan_seq()
+
+        Select(self.el("domain")).select_by_value("output")
+
+        self.settled_plan(before)
+        wait_for(lambda: "--speed-over output" in self.el("retime-command").text, "the output-domain command")
+        command = self.el("retime-command").text
+        self.assertNotEqual(self.el("speed-text").get_attribute("value"), source_text)
+        wait_for(lambda: self.data("retime-status", "state") == "done"
+                 and self.data("retime-status", "command") == command, "the output-domain result")
+        out = self.run_cli(command, os.path.join(self.work.name, "cli-output-domain.bvh"))
+        frames = int(re.search(r"output frames:\s+(\d+)", out).group(1))
+        self.assertEqual(int(self.el("frame-count").text), frames)
+        _, _, rows = read_bvh(os.path.join(self.work.name, "cli-output-domain.bvh"))
+        self.assertEqual(len(rows), frames)
+
     def test_6_malformed_file_shows_the_located_message_and_breaks_nothing(self):
         with open(CMU) as f:
             lines = f.read().split("\n")
