@@ -36,8 +36,8 @@ bool Await(grpc::CompletionQueue& cq, void* tag) {
   return ok && got == tag;
 }
 
-// Tags of the one operation in flight at a time.
-int kStart, kWrite, kWritesDone, kRead, kFinish;
+// Tags of the one operation in flight at a time: only their addresses matter.
+char start_tag, write_tag, writes_done_tag, read_tag, finish_tag;
 
 // One call on its own completion queue, driven step by step from the calling thread.
 class DrivenCall {
@@ -45,8 +45,8 @@ class DrivenCall {
   DrivenCall(grpc::GenericStub& stub, const std::string& path, std::string_view authorization) {
     if (!authorization.empty()) context_.AddMetadata("authorization", std::string(authorization));
     call_ = stub.PrepareCall(&context_, path, &cq_);
-    call_->StartCall(&kStart);
-    alive_ = Await(cq_, &kStart);
+    call_->StartCall(&start_tag);
+    alive_ = Await(cq_, &start_tag);
   }
   ~DrivenCall() {
     cq_.Shutdown();
@@ -63,27 +63,27 @@ class DrivenCall {
     if (!grpc::SerializationTraits<pb::Message>::Serialize(message, &buffer, &own).ok()) {
       return false;
     }
-    call_->Write(buffer, &kWrite);
-    alive_ = Await(cq_, &kWrite);
+    call_->Write(buffer, &write_tag);
+    alive_ = Await(cq_, &write_tag);
     return alive_;
   }
   void WritesDone() {
     if (!alive_) return;
-    call_->WritesDone(&kWritesDone);
-    alive_ = Await(cq_, &kWritesDone);
+    call_->WritesDone(&writes_done_tag);
+    alive_ = Await(cq_, &writes_done_tag);
   }
   // False at the end of the response stream (or when the call broke).
   bool Read(pb::Message& message) {
     grpc::ByteBuffer buffer;
-    call_->Read(&buffer, &kRead);
-    if (!Await(cq_, &kRead)) return false;
+    call_->Read(&buffer, &read_tag);
+    if (!Await(cq_, &read_tag)) return false;
     return grpc::SerializationTraits<pb::Message>::Deserialize(&buffer, &message).ok();
   }
   void Cancel() { context_.TryCancel(); }
   grpc::Status Finish() {
     grpc::Status status;
-    call_->Finish(&status, &kFinish);
-    Await(cq_, &kFinish);
+    call_->Finish(&status, &finish_tag);
+    Await(cq_, &finish_tag);
     return status;
   }
   std::optional<std::chrono::milliseconds> RetryAfter() const {
