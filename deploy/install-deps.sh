@@ -23,6 +23,8 @@ build_packages=(
   # `pip install client/python` into a virtual environment, offline (tests/python)
   python3-venv python3-pip python3-setuptools python3-wheel
   python3-yaml
+  libcivetweb-dev libjs-three
+  chromium chromium-driver python3-selenium
 )
 # Export checks (ctest -L export): a real browser for the glTF page, and tools that are not ours
 # under node: the Khronos glTF validator and three.js, pinned in tests/export/package-lock.json
@@ -33,6 +35,7 @@ runtime_packages=(
   libgrpc++1.51 libgrpc29 libprotobuf32 libspdlog1.10 libfmt9
   libabsl20220623 libprometheus-cpp-core1.0 libprometheus-cpp-pull1.0
   ca-certificates
+  libcivetweb1 libjs-three
 )
 # podman builds (through its built-in buildah) and runs the image; runc is its OCI runtime
 # (crun 1.8 refuses these machines' hybrid cgroup mounts; see image-smoke.sh).

@@ -5,6 +5,8 @@
 #                               (retime, key reduction) with the CLI on a real clip from
 #                               ../shared/data, write the results to build/demo, stop the server
 #   deploy/quickstart.sh test   install, build, run the whole test suite (what .ci/run calls)
+#   deploy/quickstart.sh studio install, build, serve the studio page on http://127.0.0.1:8080/
+#                               (TEMPOKEY_STUDIO_PORT) until Ctrl-C, then drain the server
 #
 # Environment: TEMPOKEY_BUILD_DIR (default: build), TEMPOKEY_JOBS (default: nproc),
 # TEMPOKEY_SANITIZER_TESTS=0 skips the sanitizer stage of `test`.
@@ -82,8 +84,17 @@ test_suite() {
   fi
 }
 
+studio() {
+  build -DTEMPOKEY_BUILD_BENCH=OFF
+  local port="${TEMPOKEY_STUDIO_PORT:-8080}"
+  log "tempokey studio: open http://127.0.0.1:$port/ in a browser (Ctrl-C stops the server)"
+  # exec: Ctrl-C reaches the server itself, which drains and exits 0.
+  exec "$build_dir/server/tempokey-server" --address 127.0.0.1:0 --http_address "127.0.0.1:$port"
+}
+
 case "${1:-}" in
   demo) shift; demo "$@" ;;
   test) shift; test_suite "$@" ;;
-  *) echo "usage: deploy/quickstart.sh demo [CLIP.bvh] | test" >&2; exit 2 ;;
+  studio) shift; studio "$@" ;;
+  *) echo "usage: deploy/quickstart.sh demo [CLIP.bvh] | test | studio" >&2; exit 2 ;;
 esac

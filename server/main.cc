@@ -17,6 +17,7 @@
 #include "absl/flags/parse.h"
 #include "absl/flags/usage.h"
 #include "absl/strings/str_cat.h"
+#include "server/http/http_front_end.h"
 #include "server/server.h"
 #include "server/server_usage.h"
 #include "spdlog/sinks/stdout_sinks.h"
@@ -56,6 +57,13 @@ ABSL_FLAG(std::string, auth_token_file, "",
 ABSL_FLAG(bool, allow_insecure_remote, false,
           "Allow a non-loopback --address without TLS.");
 ABSL_FLAG(std::string, log_level, "info", "trace, debug, info, warn, error or off.");
+ABSL_FLAG(std::string, http_address, "",
+          "Serve the studio page and the HTTP/JSON API here (e.g. 127.0.0.1:8080); empty: off.");
+ABSL_FLAG(std::string, web_root, "",
+          "The studio page's folder; empty: web/ beside the binary or ../share/tempokey/web.");
+ABSL_FLAG(std::string, three_root, "/usr/share/javascript/three",
+          "three.js (Debian's libjs-three), served under /three/.");
+ABSL_FLAG(int, http_threads, 16, "HTTP requests served at once.");
 
 namespace {
 
@@ -114,6 +122,19 @@ int Run(int argc, char** argv) {
     spdlog::error("{}", tempokey::core::AsStd(valid.message()));
     return 2;
   }
+  tempokey::server::http::HttpOptions http_options;
+  http_options.address = absl::GetFlag(FLAGS_http_address);
+  http_options.web_root = absl::GetFlag(FLAGS_web_root);
+  if (http_options.web_root.empty()) {
+    http_options.web_root = tempokey::server::http::DefaultWebRoot(argv[0]);
+  }
+  http_options.three_root = absl::GetFlag(FLAGS_three_root);
+  http_options.threads = absl::GetFlag(FLAGS_http_threads);
+  if (absl::Status valid = tempokey::server::http::ValidateHttpOptions(http_options, options);
+      !valid.ok()) {
+    spdlog::error("{}", tempokey::core::AsStd(valid.message()));
+    return 2;
+  }
 
   absl::StatusOr<std::unique_ptr<tempokey::server::Server>> server =
       tempokey::server::Server::Start(options);
@@ -138,10 +159,24 @@ int Run(int argc, char** argv) {
     }
   }
 
+  std::unique_ptr<tempokey::server::http::HttpFrontEnd> studio;
+  if (!http_options.address.empty()) {
+    auto started = tempokey::server::http::HttpFrontEnd::Start(http_options, **server);
+    if (!started.ok()) {
+      spdlog::error("cannot start: {}", tempokey::core::AsStd(started.status().message()));
+      (*server)->Drain();
+      return 1;
+    }
+    studio = *std::move(started);
+    announce->info("tempokey-server studio on {}", studio->url());
+    announce->flush();
+  }
+
   int signal_number = 0;
   sigwait(&stop_signals, &signal_number);
   spdlog::info("received {}, draining", signal_number == SIGTERM ? "SIGTERM" : "SIGINT");
   (*server)->Drain();
+  if (studio != nullptr) studio->Stop();  // after the drain: HTTP calls get its answers too
   server->reset();
   spdlog::info("exiting");
   return 0;

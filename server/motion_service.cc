@@ -7,6 +7,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "proto/clip_convert.h"
+#include "proto/editing_convert.h"
 #include "proto/operations_convert.h"
 #include "proto/jobs_convert.h"
 #include "proto/clip_digest.h"
@@ -95,6 +96,9 @@ grpc::ServerUnaryReactor* MotionService::GetServerInfo(grpc::CallbackServerConte
   response->set_max_stored_results(o.max_stored_results);
   for (std::string_view feature : {wire::kFeatureSampleSlices, wire::kFeatureBatchParts}) {
     response->add_features(std::string(feature));
+  }
+  for (const core::ExportFormat& format : core::ExportFormats()) {
+    *response->add_export_formats() = wire::ExportFormatToProto(format);
   }
   return FinishUnary(call, absl::OkStatus());
 }

@@ -39,6 +39,21 @@ class MotionService final : public v1::MotionService::CallbackService {
   grpc::ServerBidiReactor<v1::ProcessRequest, v1::ProcessResponse>* Process(
       grpc::CallbackServerContext* call) override;
 
+  // For editors (editing.proto); defined in editing_handlers.cc.
+  grpc::ServerUnaryReactor* ParseClipFile(grpc::CallbackServerContext* call,
+                                          const v1::ParseClipFileRequest* request,
+                                          v1::ParseClipFileResponse* response) override;
+  grpc::ServerWriteReactor<v1::ResultPart>* GetClip(grpc::CallbackServerContext* call,
+                                                    const v1::GetClipRequest* request) override;
+  grpc::ServerUnaryReactor* PlanRetime(grpc::CallbackServerContext* call,
+                                       const v1::PlanRetimeRequest* request,
+                                       v1::RetimePlan* response) override;
+  grpc::ServerUnaryReactor* ParseSpeedKnots(grpc::CallbackServerContext* call,
+                                            const v1::ParseSpeedKnotsRequest* request,
+                                            v1::ParseSpeedKnotsResponse* response) override;
+  grpc::ServerWriteReactor<v1::FileChunk>* ExportFile(grpc::CallbackServerContext* call,
+                                                      const v1::ExportFileRequest* request) override;
+
  private:
   ServiceContext* const context_;
 };
