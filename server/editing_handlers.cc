@@ -12,9 +12,9 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "proto/clip_convert.h"
+#include "proto/clip_digest.h"
 #include "proto/editing_convert.h"
 #include "proto/jobs_convert.h"
-#include "server/clip_digest.h"
 #include "server/motion_service.h"
 #include "server/reactors.h"
 #include "server/status_util.h"
@@ -263,7 +263,7 @@ grpc::ServerUnaryReactor* MotionService::ParseClipFile(grpc::CallbackServerConte
                               core::ParseClipText(request->content(), request->file_name(),
                                                   csv_frame_time, service->clip_limits));
     TEMPOKEY_RETURN_IF_ERROR(core::ValidateClip(clip, service->clip_limits));
-    const std::string id = ClipContentId(clip);
+    const std::string id = wire::ClipContentId(clip);
     *response->mutable_header() = wire::ClipHeaderToProto(clip);
     response->set_sample_count(clip.sample_count());
     TEMPOKEY_ASSIGN_OR_RETURN(ClipStore::PutResult stored, service->clips->Put(id, std::move(clip)));
