@@ -37,7 +37,8 @@ constexpr int kPasses = 64;
 // The server holds at most 64 queued + 2 running jobs and the clients' 128 unfetched results,
 // each well under 1 MB, besides its own ~30 MB; 512 MiB bounds it with a wide margin while still
 // catching anything that keeps every clip or result of the flood (2 000 x 0.2 MB and more).
-constexpr std::int64_t kPeakRssBoundKiB = 512 * 1024;
+// Sanitizer builds add ASan's quarantine (test_clips.h).
+constexpr std::int64_t kPeakRssBoundKiB = 512 * 1024 + kSanitizerRssAllowanceKiB;
 // The longest a refused client waits before its next submit, whatever the hint says.
 constexpr std::chrono::milliseconds kMaxBackoff{20};
 
