@@ -1,13 +1,15 @@
 // tempokey-server: serves tempokey.v1.MotionService until SIGTERM or SIGINT, then drains.
 //
-// Prints "tempokey-server listening on <host>:<port>" on stdout once serving, and with
-// --port_file writes the port there atomically, so scripts can wait for either. Exit codes: 0
-// after a clean drain, 1 when the server cannot start, 2 for bad flags.
+// Prints "tempokey-server listening on <host>:<port>" on stdout once serving (and "tempokey-server
+// metrics on <host>:<port>" with --metrics_address), and with --port_file / --metrics_port_file
+// writes the ports there atomically, so scripts can wait for either. Exit codes: 0 after a clean
+// drain, 1 when the server cannot start, 2 for bad flags.
 #include <pthread.h>
 #include <signal.h>
 
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <memory>
 #include <string>
 #include <vector>
@@ -29,6 +31,13 @@ ABSL_FLAG(int, workers, 0,
           "Worker threads running pipelines; 0: the CPUs this process may use (affinity and "
           "cgroup quota).");
 ABSL_FLAG(int, queue_capacity, 64, "Jobs waiting for a worker before submits are refused.");
+ABSL_FLAG(int64_t, memory_budget_bytes, 0,
+          "Memory for clips being received, stored clips, jobs and results, in bytes; past it "
+          "requests get RESOURCE_EXHAUSTED. 0: half the memory this process may use (physical "
+          "memory or cgroup limit).");
+ABSL_FLAG(double, stream_idle_timeout_seconds, 30,
+          "End a streaming call whose client sends nothing (or takes no message) for this long; "
+          "0: never.");
 ABSL_FLAG(int64_t, max_message_bytes, int64_t{64} << 20, "Largest message received, in bytes.");
 ABSL_FLAG(int64_t, max_clip_samples, int64_t{32} << 20,
           "Largest clip accepted, in samples (frames x channels).");
@@ -43,7 +52,11 @@ ABSL_FLAG(int, max_concurrent_streams, 1024, "Streaming calls open at once.");
 ABSL_FLAG(int64_t, max_connection_age_seconds, 0,
           "Close connections after this long so clients rebalance; 0: never.");
 ABSL_FLAG(std::string, metrics_address, "",
-          "Serve Prometheus metrics on this address (e.g. 127.0.0.1:9464); empty: off.");
+          "Serve Prometheus metrics on this address (e.g. 127.0.0.1:9464; port 0 picks one, see "
+          "--metrics_port_file); plain HTTP, so beyond loopback it needs --allow_insecure_remote; "
+          "with --auth_token_file a scrape needs the bearer token; empty: off.");
+ABSL_FLAG(std::string, metrics_port_file, "",
+          "Write the bound metrics port to this file once serving.");
 ABSL_FLAG(std::string, tls_cert, "", "PEM certificate chain; with --tls_key enables TLS.");
 ABSL_FLAG(std::string, tls_key, "", "PEM private key of --tls_cert.");
 ABSL_FLAG(std::string, tls_client_ca, "",
@@ -52,7 +65,10 @@ ABSL_FLAG(std::string, auth_token_file, "",
           "File of accepted bearer tokens, one per line; calls need "
           "'authorization: Bearer <token>'.");
 ABSL_FLAG(bool, allow_insecure_remote, false,
-          "Allow a non-loopback --address without TLS.");
+          "Allow a non-loopback --address without TLS, and a non-loopback --metrics_address.");
+ABSL_FLAG(bool, open_reflection, false,
+          "Serve gRPC reflection to callers without a token (with --auth_token_file it otherwise "
+          "needs one).");
 ABSL_FLAG(std::string, log_level, "info", "trace, debug, info, warn, error or off.");
 
 namespace {
@@ -81,6 +97,14 @@ int Run(int argc, char** argv) {
   options.address = absl::GetFlag(FLAGS_address);
   options.workers = absl::GetFlag(FLAGS_workers);
   options.queue_capacity = absl::GetFlag(FLAGS_queue_capacity);
+  options.memory_budget_bytes = absl::GetFlag(FLAGS_memory_budget_bytes);
+  const double idle_seconds = absl::GetFlag(FLAGS_stream_idle_timeout_seconds);
+  if (!(idle_seconds >= 0.0 && idle_seconds <= 1e6)) {
+    spdlog::error("--stream_idle_timeout_seconds must be in [0, 1e6], got {}", idle_seconds);
+    return 2;
+  }
+  options.stream_idle_timeout =
+      std::chrono::milliseconds(static_cast<std::int64_t>(idle_seconds * 1000.0));
   options.max_message_bytes = absl::GetFlag(FLAGS_max_message_bytes);
   options.max_clip_samples = absl::GetFlag(FLAGS_max_clip_samples);
   options.max_stored_clips = absl::GetFlag(FLAGS_max_stored_clips);
@@ -96,6 +120,7 @@ int Run(int argc, char** argv) {
   options.tls_key_file = absl::GetFlag(FLAGS_tls_key);
   options.tls_client_ca_file = absl::GetFlag(FLAGS_tls_client_ca);
   options.allow_insecure_remote = absl::GetFlag(FLAGS_allow_insecure_remote);
+  options.open_reflection = absl::GetFlag(FLAGS_open_reflection);
   if (const std::string token_file = absl::GetFlag(FLAGS_auth_token_file); !token_file.empty()) {
     absl::StatusOr<std::vector<std::string>> tokens = tempokey::server::ReadTokenFile(token_file);
     if (!tokens.ok()) {
@@ -115,30 +140,46 @@ int Run(int argc, char** argv) {
     spdlog::error("cannot start: {}", tempokey::core::AsStd(server.status().message()));
     return 1;
   }
-  const int port = (*server)->port();
-  std::string host = options.address.substr(0, options.address.rfind(':'));
   auto announce = spdlog::stdout_logger_mt("announce");
   announce->set_pattern("%v");
   announce->set_level(spdlog::level::info);  // the announcement is not subject to --log_level
-  announce->info("tempokey-server listening on {}:{}", host, port);
-  announce->flush();
-  spdlog::info("listening on {}:{}", host, port);
-  if (const std::string port_file = absl::GetFlag(FLAGS_port_file); !port_file.empty()) {
-    if (absl::Status written = tempokey::core::WriteFileAtomically(port_file, absl::StrCat(port, "\n"));
-        !written.ok()) {
-      spdlog::error("--port_file: {}", tempokey::core::AsStd(written.message()));
-      (*server)->Drain();
-      return 1;
-    }
+  // Announces "<what> on host:port" and writes the port to `port_file` (if given).
+  auto report = [&](std::string_view what, const std::string& address, int port,
+                    const std::string& port_file, std::string_view flag) -> bool {
+    const std::string host = address.substr(0, address.rfind(':'));
+    announce->info("tempokey-server {} on {}:{}", what, host, port);
+    announce->flush();
+    spdlog::info("{} on {}:{}", what, host, port);
+    if (port_file.empty()) return true;
+    absl::Status written = tempokey::core::WriteFileAtomically(port_file, absl::StrCat(port, "\n"));
+    if (!written.ok()) spdlog::error("--{}: {}", flag, tempokey::core::AsStd(written.message()));
+    return written.ok();
+  };
+  bool reported = true;
+  // The metrics port first: once the main port file exists, scripts may read both.
+  if (!options.metrics_address.empty()) {
+    reported = report("metrics", options.metrics_address, (*server)->metrics_port(),
+                      absl::GetFlag(FLAGS_metrics_port_file), "metrics_port_file");
+  }
+  reported = reported && report("listening", options.address, (*server)->port(),
+                                absl::GetFlag(FLAGS_port_file), "port_file");
+  if (!reported) {
+    (*server)->Drain();
+    return 1;
   }
 
   int signal_number = 0;
   sigwait(&stop_signals, &signal_number);
   spdlog::info("received {}, draining", signal_number == SIGTERM ? "SIGTERM" : "SIGINT");
-  (*server)->Drain();
-  server->reset();
+  (*server)->Quiesce();
+  // Nothing is left to answer. Ending the process here instead of shutting gRPC down closes the
+  // connections, which clients see as UNAVAILABLE (and retry elsewhere): gRPC's shutdown would
+  // cancel with CANCELLED any call that arrived in the meantime (its core zombifies calls it
+  // accepts after shutdown began), and clients do not retry CANCELLED.
   spdlog::info("exiting");
-  return 0;
+  spdlog::shutdown();
+  std::fflush(nullptr);
+  std::_Exit(0);
 }
 
 }  // namespace

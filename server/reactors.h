@@ -3,10 +3,14 @@
 #ifndef TEMPOKEY_SERVER_REACTORS_H_
 #define TEMPOKEY_SERVER_REACTORS_H_
 
+#include <chrono>
+#include <string_view>
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "grpcpp/support/byte_buffer.h"
 #include "grpcpp/support/server_callback.h"
+#include "proto/clip_convert.h"
 #include "server/service_context.h"
 #include "tempokey/core/pipeline/pipeline.h"
 #include "tempokey/v1/motion_service.pb.h"
@@ -15,15 +19,18 @@ namespace tempokey::server {
 
 namespace v1 = ::tempokey::v1;
 
-grpc::ServerReadReactor<v1::UploadClipRequest>* NewUploadReactor(
-    ServiceContext* service, grpc::CallbackServerContext* call, v1::UploadClipResponse* response);
-grpc::ServerWriteReactor<v1::Job>* NewWatchReactor(ServiceContext* service,
-                                                   grpc::CallbackServerContext* call,
-                                                   const v1::WatchJobRequest* request);
-grpc::ServerWriteReactor<v1::ResultPart>* NewResultReactor(ServiceContext* service,
-                                                           grpc::CallbackServerContext* call,
-                                                           const v1::GetJobResultRequest* request);
-grpc::ServerBidiReactor<v1::ProcessRequest, v1::ProcessResponse>* NewProcessReactor(
+// Each reactor parses its messages from ByteBuffers (wire_codec.h), authenticates, and arms an
+// idle timer (ServiceContext::idle) while it waits on the client.
+grpc::ServerReadReactor<grpc::ByteBuffer>* NewUploadReactor(ServiceContext* service,
+                                                            grpc::CallbackServerContext* call,
+                                                            grpc::ByteBuffer* response);
+grpc::ServerWriteReactor<grpc::ByteBuffer>* NewWatchReactor(ServiceContext* service,
+                                                            grpc::CallbackServerContext* call,
+                                                            const grpc::ByteBuffer* request);
+grpc::ServerWriteReactor<grpc::ByteBuffer>* NewResultReactor(ServiceContext* service,
+                                                             grpc::CallbackServerContext* call,
+                                                             const grpc::ByteBuffer* request);
+grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* NewProcessReactor(
     ServiceContext* service, grpc::CallbackServerContext* call);
 
 // Operations off the wire, checked against `clip` and what the server lets a pipeline produce
@@ -33,9 +40,22 @@ absl::StatusOr<std::vector<core::PipelineStep>> PrepareSteps(
     const google::protobuf::RepeatedPtrField<v1::Operation>& operations, const core::Clip& clip,
     const core::ClipLimits& limits);
 
-// Checks an id field of a request (job_id, clip_id): not empty, at most 256 bytes.
-// Errors: kInvalidArgument "job_id is empty", "job_id is 300 bytes, over the limit of 256".
+// Checks an id field of a request (job_id, clip_id): not empty, at most kMaxIdBytes.
+// Errors: kInvalidArgument "job_id is empty"; kResourceExhausted "job_id is 300 bytes, over the
+// limit of 256".
 absl::Status CheckId(std::string_view field, const std::string& id);
+
+// An allocation hook (wire::ClipAssembler) charging `reservation`, which must outlive the
+// assembler.
+wire::AllocationHook ChargeTo(MemoryBudget::Reservation* reservation);
+
+// An empty reservation for `use` in the server's budget (an unbudgeted one when the context
+// has no budget), grown as data arrives.
+absl::StatusOr<MemoryBudget::Reservation> ReserveMemory(ServiceContext& service, MemoryUse use,
+                                                        std::string_view what);
+
+// What an idle timer says when it ends a call whose client sent nothing for `timeout`.
+absl::Status IdleError(std::string_view call, std::chrono::milliseconds timeout);
 
 // "retime+reduce" for log lines.
 std::string DescribeSteps(const std::vector<core::PipelineStep>& steps);

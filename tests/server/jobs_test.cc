@@ -415,13 +415,14 @@ TEST_F(JobsTest, EveryCallTakingAJobIdRefusesAMalformedOne) {
   const std::string too_long(300, 'j');
 
   for (const std::string& id : {std::string(), too_long}) {
+    // An empty id is malformed; an id over the size limit is refused like every size cap.
     const std::string message =
         id.empty() ? "job_id is empty" : "job_id is 300 bytes, over the limit of 256";
-    EXPECT_THAT(GetJob(*stub_, id).status, GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, message));
-    EXPECT_THAT(WatchJob(*stub_, id).status,
-                GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, message));
-    EXPECT_THAT(GetResult(*stub_, id).status,
-                GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, message));
+    const grpc::StatusCode code =
+        id.empty() ? grpc::StatusCode::INVALID_ARGUMENT : grpc::StatusCode::RESOURCE_EXHAUSTED;
+    EXPECT_THAT(GetJob(*stub_, id).status, GrpcStatusIs(code, message));
+    EXPECT_THAT(WatchJob(*stub_, id).status, GrpcStatusIs(code, message));
+    EXPECT_THAT(GetResult(*stub_, id).status, GrpcStatusIs(code, message));
   }
 }
 

@@ -54,8 +54,9 @@ TEST(ServerBinaryTest, RefusesANonLoopbackAddressWithoutTls) {
 
   EXPECT_EQ(run.exit_code, 2);
   EXPECT_THAT(run.err,
-              HasSubstr("refusing to listen on non-loopback address 0.0.0.0:0 without TLS: give "
-                        "--tls_cert and --tls_key, or --allow_insecure_remote"));
+              HasSubstr("refusing to listen on non-loopback address 0.0.0.0:0 without TLS "
+                        "(0.0.0.0 is not a loopback address): give --tls_cert and --tls_key, or "
+                        "--allow_insecure_remote"));
 }
 
 TEST(ServerBinaryTest, BadFlagValueExitsWithUsageError) {
