@@ -44,7 +44,8 @@ ABSL_FLAG(int64_t, max_clip_samples, int64_t{32} << 20,
 ABSL_FLAG(int64_t, max_stored_clips, 256, "Uploaded clips kept (least recently used evicted).");
 ABSL_FLAG(int64_t, max_stored_clip_bytes, int64_t{2} << 30, "Bytes of uploaded clips kept.");
 ABSL_FLAG(int64_t, max_stored_results, 1000, "Finished jobs kept with their results.");
-ABSL_FLAG(int64_t, max_stored_result_bytes, int64_t{2} << 30, "Bytes of job results kept.");
+ABSL_FLAG(int64_t, max_stored_result_bytes, int64_t{2} << 30,
+          "Bytes of finished jobs kept: their results and operations.");
 ABSL_FLAG(int64_t, job_ttl_seconds, 3600, "Finished jobs are deleted this long after they end.");
 ABSL_FLAG(int64_t, drain_grace_seconds, 25,
           "On SIGTERM, how long queued and running jobs get to finish.");

@@ -125,6 +125,11 @@ class ProcessLink final {
 
   // Armed while a result message is being written; set before the task is queued.
   void SetIdleTimer(std::shared_ptr<IdleReaper::Timer> idle) { idle_ = std::move(idle); }
+  // The reactor's stream slot, released when the call answers; valid until then.
+  void SetSlot(StreamSlot* slot) {
+    std::lock_guard lock(mu_);
+    slot_ = slot;
+  }
 
  private:
   void OnProgress(double fraction, std::string_view stage) {
@@ -195,6 +200,7 @@ class ProcessLink final {
   void FinishLocked(const absl::Status& status) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
     finished_ = true;
     slicer_.reset();
+    if (slot_ != nullptr) slot_->Release();
     reactor_->Finish(ToGrpcStatus(status, call_));
     reactor_ = nullptr;
   }
@@ -224,6 +230,7 @@ class ProcessLink final {
   v1::ProcessResponse message_ ABSL_GUARDED_BY(mu_);
   grpc::ByteBuffer buffer_ ABSL_GUARDED_BY(mu_);  // the write in flight
   std::shared_ptr<IdleReaper::Timer> idle_;
+  StreamSlot* slot_ ABSL_GUARDED_BY(mu_) = nullptr;
 };
 
 class ProcessReactor final : public ProcessReactorBase {
@@ -281,7 +288,6 @@ class ProcessReactor final : public ProcessReactorBase {
   void OnDone() override {
     if (read_idle_ != nullptr) read_idle_->Close();
     if (write_idle_ != nullptr) write_idle_->Close();
-    if (holds_stream_) service_->CloseStream();
     delete this;
   }
 
@@ -291,8 +297,8 @@ class ProcessReactor final : public ProcessReactorBase {
     TEMPOKEY_ASSIGN_OR_RETURN(clip_memory_,
                               ReserveMemory(*service_, MemoryUse::kProcess, "a Process clip"));
     assembler_.emplace(service_->clip_limits, ChargeTo(&clip_memory_));
-    TEMPOKEY_RETURN_IF_ERROR(service_->AdmitStream());
-    holds_stream_ = true;
+    TEMPOKEY_RETURN_IF_ERROR(slot_.Claim(*service_));
+    link_->SetSlot(&slot_);
     return absl::OkStatus();
   }
 
@@ -356,7 +362,7 @@ class ProcessReactor final : public ProcessReactorBase {
   const std::shared_ptr<ProcessLink> link_;
   std::shared_ptr<IdleReaper::Timer> read_idle_;
   std::shared_ptr<IdleReaper::Timer> write_idle_;
-  bool holds_stream_ = false;
+  StreamSlot slot_;
   bool started_ = false;
   std::int64_t messages_ = 0;
   grpc::ByteBuffer buffer_;

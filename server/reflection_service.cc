@@ -86,7 +86,7 @@ class ReflectionReactor final : public grpc::ServerGenericBidiReactor {
       : service_(service), services_(services), call_(call) {
     const absl::Status admitted = Admit();
     if (!admitted.ok()) {
-      Finish(ToGrpcStatus(admitted));
+      End(ToGrpcStatus(admitted));
       return;
     }
     if (service_->idle != nullptr) {
@@ -98,12 +98,12 @@ class ReflectionReactor final : public grpc::ServerGenericBidiReactor {
   void OnReadDone(bool ok) override {
     if (idle_ != nullptr) idle_->Disarm();
     if (!ok) {
-      Finish(grpc::Status::OK);  // the client half-closed: every request was answered
+      End(grpc::Status::OK);  // the client half-closed: every request was answered
       return;
     }
     std::unique_ptr<Message> request(factory_.GetPrototype(request_type_)->New());
     if (!request->ParseFromString(Flatten(in_))) {
-      Finish(ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(
+      End(ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(
           "ServerReflectionInfo request: ", in_.Length(), " bytes are not a valid ",
           request_type_->full_name(), " message"))));
       return;
@@ -117,7 +117,7 @@ class ReflectionReactor final : public grpc::ServerGenericBidiReactor {
   void OnWriteDone(bool ok) override {
     if (idle_ != nullptr) idle_->Disarm();
     if (!ok) {
-      Finish(ToGrpcStatus(absl::CancelledError("the reflection stream broke")));
+      End(ToGrpcStatus(absl::CancelledError("the reflection stream broke")));
       return;
     }
     Read();
@@ -125,7 +125,6 @@ class ReflectionReactor final : public grpc::ServerGenericBidiReactor {
 
   void OnDone() override {
     if (idle_ != nullptr) idle_->Close();
-    if (holds_stream_) service_->CloseStream();
     delete this;
   }
 
@@ -143,17 +142,17 @@ class ReflectionReactor final : public grpc::ServerGenericBidiReactor {
     if (request_type_ == nullptr || response_type_ == nullptr) {
       return absl::UnimplementedError("server reflection is not built into this server");
     }
-    if (absl::Status admitted = service_->AdmitStream(/*allow_while_draining=*/true);
-        !admitted.ok()) {
-      return admitted;
-    }
-    holds_stream_ = true;
-    return absl::OkStatus();
+    return slot_.Claim(*service_, /*allow_while_draining=*/true);
   }
 
   void Read() {
     if (idle_ != nullptr) idle_->Arm();
     StartRead(&in_);
+  }
+
+  void End(const grpc::Status& status) {
+    slot_.Release();
+    Finish(status);
   }
 
   static std::string Flatten(const grpc::ByteBuffer& buffer) {
@@ -227,7 +226,7 @@ class ReflectionReactor final : public grpc::ServerGenericBidiReactor {
   const Descriptor* response_type_ = nullptr;
   google::protobuf::DynamicMessageFactory factory_;
   std::shared_ptr<IdleReaper::Timer> idle_;
-  bool holds_stream_ = false;
+  StreamSlot slot_;
   grpc::ByteBuffer in_;
   grpc::ByteBuffer out_;
 };

@@ -23,6 +23,7 @@ class ResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
       : service_(service) {
     absl::Status status = Open(*call, *request);
     if (!status.ok()) {
+      slot_.Release();
       Finish(ToGrpcStatus(status, call));
       return;
     }
@@ -36,6 +37,7 @@ class ResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
   void OnWriteDone(bool ok) override {
     if (idle_ != nullptr) idle_->Disarm();
     if (!ok) {
+      slot_.Release();
       Finish(ToGrpcStatus(absl::CancelledError("the result stream broke")));
       return;
     }
@@ -44,7 +46,6 @@ class ResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
 
   void OnDone() override {
     if (idle_ != nullptr) idle_->Close();
-    if (holds_stream_) service_->CloseStream();
     delete this;
   }
 
@@ -61,15 +62,14 @@ class ResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
     absl::StatusOr<std::shared_ptr<const core::PipelineResult>> result =
         service_->jobs->Result(request.job_id(), owner);
     if (!result.ok()) return result.status();
-    if (absl::Status admitted = service_->AdmitStream(/*allow_while_draining=*/true);
-        !admitted.ok()) return admitted;
-    holds_stream_ = true;
+    TEMPOKEY_RETURN_IF_ERROR(slot_.Claim(*service_, /*allow_while_draining=*/true));
     slicer_.emplace(*std::move(result), request.slice_bytes(), request.batch_parts());
     return absl::OkStatus();
   }
 
   void WriteNext() {
     if (!slicer_->Next(&part_)) {
+      slot_.Release();
       Finish(grpc::Status::OK);
       return;
     }
@@ -80,7 +80,7 @@ class ResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
   }
 
   ServiceContext* const service_;
-  bool holds_stream_ = false;
+  StreamSlot slot_;
   std::optional<wire::ResultSlicer> slicer_;
   std::shared_ptr<IdleReaper::Timer> idle_;
   v1::ResultPart part_;

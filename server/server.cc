@@ -14,6 +14,8 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "grpcpp/health_check_service_interface.h"
+#include "grpcpp/impl/server_builder_option.h"
+#include "grpcpp/impl/server_builder_plugin.h"
 #include "grpcpp/security/server_credentials.h"
 #include "grpcpp/server.h"
 #include "grpcpp/server_builder.h"
@@ -96,6 +98,19 @@ absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> BuildCredentials(const 
   }
   return grpc::SslServerCredentials(ssl);
 }
+
+// libgrpc++_reflection installs gRPC's own reflection service in every server it is linked into
+// (a static initializer registers its plugin), and that service cannot check a token. This
+// option takes the plugin out of our builder; ReflectionService serves the protocol instead.
+class WithoutStockReflection final : public grpc::ServerBuilderOption {
+ public:
+  void UpdateArguments(grpc::ChannelArguments*) override {}
+  void UpdatePlugins(std::vector<std::unique_ptr<grpc::ServerBuilderPlugin>>* plugins) override {
+    std::erase_if(*plugins, [](const std::unique_ptr<grpc::ServerBuilderPlugin>& plugin) {
+      return plugin->name() == "proto_server_reflection";
+    });
+  }
+};
 
 std::string_view Outcome(JobState state) {
   switch (state) {
@@ -266,6 +281,7 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(ServerOptions options) {
   builder.SetMaxReceiveMessageSize(static_cast<int>(options.max_message_bytes));
   builder.RegisterService(server->service_.get());
   builder.RegisterCallbackGenericService(server->reflection_.get());
+  builder.SetOption(std::make_unique<WithoutStockReflection>());
   if (options.max_connection_age.count() > 0) {
     builder.AddChannelArgument(GRPC_ARG_MAX_CONNECTION_AGE_MS,
                                static_cast<int>(options.max_connection_age.count() * 1000));

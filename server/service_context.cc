@@ -6,6 +6,7 @@
 #include <string_view>
 
 #include "absl/strings/str_cat.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::server {
 namespace {
@@ -72,6 +73,16 @@ bool ServiceContext::TryOpenStream() {
     if (open >= options.max_concurrent_streams) return false;
   } while (!open_streams.compare_exchange_weak(open, open + 1, std::memory_order_acq_rel));
   return true;
+}
+
+absl::Status StreamSlot::Claim(ServiceContext& service, bool allow_while_draining) {
+  TEMPOKEY_RETURN_IF_ERROR(service.AdmitStream(allow_while_draining));
+  service_.store(&service);
+  return absl::OkStatus();
+}
+
+void StreamSlot::Release() {
+  if (ServiceContext* service = service_.exchange(nullptr)) service->CloseStream();
 }
 
 void ServiceContext::CloseStream() { open_streams.fetch_sub(1, std::memory_order_acq_rel); }

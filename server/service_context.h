@@ -69,6 +69,25 @@ struct ServiceContext {
 // and job records never hold the token itself.
 std::string OwnerIdOfToken(std::string_view token);
 
+// A claim on one of the server's streaming-call slots (ServiceContext::AdmitStream()), given back
+// when the call answers (release it right before Finish(), so a client that saw the end of its
+// call finds the slot free) or at the latest when the reactor goes. Release() is thread-safe and
+// idempotent.
+class StreamSlot {
+ public:
+  StreamSlot() = default;
+  ~StreamSlot() { Release(); }
+  StreamSlot(const StreamSlot&) = delete;
+  StreamSlot& operator=(const StreamSlot&) = delete;
+
+  // Errors: as ServiceContext::AdmitStream().
+  absl::Status Claim(ServiceContext& service, bool allow_while_draining = false);
+  void Release();
+
+ private:
+  std::atomic<ServiceContext*> service_{nullptr};
+};
+
 }  // namespace tempokey::server
 
 #endif  // TEMPOKEY_SERVER_SERVICE_CONTEXT_H_

@@ -65,7 +65,6 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
 
   void OnDone() override {
     if (idle_ != nullptr) idle_->Close();
-    if (holds_stream_) service_->CloseStream();
     delete this;
   }
 
@@ -75,9 +74,7 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
     TEMPOKEY_ASSIGN_OR_RETURN(reservation_,
                               ReserveMemory(*service_, MemoryUse::kUpload, "an upload"));
     assembler_.emplace(service_->clip_limits, ChargeTo(&reservation_));
-    TEMPOKEY_RETURN_IF_ERROR(service_->AdmitStream());
-    holds_stream_ = true;
-    return absl::OkStatus();
+    return slot_.Claim(*service_);
   }
 
   void Read() {
@@ -90,6 +87,7 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
     std::lock_guard lock(mu_);
     if (finished_) return;
     finished_ = true;
+    slot_.Release();
     Finish(ToGrpcStatus(status, call_));
   }
 
@@ -153,7 +151,7 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
   grpc::CallbackServerContext* const call_;
   grpc::ByteBuffer* const response_;
   std::string owner_;
-  bool holds_stream_ = false;
+  StreamSlot slot_;
   std::shared_ptr<IdleReaper::Timer> idle_;
   grpc::ByteBuffer buffer_;
   v1::UploadClipRequest request_;

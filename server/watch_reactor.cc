@@ -61,13 +61,12 @@ class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
       TEMPOKEY_RETURN_IF_ERROR(ParseMessage(*raw_request, "WatchJob request", &request));
       job_id_ = request.job_id();
       TEMPOKEY_RETURN_IF_ERROR(CheckId("job_id", job_id_));
-      return service_->AdmitStream();
+      return slot_.Claim(*service_);
     }();
     if (!admitted.ok()) {
       link_->FinishNow(admitted);
       return;
     }
-    holds_stream_ = true;
     if (service_->idle != nullptr) {
       // A write outstanding for the whole timeout: the client stopped reading.
       idle_ = service_->idle->NewTimer([call] { call->TryCancel(); });
@@ -87,18 +86,18 @@ class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
   void OnDone() override {
     if (idle_ != nullptr) idle_->Close();
     if (watching_) service_->jobs->Unwatch(job_id_, link_.get());
-    if (holds_stream_) service_->CloseStream();
     delete this;
   }
 
   ServiceContext* service() const { return service_; }
+  StreamSlot& slot() { return slot_; }
 
  private:
   ServiceContext* const service_;
   std::string job_id_;
   const std::shared_ptr<WatchLink> link_;
   std::shared_ptr<IdleReaper::Timer> idle_;
-  bool holds_stream_ = false;
+  StreamSlot slot_;
   bool watching_ = false;
 };
 
@@ -160,6 +159,7 @@ void WatchLink::FinishLocked(const absl::Status& status) {
   finished_ = true;
   WatchReactor* reactor = reactor_;
   reactor_ = nullptr;
+  reactor->slot().Release();
   reactor->Finish(ToGrpcStatus(status));
 }
 

@@ -24,7 +24,9 @@ namespace {
 
 constexpr int kClients = 4;
 
-TEST(DrainRaceTest, SubmitsRacingSigtermAreAcceptedOrUnavailableNeverCancelled) {
+class DrainRaceTest : public ::testing::TestWithParam<int> {};
+
+TEST_P(DrainRaceTest, SubmitsRacingSigtermAreAcceptedOrUnavailableNeverCancelled) {
   absl::StatusOr<std::unique_ptr<ServerProcess>> server =
       ServerProcess::Start(MakeTempDir(), {"--workers=1", "--drain_grace_seconds=30"});
   ASSERT_TRUE(server.ok()) << server.status();
@@ -40,7 +42,7 @@ TEST(DrainRaceTest, SubmitsRacingSigtermAreAcceptedOrUnavailableNeverCancelled) 
   std::vector<std::thread> clients;
   for (int i = 0; i < kClients; ++i) {
     clients.emplace_back([&, i] {
-      // Each client has its own connection, so the signal lands while some are mid-call.
+      // Each client has its own connection (a distinct channel argument stops gRPC sharing one).
       grpc::ChannelArguments args;
       args.SetInt("tempokey.test.client", i);
       auto stub = v1::MotionService::NewStub(grpc::CreateCustomChannel(
@@ -70,13 +72,21 @@ TEST(DrainRaceTest, SubmitsRacingSigtermAreAcceptedOrUnavailableNeverCancelled) 
   for (std::thread& client : clients) client.join();
   const std::optional<int> exit_code = (*server)->WaitExit(std::chrono::seconds(120));
 
+  RecordProperty("accepted", codes[grpc::StatusCode::OK]);
+  RecordProperty("unavailable", codes[grpc::StatusCode::UNAVAILABLE]);
+
   EXPECT_TRUE(signalled.load());
   EXPECT_EQ(exit_code, 0) << (*server)->log();
+  // Every client ended on a refusal, and every refusal was UNAVAILABLE.
+  EXPECT_GE(codes[grpc::StatusCode::UNAVAILABLE], kClients);
   for (const auto& [code, count] : codes) {
     EXPECT_TRUE(code == grpc::StatusCode::OK || code == grpc::StatusCode::UNAVAILABLE)
         << count << " submits ended with code " << code << ": " << messages[code];
   }
 }
+
+// A few rounds: each is one race of the signal against four streams of submits.
+INSTANTIATE_TEST_SUITE_P(Rounds, DrainRaceTest, ::testing::Range(0, 3));
 
 }  // namespace
 }  // namespace tempokey::testing

@@ -501,7 +501,9 @@ TEST(JobsGatedTest, WatchDeadlineReleasesServerState) {
   while (reader->Read(&snapshot)) ++reads;
   const grpc::Status status = reader->Finish();
 
-  EXPECT_EQ(reads, 1);  // the snapshot; the job is held, so nothing else happens
+  // The snapshot at most (a loaded machine may reach the deadline before it is written); the
+  // job is held, so nothing else can happen.
+  EXPECT_LE(reads, 1);
   EXPECT_EQ(status.error_code(), grpc::StatusCode::DEADLINE_EXCEEDED);
   EXPECT_TRUE(NoStreamsLeft(*gated.server));
 }
