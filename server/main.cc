@@ -144,26 +144,31 @@ int Run(int argc, char** argv) {
   auto announce = spdlog::stdout_logger_mt("announce");
   announce->set_pattern("%v");
   announce->set_level(spdlog::level::info);  // the announcement is not subject to --log_level
-  // Announces "<what> on host:port" and writes the port to `port_file` (if given).
-  auto report = [&](std::string_view what, const std::string& address, int port,
-                    const std::string& port_file, std::string_view flag) -> bool {
+  // Announces "<what> on host:port" on stdout and in the log.
+  auto announce_port = [&](std::string_view what, const std::string& address, int port) {
     const std::string host = address.substr(0, address.rfind(':'));
     announce->info("tempokey-server {} on {}:{}", what, host, port);
     announce->flush();
     spdlog::info("{} on {}:{}", what, host, port);
+  };
+  // Writes `port` to `port_file` (if given).
+  auto write_port = [](int port, const std::string& port_file, std::string_view flag) {
     if (port_file.empty()) return true;
     absl::Status written = tempokey::core::WriteFileAtomically(port_file, absl::StrCat(port, "\n"));
     if (!written.ok()) spdlog::error("--{}: {}", flag, tempokey::core::AsStd(written.message()));
     return written.ok();
   };
+  // The listening line first (scripts read the first line); both lines before the port files,
+  // and the metrics port file before the main one: once the main port file exists, everything
+  // is there to read.
+  announce_port("listening", options.address, (*server)->port());
   bool reported = true;
-  // The metrics port first: once the main port file exists, scripts may read both.
   if (!options.metrics_address.empty()) {
-    reported = report("metrics", options.metrics_address, (*server)->metrics_port(),
-                      absl::GetFlag(FLAGS_metrics_port_file), "metrics_port_file");
+    announce_port("metrics", options.metrics_address, (*server)->metrics_port());
+    reported = write_port((*server)->metrics_port(), absl::GetFlag(FLAGS_metrics_port_file),
+                          "metrics_port_file");
   }
-  reported = reported && report("listening", options.address, (*server)->port(),
-                                absl::GetFlag(FLAGS_port_file), "port_file");
+  reported = reported && write_port((*server)->port(), absl::GetFlag(FLAGS_port_file), "port_file");
   if (!reported) {
     (*server)->Drain();
     return 1;

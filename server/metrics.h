@@ -33,8 +33,8 @@ struct MetricsGaugeSources {
   std::function<std::vector<std::pair<std::string, std::int64_t>>()> memory_used;
 };
 
-inline constexpr int kMetricsThreads = 16;
-inline constexpr int kMetricsRequestTimeoutMs = 5000;
+inline constexpr int kMetricsThreads = 32;
+inline constexpr int kMetricsRequestTimeoutMs = 2000;
 
 // Checks an HTTP request's Authorization header (null when it has none); non-OK answers 401.
 using MetricsAuthCheck = std::function<absl::Status(const char* authorization)>;
