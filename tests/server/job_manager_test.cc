@@ -117,7 +117,15 @@ class JobManagerTest : public ::testing::Test {
     }
   }
 
+  // A memory budget for the manager's jobs; declared before the pool and the manager, so it
+  // outlives every reservation they hold.
+  MemoryBudget& Budget(std::int64_t bytes) {
+    budget_ = std::make_unique<MemoryBudget>(bytes);
+    return *budget_;
+  }
+
   std::atomic<SystemTime> now_{SystemTime(std::chrono::hours(500'000))};
+  std::unique_ptr<MemoryBudget> budget_;
   std::shared_ptr<StartGate> gate_;
   std::unique_ptr<JobPool> pool_;
   std::unique_ptr<JobManager> manager_;
@@ -485,7 +493,7 @@ TEST_F(JobManagerTest, EndIsReportedBeforeAnyoneSeesTheTerminalState) {
 }
 
 TEST_F(JobManagerTest, StoredJobsCountTheirOperationsInTheMemoryBudget) {
-  MemoryBudget budget(std::int64_t{8} << 20);
+  MemoryBudget& budget = Budget(std::int64_t{8} << 20);
   JobManagerOptions options = GatedOptions();
   options.budget = &budget;
   Start(std::move(options));
@@ -519,7 +527,7 @@ TEST_F(JobManagerTest, StoredJobsCountTheirOperationsInTheMemoryBudget) {
 }
 
 TEST_F(JobManagerTest, ResultThatDoesNotFitTheBudgetFailsTheJobWithResourceExhausted) {
-  MemoryBudget budget(std::int64_t{1} << 20);
+  MemoryBudget& budget = Budget(std::int64_t{1} << 20);
   JobManagerOptions options;
   options.budget = &budget;
   Start(std::move(options));

@@ -63,14 +63,23 @@ class ReflectionClient {
     grpc::ByteBuffer in;
     grpc::Status status;
     int tag = 0;
+    // Each step runs only if the one before succeeded; the status is read in any case (a server
+    // that refuses the call ends it before the request is written).
     call->StartCall(&tag);
-    if (!Step(queue)) return nullptr;
-    call->Write(out, &tag);
-    if (!Step(queue)) return nullptr;
-    call->WritesDone(&tag);
-    if (!Step(queue)) return nullptr;
-    call->Read(&in, &tag);
-    const bool read = Step(queue);
+    bool open = Step(queue);
+    if (open) {
+      call->Write(out, &tag);
+      open = Step(queue);
+    }
+    if (open) {
+      call->WritesDone(&tag);
+      open = Step(queue);
+    }
+    bool read = false;
+    if (open) {
+      call->Read(&in, &tag);
+      read = Step(queue);
+    }
     call->Finish(&status, &tag);
     Step(queue);
     if (status_out != nullptr) *status_out = status;
