@@ -186,7 +186,7 @@ absl::StatusOr<Clip> Bake(const KeyedClip& keyed, std::optional<double> frame_ti
   const auto channel_count = static_cast<double>(keyed.layout.channels.size());
   if (last_index + 1.0 > static_cast<double>(limits.max_frames) ||
       last_index + 1.0 > static_cast<double>(limits.max_samples) / channel_count) {
-    return OverLimitError(absl::StrCat(
+    return absl::InvalidArgumentError(absl::StrCat(
         "bake at ", frame_time, " s per frame gives ", last_index + 1.0, " frames x ",
         keyed.layout.channels.size(), " channels, over the limit of ", limits.max_samples,
         " samples"));
