@@ -1,5 +1,6 @@
 // The jitter benchmark of SPEC 8 (filtering): how close key-reduced curves of noisy captures come
-// to the clean motion, against the standard zero-lag Butterworth low-pass.
+// to the clean motion, against the standard zero-lag Butterworth low-pass and an adaptive-knot
+// smoothing spline (FITPACK's criterion), side by side in one run.
 //
 // Clean motion: each shared Bandai clip, rotation channels unwrapped, upsampled 30 -> 120 fps by
 // cubic (Catmull-Rom) interpolation. Noisy input: the clean motion plus Gaussian noise of
@@ -9,10 +10,21 @@
 //
 //   filter_bench [BOUND_DEGREES ...]     (default bounds: 0.75 1.0 1.25 1.5)
 //
-// Rows: the noisy input itself, the zero-lag 2nd-order Butterworth at 10/15/20/25 Hz (filtfilt:
-// forward and backward, so no phase lag; every sample kept), and the `tolerance` reduction at
-// each bound (within the bound of the *noisy* input at every frame, as always).
+// Rows, each with RMS and max error against the clean motion (degrees) and keys kept:
+//   - the noisy input itself;
+//   - the zero-lag 2nd-order Butterworth at 10/15/20/25 Hz (filtfilt: forward and backward, so no
+//     phase lag; every sample kept);
+//   - the smoothing-spline anchor: a C2 cubic spline with knots on frames, knots added where the
+//     residual is largest until the least-squares spline's residual is at most s = N sigma^2
+//     (FITPACK's criterion, sigma the true 0.5; keys = knots), written here;
+//   - `tolerance` at each bound (within the bound of the *noisy* input at every frame);
+//   - `paper` with its defaults;
+//   - `noise` with sigma known (0.5) and estimated per channel.
+// Then, at matched key counts: each reducing method refitted to keep about as many keys as
+// `noise` (sigma estimated): `tolerance` through its key budget per clip, the spline anchor by
+// scaling s, `paper` by the spacing of its initial keys.
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -22,8 +34,10 @@
 #include <string>
 #include <vector>
 
+#include "absl/strings/str_format.h"
 #include "tempokey/core/io/bvh.h"
 #include "tempokey/core/model/keyed_clip.h"
+#include "tempokey/core/reduce/noise_fit.h"
 #include "tempokey/core/reduce/reduce.h"
 #include "tempokey/core/retime/retime.h"
 #include "tempokey/core/model/rotation.h"
@@ -78,9 +92,10 @@ bool MakeCapture(const std::string& path, std::mt19937& random, Capture& capture
   return true;
 }
 
-// Accumulates squared error against the clean motion over rotation channels.
+// Accumulates squared and largest error against the clean motion over rotation channels.
 struct ErrorSum {
   double squared = 0.0;
+  double max = 0.0;
   std::int64_t samples = 0;
   std::int64_t keys = 0;
 
@@ -88,6 +103,7 @@ struct ErrorSum {
     for (std::size_t i = 0; i < clean.size(); ++i) {
       const double e = estimate[i] - clean[i];
       squared += e * e;
+      max = std::max(max, std::abs(e));
     }
     samples += static_cast<std::int64_t>(clean.size());
   }
@@ -96,6 +112,133 @@ struct ErrorSum {
     return 100.0 * static_cast<double>(keys) / static_cast<double>(samples);
   }
 };
+
+// ---- the smoothing-spline anchor -----------------------------------------------------------------
+
+// Solves the symmetric positive definite band system A y = b in place (band[i][k] = A(i, i - k),
+// half-width 3) by Cholesky.
+void SolveBand3(std::vector<std::array<double, 4>>& band, std::vector<double>& y) {
+  const std::size_t n = band.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    for (std::size_t k = 3; k >= 1; --k) {
+      if (i < k) continue;
+      const std::size_t j = i - k;
+      double sum = band[i][k];
+      for (std::size_t m = k + 1; m <= 3 && i >= m; ++m) sum -= band[i][m] * band[j][m - k];
+      band[i][k] = sum / band[j][0];
+    }
+    double sum = band[i][0];
+    for (std::size_t k = 1; k <= 3 && i >= k; ++k) sum -= band[i][k] * band[i][k];
+    band[i][0] = std::sqrt(sum);
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    double sum = y[i];
+    for (std::size_t k = 1; k <= 3 && i >= k; ++k) sum -= band[i][k] * y[i - k];
+    y[i] = sum / band[i][0];
+  }
+  for (std::size_t i = n; i-- > 0;) {
+    double sum = y[i];
+    for (std::size_t k = 1; k <= 3 && i + k < n; ++k) sum -= band[i + k][k] * y[i + k];
+    y[i] = sum / band[i][0];
+  }
+}
+
+// The least-squares C2 cubic spline through samples x at frames 0..n-1 with the given interior
+// knots (integer frames, strictly increasing inside (0, n-1)): B-splines on the clamped knot
+// vector, the four non-zero ones at each frame by de Boor's recurrence, banded normal equations.
+std::vector<double> LeastSquaresSpline(std::span<const double> x,
+                                       const std::vector<std::int64_t>& interior) {
+  const auto last = static_cast<double>(x.size() - 1);
+  std::vector<double> knots(4, 0.0);
+  for (std::int64_t k : interior) knots.push_back(static_cast<double>(k));
+  for (int i = 0; i < 4; ++i) knots.push_back(last);
+  const std::size_t count = interior.size() + 4;  // basis functions
+  std::vector<std::array<double, 4>> band(count, {0.0, 0.0, 0.0, 0.0});
+  std::vector<double> rhs(count, 0.0);
+  std::vector<std::array<double, 4>> basis(x.size());
+  std::vector<std::size_t> span_of(x.size());
+  std::size_t span = 3;
+  for (std::size_t f = 0; f < x.size(); ++f) {
+    const auto u = static_cast<double>(f);
+    while (span + 1 < count && knots[span + 1] <= u) ++span;
+    std::array<double, 4> n{1.0, 0.0, 0.0, 0.0};
+    std::array<double, 4> left{}, right{};
+    for (int j = 1; j <= 3; ++j) {
+      left[j] = u - knots[span + 1 - j];
+      right[j] = knots[span + j] - u;
+      double saved = 0.0;
+      for (int r = 0; r < j; ++r) {
+        const double temp = n[r] / (right[r + 1] + left[j - r]);
+        n[r] = saved + right[r + 1] * temp;
+        saved = left[j - r] * temp;
+      }
+      n[j] = saved;
+    }
+    basis[f] = n;
+    span_of[f] = span;
+    for (int a = 0; a < 4; ++a) {
+      const std::size_t row = span - 3 + a;
+      rhs[row] += n[a] * x[f];
+      for (int b = 0; b <= a; ++b) band[row][a - b] += n[a] * n[b];
+    }
+  }
+  for (auto& row : band) row[0] += 1e-12;  // keeps the factorization regular
+  SolveBand3(band, rhs);
+  std::vector<double> y(x.size());
+  for (std::size_t f = 0; f < x.size(); ++f) {
+    double v = 0.0;
+    for (int a = 0; a < 4; ++a) v += basis[f][a] * rhs[span_of[f] - 3 + a];
+    y[f] = v;
+  }
+  return y;
+}
+
+// FITPACK's knot strategy for s = `target` (a residual sum of squares): from no interior knots,
+// fit, and while the residual exceeds the target add knots in the intervals (between knots)
+// whose residual is largest, each where the interval's residual splits in half; the fit with
+// residual <= target. Keys: the knots, the two ends included.
+std::vector<double> SmoothingSpline(std::span<const double> x, double target,
+                                    std::int64_t* keys) {
+  const auto n = static_cast<std::int64_t>(x.size());
+  std::vector<std::int64_t> interior;
+  std::vector<double> y = LeastSquaresSpline(x, interior);
+  for (;;) {
+    std::vector<std::int64_t> bounds = {0};
+    bounds.insert(bounds.end(), interior.begin(), interior.end());
+    bounds.push_back(n - 1);
+    double total = 0.0;
+    std::vector<std::pair<double, std::size_t>> intervals;
+    for (std::size_t j = 0; j + 1 < bounds.size(); ++j) {
+      double rss = 0.0;
+      const std::int64_t end = j + 2 == bounds.size() ? bounds[j + 1] + 1 : bounds[j + 1];
+      for (std::int64_t f = bounds[j]; f < end; ++f) rss += (y[f] - x[f]) * (y[f] - x[f]);
+      total += rss;
+      if (bounds[j + 1] - bounds[j] >= 2) intervals.emplace_back(rss, j);
+    }
+    if (total <= target || intervals.empty()) break;
+    std::sort(intervals.rbegin(), intervals.rend());
+    const std::size_t add = std::max<std::size_t>(1, intervals.size() / 5);
+    for (std::size_t r = 0; r < add && r < intervals.size(); ++r) {
+      const std::size_t j = intervals[r].second;
+      const double half = 0.5 * intervals[r].first;
+      double sum = 0.0;
+      std::int64_t at = bounds[j] + 1;
+      for (std::int64_t f = bounds[j]; f < bounds[j + 1]; ++f) {
+        sum += (y[f] - x[f]) * (y[f] - x[f]);
+        if (sum >= half) {
+          at = f;
+          break;
+        }
+      }
+      interior.push_back(std::clamp(at, bounds[j] + 1, bounds[j + 1] - 1));
+    }
+    std::sort(interior.begin(), interior.end());
+    interior.erase(std::unique(interior.begin(), interior.end()), interior.end());
+    y = LeastSquaresSpline(x, interior);
+  }
+  *keys = static_cast<std::int64_t>(interior.size()) + 2;
+  return y;
+}
 
 // One pass of the 2nd-order Butterworth low-pass (bilinear transform, pre-warped cut-off), its
 // state started at the first sample so a constant signal passes unchanged.
@@ -129,12 +272,74 @@ std::vector<double> FiltFilt(std::span<const double> x, double cutoff_hz, double
   return both;
 }
 
-void PrintRow(const char* name, const ErrorSum& sum, bool keyed) {
+void PrintRow(const std::string& name, const ErrorSum& sum, bool keyed) {
   if (keyed) {
-    std::printf("%-28s %9.4f %8.2f\n", name, sum.Rms(), sum.KeyPercent());
+    std::printf("%-36s %9.4f %9.3f %8.2f\n", name.c_str(), sum.Rms(), sum.max, sum.KeyPercent());
   } else {
-    std::printf("%-28s %9.4f %8s\n", name, sum.Rms(), "100");
+    std::printf("%-36s %9.4f %9.3f %8s\n", name.c_str(), sum.Rms(), sum.max, "100");
   }
+  std::fflush(stdout);
+}
+
+using Captures = std::vector<Capture>;
+
+// Each rotation channel of every capture through `fit` (noisy samples in, estimate out, keys
+// added to the sum).
+template <typename Fit>
+ErrorSum PerChannel(const Captures& captures, Fit fit) {
+  ErrorSum sum;
+  for (const Capture& capture : captures) {
+    for (std::size_t c = 0; c < capture.clean.channels.size(); ++c) {
+      if (!IsRotation(capture.clean.channels[c].kind)) continue;
+      std::int64_t keys = 0;
+      const std::vector<double> estimate = fit(capture.noisy.channels[c].samples, &keys);
+      sum.Add(capture.clean.channels[c].samples, estimate);
+      sum.keys += keys;
+    }
+  }
+  return sum;
+}
+
+ErrorSum SplineAnchor(const Captures& captures, double scale) {
+  return PerChannel(captures, [&](std::span<const double> noisy, std::int64_t* keys) {
+    const double target =
+        scale * static_cast<double>(noisy.size()) * kNoiseSigmaDegrees * kNoiseSigmaDegrees;
+    return SmoothingSpline(noisy, target, keys);
+  });
+}
+
+// A reduction of every capture with `options(capture index)`, measured on rotation channels.
+template <typename Options>
+absl::StatusOr<ErrorSum> Reduced(const Captures& captures, Options options) {
+  ErrorSum sum;
+  for (std::size_t i = 0; i < captures.size(); ++i) {
+    const Capture& capture = captures[i];
+    absl::StatusOr<ReduceResult> reduced = ReduceKeys(capture.noisy, options(i));
+    if (!reduced.ok()) return reduced.status();
+    std::vector<double> fitted(static_cast<std::size_t>(capture.clean.frame_count));
+    for (std::size_t c = 0; c < capture.clean.channels.size(); ++c) {
+      if (!IsRotation(capture.clean.channels[c].kind)) continue;
+      SampleCurve(reduced->keyed.curves[c], capture.clean.frame_time_seconds, fitted);
+      sum.Add(capture.clean.channels[c].samples, fitted);
+      sum.keys += static_cast<std::int64_t>(reduced->keyed.curves[c].keys.size());
+    }
+  }
+  return sum;
+}
+
+// Keys of every channel (all kinds) of a reduction of each capture, for key budgets.
+std::vector<std::int64_t> KeysPerCapture(const Captures& captures, const ReduceOptions& options) {
+  std::vector<std::int64_t> keys;
+  for (const Capture& capture : captures) {
+    absl::StatusOr<ReduceResult> reduced = ReduceKeys(capture.noisy, options);
+    keys.push_back(reduced.ok() ? reduced->report.key_count : 0);
+  }
+  return keys;
+}
+
+int Fail(const absl::Status& status) {
+  std::fprintf(stderr, "%s\n", std::string(status.message()).c_str());
+  return 1;
 }
 
 int Main(int argc, char** argv) {
@@ -143,7 +348,7 @@ int Main(int argc, char** argv) {
   if (bounds.empty()) bounds = {0.75, 1.0, 1.25, 1.5};
 
   std::mt19937 random(kSeed);
-  std::vector<Capture> captures;
+  Captures captures;
   for (const std::string& file : BandaiFiles()) {
     Capture capture;
     if (!MakeCapture(file, random, capture)) return 1;
@@ -151,53 +356,110 @@ int Main(int argc, char** argv) {
   }
   std::printf("jitter benchmark: %zu Bandai clips at %lld fps, noise sigma %.2f deg, seed %u\n",
               captures.size(), static_cast<long long>(kCleanRate), kNoiseSigmaDegrees, kSeed);
-  std::printf("%-28s %9s %8s\n", "method", "RMS deg", "keys %");
 
-  ErrorSum input;
+  // The noise estimate per rotation channel (the method's own estimator).
+  std::vector<double> estimates;
   for (const Capture& capture : captures) {
-    for (std::size_t c = 0; c < capture.clean.channels.size(); ++c) {
-      if (!IsRotation(capture.clean.channels[c].kind)) continue;
-      input.Add(capture.clean.channels[c].samples, capture.noisy.channels[c].samples);
+    for (const Channel& channel : capture.noisy.channels) {
+      if (IsRotation(channel.kind)) estimates.push_back(EstimateNoiseSigma(channel.samples));
     }
   }
-  PrintRow("noisy input", input, false);
+  std::sort(estimates.begin(), estimates.end());
+  double mean = 0.0;
+  for (double e : estimates) mean += e;
+  mean /= static_cast<double>(estimates.size());
+  std::printf("noise estimate over %zu rotation channels: median %.4f, mean %.4f, 5-95 %% "
+              "%.4f-%.4f, min %.4f, max %.4f (true %.2f)\n",
+              estimates.size(), estimates[estimates.size() / 2], mean,
+              estimates[estimates.size() / 20], estimates[estimates.size() * 19 / 20],
+              estimates.front(), estimates.back(), kNoiseSigmaDegrees);
 
+  std::printf("%-36s %9s %9s %8s\n", "method", "RMS deg", "max deg", "keys %");
+  PrintRow("noisy input", PerChannel(captures, [](std::span<const double> noisy, std::int64_t*) {
+             return std::vector<double>(noisy.begin(), noisy.end());
+           }), false);
   for (double cutoff : {10.0, 15.0, 20.0, 25.0}) {
-    ErrorSum sum;
-    for (const Capture& capture : captures) {
-      for (std::size_t c = 0; c < capture.clean.channels.size(); ++c) {
-        if (!IsRotation(capture.clean.channels[c].kind)) continue;
-        sum.Add(capture.clean.channels[c].samples,
-                FiltFilt(capture.noisy.channels[c].samples, cutoff, kCleanRate));
-      }
-    }
-    const std::string name = "butterworth 2nd, " + std::to_string(static_cast<int>(cutoff)) + " Hz";
-    PrintRow(name.c_str(), sum, false);
+    PrintRow(absl::StrFormat("butterworth 2nd, %.0f Hz", cutoff),
+             PerChannel(captures,
+                        [&](std::span<const double> noisy, std::int64_t*) {
+                          return FiltFilt(noisy, cutoff, kCleanRate);
+                        }),
+             false);
   }
+  PrintRow("smoothing spline, s = N sigma^2", SplineAnchor(captures, 1.0), true);
 
+  ErrorSum best_tolerance;
+  double best_bound = 0.0;
   for (double bound : bounds) {
-    ErrorSum sum;
-    for (const Capture& capture : captures) {
-      ReduceOptions options;
-      options.tolerance.max_rotation_error_degrees = bound;
-      absl::StatusOr<ReduceResult> reduced = ReduceKeys(capture.noisy, options);
-      if (!reduced.ok()) {
-        std::fprintf(stderr, "%s\n", std::string(reduced.status().message()).c_str());
-        return 1;
-      }
-      std::vector<double> fitted(static_cast<std::size_t>(capture.clean.frame_count));
-      for (std::size_t c = 0; c < capture.clean.channels.size(); ++c) {
-        if (!IsRotation(capture.clean.channels[c].kind)) continue;
-        SampleCurve(reduced->keyed.curves[c], capture.clean.frame_time_seconds, fitted);
-        sum.Add(capture.clean.channels[c].samples, fitted);
-        sum.keys += static_cast<std::int64_t>(reduced->keyed.curves[c].keys.size());
-      }
+    ReduceOptions options;
+    options.tolerance.max_rotation_error_degrees = bound;
+    absl::StatusOr<ErrorSum> sum = Reduced(captures, [&](std::size_t) { return options; });
+    if (!sum.ok()) return Fail(sum.status());
+    PrintRow(absl::StrFormat("tolerance, bound %.2f deg", bound), *sum, true);
+    if (best_bound == 0.0 || sum->Rms() < best_tolerance.Rms()) {
+      best_tolerance = *sum;
+      best_bound = bound;
     }
-    const std::string name = "tolerance, bound " + std::to_string(bound).substr(0, 4) + " deg";
-    PrintRow(name.c_str(), sum, true);
   }
-  std::printf("SPEC 8 target: RMS <= 0.20 deg with <= 8 %% keys; anchors: noisy 0.50, "
-              "Butterworth 20 Hz 0.276, FITPACK smoothing spline 0.236 at 9.8 %%\n");
+  ReduceOptions paper;
+  paper.method = ReduceMethod::kPaper;
+  absl::StatusOr<ErrorSum> paper_sum = Reduced(captures, [&](std::size_t) { return paper; });
+  if (!paper_sum.ok()) return Fail(paper_sum.status());
+  PrintRow("paper, defaults", *paper_sum, true);
+
+  ReduceOptions known;
+  known.method = ReduceMethod::kNoise;
+  known.noise.rotation_sigma_degrees = kNoiseSigmaDegrees;
+  absl::StatusOr<ErrorSum> known_sum = Reduced(captures, [&](std::size_t) { return known; });
+  if (!known_sum.ok()) return Fail(known_sum.status());
+  PrintRow("noise, sigma known (0.5)", *known_sum, true);
+  ReduceOptions estimated;
+  estimated.method = ReduceMethod::kNoise;
+  absl::StatusOr<ErrorSum> noise_sum = Reduced(captures, [&](std::size_t) { return estimated; });
+  if (!noise_sum.ok()) return Fail(noise_sum.status());
+  PrintRow("noise, sigma estimated", *noise_sum, true);
+  std::printf("best tolerance bound: %.2f deg\n", best_bound);
+
+  // ---- matched key counts: as many keys as `noise` (sigma estimated) -------------------------
+  std::printf("\nat the key count of noise, sigma estimated (%.2f %%):\n", noise_sum->KeyPercent());
+  std::printf("%-36s %9s %9s %8s\n", "method", "RMS deg", "max deg", "keys %");
+  PrintRow("noise, sigma estimated", *noise_sum, true);
+  // tolerance: the key budget of each clip is what `noise` kept on it (all channels).
+  const std::vector<std::int64_t> budgets = KeysPerCapture(captures, estimated);
+  absl::StatusOr<ErrorSum> tolerance_matched = Reduced(captures, [&](std::size_t i) {
+    ReduceOptions options;
+    options.tolerance.key_budget = budgets[i];
+    return options;
+  });
+  if (!tolerance_matched.ok()) return Fail(tolerance_matched.status());
+  PrintRow("tolerance, key budget", *tolerance_matched, true);
+  // The spline anchor: s scaled (bisection in ratio) until its knots match.
+  double low = 0.25, high = 4.0;
+  ErrorSum spline_matched = SplineAnchor(captures, 1.0);
+  for (int step = 0; step < 10; ++step) {
+    const double scale = std::sqrt(low * high);
+    spline_matched = SplineAnchor(captures, scale);
+    if (spline_matched.keys > noise_sum->keys) {
+      low = scale;  // more knots than wanted: allow more residual
+    } else {
+      high = scale;
+    }
+  }
+  PrintRow(absl::StrFormat("smoothing spline, s = %.3f N sigma^2", std::sqrt(low * high)),
+           spline_matched, true);
+  // paper: its keys follow its initial keys; spacing them as the matched count does.
+  ReduceOptions paper_matched = paper;
+  paper_matched.paper.min_key_spacing_frames =
+      std::max(1, static_cast<int>(std::lround(100.0 / noise_sum->KeyPercent())));
+  paper_matched.paper.smoothing_sigma_frames =
+      0.5 * static_cast<double>(paper_matched.paper.min_key_spacing_frames);
+  absl::StatusOr<ErrorSum> paper_matched_sum =
+      Reduced(captures, [&](std::size_t) { return paper_matched; });
+  if (!paper_matched_sum.ok()) return Fail(paper_matched_sum.status());
+  PrintRow(absl::StrFormat("paper, initial keys %d frames apart",
+                           paper_matched.paper.min_key_spacing_frames),
+           *paper_matched_sum, true);
+  std::printf("\nSPEC 8 target: RMS <= 0.20 deg with <= 8 %% keys\n");
   return 0;
 }
 

@@ -4,15 +4,20 @@
 // fitting time per million samples on one core.
 //
 //   reduce_quality_bench [paper|tolerance|both] [max_iterations | max_error_degrees]
+//   reduce_quality_bench world
 //
 // `paper` counts every rotation channel (constant ones keep two keys). `tolerance` excludes
 // constant channels, as SPEC 8's key-count targets do (CMU <= 5 %, Bandai <= 15 % at 0.5°).
+// `world` prints every shared clip's joint world-position error at the default settings, then the
+// joint bound against the per-channel 0.5° reduction (SPEC 8: at 1 cm on the Bandai clips, every
+// joint within 1 cm with no more keys): keys %, worst joint error, RMS rotation error.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -100,6 +105,93 @@ bool PrintTable(const ReduceOptions& options, const char* title, bool skip_const
   return true;
 }
 
+// ---- world error (SPEC 4.4, 8) -------------------------------------------------------------------
+
+// Every shared clip's world error at the default settings.
+bool PrintWorldReports() {
+  const std::string root = std::string(TEMPOKEY_SHARED_DIR) + "/data/bvh/";
+  std::printf("world error at the default settings (0.5 deg, positions 0.3 %% of the height)\n");
+  std::printf("%-50s %8s %7s %9s %8s %9s %8s  %s\n", "clip", "height", "keys %", "max", "max %",
+              "RMS", "RMS %", "worst joint, frame");
+  for (const char* set : {"cmu", "bandai"}) {
+    for (const std::string& file : BvhFiles(root + set)) {
+      absl::StatusOr<Clip> clip = ReadBvhFile(file);
+      if (!clip.ok()) return false;
+      absl::StatusOr<ReduceResult> result = ReduceKeys(*clip, ReduceOptions{});
+      if (!result.ok() || !result->report.world) {
+        std::fprintf(stderr, "%s\n", std::string(result.status().message()).c_str());
+        return false;
+      }
+      const WorldErrorReport& w = *result->report.world;
+      std::printf("%-50s %8.2f %7.2f %9.4f %8.3f %9.4f %8.4f  %s, %lld\n",
+                  (std::string(set) + "/" + std::filesystem::path(file).filename().string()).c_str(),
+                  w.figure_height, result->report.key_percent(), w.max_error,
+                  w.max_error_percent(), w.rms_error, w.rms_error_percent(),
+                  w.worst_point_name.c_str(), static_cast<long long>(w.worst_frame));
+    }
+  }
+  std::printf("\n");
+  return true;
+}
+
+struct WorldSetting {
+  const char* name;
+  std::optional<JointTolerance> joint;
+};
+
+// Per setting, over the clips of `set`: keys of the non-constant channels (all, and rotations
+// alone) as a percentage of their samples, the worst joint error (file units and % of the
+// height) with the bound it kept, the RMS error of the rotation channels (degrees), time.
+bool PrintJointBoundTable(const char* set, const std::vector<WorldSetting>& settings) {
+  const std::string root = std::string(TEMPOKEY_SHARED_DIR) + "/data/bvh/";
+  std::printf("joint bound, %s clips, channels without constant ones\n", set);
+  std::printf("%-20s %7s %7s %10s %9s %10s %10s %9s\n", "setting", "keys %", "rot %",
+              "worst jnt", "worst %", "bound", "RMS rot", "ms per M");
+  for (const WorldSetting& setting : settings) {
+    std::int64_t keys = 0, samples = 0, rotation_keys = 0, rotation_samples = 0, all = 0;
+    double rotation_squared = 0.0, worst = 0.0, worst_percent = 0.0, seconds = 0.0;
+    double bound = 0.0;
+    for (const std::string& file : BvhFiles(root + set)) {
+      absl::StatusOr<Clip> clip = ReadBvhFile(file);
+      if (!clip.ok()) return false;
+      ReduceOptions options;
+      options.tolerance.joint_tolerance = setting.joint;
+      const auto start = std::chrono::steady_clock::now();
+      absl::StatusOr<ReduceResult> result = ReduceKeys(*clip, options);
+      seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      all += clip->sample_count();
+      if (!result.ok()) {
+        std::fprintf(stderr, "%s: %s\n", file.c_str(),
+                     std::string(result.status().message()).c_str());
+        return false;
+      }
+      for (const ChannelReduction& channel : result->report.channels) {
+        const Channel& source = clip->channels[channel.channel_index];
+        if (IsConstantChannel(source)) continue;
+        keys += channel.key_count;
+        samples += channel.sample_count;
+        if (!IsRotation(source.kind)) continue;
+        rotation_keys += channel.key_count;
+        rotation_samples += channel.sample_count;
+        rotation_squared +=
+            channel.rms_error * channel.rms_error * static_cast<double>(channel.sample_count);
+      }
+      const WorldErrorReport& w = *result->report.world;
+      worst = std::max(worst, w.max_error);
+      worst_percent = std::max(worst_percent, w.max_error_percent());
+      bound = std::max(bound, w.joint_tolerance);
+    }
+    std::printf("%-20s %7.2f %7.2f %10.4f %9.3f %10.4f %10.4f %9.1f\n", setting.name,
+                100.0 * static_cast<double>(keys) / static_cast<double>(samples),
+                100.0 * static_cast<double>(rotation_keys) / static_cast<double>(rotation_samples),
+                worst, worst_percent, bound,
+                std::sqrt(rotation_squared / static_cast<double>(rotation_samples)),
+                1e9 * seconds / static_cast<double>(all));
+  }
+  std::printf("\n");
+  return true;
+}
+
 }  // namespace
 }  // namespace tempokey::core
 
@@ -122,8 +214,23 @@ int main(int argc, char** argv) {
     }
     const std::string title =
         "tolerance method, rotation channels without constant ones, bound " +
-        std::to_string(options.tolerance.max_rotation_error_degrees) + " deg";
+        std::to_string(
+            options.tolerance.max_rotation_error_degrees.value_or(kDefaultMaxRotationErrorDegrees)) +
+        " deg";
     if (!PrintTable(options, title.c_str(), true)) return 1;
+  }
+  if (which == "world") {
+    if (!PrintWorldReports()) return 1;
+    if (!PrintJointBoundTable("bandai", {{"per-channel 0.5 deg", std::nullopt},
+                                         {"joint 1 cm", JointTolerance{.value = 1.0}},
+                                         {"joint 0.5 cm", JointTolerance{.value = 0.5}}})) {
+      return 1;
+    }
+    if (!PrintJointBoundTable("cmu", {{"per-channel 0.5 deg", std::nullopt},
+                                      {"joint 0.5 %", JointTolerance{.value = 0.5,
+                                                                     .percent_of_height = true}}})) {
+      return 1;
+    }
   }
   return 0;
 }

@@ -215,10 +215,10 @@ absl::StatusOr<std::pair<std::string, std::string>> ParseLabel(std::string_view 
   return std::make_pair(std::string(text.substr(0, eq)), std::string(text.substr(eq + 1)));
 }
 
-absl::StatusOr<std::string> ParseChoice(std::string_view flag, std::string_view text,
-                                        std::span<const std::string_view> choices) {
+absl::StatusOr<std::string_view> ParseChoice(std::string_view flag, std::string_view text,
+                                             std::span<const std::string_view> choices) {
   for (std::string_view choice : choices) {
-    if (text == choice) return std::string(choice);
+    if (text == choice) return choice;
   }
   std::vector<std::string> names(choices.begin(), choices.end());
   return BadValue(flag, absl::StrCat("one of ", absl::StrJoin(names, ", ")), text);

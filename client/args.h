@@ -84,9 +84,10 @@ absl::StatusOr<std::pair<std::string, std::string>> SplitPair(std::string_view f
 absl::StatusOr<std::pair<std::string, std::string>> ParseLabel(std::string_view flag,
                                                                std::string_view text);
 
-// `text` if it is one of `choices`. Errors: "--filter: expected one of tent, linear, ..., got 'x'".
-absl::StatusOr<std::string> ParseChoice(std::string_view flag, std::string_view text,
-                                        std::span<const std::string_view> choices);
+// The entry of `choices` equal to `text` (a view of that entry: `choices` must outlive it).
+// Errors: "--filter: expected one of tent, linear, ..., got 'x'".
+absl::StatusOr<std::string_view> ParseChoice(std::string_view flag, std::string_view text,
+                                             std::span<const std::string_view> choices);
 
 }  // namespace tempokey::client
 

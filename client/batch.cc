@@ -12,7 +12,9 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "client/batch_manifest.h"
 #include "client/cli_errors.h"
+#include "proto/clip_digest.h"
 #include "proto/retry_hint.h"
 #include "tempokey/core/io/json.h"
 #include "tempokey/core/model/numbers.h"
@@ -68,6 +70,7 @@ void Describe(const core::PipelineResult& result, BatchFileResult& file) {
     if (const auto* reduction = std::get_if<core::ReductionReport>(&report)) {
       file.keys = reduction->key_count;
       file.max_error = reduction->max_error;
+      if (reduction->world) file.max_joint_error = reduction->world->max_error;
     }
   }
 }
@@ -93,26 +96,68 @@ BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
   absl::StatusOr<core::Clip> clip = ReadClipFile(item.input_path, options.csv_frame_time_seconds);
   if (!clip.ok()) return finish(clip.status());
   const std::vector<core::PipelineStep> file_steps = StepsForFormat(steps, item.output_format);
+  std::string input_id;
+  std::string pipeline;
+  if (options.manifest != nullptr) {
+    input_id = wire::ClipContentId(*clip);
+    pipeline = PipelineDigest(file_steps, item.output_format);
+    if (std::optional<ManifestRecord> record =
+            options.manifest->FindUpToDate(item, input_id, pipeline)) {
+      options.manifest->Keep(*record);
+      file.skipped = true;
+      file.frames = record->frames;
+      file.keys = record->keys;
+      file.max_error = record->max_error;
+      return finish(absl::OkStatus());
+    }
+  }
   if (absl::Status valid = core::ValidatePipeline(*clip, file_steps); !valid.ok()) {
     return finish(valid);
   }
-  absl::StatusOr<core::PipelineResult> result;
-  while (true) {
-    ++file.attempts;
-    result = client.Process(*clip, file_steps);
-    if (result.ok()) break;
-    const std::optional<std::chrono::milliseconds> delay =
-        RetryDelay(result.status(), file.attempts, options, random);
-    if (!delay) return finish(ServerError(result.status()));
-    std::this_thread::sleep_for(*delay);
+  auto process = [&](const core::Clip& input, std::span<const core::PipelineStep> part)
+      -> absl::StatusOr<core::PipelineResult> {
+    while (true) {
+      ++file.attempts;
+      absl::StatusOr<core::PipelineResult> result = client.Process(input, part);
+      if (result.ok()) return result;
+      const std::optional<std::chrono::milliseconds> delay =
+          RetryDelay(result.status(), file.attempts, options, random);
+      if (!delay) return ServerError(result.status());
+      std::this_thread::sleep_for(*delay);
+    }
+  };
+  // A keyed glTF fits its rotations against the clip the final reduce took: the input, or what
+  // the steps before that reduce make of it (fetched first, then reduced in a second call).
+  GltfExportSource gltf;
+  std::span<const core::PipelineStep> remaining(file_steps);
+  core::Clip reduce_input;
+  if (IsGltfFormat(item.output_format) && core::ProducesKeyedOutput(file_steps)) {
+    const std::size_t last = file_steps.size() - 1;
+    const auto& reduce = std::get<core::ReduceStep>(file_steps[last]);
+    gltf.max_rotation_error_degrees = GltfRotationBoundDegrees(reduce);
+    gltf.source = &*clip;
+    if (last > 0) {
+      absl::StatusOr<core::PipelineResult> before = process(*clip, remaining.first(last));
+      if (!before.ok()) return finish(before.status());
+      reduce_input = std::get<core::Clip>(std::move(before->output));
+      gltf.source = &reduce_input;
+      remaining = remaining.subspan(last);
+    }
   }
+  absl::StatusOr<core::PipelineResult> result =
+      process(gltf.source != nullptr ? *gltf.source : *clip, remaining);
+  if (!result.ok()) return finish(result.status());
   std::error_code ignored;
   fs::create_directories(fs::path(item.output_path).parent_path(), ignored);
-  if (absl::Status written = WriteOutput(item.output_path, item.output_format, result->output);
+  if (absl::Status written =
+          WriteOutput(item.output_path, item.output_format, result->output, gltf);
       !written.ok()) {
     return finish(written);
   }
   Describe(*result, file);
+  if (options.manifest != nullptr) {
+    return finish(options.manifest->RecordWritten(item, input_id, pipeline, file));
+  }
   return finish(absl::OkStatus());
 }
 
@@ -173,7 +218,7 @@ absl::StatusOr<std::vector<BatchItem>> PlanBatch(const BatchPlanOptions& options
 std::vector<core::PipelineStep> StepsForFormat(std::span<const core::PipelineStep> steps,
                                                FileFormat format) {
   std::vector<core::PipelineStep> result(steps.begin(), steps.end());
-  if (core::ProducesKeyedOutput(steps) && !IsKeyedFormat(format)) {
+  if (core::ProducesKeyedOutput(steps) && !IsKeyedFormat(format) && !IsGltfFormat(format)) {
     result.push_back(core::BakeStep{});
   }
   return result;
@@ -182,6 +227,16 @@ std::vector<core::PipelineStep> StepsForFormat(std::span<const core::PipelineSte
 int BatchSummary::failed_count() const {
   return static_cast<int>(std::count_if(files.begin(), files.end(),
                                         [](const BatchFileResult& f) { return !f.status.ok(); }));
+}
+
+int BatchSummary::skipped_count() const {
+  return static_cast<int>(std::count_if(files.begin(), files.end(), [](const BatchFileResult& f) {
+    return f.status.ok() && f.skipped;
+  }));
+}
+
+int BatchSummary::done_count() const {
+  return static_cast<int>(files.size()) - failed_count() - skipped_count();
 }
 
 BatchSummary RunBatch(const Client& client, std::span<const BatchItem> items,
@@ -197,6 +252,9 @@ BatchSummary RunBatch(const Client& client, std::span<const BatchItem> items,
     std::mt19937 random(seed);
     for (std::size_t i = next++; i < items.size(); i = next++) {
       summary.files[i] = ProcessFile(client, items[i], steps, options, random);
+      if (options.manifest != nullptr && !summary.files[i].status.ok()) {
+        options.manifest->Forget(items[i]);
+      }
       std::lock_guard<std::mutex> lock(done_mutex);
       ++done;
       if (on_done) on_done(summary.files[i], done, static_cast<int>(items.size()));
@@ -217,8 +275,24 @@ std::string FormatBatchSummaryJson(const BatchSummary& summary) {
   const int failed = summary.failed_count();
   const int total = static_cast<int>(summary.files.size());
   std::string out = absl::StrFormat(
-      "{\"files\": %d, \"succeeded\": %d, \"failed\": %d, \"seconds\": %.3f, \"results\": [",
-      total, total - failed, failed, summary.seconds);
+      "{\"files\": %d, \"succeeded\": %d, \"done\": %d, \"skipped\": %d, \"failed\": %d, "
+      "\"seconds\": %.3f",
+      total, total - failed, summary.done_count(), summary.skipped_count(), failed,
+      summary.seconds);
+  if (summary.shard) absl::StrAppend(&out, ", \"shard\": \"", summary.shard->Name(), "\"");
+  if (summary.merged_shards > 0) {
+    absl::StrAppend(&out, ", \"shards\": ", summary.merged_shards, ", \"missing_shards\": [");
+    for (std::size_t i = 0; i < summary.missing_shards.size(); ++i) {
+      absl::StrAppend(&out, i == 0 ? "\"" : ", \"", summary.missing_shards[i], "/",
+                      summary.merged_shards, "\"");
+    }
+    out += ']';
+  }
+  if (!summary.pipeline.empty()) {
+    out += ", \"pipeline\": ";
+    core::AppendJsonString(out, summary.pipeline);
+  }
+  out += ", \"results\": [";
   for (std::size_t i = 0; i < summary.files.size(); ++i) {
     const BatchFileResult& file = summary.files[i];
     out += i == 0 ? "\n  {\"input\": " : ",\n  {\"input\": ";
@@ -226,7 +300,7 @@ std::string FormatBatchSummaryJson(const BatchSummary& summary) {
     if (file.status.ok()) {
       out += ", \"output\": ";
       core::AppendJsonString(out, file.output_path);
-      out += ", \"status\": \"ok\"";
+      out += file.skipped ? ", \"status\": \"skipped\"" : ", \"status\": \"ok\"";
     } else {
       out += ", \"status\": \"failed\", \"code\": ";
       core::AppendJsonString(out, absl::StatusCodeToString(file.status.code()));
@@ -239,6 +313,9 @@ std::string FormatBatchSummaryJson(const BatchSummary& summary) {
       if (file.frames > 0) absl::StrAppend(&out, ", \"frames\": ", file.frames);
       if (file.keys > 0) absl::StrAppend(&out, ", \"keys\": ", file.keys);
       if (file.max_error) absl::StrAppend(&out, ", \"max_error\": ", core::FormatDouble(*file.max_error));
+      if (file.max_joint_error) {
+        absl::StrAppend(&out, ", \"max_joint_error\": ", core::FormatDouble(*file.max_joint_error));
+      }
     }
     out += '}';
   }

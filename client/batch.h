@@ -14,11 +14,14 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "client/batch_shard.h"
 #include "client/client.h"
 #include "client/clip_files.h"
 #include "tempokey/core/pipeline/pipeline.h"
 
 namespace tempokey::client {
+
+class BatchManifest;
 
 // One file of a batch: where it is read from and written to, and how it is named in reports
 // (its path relative to the input folder).
@@ -58,30 +61,43 @@ struct BatchOptions {
   double initial_backoff_seconds = 0.2;  // doubled per attempt, up to max_backoff_seconds,
   double max_backoff_seconds = 2.0;      // or the server's retry-after hint when it gave one
   std::optional<double> csv_frame_time_seconds;
+  // When set, a file whose output the manifest shows up to date is skipped (read and checked,
+  // not sent), and every output written is recorded in it (batch_manifest.h). Not owned.
+  BatchManifest* manifest = nullptr;
 };
 
 // What happened to one file.
 struct BatchFileResult {
-  std::string name;
-  std::string output_path;
-  absl::Status status;     // OK, or why the file failed (its message names the file)
+  std::string name{};
+  std::string output_path{};
+  absl::Status status{};   // OK, or why the file failed (its message names the file)
+  bool skipped = false;    // OK because the output from an earlier run is up to date
   int attempts = 0;        // Process calls made (0: refused before any call)
   double seconds = 0.0;    // wall time spent on the file, reading and writing included
   std::int64_t frames = 0;      // sampled output: frames written
   std::int64_t keys = 0;        // keyed output or reduction: keys kept
-  std::optional<double> max_error;  // the last reduction's max error, if the pipeline reduced
+  std::optional<double> max_error{};  // the last reduction's max error, if the pipeline reduced
+  // Its joint world-position error (file units), when the clip has a skeleton.
+  std::optional<double> max_joint_error{};
 };
 
 struct BatchSummary {
   std::vector<BatchFileResult> files;  // in plan order
   double seconds = 0.0;
+  std::optional<BatchShard> shard;     // the share of the folder this run took, if sharded
+  std::string pipeline;                // PipelineDigest() of the run's steps and --format
+  int merged_shards = 0;               // N for the merge of a sharded run's summaries
+  std::vector<int> missing_shards;     // and the shards that merge lacks
   int failed_count() const;
+  int skipped_count() const;
+  int done_count() const;  // processed and written by this run
 };
 
 // Called once per finished file (from worker threads, one call at a time).
 using BatchFileDoneFn = std::function<void(const BatchFileResult& result, int done, int total)>;
 
-// Runs `steps` on every item: reads it, checks the pipeline against it (core::ValidatePipeline),
+// Runs `steps` on every item: reads it, skips it when options.manifest says its output is up to
+// date, checks the pipeline against it (core::ValidatePipeline),
 // calls client.Process() (retrying the whole file on UNAVAILABLE, and on RESOURCE_EXHAUSTED when
 // the server sent a retry hint), and writes the output atomically. A file that fails never
 // stops the others and never leaves a partial output.
@@ -91,10 +107,15 @@ BatchSummary RunBatch(const Client& client, std::span<const BatchItem> items,
                       const BatchFileDoneFn& on_done = {});
 
 // The summary as a JSON document (README: "batch summary"):
-// {"files": 3, "succeeded": 2, "failed": 1, "seconds": 1.25, "results": [{"input": "a.bvh",
+// {"files": 3, "succeeded": 2, "done": 1, "skipped": 1, "failed": 1, "seconds": 1.25,
+//  "shard": "0/4", "pipeline": "sha256:...", "results": [{"input": "a.bvh",
 //  "output": "out/a.json", "status": "ok", "attempts": 1, "seconds": 0.4, "keys": 310,
-//  "max_error": 0.49}, {"input": "b.bvh", "status": "failed", "code": "INVALID_ARGUMENT",
+//  "max_error": 0.49, "max_joint_error": 0.98}, {"input": "c.bvh", "output": "out/c.json",
+//  "status": "skipped", ...}, {"input": "b.bvh", "status": "failed", "code": "INVALID_ARGUMENT",
 //  "error": "b.bvh:3:1: ...", "attempts": 0, "seconds": 0.01}, ...]}
+// "succeeded" = done + skipped (every output is right); "shard" only for a sharded run,
+// "pipeline" only when known; a merge (batch_summary.h) has "shards": N and
+// "missing_shards": ["1/4", ...] instead of "shard".
 std::string FormatBatchSummaryJson(const BatchSummary& summary);
 
 }  // namespace tempokey::client

@@ -10,6 +10,8 @@
 #include "client/cli_errors.h"
 #include "tempokey/core/io/bvh.h"
 #include "tempokey/core/io/csv.h"
+#include "tempokey/core/io/file_io.h"
+#include "tempokey/core/io/gltf.h"
 #include "tempokey/core/io/keyed_json.h"
 #include "tempokey/core/io/maya_anim.h"
 #include "tempokey/core/model/status.h"
@@ -28,7 +30,13 @@ constexpr FormatName kFormatNames[] = {
     {FileFormat::kCsv, ".csv"},
     {FileFormat::kKeyedJson, ".json"},
     {FileFormat::kMayaAnim, ".anim"},
+    {FileFormat::kGltf, ".gltf"},
+    {FileFormat::kGlb, ".glb"},
 };
+
+core::GltfContainer GltfContainerOf(FileFormat format) {
+  return format == FileFormat::kGlb ? core::GltfContainer::kBinary : core::GltfContainer::kText;
+}
 
 std::string LowerExtension(const std::string& path) {
   std::string extension = std::filesystem::path(path).extension().string();
@@ -48,6 +56,10 @@ std::string_view ExtensionOf(FileFormat format) {
 
 bool IsKeyedFormat(FileFormat format) {
   return format == FileFormat::kKeyedJson || format == FileFormat::kMayaAnim;
+}
+
+bool IsGltfFormat(FileFormat format) {
+  return format == FileFormat::kGltf || format == FileFormat::kGlb;
 }
 
 absl::StatusOr<FileFormat> FormatForPath(std::string_view flag, const std::string& path,
@@ -81,6 +93,11 @@ absl::Status WriteClipFile(const std::string& path, FileFormat format, const cor
       return core::WriteBvhFile(path, clip);
     case FileFormat::kCsv:
       return core::WriteCsvFile(path, clip);
+    case FileFormat::kGltf:
+    case FileFormat::kGlb: {
+      TEMPOKEY_ASSIGN_OR_RETURN(core::GltfFile file, core::FormatGltfSampled(clip, GltfContainerOf(format)));
+      return core::WriteFileAtomically(path, file.bytes);
+    }
     case FileFormat::kKeyedJson:
     case FileFormat::kMayaAnim:
       break;
@@ -96,6 +113,9 @@ absl::Status WriteKeyedClipFile(const std::string& path, FileFormat format,
       return core::WriteKeyedClipJsonFile(path, keyed);
     case FileFormat::kMayaAnim:
       return core::WriteMayaAnimFile(path, keyed);
+    case FileFormat::kGltf:
+    case FileFormat::kGlb:
+      return absl::InternalError(absl::StrCat(path, ": a keyed glTF needs the source clip"));
     case FileFormat::kBvh:
     case FileFormat::kCsv:
       break;
@@ -105,7 +125,19 @@ absl::Status WriteKeyedClipFile(const std::string& path, FileFormat format,
 }
 
 absl::Status WriteOutput(const std::string& path, FileFormat format,
-                         const std::variant<core::Clip, core::KeyedClip>& output) {
+                         const std::variant<core::Clip, core::KeyedClip>& output,
+                         const GltfExportSource& gltf) {
+  if (const auto* keyed = std::get_if<core::KeyedClip>(&output); keyed && IsGltfFormat(format)) {
+    if (gltf.source == nullptr) {
+      return absl::InternalError(absl::StrCat(path, ": a keyed glTF needs the source clip"));
+    }
+    TEMPOKEY_ASSIGN_OR_RETURN(
+        core::GltfFile file,
+        core::FormatGltfKeyed(*gltf.source, *keyed,
+                              {.max_rotation_error_degrees = gltf.max_rotation_error_degrees},
+                              GltfContainerOf(format)));
+    return core::WriteFileAtomically(path, file.bytes);
+  }
   if (const auto* clip = std::get_if<core::Clip>(&output)) {
     if (IsKeyedFormat(format)) {
       return absl::InternalError(absl::StrCat(path, ": the server returned a sampled clip where "
@@ -113,11 +145,16 @@ absl::Status WriteOutput(const std::string& path, FileFormat format,
     }
     return WriteClipFile(path, format, *clip);
   }
-  if (!IsKeyedFormat(format)) {
+  if (!IsKeyedFormat(format) && !IsGltfFormat(format)) {
     return absl::InternalError(absl::StrCat(path, ": the server returned keyed curves where a "
                                                   "sampled clip was expected"));
   }
   return WriteKeyedClipFile(path, format, std::get<core::KeyedClip>(output));
+}
+
+double GltfRotationBoundDegrees(const core::ReduceStep& reduce) {
+  return reduce.options.tolerance.max_rotation_error_degrees.value_or(
+      core::kDefaultMaxRotationErrorDegrees);
 }
 
 }  // namespace tempokey::client

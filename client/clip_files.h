@@ -14,6 +14,8 @@
 #include "absl/status/statusor.h"
 #include "tempokey/core/model/clip.h"
 #include "tempokey/core/model/keyed_clip.h"
+#include "tempokey/core/pipeline/pipeline.h"
+#include "tempokey/core/reduce/reduce.h"
 
 namespace tempokey::client {
 
@@ -21,7 +23,9 @@ enum class FileFormat {
   kBvh,        // .bvh: hierarchy and motion
   kCsv,        // .csv: one column per channel; the rate is not stored
   kKeyedJson,  // .json: keyed curves (README schema)
-  kMayaAnim,   // .anim: Maya ASCII animation curves with weighted tangents
+  kMayaAnim,   // .anim: Maya ASCII animation curves
+  kGltf,       // .gltf: glTF 2.0 (embedded buffer); keyed curves or samples
+  kGlb,        // .glb: binary glTF 2.0; keyed curves or samples
 };
 
 // ".bvh" -> kBvh, ... (case-insensitive). Errors: a usage error naming `flag` and the path
@@ -31,14 +35,34 @@ absl::StatusOr<FileFormat> FormatForPath(std::string_view flag, const std::strin
                                          std::span<const FileFormat> allowed);
 
 inline constexpr FileFormat kSampledFormats[] = {FileFormat::kBvh, FileFormat::kCsv};
-inline constexpr FileFormat kAllFormats[] = {FileFormat::kBvh, FileFormat::kCsv,
-                                             FileFormat::kKeyedJson, FileFormat::kMayaAnim};
+// What a sampled result may be written as (retime): the sampled formats and glTF.
+inline constexpr FileFormat kSampledOutputFormats[] = {FileFormat::kBvh, FileFormat::kCsv,
+                                                       FileFormat::kGltf, FileFormat::kGlb};
+inline constexpr FileFormat kAllFormats[] = {FileFormat::kBvh,       FileFormat::kCsv,
+                                             FileFormat::kKeyedJson, FileFormat::kMayaAnim,
+                                             FileFormat::kGltf,      FileFormat::kGlb};
 
-// ".bvh", ".csv", ".json" or ".anim".
+// ".bvh", ".csv", ".json", ".anim", ".gltf" or ".glb".
 std::string_view ExtensionOf(FileFormat format);
 
-// Whether `format` holds keyed curves (.json, .anim) rather than samples.
+// Whether `format` holds keyed curves only (.json, .anim) rather than samples.
 bool IsKeyedFormat(FileFormat format);
+
+// Whether `format` is glTF (.gltf, .glb), which holds either: keyed results as CUBICSPLINE
+// samplers, sampled ones as LINEAR samplers (core/io/gltf.h).
+bool IsGltfFormat(FileFormat format);
+
+// What a keyed glTF needs besides the curves: the clip that was reduced (its rotations are
+// fitted again in glTF's quaternion semantics, core/io/gltf.h) and the rotation bound.
+struct GltfExportSource {
+  const core::Clip* source = nullptr;
+  double max_rotation_error_degrees = core::kDefaultMaxRotationErrorDegrees;
+};
+
+// The rotation bound a keyed glTF of `reduce`'s result is fitted to: its rotation tolerance, or
+// the default 0.5 degrees when unset (also under a joint tolerance: the glTF's rotations then
+// stay within 0.5 degrees of the source's, whatever budgets the Euler curves were given).
+double GltfRotationBoundDegrees(const core::ReduceStep& reduce);
 
 // Reads a .bvh, or a .csv at `csv_frame_time_seconds` (the rate is not in the file).
 // Errors: a usage error for another extension, or a .csv without a frame time; the readers'
@@ -55,11 +79,13 @@ absl::Status WriteClipFile(const std::string& path, FileFormat format, const cor
 absl::Status WriteKeyedClipFile(const std::string& path, FileFormat format,
                                 const core::KeyedClip& keyed);
 
-// Writes whichever `output` holds, checking that it suits `format`.
-// Errors: kInternal when a keyed result meets a sampled format or the reverse (the CLI builds
-// pipelines so this cannot happen); those of the writers above.
+// Writes whichever `output` holds, checking that it suits `format`; a keyed result as glTF
+// needs `gltf.source`.
+// Errors: kInternal when a keyed result meets a sampled format or the reverse, or a keyed glTF
+// lacks its source (the CLI builds pipelines so this cannot happen); those of the writers.
 absl::Status WriteOutput(const std::string& path, FileFormat format,
-                         const std::variant<core::Clip, core::KeyedClip>& output);
+                         const std::variant<core::Clip, core::KeyedClip>& output,
+                         const GltfExportSource& gltf = {});
 
 }  // namespace tempokey::client
 

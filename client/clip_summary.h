@@ -41,7 +41,16 @@ std::string FormatRetimeReport(const core::RetimeReport& report);
 // Label-value lines for a reduction report: keys kept of samples with their percentage, RMS and
 // max error (degrees for rotations, file units for positions) and the worst channel and frame,
 // named through `layout` (the clip the curves came from).
+// The world error's lines follow when the report has one (FormatWorldErrorReport()).
 std::string FormatReductionReport(const core::ReductionReport& report, const core::Clip& layout);
+
+// Label-value lines for the joint world-position error, in file units and % of the figure's
+// height:
+//   figure height:   139.3 (first frame)
+//   joint max error: 0.9850 (0.707% of height) at Toes_R, frame 94
+//   joint rms error: 0.2461 (0.177% of height)
+//   joint bound:     1 (0.718% of height)          (only when the reduction kept one)
+std::string FormatWorldErrorReport(const core::WorldErrorReport& world);
 
 // "label:" padded to the summary's value column.
 std::string SummaryLine(std::string_view label, std::string_view value);

@@ -47,7 +47,8 @@ constexpr std::int64_t kMaxPemBytes = 1 << 20;
 std::span<const Command* const> AllCommands() {
   static const Command* const kCommands[] = {
       &InfoCommand(),        &UploadCommand(),     &RunCommand(),       &RetimeCommand(),
-      &ReduceCommand(),      &BatchCommand(),      &HealthCommand(),    &ServerInfoCommand(),
+      &ReduceCommand(),      &BatchCommand(),      &BatchSummaryCommand(),
+      &HealthCommand(),      &ServerInfoCommand(),
       &JobsListCommand(),    &JobsGetCommand(),    &JobsWatchCommand(), &JobsResultCommand(),
       &JobsCancelCommand(),  &JobsDeleteCommand(),
   };

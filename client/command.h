@@ -158,6 +158,7 @@ const Command& JobsDeleteCommand();
 const Command& JobsWatchCommand();
 const Command& JobsResultCommand();
 const Command& BatchCommand();
+const Command& BatchSummaryCommand();
 
 }  // namespace tempokey::client
 

@@ -1,16 +1,22 @@
 // `tempokey batch DIR -o OUTDIR --ops PIPELINE.json`: one pipeline over a folder of clips, for CI
-// stages and bulk conversions. Prints a JSON summary on stdout (and to --summary FILE), a live
-// count on a terminal, and fails (exit 1) if any file failed, after trying every file.
+// stages and bulk conversions. Prints a JSON summary on stdout (and to --summary FILE), progress
+// on stderr (progress_bar.h), and fails (exit 1) if any file failed, after trying every file.
+// Resumable (batch_manifest.h) and shardable (batch_shard.h).
+#include <sys/ioctl.h>
+#include <unistd.h>
+
 #include <algorithm>
-#include <mutex>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "client/batch.h"
+#include "client/batch_manifest.h"
+#include "client/batch_shard.h"
 #include "client/cli_errors.h"
 #include "client/clip_files.h"
 #include "client/command.h"
 #include "client/pipeline_file.h"
+#include "client/progress_bar.h"
 #include "tempokey/core/io/file_io.h"
 #include "tempokey/core/model/status.h"
 
@@ -18,40 +24,46 @@ namespace tempokey::client {
 namespace {
 
 constexpr std::string_view kDirArgument[] = {"DIR"};
-constexpr std::string_view kFormats[] = {"bvh", "csv", "json", "anim"};
-constexpr FileFormat kFormatsByName[] = {FileFormat::kBvh, FileFormat::kCsv,
-                                         FileFormat::kKeyedJson, FileFormat::kMayaAnim};
+constexpr std::string_view kFormats[] = {"bvh", "csv", "json", "anim", "gltf", "glb"};
+constexpr FileFormat kFormatsByName[] = {FileFormat::kBvh,       FileFormat::kCsv,
+                                         FileFormat::kKeyedJson, FileFormat::kMayaAnim,
+                                         FileFormat::kGltf,      FileFormat::kGlb};
 constexpr int kMaxJobs = 256;
 
 constexpr FlagSpec kBatchFlags[] = {
     {"--output", "-o", "OUTDIR", "folder for the outputs (created if missing)"},
     {"--ops", "", "FILE", "the pipeline, as JSON (see tempokey batch --help)"},
     {"--jobs", "-j", "N", "files processed at once (default 4)"},
-    {"--format", "", "NAME", "output format: bvh, csv, json or anim (default: .json for keyed "
-                             "results, the input's own otherwise)"},
+    {"--format", "", "NAME", "output format: bvh, csv, json, anim, gltf or glb (default: .json "
+                             "for keyed results, the input's own otherwise)"},
     {"--summary", "", "FILE", "also write the JSON summary to FILE (atomically)"},
     {"--attempts", "", "N", "tries per file when a server is unavailable or full (default 5)"},
     {"--recursive", "-r", "", "also process the sub-folders of DIR, mirrored under OUTDIR"},
     kInputFpsFlag,
+    {"--shard", "", "I/N", "take only share I of N (0 <= I < N) of the files, by a hash of their "
+                           "path"},
+    {"--force", "", "", "redo every file, even those whose outputs are up to date"},
+    {"--progress", "", "MODE", "auto (default: a bar on a terminal, else a line per file), bar, "
+                               "lines or none"},
 };
+constexpr std::string_view kProgressModes[] = {"auto", "bar", "lines", "none"};
+constexpr int kDefaultTerminalWidth = 80;
 
-// "batch  12/40  1 failed  walk.bvh" on one self-rewriting line of stderr, on a terminal only.
-class BatchProgress {
- public:
-  explicit BatchProgress(const CommandContext& context) : line_(context) {}
+// --progress; "auto" is a bar when stderr is a terminal, a line per file otherwise.
+absl::StatusOr<ProgressMode> ProgressModeFromFlags(const CommandContext& context) {
+  const std::string text = context.args().Value("--progress").value_or("auto");
+  TEMPOKEY_ASSIGN_OR_RETURN(std::string_view mode, ParseChoice("--progress", text, kProgressModes));
+  if (mode == "bar") return ProgressMode::kBar;
+  if (mode == "lines") return ProgressMode::kLines;
+  if (mode == "none") return ProgressMode::kNone;
+  return context.show_progress() ? ProgressMode::kBar : ProgressMode::kLines;
+}
 
-  void FileDone(const BatchFileResult& file, int done, int total) {
-    if (!file.status.ok()) ++failed_;
-    line_.Update(static_cast<double>(done) / total,
-                 absl::StrFormat("%d/%d files%s  %s", done, total,
-                                 failed_ > 0 ? absl::StrCat("  ", failed_, " failed") : "",
-                                 file.name));
-  }
-
- private:
-  ProgressLine line_;
-  int failed_ = 0;
-};
+int TerminalWidth() {
+  winsize size{};
+  if (ioctl(STDERR_FILENO, TIOCGWINSZ, &size) == 0 && size.ws_col > 0) return size.ws_col;
+  return kDefaultTerminalWidth;
+}
 
 absl::StatusOr<BatchOptions> BatchOptionsFromFlags(const ParsedArgs& args) {
   BatchOptions options;
@@ -74,7 +86,7 @@ absl::StatusOr<BatchOptions> BatchOptionsFromFlags(const ParsedArgs& args) {
 absl::StatusOr<std::optional<FileFormat>> FormatFromFlags(const ParsedArgs& args) {
   std::optional<std::string> text = args.Value("--format");
   if (!text) return std::optional<FileFormat>();
-  TEMPOKEY_ASSIGN_OR_RETURN(std::string name, ParseChoice("--format", *text, kFormats));
+  TEMPOKEY_ASSIGN_OR_RETURN(std::string_view name, ParseChoice("--format", *text, kFormats));
   return kFormatsByName[std::find(std::begin(kFormats), std::end(kFormats), name) -
                         std::begin(kFormats)];
 }
@@ -86,6 +98,11 @@ absl::Status Batch(CommandContext& context) {
   TEMPOKEY_ASSIGN_OR_RETURN(BatchOptions options, BatchOptionsFromFlags(context.args()));
   TEMPOKEY_ASSIGN_OR_RETURN(std::optional<FileFormat> format, FormatFromFlags(context.args()));
   TEMPOKEY_ASSIGN_OR_RETURN(std::vector<core::PipelineStep> steps, ReadPipelineFile(ops_path));
+  TEMPOKEY_ASSIGN_OR_RETURN(ProgressMode progress_mode, ProgressModeFromFlags(context));
+  std::optional<BatchShard> shard;
+  if (std::optional<std::string> text = context.args().Value("--shard")) {
+    TEMPOKEY_ASSIGN_OR_RETURN(shard, ParseShard(*text));
+  }
 
   BatchPlanOptions plan{
       .input_dir = dirs[0],
@@ -96,21 +113,31 @@ absl::Status Batch(CommandContext& context) {
       .recursive = context.args().Has("--recursive"),
   };
   TEMPOKEY_ASSIGN_OR_RETURN(std::vector<BatchItem> items, PlanBatch(plan));
+  if (shard) {
+    std::erase_if(items, [&](const BatchItem& item) { return !InShard(item.name, *shard); });
+  }
   TEMPOKEY_ASSIGN_OR_RETURN(const Client* client, context.Connect());
+  TEMPOKEY_ASSIGN_OR_RETURN(std::unique_ptr<BatchManifest> manifest,
+                            BatchManifest::Open(output_dir, shard, context.args().Has("--force")));
+  RemoveLeftoverTemporaries(items, manifest->path());
+  options.manifest = manifest.get();
 
   BatchSummary summary;
   {
-    BatchProgress progress(context);
+    BatchProgressDisplay progress(context.err(), progress_mode, static_cast<int>(items.size()),
+                                  progress_mode == ProgressMode::kBar ? TerminalWidth() : 0);
     summary = RunBatch(*client, items, steps, options,
-                       [&](const BatchFileResult& file, int done, int total) {
-                         progress.FileDone(file, done, total);
-                       });
+                       [&](const BatchFileResult& file, int, int) { progress.FileDone(file); });
   }
+  summary.shard = shard;
+  summary.pipeline = PipelineDigest(steps, format);
+  const absl::Status recorded = manifest->Finish(items);
   const std::string json = FormatBatchSummaryJson(summary);
   context.out() << json;
   if (std::optional<std::string> summary_path = context.args().Value("--summary")) {
     TEMPOKEY_RETURN_IF_ERROR(core::WriteFileAtomically(*summary_path, json));
   }
+  TEMPOKEY_RETURN_IF_ERROR(recorded);
   const int failed = summary.failed_count();
   if (failed == 0) return absl::OkStatus();
   const auto first = std::find_if(summary.files.begin(), summary.files.end(),
@@ -125,7 +152,7 @@ absl::Status Batch(CommandContext& context) {
 const Command& BatchCommand() {
   static const Command command{
       .name = "batch",
-      .synopsis = "DIR -o OUTDIR --ops PIPELINE.json [--jobs N] [options]",
+      .synopsis = "DIR -o OUTDIR --ops PIPELINE.json [--jobs N] [--shard I/N] [options]",
       .summary = "run a pipeline on every clip of a folder (JSON summary, exit 1 if any failed)",
       .description =
           "Runs the operations of PIPELINE.json on every .bvh file of DIR (and .csv with\n"
@@ -135,13 +162,24 @@ const Command& BatchCommand() {
           "under the input's name, written atomically. Prints a JSON summary of every file on\n"
           "stdout; exits 1 if any file failed, after trying them all.\n"
           "\n"
+          "Resumable: OUTDIR/.tempokey-batch.json records, per output, the content id of its\n"
+          "input and a digest of the pipeline and format; a re-run skips the outputs that are\n"
+          "still on disk as recorded and redoes the others (input or pipeline changed, output\n"
+          "missing or altered). --force redoes everything.\n"
+          "\n"
+          "Shards: --shard I/N (0 <= I < N) takes the files whose path relative to DIR hashes to\n"
+          "I, so N runs (machines, or the pods of a Kubernetes Indexed Job) share the folder and\n"
+          "together cover every file once; each keeps its own manifest\n"
+          "(.tempokey-batch.shard-I-of-N.json). 'tempokey batch-summary' merges their summaries.\n"
+          "\n"
           "PIPELINE.json lists operations whose options are the flags of the retime and\n"
           "reduce commands without their dashes (bake takes fps, convert wrap-rotations):\n"
           "  {\"operations\": [\n"
           "    {\"retime\": {\"speed\": \"0s:1,2s:0.5,4s:1\", \"fps\": 30}},\n"
           "    {\"reduce\": {\"tolerance\": 0.5}}]}\n"
           "A pipeline ending with reduce writes .json (keyed curves) unless --format says\n"
-          "otherwise; bvh or csv then bake the curves back to samples.\n",
+          "otherwise; bvh or csv then bake the curves back to samples; gltf or glb keep them\n"
+          "(CUBICSPLINE) for keyed results and hold samples (LINEAR) for sampled ones.\n",
       .flags = kBatchFlags,
       .run = Batch,
   };

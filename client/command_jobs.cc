@@ -119,7 +119,7 @@ absl::Status List(CommandContext& context) {
   TEMPOKEY_RETURN_IF_ERROR(context.Positionals({}).status());
   v1::ListJobsRequest request;
   for (const std::string& state : context.args().Values("--state")) {
-    TEMPOKEY_ASSIGN_OR_RETURN(std::string name, ParseChoice("--state", state, kStates));
+    TEMPOKEY_ASSIGN_OR_RETURN(std::string_view name, ParseChoice("--state", state, kStates));
     const auto index = std::find(std::begin(kStates), std::end(kStates), name) - std::begin(kStates);
     request.add_states(static_cast<v1::JobState>(v1::JOB_STATE_QUEUED + index));
   }

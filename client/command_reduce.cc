@@ -24,13 +24,17 @@ absl::Status Reduce(CommandContext& context) {
   TEMPOKEY_ASSIGN_OR_RETURN(core::ReduceStep reduce, ReduceStepFromArgs(context.args()));
   TEMPOKEY_ASSIGN_OR_RETURN(core::Clip clip, ReadInputClip(context, inputs[0]));
 
+  // glTF keeps the curves too, its rotations fitted against this clip within the rotation bound.
+  const GltfExportSource gltf{
+      .source = &clip,
+      .max_rotation_error_degrees = GltfRotationBoundDegrees(reduce)};
   std::vector<core::PipelineStep> steps = {std::move(reduce)};
   // Sampled outputs are the curves baked back at the source rate.
-  if (!IsKeyedFormat(format)) steps.push_back(core::BakeStep{});
+  if (!IsKeyedFormat(format) && !IsGltfFormat(format)) steps.push_back(core::BakeStep{});
   TEMPOKEY_ASSIGN_OR_RETURN(std::optional<core::PipelineResult> result,
                             ExecutePipeline(context, clip, steps, mode));
   if (!result) return absl::OkStatus();  // detached
-  TEMPOKEY_RETURN_IF_ERROR(WriteOutput(output, format, result->output));
+  TEMPOKEY_RETURN_IF_ERROR(WriteOutput(output, format, result->output, gltf));
   if (!result->reports.empty()) {
     if (const auto* report = std::get_if<core::ReductionReport>(&result->reports.front())) {
       context.out() << FormatReductionReport(*report, clip);
@@ -45,15 +49,20 @@ absl::Status Reduce(CommandContext& context) {
 const Command& ReduceCommand() {
   static const Command command{
       .name = "reduce",
-      .synopsis = "IN -o OUT.json|OUT.anim|OUT.bvh|OUT.csv [options]",
+      .synopsis = "IN -o OUT.json|OUT.anim|OUT.gltf|OUT.glb|OUT.bvh|OUT.csv [options]",
       .summary = "reduce a clip to key-frame curves on the server",
       .description =
           "Reads IN (.bvh, or .csv with --input-fps), fits few-key Hermite curves to every\n"
           "channel on the server and writes OUT atomically by extension: .json (keyed curves,\n"
-          "README schema) or .anim (Maya, weighted tangents) keep the keys; .bvh or .csv bake\n"
+          "README schema), .anim (Maya) or .gltf / .glb (glTF 2.0 CUBICSPLINE; rotations fitted\n"
+          "as quaternions within --tolerance degrees of IN) keep the keys; .bvh or .csv bake\n"
           "the curves back to samples at the source rate (a filtered clip). Prints the quality\n"
           "report: keys kept, RMS and max error (degrees for rotations, file units for\n"
-          "positions) and the worst channel and frame.\n",
+          "positions) and the worst channel and frame, then the joints' world-position error\n"
+          "through the skeleton (max with its joint and frame, RMS; file units and % of the\n"
+          "figure's height, the vertical extent of every joint and end site at the first frame).\n"
+          "--joint-tolerance 1 keeps every joint and end site within 1 file unit of its source\n"
+          "position at every frame, --joint-tolerance 0.5% within 0.5% of the figure's height.\n",
       .flags = kReduceFlags,
       .run = Reduce,
   };

@@ -18,7 +18,7 @@ constexpr auto kRetimeFlags = JoinFlags(kRetimeCommandFlags, kRetimeStepFlags, k
 absl::Status Retime(CommandContext& context) {
   TEMPOKEY_ASSIGN_OR_RETURN(std::vector<std::string> inputs, context.Positionals(kInArgument));
   TEMPOKEY_ASSIGN_OR_RETURN(std::string output, context.Required("--output"));
-  TEMPOKEY_ASSIGN_OR_RETURN(FileFormat format, FormatForPath("-o", output, kSampledFormats));
+  TEMPOKEY_ASSIGN_OR_RETURN(FileFormat format, FormatForPath("-o", output, kSampledOutputFormats));
   TEMPOKEY_ASSIGN_OR_RETURN(ExecutionMode mode, ExecutionModeFromFlags(context.args()));
   TEMPOKEY_ASSIGN_OR_RETURN(core::RetimeStep step, RetimeStepFromArgs(context.args()));
   TEMPOKEY_ASSIGN_OR_RETURN(core::Clip clip, ReadInputClip(context, inputs[0]));
@@ -44,10 +44,11 @@ const Command& RetimeCommand() {
   static const Command command{
       .name = "retime",
       .synopsis = "IN -o OUT [--speed KNOTS] [options]",
-      .summary = "retime a clip along a speed curve on the server (.bvh or .csv out)",
+      .summary = "retime a clip along a speed curve on the server (.bvh, .csv, .gltf, .glb out)",
       .description =
           "Reads IN (.bvh, or .csv with --input-fps), retimes it on the server and writes OUT\n"
-          "atomically in the format of its extension (.bvh or .csv). Speed 1 plays normally,\n"
+          "atomically in the format of its extension (.bvh, .csv, or glTF 2.0 .gltf / .glb with\n"
+          "one LINEAR key per frame). Speed 1 plays normally,\n"
           "0.5 is half speed (slow motion), 2 double speed; between knots speed changes\n"
           "linearly, outside them it holds. Two knots at one time make a step. Without --speed\n"
           "or --time-map the timing is kept (a frame-rate change, a fit or a reverse alone).\n"

@@ -186,10 +186,11 @@ absl::StatusOr<std::vector<core::PipelineStep>> ParsePipelineJson(std::string_vi
     return at.Fail(*operations, "\"operations\" must be an array");
   }
   std::vector<core::PipelineStep> steps;
+  steps.reserve(operations->array->size());
   for (std::size_t i = 0; i < operations->array->size(); ++i) {
-    TEMPOKEY_ASSIGN_OR_RETURN(core::PipelineStep step,
-                              ParseOperation(at, (*operations->array)[i], i));
-    steps.push_back(std::move(step));
+    absl::StatusOr<core::PipelineStep> step = ParseOperation(at, (*operations->array)[i], i);
+    if (!step.ok()) return step.status();
+    steps.push_back(*std::move(step));
   }
   absl::Status chain = core::ValidateStepChain(steps);
   if (!chain.ok()) return at.Fail(*operations, core::AsStd(chain.message()));

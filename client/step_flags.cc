@@ -52,7 +52,7 @@ absl::Status WarpFromFlags(const ParsedArgs& args, core::TimeWarpSpec& warp) {
   if (speed && time_map) return UsageError("--speed and --time-map exclude each other");
   if (domain && !speed) return UsageError("--speed-over needs --speed");
   if (speed) {
-    std::string over = "source";
+    std::string_view over = "source";
     if (domain) { TEMPOKEY_ASSIGN_OR_RETURN(over, ParseChoice("--speed-over", *domain, kDomains)); }
     warp.domain = over == "source" ? core::WarpDomain::kSpeedOverSource
                                    : core::WarpDomain::kSpeedOverOutput;
@@ -85,7 +85,7 @@ absl::Status RetimeOptionsFromArgs(const ParsedArgs& args, core::RetimeOptions& 
     TEMPOKEY_ASSIGN_OR_RETURN(options.output_rate, ParseFrameRate("--fps", *fps));
   }
   if (std::optional<std::string> filter = args.Value("--filter")) {
-    TEMPOKEY_ASSIGN_OR_RETURN(std::string name, ParseChoice("--filter", *filter, kFilters));
+    TEMPOKEY_ASSIGN_OR_RETURN(std::string_view name, ParseChoice("--filter", *filter, kFilters));
     constexpr core::ResampleFilter kByName[] = {
         core::ResampleFilter::kTent, core::ResampleFilter::kLinear, core::ResampleFilter::kBox,
         core::ResampleFilter::kCubic, core::ResampleFilter::kLanczos3};
@@ -93,11 +93,11 @@ absl::Status RetimeOptionsFromArgs(const ParsedArgs& args, core::RetimeOptions& 
                              std::begin(kFilters)];
   }
   if (std::optional<std::string> method = args.Value("--method")) {
-    TEMPOKEY_ASSIGN_OR_RETURN(std::string name, ParseChoice("--method", *method, kRetimeMethods));
+    TEMPOKEY_ASSIGN_OR_RETURN(std::string_view name, ParseChoice("--method", *method, kRetimeMethods));
     options.method = name == "exact" ? core::RetimeMethod::kExact : core::RetimeMethod::kPaper;
   }
   if (std::optional<std::string> rotation = args.Value("--rotation")) {
-    TEMPOKEY_ASSIGN_OR_RETURN(std::string name, ParseChoice("--rotation", *rotation, kRotationModes));
+    TEMPOKEY_ASSIGN_OR_RETURN(std::string_view name, ParseChoice("--rotation", *rotation, kRotationModes));
     options.rotation_mode =
         name == "quaternion" ? core::RotationMode::kQuaternion : core::RotationMode::kEuler;
   }
@@ -119,14 +119,30 @@ absl::Status RetimeOptionsFromArgs(const ParsedArgs& args, core::RetimeOptions& 
 
 // ---- reduce -------------------------------------------------------------------------------------
 
-constexpr std::string_view kReduceMethods[] = {"tolerance", "paper"};
+constexpr std::string_view kReduceMethods[] = {"tolerance", "paper", "noise"};
+constexpr std::string_view kOnOff[] = {"on", "off"};
 constexpr std::string_view kAlignments[] = {"none", "joint", "clip"};
 
-constexpr std::string_view kToleranceOnly[] = {"--tolerance", "--position-tolerance",
-                                               "--scalar-tolerance", "--key-budget", "--pose-align"};
+constexpr std::string_view kToleranceOnly[] = {"--tolerance",      "--position-tolerance",
+                                               "--scalar-tolerance", "--key-budget",
+                                               "--pose-align",       "--joint-tolerance"};
 constexpr std::string_view kPaperOnly[] = {"--step-x",     "--step-y",     "--step-tangent-x",
                                            "--step-tangent-y", "--accuracy", "--iterations",
                                            "--smoothing-sigma", "--min-key-spacing"};
+constexpr std::string_view kNoiseOnly[] = {"--noise", "--position-noise"};
+
+// "auto" (nullopt: estimated) or a noise level; the range is core's to check.
+absl::Status SetNoise(const ParsedArgs& args, std::string_view flag,
+                      std::optional<double>& field) {
+  if (std::optional<std::string> v = args.Value(flag)) {
+    if (*v == "auto") {
+      field.reset();
+    } else {
+      TEMPOKEY_ASSIGN_OR_RETURN(field, ParseDouble(flag, *v));
+    }
+  }
+  return absl::OkStatus();
+}
 
 // Sets `field` from `flag` when given.
 absl::Status SetDouble(const ParsedArgs& args, std::string_view flag, double& field) {
@@ -134,6 +150,33 @@ absl::Status SetDouble(const ParsedArgs& args, std::string_view flag, double& fi
     TEMPOKEY_ASSIGN_OR_RETURN(field, ParseDouble(flag, *v));
   }
   return absl::OkStatus();
+}
+
+absl::Status SetOptionalDouble(const ParsedArgs& args, std::string_view flag,
+                               std::optional<double>& field) {
+  if (std::optional<std::string> v = args.Value(flag)) {
+    TEMPOKEY_ASSIGN_OR_RETURN(field, ParseDouble(flag, *v));
+  }
+  return absl::OkStatus();
+}
+
+// "1" (file units) or "0.5%" (of the figure's height). The value's range is core's to check.
+absl::StatusOr<core::JointTolerance> ParseJointTolerance(std::string_view text) {
+  core::JointTolerance tolerance;
+  std::string_view number = text;
+  if (!number.empty() && number.back() == '%') {
+    tolerance.percent_of_height = true;
+    number.remove_suffix(1);
+  }
+  absl::StatusOr<double> value = ParseDouble("--joint-tolerance", number);
+  if (!value.ok()) {
+    return UsageError(absl::StrCat(
+        "--joint-tolerance: expected a distance in file units or a percentage of the figure's "
+        "height (1, 0.5%), got '",
+        core::AsAbsl(text), "'"));
+  }
+  tolerance.value = *value;
+  return tolerance;
 }
 
 absl::Status SetInt(const ParsedArgs& args, std::string_view flag, int& field) {
@@ -149,28 +192,45 @@ absl::Status SetInt(const ParsedArgs& args, std::string_view flag, int& field) {
 
 absl::StatusOr<core::ReduceOptions> ReduceOptionsFromArgs(const ParsedArgs& args) {
   core::ReduceOptions options;
-  std::string method = "tolerance";
+  std::string_view method = "tolerance";
   if (std::optional<std::string> v = args.Value("--method")) {
     TEMPOKEY_ASSIGN_OR_RETURN(method, ParseChoice("--method", *v, kReduceMethods));
   }
-  options.method = method == "paper" ? core::ReduceMethod::kPaper : core::ReduceMethod::kTolerance;
-  const auto& other_flags = method == "paper" ? std::span<const std::string_view>(kToleranceOnly)
-                                              : std::span<const std::string_view>(kPaperOnly);
-  for (std::string_view flag : other_flags) {
-    if (args.Has(flag)) {
-      return UsageError(absl::StrCat(core::AsAbsl(flag), " does not apply to --method ", method));
+  options.method = method == "paper"   ? core::ReduceMethod::kPaper
+                   : method == "noise" ? core::ReduceMethod::kNoise
+                                       : core::ReduceMethod::kTolerance;
+  for (const auto& [flags, owner] :
+       {std::pair{std::span<const std::string_view>(kToleranceOnly), "tolerance"},
+        std::pair{std::span<const std::string_view>(kPaperOnly), "paper"},
+        std::pair{std::span<const std::string_view>(kNoiseOnly), "noise"}}) {
+    if (method == owner) continue;
+    for (std::string_view flag : flags) {
+      if (args.Has(flag)) {
+        return UsageError(absl::StrCat(core::AsAbsl(flag), " does not apply to --method ", core::AsAbsl(method)));
+      }
     }
   }
+  if (std::optional<std::string> v = args.Value("--euler-filter")) {
+    TEMPOKEY_ASSIGN_OR_RETURN(std::string_view on, ParseChoice("--euler-filter", *v, kOnOff));
+    options.euler_filter = on == "on";
+  }
+  TEMPOKEY_RETURN_IF_ERROR(SetNoise(args, "--noise", options.noise.rotation_sigma_degrees));
+  TEMPOKEY_RETURN_IF_ERROR(SetNoise(args, "--position-noise", options.noise.position_sigma));
 
   core::ToleranceParams& tolerance = options.tolerance;
-  TEMPOKEY_RETURN_IF_ERROR(SetDouble(args, "--tolerance", tolerance.max_rotation_error_degrees));
-  TEMPOKEY_RETURN_IF_ERROR(SetDouble(args, "--position-tolerance", tolerance.max_position_error));
+  TEMPOKEY_RETURN_IF_ERROR(
+      SetOptionalDouble(args, "--tolerance", tolerance.max_rotation_error_degrees));
+  TEMPOKEY_RETURN_IF_ERROR(
+      SetOptionalDouble(args, "--position-tolerance", tolerance.max_position_error));
   TEMPOKEY_RETURN_IF_ERROR(SetDouble(args, "--scalar-tolerance", tolerance.max_scalar_error));
+  if (std::optional<std::string> v = args.Value("--joint-tolerance")) {
+    TEMPOKEY_ASSIGN_OR_RETURN(tolerance.joint_tolerance, ParseJointTolerance(*v));
+  }
   if (std::optional<std::string> v = args.Value("--key-budget")) {
     TEMPOKEY_ASSIGN_OR_RETURN(tolerance.key_budget, ParseInt64("--key-budget", *v));
   }
   if (std::optional<std::string> v = args.Value("--pose-align")) {
-    TEMPOKEY_ASSIGN_OR_RETURN(std::string name, ParseChoice("--pose-align", *v, kAlignments));
+    TEMPOKEY_ASSIGN_OR_RETURN(std::string_view name, ParseChoice("--pose-align", *v, kAlignments));
     tolerance.pose_alignment = name == "none"    ? core::PoseAlignment::kNone
                                : name == "joint" ? core::PoseAlignment::kJoint
                                                  : core::PoseAlignment::kClip;
@@ -194,6 +254,7 @@ absl::StatusOr<core::RetimeStep> RetimeStepFromArgs(const ParsedArgs& args) {
   core::RetimeStep step;
   TEMPOKEY_RETURN_IF_ERROR(RetimeOptionsFromArgs(args, step.options));
   TEMPOKEY_RETURN_IF_ERROR(WarpFromFlags(args, step.warp));
+  step.euler_filter = args.Has("--euler-filter");
   return step;
 }
 
@@ -211,7 +272,8 @@ absl::StatusOr<core::BakeStep> BakeStepFromArgs(const ParsedArgs& args) {
 }
 
 absl::StatusOr<core::ConvertStep> ConvertStepFromArgs(const ParsedArgs& args) {
-  return core::ConvertStep{.wrap_rotations = args.Has("--wrap-rotations")};
+  return core::ConvertStep{.wrap_rotations = args.Has("--wrap-rotations"),
+                           .euler_filter = args.Has("--euler-filter")};
 }
 
 }  // namespace tempokey::client

@@ -35,15 +35,20 @@ inline constexpr FlagSpec kRetimeStepFlags[] = {
     {"--rotation", "", "MODE", "quaternion (default) or euler (angles as scalars)"},
     {"--min-speed", "", "V", "lowest speed allowed (default 0.01)"},
     {"--max-speed", "", "V", "highest speed allowed (default 100)"},
+    {"--euler-filter", "", "", "rewrite Euler flips of the output as the nearest equivalent angles"},
 };
 
 inline constexpr FlagSpec kReduceStepFlags[] = {
-    {"--method", "", "NAME", "tolerance (default: fewest keys within a bound) or paper (Hermite DP)"},
+    {"--method", "", "NAME",
+     "tolerance (default: fewest keys within a bound), paper (Hermite DP) or noise (noise-aware)"},
     {"--tolerance", "", "DEG", "tolerance: max rotation error in degrees (default 0.5)"},
-    {"--position-tolerance", "", "UNITS", "tolerance: max position error in file units (default 0.5)"},
+    {"--position-tolerance", "", "UNITS",
+     "tolerance: max position error in file units (default 0.3% of the figure's height)"},
     {"--scalar-tolerance", "", "V", "tolerance: max error of scalar channels (default 0.5)"},
     {"--key-budget", "", "N", "tolerance: at most N keys in all instead of an error bound"},
     {"--pose-align", "", "MODE", "tolerance: keys shared per none (default), joint or clip"},
+    {"--joint-tolerance", "", "D|D%",
+     "tolerance: every joint within D file units (or D% of the figure's height) of its source"},
     {"--step-x", "", "FRAMES", "paper: initial search step of key times (default 1)"},
     {"--step-y", "", "V", "paper: initial search step of key values (default 0.5)"},
     {"--step-tangent-x", "", "FRAMES", "paper: initial step of tangent x (default 1)"},
@@ -52,6 +57,12 @@ inline constexpr FlagSpec kReduceStepFlags[] = {
     {"--iterations", "", "N", "paper: at most N refinement iterations (default 8)"},
     {"--smoothing-sigma", "", "FRAMES", "paper: smoothing used to find initial keys (default 2)"},
     {"--min-key-spacing", "", "FRAMES", "paper: minimum spacing of initial keys (default 4)"},
+    {"--noise", "", "auto|DEG",
+     "noise: noise level of rotation channels, estimated per channel (default auto) or given"},
+    {"--position-noise", "", "auto|UNITS",
+     "noise: noise level of position and scalar channels (default auto)"},
+    {"--euler-filter", "", "on|off",
+     "Euler filter on the input (default: on for --method noise, off otherwise)"},
 };
 
 inline constexpr FlagSpec kBakeStepFlags[] = {
@@ -60,6 +71,7 @@ inline constexpr FlagSpec kBakeStepFlags[] = {
 
 inline constexpr FlagSpec kConvertStepFlags[] = {
     {"--wrap-rotations", "", "", "wrap rotation angles into (-180, 180] on the way"},
+    {"--euler-filter", "", "", "rewrite Euler flips as the nearest equivalent angles (before a wrap)"},
 };
 
 // The flag lists of a command from its parts, in order: JoinFlags(kCommon, kRetimeStepFlags).

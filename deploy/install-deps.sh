@@ -3,7 +3,8 @@
 # This is the only place packages are listed; README, .ci/run and the Dockerfile all call it.
 # Idempotent: packages already present are skipped, apt is not touched when nothing is missing.
 #
-#   deploy/install-deps.sh            build + test dependencies (default)
+#   deploy/install-deps.sh            build + test dependencies (default), tests/export's npm ci
+#   deploy/install-deps.sh --build    build dependencies only (the image's build stage)
 #   deploy/install-deps.sh --runtime  only the shared libraries tempokey-server and tempokey need
 #   deploy/install-deps.sh --image    tools that build and smoke-test the container image with no
 #                                     registry (deploy/image-smoke.sh: podman, debootstrap) and
@@ -19,12 +20,22 @@ build_packages=(
   libgtest-dev libgmock-dev googletest libbenchmark-dev
   libssl-dev openssl procps curl ccache
   python3 python3-grpcio python3-protobuf
+  # `pip install client/python` into a virtual environment, offline (tests/python)
+  python3-venv python3-pip python3-setuptools python3-wheel
   python3-yaml
+  libcivetweb-dev libjs-three
+  chromium chromium-driver python3-selenium
 )
+# Export checks (ctest -L export): a real browser for the glTF page, and tools that are not ours
+# under node: the Khronos glTF validator and three.js, pinned in tests/export/package-lock.json
+# and installed with `npm ci`. A machine without node gets Debian's nodejs and npm.
+test_packages=(chromium)
+node_packages=(nodejs npm)
 runtime_packages=(
   libgrpc++1.51 libgrpc29 libprotobuf32 libspdlog1.10 libfmt9
   libabsl20220623 libprometheus-cpp-core1.0 libprometheus-cpp-pull1.0 libcivetweb1
   ca-certificates
+  libcivetweb1 libjs-three
 )
 # podman builds (through its built-in buildah) and runs the image; runc is its OCI runtime
 # (crun 1.8 refuses these machines' hybrid cgroup mounts; see image-smoke.sh).
@@ -39,11 +50,28 @@ image_packages=(
 )
 
 case "${1:-}" in
-  "") packages=("${build_packages[@]}") ;;
+  "") packages=("${build_packages[@]}" "${test_packages[@]}") ;;
+  --build) packages=("${build_packages[@]}") ;;
   --runtime) packages=("${runtime_packages[@]}") ;;
   --image) packages=("${image_packages[@]}") ;;
-  *) echo "usage: deploy/install-deps.sh [--runtime | --image]" >&2; exit 2 ;;
+  *) echo "usage: deploy/install-deps.sh [--build | --runtime | --image]" >&2; exit 2 ;;
 esac
+
+# The machine's node is used when it has one (it may come from elsewhere than Debian).
+if [[ -z "${1:-}" ]] && ! command -v node > /dev/null; then
+  packages+=("${node_packages[@]}")
+fi
+
+# npm ci in tests/export when its packages are missing or older than the lock file.
+install_export_packages() {
+  local dir
+  dir="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)/tests/export"
+  if [[ ! -f "$dir/node_modules/.package-lock.json" ||
+        "$dir/package-lock.json" -nt "$dir/node_modules/.package-lock.json" ]]; then
+    echo "install-deps: npm ci in tests/export"
+    (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error)
+  fi
+}
 
 missing=()
 for p in "${packages[@]}"; do
@@ -54,11 +82,13 @@ done
 
 if [[ ${#missing[@]} -eq 0 ]]; then
   echo "install-deps: all ${#packages[@]} packages present"
-  exit 0
+else
+  echo "install-deps: installing ${missing[*]}"
+  export DEBIAN_FRONTEND=noninteractive
+  apt-get update -qq
+  apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+  echo "install-deps: done"
 fi
-
-echo "install-deps: installing ${missing[*]}"
-export DEBIAN_FRONTEND=noninteractive
-apt-get update -qq
-apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
-echo "install-deps: done"
+if [[ -z "${1:-}" ]]; then
+  install_export_packages
+fi

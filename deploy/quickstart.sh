@@ -5,6 +5,8 @@
 #                               (retime, key reduction) with the CLI on a real clip from
 #                               ../shared/data, write the results to build/demo, stop the server
 #   deploy/quickstart.sh test   install, build, run the whole test suite (what .ci/run calls)
+#   deploy/quickstart.sh studio install, build, serve the studio page on http://127.0.0.1:8080/
+#                               (TEMPOKEY_STUDIO_PORT) until Ctrl-C, then drain the server
 #
 # Environment: TEMPOKEY_BUILD_DIR (default: build), TEMPOKEY_JOBS (default: nproc),
 # TEMPOKEY_SANITIZER_TESTS=0 skips the sanitizer stage of `test`.
@@ -52,10 +54,12 @@ demo() {
   "${cli[@]}" info "$clip"
   log "retime: half speed from 2 s to 4 s (slow motion in the middle of the clip)"
   "${cli[@]}" retime "$clip" -o "$out/$stem-slow.bvh" --speed "0s:1,2s:1,2s:0.5,4s:0.5,4s:1"
-  log "reduce: fewest keys within 0.5 degrees / 0.5 units, as Maya .anim, as JSON, baked to BVH"
+  log "reduce: fewest keys within 0.5 degrees / 0.3 % of the figure's height, as Maya .anim, as JSON, baked to BVH"
   "${cli[@]}" reduce "$clip" -o "$out/$stem-keys.anim"
   "${cli[@]}" reduce "$clip" -o "$out/$stem-keys.json" >/dev/null
   "${cli[@]}" reduce "$clip" -o "$out/$stem-reduced.bvh" >/dev/null
+  log "reduce: every joint within 0.5 % of the figure's height of its source position"
+  "${cli[@]}" reduce "$clip" -o "$out/$stem-joints.json" --joint-tolerance 0.5%
   log "reduce: the paper's Hermite DP fit, for comparison"
   "${cli[@]}" reduce "$clip" -o "$out/$stem-paper.anim" --method paper
   log "outputs in $out"
@@ -80,8 +84,17 @@ test_suite() {
   fi
 }
 
+studio() {
+  build -DTEMPOKEY_BUILD_BENCH=OFF
+  local port="${TEMPOKEY_STUDIO_PORT:-8080}"
+  log "tempokey studio: open http://127.0.0.1:$port/ in a browser (Ctrl-C stops the server)"
+  # exec: Ctrl-C reaches the server itself, which drains and exits 0.
+  exec "$build_dir/server/tempokey-server" --address 127.0.0.1:0 --http_address "127.0.0.1:$port"
+}
+
 case "${1:-}" in
   demo) shift; demo "$@" ;;
   test) shift; test_suite "$@" ;;
-  *) echo "usage: deploy/quickstart.sh demo [CLIP.bvh] | test" >&2; exit 2 ;;
+  studio) shift; studio "$@" ;;
+  *) echo "usage: deploy/quickstart.sh demo [CLIP.bvh] | test | studio" >&2; exit 2 ;;
 esac

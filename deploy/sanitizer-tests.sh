@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Sanitizer stage of the test suite: only what needs it, to stay inside CI's budget.
-#   ASan + UBSan: core and server tests (Debug, no benchmarks, no CLI tests).
+#   ASan + UBSan: core, proto and server tests (Debug, no benchmarks, no CLI tests).
 #   TSan: the job pool, job manager, memory budget and idle reaper tests, which have no gRPC in
 #   them (Debian's gRPC is not instrumented, so TSan would report noise inside it).
 set -euo pipefail
@@ -16,12 +16,15 @@ cmake -S . -B "$asan_dir" -G Ninja -DCMAKE_BUILD_TYPE=Debug -DTEMPOKEY_BUILD_BEN
 asan_targets=$(cd "$asan_dir" && ninja -t targets all | sed -n 's/^\([a-z0-9_]*_test\): .*/\1/p' | sort -u)
 server_and_core=()
 for t in $asan_targets; do
-  if [[ -f "tests/core/$t.cc" || -f "tests/server/$t.cc" ]]; then server_and_core+=("$t"); fi
+  # Core tests live in subject folders (tests/core/io/, tests/core/reduce/, ...).
+  if [[ -n "$(find tests/core tests/proto tests/server -name "$t.cc" -print -quit)" ]]; then
+    server_and_core+=("$t")
+  fi
 done
 ninja -C "$asan_dir" -j "$jobs" "${server_and_core[@]}"
 export ASAN_OPTIONS="detect_leaks=1:abort_on_error=1"
 export UBSAN_OPTIONS="print_stacktrace=1:halt_on_error=1"
-ctest --test-dir "$asan_dir" --output-on-failure -j "$jobs" -L 'core|server' --timeout 900
+ctest --test-dir "$asan_dir" --output-on-failure -j "$jobs" -L 'core|proto|server' --timeout 900
 
 printf '\n== TSan build (job pool)\n'
 cmake -S . -B "$tsan_dir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DTEMPOKEY_BUILD_BENCH=OFF \

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <optional>
 #include <string>
 #include <utility>
 
@@ -180,6 +181,7 @@ absl::StatusOr<core::RetimeStep> RetimeFromProto(int op, const v1::RetimeOperati
   // 0 selects the default range; anything else is the caller's and core checks it.
   if (r.min_speed() != 0.0) step.options.min_speed = r.min_speed();
   if (r.max_speed() != 0.0) step.options.max_speed = r.max_speed();
+  step.euler_filter = r.euler_filter();
   return step;
 }
 
@@ -194,9 +196,19 @@ absl::StatusOr<core::ReduceStep> ReduceFromProto(int op, const v1::ReduceOperati
     case v1::REDUCE_METHOD_PAPER:
       o.method = core::ReduceMethod::kPaper;
       break;
+    case v1::REDUCE_METHOD_NOISE:
+      o.method = core::ReduceMethod::kNoise;
+      break;
     default:
       return UnknownEnum(op, "reduce.method", r.method());
   }
+  if (r.has_euler_filter()) o.euler_filter = r.euler_filter();
+  const v1::NoiseParams& n = r.noise();
+  if (n.has_rotation_sigma_degrees()) o.noise.rotation_sigma_degrees = n.rotation_sigma_degrees();
+  if (n.has_position_sigma()) o.noise.position_sigma = n.position_sigma();
+  if (n.has_min_sigma()) o.noise.min_sigma = n.min_sigma();
+  if (n.has_guard_sigmas()) o.noise.guard_sigmas = n.guard_sigmas();
+  if (n.has_key_sigmas()) o.noise.key_sigmas = n.key_sigmas();
 
   // Set fields replace the defaults; ValidateReduceOptions() (run on the whole pipeline before
   // anything is queued) checks every value and names it.
@@ -217,6 +229,17 @@ absl::StatusOr<core::ReduceStep> ReduceFromProto(int op, const v1::ReduceOperati
   if (t.has_max_position_error()) o.tolerance.max_position_error = t.max_position_error();
   if (t.has_max_scalar_error()) o.tolerance.max_scalar_error = t.max_scalar_error();
   if (t.has_key_budget()) o.tolerance.key_budget = t.key_budget();
+  switch (t.joint_tolerance_case()) {
+    case v1::ToleranceParams::kMaxJointError:
+      o.tolerance.joint_tolerance = core::JointTolerance{.value = t.max_joint_error()};
+      break;
+    case v1::ToleranceParams::kMaxJointErrorPercentOfHeight:
+      o.tolerance.joint_tolerance = core::JointTolerance{
+          .value = t.max_joint_error_percent_of_height(), .percent_of_height = true};
+      break;
+    case v1::ToleranceParams::JOINT_TOLERANCE_NOT_SET:
+      break;
+  }
   switch (t.pose_alignment()) {
     case v1::POSE_ALIGNMENT_UNSPECIFIED:
     case v1::POSE_ALIGNMENT_NONE:
@@ -303,13 +326,25 @@ v1::RetimeOperation RetimeToProto(const core::RetimeStep& step) {
   }
   r.set_min_speed(o.min_speed);
   r.set_max_speed(o.max_speed);
+  r.set_euler_filter(step.euler_filter);
   return r;
 }
 
 v1::ReduceOperation ReduceToProto(const core::ReduceStep& step) {
   v1::ReduceOperation r;
   const core::ReduceOptions& o = step.options;
-  if (o.method == core::ReduceMethod::kPaper) {
+  if (o.euler_filter) r.set_euler_filter(*o.euler_filter);
+  if (o.method == core::ReduceMethod::kNoise) {
+    r.set_method(v1::REDUCE_METHOD_NOISE);
+    v1::NoiseParams* n = r.mutable_noise();
+    if (o.noise.rotation_sigma_degrees) {
+      n->set_rotation_sigma_degrees(*o.noise.rotation_sigma_degrees);
+    }
+    if (o.noise.position_sigma) n->set_position_sigma(*o.noise.position_sigma);
+    n->set_min_sigma(o.noise.min_sigma);
+    n->set_guard_sigmas(o.noise.guard_sigmas);
+    n->set_key_sigmas(o.noise.key_sigmas);
+  } else if (o.method == core::ReduceMethod::kPaper) {
     r.set_method(v1::REDUCE_METHOD_PAPER);
     v1::PaperParams* p = r.mutable_paper();
     p->set_step_x_frames(o.paper.step_x_frames);
@@ -323,9 +358,21 @@ v1::ReduceOperation ReduceToProto(const core::ReduceStep& step) {
   } else {
     r.set_method(v1::REDUCE_METHOD_TOLERANCE);
     v1::ToleranceParams* t = r.mutable_tolerance();
-    t->set_max_rotation_error_degrees(o.tolerance.max_rotation_error_degrees);
-    t->set_max_position_error(o.tolerance.max_position_error);
+    // Unset bounds stay unset: the server resolves the scale-aware defaults against the clip.
+    if (o.tolerance.max_rotation_error_degrees) {
+      t->set_max_rotation_error_degrees(*o.tolerance.max_rotation_error_degrees);
+    }
+    if (o.tolerance.max_position_error) {
+      t->set_max_position_error(*o.tolerance.max_position_error);
+    }
     t->set_max_scalar_error(o.tolerance.max_scalar_error);
+    if (const std::optional<core::JointTolerance>& joint = o.tolerance.joint_tolerance) {
+      if (joint->percent_of_height) {
+        t->set_max_joint_error_percent_of_height(joint->value);
+      } else {
+        t->set_max_joint_error(joint->value);
+      }
+    }
     if (o.tolerance.key_budget) {
       t->set_key_budget(static_cast<std::int32_t>(std::min<std::int64_t>(
           *o.tolerance.key_budget, std::numeric_limits<std::int32_t>::max())));
@@ -343,6 +390,30 @@ v1::ReduceOperation ReduceToProto(const core::ReduceStep& step) {
     }
   }
   return r;
+}
+
+v1::WorldErrorReport WorldErrorToProto(const core::WorldErrorReport& w) {
+  v1::WorldErrorReport out;
+  out.set_figure_height_units(w.figure_height);
+  out.set_max_error_units(w.max_error);
+  out.set_rms_error_units(w.rms_error);
+  out.set_worst_point(w.worst_point_name);
+  out.set_worst_joint_index(w.worst_point.joint);
+  out.set_worst_end_site_index(w.worst_point.end_site);
+  out.set_worst_frame(w.worst_frame);
+  out.set_joint_tolerance_units(w.joint_tolerance);
+  return out;
+}
+
+core::WorldErrorReport WorldErrorFromProto(const v1::WorldErrorReport& w) {
+  return core::WorldErrorReport{
+      .figure_height = w.figure_height_units(),
+      .max_error = w.max_error_units(),
+      .worst_point = {.joint = w.worst_joint_index(), .end_site = w.worst_end_site_index()},
+      .worst_point_name = w.worst_point(),
+      .worst_frame = w.worst_frame(),
+      .rms_error = w.rms_error_units(),
+      .joint_tolerance = w.joint_tolerance_units()};
 }
 
 }  // namespace
@@ -371,7 +442,8 @@ absl::StatusOr<std::vector<core::PipelineStep>> PipelineFromProto(
             .rate = RateFromProto(op.bake().rate_numerator(), op.bake().rate_denominator())});
         break;
       case v1::Operation::kConvert:
-        steps.emplace_back(core::ConvertStep{.wrap_rotations = op.convert().wrap_rotations()});
+        steps.emplace_back(core::ConvertStep{.wrap_rotations = op.convert().wrap_rotations(),
+                                             .euler_filter = op.convert().euler_filter()});
         break;
       case v1::Operation::KIND_NOT_SET:
         return Invalid(absl::StrCat(OpPrefix(i),
@@ -395,6 +467,7 @@ v1::Operation PipelineStepToProto(const core::PipelineStep& step) {
                  },
                  [&](const core::ConvertStep& s) {
                    op.mutable_convert()->set_wrap_rotations(s.wrap_rotations);
+                   op.mutable_convert()->set_euler_filter(s.euler_filter);
                  },
              },
              step);
@@ -423,6 +496,8 @@ v1::OperationReport StepReportToProto(const core::StepReport& report) {
                      c->set_rms_error(ch.rms_error);
                      c->set_max_error(ch.max_error);
                      c->set_max_error_frame(ch.max_error_frame);
+                     c->set_noise_sigma(ch.noise_sigma);
+                     c->set_noise_sigma_estimated(ch.noise_sigma_estimated);
                    }
                    o->set_key_count(r.key_count);
                    o->set_sample_count(r.sample_count);
@@ -431,6 +506,8 @@ v1::OperationReport StepReportToProto(const core::StepReport& report) {
                    o->set_worst_channel_index(r.worst_channel_index);
                    o->set_worst_frame(r.worst_frame);
                    o->set_iterations(r.iterations);
+                   if (r.world) *o->mutable_world_error() = WorldErrorToProto(*r.world);
+                   o->set_euler_filtered_frames(r.euler_filtered_frames);
                  },
              },
              report);
@@ -448,7 +525,10 @@ core::StepReport StepReportFromProto(const v1::OperationReport& report) {
                                                     .sample_count = c.sample_count(),
                                                     .rms_error = c.rms_error(),
                                                     .max_error = c.max_error(),
-                                                    .max_error_frame = c.max_error_frame()});
+                                                    .max_error_frame = c.max_error_frame(),
+                                                    .noise_sigma = c.noise_sigma(),
+                                                    .noise_sigma_estimated =
+                                                        c.noise_sigma_estimated()});
     }
     out.key_count = r.key_count();
     out.sample_count = r.sample_count();
@@ -457,6 +537,8 @@ core::StepReport StepReportFromProto(const v1::OperationReport& report) {
     out.worst_channel_index = r.worst_channel_index();
     out.worst_frame = r.worst_frame();
     out.iterations = r.iterations();
+    if (r.has_world_error()) out.world = WorldErrorFromProto(r.world_error());
+    out.euler_filtered_frames = r.euler_filtered_frames();
     return out;
   }
   const v1::RetimeReport& r = report.retime();

@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -18,7 +19,9 @@
 #include "absl/flags/parse.h"
 #include "absl/flags/usage.h"
 #include "absl/strings/str_cat.h"
+#include "server/http/http_front_end.h"
 #include "server/server.h"
+#include "server/server_usage.h"
 #include "spdlog/sinks/stdout_sinks.h"
 #include "spdlog/spdlog.h"
 #include "tempokey/core/io/file_io.h"
@@ -71,6 +74,13 @@ ABSL_FLAG(bool, open_reflection, false,
           "Serve gRPC reflection to callers without a token (with --auth_token_file it otherwise "
           "needs one).");
 ABSL_FLAG(std::string, log_level, "info", "trace, debug, info, warn, error or off.");
+ABSL_FLAG(std::string, http_address, "",
+          "Serve the studio page and the HTTP/JSON API here (e.g. 127.0.0.1:8080); empty: off.");
+ABSL_FLAG(std::string, web_root, "",
+          "The studio page's folder; empty: web/ beside the binary or ../share/tempokey/web.");
+ABSL_FLAG(std::string, three_root, "/usr/share/javascript/three",
+          "three.js (Debian's libjs-three), served under /three/.");
+ABSL_FLAG(int, http_threads, 16, "HTTP requests served at once.");
 
 namespace {
 
@@ -85,6 +95,10 @@ int Run(int argc, char** argv) {
   sigaddset(&stop_signals, SIGINT);
   pthread_sigmask(SIG_BLOCK, &stop_signals, nullptr);
 
+  if (tempokey::server::WantsUsage(std::span<char* const>(argv, static_cast<std::size_t>(argc)))) {
+    std::fputs(tempokey::server::ServerUsage().c_str(), stdout);
+    return 0;
+  }
   absl::SetProgramUsageMessage("tempokey-server [--address host:port] [flags]");
   std::vector<char*> positional = absl::ParseCommandLine(argc, argv);
   spdlog::set_default_logger(spdlog::stderr_logger_mt("tempokey"));
@@ -134,6 +148,19 @@ int Run(int argc, char** argv) {
     spdlog::error("{}", tempokey::core::AsStd(valid.message()));
     return 2;
   }
+  tempokey::server::http::HttpOptions http_options;
+  http_options.address = absl::GetFlag(FLAGS_http_address);
+  http_options.web_root = absl::GetFlag(FLAGS_web_root);
+  if (http_options.web_root.empty()) {
+    http_options.web_root = tempokey::server::http::DefaultWebRoot(argv[0]);
+  }
+  http_options.three_root = absl::GetFlag(FLAGS_three_root);
+  http_options.threads = absl::GetFlag(FLAGS_http_threads);
+  if (absl::Status valid = tempokey::server::http::ValidateHttpOptions(http_options, options);
+      !valid.ok()) {
+    spdlog::error("{}", tempokey::core::AsStd(valid.message()));
+    return 2;
+  }
 
   absl::StatusOr<std::unique_ptr<tempokey::server::Server>> server =
       tempokey::server::Server::Start(options);
@@ -174,10 +201,24 @@ int Run(int argc, char** argv) {
     return 1;
   }
 
+  std::unique_ptr<tempokey::server::http::HttpFrontEnd> studio;
+  if (!http_options.address.empty()) {
+    auto started = tempokey::server::http::HttpFrontEnd::Start(http_options, **server);
+    if (!started.ok()) {
+      spdlog::error("cannot start: {}", tempokey::core::AsStd(started.status().message()));
+      (*server)->Drain();
+      return 1;
+    }
+    studio = *std::move(started);
+    announce->info("tempokey-server studio on {}", studio->url());
+    announce->flush();
+  }
+
   int signal_number = 0;
   sigwait(&stop_signals, &signal_number);
   spdlog::info("received {}, draining", signal_number == SIGTERM ? "SIGTERM" : "SIGINT");
   (*server)->Quiesce();
+  if (studio != nullptr) studio->Stop();  // after the drain: HTTP calls get its answers too
   // Nothing is left to answer. Ending the process here instead of shutting gRPC down closes the
   // connections, which clients see as UNAVAILABLE (and retry elsewhere): gRPC's shutdown would
   // cancel with CANCELLED any call that arrived in the meantime (its core zombifies calls it

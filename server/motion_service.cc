@@ -8,9 +8,10 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "proto/clip_convert.h"
+#include "proto/clip_digest.h"
+#include "proto/editing_convert.h"
 #include "proto/jobs_convert.h"
 #include "proto/operations_convert.h"
-#include "server/clip_digest.h"
 #include "server/job_proto.h"
 #include "server/memory_size.h"
 #include "server/reactors.h"
@@ -26,15 +27,8 @@ namespace {
 // A unary request or response this large leaves enough freed memory behind to matter.
 constexpr std::int64_t kLargeMessageBytes = std::int64_t{1} << 20;
 
-grpc::ServerUnaryReactor* FinishUnary(grpc::CallbackServerContext* call,
-                                      const absl::Status& status) {
-  grpc::ServerUnaryReactor* reactor = call->DefaultReactor();
-  reactor->Finish(ToGrpcStatus(status, call));
-  return reactor;
-}
-
-// One unary call: authenticate, parse `raw_request` as a Request, run `handler(owner, request,
-// response)`, serialize the response. `method` names the request in a parse error.
+// One unary call answered at once: OpenUnary(), `handler(owner, request, response)`,
+// AnswerUnary(). `method` names the request in a parse error.
 template <typename Request, typename Response, typename Handler>
 grpc::ServerUnaryReactor* ServeUnary(ServiceContext* service, grpc::CallbackServerContext* call,
                                      const grpc::ByteBuffer* raw_request,
@@ -43,23 +37,11 @@ grpc::ServerUnaryReactor* ServeUnary(ServiceContext* service, grpc::CallbackServ
   Request request;
   Response response;
   absl::Status status = [&]() -> absl::Status {
-    TEMPOKEY_ASSIGN_OR_RETURN(const std::string owner, service->Authenticate(*call));
-    service->BytesIn(static_cast<std::int64_t>(raw_request->Length()));
-    TEMPOKEY_RETURN_IF_ERROR(
-        ParseMessage(*raw_request, absl::StrCat(core::AsAbsl(method), " request"), &request));
+    TEMPOKEY_ASSIGN_OR_RETURN(const std::string owner,
+                              OpenUnary(*service, *call, *raw_request, method, &request));
     return handler(owner, request, response);
   }();
-  if (status.ok()) {
-    SerializeMessage(response, raw_response);
-    service->BytesOut(static_cast<std::int64_t>(raw_response->Length()));
-  }
-  // The parsed request and the response built for it are freed when this returns; large ones
-  // count towards returning free memory to the system.
-  const auto transient = static_cast<std::int64_t>(raw_request->Length() + raw_response->Length());
-  if (service->budget != nullptr && transient >= kLargeMessageBytes) {
-    service->budget->NoteFreed(transient);
-  }
-  return FinishUnary(call, status);
+  return AnswerUnary(*service, call, *raw_request, status, response, raw_response);
 }
 
 absl::Status CheckLabels(const google::protobuf::Map<std::string, std::string>& labels) {
@@ -84,6 +66,57 @@ absl::Status CheckLabels(const google::protobuf::Map<std::string, std::string>& 
 }
 
 }  // namespace
+
+grpc::ServerUnaryReactor* FinishUnary(grpc::CallbackServerContext* call,
+                                      const absl::Status& status) {
+  return FinishUnary(call->DefaultReactor(), call, status);
+}
+
+grpc::ServerUnaryReactor* FinishUnary(grpc::ServerUnaryReactor* reactor,
+                                      grpc::CallbackServerContext* call,
+                                      const absl::Status& status) {
+  reactor->Finish(ToGrpcStatus(status, call));
+  return reactor;
+}
+
+absl::StatusOr<std::string> OpenUnary(ServiceContext& service,
+                                      const grpc::CallbackServerContext& call,
+                                      const grpc::ByteBuffer& raw_request, std::string_view method,
+                                      google::protobuf::Message* request) {
+  TEMPOKEY_ASSIGN_OR_RETURN(std::string owner, service.Authenticate(call));
+  service.BytesIn(static_cast<std::int64_t>(raw_request.Length()));
+  TEMPOKEY_RETURN_IF_ERROR(
+      ParseMessage(raw_request, absl::StrCat(core::AsAbsl(method), " request"), request));
+  return owner;
+}
+
+grpc::ServerUnaryReactor* AnswerUnary(ServiceContext& service, grpc::CallbackServerContext* call,
+                                      const grpc::ByteBuffer& raw_request,
+                                      const absl::Status& status,
+                                      const google::protobuf::Message& response,
+                                      grpc::ByteBuffer* raw_response) {
+  return AnswerUnary(service, call->DefaultReactor(), call, raw_request, status, response,
+                     raw_response);
+}
+
+grpc::ServerUnaryReactor* AnswerUnary(ServiceContext& service, grpc::ServerUnaryReactor* reactor,
+                                      grpc::CallbackServerContext* call,
+                                      const grpc::ByteBuffer& raw_request,
+                                      const absl::Status& status,
+                                      const google::protobuf::Message& response,
+                                      grpc::ByteBuffer* raw_response) {
+  if (status.ok()) {
+    SerializeMessage(response, raw_response);
+    service.BytesOut(static_cast<std::int64_t>(raw_response->Length()));
+  }
+  // The parsed request and the response built for it are freed once the call ends; large ones
+  // count towards returning free memory to the system.
+  const auto transient = static_cast<std::int64_t>(raw_request.Length() + raw_response->Length());
+  if (service.budget != nullptr && transient >= kLargeMessageBytes) {
+    service.budget->NoteFreed(transient);
+  }
+  return FinishUnary(reactor, call, status);
+}
 
 absl::Status CheckId(std::string_view field, const std::string& id) {
   if (id.empty()) {
@@ -152,6 +185,9 @@ grpc::ServerUnaryReactor* MotionService::GetServerInfo(grpc::CallbackServerConte
         for (std::string_view feature : {wire::kFeatureSampleSlices, wire::kFeatureBatchParts}) {
           response.add_features(std::string(feature));
         }
+        for (const core::ExportFormat& format : core::ExportFormats()) {
+          *response.add_export_formats() = wire::ExportFormatToProto(format);
+        }
         return absl::OkStatus();
       });
 }
@@ -209,7 +245,7 @@ grpc::ServerUnaryReactor* MotionService::SubmitJob(grpc::CallbackServerContext* 
             absl::StatusOr<core::Clip> inline_clip = wire::ClipFromProto(
                 request.inline_clip(), context_->clip_limits, ChargeTo(&reservation));
             if (!inline_clip.ok()) return core::Annotate(inline_clip.status(), "inline_clip");
-            clip_id = ClipContentId(*inline_clip);
+            clip_id = wire::ClipContentId(*inline_clip);
             reservation.Settle(ClipBytes(*inline_clip));
             clip = ShareWithReservation(*std::move(inline_clip), std::move(reservation));
             break;

@@ -27,17 +27,19 @@ inline constexpr std::size_t kMaxIdBytes = 256;
 inline constexpr std::int64_t kMaxListPageBytes = std::int64_t{1} << 20;
 
 namespace internal {
-using RawMotionServiceBase = v1::MotionService::WithRawCallbackMethod_GetServerInfo<
-    v1::MotionService::WithRawCallbackMethod_UploadClip<
-        v1::MotionService::WithRawCallbackMethod_SubmitJob<
-            v1::MotionService::WithRawCallbackMethod_GetJob<
-                v1::MotionService::WithRawCallbackMethod_ListJobs<
-                    v1::MotionService::WithRawCallbackMethod_CancelJob<
-                        v1::MotionService::WithRawCallbackMethod_DeleteJob<
-                            v1::MotionService::WithRawCallbackMethod_WatchJob<
-                                v1::MotionService::WithRawCallbackMethod_GetJobResult<
-                                    v1::MotionService::WithRawCallbackMethod_Process<
-                                        v1::MotionService::Service>>>>>>>>>>;
+using Generated = v1::MotionService;
+// Every method raw: the editing calls, then the jobs and clips calls on top of them.
+using RawEditingMethods = Generated::WithRawCallbackMethod_ParseClipFile<
+    Generated::WithRawCallbackMethod_GetClip<Generated::WithRawCallbackMethod_PlanRetime<
+        Generated::WithRawCallbackMethod_ParseSpeedKnots<
+            Generated::WithRawCallbackMethod_ExportFile<Generated::Service>>>>>;
+using RawMotionServiceBase = Generated::WithRawCallbackMethod_GetServerInfo<
+    Generated::WithRawCallbackMethod_UploadClip<Generated::WithRawCallbackMethod_SubmitJob<
+        Generated::WithRawCallbackMethod_GetJob<Generated::WithRawCallbackMethod_ListJobs<
+            Generated::WithRawCallbackMethod_CancelJob<Generated::WithRawCallbackMethod_DeleteJob<
+                Generated::WithRawCallbackMethod_WatchJob<
+                    Generated::WithRawCallbackMethod_GetJobResult<
+                        Generated::WithRawCallbackMethod_Process<RawEditingMethods>>>>>>>>>>;
 }  // namespace internal
 
 // Thread-safe; `context` must outlive the service and every call it serves.
@@ -71,6 +73,21 @@ class MotionService final : public internal::RawMotionServiceBase {
       grpc::CallbackServerContext* call, const grpc::ByteBuffer* request) override;
   grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* Process(
       grpc::CallbackServerContext* call) override;
+
+  // For editors (editing.proto); defined in editing_handlers.cc.
+  grpc::ServerUnaryReactor* ParseClipFile(grpc::CallbackServerContext* call,
+                                          const grpc::ByteBuffer* request,
+                                          grpc::ByteBuffer* response) override;
+  grpc::ServerWriteReactor<grpc::ByteBuffer>* GetClip(grpc::CallbackServerContext* call,
+                                                      const grpc::ByteBuffer* request) override;
+  grpc::ServerUnaryReactor* PlanRetime(grpc::CallbackServerContext* call,
+                                       const grpc::ByteBuffer* request,
+                                       grpc::ByteBuffer* response) override;
+  grpc::ServerUnaryReactor* ParseSpeedKnots(grpc::CallbackServerContext* call,
+                                            const grpc::ByteBuffer* request,
+                                            grpc::ByteBuffer* response) override;
+  grpc::ServerWriteReactor<grpc::ByteBuffer>* ExportFile(grpc::CallbackServerContext* call,
+                                                         const grpc::ByteBuffer* request) override;
 
  private:
   ServiceContext* const context_;

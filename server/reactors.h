@@ -33,6 +33,37 @@ grpc::ServerWriteReactor<grpc::ByteBuffer>* NewResultReactor(ServiceContext* ser
 grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* NewProcessReactor(
     ServiceContext* service, grpc::CallbackServerContext* call);
 
+// Finishes a unary `call` with `status` (its retry hint as trailing metadata).
+grpc::ServerUnaryReactor* FinishUnary(grpc::CallbackServerContext* call, const absl::Status& status);
+// The same with the call's reactor already taken: CallbackServerContext::DefaultReactor() builds
+// the reactor afresh each time it is called, so a call answered on another thread must take it
+// once, before it hands the work on, and finish that one.
+grpc::ServerUnaryReactor* FinishUnary(grpc::ServerUnaryReactor* reactor,
+                                      grpc::CallbackServerContext* call, const absl::Status& status);
+
+// The start of every unary call: the token check (the caller's owner id), then `raw_request`
+// parsed into `request` (`method` names it in the error). Counts the bytes in.
+// Errors: kUnauthenticated; kInvalidArgument "SubmitJob request: 18 bytes are not a valid ...".
+absl::StatusOr<std::string> OpenUnary(ServiceContext& service,
+                                      const grpc::CallbackServerContext& call,
+                                      const grpc::ByteBuffer& raw_request, std::string_view method,
+                                      google::protobuf::Message* request);
+
+// The end of every unary call, on any thread: `response` into `raw_response` when `status` is
+// OK, the bytes counted, a large exchange noted for returning memory, the call finished.
+grpc::ServerUnaryReactor* AnswerUnary(ServiceContext& service, grpc::CallbackServerContext* call,
+                                      const grpc::ByteBuffer& raw_request,
+                                      const absl::Status& status,
+                                      const google::protobuf::Message& response,
+                                      grpc::ByteBuffer* raw_response);
+// The same finishing `reactor`, the call's DefaultReactor() taken before (see FinishUnary()).
+grpc::ServerUnaryReactor* AnswerUnary(ServiceContext& service, grpc::ServerUnaryReactor* reactor,
+                                      grpc::CallbackServerContext* call,
+                                      const grpc::ByteBuffer& raw_request,
+                                      const absl::Status& status,
+                                      const google::protobuf::Message& response,
+                                      grpc::ByteBuffer* raw_response);
+
 // Operations off the wire, checked against `clip` and what the server lets a pipeline produce
 // (wire::PipelineFromProto() then core::ValidatePipeline()), before anything is queued.
 // Errors: kInvalidArgument naming the operation, field and value.

@@ -172,6 +172,9 @@ std::vector<std::string> ProbeOperations() {
   paper.options.method = core::ReduceMethod::kPaper;
   const bool has_paper = offered({paper});
   if (has_paper) operations.push_back("reduce/paper");
+  core::ReduceStep noise;
+  noise.options.method = core::ReduceMethod::kNoise;
+  if (offered({noise})) operations.push_back("reduce/noise");
   // Bake needs a keyed clip, which only a reduce step makes.
   if ((has_tolerance || has_paper) &&
       offered({has_tolerance ? tolerance : paper, core::BakeStep{}})) {

@@ -189,6 +189,25 @@ absl::Status CheckLoopbackAddress(std::string_view address) {
 
 bool IsLoopbackAddress(std::string_view address) { return CheckLoopbackAddress(address).ok(); }
 
+bool IsLoopbackLiteral(std::string_view host) {
+  if (host.size() >= 2 && host.front() == '[' && host.back() == ']') {
+    host = host.substr(1, host.size() - 2);
+  }
+  const std::string name = absl::AsciiStrToLower(std::string(host));
+  if (name == "localhost") return true;
+  sockaddr_in v4{};
+  if (inet_pton(AF_INET, name.c_str(), &v4.sin_addr) == 1) {
+    v4.sin_family = AF_INET;
+    return IsLoopbackSockaddr(reinterpret_cast<const sockaddr*>(&v4));
+  }
+  sockaddr_in6 v6{};
+  if (inet_pton(AF_INET6, name.c_str(), &v6.sin6_addr) == 1) {
+    v6.sin6_family = AF_INET6;
+    return IsLoopbackSockaddr(reinterpret_cast<const sockaddr*>(&v6));
+  }
+  return false;
+}
+
 std::int64_t MemoryLimitFrom(std::string_view v2_memory_max, std::string_view v1_limit_in_bytes,
                              std::int64_t physical_bytes) {
   std::int64_t limit = physical_bytes > 0 ? physical_bytes : 0;

@@ -116,6 +116,12 @@ absl::StatusOr<std::vector<std::string>> ReadTokenFile(const std::string& path);
 absl::Status CheckLoopbackAddress(std::string_view address);
 bool IsLoopbackAddress(std::string_view address);
 
+// True when `host` (no port; "[::1]" brackets allowed) is itself a loopback name, without asking
+// a resolver: "localhost" in any case, or an IPv4 / IPv6 literal in the loopback ranges above.
+// For names a peer sends (an HTTP Host header): resolving them would let a name that an attacker
+// points at 127.0.0.1 pass (DNS rebinding).
+bool IsLoopbackLiteral(std::string_view host);
+
 // Checks values no server can run with (sizes <= 0, a TLS key without its certificate, a
 // non-loopback address without TLS unless allow_insecure_remote).
 // Errors: kInvalidArgument naming the option and value.

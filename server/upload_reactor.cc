@@ -11,7 +11,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "proto/clip_convert.h"
-#include "server/clip_digest.h"
+#include "proto/clip_digest.h"
 #include "server/memory_size.h"
 #include "server/reactors.h"
 #include "server/status_util.h"
@@ -158,7 +158,7 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
   // Declared before the assembler, which charges it.
   MemoryBudget::Reservation reservation_;
   std::optional<wire::ClipAssembler> assembler_;
-  std::optional<IncrementalClipDigest> digest_;
+  std::optional<wire::IncrementalClipDigest> digest_;
   std::int64_t messages_ = 0;
   std::mutex mu_;
   bool finished_ ABSL_GUARDED_BY(mu_) = false;

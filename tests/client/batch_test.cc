@@ -7,10 +7,12 @@
 #include <filesystem>
 #include <map>
 #include <memory>
+#include <regex>
 #include <string>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -18,6 +20,7 @@
 #include "tempokey/core/io/file_io.h"
 #include "tempokey/core/io/json.h"
 #include "tempokey/core/io/keyed_json.h"
+#include "tests/testing/batch_util.h"
 #include "tests/testing/process_util.h"
 #include "tests/testing/test_paths.h"
 
@@ -27,67 +30,6 @@ namespace {
 namespace fs = std::filesystem;
 using ::testing::HasSubstr;
 using ::testing::StartsWith;
-
-// One entry of a batch summary's "results".
-struct SummaryEntry {
-  std::string input;
-  std::string output;
-  std::string status;
-  std::string code;
-  std::string error;
-  int attempts = 0;
-  double keys = 0;
-  double frames = 0;
-  double max_error = 0;
-};
-
-struct Summary {
-  int files = -1;
-  int succeeded = -1;
-  int failed = -1;
-  std::map<std::string, SummaryEntry> by_input;
-};
-
-std::string Text(const core::JsonValue* value) { return value ? value->text : std::string(); }
-double Number(const core::JsonValue* value) { return value ? value->number : 0.0; }
-
-Summary ParseSummary(const std::string& json) {
-  Summary summary;
-  absl::StatusOr<core::JsonValue> root = core::ParseJson(json, "summary");
-  EXPECT_TRUE(root.ok()) << root.status() << "\n" << json;
-  if (!root.ok()) return summary;
-  summary.files = static_cast<int>(Number(root->Find("files")));
-  summary.succeeded = static_cast<int>(Number(root->Find("succeeded")));
-  summary.failed = static_cast<int>(Number(root->Find("failed")));
-  const core::JsonValue* results = root->Find("results");
-  if (results == nullptr || results->type != core::JsonValue::Type::kArray) return summary;
-  for (const core::JsonValue& item : *results->array) {
-    SummaryEntry entry{
-        .input = Text(item.Find("input")),
-        .output = Text(item.Find("output")),
-        .status = Text(item.Find("status")),
-        .code = Text(item.Find("code")),
-        .error = Text(item.Find("error")),
-        .attempts = static_cast<int>(Number(item.Find("attempts"))),
-        .keys = Number(item.Find("keys")),
-        .frames = Number(item.Find("frames")),
-        .max_error = Number(item.Find("max_error")),
-    };
-    summary.by_input[entry.input] = entry;
-  }
-  return summary;
-}
-
-// The names of the regular files in `dir`, sorted.
-std::vector<std::string> FilesIn(const std::string& dir) {
-  std::vector<std::string> names;
-  std::error_code error;
-  for (const auto& entry : fs::directory_iterator(dir, error)) {
-    if (entry.is_regular_file()) names.push_back(entry.path().filename().string());
-  }
-  std::sort(names.begin(), names.end());
-  return names;
-}
 
 std::string Stem(const std::string& path) { return fs::path(path).stem().string(); }
 
@@ -134,8 +76,15 @@ TEST_F(BatchTest, EveryClipOfTheFolderIsProcessedAndSummarized) {
                              "--jobs", "3", "--summary", Path("summary.json")});
 
   ASSERT_EQ(run.exit_code, 0) << run.err;
-  EXPECT_EQ(run.err, "");
   EXPECT_EQ(core::ReadFile(Path("summary.json")).value_or(""), run.out);
+  // Without a terminal, one line per file, in the order they finish.
+  const std::vector<std::string> log = Lines(run.err);
+  ASSERT_EQ(log.size(), sources.size()) << run.err;
+  for (std::size_t i = 0; i < log.size(); ++i) {
+    const std::regex line(absl::StrFormat(R"(\[ ?%d/%d\] ok (\S+)\.bvh -> %s/\1\.json \(1 attempt, \d+\.\d{3} s\))",
+                                          i + 1, sources.size(), Path("out")));
+    EXPECT_TRUE(std::regex_match(log[i], line)) << log[i];
+  }
   const Summary summary = ParseSummary(run.out);
   EXPECT_EQ(summary.files, static_cast<int>(sources.size()));
   EXPECT_EQ(summary.succeeded, static_cast<int>(sources.size()));
@@ -157,6 +106,7 @@ TEST_F(BatchTest, EveryClipOfTheFolderIsProcessedAndSummarized) {
     EXPECT_GT(entry.max_error, 0.0) << name;
     EXPECT_LE(entry.max_error, 0.5 + 1e-9) << name;
   }
+  expected_outputs.push_back(kManifestName);
   std::sort(expected_outputs.begin(), expected_outputs.end());
   EXPECT_EQ(FilesIn(Path("out")), expected_outputs);  // nothing else, no temporaries
 }
@@ -211,8 +161,9 @@ TEST_F(BatchTest, AFailedFileIsReportedAndTheOthersAreStillWritten) {
   ProcessResult run = Batch({in, "-o", Path("out"), "--ops", PipelineFile(kRetimeThenReduce)});
 
   EXPECT_EQ(run.exit_code, 1);
-  EXPECT_THAT(run.err, IsOneErrorLine());
-  EXPECT_THAT(run.err, StartsWith("error: 1 of 2 files failed; first: " + in + "/broken.bvh:96:24: "));
+  EXPECT_THAT(LastLine(run.err), IsOneErrorLine());
+  EXPECT_THAT(LastLine(run.err),
+              StartsWith("error: 1 of 2 files failed; first: " + in + "/broken.bvh:96:24: "));
   const Summary summary = ParseSummary(run.out);
   EXPECT_EQ(summary.succeeded, 1);
   EXPECT_EQ(summary.failed, 1);
@@ -222,7 +173,8 @@ TEST_F(BatchTest, AFailedFileIsReportedAndTheOthersAreStillWritten) {
   EXPECT_EQ(broken.code, "INVALID_ARGUMENT");
   EXPECT_THAT(broken.error, StartsWith(in + "/broken.bvh:96:24: expected 3 numbers after OFFSET"));
   EXPECT_EQ(broken.attempts, 0);  // refused before anything was sent
-  EXPECT_EQ(FilesIn(Path("out")), std::vector<std::string>{"dataset-1_walk_active_001.json"});
+  EXPECT_EQ(FilesIn(Path("out")),
+            (std::vector<std::string>{kManifestName, "dataset-1_walk_active_001.json"}));
 }
 
 TEST_F(BatchTest, InvalidOperationFailsEveryFileWithTheCoreMessage) {
@@ -233,9 +185,16 @@ TEST_F(BatchTest, InvalidOperationFailsEveryFileWithTheCoreMessage) {
        PipelineFile(R"({"operations": [{"retime": {"speed": "0s:1,1s:0"}}]})")});
 
   EXPECT_EQ(run.exit_code, 1);
-  EXPECT_EQ(run.err,
+  const std::vector<std::string> lines = Lines(run.err);
+  ASSERT_EQ(lines.size(), 2u) << run.err;
+  EXPECT_TRUE(std::regex_match(
+      lines[0], std::regex(R"(\[1/1\] failed dataset-1_walk_active_001\.bvh \(0 attempts, )"
+                           R"(\d+\.\d{3} s\): dataset-1_walk_active_001\.bvh: operation 1 )"
+                           R"(\(retime\): speed knot 2 \(1s:0\): speed must be > 0)")))
+      << lines[0];
+  EXPECT_EQ(lines[1],
             "error: 1 of 1 files failed; first: dataset-1_walk_active_001.bvh: operation 1 "
-            "(retime): speed knot 2 (1s:0): speed must be > 0\n");
+            "(retime): speed knot 2 (1s:0): speed must be > 0");
   EXPECT_TRUE(FilesIn(Path("out")).empty());
 }
 
@@ -255,7 +214,7 @@ TEST_F(BatchTest, UsageMistakesExitTwoWithOneLine) {
       {{in, "-o", Path("out"), "--ops", retime_only, "--jobs", "0"},
        "error: --jobs: expected 1 to 256, got 0"},
       {{in, "-o", Path("out"), "--ops", retime_only, "--format", "fbx"},
-       "error: --format: expected one of bvh, csv, json, anim, got 'fbx'"},
+       "error: --format: expected one of bvh, csv, json, anim, gltf, glb, got 'fbx'"},
       {{in, "-o", Path("out"), "--ops", Path("missing.json")},
        "error: " + Path("missing.json") + ": no such file"},
   };
@@ -293,7 +252,7 @@ TEST_F(BatchTest, UnreachableServerFailsEachFileAfterItsAttempts) {
                             target);
 
   EXPECT_EQ(run.exit_code, 1);
-  EXPECT_THAT(run.err, StartsWith("error: 2 of 2 files failed; first: "));
+  EXPECT_THAT(LastLine(run.err), StartsWith("error: 2 of 2 files failed; first: "));
   const Summary summary = ParseSummary(run.out);
   ASSERT_EQ(summary.by_input.size(), 2u);
   for (const auto& [name, entry] : summary.by_input) {
@@ -352,7 +311,7 @@ TEST_F(BatchTest, EveryFileIsProcessedWhenAServerIsKilledMidBatch) {
   const Summary summary = ParseSummary(ReadOrEmpty(Path("batch.out")));
   EXPECT_EQ(summary.files, copies);
   EXPECT_EQ(summary.succeeded, copies);
-  EXPECT_EQ(FilesIn(out).size(), static_cast<std::size_t>(copies));
+  EXPECT_EQ(FilesIn(out).size(), static_cast<std::size_t>(copies) + 1);  // and the manifest
   int retried = 0;
   for (const auto& [name, entry] : summary.by_input) retried += entry.attempts > 1 ? 1 : 0;
   RecordProperty("files_retried_after_the_kill", retried);

@@ -245,6 +245,10 @@ TEST_F(ClientTest, ListJobsFiltersByLabelAndDeleteRemovesAJob) {
   v1::ListJobsRequest only_a;
   (*only_a.mutable_labels())["shot"] = "a";
 
+  // A job is deleted once it has ended: wait for it rather than for the clock.
+  absl::StatusOr<v1::Job> a_ended = client->WatchJob(a->job_id(), {});
+  ASSERT_TRUE(a_ended.ok()) << a_ended.status();
+
   absl::StatusOr<v1::ListJobsResponse> listed = client->ListJobs(only_a);
   absl::Status deleted = client->DeleteJob(a->job_id());
   absl::Status after = client->GetJob(a->job_id()).status();

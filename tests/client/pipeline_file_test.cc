@@ -100,8 +100,9 @@ INSTANTIATE_TEST_SUITE_P(
                     "{\"operations\": [\n  {\"reduce\": {\"tolerence\": 0.5}}]}",
                     "ops.json:2:28: operation 1 (reduce): no option 'tolerence' (options: "
                     "method, tolerance, position-tolerance, scalar-tolerance, key-budget, "
-                    "pose-align, step-x, step-y, step-tangent-x, step-tangent-y, accuracy, "
-                    "iterations, smoothing-sigma, min-key-spacing)"},
+                    "pose-align, joint-tolerance, step-x, step-y, step-tangent-x, "
+                    "step-tangent-y, accuracy, iterations, smoothing-sigma, min-key-spacing, "
+                    "noise, position-noise, euler-filter)"},
         BadPipeline{"BadValueIsPointedAt",
                     "{\"operations\": [{\"retime\": {\"speed\": \"0s:1\", \"fps\": \"fast\"}}]}",
                     "ops.json:1:53: operation 1 (retime): --fps: expected a frame rate such as "

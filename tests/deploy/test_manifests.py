@@ -7,16 +7,22 @@ tempokey.v1.MotionService, live = ""); terminationGracePeriodSeconds covers the 
 the drain and the server's shutdown; the headless Service, the PodDisruptionBudget and the
 HorizontalPodAutoscaler point at the Deployment; non-root uid 10001 with a locked-down context;
 the ports in the args are the container ports; and every flag is one tempokey-server accepts.
+The batch Job of deploy/k8s/batch/ (an Indexed Job whose pods each run one shard of `tempokey
+batch`) is held to its own rules: the completion index is the shard, N is the completion count,
+retries are per index, the target is the server's Service, the volumes are where the arguments
+say, and its command line is one the real CLI accepts, with a pipeline file it parses.
 
 Run by CTest (label `deploy`) as `/usr/bin/python3 test_manifests.py`; exits 77 (skipped) when
 python3-yaml is missing. Environment: TEMPOKEY_SOURCE_DIR (default: two levels up) and
-TEMPOKEY_SERVER, the built tempokey-server, whose --helpfull lists the flags it accepts.
+TEMPOKEY_SERVER, the built tempokey-server, whose --help lists the flags it accepts, and
+TEMPOKEY_CLI, the built tempokey, which runs the batch Job's command line.
 """
 
 import os
 import re
 import subprocess
 import sys
+import tempfile
 import unittest
 from pathlib import Path
 
@@ -27,6 +33,7 @@ except ImportError:  # reported by main() below as a skip
 
 SOURCE_DIR = Path(os.environ.get("TEMPOKEY_SOURCE_DIR") or Path(__file__).resolve().parents[2])
 K8S_DIR = SOURCE_DIR / "deploy" / "k8s"
+BATCH_DIR = K8S_DIR / "batch"
 COMPOSE_FILE = SOURCE_DIR / "deploy" / "compose.yaml"
 DOCKERFILE = SOURCE_DIR / "Dockerfile"
 SERVER_MAIN = SOURCE_DIR / "server" / "main.cc"
@@ -112,15 +119,20 @@ def dockerfile_entrypoint():
     return yaml.safe_load(found.group(1))  # a JSON array is YAML too
 
 
-def load_k8s():
-    """[(file name, document)] of every resource kustomization.yaml lists, in order."""
-    kustomization = yaml.safe_load((K8S_DIR / "kustomization.yaml").read_text())
+def load_k8s(directory=K8S_DIR):
+    """[(file name, document)] of every resource `directory`/kustomization.yaml lists, in order."""
+    kustomization = yaml.safe_load((directory / "kustomization.yaml").read_text())
     documents = []
     for resource in kustomization["resources"]:
-        for document in yaml.safe_load_all((K8S_DIR / resource).read_text()):
+        for document in yaml.safe_load_all((directory / resource).read_text()):
             if document is not None:
                 documents.append((resource, document))
     return documents
+
+
+def env_references(text):
+    """The names of the $(VAR) references Kubernetes expands in a command or an argument."""
+    return set(re.findall(r"\$\(([A-Za-z_][A-Za-z0-9_]*)\)", text))
 
 
 class ManifestTest(unittest.TestCase):
@@ -290,14 +302,185 @@ class ManifestTest(unittest.TestCase):
         if not server or not os.access(server, os.X_OK):
             self.skipTest(f"no tempokey-server binary (TEMPOKEY_SERVER={server!r}): build it")
 
-        # --helpfull prints every flag and exits 1 (absl's convention for help).
-        help_text = subprocess.run([server, "--helpfull"], capture_output=True, text=True,
+        # --help lists the server's own flags, one line each: "  --name   help (default: v)".
+        help_text = subprocess.run([server, "--help"], capture_output=True, text=True,
                                    timeout=HELP_TIMEOUT_SECONDS).stdout
-        accepted = set(re.findall(r"^ {4}--(\w+) \(", help_text, re.M))
+        accepted = set(re.findall(r"^  --(\w+) ", help_text, re.M))
 
-        self.assertIn("address", accepted, "could not read tempokey-server --helpfull")
+        self.assertIn("address", accepted, "could not read tempokey-server --help")
         self.assertEqual(set(self.args) - accepted, set())
         self.assertEqual(set(parse_flags(dockerfile_entrypoint()[1:])) - accepted, set())
+
+
+class BatchJobTest(unittest.TestCase):
+    """deploy/k8s/batch/: the Indexed Job that runs a batch's shards against the Service."""
+
+    SHARD_ARG = re.compile(r"^--shard=\$\(JOB_COMPLETION_INDEX\)/(\d+)$")
+
+    @classmethod
+    def setUpClass(cls):
+        cls.kustomization = yaml.safe_load((BATCH_DIR / "kustomization.yaml").read_text())
+        cls.documents = load_k8s(BATCH_DIR)
+        jobs = [doc for _, doc in cls.documents if doc.get("kind") == "Job"]
+        assert len(jobs) == 1, "deploy/k8s/batch holds one Job"
+        cls.job = jobs[0]
+        cls.pod = cls.job["spec"]["template"]
+        containers = cls.pod["spec"]["containers"]
+        assert len(containers) == 1, "one container per pod: the CLI"
+        cls.container = containers[0]
+        cls.args = [str(a) for a in cls.container["args"]]
+        cls.command_index = cls.args.index("batch")
+        cls.env = {e["name"]: e for e in cls.container.get("env", [])}
+        cls.mounts = {m["name"]: m for m in cls.container["volumeMounts"]}
+        cls.volumes = {v["name"]: v for v in cls.pod["spec"]["volumes"]}
+        server_documents = load_k8s()
+        cls.service = [doc for _, doc in server_documents if doc["kind"] == "Service"][0]
+        cls.server_set = server_documents
+
+    def flag(self, name):
+        """The value of --name=value in the batch command's arguments, or None."""
+        for arg in self.args[self.command_index + 1:]:
+            if arg.startswith("--%s=" % name):
+                return arg.split("=", 1)[1]
+        return None
+
+    def mount_of(self, path):
+        """The volume mount whose mountPath contains `path`."""
+        found = [m for m in self.mounts.values() if path == m["mountPath"]
+                 or path.startswith(m["mountPath"].rstrip("/") + "/")]
+        self.assertEqual(len(found), 1, "%s is on no mounted volume" % path)
+        return found[0]
+
+    def test_every_manifest_is_listed_and_none_is_in_the_server_set(self):
+        listed = {name for name, _ in self.documents}
+        on_disk = {p.name for p in BATCH_DIR.glob("*.yaml")} - {"kustomization.yaml"}
+        server_kinds = {doc["kind"] for _, doc in self.server_set}
+
+        self.assertEqual(listed, on_disk)
+        self.assertEqual(self.job["apiVersion"], "batch/v1")
+        self.assertNotIn("Job", server_kinds,
+                         "applying the server set (kubectl apply -k deploy/k8s) must not start "
+                         "a run")
+
+    def test_completion_index_is_the_shard_of_as_many_shards_as_completions(self):
+        spec = self.job["spec"]
+        shard_args = [a for a in self.args if self.SHARD_ARG.match(a)]
+        index_env = self.env["JOB_COMPLETION_INDEX"]["valueFrom"]["fieldRef"]["fieldPath"]
+
+        self.assertEqual(spec["completionMode"], "Indexed")
+        self.assertEqual(len(shard_args), 1, "--shard=$(JOB_COMPLETION_INDEX)/N")
+        self.assertEqual(int(self.SHARD_ARG.match(shard_args[0]).group(1)), spec["completions"])
+        self.assertGreaterEqual(spec["parallelism"], 1)
+        self.assertLessEqual(spec["parallelism"], spec["completions"])
+        self.assertEqual(index_env,
+                         "metadata.annotations['batch.kubernetes.io/job-completion-index']")
+
+    def test_retries_are_per_shard_and_usage_errors_stop_the_job(self):
+        spec = self.job["spec"]
+        rules = spec["podFailurePolicy"]["rules"]
+
+        fail_job = [r for r in rules if r["action"] == "FailJob"]
+        ignore = [r for r in rules if r["action"] == "Ignore"]
+
+        self.assertGreaterEqual(spec["backoffLimitPerIndex"], 1)
+        self.assertEqual(self.pod["spec"]["restartPolicy"], "Never",
+                         "backoffLimitPerIndex and podFailurePolicy need restartPolicy Never")
+        self.assertEqual(len(fail_job), 1)
+        self.assertEqual(fail_job[0]["onExitCodes"]["containerName"], self.container["name"])
+        self.assertEqual(fail_job[0]["onExitCodes"]["values"], [2], "exit 2: a usage error")
+        self.assertEqual(ignore[0]["onPodConditions"], [{"type": "DisruptionTarget"}])
+
+    def test_target_is_the_servers_headless_service(self):
+        server = [a for a in self.args[:self.command_index] if a.startswith("--server=")]
+        self.assertEqual(len(server), 1)
+        target = server[0].split("=", 1)[1]
+        grpc_port = [p["port"] for p in self.service["spec"]["ports"] if p["name"] == "grpc"][0]
+
+        match = re.fullmatch(r"dns:///([^.]+)\.\$\(POD_NAMESPACE\)\.svc\.cluster\.local:(\d+)",
+                             target)
+
+        self.assertIsNotNone(match, target)
+        self.assertEqual(match.group(1), self.service["metadata"]["name"])
+        self.assertEqual(int(match.group(2)), grpc_port)
+        self.assertEqual(self.env["POD_NAMESPACE"]["valueFrom"]["fieldRef"]["fieldPath"],
+                         "metadata.namespace")
+
+    def test_every_expanded_variable_is_defined(self):
+        for arg in self.args + [str(c) for c in self.container["command"]]:
+            with self.subTest(arg=arg):
+                self.assertEqual(env_references(arg) - set(self.env), set())
+
+    def test_pods_are_not_servers_to_the_service(self):
+        labels = self.pod["metadata"]["labels"]
+        selector = self.service["spec"]["selector"]
+
+        self.assertNotEqual({k: labels.get(k) for k in selector}, selector,
+                            "the Service would send gRPC calls to batch pods")
+
+    def test_volumes_are_where_the_arguments_say(self):
+        captures = self.mount_of(self.args[self.command_index + 1])
+        curves = self.mount_of(self.flag("output"))
+        pipeline = self.mount_of(self.flag("ops"))
+        summary = self.mount_of(self.flag("summary"))
+        generated = [g["name"] for g in self.kustomization["configMapGenerator"]]
+
+        self.assertIs(captures.get("readOnly"), True, "the captures are only read")
+        self.assertIs(self.volumes[captures["name"]]["persistentVolumeClaim"].get("readOnly"), True)
+        self.assertFalse(curves.get("readOnly", False), "the outputs are written")
+        self.assertEqual(summary["name"], curves["name"], "summaries land beside the outputs")
+        self.assertIn("persistentVolumeClaim", self.volumes[curves["name"]])
+        self.assertIn(self.volumes[pipeline["name"]]["configMap"]["name"], generated)
+        self.assertIn(Path(self.flag("ops")).name,
+                      [Path(f).name for g in self.kustomization["configMapGenerator"]
+                       for f in g["files"]])
+
+    def test_runs_as_the_image_user_locked_down(self):
+        context = {**self.pod["spec"].get("securityContext", {}),
+                   **self.container.get("securityContext", {})}
+
+        self.assertIs(context.get("runAsNonRoot"), True)
+        self.assertEqual(context.get("runAsUser"), IMAGE_UID)
+        self.assertIs(context.get("allowPrivilegeEscalation"), False)
+        self.assertIs(context.get("readOnlyRootFilesystem"), True)
+        self.assertEqual(context.get("capabilities", {}).get("drop"), ["ALL"])
+        self.assertEqual(self.container["command"], ["/usr/local/bin/tempokey"])
+        self.assertIn("/build/client/tempokey", DOCKERFILE.read_text(),
+                      "the image ships the CLI the Job runs")
+        self.assertEqual(self.container["image"].rsplit(":", 1)[0], "tempokey")
+        self.assertIn(self.container.get("imagePullPolicy"), ("IfNotPresent", "Never"))
+
+    def test_the_real_cli_accepts_the_command_line_and_the_pipeline(self):
+        cli = os.environ.get("TEMPOKEY_CLI")
+        if not cli or not os.access(cli, os.X_OK):
+            self.skipTest("no tempokey binary (TEMPOKEY_CLI=%r): build it" % cli)
+        with tempfile.TemporaryDirectory() as directory:
+            # Each mount becomes a local folder; the ConfigMap's files are the ones kustomize
+            # puts in it.
+            local = {}
+            for name, mount in self.mounts.items():
+                volume = self.volumes[name]
+                if "configMap" in volume:
+                    local[mount["mountPath"]] = str(BATCH_DIR)
+                else:
+                    local[mount["mountPath"]] = os.path.join(directory, name)
+                    os.mkdir(local[mount["mountPath"]])
+            values = {"JOB_COMPLETION_INDEX": "3", "POD_NAMESPACE": "studio"}
+            argv = []
+            for arg in self.args:
+                arg = re.sub(r"\$\((\w+)\)", lambda m: values[m.group(1)], arg)
+                for mount_path, path in sorted(local.items(), key=lambda i: -len(i[0])):
+                    arg = re.sub(r"(^|=)" + re.escape(mount_path) + r"(?=/|$)",
+                                 lambda m: m.group(1) + path, arg)
+                argv.append(arg)
+
+            run = subprocess.run([cli] + argv, capture_output=True, text=True,
+                                 timeout=HELP_TIMEOUT_SECONDS)
+
+        # Every flag and the pipeline were accepted (a mistake in either is exit 2); the run
+        # then stops at the empty captures folder, before any server is needed.
+        captures = local[self.mounts["captures"]["mountPath"]]
+        self.assertEqual((run.returncode, run.stderr),
+                         (1, "error: %s: no .bvh files\n" % captures), " ".join(argv))
 
 
 class ComposeTest(unittest.TestCase):

@@ -161,9 +161,15 @@ TEST(OperationConvertTest, EveryStepRoundTripsThroughProto) {
   core::ReduceStep paper;
   paper.options.method = core::ReduceMethod::kPaper;
   paper.options.paper.accuracy = 0.001;
+  retime.euler_filter = true;
+  core::ReduceStep noise;
+  noise.options.method = core::ReduceMethod::kNoise;
+  noise.options.noise.position_sigma = 0.25;
+  noise.options.noise.key_sigmas = 0.3;
+  noise.options.euler_filter = false;
   const std::vector<core::PipelineStep> steps = {
       retime, reduce, paper, core::BakeStep{.rate = core::FrameRate{.numerator = 24, .denominator = 1}},
-      core::BakeStep{}, core::ConvertStep{.wrap_rotations = true}};
+      core::BakeStep{}, core::ConvertStep{.wrap_rotations = true, .euler_filter = true}, noise};
   google::protobuf::RepeatedPtrField<v1::Operation> ops;
   for (const core::PipelineStep& step : steps) *ops.Add() = PipelineStepToProto(step);
 
@@ -184,6 +190,15 @@ TEST(OperationConvertTest, EveryStepRoundTripsThroughProto) {
   EXPECT_EQ(std::get<core::ReduceStep>((*back)[2]).options.paper.accuracy, 0.001);
   EXPECT_FALSE(std::get<core::BakeStep>((*back)[4]).rate.has_value());
   EXPECT_TRUE(std::get<core::ConvertStep>((*back)[5]).wrap_rotations);
+  EXPECT_TRUE(std::get<core::ConvertStep>((*back)[5]).euler_filter);
+  EXPECT_TRUE(r.euler_filter);
+  EXPECT_FALSE(std::get<core::ReduceStep>((*back)[1]).options.euler_filter.has_value());
+  const core::ReduceOptions& n = std::get<core::ReduceStep>((*back)[6]).options;
+  EXPECT_EQ(n.method, core::ReduceMethod::kNoise);
+  EXPECT_FALSE(n.noise.rotation_sigma_degrees.has_value());
+  EXPECT_EQ(n.noise.position_sigma, 0.25);
+  EXPECT_EQ(n.noise.key_sigmas, 0.3);
+  EXPECT_EQ(n.euler_filter, false);
 }
 
 TEST(ReportConvertTest, ReportsRoundTrip) {
@@ -193,7 +208,10 @@ TEST(ReportConvertTest, ReportsRoundTrip) {
                                                       .sample_count = 100,
                                                       .rms_error = 0.1,
                                                       .max_error = 0.4,
-                                                      .max_error_frame = 55});
+                                                      .max_error_frame = 55,
+                                                      .noise_sigma = 0.45,
+                                                      .noise_sigma_estimated = true});
+  reduction.euler_filtered_frames = 12;
   reduction.key_count = 7;
   reduction.sample_count = 100;
   reduction.worst_channel_index = 3;
@@ -212,6 +230,9 @@ TEST(ReportConvertTest, ReportsRoundTrip) {
   EXPECT_EQ(ra.channels[0].max_error_frame, 55);
   EXPECT_EQ(ra.iterations, 4);
   EXPECT_EQ(ra.worst_channel_index, 3);
+  EXPECT_EQ(ra.channels[0].noise_sigma, 0.45);
+  EXPECT_TRUE(ra.channels[0].noise_sigma_estimated);
+  EXPECT_EQ(ra.euler_filtered_frames, 12);
   const auto& rb = std::get<core::RetimeReport>(b);
   EXPECT_EQ(rb.output_frame_count, 76);
   EXPECT_EQ(rb.fit_factor, 1.001);

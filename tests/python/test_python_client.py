@@ -1,7 +1,8 @@
-"""Tests of the Python example client (client/python) against the real tempokey-server.
+"""Tests of the tempokey Python package (client/python) against the real tempokey-server.
 
-Run by CTest (label `python`); tests/python/CMakeLists.txt sets the environment:
-  PYTHONPATH            the generated tempokey.v1 stubs and client/python
+Run by CTest (label `python`) with the interpreter of the virtual environment the package was
+installed into (tests/python/install_package.py); tests/python/CMakeLists.txt sets:
+  PYTHONPATH            this folder only: `tempokey` comes from the installed package
   TEMPOKEY_SERVER       the tempokey-server binary; TEMPOKEY_CLI the tempokey binary
   TEMPOKEY_SHARED_DIR   ../shared (captures under data/bvh)
   TEMPOKEY_CLIENT_DIR   client/python (the example script); TEMPOKEY_PYTHON the interpreter
@@ -25,9 +26,7 @@ import unittest
 
 import grpc
 
-import bvh
-import example_pipeline
-import tempokey_client as tk
+import tempokey as tk
 
 # Bounds, generous for a loaded 2-core CI machine; none of them is a performance assertion.
 STARTUP_TIMEOUT_SECONDS = 60
@@ -128,7 +127,7 @@ class RunningServer:
 def cmu_clip():
     """CMU 131_01 (994 frames, 96 channels) read and converted as the example does, so the tests
     send exactly what the example sends. Shared: callers do not modify it."""
-    return example_pipeline.clip_from_bvh(bvh.read_bvh(CMU_BVH))
+    return tk.read_bvh_clip(CMU_BVH)
 
 
 def ramp_clip(frames, fps=30):
@@ -214,7 +213,7 @@ class SampleBatchTest(unittest.TestCase):
         clip = tk.make_clip("many", 1.0 / 30, channels=["a", "b", "c"],
                             samples=[[float(c * 1000 + i) for i in range(130)] for c in range(3)])
 
-        batches = list(tk._sample_batches(clip, slice_bytes=8 * 100))
+        batches = list(tk.sample_batches(clip, slice_bytes=8 * 100))
 
         self.assertEqual([sum(len(s.samples) for s in b.slices) for b in batches],
                          [100, 100, 100, 90])
@@ -335,6 +334,40 @@ class ReduceTest(ServerTestCase):
 
         self.assertGreater(tight.reduction_report.key_count, loose.reduction_report.key_count)
 
+    def test_noise_method_reports_each_channels_level_given_or_estimated(self):
+        clip = cmu_clip()
+
+        given = self.client.process(clip, [tk.reduce_operation(method="noise", noise=0.3)])
+        estimated = self.client.process(clip, [tk.reduce_operation(method="noise")])
+
+        rotation_kinds = {tk.CHANNEL_KINDS[name] for name in ("Xrotation", "Yrotation", "Zrotation")}
+        header = given.keyed_clip.header
+        rotations = [c for c in given.reduction_report.channels
+                     if header.channels[c.channel_index].kind in rotation_kinds]
+        self.assertEqual(len(rotations), 93)
+        for channel in rotations:
+            self.assertEqual(channel.noise_sigma, 0.3)
+            self.assertFalse(channel.noise_sigma_estimated)
+        for channel in estimated.reduction_report.channels:
+            self.assertGreater(channel.noise_sigma, 0.0)
+            self.assertTrue(channel.noise_sigma_estimated)
+        self.assertLess(estimated.reduction_report.key_count, estimated.reduction_report.sample_count)
+
+    def test_euler_filter_is_on_for_noise_and_asked_for_tolerance(self):
+        clip = cmu_clip()
+
+        noise = self.client.process(clip, [tk.reduce_operation(method="noise", noise=0.3)])
+        noise_off = self.client.process(clip, [tk.reduce_operation(
+            method="noise", noise=0.3, euler_filter=False)])
+        tolerance = self.client.process(clip, [tk.reduce_operation()])
+        tolerance_on = self.client.process(clip, [tk.reduce_operation(euler_filter=True)])
+
+        self.assertGreater(noise.reduction_report.euler_filtered_frames, 0)
+        self.assertEqual(noise_off.reduction_report.euler_filtered_frames, 0)
+        self.assertEqual(tolerance.reduction_report.euler_filtered_frames, 0)
+        self.assertEqual(tolerance_on.reduction_report.euler_filtered_frames,
+                         noise.reduction_report.euler_filtered_frames)
+
     def test_keyed_json_equals_the_cli_output(self):
         result = self.client.process(cmu_clip(), [tk.reduce_operation()])
 
@@ -387,11 +420,60 @@ class InvalidRequestTest(ServerTestCase):
                                 [tk.reduce_operation()], clip_id="sha256:00")
         self.assertRaisesStatus(grpc.StatusCode.NOT_FOUND, self.client.result, "no-such-job")
 
+    def test_noise_levels_belong_to_the_noise_method(self):
+        with self.assertRaises(ValueError):
+            tk.reduce_operation(noise=0.5)
+        with self.assertRaises(ValueError):
+            tk.reduce_operation(method="noise", tolerance=0.5)
+
     def test_client_side_encoding_errors_are_value_errors(self):
         with self.assertRaisesRegex(ValueError, r"speed knot 2 \('2x:1'\)"):
             tk.parse_speed("0s:1,2x:1")
         with self.assertRaisesRegex(ValueError, "channel 1 has 2 samples, channel 0 has 3"):
             tk.make_clip("ragged", 0.1, ["a", "b"], [[1, 2, 3], [1, 2]])
+
+
+class ReduceOptionsTest(ServerTestCase):
+    """reduce_operation() builds ReduceOperation from its keyword table, REDUCE_OPTIONS."""
+
+    def test_every_option_lands_in_its_field_and_the_server_takes_it(self):
+        values = {"tolerance": 0.75, "position_tolerance": 0.25, "scalar_tolerance": 0.125,
+                  "key_budget": 400, "pose_alignment": "joint", "joint_tolerance": "0.5%",
+                  "noise": 0.25, "position_noise": 0.5, "euler_filter": True}
+        # Options that choose their field from their value: where this value must land.
+        chosen_fields = {"joint_tolerance": ("tolerance.max_joint_error_percent_of_height", 0.5),
+                         "noise": ("noise.rotation_sigma_degrees", 0.25),
+                         "position_noise": ("noise.position_sigma", 0.5)}
+        methods = {"noise": "noise", "position_noise": "noise"}
+        self.assertEqual(set(values), set(tk.REDUCE_OPTIONS), "a new option needs a value here")
+
+        for keyword, value in values.items():
+            with self.subTest(option=keyword):
+                option = tk.REDUCE_OPTIONS[keyword]
+                field, expected = chosen_fields.get(keyword, (option.field, None))
+                if keyword not in chosen_fields:
+                    expected = option.convert(value)
+                operation = tk.reduce_operation(method=methods.get(keyword, "tolerance"),
+                                                **{keyword: value})
+                found = operation.reduce
+                for part in field.split("."):
+                    found = getattr(found, part)
+                self.assertEqual(found, expected, field)
+                result = self.client.process(cmu_clip(), [operation])
+                self.assertIsNotNone(result.keyed_clip)
+
+    def test_unknown_keywords_and_options_of_another_method_are_refused(self):
+        with self.assertRaisesRegex(TypeError, r"unexpected keyword argument 'tolerence' "
+                                               r"\(options: tolerance, position_tolerance"):
+            tk.reduce_operation(tolerence=0.5)
+        with self.assertRaisesRegex(ValueError, "key_budget belongs to method 'tolerance', "
+                                                "not 'paper'"):
+            tk.reduce_operation(method="paper", key_budget=10)
+        with self.assertRaisesRegex(ValueError, "paper parameter 'no_such_field'"):
+            tk.reduce_operation(method="paper", paper={"no_such_field": 1})
+
+    def test_none_leaves_an_option_at_the_servers_default(self):
+        self.assertEqual(tk.reduce_operation(tolerance=None), tk.reduce_operation())
 
 
 class StoredJobTest(ServerTestCase):
@@ -490,6 +572,52 @@ class SmallMessageLimitTest(unittest.TestCase):
         self.assertEqual(caught.exception.code, grpc.StatusCode.UNAVAILABLE)
 
 
+class WorldErrorTest(ServerTestCase):
+    """Joints' world-position error (SPEC 4.4) in the report, and the joint tolerance."""
+
+    def cli_report(self, *args):
+        with tempfile.TemporaryDirectory() as directory:
+            cli = run_cli("--server", _server.address, "reduce", CMU_BVH, "-o",
+                          os.path.join(directory, "cli.json"), *args)
+        self.assertEqual(cli.returncode, 0, cli.stderr)
+        return [line for line in cli.stdout.splitlines()
+                if line.startswith(("figure height:", "joint "))]
+
+    def test_default_reduction_reports_what_the_cli_prints(self):
+        result = self.client.process(cmu_clip(), [tk.reduce_operation()])
+
+        world = result.world_error
+        self.assertIsNotNone(world)
+        self.assertGreater(world.max_error_units, world.rms_error_units)
+        self.assertEqual(world.joint_tolerance_units, 0.0)
+        self.assertEqual(tk.world_error_lines(world), self.cli_report())
+
+    def test_joint_tolerance_in_percent_bounds_every_joint(self):
+        result = self.client.process(cmu_clip(), [tk.reduce_operation(joint_tolerance="0.5%")])
+
+        world = result.world_error
+        bound = 0.005 * world.figure_height_units
+        self.assertAlmostEqual(world.joint_tolerance_units, bound, delta=1e-12 * bound)
+        self.assertLessEqual(world.max_error_units, world.joint_tolerance_units)
+        self.assertEqual(tk.world_error_lines(world), self.cli_report("--joint-tolerance", "0.5%"))
+
+    def test_joint_tolerance_in_file_units_travels_as_its_own_field(self):
+        units = tk.reduce_operation(joint_tolerance=0.25)
+        text = tk.reduce_operation(joint_tolerance="0.25")
+        percent = tk.reduce_operation(joint_tolerance="1%")
+
+        self.assertEqual(units.reduce.tolerance.max_joint_error, 0.25)
+        self.assertEqual(text, units)
+        self.assertEqual(percent.reduce.tolerance.max_joint_error_percent_of_height, 1.0)
+        with self.assertRaisesRegex(ValueError, "got '1cm'"):
+            tk.reduce_operation(joint_tolerance="1cm")
+        with self.assertRaises(ValueError):
+            tk.reduce_operation(method="paper", joint_tolerance=1)
+        result = self.client.process(cmu_clip(), [units])
+        self.assertEqual(result.world_error.joint_tolerance_units, 0.25)
+        self.assertLessEqual(result.world_error.max_error_units, 0.25)
+
+
 class ExampleScriptTest(unittest.TestCase):
     """example_pipeline.py as a user runs it: a subprocess, its exit code, stdout and file."""
 
@@ -522,7 +650,9 @@ class ExampleScriptTest(unittest.TestCase):
         lines = run.stdout.splitlines()
         self.assertEqual(len(lines), 1, run.stdout)
         summary = re.fullmatch(r"131_01: 994 -> (\d+) frames, (\d+) of (\d+) keys kept "
-                               r"\([0-9.]+ %\), max error ([0-9.e+-]+) at \S+ frame \d+", lines[0])
+                               r"\([0-9.]+ %\), max error ([0-9.e+-]+) at \S+ frame \d+, "
+                               r"joint error [0-9.e+-]+ \([0-9.]+ % of height\) at [^,]+ frame "
+                               r"\d+", lines[0])
         self.assertIsNotNone(summary, lines[0])
         frames, keys, samples, max_error = summary.groups()
         self.assertEqual(int(frames), expected_frames)
@@ -582,14 +712,14 @@ class ExampleScriptTest(unittest.TestCase):
 
 
 class BvhReaderTest(unittest.TestCase):
-    """The example's BVH reader on inputs the C++ reader also accepts."""
+    """The package's BVH reader on inputs the C++ reader also accepts."""
 
     def test_line_endings_exponents_and_end_sites(self):
         text = ("\ufeffHIERARCHY\r\nROOT Hips\r{\n OFFSET 0 +1 -2.5e-1\n CHANNELS 2 Zrotation "
                 "Xposition\n End Site\n {\n  OFFSET 0 1 0\n }\n}\nMOTION\nFrames:2\n"
                 "Frame Time:\t0.0083333\n1e1 2\n\n3 4.5\n")
 
-        clip = bvh.parse_bvh(text, "dir/walk.bvh")
+        clip = tk.parse_bvh(text, "dir/walk.bvh")
 
         self.assertEqual(clip.name, "walk")
         self.assertEqual(clip.frame_time_seconds, 0.0083333)
@@ -612,8 +742,8 @@ class BvhReaderTest(unittest.TestCase):
         ]
         for text, message in cases:
             with self.subTest(message=message):
-                with self.assertRaises(bvh.BvhError) as caught:
-                    bvh.parse_bvh(text, "x.bvh")
+                with self.assertRaises(tk.BvhError) as caught:
+                    tk.parse_bvh(text, "x.bvh")
                 self.assertEqual(str(caught.exception), message)
 
 

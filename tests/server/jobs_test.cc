@@ -391,7 +391,7 @@ TEST_F(JobsTest, BadSubmitsGetPreciseErrors) {
 TEST_F(JobsTest, ServerOffersEveryOperation) {
   EXPECT_THAT(server_->operations(),
               ElementsAre("convert", "retime", "retime/paper", "reduce", "reduce/tolerance",
-                          "reduce/paper", "bake"));
+                          "reduce/paper", "reduce/noise", "bake"));
 }
 
 TEST_F(JobsTest, LookupsOfUnknownJobsAreNotFound) {

@@ -324,29 +324,18 @@ TEST(ReadmeTest, LimitsTableMatchesWhatTheServerRefuses) {
 
 // ---- the server-flags table -----------------------------------------------------------------------
 
-// --name -> default, from `tempokey-server --helpfull`, for the flags of server/main.cc.
+// --name -> default, from `tempokey-server --help`: one line per flag of server/main.cc,
+// "  --name   help text (default: value)", "none" for an empty default.
 std::map<std::string, std::string> ServerFlags() {
-  const ProcessResult help = RunProcess({ServerBinary(), "--helpfull"}, MakeTempDir());
-  std::string text = help.out + help.err;
-  const std::size_t start = text.find("Flags from ../server/main.cc:");
-  EXPECT_NE(start, std::string::npos) << text;
-  if (start == std::string::npos) return {};
-  text = text.substr(start);
-  text = text.substr(0, text.find("Flags from", 10));
-  // Help texts wrap over lines; join them, then read "--name (help); default: value;".
-  std::string joined;
-  for (absl::string_view line : absl::StrSplit(text, '\n')) {
-    absl::StrAppend(&joined, absl::StripAsciiWhitespace(line), " ");
-  }
+  const ProcessResult help = RunProcess({ServerBinary(), "--help"}, MakeTempDir());
+  EXPECT_EQ(help.exit_code, 0) << help.err;
   std::map<std::string, std::string> flags;
-  const std::regex flag(R"(--([a-z_0-9]+) \(.*?\); default: (.*?);)");
-  for (auto it = std::sregex_iterator(joined.begin(), joined.end(), flag);
-       it != std::sregex_iterator(); ++it) {
-    std::string value = (*it)[2];
-    if (value.size() >= 2 && value.front() == '"' && value.back() == '"') {
-      value = value.substr(1, value.size() - 2);
-    }
-    flags["--" + (*it)[1].str()] = value;
+  const std::regex flag(R"(^  (--[a-z_0-9]+) .*\(default: (.*)\)$)");
+  for (absl::string_view view : absl::StrSplit(help.out, '\n')) {
+    const std::string line(view);
+    std::smatch match;
+    if (!std::regex_match(line, match, flag)) continue;
+    flags[match[1].str()] = match[2].str() == "none" ? "" : match[2].str();
   }
   return flags;
 }

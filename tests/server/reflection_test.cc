@@ -169,7 +169,8 @@ TEST(ReflectionTest, FileByNameComesWithTheFilesItImports) {
   }
   EXPECT_THAT(names, ::testing::UnorderedElementsAre(
                          "tempokey/v1/motion_service.proto", "tempokey/v1/clip.proto",
-                         "tempokey/v1/operations.proto", "google/protobuf/timestamp.proto"));
+                         "tempokey/v1/operations.proto", "tempokey/v1/editing.proto",
+                         "google/protobuf/timestamp.proto"));
   ASSERT_NE(missing, nullptr);
   const Message& error = Field(*missing, "error_response");
   EXPECT_EQ(error.GetReflection()->GetInt32(error, error.GetDescriptor()->FindFieldByName("error_code")),

@@ -18,6 +18,7 @@ namespace tempokey::testing {
 namespace {
 
 using ::testing::HasSubstr;
+using ::testing::Not;
 
 // Starts the server with info logging (the drain tests read its log lines).
 std::unique_ptr<ServerProcess> StartInfoServer(const std::vector<std::string>& flags) {
@@ -47,6 +48,21 @@ TEST(ServerBinaryTest, AnnouncesTheBoundPortOnStdoutAndInThePortFile) {
   EXPECT_THAT(server->output(),
               HasSubstr("tempokey-server listening on 127.0.0.1:" + std::to_string(port) + "\n"));
   EXPECT_EQ(code, 0) << server->log();
+}
+
+TEST(ServerBinaryTest, HelpListsTheServersOwnFlagsOneLineEach) {
+  const ProcessResult run = RunServer({"--help"});
+
+  EXPECT_EQ(run.exit_code, 0) << run.err;
+  EXPECT_THAT(run.out, HasSubstr("usage: tempokey-server [flags]\n"));
+  for (const char* flag : {"address", "workers", "queue_capacity", "drain_grace_seconds",
+                           "metrics_address", "auth_token_file", "tls_cert", "log_level"}) {
+    EXPECT_THAT(run.out, HasSubstr(std::string("\n  --") + flag + " ")) << flag;
+  }
+  EXPECT_THAT(run.out, HasSubstr("(default: 127.0.0.1:50051)\n"));
+  // gRPC's and Abseil's own flags are not the server's interface.
+  EXPECT_THAT(run.out, Not(HasSubstr("--flagfile")));
+  EXPECT_THAT(run.out, Not(HasSubstr("No flags matched")));
 }
 
 TEST(ServerBinaryTest, RefusesANonLoopbackAddressWithoutTls) {

@@ -64,11 +64,14 @@ TEST_F(UploadTest, OperationsOfferedAreExactlyThoseCoreImplements) {
   const core::Clip clip = MakeClip(1, 32);
   core::ReduceStep paper;
   paper.options.method = core::ReduceMethod::kPaper;
+  core::ReduceStep noise;
+  noise.options.method = core::ReduceMethod::kNoise;
   const std::vector<std::pair<std::string, std::vector<core::PipelineStep>>> probes = {
       {"convert", {core::ConvertStep{}}},
       {"retime", {core::RetimeStep{}}},
       {"reduce/tolerance", {core::ReduceStep{}}},
       {"reduce/paper", {paper}},
+      {"reduce/noise", {noise}},
   };
   const std::vector<std::string>& offered = server_->operations();
 

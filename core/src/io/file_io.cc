@@ -156,6 +156,19 @@ absl::StatusOr<std::string> ReadFile(const std::string& path, std::int64_t max_b
   return contents;
 }
 
+bool IsAtomicWriteTemporary(std::string_view file_name, std::string_view target_name) {
+  constexpr std::string_view kMark = ".tmp-";
+  if (file_name.size() != target_name.size() + kMark.size() + kTempSuffixLength ||
+      !file_name.starts_with(target_name) ||
+      file_name.substr(target_name.size(), kMark.size()) != kMark) {
+    return false;
+  }
+  const std::string_view suffix = file_name.substr(target_name.size() + kMark.size());
+  return std::all_of(suffix.begin(), suffix.end(), [](char c) {
+    return (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9');
+  });
+}
+
 absl::Status WriteFileAtomically(const std::string& path, std::string_view contents) {
   const std::string directory = DirectoryOf(path);
   std::string temp_path;

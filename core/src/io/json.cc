@@ -1,4 +1,12 @@
 // The small JSON reader and string writer of tempokey's file formats (keyed clips, pipelines).
+//
+// Why our own and not nlohmann-json3-dev (Debian 12 ships 3.11.2): every value we return carries
+// the line and column where it starts, so a refusal that is about a value's meaning, not its
+// syntax ("ops.json:2:39: operation 1 (retime): no option 'fsp'"), points at it; nlohmann's DOM
+// keeps no positions (only its parse errors carry a byte offset). We also keep each number's text
+// exactly as written, which pipeline files need for rates such as "29.97" and which makes the keyed
+// clip round trip exact by construction, and we refuse non-finite numbers and nesting beyond 64
+// levels up front (untrusted input). The reader is about 200 lines and fuzzed.
 #include "tempokey/core/io/json.h"
 
 #include <cctype>

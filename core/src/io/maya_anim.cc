@@ -1,11 +1,9 @@
-// Maya .anim export of keyed clips (conventions in maya_anim.h).
+// Maya .anim export of keyed clips (conventions and sources in maya_anim.h).
 //
-// Per key and side, the Bezier handle of keyed_clip.h spans dt = weight * T seconds (T the
-// segment's duration; unset weights are 1/3) and dv = slope * dt value units. Maya describes a
-// tangent by the vector (x, y) = (3 dt, 3 dv), time in seconds: angle = atan2(y, x) in degrees
-// and weight = hypot(x, y). The first key's in side and the last key's out side have no segment;
-// they mirror the other side. Times are written in frames of the declared timeUnit, the Maya unit
-// nearest the clip's rate, so they play at the right time whatever that rate is.
+// Everything Maya reads from a key line is in UI space: time in frames of the declared unit,
+// values in the declared units, and a fixed tangent as an angle and weight in (frames, value)
+// space. Our keys are in seconds with slopes per second, so each number goes through k, the file
+// frames per second, exactly once.
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
@@ -13,10 +11,12 @@
 #include <limits>
 #include <numbers>
 #include <string>
+#include <string_view>
 
 #include "absl/strings/str_cat.h"
 #include "tempokey/core/io/file_io.h"
 #include "tempokey/core/io/maya_anim.h"
+#include "tempokey/core/model/kinematics.h"
 #include "tempokey/core/model/numbers.h"
 #include "tempokey/core/model/status.h"
 
@@ -66,30 +66,42 @@ const TimeUnit& NearestTimeUnit(double frame_rate) {
   return *nearest;
 }
 
-// Converts seconds to frames of the declared unit: time * unit rate. When the clip's frame time
-// is exactly one unit frame (to rounding), time / frame time gives the clip's own frame numbers
-// without the rounding of the rate.
-class UnitFrames {
- public:
-  UnitFrames(double frame_time_seconds, const TimeUnit& unit)
-      : frame_time_(frame_time_seconds),
-        rate_(unit.rate),
-        same_rate_(frame_time_seconds * unit.rate == 1.0) {}
+// A clip rate within this ratio of a Maya unit's plays at that unit with one file frame per
+// source frame (BVH frame times are written rounded: 0.0083333 s is 120.0005 Hz).
+constexpr double kSameRateTolerance = 1e-4;
 
+// File frames of the declared unit. When the clip's rate matches the unit (kSameRateTolerance), a
+// file frame is one source frame and times become the source's frame numbers; otherwise a file
+// frame is one unit frame.
+class FileFrames {
+ public:
+  FileFrames(double frame_time_seconds, const TimeUnit& unit)
+      : frame_time_(frame_time_seconds),
+        same_rate_(std::abs(unit.rate * frame_time_seconds - 1.0) <= kSameRateTolerance),
+        per_second_(same_rate_ ? 1.0 / frame_time_seconds : unit.rate) {}
+
+  // File frames per second (k in maya_anim.h).
+  double per_second() const { return per_second_; }
+
+  // The file frame of a time in seconds. On a matching rate a key on a source frame lands on
+  // that frame number exactly (the division's rounding is undone).
   double operator()(double seconds) const {
-    return same_rate_ ? seconds / frame_time_ : seconds * rate_;
+    if (!same_rate_) return seconds * per_second_;
+    const double frames = seconds / frame_time_;
+    const double whole = std::round(frames);
+    return std::abs(frames - whole) <= 1e-9 * std::max(1.0, std::abs(whole)) ? whole : frames;
   }
 
-  // The unit frame of the clip's frame `frame`.
+  // The file frame of the clip's frame `frame`.
   double OfClipFrame(std::int64_t frame) const {
     const auto f = static_cast<double>(frame);
-    return same_rate_ ? f : f * frame_time_ * rate_;
+    return same_rate_ ? f : f * frame_time_ * per_second_;
   }
 
  private:
   double frame_time_;
-  double rate_;
   bool same_rate_;
+  double per_second_;
 };
 
 struct Tangent {
@@ -97,10 +109,25 @@ struct Tangent {
   double weight;
 };
 
-Tangent MayaTangent(double slope, double weight, double segment_seconds) {
-  const double x = 3.0 * weight * segment_seconds;
-  const double y = x * slope;
-  return {std::atan2(y, x) * 180.0 / std::numbers::pi, std::hypot(x, y)};
+constexpr double kDegreesPerRadian = 180.0 / std::numbers::pi;
+
+// A non-weighted curve: only the slope matters (per file frame); Maya ignores the weight.
+Tangent PlainTangent(double slope_per_second, double frames_per_second) {
+  return {std::atan(slope_per_second / frames_per_second) * kDegreesPerRadian, 1.0};
+}
+
+// A weighted curve: the handle spans weight * segment seconds, i.e. (DF, DV) in UI space.
+Tangent WeightedTangent(double slope_per_second, double weight, double segment_seconds,
+                        double frames_per_second) {
+  const double handle_seconds = weight * segment_seconds;
+  const double df = handle_seconds * frames_per_second;
+  const double dv = handle_seconds * slope_per_second;
+  return {std::atan2(dv, df) * kDegreesPerRadian, std::hypot(df, dv)};
+}
+
+bool IsWeighted(const Curve& curve) {
+  return std::any_of(curve.keys.begin(), curve.keys.end(),
+                     [](const Key& key) { return key.in_weight || key.out_weight; });
 }
 
 // "rotate.rotateX rotateX" for the attribute of a channel kind, the channel name for scalars.
@@ -116,29 +143,35 @@ std::string Attribute(const Clip& layout, int c) {
   return absl::StrCat(name, " ", name);
 }
 
-void AppendCurve(std::string& out, const KeyedClip& keyed, int c, const UnitFrames& frames) {
+void AppendCurve(std::string& out, const KeyedClip& keyed, int c, const FileFrames& frames) {
   const Clip& layout = keyed.layout;
   const Channel& channel = layout.channels[c];
   const std::string node = channel.joint >= 0 ? layout.skeleton.joints[channel.joint].name
                                               : ChannelName(layout, c);
+  const Curve& curve = keyed.curves[c];
+  const bool weighted = IsWeighted(curve);
   absl::StrAppend(&out, "anim ", Attribute(layout, c), " ", node, " 0 0 0;\n");
   absl::StrAppend(&out, "animData {\n  input time;\n  output ",
                   IsRotation(channel.kind)   ? "angular"
                   : IsPosition(channel.kind) ? "linear"
                                              : "unitless",
-                  ";\n  weighted 1;\n  preInfinity constant;\n  postInfinity constant;\n"
-                  "  keys {\n");
-  const std::vector<Key>& keys = keyed.curves[c].keys;
+                  ";\n  weighted ", weighted ? 1 : 0,
+                  ";\n  preInfinity constant;\n  postInfinity constant;\n  keys {\n");
+  const std::vector<Key>& keys = curve.keys;
+  const double k_rate = frames.per_second();
   for (std::size_t k = 0; k < keys.size(); ++k) {
     const Key& key = keys[k];
     const double before =
         k > 0 ? key.time_seconds - keys[k - 1].time_seconds
               : (k + 1 < keys.size() ? keys[k + 1].time_seconds - key.time_seconds : 0.0);
     const double after = k + 1 < keys.size() ? keys[k + 1].time_seconds - key.time_seconds : before;
-    const double in_weight = key.in_weight.value_or(kDefaultWeight);
-    const double out_weight = key.out_weight.value_or(kDefaultWeight);
-    const Tangent in = MayaTangent(key.in_tangent, in_weight, before);
-    const Tangent tangent_out = MayaTangent(key.out_tangent, out_weight, after);
+    Tangent in = PlainTangent(key.in_tangent, k_rate);
+    Tangent tangent_out = PlainTangent(key.out_tangent, k_rate);
+    if (weighted) {
+      in = WeightedTangent(key.in_tangent, key.in_weight.value_or(kDefaultWeight), before, k_rate);
+      tangent_out = WeightedTangent(key.out_tangent, key.out_weight.value_or(kDefaultWeight), after,
+                                    k_rate);
+    }
     out += "    ";
     AppendDouble(out, frames(key.time_seconds));
     out += ' ';
@@ -156,18 +189,45 @@ void AppendCurve(std::string& out, const KeyedClip& keyed, int c, const UnitFram
   out += "  }\n}\n";
 }
 
+// "// tempokey rotateOrder Hips yxz 4;" for every joint with three rotation channels.
+void AppendRotateOrders(std::string& out, const Clip& layout) {
+  bool first = true;
+  for (const JointRotation& rotation : JointRotations(layout)) {
+    if (rotation.channels.size() != 3) continue;
+    if (first) {
+      out +=
+          "// Rotation orders: Maya must have these on the joints before the import (README).\n";
+      first = false;
+    }
+    const MayaRotateOrder order = MayaRotateOrderOf(rotation.order);
+    absl::StrAppend(&out, "// tempokey rotateOrder ", layout.skeleton.joints[rotation.joint].name,
+                    " ", order.name, " ", order.value, ";\n");
+  }
+}
+
 }  // namespace
+
+MayaRotateOrder MayaRotateOrderOf(const std::array<int, 3>& order) {
+  MayaRotateOrder result;
+  for (int i = 2; i >= 0; --i) result.name += "xyz"[order[static_cast<std::size_t>(i)]];
+  constexpr std::string_view kNames[] = {"xyz", "yzx", "zxy", "xzy", "yxz", "zyx"};
+  for (int v = 0; v < 6; ++v) {
+    if (kNames[v] == result.name) result.value = v;
+  }
+  return result;
+}
 
 absl::StatusOr<std::string> FormatMayaAnim(const KeyedClip& keyed) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateKeyedClip(keyed));
   const Clip& layout = keyed.layout;
   const TimeUnit& unit = NearestTimeUnit(layout.frame_rate());
-  const UnitFrames frames(layout.frame_time_seconds, unit);
+  const FileFrames frames(layout.frame_time_seconds, unit);
   std::string out = "animVersion 1.1;\nmayaVersion 2020;\n";
   absl::StrAppend(&out, "timeUnit ", unit.name, ";\n",
                   "linearUnit cm;\nangularUnit deg;\nstartTime 0;\nendTime ");
   AppendDouble(out, frames.OfClipFrame(layout.frame_count - 1));
   out += ";\n";
+  AppendRotateOrders(out, layout);
   for (std::size_t c = 0; c < layout.channels.size(); ++c) {
     AppendCurve(out, keyed, static_cast<int>(c), frames);
   }

@@ -40,11 +40,12 @@ double EvaluatePlainSegment(const Key& a, const Key& b, double time_seconds) {
   const double s = (time_seconds - a.time_seconds) / dt;
   const double s2 = s * s;
   const double s3 = s2 * s;
-  const double h00 = 2 * s3 - 3 * s2 + 1;
   const double h10 = s3 - 2 * s2 + s;
   const double h01 = -2 * s3 + 3 * s2;
   const double h11 = s3 - s2;
-  return h00 * a.value + h10 * a.out_tangent * dt + h01 * b.value + h11 * b.in_tangent * dt;
+  // h00 = 1 - h01: written from a's value so that a flat segment gives exactly its value.
+  return a.value + h01 * (b.value - a.value) + h10 * a.out_tangent * dt +
+         h11 * b.in_tangent * dt;
 }
 
 // A weighted side: the 2D Bezier, its parameter solved from time.

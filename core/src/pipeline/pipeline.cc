@@ -1,5 +1,7 @@
 #include "tempokey/core/pipeline/pipeline.h"
 
+#include "tempokey/core/model/euler_filter.h"
+
 #include <cmath>
 #include <string>
 #include <utility>
@@ -126,7 +128,7 @@ absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> st
               probe.frame_count = 2;
               return ValidateRetime(probe, s.warp, s.options, limits);
             },
-            [](const ReduceStep& s) { return ValidateReduceOptions(s.options); },
+            [&](const ReduceStep& s) { return ValidateReduceOptionsForClip(clip, s.options); },
             [](const BakeStep& s) { return ValidateRate(s.rate); },
             [](const ConvertStep&) { return absl::OkStatus(); },
         },
@@ -174,6 +176,9 @@ absl::StatusOr<PipelineResult> RunPipeline(const Clip& clip, std::span<const Pip
                   Retime(*input, s.warp, s.options, step_progress, stop, limits));
               result.output = std::move(r.clip);
               input = std::get_if<Clip>(&result.output);
+              if (s.euler_filter) {
+                TEMPOKEY_RETURN_IF_ERROR(ApplyEulerFilter(std::get<Clip>(result.output)).status());
+              }
               result.reports.emplace_back(r.report);
               return absl::OkStatus();
             },
@@ -200,6 +205,7 @@ absl::StatusOr<PipelineResult> RunPipeline(const Clip& clip, std::span<const Pip
             },
             [&](const ConvertStep& s) -> absl::Status {
               Clip& owned = own_input();
+              if (s.euler_filter) TEMPOKEY_RETURN_IF_ERROR(ApplyEulerFilter(owned).status());
               if (s.wrap_rotations) owned = WrapRotations(std::move(owned));
               return absl::OkStatus();
             },

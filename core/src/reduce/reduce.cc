@@ -4,16 +4,22 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <optional>
 #include <span>
 #include <string>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "joint_bound_fit.h"
+#include "noise_reduction.h"
 #include "reduction_internal.h"
-#include "tempokey/core/reduce/hermite_dp.h"
+#include "world_error_internal.h"
+#include "tempokey/core/model/euler_filter.h"
+#include "tempokey/core/model/kinematics.h"
 #include "tempokey/core/model/numbers.h"
 #include "tempokey/core/model/rotation.h"
 #include "tempokey/core/model/status.h"
+#include "tempokey/core/reduce/hermite_dp.h"
 #include "tempokey/core/reduce/tolerance_fit.h"
 
 namespace tempokey::core {
@@ -75,10 +81,15 @@ absl::Status CheckBound(std::string_view field, double value) {
 }
 
 absl::Status ValidateToleranceParams(const ToleranceParams& t) {
-  TEMPOKEY_RETURN_IF_ERROR(
-      CheckBound("tolerance.max_rotation_error_degrees", t.max_rotation_error_degrees));
-  TEMPOKEY_RETURN_IF_ERROR(CheckBound("tolerance.max_position_error", t.max_position_error));
+  if (t.max_rotation_error_degrees) {
+    TEMPOKEY_RETURN_IF_ERROR(
+        CheckBound("tolerance.max_rotation_error_degrees", *t.max_rotation_error_degrees));
+  }
+  if (t.max_position_error) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckBound("tolerance.max_position_error", *t.max_position_error));
+  }
   TEMPOKEY_RETURN_IF_ERROR(CheckBound("tolerance.max_scalar_error", t.max_scalar_error));
+  if (t.joint_tolerance) TEMPOKEY_RETURN_IF_ERROR(ValidateJointTolerance(*t.joint_tolerance));
   if (t.key_budget && *t.key_budget < 2) {
     return absl::InvalidArgumentError(
         absl::StrCat("tolerance.key_budget must be >= 2 when set, got ", *t.key_budget));
@@ -116,12 +127,19 @@ struct ChannelFit {
   int iterations = 0;
 };
 
-// Two flat keys at `value` at the ends of `frame_count` frames (one for a single frame).
+// Two flat keys at `value` at the ends of `frame_count` frames (one for a single frame), with no
+// weights: a constant needs none, and the files say so (README: unweighted curves carry none).
 ChannelFit FlatFit(std::size_t frame_count, double value, double frame_time) {
-  const double last = static_cast<double>(frame_count - 1);
-  std::vector<HermiteKey2D> keys = {{0.0, value, last, 0.0}};
-  if (frame_count > 1) keys.push_back({last, value, last, 0.0});
-  return {HermiteKeysToCurve(keys, frame_time), {}, 0};
+  Curve curve;
+  Key first;
+  first.value = value;
+  curve.keys.push_back(first);
+  if (frame_count > 1) {
+    Key last = first;
+    last.time_seconds = static_cast<double>(frame_count - 1) * frame_time;
+    curve.keys.push_back(last);
+  }
+  return {std::move(curve), {}, 0};
 }
 
 absl::StatusOr<ChannelFit> PaperFit(std::span<const double> samples, double frame_time,
@@ -150,10 +168,43 @@ constexpr double kMinBudgetScale = 1e-6;
 // Bisection steps of the budget search on the bounds' scale (a factor 2^-12 apart at the end).
 constexpr int kBudgetBisections = 12;
 
-double BoundOf(const ToleranceParams& t, ChannelKind kind) {
-  if (IsRotation(kind)) return t.max_rotation_error_degrees;
-  if (kind == ChannelKind::kScalar) return t.max_scalar_error;
-  return t.max_position_error;
+// The bounds of a tolerance fit before any key-budget scaling (SPEC 4.2, 4.4).
+struct ToleranceBounds {
+  // Per channel (value units): its bound; with a joint bound, only the bounds that were set
+  // (+infinity for the others: the joint bound chooses those).
+  std::vector<double> channel;
+  // Per channel: the default of its kind, for a channel the joint bound leaves unbounded.
+  std::vector<double> fallback;
+  // The joint bound (file units), when asked for.
+  std::optional<double> joint;
+};
+
+// Each channel's bound from `t`, defaults resolved against the figure's height.
+absl::StatusOr<ToleranceBounds> ResolveBounds(const Clip& clip, const ToleranceParams& t) {
+  double height = 0.0;
+  if (!clip.skeleton.empty()) { TEMPOKEY_ASSIGN_OR_RETURN(height, FigureHeight(clip)); }
+  ToleranceBounds bounds;
+  if (t.joint_tolerance) {  // on a skeleton: ValidateReduceOptionsForClip()
+    TEMPOKEY_ASSIGN_OR_RETURN(bounds.joint, ResolveJointTolerance(*t.joint_tolerance, height));
+  }
+  const double position_default = height > 0.0 ? kDefaultPositionErrorHeightFraction * height
+                                               : kDefaultMaxPositionErrorWithoutFigure;
+  for (const Channel& channel : clip.channels) {
+    double fallback = t.max_scalar_error;
+    std::optional<double> set = t.max_scalar_error;
+    if (IsRotation(channel.kind)) {
+      fallback = kDefaultMaxRotationErrorDegrees;
+      set = t.max_rotation_error_degrees;
+    } else if (IsPosition(channel.kind)) {
+      fallback = position_default;
+      set = t.max_position_error;
+    }
+    bounds.fallback.push_back(set.value_or(fallback));
+    bounds.channel.push_back(set                ? *set
+                             : bounds.joint.has_value() ? std::numeric_limits<double>::infinity()
+                                                        : fallback);
+  }
+  return bounds;
 }
 
 // Channels whose keys share frames: each alone, a joint's (channels off joints alone), or all.
@@ -199,15 +250,16 @@ Curve SplineCurve(const SplineFit& fit, std::size_t index, double frame_time) {
   return curve;
 }
 
-// The scale at which every channel's bound covers the range (max - min) of its fitted samples:
-// there two flat keys at mid-range keep every channel within half its bound, so every group fits
-// with two keys. At least 1; at most the largest double (for absurdly small bounds).
-double CoveringScale(const Clip& clip, std::span<const std::span<const double>> inputs,
-                     const ToleranceParams& params) {
+// The scale at which every channel's bound (`bounds`, +infinity for none) covers the range
+// (max - min) of its fitted samples: there two flat keys at mid-range keep every channel within
+// half its bound, so every group fits with two keys. At least 1; at most the largest double (for
+// absurdly small bounds).
+double CoveringScale(std::span<const std::span<const double>> inputs,
+                     std::span<const double> bounds) {
   double scale = 1.0;
   for (std::size_t c = 0; c < inputs.size(); ++c) {
     const auto [low, high] = std::minmax_element(inputs[c].begin(), inputs[c].end());
-    scale = std::max(scale, (*high - *low) / BoundOf(params, clip.channels[c].kind));
+    scale = std::max(scale, (*high - *low) / bounds[c]);
   }
   return std::min(scale, std::numeric_limits<double>::max());
 }
@@ -225,15 +277,16 @@ std::vector<Curve> MidRangeCurves(const Clip& clip,
   return curves;
 }
 
-// The tolerance fit of every group with every bound multiplied by `scale`; curves in channel order.
-absl::StatusOr<std::vector<Curve>> ToleranceCurves(
-    const Clip& clip, std::span<const std::span<const double>> inputs,
-    const std::vector<std::vector<int>>& groups, const ToleranceParams& params, double scale,
-    const ProgressFn& progress, std::stop_token stop) {
-  std::vector<Curve> curves(clip.channels.size());
-  for (std::size_t g = 0; g < groups.size(); ++g) {
+// The tolerance fit of the groups `which` (indices into `groups`), channel c within bounds[c];
+// writes their curves into `curves` (one per channel of the clip).
+absl::Status FitGroups(const Clip& clip, std::span<const std::span<const double>> inputs,
+                       const std::vector<std::vector<int>>& groups,
+                       std::span<const std::size_t> which, std::span<const double> bounds,
+                       std::vector<Curve>& curves, const ProgressFn& progress,
+                       std::stop_token stop) {
+  for (std::size_t i = 0; i < which.size(); ++i) {
     TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
-    const std::vector<int>& group = groups[g];
+    const std::vector<int>& group = groups[which[i]];
     if (group.size() == 1 && IsConstant(inputs[group[0]])) {
       curves[group[0]] =
           FlatFit(inputs[group[0]].size(), inputs[group[0]].front(), clip.frame_time_seconds)
@@ -241,22 +294,21 @@ absl::StatusOr<std::vector<Curve>> ToleranceCurves(
       continue;
     }
     std::vector<std::span<const double>> channels;
-    std::vector<double> bounds;
+    std::vector<double> group_bounds;
     for (int c : group) {
       channels.emplace_back(inputs[c]);
       // Capped: a huge bound times a huge scale must not become infinite (the fit refuses it).
-      bounds.push_back(std::min(scale * BoundOf(params, clip.channels[c].kind),
-                                std::numeric_limits<double>::max()));
+      group_bounds.push_back(std::min(bounds[c], std::numeric_limits<double>::max()));
     }
-    absl::StatusOr<SplineFit> fit = FitWithinTolerance(channels, bounds, {}, stop);
+    absl::StatusOr<SplineFit> fit = FitWithinTolerance(channels, group_bounds, {}, stop);
     if (!fit.ok()) return Annotate(fit.status(), ChannelLabel(clip, group.front()));
     for (std::size_t k = 0; k < group.size(); ++k) {
       curves[group[k]] = SplineCurve(*fit, k, clip.frame_time_seconds);
     }
-    ReportProgress(progress, static_cast<double>(g + 1) / static_cast<double>(groups.size()),
+    ReportProgress(progress, static_cast<double>(i + 1) / static_cast<double>(which.size()),
                    absl::StrCat("reduce ", group.back() + 1, "/", clip.channels.size()));
   }
-  return curves;
+  return absl::OkStatus();
 }
 
 std::int64_t KeyCount(const std::vector<Curve>& curves) {
@@ -265,14 +317,94 @@ std::int64_t KeyCount(const std::vector<Curve>& curves) {
   return keys;
 }
 
+std::vector<double> Scaled(std::span<const double> values, double scale) {
+  std::vector<double> out(values.begin(), values.end());
+  for (double& v : out) v *= scale;
+  return out;
+}
+
+// A tolerance fit and the joint bound it kept (file units, 0 without one).
+struct ToleranceCurves {
+  std::vector<Curve> curves;
+  double joint_bound = 0.0;
+};
+
+// One tolerance fit: the channels' bounds and the joint bound, each multiplied by a scale.
+class ToleranceFitter {
+ public:
+  // `meter` is needed (non-null) when `bounds` has a joint bound; it must outlive the fitter.
+  ToleranceFitter(const Clip& clip, std::span<const std::span<const double>> inputs,
+                  const ToleranceParams& params, ToleranceBounds bounds,
+                  reduce_internal::WorldErrorMeter* meter)
+      : clip_(clip),
+        inputs_(inputs),
+        groups_(AlignmentGroups(clip, params.pose_alignment)),
+        bounds_(std::move(bounds)) {
+    if (bounds_.joint) joint_plan_.emplace(*meter, inputs);
+  }
+
+  absl::StatusOr<ToleranceCurves> Fit(double scale, const ProgressFn& progress,
+                                      std::stop_token stop) {
+    ToleranceCurves out;
+    out.curves.resize(clip_.channels.size());
+    if (!bounds_.joint) {
+      std::vector<std::size_t> all(groups_.size());
+      for (std::size_t g = 0; g < all.size(); ++g) all[g] = g;
+      TEMPOKEY_RETURN_IF_ERROR(FitGroups(clip_, inputs_, groups_, all,
+                                         Scaled(bounds_.channel, scale), out.curves, progress,
+                                         stop));
+      return out;
+    }
+    // Progress follows the first round, which fits every group; later rounds refit a few.
+    bool first_round = true;
+    const ProgressFn quiet;
+    const reduce_internal::GroupFitter fit_groups =
+        [&](std::span<const std::size_t> which, std::span<const double> bounds,
+            std::vector<Curve>& curves) {
+          const absl::Status status = FitGroups(clip_, inputs_, groups_, which, bounds, curves,
+                                                first_round ? progress : quiet, stop);
+          first_round = false;
+          return status;
+        };
+    out.joint_bound = *bounds_.joint * scale;
+    TEMPOKEY_ASSIGN_OR_RETURN(
+        out.curves, joint_plan_->Fit(out.joint_bound, Scaled(bounds_.channel, scale),
+                                     Scaled(bounds_.fallback, scale), groups_, fit_groups, stop));
+    return out;
+  }
+
+  // The scale at which two flat keys per channel keep every bound (CoveringScale()); with a joint
+  // bound, of the guaranteed budgets (capped by the set bounds), which keep it whatever the fit.
+  double CoveringScale() const {
+    if (!bounds_.joint) return tempokey::core::CoveringScale(inputs_, bounds_.channel);
+    std::vector<double> bounds = joint_plan_->GuaranteedBudgets(*bounds_.joint);
+    for (std::size_t c = 0; c < bounds.size(); ++c) {
+      bounds[c] = std::min(bounds[c], bounds_.channel[c]);
+      if (!std::isfinite(bounds[c])) bounds[c] = bounds_.fallback[c];
+    }
+    return tempokey::core::CoveringScale(inputs_, bounds);
+  }
+
+  std::optional<double> joint_bound() const { return bounds_.joint; }
+
+ private:
+  const Clip& clip_;
+  std::span<const std::span<const double>> inputs_;
+  std::vector<std::vector<int>> groups_;
+  ToleranceBounds bounds_;
+  std::optional<reduce_internal::JointBoundPlan> joint_plan_;
+};
+
 // Curves within the bounds, or, with a key budget, within the smallest common scale of the bounds
 // whose fit keeps at most that many keys (bisection on the scale, in ratio).
-absl::StatusOr<std::vector<Curve>> ToleranceFit(const Clip& clip,
-                                                std::span<const std::span<const double>> inputs,
-                                                const ToleranceParams& params,
-                                                const ProgressFn& progress, std::stop_token stop) {
-  const std::vector<std::vector<int>> groups = AlignmentGroups(clip, params.pose_alignment);
-  if (!params.key_budget) return ToleranceCurves(clip, inputs, groups, params, 1.0, progress, stop);
+absl::StatusOr<ToleranceCurves> ToleranceFit(const Clip& clip,
+                                             std::span<const std::span<const double>> inputs,
+                                             const ToleranceParams& params,
+                                             reduce_internal::WorldErrorMeter* meter,
+                                             const ProgressFn& progress, std::stop_token stop) {
+  TEMPOKEY_ASSIGN_OR_RETURN(ToleranceBounds bounds, ResolveBounds(clip, params));
+  ToleranceFitter fitter(clip, inputs, params, std::move(bounds), meter);
+  if (!params.key_budget) return fitter.Fit(1.0, progress, stop);
 
   const std::int64_t budget = *params.key_budget;
   const std::int64_t minimum =
@@ -283,17 +415,15 @@ absl::StatusOr<std::vector<Curve>> ToleranceFit(const Clip& clip,
         clip.channels.size(), " channels needs (", clip.frame_count > 1 ? 2 : 1, " per channel)"));
   }
   const ProgressFn quiet;
-  auto fit = [&](double scale) {
-    return ToleranceCurves(clip, inputs, groups, params, scale, quiet, stop);
-  };
+  auto fit = [&](double scale) { return fitter.Fit(scale, quiet, stop); };
   // Bracket: `within` keeps to the budget, `over` does not.
   double within = 1.0;
   double over = 0.0;
-  TEMPOKEY_ASSIGN_OR_RETURN(std::vector<Curve> best, fit(1.0));
-  if (KeyCount(best) <= budget) {
+  TEMPOKEY_ASSIGN_OR_RETURN(ToleranceCurves best, fit(1.0));
+  if (KeyCount(best.curves) <= budget) {
     for (double scale = 0.5; scale >= kMinBudgetScale; scale *= 0.5) {
-      TEMPOKEY_ASSIGN_OR_RETURN(std::vector<Curve> curves, fit(scale));
-      if (KeyCount(curves) > budget) {
+      TEMPOKEY_ASSIGN_OR_RETURN(ToleranceCurves curves, fit(scale));
+      if (KeyCount(curves.curves) > budget) {
         over = scale;
         break;
       }
@@ -305,12 +435,12 @@ absl::StatusOr<std::vector<Curve>> ToleranceFit(const Clip& clip,
     // Doubling, up to the scale whose bounds cover every channel's range: the fit there keeps
     // two keys per channel, which the budget allows (checked above).
     over = 1.0;
-    const double ceiling = CoveringScale(clip, inputs, params);
+    const double ceiling = fitter.CoveringScale();
     bool found = false;
     for (double scale = 2.0; !found && over < ceiling; scale *= 2.0) {
       const double capped = std::min(scale, ceiling);
-      TEMPOKEY_ASSIGN_OR_RETURN(std::vector<Curve> curves, fit(capped));
-      if (KeyCount(curves) <= budget) {
+      TEMPOKEY_ASSIGN_OR_RETURN(ToleranceCurves curves, fit(capped));
+      if (KeyCount(curves.curves) <= budget) {
         within = capped;
         best = std::move(curves);
         found = true;
@@ -320,8 +450,10 @@ absl::StatusOr<std::vector<Curve>> ToleranceFit(const Clip& clip,
     }
     if (!found) {
       // The fit kept more than two keys per channel even where two flat keys are within every
-      // bound (not seen in practice): take those.
-      best = MidRangeCurves(clip, inputs);
+      // bound (not seen in practice): take those. With a joint bound they keep it too, since
+      // every channel is then within its guaranteed budget.
+      best.curves = MidRangeCurves(clip, inputs);
+      best.joint_bound = fitter.joint_bound() ? *fitter.joint_bound() * ceiling : 0.0;
       ReportProgress(progress, 1.0, absl::StrCat("reduce ", clip.channels.size(), "/",
                                                  clip.channels.size()));
       return best;
@@ -329,8 +461,8 @@ absl::StatusOr<std::vector<Curve>> ToleranceFit(const Clip& clip,
   }
   for (int step = 0; step < kBudgetBisections; ++step) {
     const double scale = std::sqrt(within * over);
-    TEMPOKEY_ASSIGN_OR_RETURN(std::vector<Curve> curves, fit(scale));
-    if (KeyCount(curves) <= budget) {
+    TEMPOKEY_ASSIGN_OR_RETURN(ToleranceCurves curves, fit(scale));
+    if (KeyCount(curves.curves) <= budget) {
       within = scale;
       best = std::move(curves);
     } else {
@@ -350,15 +482,27 @@ absl::Status ValidateReduceOptions(const ReduceOptions& options) {
       return ValidatePaperParams(options.paper);
     case ReduceMethod::kTolerance:
       return ValidateToleranceParams(options.tolerance);
+    case ReduceMethod::kNoise:
+      return reduce_internal::ValidateNoiseParams(options.noise);
   }
   return absl::InvalidArgumentError(
       absl::StrCat("reduce method ", static_cast<int>(options.method), " is not a known method"));
 }
 
+absl::Status ValidateReduceOptionsForClip(const Clip& layout, const ReduceOptions& options) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateReduceOptions(options));
+  if (options.method == ReduceMethod::kTolerance && options.tolerance.joint_tolerance &&
+      layout.skeleton.empty()) {
+    return absl::FailedPreconditionError(
+        "tolerance.joint_tolerance needs a skeleton, the clip has none");
+  }
+  return absl::OkStatus();
+}
+
 absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& options,
                                         const ProgressFn& progress, std::stop_token stop) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateClip(clip));
-  TEMPOKEY_RETURN_IF_ERROR(ValidateReduceOptions(options));
+  TEMPOKEY_RETURN_IF_ERROR(ValidateReduceOptionsForClip(clip, options));
 
   ReduceResult result;
   Clip& layout = result.keyed.layout;  // the clip without its samples
@@ -375,16 +519,40 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
     empty.name = channel.name;
   }
   const int channel_count = static_cast<int>(clip.channels.size());
+  // The Euler filter works on a copy; the fit reads that copy instead of the clip.
+  const bool euler_filter =
+      options.euler_filter.value_or(options.method == ReduceMethod::kNoise);
+  std::optional<Clip> filtered;
+  if (euler_filter) {
+    filtered = clip;
+    TEMPOKEY_ASSIGN_OR_RETURN(const EulerFilterReport euler, ApplyEulerFilter(*filtered));
+    result.report.euler_filtered_frames = euler.frames_changed;
+  }
   // Rotations unwrapped into copies, every other channel read in place.
-  const reduce_internal::FittedSamples fitted(clip);
+  const reduce_internal::FittedSamples fitted(filtered ? *filtered : clip);
   const std::span<const std::span<const double>> inputs = fitted.channels();
   for (int c = 0; c < channel_count; ++c) {
     TEMPOKEY_RETURN_IF_ERROR(CheckMagnitudes(clip, c, inputs[c]));
   }
+  // Measures joints through the skeleton: the report's world error, and the joint bound's
+  // verification.
+  std::optional<reduce_internal::WorldErrorMeter> meter;
+  if (!clip.skeleton.empty()) {
+    TEMPOKEY_ASSIGN_OR_RETURN(meter, reduce_internal::WorldErrorMeter::ForClip(clip));
+  }
   int iterations = 0;
-  if (options.method == ReduceMethod::kTolerance) {
-    TEMPOKEY_ASSIGN_OR_RETURN(result.keyed.curves,
-                              ToleranceFit(clip, inputs, options.tolerance, progress, stop));
+  double joint_bound = 0.0;
+  reduce_internal::NoiseCurves noise;
+  if (options.method == ReduceMethod::kNoise) {
+    TEMPOKEY_ASSIGN_OR_RETURN(
+        noise, reduce_internal::FitNoiseCurves(clip, inputs, options.noise, progress, stop));
+    result.keyed.curves = std::move(noise.curves);
+  } else if (options.method == ReduceMethod::kTolerance) {
+    TEMPOKEY_ASSIGN_OR_RETURN(
+        ToleranceCurves fit,
+        ToleranceFit(clip, inputs, options.tolerance, meter ? &*meter : nullptr, progress, stop));
+    result.keyed.curves = std::move(fit.curves);
+    joint_bound = fit.joint_bound;
   } else {
     result.keyed.curves.reserve(clip.channels.size());
     result.squared_error_history.reserve(clip.channels.size());
@@ -402,9 +570,20 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
   }
   // The clip was validated above and the curves are ours: measure without MeasureReduction()'s
   // checks and copies.
+  const std::int64_t euler_filtered_frames = result.report.euler_filtered_frames;
   result.report =
       reduce_internal::MeasureFitted(inputs, result.keyed.curves, clip.frame_time_seconds);
   result.report.iterations = iterations;
+  result.report.euler_filtered_frames = euler_filtered_frames;
+  for (std::size_t c = 0; c < noise.sigmas.size(); ++c) {
+    result.report.channels[c].noise_sigma = noise.sigmas[c];
+    result.report.channels[c].noise_sigma_estimated = noise.estimated[c];
+  }
+  if (meter) {
+    const std::vector<std::vector<double>> baked = reduce_internal::SampleCurves(
+        result.keyed.curves, clip.frame_count, clip.frame_time_seconds);
+    result.report.world = meter->Report(meter->Measure(reduce_internal::Spans(baked)), joint_bound);
+  }
   return result;
 }
 

@@ -35,6 +35,11 @@ class FittedSamples {
 ReductionReport MeasureFitted(std::span<const std::span<const double>> samples,
                               std::span<const Curve> curves, double frame_time_seconds);
 
+// Checks that `keyed` holds one curve per channel of `clip`, of the same kinds.
+// Errors: kInvalidArgument "keyed clip has 1 channels, the clip has 2", "channel 3 (Hips.Xrotation):
+// the keyed clip's channel is Yrotation, not Xrotation".
+absl::Status CheckCurvesFitClip(const Clip& clip, const KeyedClip& keyed);
+
 }  // namespace tempokey::core::reduce_internal
 
 #endif  // TEMPOKEY_CORE_SRC_REDUCE_REDUCTION_INTERNAL_H_

@@ -9,6 +9,7 @@
 #include "absl/strings/str_cat.h"
 #include "reduction_internal.h"
 #include "tempokey/core/reduce/reduce.h"
+#include "tempokey/core/reduce/world_error.h"
 #include "tempokey/core/model/rotation.h"
 #include "tempokey/core/model/status.h"
 
@@ -85,11 +86,7 @@ ReductionReport MeasureFitted(std::span<const std::span<const double>> samples,
   return report;
 }
 
-}  // namespace reduce_internal
-
-absl::StatusOr<ReductionReport> MeasureReduction(const Clip& clip, const KeyedClip& keyed) {
-  TEMPOKEY_RETURN_IF_ERROR(ValidateClip(clip));
-  TEMPOKEY_RETURN_IF_ERROR(ValidateKeyedClip(keyed));
+absl::Status CheckCurvesFitClip(const Clip& clip, const KeyedClip& keyed) {
   if (keyed.layout.channels.size() != clip.channels.size()) {
     return absl::InvalidArgumentError(absl::StrCat("keyed clip has ", keyed.layout.channels.size(),
                                                    " channels, the clip has ",
@@ -103,9 +100,22 @@ absl::StatusOr<ReductionReport> MeasureReduction(const Clip& clip, const KeyedCl
           AsAbsl(ChannelKindName(clip.channels[c].kind))));
     }
   }
+  return absl::OkStatus();
+}
+
+}  // namespace reduce_internal
+
+absl::StatusOr<ReductionReport> MeasureReduction(const Clip& clip, const KeyedClip& keyed) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateClip(clip));
+  TEMPOKEY_RETURN_IF_ERROR(ValidateKeyedClip(keyed));
+  TEMPOKEY_RETURN_IF_ERROR(reduce_internal::CheckCurvesFitClip(clip, keyed));
   const reduce_internal::FittedSamples samples(clip);
-  return reduce_internal::MeasureFitted(samples.channels(), keyed.curves,
-                                        clip.frame_time_seconds);
+  ReductionReport report =
+      reduce_internal::MeasureFitted(samples.channels(), keyed.curves, clip.frame_time_seconds);
+  if (!clip.skeleton.empty()) {
+    TEMPOKEY_ASSIGN_OR_RETURN(report.world, MeasureWorldError(clip, keyed));
+  }
+  return report;
 }
 
 }  // namespace tempokey::core

@@ -329,6 +329,55 @@ absl::StatusOr<RetimeResult> Retime(const Clip& clip, const TimeWarpSpec& warp,
   return result;
 }
 
+absl::StatusOr<RetimePlan> PlanRetime(const Clip& clip, const TimeWarpSpec& warp,
+                                      const RetimeOptions& options, const ClipLimits& limits) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateEnums(options));
+  TEMPOKEY_ASSIGN_OR_RETURN(Schedule schedule, MakeSchedule(clip, warp, options));
+  const auto m = static_cast<std::int64_t>(schedule.positions.size());
+  TEMPOKEY_RETURN_IF_ERROR(CheckOutputSize(m, clip.channels.size(), limits));
+  TEMPOKEY_ASSIGN_OR_RETURN(ResamplePlan kernels,
+                            MakeResamplePlan(schedule.positions, schedule.ratios, clip.frame_count,
+                                             schedule.filter));
+  RetimePlan plan;
+  plan.report.output_duration_seconds = schedule.output_duration;
+  plan.report.output_frame_count = m;
+  plan.report.fit_factor = schedule.fit_factor;
+  plan.report.max_decimation_ratio = kernels.max_ratio;
+  plan.report.filtered_sample_count = kernels.filtered_count;
+  plan.output_frame_time_seconds = schedule.output_frame_time;
+  if (warp.domain == WarpDomain::kSpeedOverSource) {
+    for (const SpeedKnot& knot : warp.speed) {
+      plan.knot_output_seconds.push_back(
+          MapTime(schedule, clip.frame_time_seconds, knot.time.Seconds(clip.frame_time_seconds)));
+    }
+  } else if (warp.domain == WarpDomain::kSpeedOverOutput && schedule.map && options.pins.empty()) {
+    // The fit compresses an output-time curve by its factor (retime.h, kSpeedOverOutput).
+    for (const SpeedKnot& knot : warp.speed) {
+      const double output_seconds =
+          knot.time.Seconds(schedule.output_frame_time) / schedule.map->fit_factor();
+      plan.knot_source_seconds.push_back(schedule.map->reversed()
+                                             ? schedule.map->SourceTime(
+                                                   schedule.output_duration - output_seconds)
+                                             : schedule.map->SourceTime(output_seconds));
+    }
+  }
+  plan.source_frames = std::move(schedule.positions);
+  plan.decimation_ratios = std::move(schedule.ratios);
+  return plan;
+}
+
+std::string FormatSpeedKnots(std::span<const SpeedKnot> knots) {
+  std::string text;
+  for (const SpeedKnot& knot : knots) {
+    if (!text.empty()) text += ',';
+    AppendDouble(text, knot.time.value);
+    text += knot.time.in_frames ? 'f' : 's';
+    text += ':';
+    AppendDouble(text, knot.speed);
+  }
+  return text;
+}
+
 absl::StatusOr<std::vector<SpeedKnot>> ParseSpeedKnots(std::string_view text) {
   auto trim = [](std::string_view s) {
     const auto is_space = [](char c) { return c == ' ' || c == '\t' || c == '\n' || c == '\r'; };

@@ -224,5 +224,16 @@ TEST(WriteFileAtomicallyTest, PathWithoutDirectoryWritesInTheWorkingDirectory) {
   EXPECT_EQ(DirectoryEntries(directory), std::vector<std::string>{"bare.txt"});
 }
 
+TEST(IsAtomicWriteTemporaryTest, MatchesOnlyTheTemporaryNamesOfTheTarget) {
+  EXPECT_TRUE(IsAtomicWriteTemporary("walk.json.tmp-ab12cd34", "walk.json"));
+  EXPECT_TRUE(IsAtomicWriteTemporary(".m.json.tmp-zzzzzzzz", ".m.json"));
+  EXPECT_FALSE(IsAtomicWriteTemporary("walk.json.tmp-AB12CD34", "walk.json"));
+  EXPECT_FALSE(IsAtomicWriteTemporary("walk.json.tmp-ab12cd3", "walk.json"));
+  EXPECT_FALSE(IsAtomicWriteTemporary("walk.json.tmp-ab12cd345", "walk.json"));
+  EXPECT_FALSE(IsAtomicWriteTemporary("run.json.tmp-ab12cd34", "walk.json"));
+  EXPECT_FALSE(IsAtomicWriteTemporary("walk.json.bak-ab12cd34", "walk.json"));
+  EXPECT_FALSE(IsAtomicWriteTemporary("walk.json", "walk.json"));
+}
+
 }  // namespace
 }  // namespace tempokey::core

@@ -1,5 +1,4 @@
 #include "tempokey/core/io/keyed_json.h"
-#include "tempokey/core/io/maya_anim.h"
 
 #include <cmath>
 #include <cstdlib>
@@ -154,139 +153,32 @@ TEST(KeyedJsonTest, MalformedDocumentsAreRefusedWithPlaceAndReason) {
   }
 }
 
-TEST(MayaAnimTest, WritesOneWeightedBlockPerChannelWithMayaNames) {
-  const KeyedClip keyed = ReducedCmu();
+TEST(KeyedJsonTest, ConstantChannelsCarryNoWeights) {
+  // The README: unweighted curves carry no weights. A constant channel gets two flat keys with
+  // none, whichever method fitted the clip (the paper's other channels are weighted).
+  Clip clip;
+  clip.frame_time_seconds = 0.1;
+  clip.frame_count = 20;
+  Channel constant;
+  constant.name = "constant";
+  constant.samples.assign(20, 3.5);
+  Channel ramp;
+  ramp.name = "ramp";
+  for (int i = 0; i < 20; ++i) ramp.samples.push_back(std::sin(0.3 * i));
+  clip.channels = {constant, ramp};
+  ReduceOptions paper;
+  paper.method = ReduceMethod::kPaper;
+  paper.paper.max_iterations = 1;
+  absl::StatusOr<ReduceResult> result = ReduceKeys(clip, paper);
+  ASSERT_TRUE(result.ok()) << result.status();
 
-  absl::StatusOr<std::string> text = FormatMayaAnim(keyed);
-
-  ASSERT_TRUE(text.ok()) << text.status();
-  EXPECT_EQ(text->rfind("animVersion 1.1;\nmayaVersion 2020;\ntimeUnit 120fps;\n", 0), 0u);
-  std::size_t blocks = 0;
-  for (std::size_t at = text->find("animData {"); at != std::string::npos;
-       at = text->find("animData {", at + 1)) {
-    ++blocks;
-  }
-  EXPECT_EQ(blocks, keyed.curves.size());
-  EXPECT_NE(text->find("anim translate.translateX translateX Hips 0 0 0;\n"), std::string::npos);
-  EXPECT_NE(text->find("anim rotate.rotateZ rotateZ Hips 0 0 0;\n"), std::string::npos);
-  EXPECT_NE(text->find("  output angular;\n  weighted 1;\n"), std::string::npos);
-}
-
-TEST(MayaAnimTest, TangentAnglesAndWeightsFollowTheHandle) {
-  // Key 0: slope 0.3 /s, out weight 1/3 of a 1 s segment: handle (1/3 s, 0.1), so Maya's
-  // vector is (1, 0.3): angle atan(0.3) = 16.69924423399362 degrees, weight hypot(1, 0.3).
-  KeyedClip keyed = SmallKeyed();
-  keyed.curves[0].keys[0].out_tangent = 0.3;
-  keyed.curves[0].keys[0].in_tangent = 0.3;
-
-  absl::StatusOr<std::string> text = FormatMayaAnim(keyed);
+  const absl::StatusOr<std::string> text = FormatKeyedClipJson(result->keyed);
 
   ASSERT_TRUE(text.ok()) << text.status();
-  EXPECT_NE(text->find("timeUnit ntsc;"), std::string::npos);
-  EXPECT_NE(text->find("    0 0.1 fixed fixed 1 0 0 16.69924423399362 1.044030650891055 "
-                       "16.69924423399362 1.044030650891055;\n"),
+  EXPECT_NE(text->find("\"name\": \"constant\", \"keys\": [[0, 3.5, 0, 0], [1.9000000000000001, 3.5, 0, 0]]"),
             std::string::npos)
       << *text;
-  EXPECT_NE(text->find("    30 -2.5e-300 fixed fixed 0 0 0 "), std::string::npos) << *text;
-}
-
-// A scalar channel at `frame_time` with flat keys at `times`.
-KeyedClip KeyedAtRate(double frame_time, std::int64_t frame_count,
-                      const std::vector<double>& times) {
-  KeyedClip keyed;
-  keyed.layout.frame_time_seconds = frame_time;
-  keyed.layout.frame_count = frame_count;
-  Channel channel;
-  channel.name = "blend";
-  keyed.layout.channels = {channel};
-  Curve curve;
-  for (double t : times) {
-    Key key;
-    key.time_seconds = t;
-    curve.keys.push_back(key);
-  }
-  keyed.curves = {curve};
-  return keyed;
-}
-
-// The time (first number) of every key line of a .anim text, and its endTime.
-struct AnimTimes {
-  std::vector<double> keys;
-  double end = -1.0;
-};
-
-AnimTimes ParseAnimTimes(const std::string& text) {
-  AnimTimes times;
-  std::istringstream lines(text);
-  for (std::string line; std::getline(lines, line);) {
-    if (line.rfind("endTime ", 0) == 0) times.end = std::strtod(line.c_str() + 8, nullptr);
-    if (line.find(" fixed fixed ") != std::string::npos) {
-      times.keys.push_back(std::strtod(line.c_str(), nullptr));
-    }
-  }
-  return times;
-}
-
-// Key times go through one multiplication (or division) each: a few ulps.
-constexpr double kFrameTolerance = 1e-9;
-
-TEST(MayaAnimTest, NtscFractionalRateDeclares2997AndWritesTimesInItsFrames) {
-  const double frame_time = 1001.0 / 30000.0;
-  const std::vector<double> times = {0.0, 1.5, 2.0, 99.0 * frame_time};
-  const KeyedClip keyed = KeyedAtRate(frame_time, 100, times);
-
-  const absl::StatusOr<std::string> text = FormatMayaAnim(keyed);
-
-  ASSERT_TRUE(text.ok()) << text.status();
-  EXPECT_NE(text->find("\ntimeUnit 29.97fps;\n"), std::string::npos) << *text;
-  const AnimTimes written = ParseAnimTimes(*text);
-  ASSERT_EQ(written.keys.size(), times.size());
-  for (std::size_t k = 0; k < times.size(); ++k) {
-    EXPECT_NEAR(written.keys[k], times[k] * 30000.0 / 1001.0, kFrameTolerance) << k;
-  }
-  EXPECT_NEAR(written.end, 99.0, kFrameTolerance);
-}
-
-TEST(MayaAnimTest, BvhRateOffTheUnitDeclares120fpsWithTimesIn120HzFrames) {
-  // 0.0083333 s is 120.0005 Hz: declared 120fps, so times are scaled into 120 Hz frames rather
-  // than written as the clip's frame numbers (which would play 0.0004% slow).
-  const double frame_time = 0.0083333;
-  const std::vector<double> times = {0.0, 500.0 * frame_time, 993.0 * frame_time};
-  const KeyedClip keyed = KeyedAtRate(frame_time, 994, times);
-
-  const absl::StatusOr<std::string> text = FormatMayaAnim(keyed);
-
-  ASSERT_TRUE(text.ok()) << text.status();
-  EXPECT_NE(text->find("\ntimeUnit 120fps;\n"), std::string::npos) << *text;
-  const AnimTimes written = ParseAnimTimes(*text);
-  ASSERT_EQ(written.keys.size(), times.size());
-  for (std::size_t k = 0; k < times.size(); ++k) {
-    EXPECT_NEAR(written.keys[k], times[k] * 120.0, kFrameTolerance) << k;
-  }
-  EXPECT_NE(written.keys[2], 993.0);
-  EXPECT_NEAR(written.end, 993.0 * frame_time * 120.0, kFrameTolerance);
-}
-
-TEST(MayaAnimTest, TimeUnitIsTheNearestMayaUnit) {
-  struct Case {
-    double frame_time;
-    const char* unit;
-  } cases[] = {
-      {1.0 / 24.0, "film"},   {1001.0 / 24000.0, "23.976fps"}, {1.0 / 25.0, "pal"},
-      {1.0 / 30.0, "ntsc"},   {1001.0 / 60000.0, "59.94fps"},  {1.0 / 60.0, "ntscf"},
-      {1.0 / 90.0, "100fps"}, {1.0 / 1000.0, "1200fps"},       {1.0 / 7.0, "8fps"},
-      {10.0, "2fps"},         {1e-300, "6000fps"},             {5e-324, "6000fps"},
-  };
-  for (const Case& c : cases) {
-    const KeyedClip keyed = KeyedAtRate(c.frame_time, 2, {0.0, c.frame_time});
-
-    const absl::StatusOr<std::string> text = FormatMayaAnim(keyed);
-
-    ASSERT_TRUE(text.ok()) << text.status();
-    EXPECT_NE(text->find(std::string("\ntimeUnit ") + c.unit + ";\n"), std::string::npos)
-        << c.frame_time << "\n"
-        << *text;
-  }
+  EXPECT_TRUE(result->keyed.curves[1].keys[0].out_weight.has_value());
 }
 
 }  // namespace

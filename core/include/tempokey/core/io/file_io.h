@@ -31,6 +31,10 @@ absl::StatusOr<std::string> ReadFile(const std::string& path,
 // Thread-safe; concurrent writers to one path leave one complete version (the last rename).
 absl::Status WriteFileAtomically(const std::string& path, std::string_view contents);
 
+// Whether `file_name` is the name of a temporary WriteFileAtomically() makes for a file named
+// `target_name` (both without folders): what a killed writer leaves behind. Thread-safe.
+bool IsAtomicWriteTemporary(std::string_view file_name, std::string_view target_name);
+
 }  // namespace tempokey::core
 
 #endif  // TEMPOKEY_CORE_IO_FILE_IO_H_

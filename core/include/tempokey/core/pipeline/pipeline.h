@@ -22,6 +22,9 @@ namespace tempokey::core {
 struct RetimeStep {
   TimeWarpSpec warp;
   RetimeOptions options;
+  // The Euler filter (euler_filter.h) on the output. Off by default: the rotation-aware retime
+  // already keeps the source's Euler branch, and its output keeps the source's conventions.
+  bool euler_filter = false;
 };
 
 struct ReduceStep {
@@ -36,6 +39,9 @@ struct BakeStep {
 // Sampled clip -> sampled clip.
 struct ConvertStep {
   bool wrap_rotations = false;
+  // The Euler filter (euler_filter.h), before any re-wrap. Off by default: a conversion keeps the
+  // values it is given unless asked.
+  bool euler_filter = false;
 };
 
 using PipelineStep = std::variant<RetimeStep, ReduceStep, BakeStep, ConvertStep>;
@@ -61,9 +67,11 @@ absl::Status ValidateStepChain(std::span<const PipelineStep> steps);
 bool ProducesKeyedOutput(std::span<const PipelineStep> steps);
 
 // Checks, before anything is queued, that the steps fit together (retime, reduce and convert
-// take a sampled clip; bake takes a keyed clip), that each step's options are valid, and the
-// first step against `clip`'s timing (ValidateRetime()).
-// Errors: kInvalidArgument "operation 2 (bake): needs a keyed clip, got a sampled clip".
+// take a sampled clip; bake takes a keyed clip), that each step's options are valid (a reduce's
+// against `clip`'s layout: ValidateReduceOptionsForClip()), and the first step against `clip`'s
+// timing (ValidateRetime()).
+// Errors: kInvalidArgument "operation 2 (bake): needs a keyed clip, got a sampled clip";
+// kFailedPrecondition for a joint tolerance on a clip without a skeleton.
 // `limits` caps what the steps may produce (a retime's or bake's frames and samples).
 absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> steps,
                               const ClipLimits& limits = {});

@@ -11,10 +11,12 @@
 #include "tempokey/core/model/clip.h"
 #include "tempokey/core/model/keyed_clip.h"
 #include "tempokey/core/model/progress.h"
+#include "tempokey/core/reduce/joint_bound.h"
+#include "tempokey/core/reduce/world_error.h"
 
 namespace tempokey::core {
 
-enum class ReduceMethod { kTolerance, kPaper };
+enum class ReduceMethod { kTolerance, kPaper, kNoise };
 
 // The paper's Hermite DP fit (SPEC 4.1; definitions in hermite_dp.h). Steps are in frames (x)
 // and value units (y: degrees for rotations, file units for positions); tangent steps in the 2D
@@ -39,19 +41,52 @@ struct PaperParams {
 
 enum class PoseAlignment { kNone, kJoint, kClip };
 
-// The error-bounded method (SPEC 4.2).
+// Default per-channel bounds (SPEC 4.2, 4.4). They are scale-aware: the same motion in
+// centimetres, metres or inches gets the same keys. Rotations in degrees; positions a fraction of
+// the figure's height (FigureHeight(): the vertical extent of every joint and end site at the
+// first frame; 0.3 % is 0.49 cm on a 162-cm figure, about the 0.5 file units the bound used to
+// be on centimetre captures), or kDefaultMaxPositionErrorWithoutFigure file units for a clip
+// without a skeleton or with a figure of height 0; scalars in their own units.
+inline constexpr double kDefaultMaxRotationErrorDegrees = 0.5;
+inline constexpr double kDefaultPositionErrorHeightFraction = 0.003;
+inline constexpr double kDefaultMaxPositionErrorWithoutFigure = 0.5;
+inline constexpr double kDefaultMaxScalarError = 0.5;
+
+// The error-bounded method (SPEC 4.2). Unset bounds take the defaults above. With
+// `joint_tolerance` (SPEC 4.4, joint_bound.h) every joint and end site stays within it at every
+// frame; the rotation and position bounds then apply only when set (the tighter of a set bound and
+// the channel's joint budget wins), unset ones leave the choice to the joint bound.
 struct ToleranceParams {
-  double max_rotation_error_degrees = 0.5;
-  double max_position_error = 0.5;
-  double max_scalar_error = 0.5;
+  std::optional<double> max_rotation_error_degrees;
+  std::optional<double> max_position_error;  // file units
+  double max_scalar_error = kDefaultMaxScalarError;
   std::optional<std::int64_t> key_budget;
   PoseAlignment pose_alignment = PoseAlignment::kNone;
+  std::optional<JointTolerance> joint_tolerance;
+};
+
+// The noise-aware method (SPEC 4.3; noise_fit.h). Noise levels are standard deviations in value
+// units: degrees for rotation channels, file units for position and scalar channels; unset means
+// estimated per channel from the data (EstimateNoiseSigma()).
+struct NoiseParams {
+  std::optional<double> rotation_sigma_degrees;  // finite, > 0 when set
+  std::optional<double> position_sigma;          // position and scalar channels
+  // An estimate below this is raised to it, so a noiseless channel still gets a fit (and is
+  // barely smoothed). Value units; finite, > 0.
+  double min_sigma = 1e-4;
+  double guard_sigmas = 5.0;  // [2, 100], NoiseFitOptions
+  double key_sigmas = 0.2;    // [0.01, 10], NoiseFitOptions
 };
 
 struct ReduceOptions {
   ReduceMethod method = ReduceMethod::kTolerance;
   PaperParams paper;
   ToleranceParams tolerance;
+  NoiseParams noise;
+  // The Euler filter (euler_filter.h) on the input before fitting; unset: the method's default,
+  // on for `noise` (an Euler flip is not noise and costs keys), off for `tolerance` and `paper`
+  // (their curves keep the input's angles value for value unless asked).
+  std::optional<bool> euler_filter;
 };
 
 // Quality of one channel against its input samples (ACL style: keep the worst frame).
@@ -62,6 +97,10 @@ struct ChannelReduction {
   double rms_error = 0.0;
   double max_error = 0.0;
   std::int64_t max_error_frame = 0;
+  // noise: the channel's noise level (value units) the fit used, and whether it was estimated
+  // from the data (else given); 0 and false for other methods.
+  double noise_sigma = 0.0;
+  bool noise_sigma_estimated = false;
 };
 
 // Errors are in value units (degrees for rotations, unwrapped), measured at every source frame.
@@ -74,6 +113,10 @@ struct ReductionReport {
   int worst_channel_index = 0;
   std::int64_t worst_frame = 0;
   int iterations = 0;  // paper: the most refinement iterations any channel ran
+  // Joint world-position error through the skeleton (SPEC 4.4); unset for a clip without one.
+  std::optional<WorldErrorReport> world;
+  // (joint, frame) pairs the Euler filter rewrote on the input (0 when it was off).
+  std::int64_t euler_filtered_frames = 0;
 
   // Keys kept as a percentage of samples (0 for an empty report).
   double key_percent() const {
@@ -94,16 +137,26 @@ struct ReduceResult {
 
 // Checks `options` for the chosen method: the method is known; paper: steps and accuracy in
 // (0, 1e6], 1 <= max_iterations <= 1000, sigma in [0, 1000], 1 <= spacing <= 1000000;
-// tolerance: error bounds finite and > 0, key budget >= 2 when set, a known pose alignment.
+// tolerance: error bounds finite and > 0 when set, key budget >= 2 when set, a known pose
+// alignment, a joint tolerance finite and > 0 when set (ValidateJointTolerance());
+// noise: given sigmas and min_sigma finite and > 0, guard_sigmas in [2, 100], key_sigmas in
+// [0.01, 10].
 // Errors: kInvalidArgument naming the field and value, e.g.
 //   "paper.step_y must be > 0, got -1", "paper.max_iterations must be in [1, 1000], got 0".
 // Thread-safe.
 absl::Status ValidateReduceOptions(const ReduceOptions& options);
 
+// ValidateReduceOptions(), then what can be checked against the layout of the clip to reduce
+// (its samples are not read): a joint tolerance needs a skeleton.
+// Errors: as ValidateReduceOptions(); kFailedPrecondition "tolerance.joint_tolerance needs a
+// skeleton, the clip has none". Thread-safe.
+absl::Status ValidateReduceOptionsForClip(const Clip& layout, const ReduceOptions& options);
+
 // Fits every channel of `clip` and reports the error against the input (MeasureReduction()).
 // Rotation channels are unwrapped first (UnwrapDegrees()), so the curves carry unwrapped angles;
 // re-wrap after baking if wanted.
-//   `tolerance`: FitWithinTolerance() (tolerance_fit.h) with the bound of each channel's kind:
+//   `tolerance`: FitWithinTolerance() (tolerance_fit.h) with the bound of each channel's kind
+//     (defaults resolved against the clip's figure height, see ToleranceParams):
 //     every channel stays within it at every source frame; keys on integer frames, non-weighted,
 //     C1 (in and out tangents equal). Channels share key frames per pose_alignment (each alone, a
 //     joint's channels, or all). With key_budget, every bound is scaled by one common factor,
@@ -112,8 +165,17 @@ absl::Status ValidateReduceOptions(const ReduceOptions& options);
 //     range (max - min) of its fitted samples; there two keys per channel always suffice (if the
 //     fit keeps more, each channel takes two flat keys at the middle of its range), so every
 //     budget of at least 2 keys per channel is met.
+//     With joint_tolerance the channels' bounds come from the joint bound (joint_bound.h): every
+//     joint and end site stays within it at every source frame, verified by forward kinematics.
+//     A key budget scales the joint bound too (the covering scale is then the one at which the
+//     guaranteed budgets cover every channel's range).
 //   `paper`: initial keys, DP passes and the conversion to weighted keys as in hermite_dp.h;
 //     keys land at fractional frames.
+//   `noise`: per channel, the given noise level of its kind or EstimateNoiseSigma() of its
+//     (filtered, unwrapped) samples, at least min_sigma, then FitToNoise() (noise_fit.h); keys on
+//     integer frames, non-weighted, C1. The report carries each channel's level.
+// With the Euler filter on (ReduceOptions::euler_filter), the input is filtered first and the
+// curves and errors refer to the filtered angles (the same rotations).
 // A lone channel whose samples are all equal gets two flat keys at the first and last frame (one
 // key for a one-frame clip).
 //
@@ -122,8 +184,13 @@ absl::Status ValidateReduceOptions(const ReduceOptions& options);
 //                     sample's magnitude exceeds 1e100 (its square would overflow the error), or
 //                     a key budget below 2 keys per channel ("tolerance.key_budget 5 is below the
 //                     18 keys any fit of 9 channels needs (2 per channel)").
+//   kFailedPrecondition  a joint tolerance on a clip without a skeleton ("tolerance.joint_tolerance
+//                     needs a skeleton, the clip has none"), or in percent of a figure whose height
+//                     is 0 (ResolveJointTolerance()).
 //   kCancelled        `stop` was requested; checked between channels (between groups of
 //                     pose-aligned channels).
+// The report's `world` measures every joint and end site through the skeleton
+// (MeasureWorldError()) for every method, when the clip has a skeleton.
 // Progress: once per channel or group, "reduce 12/96".
 //
 // Thread-safe: a pure function of its arguments.
@@ -135,7 +202,7 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
 // and benchmarks): error = EvaluateCurve(curve, f * clip.frame_time_seconds) - sample, with
 // rotation samples unwrapped first. Per channel: keys, RMS and max |error| and its frame; per
 // clip: totals, RMS over all samples, the worst channel and frame. Pass a clean clip to measure
-// against a known truth.
+// against a known truth. With a skeleton, `world` is MeasureWorldError()'s.
 // Errors: kInvalidArgument when either fails validation or the channel count or kinds differ.
 // Thread-safe.
 absl::StatusOr<ReductionReport> MeasureReduction(const Clip& clip, const KeyedClip& keyed);

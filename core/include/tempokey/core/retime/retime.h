@@ -6,6 +6,8 @@
 
 #include <cstdint>
 #include <optional>
+#include <span>
+#include <string>
 #include <stop_token>
 #include <string_view>
 #include <vector>
@@ -177,6 +179,36 @@ absl::Status ValidateRetime(const Clip& clip, const TimeWarpSpec& warp,
 // "speed knot 1 '0s:1x': speed: malformed number \"1x\"").
 // Thread-safe.
 absl::StatusOr<std::vector<SpeedKnot>> ParseSpeedKnots(std::string_view text);
+
+// The inverse of ParseSpeedKnots(): "0s:1,2.5s:0.5,75f:2", each number in the shortest form
+// that reads back to the same double (FormatDouble()), so
+// ParseSpeedKnots(FormatSpeedKnots(k)) == k bit for bit for finite values. An empty list gives
+// "" (which ParseSpeedKnots() refuses: a curve needs a knot). Thread-safe.
+std::string FormatSpeedKnots(std::span<const SpeedKnot> knots);
+
+// Where a retime puts every output sample, computed without reading or resampling any sample:
+// what an editor shows live while the speed curve is dragged (SPEC 3.1-3.3).
+struct RetimePlan {
+  // Exactly what Retime() reports for a clip of this timing and channel count.
+  RetimeReport report;
+  double output_frame_time_seconds = 0.0;
+  // Per output sample j = 0..M-1: the source position read, in source frames (x_j = τ_j·f_s),
+  // and the local decimation ratio ρ_j (0 inside a hold).
+  std::vector<double> source_frames;
+  std::vector<double> decimation_ratios;
+  // Speed over source time: each knot's output time t(τ_k) in seconds, in knot order.
+  // Speed over output time (exact method, no pins): each knot's source time in seconds, its
+  // output time taken after the fit (t_k / fit factor). Empty otherwise.
+  std::vector<double> knot_output_seconds;
+  std::vector<double> knot_source_seconds;
+};
+
+// Compiles the time map (or the paper's schedule) and the resampling kernels Retime() would use
+// on `clip`, reading only its frame time, frame count and channel count.
+// Errors: those of ValidateRetime() (the same messages Retime() gives).
+// Thread-safe: a pure function of its arguments.
+absl::StatusOr<RetimePlan> PlanRetime(const Clip& clip, const TimeWarpSpec& warp,
+                                      const RetimeOptions& options, const ClipLimits& limits = {});
 
 }  // namespace tempokey::core
 

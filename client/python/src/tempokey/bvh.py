@@ -1,4 +1,5 @@
-"""A small, strict BVH reader for the Python example client.
+"""A small, strict BVH reader for the tempokey Python package (tempokey.formats turns its result
+into a tempokey.v1 Clip).
 
 Reads the hierarchy (ROOT / JOINT / End Site blocks with OFFSET and CHANNELS, several roots
 allowed), then MOTION, "Frames:", "Frame Time:" and one row of numbers per frame. Accepts LF,
@@ -15,6 +16,8 @@ import dataclasses
 import os
 import re
 from typing import List, Optional, Tuple
+
+__all__ = ["CHANNEL_NAMES", "BvhClip", "BvhError", "BvhJoint", "parse_bvh", "read_bvh"]
 
 CHANNEL_NAMES = ("Xposition", "Yposition", "Zposition", "Xrotation", "Yrotation", "Zrotation")
 # Caps that keep a hostile file from exhausting memory or the Python stack.

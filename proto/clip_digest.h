@@ -1,24 +1,30 @@
-// Content ids of clips: "sha256:<64 hex>" over a canonical serialization of the layout and the
-// samples, so the same clip gets the same id however it was sliced for upload.
+// Content ids of the tempokey.v1 API: a clip's id, "sha256:<64 hex>" over a canonical
+// serialization of its layout and samples, so the same clip gets the same id however it was
+// sliced for upload (the server names stored clips by it; `tempokey batch` records it to know
+// whether an input changed), and the same "sha256:<hex>" spelling for plain bytes.
 //
 // Canonical form: the tag "tempokey.clip.v1", then the name, frame time (IEEE bits), frame
 // count, joints (name, parent, offset, end sites), channels (joint, kind, name) and markers,
 // every string length-prefixed and every number little-endian 8 bytes; then the samples of
 // channel 0, 1, ... each frame 0..N-1 as little-endian IEEE doubles.
-#ifndef TEMPOKEY_SERVER_CLIP_DIGEST_H_
-#define TEMPOKEY_SERVER_CLIP_DIGEST_H_
+#ifndef TEMPOKEY_PROTO_CLIP_DIGEST_H_
+#define TEMPOKEY_PROTO_CLIP_DIGEST_H_
 
 #include <cstdint>
 #include <memory>
 #include <span>
 #include <string>
+#include <string_view>
 
 #include "tempokey/core/model/clip.h"
 
-namespace tempokey::server {
+namespace tempokey::wire {
 
-// The content id of a whole clip.
+// The content id of a whole clip. Thread-safe: a pure function.
 std::string ClipContentId(const core::Clip& clip);
+
+// "sha256:<64 lowercase hex>" of `bytes` (the same as `sha256sum`). Thread-safe.
+std::string Sha256Id(std::string_view bytes);
 
 // Digests a clip while it is being assembled: samples that continue the canonical order are
 // hashed as they arrive (uploads sent channel by channel in frame order cost nothing extra at
@@ -46,6 +52,6 @@ class IncrementalClipDigest {
   std::int64_t next_frame_ = 0;
 };
 
-}  // namespace tempokey::server
+}  // namespace tempokey::wire
 
-#endif  // TEMPOKEY_SERVER_CLIP_DIGEST_H_
+#endif  // TEMPOKEY_PROTO_CLIP_DIGEST_H_

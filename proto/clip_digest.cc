@@ -1,4 +1,4 @@
-#include "server/clip_digest.h"
+#include "proto/clip_digest.h"
 
 #include <openssl/evp.h>
 
@@ -6,16 +6,21 @@
 #include <cstring>
 #include <string_view>
 
-namespace tempokey::server {
+namespace tempokey::wire {
 
 static_assert(std::endian::native == std::endian::little,
               "the canonical form stores samples as little-endian doubles");
 
-struct IncrementalClipDigest::Hasher {
+namespace {
+
+// SHA-256 of the canonical form, fed field by field.
+struct Sha256 {
   EVP_MD_CTX* ctx = EVP_MD_CTX_new();
 
-  Hasher() { EVP_DigestInit_ex(ctx, EVP_sha256(), nullptr); }
-  ~Hasher() { EVP_MD_CTX_free(ctx); }
+  Sha256() { EVP_DigestInit_ex(ctx, EVP_sha256(), nullptr); }
+  ~Sha256() { EVP_MD_CTX_free(ctx); }
+  Sha256(const Sha256&) = delete;
+  Sha256& operator=(const Sha256&) = delete;
 
   void Bytes(const void* data, std::size_t n) {
     if (n > 0) EVP_DigestUpdate(ctx, data, n);
@@ -44,6 +49,10 @@ struct IncrementalClipDigest::Hasher {
     return out;
   }
 };
+
+}  // namespace
+
+struct IncrementalClipDigest::Hasher : Sha256 {};
 
 IncrementalClipDigest::IncrementalClipDigest(const core::Clip& layout)
     : hasher_(std::make_unique<Hasher>()),
@@ -104,4 +113,10 @@ std::string ClipContentId(const core::Clip& clip) {
   return digest.Finish(clip);
 }
 
-}  // namespace tempokey::server
+std::string Sha256Id(std::string_view bytes) {
+  Sha256 hasher;
+  hasher.Bytes(bytes.data(), bytes.size());
+  return hasher.Hex();
+}
+
+}  // namespace tempokey::wire

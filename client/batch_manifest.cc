@@ -1,0 +1,406 @@
+#include "client/batch_manifest.h"
+
+#include <algorithm>
+#include <filesystem>
+#include <set>
+#include <system_error>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "google/protobuf/io/coded_stream.h"
+#include "google/protobuf/io/zero_copy_stream_impl_lite.h"
+#include "proto/clip_digest.h"
+#include "proto/operations_convert.h"
+#include "tempokey/core/io/file_io.h"
+#include "tempokey/core/io/json.h"
+#include "tempokey/core/model/numbers.h"
+#include "tempokey/core/model/status.h"
+
+namespace tempokey::client {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+using core::AsAbsl;
+using core::JsonValue;
+
+constexpr std::string_view kManifestFormat = "tempokey.batch_manifest";
+constexpr int kManifestVersion = 1;
+constexpr std::int64_t kMaxManifestBytes = std::int64_t{256} << 20;
+// A save may take at most this share of the time between saves (see SaveWhenDue()).
+constexpr int kSaveCostFactor = 10;
+
+// The bytes of `message` in deterministic serialization, length-prefixed.
+void AppendOperation(std::string& out, const v1::Operation& operation) {
+  std::string bytes;
+  {
+    google::protobuf::io::StringOutputStream stream(&bytes);
+    google::protobuf::io::CodedOutputStream coded(&stream);
+    coded.SetSerializationDeterministic(true);
+    operation.SerializeToCodedStream(&coded);
+  }
+  absl::StrAppend(&out, bytes.size(), ":", bytes);
+}
+
+// Reports a problem at a value of a manifest document.
+class Place {
+ public:
+  explicit Place(std::string_view source) : source_(source) {}
+
+  absl::Status Fail(const JsonValue& at, std::string_view what) const {
+    return absl::InvalidArgumentError(
+        absl::StrCat(AsAbsl(source_), ":", at.line, ":", at.column, ": ", AsAbsl(what)));
+  }
+
+ private:
+  std::string_view source_;
+};
+
+absl::StatusOr<std::string> StringMember(const Place& place, const JsonValue& object,
+                                         std::string_view name) {
+  const JsonValue* value = object.Find(name);
+  if (value == nullptr) return place.Fail(object, absl::StrCat("missing \"", AsAbsl(name), "\""));
+  if (value->type != JsonValue::Type::kString) {
+    return place.Fail(*value, absl::StrCat("\"", AsAbsl(name), "\" must be a string"));
+  }
+  return value->text;
+}
+
+// An optional whole number >= 0 (0 when absent).
+absl::StatusOr<std::int64_t> CountMember(const Place& place, const JsonValue& object,
+                                         std::string_view name) {
+  const JsonValue* value = object.Find(name);
+  if (value == nullptr) return 0;
+  constexpr double kLargestExact = 9007199254740992.0;  // 2^53
+  if (value->type != JsonValue::Type::kNumber || value->number < 0 ||
+      value->number > kLargestExact || value->number != static_cast<double>(
+                                           static_cast<std::int64_t>(value->number))) {
+    return place.Fail(*value,
+                      absl::StrCat("\"", AsAbsl(name), "\" must be a whole number >= 0"));
+  }
+  return static_cast<std::int64_t>(value->number);
+}
+
+absl::StatusOr<ManifestRecord> ParseRecord(const Place& place, const std::string& output,
+                                           const JsonValue& value) {
+  if (value.type != JsonValue::Type::kObject) {
+    return place.Fail(value, "an output's record must be an object");
+  }
+  ManifestRecord record;
+  record.output = output;
+  TEMPOKEY_ASSIGN_OR_RETURN(record.input, StringMember(place, value, "input"));
+  TEMPOKEY_ASSIGN_OR_RETURN(record.input_id, StringMember(place, value, "input_id"));
+  TEMPOKEY_ASSIGN_OR_RETURN(record.pipeline, StringMember(place, value, "pipeline"));
+  TEMPOKEY_ASSIGN_OR_RETURN(record.output_id, StringMember(place, value, "output_id"));
+  TEMPOKEY_ASSIGN_OR_RETURN(record.output_bytes, CountMember(place, value, "output_bytes"));
+  TEMPOKEY_ASSIGN_OR_RETURN(record.frames, CountMember(place, value, "frames"));
+  TEMPOKEY_ASSIGN_OR_RETURN(record.keys, CountMember(place, value, "keys"));
+  if (const JsonValue* error = value.Find("max_error")) {
+    if (error->type != JsonValue::Type::kNumber) {
+      return place.Fail(*error, "\"max_error\" must be a number");
+    }
+    record.max_error = error->number;
+  }
+  return record;
+}
+
+// The size and id of the file at `path` as it is now.
+absl::StatusOr<std::pair<std::int64_t, std::string>> FileIdentity(const std::string& path) {
+  TEMPOKEY_ASSIGN_OR_RETURN(std::string bytes, core::ReadFile(path));
+  return std::make_pair(static_cast<std::int64_t>(bytes.size()), wire::Sha256Id(bytes));
+}
+
+}  // namespace
+
+std::string PipelineDigest(std::span<const core::PipelineStep> steps,
+                           std::optional<FileFormat> format) {
+  std::string canonical = "tempokey.pipeline.v1\n";
+  absl::StrAppend(&canonical, format ? AsAbsl(ExtensionOf(*format)) : "auto", "\n",
+                  steps.size(), "\n");
+  for (const core::PipelineStep& step : steps) {
+    AppendOperation(canonical, wire::PipelineStepToProto(step));
+  }
+  return wire::Sha256Id(canonical);
+}
+
+std::string ManifestFileName(const std::optional<BatchShard>& shard) {
+  if (!shard) return absl::StrCat(AsAbsl(kManifestPrefix), ".json");
+  return absl::StrCat(AsAbsl(kManifestPrefix), ".shard-", shard->index, "-of-", shard->count,
+                      ".json");
+}
+
+absl::StatusOr<std::vector<ManifestRecord>> ParseManifest(std::string_view text,
+                                                          std::string_view source) {
+  TEMPOKEY_ASSIGN_OR_RETURN(JsonValue root, core::ParseJson(text, source));
+  const Place place(source);
+  if (root.type != JsonValue::Type::kObject) return place.Fail(root, "expected an object");
+  const JsonValue* format = root.Find("format");
+  const JsonValue* version = root.Find("version");
+  if (format == nullptr || format->text != kManifestFormat) {
+    return place.Fail(format ? *format : root,
+                      absl::StrCat("not a batch manifest (\"format\" must be \"",
+                                   AsAbsl(kManifestFormat), "\")"));
+  }
+  if (version == nullptr || version->type != JsonValue::Type::kNumber ||
+      version->number != kManifestVersion) {
+    return place.Fail(version ? *version : root,
+                      absl::StrCat("unsupported manifest version (this tempokey reads ",
+                                   kManifestVersion, ")"));
+  }
+  const JsonValue* outputs = root.Find("outputs");
+  if (outputs == nullptr || outputs->type != JsonValue::Type::kObject) {
+    return place.Fail(outputs ? *outputs : root, "\"outputs\" must be an object");
+  }
+  std::vector<ManifestRecord> records;
+  std::set<std::string> seen;
+  for (const auto& [output, value] : *outputs->object) {
+    if (!seen.insert(output).second) {
+      return place.Fail(value, absl::StrCat("output \"", output, "\" is listed twice"));
+    }
+    TEMPOKEY_ASSIGN_OR_RETURN(ManifestRecord record, ParseRecord(place, output, value));
+    records.push_back(std::move(record));
+  }
+  return records;
+}
+
+std::string FormatManifest(const std::vector<ManifestRecord>& records,
+                           const std::optional<BatchShard>& shard) {
+  std::vector<const ManifestRecord*> sorted;
+  for (const ManifestRecord& record : records) sorted.push_back(&record);
+  std::sort(sorted.begin(), sorted.end(),
+            [](const ManifestRecord* a, const ManifestRecord* b) { return a->output < b->output; });
+  std::string out = absl::StrCat("{\"format\": \"", AsAbsl(kManifestFormat),
+                                 "\", \"version\": ", kManifestVersion);
+  if (shard) absl::StrAppend(&out, ", \"shard\": \"", shard->Name(), "\"");
+  out += ", \"outputs\": {";
+  for (std::size_t i = 0; i < sorted.size(); ++i) {
+    const ManifestRecord& r = *sorted[i];
+    out += i == 0 ? "\n  " : ",\n  ";
+    core::AppendJsonString(out, r.output);
+    out += ": {\"input\": ";
+    core::AppendJsonString(out, r.input);
+    out += ", \"input_id\": ";
+    core::AppendJsonString(out, r.input_id);
+    out += ", \"pipeline\": ";
+    core::AppendJsonString(out, r.pipeline);
+    absl::StrAppend(&out, ", \"output_bytes\": ", r.output_bytes, ", \"output_id\": ");
+    core::AppendJsonString(out, r.output_id);
+    if (r.frames > 0) absl::StrAppend(&out, ", \"frames\": ", r.frames);
+    if (r.keys > 0) absl::StrAppend(&out, ", \"keys\": ", r.keys);
+    if (r.max_error) absl::StrAppend(&out, ", \"max_error\": ", core::FormatDouble(*r.max_error));
+    out += '}';
+  }
+  out += sorted.empty() ? "}}\n" : "\n}}\n";
+  return out;
+}
+
+int RemoveLeftoverTemporaries(std::span<const BatchItem> items, const std::string& manifest_path) {
+  // Targets by folder, so each folder is listed once.
+  std::map<fs::path, std::set<std::string>> targets;
+  for (const BatchItem& item : items) {
+    const fs::path output(item.output_path);
+    targets[output.parent_path()].insert(output.filename().string());
+  }
+  targets[fs::path(manifest_path).parent_path()].insert(
+      fs::path(manifest_path).filename().string());
+  int removed = 0;
+  for (const auto& [folder, names] : targets) {
+    std::error_code error;
+    std::vector<fs::path> leftovers;
+    for (const auto& entry : fs::directory_iterator(folder.empty() ? "." : folder, error)) {
+      const std::string name = entry.path().filename().string();
+      const std::size_t mark = name.rfind(".tmp-");
+      if (mark != std::string::npos && names.count(name.substr(0, mark)) > 0 &&
+          core::IsAtomicWriteTemporary(name, name.substr(0, mark))) {
+        leftovers.push_back(entry.path());
+      }
+    }
+    for (const fs::path& leftover : leftovers) removed += fs::remove(leftover, error) ? 1 : 0;
+  }
+  return removed;
+}
+
+absl::StatusOr<std::unique_ptr<BatchManifest>> BatchManifest::Open(
+    const std::string& output_dir, const std::optional<BatchShard>& shard, bool force) {
+  const std::string own_name = ManifestFileName(shard);
+  auto manifest = std::unique_ptr<BatchManifest>(
+      new BatchManifest(output_dir, (fs::path(output_dir) / own_name).string(), shard));
+  manifest->saver_ =
+      std::jthread([m = manifest.get()](std::stop_token stop) { m->SaveWhenDue(stop); });
+  if (force) return manifest;
+  std::error_code error;
+  std::vector<fs::path> files;
+  for (const auto& entry : fs::directory_iterator(output_dir, error)) {
+    const std::string name = entry.path().filename().string();
+    if (name.starts_with(kManifestPrefix) && name.ends_with(".json") &&
+        entry.is_regular_file(error)) {
+      files.push_back(entry.path());
+    }
+  }
+  std::sort(files.begin(), files.end());
+  for (const fs::path& file : files) {
+    TEMPOKEY_ASSIGN_OR_RETURN(std::string text, core::ReadFile(file.string(), kMaxManifestBytes));
+    absl::StatusOr<std::vector<ManifestRecord>> records = ParseManifest(text, file.string());
+    if (!records.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          records.status().message(), "; remove the file or run with --force"));
+    }
+    const bool own = file.filename() == own_name;
+    std::lock_guard<std::mutex> lock(manifest->mutex_);
+    for (ManifestRecord& record : *records) {
+      if (own) manifest->own_[record.output] = record;
+      manifest->known_.emplace(record.output, std::move(record));
+    }
+  }
+  return manifest;
+}
+
+BatchManifest::~BatchManifest() {
+  saver_.request_stop();
+  changed_.notify_all();
+}
+
+std::string BatchManifest::OutputKey(const BatchItem& item) const {
+  return fs::path(item.output_path).lexically_relative(output_dir_).generic_string();
+}
+
+std::optional<ManifestRecord> BatchManifest::FindUpToDate(const BatchItem& item,
+                                                          std::string_view input_id,
+                                                          std::string_view pipeline) const {
+  const auto [first, last] = known_.equal_range(OutputKey(item));
+  std::optional<std::pair<std::int64_t, std::string>> on_disk;  // read once, when needed
+  for (auto it = first; it != last; ++it) {
+    const ManifestRecord& record = it->second;
+    if (record.input != item.name || record.input_id != input_id ||
+        record.pipeline != pipeline) {
+      continue;
+    }
+    if (!on_disk) {
+      std::error_code error;
+      const auto size = fs::file_size(item.output_path, error);
+      if (error || static_cast<std::int64_t>(size) != record.output_bytes) continue;
+      absl::StatusOr<std::pair<std::int64_t, std::string>> identity =
+          FileIdentity(item.output_path);
+      if (!identity.ok()) return std::nullopt;
+      on_disk = *std::move(identity);
+    }
+    if (on_disk->first == record.output_bytes && on_disk->second == record.output_id) {
+      return record;
+    }
+  }
+  return std::nullopt;
+}
+
+void BatchManifest::Keep(const ManifestRecord& record) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (auto it = own_.find(record.output); it != own_.end() && it->second == record) return;
+    own_[record.output] = record;
+    ++version_;
+  }
+  Changed();
+}
+
+absl::Status BatchManifest::RecordWritten(const BatchItem& item, std::string_view input_id,
+                                          std::string_view pipeline,
+                                          const BatchFileResult& file) {
+  absl::StatusOr<std::pair<std::int64_t, std::string>> identity = FileIdentity(item.output_path);
+  if (!identity.ok()) {
+    Forget(item);
+    return identity.status();
+  }
+  ManifestRecord record{
+      .output = OutputKey(item),
+      .input = item.name,
+      .input_id = std::string(input_id),
+      .pipeline = std::string(pipeline),
+      .output_bytes = identity->first,
+      .output_id = identity->second,
+      .frames = file.frames,
+      .keys = file.keys,
+      .max_error = file.max_error,
+  };
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    own_[record.output] = std::move(record);
+    ++version_;
+  }
+  Changed();
+  return absl::OkStatus();
+}
+
+void BatchManifest::Forget(const BatchItem& item) {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (own_.erase(OutputKey(item)) == 0) return;
+    ++version_;
+  }
+  Changed();
+}
+
+absl::Status BatchManifest::Finish(std::span<const BatchItem> items) {
+  std::set<std::string> planned;
+  for (const BatchItem& item : items) planned.insert(OutputKey(item));
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    const std::size_t erased = std::erase_if(
+        own_, [&](const auto& entry) { return planned.count(entry.first) == 0; });
+    if (erased > 0) ++version_;
+  }
+  saver_.request_stop();
+  changed_.notify_all();
+  if (saver_.joinable()) saver_.join();
+  std::lock_guard<std::mutex> save_lock(save_mutex_);
+  absl::Status saved = Save();
+  return first_save_error_.ok() ? saved : first_save_error_;
+}
+
+void BatchManifest::Changed() { changed_.notify_all(); }
+
+void BatchManifest::SaveWhenDue(std::stop_token stop) {
+  while (!stop.stop_requested()) {
+    Clock::duration pause{};
+    {
+      std::lock_guard<std::mutex> save_lock(save_mutex_);
+      pause = kSaveCostFactor * last_save_cost_;
+    }
+    {
+      // Sleeps `pause` (interruptible by stop), then waits for a change not saved yet.
+      std::unique_lock<std::mutex> lock(mutex_);
+      changed_.wait_for(lock, stop, pause, [] { return false; });
+      const bool changed = changed_.wait(lock, stop, [this] { return version_ != saved_version_; });
+      if (!changed) return;
+    }
+    std::lock_guard<std::mutex> save_lock(save_mutex_);
+    (void)Save();
+  }
+}
+
+absl::Status BatchManifest::Save() {
+  std::vector<ManifestRecord> records;
+  std::uint64_t version = 0;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    version = version_;
+    if (saved_once_ && version == saved_version_) return absl::OkStatus();
+    records.reserve(own_.size());
+    for (const auto& [output, record] : own_) records.push_back(record);
+  }
+  const Clock::time_point start = Clock::now();
+  saved_once_ = true;
+  // A run that recorded nothing leaves no manifest behind (but empties one it had).
+  std::error_code missing;
+  if (!records.empty() || fs::exists(path_, missing)) {
+    absl::Status written = core::WriteFileAtomically(path_, FormatManifest(records, shard_));
+    last_save_cost_ = Clock::now() - start;
+    if (!written.ok()) {
+      if (first_save_error_.ok()) first_save_error_ = written;
+      return written;
+    }
+  }
+  std::lock_guard<std::mutex> lock(mutex_);
+  saved_version_ = version;
+  return absl::OkStatus();
+}
+
+}  // namespace tempokey::client

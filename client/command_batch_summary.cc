@@ -1,0 +1,81 @@
+// `tempokey batch-summary SUMMARY...`: merges the summaries of the shards of one batch run into
+// the summary one unsharded run would have printed; exits 1 when shards are missing or files
+// failed, so a night's last step can gate on it.
+#include <algorithm>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "client/batch.h"
+#include "client/batch_summary.h"
+#include "client/cli_errors.h"
+#include "client/command.h"
+#include "tempokey/core/io/file_io.h"
+#include "tempokey/core/model/status.h"
+
+namespace tempokey::client {
+namespace {
+
+constexpr std::int64_t kMaxSummaryBytes = std::int64_t{256} << 20;
+
+constexpr FlagSpec kBatchSummaryFlags[] = {
+    {"--output", "-o", "FILE", "also write the merged summary to FILE (atomically)"},
+};
+
+absl::Status BatchSummaryMerge(CommandContext& context) {
+  const std::vector<std::string>& paths = context.args().positionals();
+  if (paths.empty()) {
+    return UsageError("batch-summary: missing SUMMARY (see tempokey batch-summary --help)");
+  }
+  std::vector<NamedSummary> summaries;
+  for (const std::string& path : paths) {
+    TEMPOKEY_ASSIGN_OR_RETURN(std::string text, core::ReadFile(path, kMaxSummaryBytes));
+    TEMPOKEY_ASSIGN_OR_RETURN(BatchSummary summary, ParseBatchSummary(text, path));
+    summaries.push_back({.source = path, .summary = std::move(summary)});
+  }
+  TEMPOKEY_ASSIGN_OR_RETURN(BatchSummary merged, MergeBatchSummaries(summaries));
+
+  const std::string json = FormatBatchSummaryJson(merged);
+  context.out() << json;
+  if (std::optional<std::string> output = context.args().Value("--output")) {
+    TEMPOKEY_RETURN_IF_ERROR(core::WriteFileAtomically(*output, json));
+  }
+  if (!merged.missing_shards.empty()) {
+    std::vector<std::string> names;
+    for (int index : merged.missing_shards) {
+      names.push_back(absl::StrCat(index, "/", merged.merged_shards));
+    }
+    return absl::FailedPreconditionError(absl::StrCat(
+        merged.missing_shards.size() == 1 ? "shard " : "shards ", absl::StrJoin(names, ", "),
+        " missing: the run is incomplete (run ", merged.missing_shards.size() == 1 ? "it" : "them",
+        " with batch --shard)"));
+  }
+  const int failed = merged.failed_count();
+  if (failed == 0) return absl::OkStatus();
+  const auto first = std::find_if(merged.files.begin(), merged.files.end(),
+                                  [](const BatchFileResult& f) { return !f.status.ok(); });
+  return absl::Status(first->status.code(),
+                      absl::StrCat(failed, " of ", merged.files.size(),
+                                   " files failed; first: ", first->status.message()));
+}
+
+}  // namespace
+
+const Command& BatchSummaryCommand() {
+  static const Command command{
+      .name = "batch-summary",
+      .synopsis = "SUMMARY... [-o FILE]",
+      .summary = "merge the summaries of the shards of a batch (exit 1 if incomplete or failed)",
+      .description =
+          "Reads the JSON summaries that 'tempokey batch --shard I/N --summary FILE' wrote, one\n"
+          "per shard, checks that they are shards of one run (same N and pipeline, no shard or\n"
+          "file twice) and prints the merged summary: every file once, sorted by input, with\n"
+          "\"shards\": N and the shards still missing. Local, no server.\n"
+          "Exits 0 when every shard is there and no file failed; 1 when shards are missing\n"
+          "or files failed (the merged summary is printed either way).\n",
+      .flags = kBatchSummaryFlags,
+      .run = BatchSummaryMerge,
+  };
+  return command;
+}
+
+}  // namespace tempokey::client

@@ -1,0 +1,519 @@
+"""The client of tempokey.v1.MotionService (SPEC 6): connect with a deadline, a token and TLS;
+health; upload; the stateless `process` call with progress; stored jobs (submit, watch, result).
+
+    import tempokey as tk
+
+    with tk.connect("127.0.0.1:50051", timeout=60) as client:
+        result = client.process(clip, [tk.retime_operation(speed="0s:1,2s:0.5,4s:0.5,4s:1"),
+                                       tk.reduce_operation(tolerance=0.5)])
+    result.keyed_clip        # tempokey.v1.KeyedClip: the header and one curve per channel
+    result.reduction_report  # keys kept, RMS and max error, worst channel and frame
+
+Clips are sent as the C++ client sends them: the header, then slices of at most 1 MiB of samples
+(less when the server's message limit is smaller), packed several to a message for servers with
+the "sample_slices" feature. Results are reassembled into one Clip (one ChannelSamples per
+channel covering every frame) or one KeyedClip (one KeyedCurve per channel), with the reports.
+
+Errors: a failed call raises TempokeyError with the gRPC status code and the server's message
+exactly as sent, e.g. ``INVALID_ARGUMENT: operation 1 (retime): speed knot 2 (2s:-1): speed must
+be > 0``. Only UNAVAILABLE is retried (the server is draining or unreachable), as the C++ client
+does. Thread-safety: a Client may be shared by threads (gRPC channels are thread-safe); the
+server info it caches is read-only once fetched.
+"""
+
+import json
+import random
+import time
+import uuid
+from typing import Any, Callable, Iterator, List, Mapping, Optional, Sequence, Tuple, TypeVar
+
+import grpc
+
+from tempokey.clips import (BYTES_PER_SAMPLE, DEFAULT_SLICE_BYTES, channel_label, sample_batches,
+                            sample_slices)
+from tempokey.errors import TempokeyError, from_rpc_error, malformed_result
+from tempokey.pipelines import PipelineResult
+from tempokey.v1 import clip_pb2
+from tempokey.v1 import motion_service_pb2
+from tempokey.v1 import motion_service_pb2_grpc
+from tempokey.v1 import operations_pb2
+
+__all__ = ["Client", "DEFAULT_MAX_RECEIVE_BYTES", "HEALTH_STATES", "MOTION_SERVICE", "connect"]
+
+MOTION_SERVICE = "tempokey.v1.MotionService"
+HEALTH_CHECK_METHOD = "/grpc.health.v1.Health/Check"
+# Largest message accepted from the server; results come in slices well below it.
+DEFAULT_MAX_RECEIVE_BYTES = 64 << 20
+_UNARY_METHODS = ("GetServerInfo", "SubmitJob", "GetJob", "ListJobs", "CancelJob", "DeleteJob")
+
+_T = TypeVar("_T")
+# One attempt of a streaming call: (timeout in seconds or None, list filled once a response
+# arrived) -> its result.
+_Attempt = Callable[[Optional[float], List[bool]], _T]
+
+
+# ---- results ------------------------------------------------------------------------------------
+
+class _ResultAssembler:
+    """Rebuilds a PipelineResult from the ResultPart messages of Process or GetJobResult: a
+    header (reports, then a clip or keyed-clip header), then sample slices or curve pieces.
+    Slices of a channel must tile its frames exactly; curve pieces of a channel are joined in
+    arrival order. Raises TempokeyError (INTERNAL) for anything else."""
+
+    def __init__(self) -> None:
+        self._header: Optional[motion_service_pb2.ResultHeader] = None
+        self._slices: dict = {}  # channel index -> [(first_frame, samples)]
+        self._curves: dict = {}  # channel index -> KeyedCurve joined so far
+
+    def add(self, part: motion_service_pb2.ResultPart) -> None:
+        kind = part.WhichOneof("part")
+        if kind == "header":
+            if self._header is not None:
+                raise malformed_result("a second result header")
+            if part.header.WhichOneof("kind") is None:
+                raise malformed_result("the header names neither a clip nor a keyed clip")
+            self._header = part.header
+            return
+        if self._header is None:
+            raise malformed_result("%s before the header" % (kind or "an empty part"))
+        keyed = self._header.WhichOneof("kind") == "keyed_clip"
+        if kind == "samples" and not keyed:
+            self._add_samples(part.samples)
+        elif kind == "sample_slices" and not keyed:
+            for samples in part.sample_slices.slices:
+                self._add_samples(samples)
+        elif kind == "curve" and keyed:
+            self._add_curve(part.curve)
+        elif kind == "curves" and keyed:
+            for piece in part.curves.curves:
+                self._add_curve(piece)
+        else:
+            raise malformed_result("a %s part in a %s result"
+                                    % (kind, "keyed" if keyed else "sampled"))
+
+    def _layout(self) -> clip_pb2.ClipHeader:
+        return getattr(self._header, self._header.WhichOneof("kind"))
+
+    def _check_channel(self, index: int) -> None:
+        if not 0 <= index < len(self._layout().channels):
+            raise malformed_result("channel index %d out of range" % index)
+
+    def _add_samples(self, samples: clip_pb2.ChannelSamples) -> None:
+        self._check_channel(samples.channel_index)
+        self._slices.setdefault(samples.channel_index, []).append(
+            (samples.first_frame, samples.samples))
+
+    def _add_curve(self, piece: clip_pb2.KeyedCurve) -> None:
+        self._check_channel(piece.channel_index)
+        curve = self._curves.setdefault(piece.channel_index,
+                                        clip_pb2.KeyedCurve(channel_index=piece.channel_index))
+        curve.MergeFrom(piece)  # repeated columns append: consecutive runs of keys
+
+    def _channel_samples(self, layout: clip_pb2.ClipHeader, index: int) -> List[float]:
+        values: List[float] = []
+        for first_frame, run in sorted(self._slices.get(index, []), key=lambda s: s[0]):
+            if first_frame != len(values):
+                raise malformed_result("%s: frames %d..%d %s" % (
+                    channel_label(layout, index), min(first_frame, len(values)),
+                    max(first_frame, len(values)) - 1,
+                    "missing" if first_frame > len(values) else "sent twice"))
+            values.extend(run)
+        if len(values) != layout.frame_count:
+            raise malformed_result("%s: %d samples for %d frames" % (
+                channel_label(layout, index), len(values), layout.frame_count))
+        return values
+
+    def finish(self) -> PipelineResult:
+        if self._header is None:
+            raise malformed_result("the result has no header")
+        layout = self._layout()
+        result = PipelineResult(reports=list(self._header.reports))
+        if self._header.WhichOneof("kind") == "clip":
+            clip = clip_pb2.Clip(header=layout)
+            for index in range(len(layout.channels)):
+                clip.samples.add(channel_index=index, first_frame=0,
+                                 samples=self._channel_samples(layout, index))
+            result.clip = clip
+        else:
+            keyed = clip_pb2.KeyedClip(header=layout)
+            for index in range(len(layout.channels)):
+                if index not in self._curves:
+                    raise malformed_result("%s: no curve arrived" % channel_label(layout, index))
+                keyed.curves.append(self._curves[index])
+            result.keyed_clip = keyed
+        return result
+
+
+# ---- health codec -------------------------------------------------------------------------------
+# grpc.health.v1 by hand, as the C++ client does: Debian ships no Python health stubs and the
+# messages are tiny: HealthCheckRequest { string service = 1; } and
+# HealthCheckResponse { ServingStatus status = 1; } (an enum, a varint on the wire).
+
+HEALTH_STATES = ("UNKNOWN", "SERVING", "NOT_SERVING", "SERVICE_UNKNOWN")
+
+
+def _encode_varint(value: int) -> bytes:
+    out = bytearray()
+    while True:
+        byte = value & 0x7F
+        value >>= 7
+        out.append(byte | (0x80 if value else 0))
+        if not value:
+            return bytes(out)
+
+
+def _decode_varint(data: bytes, pos: int) -> Tuple[int, int]:
+    value, shift = 0, 0
+    while True:
+        if pos >= len(data) or shift > 63:
+            raise ValueError("health response: truncated varint")
+        byte = data[pos]
+        pos += 1
+        value |= (byte & 0x7F) << shift
+        shift += 7
+        if not byte & 0x80:
+            return value, pos
+
+
+def _encode_health_request(service: str) -> bytes:
+    name = service.encode("utf-8")
+    return (b"\x0a" + _encode_varint(len(name)) + name) if name else b""
+
+
+def _decode_health_response(data: bytes) -> str:
+    """The status name of HealthCheckResponse wire bytes; unknown fields are skipped."""
+    status, pos = 0, 0
+    while pos < len(data):
+        tag, pos = _decode_varint(data, pos)
+        field, wire_type = tag >> 3, tag & 7
+        if wire_type == 0:
+            value, pos = _decode_varint(data, pos)
+            if field == 1:
+                status = value
+        elif wire_type == 2:
+            length, pos = _decode_varint(data, pos)
+            pos += length
+        elif wire_type in (1, 5):
+            pos += 8 if wire_type == 1 else 4
+        else:
+            raise ValueError("health response: wire type %d not expected" % wire_type)
+    if pos > len(data) or status >= len(HEALTH_STATES):
+        raise ValueError("health response: malformed (status %d)" % status)
+    return HEALTH_STATES[status]
+
+
+# ---- the client ---------------------------------------------------------------------------------
+
+def _service_config(max_attempts: int) -> str:
+    """Round-robin over every address of the target, and retries on UNAVAILABLE for unary
+    methods (the streaming ones are retried by the Client, before anything was received)."""
+    config = {"loadBalancingConfig": [{"round_robin": {}}]}
+    if max_attempts > 1:
+        names = [{"service": MOTION_SERVICE, "method": m} for m in _UNARY_METHODS]
+        names.append({"service": "grpc.health.v1.Health", "method": "Check"})
+        config["methodConfig"] = [{"name": names, "retryPolicy": {
+            "maxAttempts": max_attempts, "initialBackoff": "0.1s", "maxBackoff": "1s",
+            "backoffMultiplier": 2, "retryableStatusCodes": ["UNAVAILABLE"]}}]
+    return json.dumps(config)
+
+
+class Client:
+    """A client of one target. Use connect() to make one; close() (or a `with` block) releases
+    the channel. Every method raises TempokeyError for a failed call. Each method call has one
+    deadline of `timeout` seconds covering all its attempts (None: no deadline)."""
+
+    def __init__(self, channel: grpc.Channel, *, timeout: Optional[float] = 60.0,
+                 token: Optional[str] = None, max_attempts: int = 4,
+                 slice_bytes: int = DEFAULT_SLICE_BYTES):
+        if max_attempts < 1:
+            raise ValueError("max_attempts must be >= 1, got %d" % max_attempts)
+        if slice_bytes < BYTES_PER_SAMPLE:
+            raise ValueError("slice_bytes must be >= 8, got %d" % slice_bytes)
+        self._channel = channel
+        self._stub = motion_service_pb2_grpc.MotionServiceStub(channel)
+        self._health_check = channel.unary_unary(
+            HEALTH_CHECK_METHOD, request_serializer=_encode_health_request,
+            response_deserializer=_decode_health_response)
+        self._timeout = timeout
+        self._metadata = (("authorization", "Bearer " + token),) if token else ()
+        self._max_attempts = max_attempts
+        self._slice_bytes = slice_bytes
+        self._server_info = None
+
+    def close(self) -> None:
+        """Closes the channel; calls in flight are cancelled."""
+        self._channel.close()
+
+    def __enter__(self) -> "Client":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    # -- plumbing --
+
+    def _deadline(self) -> Optional[float]:
+        return None if self._timeout is None else time.monotonic() + self._timeout
+
+    @staticmethod
+    def _remaining(deadline: Optional[float]) -> Optional[float]:
+        return None if deadline is None else max(0.0, deadline - time.monotonic())
+
+    def _unary(self, method: Callable[..., _T], request: Any) -> _T:
+        try:
+            return method(request, timeout=self._timeout, metadata=self._metadata)
+        except grpc.RpcError as error:
+            raise from_rpc_error(error) from None
+
+    def _with_retries(self, attempt: "_Attempt[_T]") -> _T:
+        """Runs attempt(timeout, received) until it succeeds or fails with another code than
+        UNAVAILABLE, after a response arrived (`received` non-empty), after max_attempts, or when
+        the next backoff would pass the deadline. Backoff: full jitter from 0.1 s, doubling up
+        to 1 s."""
+        deadline = self._deadline()
+        backoff = 0.1
+        for number in range(1, self._max_attempts + 1):
+            received: List[bool] = []
+            try:
+                return attempt(self._remaining(deadline), received)
+            except grpc.RpcError as error:
+                failure = from_rpc_error(error)
+            if (failure.code != grpc.StatusCode.UNAVAILABLE or received
+                    or number == self._max_attempts):
+                raise failure
+            pause = random.uniform(0.0, backoff)
+            if deadline is not None and time.monotonic() + pause >= deadline:
+                raise failure
+            time.sleep(pause)
+            backoff = min(backoff * 2.0, 1.0)
+        raise AssertionError("unreachable")
+
+    def _sends_batches(self) -> bool:
+        """Whether the server takes SampleSlices (its "sample_slices" feature); servers of the
+        first v1 get one slice per message."""
+        if self._server_info is None:
+            self._server_info = self.server_info()
+        return "sample_slices" in self._server_info.features
+
+    def _sample_requests(self, clip: clip_pb2.Clip, slice_bytes: int,
+                         request_type: Callable[..., _T]) -> Iterator[_T]:
+        """The sample messages of `clip` as `request_type` (UploadClipRequest, ProcessRequest)."""
+        if self._sends_batches():
+            for batch in sample_batches(clip, slice_bytes):
+                yield request_type(sample_slices=batch)
+        else:
+            for samples in sample_slices(clip, slice_bytes):
+                yield request_type(samples=samples)
+
+    def _effective_slice_bytes(self) -> int:
+        """Bytes of samples per sent message: slice_bytes, held to half the server's message
+        limit so a slice and its framing always fit (asked once, then remembered)."""
+        if self._server_info is None:
+            self._server_info = self.server_info()
+        limit = self._server_info.max_message_bytes
+        if limit > 0:
+            return max(BYTES_PER_SAMPLE, min(self._slice_bytes, limit // 2))
+        return self._slice_bytes
+
+    # -- service --
+
+    def health(self, service: str = "") -> str:
+        """grpc.health.v1 state of `service`: "" the server overall (live), MOTION_SERVICE ready
+        for jobs (NOT_SERVING while draining). Returns "SERVING", "NOT_SERVING" or "UNKNOWN".
+        Raises: TempokeyError NOT_FOUND for a service the server does not know; call errors."""
+        return self._unary(self._health_check, service)
+
+    def server_info(self) -> motion_service_pb2.ServerInfo:
+        """Version, limits (max_message_bytes, max_clip_samples), queue capacity, workers and the
+        operations the server implements ("retime", "reduce/paper", ...)."""
+        return self._unary(self._stub.GetServerInfo, motion_service_pb2.GetServerInfoRequest())
+
+    def upload_clip(self, clip: clip_pb2.Clip) -> motion_service_pb2.UploadClipResponse:
+        """Streams `clip` (header, then sample slices) and returns the server's answer: clip_id
+        ("sha256:<hex>" of the content, so uploading the same clip again gives the same id and
+        costs nothing), counts and already_stored. Retried whole on UNAVAILABLE.
+        Raises: TempokeyError INVALID_ARGUMENT (the message names channel, frame and value),
+        RESOURCE_EXHAUSTED over the server's limits; call errors."""
+        slice_bytes = self._effective_slice_bytes()
+
+        def requests() -> Iterator[motion_service_pb2.UploadClipRequest]:
+            yield motion_service_pb2.UploadClipRequest(header=clip.header)
+            yield from self._sample_requests(clip, slice_bytes,
+                                             motion_service_pb2.UploadClipRequest)
+
+        return self._with_retries(lambda timeout, received: self._stub.UploadClip(
+            requests(), timeout=timeout, metadata=self._metadata))
+
+    def process(self, clip: clip_pb2.Clip, operations: Sequence[operations_pb2.Operation],
+                on_progress: Optional[Callable[[float, str], None]] = None) -> PipelineResult:
+        """Runs `operations` on `clip` in one stateless call: the clip streams in, progress and
+        the result stream out, nothing is kept on the server. `on_progress(fraction 0..1, stage)`
+        is called on this thread for each progress update (an exception from it cancels the call
+        and propagates). Retried whole on UNAVAILABLE while nothing has been received.
+        Raises: TempokeyError as upload_clip, plus the pipeline's own errors
+        ("operation 1 (retime): ..."), and INTERNAL for a malformed result."""
+        slice_bytes = self._effective_slice_bytes()
+        # Batched result parts; servers without the feature ignore the field.
+        start = motion_service_pb2.ProcessStart(operations=operations, batch_parts=True)
+
+        def requests() -> Iterator[motion_service_pb2.ProcessRequest]:
+            yield motion_service_pb2.ProcessRequest(header=clip.header)
+            yield from self._sample_requests(clip, slice_bytes, motion_service_pb2.ProcessRequest)
+            yield motion_service_pb2.ProcessRequest(start=start)
+
+        def attempt(timeout: Optional[float], received: List[bool]) -> PipelineResult:
+            assembler = _ResultAssembler()
+            responses = self._stub.Process(requests(), timeout=timeout, metadata=self._metadata)
+            try:
+                for response in responses:
+                    received.append(True)
+                    if response.WhichOneof("part") == "progress":
+                        if on_progress is not None:
+                            on_progress(response.progress.progress, response.progress.stage)
+                    elif response.WhichOneof("part") == "result":
+                        assembler.add(response.result)
+            except grpc.RpcError:
+                raise
+            except BaseException:
+                responses.cancel()
+                raise
+            return assembler.finish()
+
+        return self._with_retries(attempt)
+
+    # -- stored jobs --
+
+    def submit(self, operations: Sequence[operations_pb2.Operation], *,
+               clip_id: Optional[str] = None, clip: Optional[clip_pb2.Clip] = None,
+               labels: Optional[Mapping[str, str]] = None,
+               request_id: Optional[str] = None) -> motion_service_pb2.Job:
+        """Queues `operations` on an uploaded clip (`clip_id`) or on `clip` sent inline (small
+        clips: one message). `request_id` makes a retried submit return the first job; a fresh
+        one is generated when None, so the library's own retries never create two jobs.
+        Returns the job (job_id, state QUEUED...).
+        Raises: ValueError unless exactly one of clip_id and clip is given; TempokeyError
+        NOT_FOUND unknown clip, INVALID_ARGUMENT bad pipeline, RESOURCE_EXHAUSTED queue full
+        (see retry_after_seconds), UNIMPLEMENTED an operation the server lacks."""
+        if (clip_id is None) == (clip is None):
+            raise ValueError("give exactly one of clip_id and clip")
+        request = motion_service_pb2.SubmitJobRequest(
+            operations=operations, labels=labels or {},
+            request_id=request_id or _new_request_id())
+        if clip_id is not None:
+            request.clip_id = clip_id
+        else:
+            request.inline_clip.CopyFrom(clip)
+        return self._unary(self._stub.SubmitJob, request)
+
+    def get_job(self, job_id: str) -> motion_service_pb2.Job:
+        """The job's current snapshot. Raises: TempokeyError NOT_FOUND for an unknown job."""
+        return self._unary(self._stub.GetJob, motion_service_pb2.GetJobRequest(job_id=job_id))
+
+    def cancel_job(self, job_id: str) -> motion_service_pb2.Job:
+        """Cancels a job (idempotent). Raises: TempokeyError NOT_FOUND for an unknown job."""
+        return self._unary(self._stub.CancelJob,
+                           motion_service_pb2.CancelJobRequest(job_id=job_id))
+
+    def delete_job(self, job_id: str) -> None:
+        """Deletes a job and its result. Raises: TempokeyError NOT_FOUND for an unknown job."""
+        self._unary(self._stub.DeleteJob, motion_service_pb2.DeleteJobRequest(job_id=job_id))
+
+    def watch(self, job_id: str,
+              on_update: Optional[Callable[[motion_service_pb2.Job], None]] = None
+              ) -> motion_service_pb2.Job:
+        """Follows a job until it ends: calls `on_update` with each snapshot (strictly increasing
+        version) and returns the last, terminal one (SUCCEEDED, FAILED with error_code and
+        error_message, or CANCELLED).
+        Raises: TempokeyError NOT_FOUND unknown job, UNAVAILABLE the server is draining,
+        DEADLINE_EXCEEDED after `timeout`; INTERNAL if the watch ended without a snapshot."""
+        request = motion_service_pb2.WatchJobRequest(job_id=job_id)
+
+        def attempt(timeout: Optional[float], received: List[bool]) -> motion_service_pb2.Job:
+            last = None
+            for job in self._stub.WatchJob(request, timeout=timeout, metadata=self._metadata):
+                received.append(True)
+                if on_update is not None:
+                    on_update(job)
+                last = job
+            if last is None:
+                raise TempokeyError(grpc.StatusCode.INTERNAL,
+                                    "the watch ended without sending the job")
+            return last
+
+        return self._with_retries(attempt)
+
+    def result(self, job_id: str, slice_bytes: int = 0) -> PipelineResult:
+        """The result of a succeeded job, reassembled (see PipelineResult), reports first.
+        `slice_bytes` bounds the samples per message (0: the server's 1 MiB).
+        Raises: TempokeyError FAILED_PRECONDITION the job has not succeeded, NOT_FOUND."""
+        request = motion_service_pb2.GetJobResultRequest(job_id=job_id, slice_bytes=slice_bytes,
+                                                          batch_parts=True)
+
+        def attempt(timeout: Optional[float], received: List[bool]) -> PipelineResult:
+            assembler = _ResultAssembler()
+            parts = self._stub.GetJobResult(request, timeout=timeout, metadata=self._metadata)
+            try:
+                for part in parts:
+                    received.append(True)
+                    assembler.add(part)
+            except grpc.RpcError:
+                raise
+            except BaseException:
+                parts.cancel()
+                raise
+            return assembler.finish()
+
+        return self._with_retries(attempt)
+
+
+def _new_request_id() -> str:
+    """A fresh random idempotency key (UUID v4 text)."""
+    return str(uuid.uuid4())
+
+
+def connect(target: str, timeout: Optional[float] = 60.0, token: Optional[str] = None, *,
+            tls: bool = False, root_certificates: Optional[bytes] = None,
+            certificate_chain: Optional[bytes] = None, private_key: Optional[bytes] = None,
+            target_name_override: Optional[str] = None, max_attempts: int = 4,
+            max_receive_message_bytes: int = DEFAULT_MAX_RECEIVE_BYTES,
+            slice_bytes: int = DEFAULT_SLICE_BYTES) -> Client:
+    """Creates a client of `target` (no connection is made until the first call).
+
+    Args:
+      target: any gRPC target: "host:port", "dns:///host:port", "ipv4:127.0.0.1:1,127.0.0.1:2"
+        (calls are spread round-robin over the addresses).
+      timeout: deadline of each method call in seconds, covering its retries; None for none.
+      token: sent as "authorization: Bearer <token>" on every call.
+      tls: use TLS; root_certificates (PEM bytes, None: system roots), certificate_chain and
+        private_key (PEM bytes, both or neither) for mutual TLS, target_name_override to accept
+        a certificate issued for another name (test certificates).
+      max_attempts: attempts per call on UNAVAILABLE (1 disables retries).
+      max_receive_message_bytes: largest message accepted from the server.
+      slice_bytes: bytes of samples per sent message (further held to half the server's limit).
+
+    Raises: ValueError for an empty target, TLS settings without tls, a certificate without its
+    key, or a non-positive size.
+    """
+    if not target:
+        raise ValueError("the server target is empty")
+    if (certificate_chain is None) != (private_key is None):
+        raise ValueError("a client certificate needs its private key and a key its certificate")
+    if not tls and (root_certificates or certificate_chain or target_name_override):
+        raise ValueError("TLS settings were given but tls is False")
+    if max_receive_message_bytes <= 0:
+        raise ValueError("max_receive_message_bytes must be > 0")
+    options = [("grpc.max_receive_message_length", max_receive_message_bytes),
+               ("grpc.service_config", _service_config(max_attempts)),
+               ("grpc.enable_retries", 1 if max_attempts > 1 else 0),
+               ("grpc.primary_user_agent", "tempokey-client-python")]
+    if tls:
+        if target_name_override:
+            options.append(("grpc.ssl_target_name_override", target_name_override))
+        credentials = grpc.ssl_channel_credentials(root_certificates=root_certificates,
+                                                   private_key=private_key,
+                                                   certificate_chain=certificate_chain)
+        channel = grpc.secure_channel(target, credentials, options=options)
+    else:
+        channel = grpc.insecure_channel(target, options=options)
+    return Client(channel, timeout=timeout, token=token, max_attempts=max_attempts,
+                  slice_bytes=slice_bytes)

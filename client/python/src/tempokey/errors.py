@@ -1,0 +1,53 @@
+"""Errors of the tempokey client: a failed call is a TempokeyError carrying the gRPC status code
+and the server's message unchanged; what cannot be encoded at all is a ValueError."""
+
+from typing import Any, Optional
+
+import grpc
+
+__all__ = ["RETRY_AFTER_METADATA_KEY", "TempokeyError"]
+
+# Trailing metadata of a RESOURCE_EXHAUSTED from a full queue: whole milliseconds to wait.
+RETRY_AFTER_METADATA_KEY = "retry-after-ms"
+
+
+class TempokeyError(Exception):
+    """A failed call: the gRPC status code and the server's message, unchanged.
+
+    Attributes:
+      code: grpc.StatusCode, e.g. grpc.StatusCode.INVALID_ARGUMENT.
+      details: the server's message ("operation 1 (retime): ...").
+      retry_after_seconds: the server's hint of when to try again (a full queue), or None.
+    """
+
+    def __init__(self, code: grpc.StatusCode, details: str,
+                 retry_after_seconds: Optional[float] = None):
+        super().__init__("%s: %s" % (code.name, details))
+        self.code = code
+        self.details = details
+        self.retry_after_seconds = retry_after_seconds
+
+
+def retry_after_seconds(call: Any) -> Optional[float]:
+    """The retry-after-ms trailing metadata of a finished call, in seconds, or None."""
+    try:
+        trailers = call.trailing_metadata() or ()
+    except Exception:  # a call that never reached the server has no trailers
+        return None
+    for key, value in trailers:
+        if key == RETRY_AFTER_METADATA_KEY and str(value).isdigit():
+            return int(value) / 1000.0
+    return None
+
+
+def from_rpc_error(error: grpc.RpcError) -> TempokeyError:
+    """The one place gRPC errors become TempokeyError: same code, same message."""
+    code = error.code() if hasattr(error, "code") else grpc.StatusCode.UNKNOWN
+    details = error.details() if hasattr(error, "details") else str(error)
+    return TempokeyError(code, details or "", retry_after_seconds(error))
+
+
+def malformed_result(what: str) -> TempokeyError:
+    """The error of a result the server sent in a shape the protocol does not allow."""
+    return TempokeyError(grpc.StatusCode.INTERNAL, "malformed result from the server: " + what)
+

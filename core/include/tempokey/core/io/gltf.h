@@ -1,0 +1,89 @@
+// glTF 2.0 export of clips and keyed clips (SPEC 2): a skin-less node hierarchy and one animation.
+//
+// The scene: one node per joint, in file order, with the joint's name and its BVH offset as rest
+// translation (no rotation, no scale), children as in the skeleton; each End Site is a child node
+// named "<joint>_end" (numbered when a joint has several; made unique against joint names) with
+// its offset, so viewers can draw the last bones. Units are the file's as they are (BVH files
+// are often centimetres; glTF means metres: scale the scene by 0.01 on import, README).
+// Channels without a joint are not written (glTF animates nodes only).
+//
+// The animation ("<clip name>", one per file):
+//   - translation: for a joint with position channels, a VEC3 sampler whose components are the
+//     position channels (each replaces the offset's component on its axis, as in BVH) and the
+//     offset on axes without a channel;
+//   - rotation: for a joint with rotation channels, a VEC4 quaternion (x, y, z, w) sampler of
+//     the rotation its channels compose in their listed order (BVH: intrinsic, left to right,
+//     `Zrotation Xrotation Yrotation` is Rz·Rx·Ry; rotation.h), axes without a channel being 0.
+// Sampled clips (FormatGltfSampled): LINEAR samplers with one key per frame.
+// Keyed clips (FormatGltfKeyed): CUBICSPLINE samplers (in-tangent, value, out-tangent per key;
+// tangents per second, multiplied by the key interval when evaluated, glTF 2.0 "Animation
+// Samplers"):
+//   - translation: the keyed position curves, exactly: one time list, the union of the joint's
+//     position curves' key times; a curve is split at the times it lacks (splitting a cubic is
+//     exact: value and slope there). Weighted segments (`paper` keys: a Bezier whose time is not
+//     linear in its parameter, which CUBICSPLINE cannot hold) get a key at every source frame
+//     they span, with the curve's exact value and slope there.
+//   - rotation: the Euler curves do not carry over (glTF interpolates quaternion components and
+//     normalises), so rotation keys are fitted again against the SOURCE rotations
+//     (quaternion_fit.h) within `max_rotation_error_degrees` at every source frame. The source
+//     clip is therefore part of the call: export where the source is at hand (the CLI has the
+//     input file; a server job returns the keyed clip and the client writes the glTF).
+// Times, values and tangents are float32 in the file (the glTF accessor type); key times are
+// i x frame time.
+//
+// Containers: .gltf is the JSON with the buffer embedded as a base64 data URI (one file, written
+// atomically); .glb is the binary container (JSON chunk, BIN chunk).
+#ifndef TEMPOKEY_CORE_IO_GLTF_H_
+#define TEMPOKEY_CORE_IO_GLTF_H_
+
+#include <cstdint>
+#include <stop_token>
+#include <string>
+
+#include "absl/status/statusor.h"
+#include "tempokey/core/model/clip.h"
+#include "tempokey/core/model/keyed_clip.h"
+
+namespace tempokey::core {
+
+enum class GltfContainer {
+  kText,    // .gltf: JSON, buffer embedded as a data URI
+  kBinary,  // .glb
+};
+
+// Counts of what a file holds, for reports and benchmarks.
+struct GltfStats {
+  int animated_joints = 0;               // joints with a rotation sampler
+  std::int64_t rotation_keys = 0;        // keys over all rotation samplers
+  std::int64_t rotation_samples = 0;     // source frames x joints with a rotation sampler
+  std::int64_t translation_keys = 0;     // keys over all translation samplers
+};
+
+struct GltfFile {
+  std::string bytes;
+  GltfStats stats;
+};
+
+// A sampled clip: LINEAR samplers, one key per frame.
+// Errors: kInvalidArgument from ValidateClip(), a clip without a skeleton ("glTF export needs a
+// skeleton: ..."), or a frame time too small for distinct float32 key times. Thread-safe.
+absl::StatusOr<GltfFile> FormatGltfSampled(const Clip& clip, GltfContainer container);
+
+struct GltfKeyedOptions {
+  // Largest angle between a glTF rotation and the source rotation at any source frame, degrees,
+  // finite and > 0: use the reduction's rotation tolerance.
+  double max_rotation_error_degrees = 0.5;
+};
+
+// A keyed clip, with `source` the clip it was reduced from (same layout, frame time and frame
+// count): CUBICSPLINE samplers as above.
+// Errors: kInvalidArgument from ValidateClip() / ValidateKeyedClip(), a source whose layout, frame
+// time or frame count differs from the keyed clip's, no skeleton, a bound that is not finite and
+// > 0; kCancelled when `stop` is requested (checked between joints). Thread-safe.
+absl::StatusOr<GltfFile> FormatGltfKeyed(const Clip& source, const KeyedClip& keyed,
+                                         const GltfKeyedOptions& options, GltfContainer container,
+                                         std::stop_token stop = {});
+
+}  // namespace tempokey::core
+
+#endif  // TEMPOKEY_CORE_IO_GLTF_H_

@@ -1,0 +1,103 @@
+// Joint world-position error (SPEC 4.4), through the one forward kinematics.
+#include "tempokey/core/reduce/world_error.h"
+
+#include <cmath>
+#include <utility>
+
+#include "tempokey/core/model/status.h"
+#include "reduction_internal.h"
+#include "world_error_internal.h"
+
+namespace tempokey::core {
+namespace reduce_internal {
+
+absl::StatusOr<WorldErrorMeter> WorldErrorMeter::ForClip(const Clip& clip) {
+  TEMPOKEY_ASSIGN_OR_RETURN(PointTrajectories source, WorldTrajectories(clip));
+  TEMPOKEY_ASSIGN_OR_RETURN(ForwardKinematics fk, ForwardKinematics::ForLayout(clip));
+  WorldErrorMeter meter(clip, std::move(fk));
+  meter.source_ = std::move(source);
+  meter.figure_height_ = VerticalExtent(
+      std::span<const Vec3>(meter.source_.positions).first(meter.source_.points.size()));
+  meter.scratch_.resize(meter.source_.points.size());
+  return meter;
+}
+
+PointErrors WorldErrorMeter::Measure(std::span<const std::span<const double>> fitted) {
+  const std::size_t n = source_.points.size();
+  PointErrors errors;
+  errors.max_error.assign(n, 0.0);
+  errors.worst_frame.assign(n, 0);
+  for (std::int64_t f = 0; f < source_.frame_count; ++f) {
+    fk_.Pose(fitted, static_cast<std::size_t>(f), scratch_);
+    for (std::size_t p = 0; p < n; ++p) {
+      const Vec3& a = scratch_[p];
+      const Vec3& b = source_.at(f, p);
+      const double dx = a[0] - b[0];
+      const double dy = a[1] - b[1];
+      const double dz = a[2] - b[2];
+      const double squared = dx * dx + dy * dy + dz * dz;
+      errors.squared_sum += squared;
+      const double distance = std::sqrt(squared);
+      if (distance > errors.max_error[p]) {
+        errors.max_error[p] = distance;
+        errors.worst_frame[p] = f;
+      }
+    }
+  }
+  return errors;
+}
+
+WorldErrorReport WorldErrorMeter::Report(const PointErrors& errors, double joint_tolerance) const {
+  WorldErrorReport report;
+  report.figure_height = figure_height_;
+  report.joint_tolerance = joint_tolerance;
+  std::size_t worst = 0;
+  for (std::size_t p = 0; p < errors.max_error.size(); ++p) {
+    if (errors.max_error[p] > errors.max_error[worst]) worst = p;
+  }
+  // Ties between points go to the earliest frame, then the first point.
+  for (std::size_t p = 0; p < errors.max_error.size(); ++p) {
+    if (errors.max_error[p] == errors.max_error[worst] &&
+        errors.worst_frame[p] < errors.worst_frame[worst]) {
+      worst = p;
+    }
+  }
+  if (!errors.max_error.empty()) {
+    report.max_error = errors.max_error[worst];
+    report.worst_point = source_.points[worst];
+    report.worst_point_name = SkeletonPointName(clip_->skeleton, report.worst_point);
+    report.worst_frame = errors.worst_frame[worst];
+  }
+  const double count =
+      static_cast<double>(errors.max_error.size()) * static_cast<double>(source_.frame_count);
+  report.rms_error = count > 0.0 ? std::sqrt(errors.squared_sum / count) : 0.0;
+  return report;
+}
+
+std::vector<std::vector<double>> SampleCurves(std::span<const Curve> curves,
+                                              std::int64_t frame_count, double frame_time_seconds) {
+  std::vector<std::vector<double>> samples(curves.size());
+  for (std::size_t c = 0; c < curves.size(); ++c) {
+    samples[c].resize(static_cast<std::size_t>(frame_count));
+    SampleCurve(curves[c], frame_time_seconds, samples[c]);
+  }
+  return samples;
+}
+
+std::vector<std::span<const double>> Spans(const std::vector<std::vector<double>>& samples) {
+  return {samples.begin(), samples.end()};
+}
+
+}  // namespace reduce_internal
+
+absl::StatusOr<WorldErrorReport> MeasureWorldError(const Clip& clip, const KeyedClip& keyed) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateKeyedClip(keyed));
+  TEMPOKEY_ASSIGN_OR_RETURN(reduce_internal::WorldErrorMeter meter,
+                            reduce_internal::WorldErrorMeter::ForClip(clip));
+  TEMPOKEY_RETURN_IF_ERROR(reduce_internal::CheckCurvesFitClip(clip, keyed));
+  const std::vector<std::vector<double>> fitted =
+      reduce_internal::SampleCurves(keyed.curves, clip.frame_count, clip.frame_time_seconds);
+  return meter.Report(meter.Measure(reduce_internal::Spans(fitted)), 0.0);
+}
+
+}  // namespace tempokey::core

@@ -1,0 +1,63 @@
+// The world-error measurement shared by ReduceKeys() (its report and the joint bound's
+// verification) and MeasureWorldError(): the source's points placed once, any number of fitted
+// sample sets measured against them.
+#ifndef TEMPOKEY_CORE_SRC_REDUCE_WORLD_ERROR_INTERNAL_H_
+#define TEMPOKEY_CORE_SRC_REDUCE_WORLD_ERROR_INTERNAL_H_
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "tempokey/core/model/clip.h"
+#include "tempokey/core/model/kinematics.h"
+#include "tempokey/core/reduce/world_error.h"
+
+namespace tempokey::core::reduce_internal {
+
+// Per point (SkeletonPoints() order): the largest distance from the source over every frame and
+// the first frame where it is; the sum of squared distances over every point and frame.
+struct PointErrors {
+  std::vector<double> max_error;
+  std::vector<std::int64_t> worst_frame;
+  double squared_sum = 0.0;
+};
+
+// Borrows `clip`, which must outlive the meter. Holds the source's world positions of every point
+// at every frame (points x frames x 3 doubles). Not thread-safe (forward kinematics scratch).
+class WorldErrorMeter {
+ public:
+  // Errors: kInvalidArgument when the clip has no skeleton or fails ValidateClip().
+  static absl::StatusOr<WorldErrorMeter> ForClip(const Clip& clip);
+
+  // The errors of `fitted` (one span of frame_count samples per channel of the clip).
+  PointErrors Measure(std::span<const std::span<const double>> fitted);
+
+  // The report of `errors` (which Measure() returned), with `joint_tolerance` as the bound kept.
+  WorldErrorReport Report(const PointErrors& errors, double joint_tolerance) const;
+
+  const Clip& clip() const { return *clip_; }
+  const PointTrajectories& source() const { return source_; }
+  double figure_height() const { return figure_height_; }
+
+ private:
+  WorldErrorMeter(const Clip& clip, ForwardKinematics fk) : clip_(&clip), fk_(std::move(fk)) {}
+
+  const Clip* clip_;
+  ForwardKinematics fk_;
+  PointTrajectories source_;
+  double figure_height_ = 0.0;
+  std::vector<Vec3> scratch_;
+};
+
+// Every channel's samples at every source frame of `curves` (one curve per channel, sampled at
+// f * frame_time_seconds as SampleCurve() does).
+std::vector<std::vector<double>> SampleCurves(std::span<const Curve> curves,
+                                              std::int64_t frame_count, double frame_time_seconds);
+
+// Spans over `samples`.
+std::vector<std::span<const double>> Spans(const std::vector<std::vector<double>>& samples);
+
+}  // namespace tempokey::core::reduce_internal
+
+#endif  // TEMPOKEY_CORE_SRC_REDUCE_WORLD_ERROR_INTERNAL_H_

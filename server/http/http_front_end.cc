@@ -1,0 +1,375 @@
+#include "server/http/http_front_end.h"
+
+#include <civetweb.h>
+
+#include <algorithm>
+#include <cctype>
+#include <cstring>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "grpcpp/support/channel_arguments.h"
+#include "server/http/http_status.h"
+#include "spdlog/spdlog.h"
+#include "tempokey/core/model/status.h"
+
+namespace tempokey::server::http {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr std::string_view kApiPrefix = "/tempokey.v1.MotionService/";
+constexpr std::string_view kThreePrefix = "/three/";
+// Header lines every answer carries.
+constexpr char kApiHeaders[] = "Cache-Control: no-store\r\nX-Content-Type-Options: nosniff\r\n";
+// The page loads only from this server: no CDN, no other origin.
+constexpr char kPageHeaders[] =
+    "X-Content-Type-Options: nosniff\r\n"
+    "Content-Security-Policy: default-src 'self'; img-src 'self' blob: data:; "
+    "connect-src 'self'; object-src 'none'; base-uri 'none'; frame-ancestors 'none'\r\n";
+constexpr std::size_t kReadBlock = 64 * 1024;
+
+std::string_view HeaderOf(const mg_connection* connection, const char* name) {
+  const char* value = mg_get_header(connection, name);
+  return value == nullptr ? std::string_view() : std::string_view(value);
+}
+
+bool StartsWith(std::string_view text, std::string_view prefix) {
+  return text.substr(0, prefix.size()) == prefix;
+}
+
+std::string Lower(std::string_view text) {
+  std::string out(text);
+  std::transform(out.begin(), out.end(), out.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  return out;
+}
+
+std::string_view MediaTypeOf(const fs::path& path) {
+  const std::string extension = Lower(path.extension().string());
+  if (extension == ".html") return "text/html; charset=utf-8";
+  if (extension == ".js" || extension == ".mjs") return "text/javascript; charset=utf-8";
+  if (extension == ".css") return "text/css; charset=utf-8";
+  if (extension == ".json") return "application/json";
+  if (extension == ".png") return "image/png";
+  if (extension == ".svg") return "image/svg+xml";
+  if (extension == ".ico") return "image/x-icon";
+  return "application/octet-stream";
+}
+
+// A file below `root` named by the cleaned URL path `relative`, or nullopt when the path has a
+// hidden or parent component or names no regular file.
+std::optional<fs::path> FileBelow(const std::string& root, std::string_view relative) {
+  fs::path path(root);
+  std::size_t start = 0;
+  while (start <= relative.size()) {
+    std::size_t end = relative.find('/', start);
+    if (end == std::string_view::npos) end = relative.size();
+    const std::string_view part = relative.substr(start, end - start);
+    if (!part.empty()) {
+      if (part.front() == '.' || part.find('\\') != std::string_view::npos ||
+          part.find('\0') != std::string_view::npos) {
+        return std::nullopt;
+      }
+      path /= std::string(part);
+    }
+    start = end + 1;
+  }
+  std::error_code error;
+  if (!fs::is_regular_file(path, error)) return std::nullopt;
+  return path;
+}
+
+void SendText(mg_connection* connection, int code, std::string_view content_type,
+              std::string_view body, std::string_view extra_headers = {}) {
+  mg_response_header_start(connection, code);
+  mg_response_header_add(connection, "Content-Type", content_type.data(),
+                         static_cast<int>(content_type.size()));
+  const std::string length = std::to_string(body.size());
+  mg_response_header_add(connection, "Content-Length", length.c_str(), -1);
+  mg_response_header_add_lines(connection, kApiHeaders);
+  if (!extra_headers.empty()) mg_response_header_add_lines(connection, std::string(extra_headers).c_str());
+  mg_response_header_send(connection);
+  if (!body.empty() && std::string_view(mg_get_request_info(connection)->request_method) != "HEAD") {
+    mg_write(connection, body.data(), body.size());
+  }
+}
+
+// An error as the API answers it: the HTTP status of its code and {"code", "status", "message"}.
+int SendApiError(mg_connection* connection, const absl::Status& status,
+                 std::optional<std::chrono::milliseconds> retry_after = std::nullopt) {
+  std::string extra;
+  if (retry_after) {
+    // Retry-After is in whole seconds; round up so a client never comes back too early.
+    absl::StrAppend(&extra, "Retry-After: ", (retry_after->count() + 999) / 1000, "\r\n");
+  }
+  const int code = HttpStatusOf(status.code());
+  SendText(connection, code, "application/json", StatusToJson(status, retry_after) + "\n", extra);
+  return code;
+}
+
+// The request body of one call: the whole body as one message, or one message per line for
+// client-streaming methods; and the answer: one JSON object, or NDJSON lines
+// {"result": ...} / {"error": ...} for server-streaming methods.
+class HttpCallStream final : public JsonBridge::Stream {
+ public:
+  HttpCallStream(mg_connection* connection, const google::protobuf::MethodDescriptor& method,
+                 std::int64_t max_message_bytes)
+      : connection_(connection), method_(method), max_bytes_(max_message_bytes) {}
+
+  absl::StatusOr<std::optional<std::string>> NextRequest() override {
+    if (!method_.client_streaming()) {
+      if (sent_single_) return std::optional<std::string>();
+      sent_single_ = true;
+      TEMPOKEY_RETURN_IF_ERROR(ReadUntil(/*line=*/false));
+      std::string body = std::move(buffer_);
+      buffer_.clear();
+      if (body.find_first_not_of(" \t\r\n") == std::string::npos) body = "{}";
+      return std::optional<std::string>(std::move(body));
+    }
+    while (true) {
+      TEMPOKEY_RETURN_IF_ERROR(ReadUntil(/*line=*/true));
+      const std::size_t newline = buffer_.find('\n');
+      std::string line;
+      if (newline == std::string::npos) {
+        if (buffer_.empty()) return std::optional<std::string>();
+        line = std::move(buffer_);
+        buffer_.clear();
+      } else {
+        line = buffer_.substr(0, newline);
+        buffer_.erase(0, newline + 1);
+      }
+      if (line.find_first_not_of(" \t\r") == std::string::npos) continue;  // blank line
+      return std::optional<std::string>(std::move(line));
+    }
+  }
+
+  bool WriteResponse(std::string_view json) override {
+    if (!method_.server_streaming()) {
+      single_response_ = std::string(json);
+      return true;
+    }
+    if (!streaming_started_) {
+      streaming_started_ = true;
+      mg_response_header_start(connection_, 200);
+      mg_response_header_add(connection_, "Content-Type", "application/x-ndjson", -1);
+      mg_response_header_add(connection_, "Transfer-Encoding", "chunked", -1);
+      mg_response_header_add_lines(connection_, kApiHeaders);
+      mg_response_header_send(connection_);
+    }
+    const std::string line = absl::StrCat("{\"result\":", core::AsAbsl(json), "}\n");
+    return mg_send_chunk(connection_, line.data(), static_cast<unsigned>(line.size())) > 0;
+  }
+
+  // Sends what the call ended with: its one answer or error, or the end of the NDJSON stream.
+  int Finish(const JsonBridge::Outcome& outcome) {
+    if (streaming_started_) {
+      if (!outcome.status.ok()) {
+        const std::string line =
+            absl::StrCat("{\"error\":", StatusToJson(outcome.status, outcome.retry_after), "}\n");
+        mg_send_chunk(connection_, line.data(), static_cast<unsigned>(line.size()));
+      }
+      mg_send_chunk(connection_, "", 0);
+      return 200;
+    }
+    if (!outcome.status.ok()) return SendApiError(connection_, outcome.status, outcome.retry_after);
+    if (method_.server_streaming()) {  // a stream that ended with no message: an empty body
+      SendText(connection_, 200, "application/x-ndjson", "");
+      return 200;
+    }
+    SendText(connection_, 200, "application/json", single_response_ + "\n");
+    return 200;
+  }
+
+ private:
+  // Reads until a whole line is buffered (`line`) or to the end of the body, within the size cap.
+  absl::Status ReadUntil(bool line) {
+    // On the heap: civetweb's worker threads have small stacks (about 100 KiB).
+    block_.resize(kReadBlock);
+    while (!done_reading_ && !(line && buffer_.find('\n') != std::string::npos)) {
+      const int got = mg_read(connection_, block_.data(), block_.size());
+      if (got < 0) return absl::CancelledError("the HTTP request body could not be read");
+      if (got == 0) {
+        done_reading_ = true;
+        break;
+      }
+      buffer_.append(block_.data(), static_cast<std::size_t>(got));
+      const std::size_t pending = line ? std::min(buffer_.size(), buffer_.find('\n')) : buffer_.size();
+      if (static_cast<std::int64_t>(pending) > max_bytes_) {
+        return absl::ResourceExhaustedError(absl::StrCat(
+            "a request message is over the limit of ", max_bytes_, " bytes of JSON"));
+      }
+    }
+    return absl::OkStatus();
+  }
+
+  mg_connection* const connection_;
+  const google::protobuf::MethodDescriptor& method_;
+  const std::int64_t max_bytes_;
+  std::string buffer_;
+  std::vector<char> block_;
+  bool done_reading_ = false;
+  bool sent_single_ = false;
+  bool streaming_started_ = false;
+  std::string single_response_;
+};
+
+int HandleRequestThunk(mg_connection* connection, void* front_end) {
+  return static_cast<HttpFrontEnd*>(front_end)->HandleRequest(connection);
+}
+
+int LogMessage(const mg_connection*, const char* message) {
+  spdlog::warn("http: {}", message);
+  return 1;
+}
+
+// civetweb's listening_ports entry for "host:port": IPv4 literals only (Debian's civetweb is
+// built without IPv6); "localhost" is 127.0.0.1.
+absl::StatusOr<std::string> ListeningPort(const std::string& address) {
+  const std::size_t colon = address.rfind(':');
+  if (colon == std::string::npos || colon + 1 == address.size()) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--http_address ", address, ": expected host:port"));
+  }
+  std::string host = address.substr(0, colon);
+  const std::string port = address.substr(colon + 1);
+  if (host == "localhost") host = "127.0.0.1";
+  if (host.find(':') != std::string::npos || host.find('[') != std::string::npos) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "--http_address ", address, ": IPv6 is not supported by the HTTP front end; use an IPv4 "
+        "address such as 127.0.0.1"));
+  }
+  if (port.find_first_not_of("0123456789") != std::string::npos) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--http_address ", address, ": port \"", port, "\" is not a number"));
+  }
+  return absl::StrCat(host, ":", port);
+}
+
+}  // namespace
+
+HttpFrontEnd::HttpFrontEnd(const HttpOptions& options, Server& server)
+    : options_(options),
+      server_(server),
+      bridge_(
+          [&server] {
+            grpc::ChannelArguments args;
+            args.SetMaxReceiveMessageSize(-1);  // answers are bounded by the server's own limits
+            return server.InProcessChannel(args);
+          }(),
+          server.options().max_message_bytes) {}
+
+absl::StatusOr<std::unique_ptr<HttpFrontEnd>> HttpFrontEnd::Start(const HttpOptions& options,
+                                                                 Server& server) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateHttpOptions(options, server.options()));
+  if (options.address.empty()) return absl::InvalidArgumentError("--http_address is empty");
+  std::unique_ptr<HttpFrontEnd> front_end(new HttpFrontEnd(options, server));
+  front_end->loopback_only_ = IsLoopbackAddress(options.address);
+  front_end->host_ = options.address.substr(0, options.address.rfind(':'));
+  TEMPOKEY_ASSIGN_OR_RETURN(std::string ports, ListeningPort(options.address));
+  const std::string threads = std::to_string(options.threads);
+  const std::string io_timeout = std::to_string(options.io_timeout.count());
+  const std::string keep_alive = std::to_string(options.keep_alive_timeout.count());
+  const char* settings[] = {"listening_ports",       ports.c_str(),
+                            "num_threads",           threads.c_str(),
+                            "request_timeout_ms",    io_timeout.c_str(),
+                            "keep_alive_timeout_ms", keep_alive.c_str(),
+                            "enable_keep_alive",     "yes",
+                            "max_request_size",      "16384",
+                            "static_file_cache_control", "no-cache",
+                            nullptr};
+  mg_callbacks callbacks;
+  std::memset(&callbacks, 0, sizeof callbacks);
+  callbacks.log_message = LogMessage;
+  mg_init_library(0);
+  char error_text[256] = {0};
+  mg_init_data init;
+  std::memset(&init, 0, sizeof init);
+  init.callbacks = &callbacks;
+  init.user_data = front_end.get();
+  init.configuration_options = settings;
+  mg_error_data error;
+  std::memset(&error, 0, sizeof error);
+  error.text = error_text;
+  error.text_buffer_size = sizeof error_text;
+  front_end->context_ = mg_start2(&init, &error);
+  if (front_end->context_ == nullptr) {
+    return absl::UnavailableError(absl::StrCat("cannot serve HTTP on ", options.address, ": ",
+                                               error_text[0] != 0 ? error_text : "civetweb failed"));
+  }
+  mg_set_request_handler(front_end->context_, "/", HandleRequestThunk, front_end.get());
+  mg_server_port port;
+  std::memset(&port, 0, sizeof port);
+  if (mg_get_server_ports(front_end->context_, 1, &port) < 1) {
+    return absl::UnavailableError(absl::StrCat("cannot serve HTTP on ", options.address));
+  }
+  front_end->port_ = port.port;
+  spdlog::info("http: serving the studio on {} (threads={})", front_end->url(), options.threads);
+  return front_end;
+}
+
+HttpFrontEnd::~HttpFrontEnd() { Stop(); }
+
+void HttpFrontEnd::Stop() {
+  if (context_ == nullptr) return;
+  mg_stop(context_);
+  context_ = nullptr;
+}
+
+std::string HttpFrontEnd::url() const {
+  const std::string host = host_ == "localhost" || host_.empty() ? "127.0.0.1" : host_;
+  return absl::StrCat("http://", host, ":", port_, "/");
+}
+
+int HttpFrontEnd::HandleRequest(mg_connection* connection) {
+  const mg_request_info* info = mg_get_request_info(connection);
+  const std::string_view verb = info->request_method;
+  const std::string_view path = info->local_uri != nullptr ? info->local_uri : "";
+  if (StartsWith(path, kApiPrefix)) {
+    if (verb != "POST") {
+      SendText(connection, 405, "application/json",
+               StatusToJson(absl::InvalidArgumentError("API calls are POST requests")) + "\n",
+               "Allow: POST\r\n");
+      return 405;
+    }
+    const google::protobuf::MethodDescriptor* method = JsonBridge::FindMethod(path);
+    if (method == nullptr) {
+      return SendApiError(connection, absl::UnimplementedError(absl::StrCat(
+                                          "no method ", core::AsAbsl(path.substr(1)), " in this server")));
+    }
+    if (absl::Status allowed = CheckApiRequest(
+            HeaderOf(connection, "Content-Type"), HeaderOf(connection, "Origin"),
+            HeaderOf(connection, "Host"), loopback_only_ && server_.options().auth_tokens.empty());
+        !allowed.ok()) {
+      return SendApiError(connection, allowed);
+    }
+    HttpCallStream stream(connection, *method, bridge_.max_message_bytes());
+    const JsonBridge::Outcome outcome =
+        bridge_.Call(*method, HeaderOf(connection, "Authorization"), stream);
+    return stream.Finish(outcome);
+  }
+  if (verb != "GET" && verb != "HEAD") {
+    SendText(connection, 405, "text/plain; charset=utf-8", "method not allowed\n",
+             "Allow: GET, HEAD\r\n");
+    return 405;
+  }
+  std::optional<fs::path> file;
+  if (StartsWith(path, kThreePrefix)) {
+    file = FileBelow(options_.three_root, path.substr(kThreePrefix.size()));
+  } else {
+    file = FileBelow(options_.web_root, path == "/" ? std::string_view("index.html") : path);
+  }
+  if (!file) {
+    SendText(connection, 404, "text/plain; charset=utf-8", "not found\n");
+    return 404;
+  }
+  const std::string media_type(MediaTypeOf(*file));
+  mg_send_mime_file2(connection, file->c_str(), media_type.c_str(), kPageHeaders);
+  return 200;
+}
+
+}  // namespace tempokey::server::http

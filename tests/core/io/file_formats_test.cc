@@ -1,0 +1,90 @@
+// The list of file formats: each entry writes what the format's own function writes, keyed
+// results in sampled formats are baked first, and clip files are read by their extension.
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "gtest/gtest.h"
+#include "tempokey/core/io/bvh.h"
+#include "tempokey/core/io/csv.h"
+#include "tempokey/core/io/file_formats.h"
+#include "tempokey/core/io/file_io.h"
+#include "tempokey/core/io/keyed_json.h"
+#include "tempokey/core/io/maya_anim.h"
+#include "tempokey/core/reduce/reduce.h"
+#include "tests/testing/test_paths.h"
+
+namespace tempokey::core {
+namespace {
+
+const Clip& Bandai() {
+  static const Clip clip = *ReadBvhFile(testing::SharedBvh("bandai/dataset-1_bow_active_001.bvh"));
+  return clip;
+}
+
+const KeyedClip& Keyed() {
+  static const KeyedClip keyed = ReduceKeys(Bandai(), {})->keyed;
+  return keyed;
+}
+
+TEST(FileFormatsTest, ListsTheCliOutputFormatsInOrder) {
+  std::vector<std::string> names;
+  for (const ExportFormat& format : ExportFormats()) {
+    names.emplace_back(format.name);
+    EXPECT_EQ(format.extension, "." + std::string(format.name));
+    EXPECT_EQ(format.format_sampled != nullptr, format.content == FileContent::kSampled);
+    EXPECT_EQ(format.format_keyed != nullptr, format.content == FileContent::kKeyed);
+  }
+
+  EXPECT_EQ(names, (std::vector<std::string>{"bvh", "csv", "json", "anim"}));
+  EXPECT_EQ(FindExportFormat("BVH"), FindExportFormat(".bvh"));
+  EXPECT_EQ(FindExportFormat("gif"), nullptr);
+}
+
+TEST(FileFormatsTest, EachFormatWritesWhatItsOwnFunctionWrites) {
+  const std::variant<Clip, KeyedClip> sampled = Bandai();
+  const std::variant<Clip, KeyedClip> keyed = Keyed();
+  const Clip baked = *Bake(Keyed());
+
+  EXPECT_EQ(*FormatOutput(sampled, *FindExportFormat("bvh")), *FormatBvh(Bandai()));
+  EXPECT_EQ(*FormatOutput(sampled, *FindExportFormat("csv")), *FormatCsv(Bandai()));
+  EXPECT_EQ(*FormatOutput(keyed, *FindExportFormat("json")), *FormatKeyedClipJson(Keyed()));
+  EXPECT_EQ(*FormatOutput(keyed, *FindExportFormat("anim")), *FormatMayaAnim(Keyed()));
+  EXPECT_EQ(*FormatOutput(keyed, *FindExportFormat("bvh")), *FormatBvh(baked));
+  EXPECT_EQ(*FormatOutput(keyed, *FindExportFormat("csv")), *FormatCsv(baked));
+}
+
+TEST(FileFormatsTest, SampledClipHasNoCurvesToWrite) {
+  const absl::StatusOr<std::string> text =
+      FormatOutput(std::variant<Clip, KeyedClip>(Bandai()), *FindExportFormat("anim"));
+
+  ASSERT_FALSE(text.ok());
+  EXPECT_EQ(text.status().message(), "anim holds key-frame curves; a sampled clip has none: reduce it first");
+}
+
+TEST(FileFormatsTest, ClipTextIsReadByItsExtension) {
+  const std::string bvh = *FormatBvh(Bandai());
+  const std::string csv = *FormatCsv(Bandai());
+
+  const absl::StatusOr<Clip> from_bvh = ParseClipText(bvh, "dir/Walk.BVH", std::nullopt);
+  const absl::StatusOr<Clip> from_csv = ParseClipText(csv, "walk.csv", 1.0 / 30.0);
+  const absl::StatusOr<Clip> csv_without_rate = ParseClipText(csv, "walk.csv", std::nullopt);
+  const absl::StatusOr<Clip> other = ParseClipText(bvh, "walk.txt", std::nullopt);
+  const absl::StatusOr<Clip> none = ParseClipText(bvh, "walk", std::nullopt);
+  const absl::StatusOr<Clip> broken = ParseClipText("HIERARCHY\nROOT Hips\n{\n\tOFFSET 0 0\n", "broken.bvh", std::nullopt);
+
+  ASSERT_TRUE(from_bvh.ok()) << from_bvh.status();
+  EXPECT_EQ(from_bvh->name, "Walk");
+  EXPECT_EQ(from_bvh->channels, Bandai().channels);
+  ASSERT_TRUE(from_csv.ok()) << from_csv.status();
+  EXPECT_EQ(from_csv->channels.size(), Bandai().channels.size());
+  EXPECT_EQ(csv_without_rate.status().message(),
+            "walk.csv: a CSV file does not store its frame rate; give it");
+  EXPECT_EQ(other.status().message(), "walk.txt: unknown clip format '.txt' (expected .bvh, .csv)");
+  EXPECT_EQ(none.status().message(), "walk: no extension (expected .bvh, .csv)");
+  ASSERT_FALSE(broken.ok());
+  EXPECT_EQ(broken.status().message().substr(0, 13), "broken.bvh:4:");
+}
+
+}  // namespace
+}  // namespace tempokey::core

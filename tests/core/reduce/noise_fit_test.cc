@@ -1,0 +1,217 @@
+// The noise-aware reduction: known noise on known curves (the estimate, the fit against the truth,
+// the guard), clean data, bad input, and the method through ReduceKeys().
+#include "tempokey/core/reduce/noise_fit.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+#include <random>
+#include <vector>
+
+#include "tempokey/core/io/bvh.h"
+#include "tempokey/core/model/keyed_clip.h"
+#include "tempokey/core/reduce/reduce.h"
+#include "tests/testing/test_paths.h"
+
+namespace tempokey::core {
+namespace {
+
+constexpr double kSigma = 0.5;
+constexpr unsigned kSeed = 7;
+
+// A motion of a few slow and one quicker component, 120 fps, degrees.
+double Motion(int f) {
+  const double t = f / 120.0;
+  return 30.0 * std::sin(2.0 * std::numbers::pi * 0.4 * t) +
+         8.0 * std::sin(2.0 * std::numbers::pi * 1.3 * t + 1.0) + 5.0 * t;
+}
+
+std::vector<double> Truth(int frames) {
+  std::vector<double> v;
+  for (int f = 0; f < frames; ++f) v.push_back(Motion(f));
+  return v;
+}
+
+std::vector<double> WithNoise(std::vector<double> v, double sigma, unsigned seed) {
+  std::mt19937 random(seed);
+  std::normal_distribution<double> noise(0.0, sigma);
+  for (double& x : v) x += noise(random);
+  return v;
+}
+
+double Rms(const std::vector<double>& a, const std::vector<double>& b) {
+  double sum = 0.0;
+  for (std::size_t i = 0; i < a.size(); ++i) sum += (a[i] - b[i]) * (a[i] - b[i]);
+  return std::sqrt(sum / static_cast<double>(a.size()));
+}
+
+TEST(NoiseFitTest, EstimateRecoversKnownGaussianNoiseOnAMovingCurve) {
+  // The median of 20000 correlated third differences: a standard error near 1.5 %.
+  const std::vector<double> noisy = WithNoise(Truth(20000), kSigma, kSeed);
+
+  const double estimate = EstimateNoiseSigma(noisy);
+
+  EXPECT_NEAR(estimate, kSigma, 0.04 * kSigma);
+}
+
+TEST(NoiseFitTest, EstimateOfAQuadraticIsZero) {
+  std::vector<double> quadratic;
+  for (int f = 0; f < 100; ++f) quadratic.push_back(0.25 * f * f - 3.0 * f + 7.0);
+
+  EXPECT_LT(EstimateNoiseSigma(quadratic), 1e-9);
+  EXPECT_EQ(EstimateNoiseSigma(std::vector<double>{1.0, 2.0, 4.0}), 0.0);
+}
+
+TEST(NoiseFitTest, EstimateOfCleanSmoothMotionIsFarBelowTheNoise) {
+  // Its third differences are those of the motion itself: 30 deg at 0.4 Hz and 8 deg at 1.3 Hz
+  // give |d| up to 8 (2 pi 1.3 / 120)^3 = 2.5e-3, a median near 5e-4 / (0.6745 sqrt 20).
+  EXPECT_LT(EstimateNoiseSigma(Truth(2000)), 1e-3);
+}
+
+TEST(NoiseFitTest, FitFollowsTheMotionNotTheNoise) {
+  const std::vector<double> truth = Truth(2400);
+  const std::vector<double> noisy = WithNoise(truth, kSigma, kSeed);
+
+  absl::StatusOr<SplineFit> fit = FitToNoise(noisy, kSigma);
+
+  ASSERT_TRUE(fit.ok()) << fit.status();
+  const std::vector<double> curve = EvaluateSplineFit(*fit, 0);
+  // A smooth motion: the error against the truth is a small part of the noise (a quarter, where
+  // the noise projected on the keys' 2 K parameters alone would be sqrt(2 K / N) = 0.25), with
+  // few keys, and what is left against the data is the noise itself.
+  EXPECT_LT(Rms(curve, truth), 0.3 * kSigma);
+  EXPECT_LT(fit->frames.size(), 2400u / 25);
+  const double residual = Rms(curve, noisy);
+  EXPECT_GT(residual, 0.9 * kSigma);
+  EXPECT_LT(residual, 1.05 * kSigma);
+}
+
+TEST(NoiseFitTest, GuardKeepsAnImpactTheSmoothingWouldCut) {
+  // A 3-frame spike of 8 sigma (an impact) on the noisy motion.
+  constexpr double kSpike = 8.0 * kSigma;
+  std::vector<double> truth = Truth(1200);
+  for (int f = 600; f < 603; ++f) truth[f] += kSpike;
+  const std::vector<double> noisy = WithNoise(truth, kSigma, kSeed);
+  NoiseFitOptions guarded;
+  NoiseFitOptions unguarded;
+  unguarded.guard_sigmas = 100.0;
+
+  absl::StatusOr<SplineFit> fit = FitToNoise(noisy, kSigma, guarded);
+  absl::StatusOr<SplineFit> cut = FitToNoise(noisy, kSigma, unguarded);
+
+  ASSERT_TRUE(fit.ok()) << fit.status();
+  ASSERT_TRUE(cut.ok()) << cut.status();
+  const std::vector<double> curve = EvaluateSplineFit(*fit, 0);
+  double worst = 0.0;
+  for (std::size_t f = 0; f < curve.size(); ++f) worst = std::max(worst, std::abs(curve[f] - noisy[f]));
+  EXPECT_LE(worst, (guarded.guard_sigmas + guarded.key_sigmas) * kSigma);
+  // The impact is kept within the guard of the data (give or take 2 sigma of noise), where the
+  // risk-optimal smoothing alone flattens it further.
+  const double kept = curve[601] - Motion(601);
+  EXPECT_GT(kept, kSpike - 5.2 * kSigma - 2.0 * kSigma);
+  EXPECT_LT(EvaluateSplineFit(*cut, 0)[601] - Motion(601), kept) << kept;
+}
+
+TEST(NoiseFitTest, SmootherReturnsShortInputsAsTheyAre) {
+  const std::vector<double> samples = {1.0, 5.0, -2.0, 4.0};
+
+  EXPECT_EQ(SmoothToNoise(samples, kSigma), samples);
+}
+
+TEST(NoiseFitTest, BadInputIsRefusedWithItsReason) {
+  const std::vector<double> samples = {0.0, 1.0, std::nan(""), 3.0};
+  const std::vector<double> good = {0.0, 1.0, 2.0, 3.0};
+  NoiseFitOptions bad_keys;
+  bad_keys.key_sigmas = 0.0;
+
+  EXPECT_EQ(FitToNoise(samples, kSigma).status().message(), "sample 2 is NaN");
+  EXPECT_EQ(FitToNoise(good, 0.0).status().message(),
+            "the noise level must be finite and > 0, got 0");
+  EXPECT_EQ(FitToNoise(good, kSigma, bad_keys).status().message(),
+            "key_sigmas must be in [0.01, 10], got 0");
+  EXPECT_EQ(FitToNoise({}, kSigma).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+Clip TwoChannelClip(std::vector<double> rotation, std::vector<double> position) {
+  Clip clip;
+  clip.name = "noise";
+  clip.frame_time_seconds = 1.0 / 120.0;
+  clip.frame_count = static_cast<std::int64_t>(rotation.size());
+  clip.channels.push_back({.joint = -1, .kind = ChannelKind::kXRotation, .name = "rx",
+                           .samples = std::move(rotation)});
+  clip.channels.push_back({.joint = -1, .kind = ChannelKind::kXPosition, .name = "px",
+                           .samples = std::move(position)});
+  return clip;
+}
+
+TEST(NoiseReductionTest, ReportCarriesEachChannelsEstimatedOrGivenNoise) {
+  const Clip clip = TwoChannelClip(WithNoise(Truth(1200), kSigma, 1),
+                                   WithNoise(Truth(1200), 0.1, 2));
+  ReduceOptions estimated;
+  estimated.method = ReduceMethod::kNoise;
+  ReduceOptions given = estimated;
+  given.noise.rotation_sigma_degrees = 0.4;
+
+  absl::StatusOr<ReduceResult> a = ReduceKeys(clip, estimated);
+  absl::StatusOr<ReduceResult> b = ReduceKeys(clip, given);
+
+  ASSERT_TRUE(a.ok()) << a.status();
+  ASSERT_TRUE(b.ok()) << b.status();
+  // 1200 frames: the estimate's standard error is near 6 %.
+  EXPECT_NEAR(a->report.channels[0].noise_sigma, kSigma, 0.15 * kSigma);
+  EXPECT_TRUE(a->report.channels[0].noise_sigma_estimated);
+  EXPECT_NEAR(a->report.channels[1].noise_sigma, 0.1, 0.015);
+  EXPECT_EQ(b->report.channels[0].noise_sigma, 0.4);
+  EXPECT_FALSE(b->report.channels[0].noise_sigma_estimated);
+  EXPECT_TRUE(b->report.channels[1].noise_sigma_estimated);
+  // Keys on whole frames, C1.
+  for (const Key& key : a->keyed.curves[0].keys) {
+    const double frame = key.time_seconds / clip.frame_time_seconds;
+    EXPECT_NEAR(frame, std::round(frame), 1e-9);
+    EXPECT_EQ(key.in_tangent, key.out_tangent);
+  }
+}
+
+TEST(NoiseReductionTest, InvalidNoiseParamsAreNamed) {
+  ReduceOptions options;
+  options.method = ReduceMethod::kNoise;
+  options.noise.rotation_sigma_degrees = -1.0;
+
+  EXPECT_EQ(ValidateReduceOptions(options).message(),
+            "noise.rotation_sigma_degrees must be finite and > 0, got -1");
+  options.noise.rotation_sigma_degrees.reset();
+  options.noise.guard_sigmas = 1.0;
+  EXPECT_EQ(ValidateReduceOptions(options).message(),
+            "noise.guard_sigmas must be in [2, 100], got 1");
+}
+
+// Clean captures as they are (30 fps): the estimate reads only their own frame-level detail, a
+// fraction of the benchmark's 0.5 degrees (median 0.02 to 0.15 per clip), and the curve stays
+// within a tenth of a degree RMS of the data: clean data is not smoothed.
+TEST(NoiseReductionCorpusTest, CleanBandaiClipsReadAsNearlyNoiseless) {
+  for (const std::string& path : testing::AllSharedBvhFiles()) {
+    if (path.find("bandai") == std::string::npos) continue;
+    SCOPED_TRACE(path);
+    absl::StatusOr<Clip> clip = ReadBvhFile(path);
+    ASSERT_TRUE(clip.ok()) << clip.status();
+    ReduceOptions options;
+    options.method = ReduceMethod::kNoise;
+
+    absl::StatusOr<ReduceResult> result = ReduceKeys(*clip, options);
+
+    ASSERT_TRUE(result.ok()) << result.status();
+    std::vector<double> levels;
+    for (const ChannelReduction& channel : result->report.channels) {
+      if (IsRotation(clip->channels[channel.channel_index].kind)) {
+        levels.push_back(channel.noise_sigma);
+      }
+    }
+    std::sort(levels.begin(), levels.end());
+    EXPECT_LT(levels[levels.size() / 2], 0.2);
+    EXPECT_LT(result->report.rms_error, 0.12);
+  }
+}
+
+}  // namespace
+}  // namespace tempokey::core

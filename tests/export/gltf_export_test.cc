@@ -1,0 +1,137 @@
+// glTF exports of every shared clip, checked by tools that are not ours: the Khronos validator
+// (no errors, no warnings) and three.js's GLTFLoader + AnimationMixer under node, which must
+// reproduce every joint's local rotation and translation within the reduction's bounds at every
+// source frame (tests/export/three_check.mjs reads the source BVH with its own reader).
+#include "tempokey/core/io/gltf.h"
+
+#include <string>
+#include <vector>
+
+#include "gtest/gtest.h"
+#include "tempokey/core/io/bvh.h"
+#include "tempokey/core/io/file_io.h"
+#include "tempokey/core/reduce/reduce.h"
+#include "tests/export/export_tools.h"
+#include "tests/testing/test_paths.h"
+
+namespace tempokey::core {
+namespace {
+
+using testing::NumberOf;
+using testing::RunNodeScript;
+
+// glTF stores float32: a translation of magnitude ~300 (Bandai roots, cm) is rounded by up to
+// 300 * 2^-24 = 1.8e-5; rotations by ~1e-5 degrees. The bounds are checked with this slack.
+constexpr double kFloat32TranslationSlack = 1e-4;
+constexpr double kFloat32RotationSlackDegrees = 1e-3;
+// Sampled files key every frame at float32 times, which sit up to 2^-24 relative (4e-7 s at 7 s)
+// from the frame times i x 0.0083333 that three.js is asked for; the CMU thumb, turning up to
+// ~15000 degrees/s, moves 0.006 degrees in that time. (Keyed fits are verified in C++ with the
+// same float32 times and double queries, so their bound already includes it.)
+constexpr double kFloat32TimeSlackDegrees = 0.01;
+
+std::string Stem(const std::string& path) {
+  const std::size_t slash = path.rfind('/');
+  const std::string name = path.substr(slash + 1);
+  return name.substr(0, name.rfind('.'));
+}
+
+// Reduces `path` within `tolerance` (degrees and file units) and writes it as glTF in `dir`.
+std::string WriteKeyed(const std::string& path, double tolerance, GltfContainer container,
+                       const std::string& dir) {
+  absl::StatusOr<Clip> source = ReadBvhFile(path);
+  EXPECT_TRUE(source.ok()) << source.status();
+  ReduceOptions options;
+  options.tolerance.max_rotation_error_degrees = tolerance;
+  options.tolerance.max_position_error = tolerance;
+  absl::StatusOr<ReduceResult> reduced = ReduceKeys(*source, options);
+  EXPECT_TRUE(reduced.ok()) << reduced.status();
+  absl::StatusOr<GltfFile> file =
+      FormatGltfKeyed(*source, reduced->keyed, {.max_rotation_error_degrees = tolerance}, container);
+  EXPECT_TRUE(file.ok()) << file.status();
+  const std::string out = absl::StrCat(dir, "/", Stem(path), "_", tolerance,
+                                       container == GltfContainer::kText ? ".gltf" : ".glb");
+  EXPECT_TRUE(WriteFileAtomically(out, file->bytes).ok());
+  return out;
+}
+
+std::string WriteSampled(const std::string& path, GltfContainer container, const std::string& dir) {
+  absl::StatusOr<Clip> source = ReadBvhFile(path);
+  EXPECT_TRUE(source.ok()) << source.status();
+  absl::StatusOr<GltfFile> file = FormatGltfSampled(*source, container);
+  EXPECT_TRUE(file.ok()) << file.status();
+  const std::string out = absl::StrCat(dir, "/", Stem(path), "_sampled",
+                                       container == GltfContainer::kText ? ".gltf" : ".glb");
+  EXPECT_TRUE(WriteFileAtomically(out, file->bytes).ok());
+  return out;
+}
+
+void ExpectThreeWithin(const std::string& bvh, const std::string& gltf, double rotation_bound,
+                       double translation_bound, const std::string& dir) {
+  const std::vector<JsonValue> lines = RunNodeScript("three_check.mjs", {bvh, gltf}, dir);
+  ASSERT_EQ(lines.size(), 1u) << gltf;
+  const JsonValue& result = lines[0];
+  EXPECT_LE(NumberOf(result, "max_rotation_error_degrees"),
+            rotation_bound + kFloat32RotationSlackDegrees)
+      << gltf;
+  EXPECT_LE(NumberOf(result, "max_translation_error"),
+            translation_bound + kFloat32TranslationSlack)
+      << gltf;
+  EXPECT_GT(NumberOf(result, "animated_joints"), 0) << gltf;
+}
+
+TEST(GltfExportTest, EveryKeyedAndSampledFilePassesTheKhronosValidatorCleanly) {
+  const std::string dir = testing::MakeTempDir();
+  std::vector<std::string> files;
+  for (const std::string& path : testing::AllSharedBvhFiles()) {
+    files.push_back(WriteKeyed(path, 0.5, GltfContainer::kText, dir));
+  }
+  const std::string cmu = testing::SharedBvh("cmu/131_01.bvh");
+  const std::string walk = testing::SharedBvh("bandai/dataset-1_walk_active_001.bvh");
+  files.push_back(WriteKeyed(cmu, 0.5, GltfContainer::kBinary, dir));
+  files.push_back(WriteSampled(cmu, GltfContainer::kText, dir));
+  files.push_back(WriteSampled(walk, GltfContainer::kBinary, dir));
+
+  const std::vector<JsonValue> reports = RunNodeScript("validate.mjs", files, dir);
+
+  ASSERT_EQ(reports.size(), files.size());
+  for (const JsonValue& report : reports) {
+    const std::string file = report.Find("file")->text;
+    EXPECT_EQ(NumberOf(report, "errors"), 0) << file;
+    EXPECT_EQ(NumberOf(report, "warnings"), 0) << file;
+    for (const JsonValue& message : *report.Find("messages")->array) {
+      ADD_FAILURE() << file << ": " << message.text;
+    }
+  }
+}
+
+TEST(GltfExportTest, ThreeJsPlaysEveryKeyedClipWithinTheBoundAtEverySourceFrame) {
+  const std::string dir = testing::MakeTempDir();
+  for (const std::string& path : testing::AllSharedBvhFiles()) {
+    ExpectThreeWithin(path, WriteKeyed(path, 0.5, GltfContainer::kText, dir), 0.5, 0.5, dir);
+  }
+}
+
+TEST(GltfExportTest, ThreeJsStaysWithinTighterAndLooserBoundsToo) {
+  // The sweep on two clips (one per source rate) keeps the stage short.
+  const std::string dir = testing::MakeTempDir();
+  for (const char* clip : {"cmu/131_01.bvh", "bandai/dataset-1_kick_normal_001.bvh"}) {
+    const std::string path = testing::SharedBvh(clip);
+    for (double tolerance : {0.1, 1.0}) {
+      ExpectThreeWithin(path, WriteKeyed(path, tolerance, GltfContainer::kBinary, dir), tolerance,
+                        tolerance, dir);
+    }
+  }
+}
+
+TEST(GltfExportTest, ThreeJsPlaysSampledClipsAsTheSourceItself) {
+  const std::string dir = testing::MakeTempDir();
+  for (const char* clip : {"cmu/131_01.bvh", "bandai/dataset-1_walk_active_001.bvh"}) {
+    const std::string path = testing::SharedBvh(clip);
+    ExpectThreeWithin(path, WriteSampled(path, GltfContainer::kBinary, dir),
+                      kFloat32TimeSlackDegrees, 0.0, dir);
+  }
+}
+
+}  // namespace
+}  // namespace tempokey::core

@@ -1,0 +1,373 @@
+// The editing calls of MotionService over gRPC against a real server on 127.0.0.1:0: clip files
+// parsed by core's readers, stored clips read back, retime plans against the retime job's own
+// report, the CLI's speed syntax, and files written with the bytes the CLI writes.
+#include <fstream>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "client/clip_files.h"
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "proto/operations_convert.h"
+#include "server/server.h"
+#include "tempokey/core/io/bvh.h"
+#include "tempokey/core/io/file_io.h"
+#include "tempokey/core/pipeline/pipeline.h"
+#include "tests/server/server_test_util.h"
+#include "tests/testing/test_paths.h"
+
+namespace tempokey::testing {
+namespace {
+
+using ::testing::HasSubstr;
+using ::testing::StartsWith;
+
+std::string ReadBytes(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream buffer;
+  buffer << in.rdbuf();
+  return buffer.str();
+}
+
+class EditingServiceTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    server_ = StartServer(TestServerOptions());
+    ASSERT_NE(server_, nullptr);
+    stub_ = v1::MotionService::NewStub(Connect(server_->target()));
+  }
+
+  v1::ParseClipFileResponse Parse(const std::string& name, const std::string& content,
+                                  grpc::Status* status) {
+    grpc::ClientContext context;
+    SetDeadline(context);
+    v1::ParseClipFileRequest request;
+    request.set_file_name(name);
+    request.set_content(content);
+    v1::ParseClipFileResponse response;
+    *status = stub_->ParseClipFile(&context, request, &response);
+    return response;
+  }
+
+  std::string ParseCmu() {
+    grpc::Status status;
+    v1::ParseClipFileResponse response = Parse("131_01.bvh", ReadBytes(Cmu()), &status);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    return response.clip_id();
+  }
+
+  static std::string Cmu() { return SharedBvh("cmu/131_01.bvh"); }
+
+  v1::RetimePlan Plan(const v1::PlanRetimeRequest& request, grpc::Status* status) {
+    grpc::ClientContext context;
+    SetDeadline(context);
+    v1::RetimePlan plan;
+    *status = stub_->PlanRetime(&context, request, &plan);
+    return plan;
+  }
+
+  // ExportFile's chunks joined; the first chunk's name in `file_name`.
+  std::string Export(const v1::ExportFileRequest& request, grpc::Status* status,
+                     std::string* file_name = nullptr) {
+    grpc::ClientContext context;
+    SetDeadline(context);
+    auto reader = stub_->ExportFile(&context, request);
+    std::string bytes;
+    v1::FileChunk chunk;
+    bool first = true;
+    while (reader->Read(&chunk)) {
+      if (first && file_name != nullptr) *file_name = chunk.file_name();
+      first = false;
+      bytes += chunk.data();
+    }
+    *status = reader->Finish();
+    return bytes;
+  }
+
+  // A stored job running `operations` on `clip_id`, finished.
+  std::string RunJob(const std::string& clip_id, const std::vector<core::PipelineStep>& steps) {
+    v1::SubmitJobRequest request;
+    request.set_clip_id(clip_id);
+    for (const core::PipelineStep& step : steps) *request.add_operations() = wire::PipelineStepToProto(step);
+    JobOutcome submitted = Submit(*stub_, request);
+    EXPECT_TRUE(submitted.status.ok()) << submitted.status.error_message();
+    EXPECT_EQ(WaitForJob(*stub_, submitted.job.job_id()).state(), v1::JOB_STATE_SUCCEEDED);
+    return submitted.job.job_id();
+  }
+
+  std::unique_ptr<server::Server> server_;
+  std::unique_ptr<v1::MotionService::Stub> stub_;
+};
+
+core::RetimeStep RampStep() {
+  core::RetimeStep step;
+  step.warp.domain = core::WarpDomain::kSpeedOverSource;
+  step.warp.speed = *core::ParseSpeedKnots("0s:1,2s:0.5,4s:2");
+  step.warp.holds.push_back({.at = {.value = 1.0}, .duration_seconds = 0.25});
+  return step;
+}
+
+TEST_F(EditingServiceTest, ParsedFileIsStoredUnderTheIdAnUploadOfTheSameClipGets) {
+  const core::Clip clip = *core::ReadBvhFile(Cmu());
+  const UploadOutcome uploaded = UploadClip(*stub_, clip);
+  ASSERT_TRUE(uploaded.status.ok());
+
+  grpc::Status status;
+  const v1::ParseClipFileResponse parsed = Parse("131_01.bvh", ReadBytes(Cmu()), &status);
+
+  TEMPOKEY_ASSERT_GRPC_OK(status);
+  EXPECT_EQ(parsed.clip_id(), uploaded.response.clip_id());
+  EXPECT_TRUE(parsed.already_stored());
+  EXPECT_EQ(parsed.header().frame_count(), 994);
+  EXPECT_EQ(parsed.header().channels_size(), 96);
+  EXPECT_EQ(parsed.sample_count(), 994 * 96);
+}
+
+TEST_F(EditingServiceTest, MalformedFileIsRefusedWithTheReadersLocatedMessage) {
+  std::string text = ReadBytes(Cmu());
+  text.replace(text.find("Yposition"), 9, "Ypozition");
+  const absl::StatusOr<core::Clip> local = core::ParseBvh(text, "broken.bvh");
+  ASSERT_FALSE(local.ok());
+
+  grpc::Status broken, unknown, unnamed;
+  Parse("broken.bvh", text, &broken);
+  Parse("walk.txt", text, &unknown);
+  Parse("", text, &unnamed);
+
+  EXPECT_THAT(broken, GrpcStatusIs(grpc::INVALID_ARGUMENT, std::string(local.status().message())));
+  EXPECT_THAT(broken, GrpcStatusIs(grpc::INVALID_ARGUMENT, StartsWith("broken.bvh:5:")));
+  EXPECT_THAT(unknown, GrpcStatusIs(grpc::INVALID_ARGUMENT,
+                                    "walk.txt: unknown clip format '.txt' (expected .bvh, .csv)"));
+  EXPECT_THAT(unnamed, GrpcStatusIs(grpc::INVALID_ARGUMENT, "file_name is empty"));
+}
+
+TEST_F(EditingServiceTest, GetClipReturnsTheStoredClipSampleForSample) {
+  const std::string clip_id = ParseCmu();
+  grpc::ClientContext context;
+  SetDeadline(context);
+  v1::GetClipRequest request;
+  request.set_clip_id(clip_id);
+  auto reader = stub_->GetClip(&context, request);
+  std::vector<v1::ResultPart> parts;
+  v1::ResultPart part;
+  while (reader->Read(&part)) parts.push_back(part);
+  TEMPOKEY_ASSERT_GRPC_OK(reader->Finish());
+
+  const absl::StatusOr<core::Clip> clip = AssembleClipResult(parts);
+
+  ASSERT_TRUE(clip.ok()) << clip.status();
+  const core::Clip expected = *core::ReadBvhFile(Cmu());
+  EXPECT_EQ(clip->channels, expected.channels);
+  EXPECT_EQ(clip->skeleton, expected.skeleton);
+  EXPECT_EQ(clip->frame_time_seconds, expected.frame_time_seconds);
+}
+
+TEST_F(EditingServiceTest, PlanReportIsTheReportOfTheRetimeJob) {
+  const std::string clip_id = ParseCmu();
+  const std::string job_id = RunJob(clip_id, {RampStep()});
+  const v1::Job job = GetJob(*stub_, job_id).job;
+  v1::PlanRetimeRequest request;
+  request.set_clip_id(clip_id);
+  *request.mutable_retime() = wire::PipelineStepToProto(RampStep()).retime();
+  request.set_max_points(5);
+
+  grpc::Status status;
+  const v1::RetimePlan plan = Plan(request, &status);
+
+  TEMPOKEY_ASSERT_GRPC_OK(status);
+  ASSERT_EQ(job.reports_size(), 1);
+  EXPECT_EQ(plan.report().SerializeAsString(), job.reports(0).retime().SerializeAsString());
+  const std::int64_t frames = plan.report().output_frame_count();
+  EXPECT_THAT(plan.output_frames(), ::testing::ElementsAre(0, (frames - 1) / 4, (frames - 1) / 2,
+                                                           3 * (frames - 1) / 4, frames - 1));
+  EXPECT_EQ(plan.source_time_seconds(0), 0.0);
+  EXPECT_EQ(plan.source_time_seconds(4), 993 * 0.0083333);
+  EXPECT_EQ(plan.speed_text(), "0s:1,2s:0.5,4s:2");
+  EXPECT_EQ(plan.knot_output_time_seconds_size(), 3);
+  EXPECT_EQ(plan.source_duration_seconds(), 993 * 0.0083333);
+}
+
+TEST_F(EditingServiceTest, PlanRefusesBadKnotsUnknownClipsAndPointCounts) {
+  const std::string clip_id = ParseCmu();
+  v1::PlanRetimeRequest bad_knot;
+  bad_knot.set_clip_id(clip_id);
+  v1::SpeedKnot* knot = bad_knot.mutable_retime()->add_speed_over_source();
+  knot->mutable_time()->set_seconds(0);
+  knot->set_speed(1000);
+  v1::PlanRetimeRequest no_unit = bad_knot;
+  no_unit.mutable_retime()->mutable_speed_over_source(0)->clear_time();
+  v1::PlanRetimeRequest unknown;
+  unknown.set_clip_id("sha256:0");
+  v1::PlanRetimeRequest one_point;
+  one_point.set_clip_id(clip_id);
+  one_point.set_max_points(1);
+
+  grpc::Status s1, s2, s3, s4;
+  Plan(bad_knot, &s1);
+  Plan(no_unit, &s2);
+  Plan(unknown, &s3);
+  Plan(one_point, &s4);
+
+  EXPECT_THAT(s1, GrpcStatusIs(grpc::INVALID_ARGUMENT,
+                               "speed knot 1 (0s:1000): speed 1000 is outside the allowed range [0.01, 100]"));
+  EXPECT_THAT(s2, GrpcStatusIs(grpc::INVALID_ARGUMENT,
+                               "retime.speed_over_source[0].time has no unit: set seconds or frames"));
+  EXPECT_EQ(s3.error_code(), grpc::NOT_FOUND);
+  EXPECT_THAT(s4, GrpcStatusIs(grpc::INVALID_ARGUMENT, HasSubstr("max_points must be 0")));
+}
+
+TEST_F(EditingServiceTest, SpeedTextIsReadAndWrittenInTheCliSyntax) {
+  auto parse = [&](const std::string& text, grpc::Status* status) {
+    grpc::ClientContext context;
+    SetDeadline(context);
+    v1::ParseSpeedKnotsRequest request;
+    request.set_text(text);
+    v1::ParseSpeedKnotsResponse response;
+    *status = stub_->ParseSpeedKnots(&context, request, &response);
+    return response;
+  };
+  grpc::Status ok, bad;
+
+  const v1::ParseSpeedKnotsResponse knots = parse(" 0s:1, 2.50s:0.5,75f:+2", &ok);
+  parse("0s:1,2x:0.5", &bad);
+
+  TEMPOKEY_ASSERT_GRPC_OK(ok);
+  ASSERT_EQ(knots.knots_size(), 3);
+  EXPECT_EQ(knots.knots(1).time().seconds(), 2.5);
+  EXPECT_EQ(knots.knots(2).time().frames(), 75.0);
+  EXPECT_EQ(knots.knots(2).speed(), 2.0);
+  EXPECT_EQ(knots.text(), "0s:1,2.5s:0.5,75f:2");
+  EXPECT_THAT(bad, GrpcStatusIs(grpc::INVALID_ARGUMENT, "speed knot 2 '2x:0.5': time needs a unit, s or f"));
+}
+
+TEST_F(EditingServiceTest, ExportedFilesAreTheBytesTheCliWritesForTheSameResult) {
+  const std::string clip_id = ParseCmu();
+  const core::Clip clip = *core::ReadBvhFile(Cmu());
+  const core::RetimeStep retime = RampStep();
+  const core::ReduceStep reduce;
+  const std::string dir = MakeTempDir();
+  struct Case {
+    std::vector<core::PipelineStep> job;      // what the page runs
+    std::vector<core::PipelineStep> cli;      // what the CLI runs for that output
+    client::FileFormat format;
+    std::string name;
+  };
+  const std::vector<Case> cases = {
+      {{retime}, {retime}, client::FileFormat::kBvh, "bvh"},
+      {{retime}, {retime}, client::FileFormat::kCsv, "csv"},
+      {{reduce}, {reduce}, client::FileFormat::kKeyedJson, "json"},
+      {{reduce}, {reduce}, client::FileFormat::kMayaAnim, "anim"},
+      {{reduce}, {reduce, core::BakeStep{}}, client::FileFormat::kBvh, "bvh"},
+      {{reduce}, {reduce, core::BakeStep{}}, client::FileFormat::kCsv, "csv"},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name + " after " + std::string(core::StepName(c.job.front())));
+    const std::string job_id = RunJob(clip_id, c.job);
+    const absl::StatusOr<core::PipelineResult> local = core::RunPipeline(clip, c.cli);
+    ASSERT_TRUE(local.ok());
+    const std::string path = dir + "/cli" + std::string(client::ExtensionOf(c.format));
+    TEMPOKEY_ASSERT_OK(client::WriteOutput(path, c.format, local->output));
+    v1::ExportFileRequest request;
+    request.set_job_id(job_id);
+    request.set_format(c.name);
+    request.set_chunk_bytes(100000);
+
+    grpc::Status status;
+    std::string file_name;
+    const std::string bytes = Export(request, &status, &file_name);
+
+    TEMPOKEY_ASSERT_GRPC_OK(status);
+    EXPECT_EQ(file_name, "131_01" + std::string(client::ExtensionOf(c.format)));
+    EXPECT_GT(bytes.size(), 1000u);
+    EXPECT_TRUE(bytes == ReadBytes(path)) << bytes.size() << " bytes vs " << ReadBytes(path).size();
+  }
+}
+
+TEST_F(EditingServiceTest, ExportRefusesUnknownFormatsAndCurvesOfASampledClip) {
+  const std::string clip_id = ParseCmu();
+  v1::ExportFileRequest gif;
+  gif.set_clip_id(clip_id);
+  gif.set_format("gif");
+  v1::ExportFileRequest anim;
+  anim.set_clip_id(clip_id);
+  anim.set_format("anim");
+  v1::ExportFileRequest bvh;
+  bvh.set_clip_id(clip_id);
+  bvh.set_format("bvh");
+
+  grpc::Status s1, s2, s3;
+  Export(gif, &s1);
+  Export(anim, &s2);
+  const std::string text = Export(bvh, &s3);
+
+  EXPECT_THAT(s1, GrpcStatusIs(grpc::INVALID_ARGUMENT, "format \"gif\" is not one of bvh, csv, json, anim"));
+  EXPECT_THAT(s2, GrpcStatusIs(grpc::INVALID_ARGUMENT, HasSubstr("a sampled clip has none")));
+  TEMPOKEY_ASSERT_GRPC_OK(s3);
+  EXPECT_EQ(text, *core::FormatBvh(*core::ReadBvhFile(Cmu())));
+}
+
+TEST(EditingServiceAuthTest, EditingCallsNeedTheBearerToken) {
+  server::ServerOptions options = TestServerOptions();
+  options.auth_tokens = {"s3cret"};
+  std::unique_ptr<server::Server> server = StartServer(options);
+  ASSERT_NE(server, nullptr);
+  auto stub = v1::MotionService::NewStub(Connect(server->target()));
+  std::vector<grpc::Status> statuses;
+  {
+    grpc::ClientContext context;
+    v1::ParseClipFileResponse response;
+    v1::ParseClipFileRequest request;
+    request.set_file_name("a.bvh");
+    statuses.push_back(stub->ParseClipFile(&context, request, &response));
+  }
+  {
+    grpc::ClientContext context;
+    v1::RetimePlan response;
+    statuses.push_back(stub->PlanRetime(&context, v1::PlanRetimeRequest(), &response));
+  }
+  {
+    grpc::ClientContext context;
+    v1::ParseSpeedKnotsResponse response;
+    statuses.push_back(stub->ParseSpeedKnots(&context, v1::ParseSpeedKnotsRequest(), &response));
+  }
+  {
+    grpc::ClientContext context;
+    v1::ResultPart part;
+    auto reader = stub->GetClip(&context, v1::GetClipRequest());
+    while (reader->Read(&part)) {
+    }
+    statuses.push_back(reader->Finish());
+  }
+  {
+    grpc::ClientContext context;
+    v1::FileChunk chunk;
+    auto reader = stub->ExportFile(&context, v1::ExportFileRequest());
+    while (reader->Read(&chunk)) {
+    }
+    statuses.push_back(reader->Finish());
+  }
+
+  for (const grpc::Status& status : statuses) {
+    EXPECT_THAT(status, GrpcStatusIs(grpc::UNAUTHENTICATED, HasSubstr("authorization")));
+  }
+}
+
+TEST_F(EditingServiceTest, ServerInfoListsTheExportFormats) {
+  grpc::ClientContext context;
+  SetDeadline(context);
+  v1::ServerInfo info;
+
+  TEMPOKEY_ASSERT_GRPC_OK(stub_->GetServerInfo(&context, v1::GetServerInfoRequest(), &info));
+
+  std::vector<std::string> names;
+  for (const v1::ExportFormat& format : info.export_formats()) names.push_back(format.name());
+  EXPECT_EQ(names, (std::vector<std::string>{"bvh", "csv", "json", "anim"}));
+  EXPECT_TRUE(info.export_formats(2).keyed());
+  EXPECT_FALSE(info.export_formats(0).keyed());
+}
+
+}  // namespace
+}  // namespace tempokey::testing

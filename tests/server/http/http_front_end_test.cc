@@ -1,0 +1,169 @@
+// The HTTP front end's pieces: its options against the --address rule, the status mapping and
+// browser rules, and the JSON bridge driving a real server's handlers through its in-process
+// channel.
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "google/protobuf/util/json_util.h"
+#include "server/http/http_options.h"
+#include "server/http/http_status.h"
+#include "server/http/json_bridge.h"
+#include "server/server.h"
+#include "tempokey/v1/motion_service.pb.h"
+#include "tests/server/server_test_util.h"
+#include "tests/testing/test_paths.h"
+
+namespace tempokey::server::http {
+namespace {
+
+using ::testing::HasSubstr;
+
+HttpOptions Options(std::string address) {
+  HttpOptions options;
+  options.address = std::move(address);
+  options.web_root = "/nowhere";
+  return options;
+}
+
+TEST(HttpOptionsTest, FollowsTheAddressLoopbackRuleForAListenerWithoutTls) {
+  ServerOptions server;
+  ServerOptions insecure;
+  insecure.allow_insecure_remote = true;
+  ServerOptions tls;
+  tls.tls_cert_file = "cert.pem";
+  tls.tls_key_file = "key.pem";
+  ServerOptions mutual = tls;
+  mutual.tls_client_ca_file = "ca.pem";
+
+  EXPECT_TRUE(ValidateHttpOptions(Options("127.0.0.1:0"), server).ok());
+  EXPECT_TRUE(ValidateHttpOptions(Options("localhost:8080"), server).ok());
+  EXPECT_TRUE(ValidateHttpOptions(Options(""), server).ok());
+  EXPECT_THAT(std::string(ValidateHttpOptions(Options("0.0.0.0:8080"), server).message()),
+              HasSubstr("refusing to serve HTTP on non-loopback address 0.0.0.0:8080 without TLS"));
+  EXPECT_THAT(std::string(ValidateHttpOptions(Options("10.1.2.3:8080"), tls).message()),
+              HasSubstr("refusing to serve HTTP on non-loopback address"));
+  EXPECT_TRUE(ValidateHttpOptions(Options("0.0.0.0:8080"), insecure).ok());
+  EXPECT_TRUE(ValidateHttpOptions(Options("127.0.0.1:8080"), tls).ok());
+  EXPECT_THAT(std::string(ValidateHttpOptions(Options("127.0.0.1:8080"), mutual).message()),
+              HasSubstr("cannot check client certificates"));
+  HttpOptions no_threads = Options("127.0.0.1:0");
+  no_threads.threads = 0;
+  EXPECT_EQ(ValidateHttpOptions(no_threads, server).message(), "--http_threads must be in [1, 256], got 0");
+}
+
+TEST(HttpOptionsTest, DefaultWebRootIsTheFolderBesideTheBinaryThatHoldsThePage) {
+  namespace fs = std::filesystem;
+  const fs::path dir = testing::MakeTempDir();
+  fs::create_directories(dir / "bin");
+  fs::create_directories(dir / "share" / "tempokey" / "web");
+  std::ofstream(dir / "share" / "tempokey" / "web" / "index.html") << "<!doctype html>";
+
+  EXPECT_EQ(DefaultWebRoot((dir / "bin" / "tempokey-server").string()),
+            (dir / "share" / "tempokey" / "web").string());
+  fs::create_directories(dir / "bin" / "web");
+  std::ofstream(dir / "bin" / "web" / "index.html") << "<!doctype html>";
+  EXPECT_EQ(DefaultWebRoot((dir / "bin" / "tempokey-server").string()), (dir / "bin" / "web").string());
+}
+
+TEST(HttpStatusTest, GrpcCodesMapToTheDocumentedHttpStatuses) {
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kOk), 200);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kInvalidArgument), 400);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kFailedPrecondition), 400);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kUnauthenticated), 401);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kPermissionDenied), 403);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kNotFound), 404);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kResourceExhausted), 429);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kCancelled), 499);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kInternal), 500);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kUnimplemented), 501);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kUnavailable), 503);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kDeadlineExceeded), 504);
+}
+
+TEST(HttpStatusTest, ErrorJsonEscapesTheMessageAndCarriesTheRetryHint) {
+  EXPECT_EQ(StatusToJson(absl::InvalidArgumentError("walk.bvh:1:2: got \"x\"\t\\\n")),
+            R"({"code":3,"status":"INVALID_ARGUMENT","message":"walk.bvh:1:2: got \"x\"\t\\\n"})");
+  EXPECT_EQ(StatusToJson(absl::ResourceExhaustedError("full"), std::chrono::milliseconds(250)),
+            R"({"code":8,"status":"RESOURCE_EXHAUSTED","message":"full","retryAfterMs":250})");
+}
+
+TEST(HttpStatusTest, BrowserRulesRefuseOtherOriginsRebindingHostsAndFormBodies) {
+  EXPECT_TRUE(CheckApiRequest("application/json", "", "127.0.0.1:80", true).ok());
+  EXPECT_TRUE(CheckApiRequest("application/x-ndjson; charset=utf-8", "http://localhost:8080",
+                              "localhost:8080", true).ok());
+  EXPECT_TRUE(CheckApiRequest("application/json", "https://studio.example", "studio.example", false).ok());
+  EXPECT_EQ(CheckApiRequest("text/plain", "", "127.0.0.1:80", true).code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(CheckApiRequest("application/json", "http://evil.example", "127.0.0.1:80", true).code(),
+            absl::StatusCode::kPermissionDenied);
+  EXPECT_EQ(CheckApiRequest("application/json", "", "rebound.example:80", true).code(),
+            absl::StatusCode::kPermissionDenied);
+  EXPECT_TRUE(CheckApiRequest("application/json", "", "rebound.example:80", false).ok());
+}
+
+// One call's request lines and answers, in memory.
+class MemoryStream final : public JsonBridge::Stream {
+ public:
+  explicit MemoryStream(std::vector<std::string> requests) : requests_(std::move(requests)) {}
+  absl::StatusOr<std::optional<std::string>> NextRequest() override {
+    if (next_ == requests_.size()) return std::optional<std::string>();
+    return std::optional<std::string>(requests_[next_++]);
+  }
+  bool WriteResponse(std::string_view json) override {
+    responses.emplace_back(json);
+    return true;
+  }
+  std::vector<std::string> responses;
+
+ private:
+  std::vector<std::string> requests_;
+  std::size_t next_ = 0;
+};
+
+TEST(JsonBridgeTest, FindsEveryMethodOfTheServiceAndNothingElse) {
+  const auto* service = google::protobuf::DescriptorPool::generated_pool()->FindServiceByName(kBridgedService);
+  ASSERT_NE(service, nullptr);
+  for (int i = 0; i < service->method_count(); ++i) {
+    EXPECT_EQ(JsonBridge::FindMethod("/tempokey.v1.MotionService/" + service->method(i)->name()),
+              service->method(i));
+  }
+  EXPECT_EQ(JsonBridge::FindMethod("/tempokey.v1.MotionService/Nope"), nullptr);
+  EXPECT_EQ(JsonBridge::FindMethod("/grpc.health.v1.Health/Check"), nullptr);
+  EXPECT_EQ(JsonBridge::FindMethod("tempokey.v1.MotionService/GetJob"), nullptr);
+}
+
+TEST(JsonBridgeTest, CallsTheServersOwnHandlersWithJsonMessages) {
+  std::unique_ptr<Server> server = testing::StartServer(testing::TestServerOptions());
+  ASSERT_NE(server, nullptr);
+  JsonBridge bridge(server->InProcessChannel(), 1 << 20);
+  MemoryStream info({"{}"});
+  MemoryStream missing({R"({"jobId": "job-none"})"});
+  MemoryStream mistyped({R"({"jobID": 3})"});
+
+  const JsonBridge::Outcome a =
+      bridge.Call(*JsonBridge::FindMethod("/tempokey.v1.MotionService/GetServerInfo"), "", info);
+  const JsonBridge::Outcome b =
+      bridge.Call(*JsonBridge::FindMethod("/tempokey.v1.MotionService/GetJob"), "", missing);
+  const JsonBridge::Outcome c =
+      bridge.Call(*JsonBridge::FindMethod("/tempokey.v1.MotionService/GetJob"), "", mistyped);
+
+  ASSERT_TRUE(a.status.ok()) << a.status;
+  ASSERT_EQ(info.responses.size(), 1u);
+  v1::ServerInfo parsed;
+  ASSERT_TRUE(google::protobuf::util::JsonStringToMessage(info.responses[0], &parsed).ok());
+  EXPECT_EQ(parsed.operations_size(), static_cast<int>(server->operations().size()));
+  EXPECT_EQ(b.status.code(), absl::StatusCode::kNotFound);
+  EXPECT_TRUE(missing.responses.empty());
+  EXPECT_EQ(c.status.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(c.status.message()),
+              HasSubstr("request message 1 is not a tempokey.v1.GetJobRequest in JSON"));
+}
+
+}  // namespace
+}  // namespace tempokey::server::http

@@ -1,0 +1,399 @@
+"""The studio page in a real headless Chromium against a real tempokey-server.
+
+Run by CTest (label `browser`); tests/studio/CMakeLists.txt sets the environment:
+  TEMPOKEY_SERVER, TEMPOKEY_CLI    the built binaries
+  TEMPOKEY_SHARED_DIR              ../shared (131_01 under data/bvh/cmu)
+  TEMPOKEY_ARTEFACTS_DIR           where the screenshots go (the build tree)
+  TEMPOKEY_CHROMIUM, TEMPOKEY_CHROMEDRIVER
+
+The tests run in order on one page, as a person would use it: open 131_01, build a speed curve with
+the mouse and the keyboard, check the duration against the closed form, play the preview and check
+the frame shown, reduce and compare the key count with the CLI's, download every format and compare
+the bytes with the CLI's files, then open a malformed file. Every wait polls the page for a state
+with a deadline that only bounds a hang; nothing asserts a time.
+"""
+
+import os
+import re
+import shlex
+import subprocess
+import sys
+import tempfile
+import time
+import unittest
+
+from selenium import webdriver
+from selenium.webdriver.chrome.service import Service
+from selenium.webdriver.common.action_chains import ActionChains
+from selenium.webdriver.common.actions.wheel_input import ScrollOrigin
+from selenium.webdriver.common.by import By
+from selenium.webdriver.common.keys import Keys
+from selenium.webdriver.support.ui import Select
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import closed_form  # noqa: E402
+from studio_server import StudioServer, env_path  # noqa: E402
+
+CLI = env_path("TEMPOKEY_CLI")
+SHARED_DIR = env_path("TEMPOKEY_SHARED_DIR")
+ARTEFACTS = env_path("TEMPOKEY_ARTEFACTS_DIR")
+CHROMIUM = os.environ.get("TEMPOKEY_CHROMIUM", "/usr/bin/chromium")
+CHROMEDRIVER = os.environ.get("TEMPOKEY_CHROMEDRIVER", "/usr/bin/chromedriver")
+CMU = os.path.join(SHARED_DIR, "data", "bvh", "cmu", "131_01.bvh")
+
+# Bounds on waits: generous for a loaded 2-core machine, never a performance claim.
+DEADLINE_SECONDS = 90
+# The page shows the server's doubles; the closed form is evaluated independently in Python.
+CLOSED_FORM_REL = 1e-9
+# three.js keeps keyframe values in Float32Array.
+FLOAT32_REL = 2e-6
+# The page's editor geometry (velocity_editor.js PAD and its default speed view).
+EDITOR_PAD_LEFT, EDITOR_PAD_RIGHT, EDITOR_PAD_TOP, EDITOR_PAD_BOTTOM = 48, 14, 14, 28
+VIEW_LO, VIEW_HI = 0.05 / 1.25, 20 * 1.25
+
+
+def wait_for(predicate, what, deadline=DEADLINE_SECONDS):
+    end = time.monotonic() + deadline
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() > end:
+            raise AssertionError("timed out waiting for " + what)
+        time.sleep(0.05)
+
+
+def read_bvh(path):
+    """(root offset, frame time, rows) of a BVH file: a plain reading of the text."""
+    with open(path) as f:
+        text = f.read()
+    head, motion = text.split("MOTION", 1)
+    offset = [float(v) for v in re.search(r"ROOT\s+\S+\s*\{\s*OFFSET\s+(\S+)\s+(\S+)\s+(\S+)", head).groups()]
+    lines = [line for line in motion.strip().splitlines() if line.strip()]
+    frame_time = float(lines[1].split(":")[1])
+    rows = [[float(v) for v in line.split()] for line in lines[2:]]
+    return offset, frame_time, rows
+
+
+def close(a, b, rel):
+    return abs(a - b) <= rel * max(1.0, abs(a), abs(b))
+
+
+class StudioBrowserTest(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        os.makedirs(ARTEFACTS, exist_ok=True)
+        cls.work = tempfile.TemporaryDirectory()
+        cls.downloads = os.path.join(cls.work.name, "downloads")
+        os.makedirs(cls.downloads)
+        cls.server = StudioServer().__enter__()
+        options = webdriver.ChromeOptions()
+        options.binary_location = CHROMIUM
+        for flag in ["--headless=new", "--no-sandbox", "--disable-gpu",
+                     "--disable-background-networking", "--disable-component-update",
+                     "--disable-sync", "--no-first-run", "--window-size=1500,1300",
+                     # WebGL on the software rasterizer: headless CI machines have no GPU.
+                     "--enable-unsafe-swiftshader",
+                     "--user-data-dir=" + os.path.join(cls.work.name, "profile")]:
+            options.add_argument(flag)
+        cls.driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
+        cls.driver.set_page_load_timeout(DEADLINE_SECONDS)
+        cls.driver.execute_cdp_cmd("Browser.setDownloadBehavior",
+                                   {"behavior": "allow", "downloadPath": cls.downloads})
+        cls.driver.get(cls.server.http_url)
+        wait_for(lambda: cls.driver.execute_script("return document.body.dataset.ready") == "true",
+                 "the page to reach the server")
+
+    @classmethod
+    def tearDownClass(cls):
+        try:
+            logs = cls.driver.get_log("browser")
+            with open(os.path.join(ARTEFACTS, "browser-console.txt"), "w") as f:
+                for entry in logs:
+                    f.write("%s %s\n" % (entry["level"], entry["message"]))
+        finally:
+            cls.driver.quit()
+            cls.server.__exit__(None, None, None)
+            cls.work.cleanup()
+        assert cls.server.exit_code == 0, "the server did not drain cleanly:\n" + cls.server.server_log()
+
+    # ---- helpers ---------------------------------------------------------------------------------
+    def el(self, element_id):
+        return self.driver.find_element(By.ID, element_id)
+
+    def data(self, element_id, name):
+        return self.el(element_id).get_attribute("data-" + name)
+
+    def body(self, name):
+        return self.driver.execute_script("return document.body.dataset[arguments[0]] || ''", name)
+
+    def settled_plan(self, before):
+        """Waits for a plan newer than `before` with none pending; returns its sequence number."""
+        def ready():
+            seq = int(self.body("planSeq") or 0)
+            return seq > before and self.body("planPending") == "false" and seq
+        return wait_for(ready, "the server's plan")
+
+    def plan_seq(self):
+        return int(self.body("planSeq") or 0)
+
+    def editor_point(self, seconds, speed, duration):
+        """Offsets from the editor canvas's centre for (seconds, speed)."""
+        canvas = self.el("editor")
+        w, h = canvas.size["width"], canvas.size["height"]
+        x = EDITOR_PAD_LEFT + seconds / duration * (w - EDITOR_PAD_LEFT - EDITOR_PAD_RIGHT)
+        f = (closed_form.math.log(speed) - closed_form.math.log(VIEW_LO)) / (
+            closed_form.math.log(VIEW_HI) - closed_form.math.log(VIEW_LO))
+        y = h - EDITOR_PAD_BOTTOM - f * (h - EDITOR_PAD_TOP - EDITOR_PAD_BOTTOM)
+        return int(round(x - w / 2)), int(round(y - h / 2))
+
+    def wait_for_knots(self, predicate, what):
+        """The knots the page shows once `predicate` holds for them and no plan is pending."""
+        def ready():
+            if self.body("planPending") != "false":
+                return None
+            knots = self.shown_knots()
+            return knots if predicate(knots) else None
+        try:
+            return wait_for(ready, what)
+        except AssertionError:
+            self.driver.save_screenshot(os.path.join(ARTEFACTS, "failure-%s.png" % self._testMethodName))
+            raise AssertionError("timed out waiting for %s; the page shows %s" % (
+                what, self.el("speed-text").get_attribute("value")))
+
+    def shown_knots(self):
+        return closed_form.parse_speed_text(self.el("speed-text").get_attribute("value"), self.frame_time)
+
+    def run_cli(self, command, output):
+        """Runs the command line the page shows, on the real file, writing `output`."""
+        args = shlex.split(command)
+        self.assertEqual(args[0], "tempokey")
+        args = [CLI, "--server", self.server.grpc_target] + args[1:]
+        args[args.index("-o") + 1] = output
+        args = [CMU if a == "131_01.bvh" else a for a in args]
+        done = subprocess.run(args, capture_output=True, text=True, timeout=DEADLINE_SECONDS)
+        self.assertEqual(done.returncode, 0, done.stderr)
+        return done.stdout
+
+    def screenshot(self, element_id, name):
+        element = self.el(element_id)
+        self.driver.execute_script("arguments[0].scrollIntoView(true)", element)
+        element.screenshot(os.path.join(ARTEFACTS, name))
+
+    # ---- the tests, in order -----------------------------------------------------------------------
+    def test_1_opens_a_clip_through_the_file_picker(self):
+        self.el("file-input").send_keys(CMU)
+
+        wait_for(lambda: self.data("clip-info", "state") == "loaded", "the clip to load")
+        self.settled_plan(0)
+        self.assertIn("131_01.bvh: 994 frames at 120 fps", self.el("clip-info").text)
+        self.assertEqual(self.el("speed-text").get_attribute("value"), "0s:1")
+        type(self).frame_time = 0.0083333
+        type(self).source_duration = 993 * 0.0083333
+        self.assertTrue(close(float(self.data("duration", "seconds")), self.source_duration, 1e-12))
+
+    def test_2_speed_curve_built_with_mouse_and_keys_lasts_the_closed_form(self):
+        duration = self.source_duration
+        canvas = self.el("editor")
+        # Mouse: Ctrl+click adds a knot (snapped to 0.01 s and 0.01x), as a double-click does. A
+        # double-click is not used here: chromedriver counts it as one only if its second press
+        # comes within the double-click time, which a loaded machine can miss.
+        for count, (seconds, speed) in enumerate([(2.0, 1.0), (2.5, 0.25), (3.5, 0.25), (4.0, 1.0)], start=2):
+            dx, dy = self.editor_point(seconds, speed, duration)
+            (ActionChains(self.driver).move_to_element_with_offset(canvas, dx, dy).key_down(Keys.CONTROL)
+             .click().key_up(Keys.CONTROL).perform())
+            self.wait_for_knots(lambda knots: len(knots) == count, "knot %d" % count)
+        # Drag the knot near (3.5 s, 0.25x) to about (3.6 s, 0.3x).
+        before = self.plan_seq()
+        x0, y0 = self.editor_point(self.shown_knots()[3][0], self.shown_knots()[3][1], duration)
+        x1, y1 = self.editor_point(3.6, 0.3, duration)
+        (ActionChains(self.driver).move_to_element_with_offset(canvas, x0, y0).click_and_hold()
+         .move_by_offset((x1 - x0) // 2, (y1 - y0) // 2).move_by_offset(x1 - x0 - (x1 - x0) // 2, y1 - y0 - (y1 - y0) // 2)
+         .release().perform())
+        dragged = self.wait_for_knots(lambda knots: abs(knots[3][0] - 3.6) < 0.03, "the dragged knot")[3]
+        # Keyboard: two steps up, then S doubles the knot into a step whose second half goes up 0.3.
+        ActionChains(self.driver).send_keys(Keys.ARROW_UP, Keys.ARROW_UP, "s").perform()
+        ActionChains(self.driver).key_down(Keys.SHIFT).send_keys(Keys.ARROW_UP * 3).key_up(Keys.SHIFT).perform()
+        knots = self.wait_for_knots(lambda knots: len(knots) == 6 and knots[4][1] > knots[3][1] + 0.25,
+                                    "the step")
+        self.assertEqual(knots[3][0], knots[4][0], "a step is two knots at one time")
+        self.assertAlmostEqual(knots[3][1], round(dragged[1] + 0.02, 2), places=12)
+        self.assertAlmostEqual(knots[4][1], round(dragged[1] + 0.02, 2) + 0.3, places=9)
+        # Numeric entry: select the last knot (Tab) and type its time and speed.
+        ActionChains(self.driver).send_keys(Keys.TAB).perform()
+        last = self.shown_knots()[-1][0]
+        wait_for(lambda: float(self.el("knot-time").get_attribute("value")) == last, "the last knot selected")
+        for element_id, value in [("knot-time", "5"), ("knot-speed", "1.5")]:
+            field = self.el(element_id)
+            field.clear()
+            field.send_keys(value, Keys.TAB)
+        knots = self.wait_for_knots(lambda knots: knots[-1] == (5.0, 1.5), "the typed knot")
+        # A hold, from its fields.
+        before = self.plan_seq()
+        for element_id, value in [("hold-at", "1"), ("hold-duration", "0.5")]:
+            field = self.el(element_id)
+            field.clear()
+            field.send_keys(value)
+        self.el("add-hold").click()
+        wait_for(lambda: "--hold 1s:0.5" in self.el("retime-command").text, "the hold")
+        self.settled_plan(before)
+
+        # Fit to grid (default): whole output frames, the frame count of the closed form.
+        c, frames = closed_form.grid_fit(knots, duration, self.frame_time, hold_seconds=0.5)
+        self.assertEqual(int(self.el("frame-count").text), frames)
+        self.assertTrue(close(float(self.data("duration", "seconds")), (frames - 1) * self.frame_time, 1e-12))
+        self.assertTrue(close(float(self.el("fit-factor").text), c, 1e-6))
+        # Without it: exactly the closed form, sum of h / logmean(v0, v1) plus the hold.
+        before = self.plan_seq()
+        self.el("fit-to-grid").click()
+        self.settled_plan(before)
+        expected = closed_form.output_duration(knots, duration) + 0.5
+        shown = float(self.data("duration", "seconds"))
+        self.assertTrue(close(shown, expected, CLOSED_FORM_REL), (shown, expected))
+        self.assertEqual(self.el("duration").text, "%.6f s" % expected)
+        before = self.plan_seq()
+        self.el("fit-to-grid").click()
+        self.settled_plan(before)
+        type(self).knots = knots
+        type(self).grid = (c, frames)
+        self.screenshot("retime", "studio-editor.png")
+
+    def test_3_preview_plays_and_shows_the_frames_the_cli_writes(self):
+        command = self.el("retime-command").text
+        wait_for(lambda: self.data("retime-status", "state") == "done"
+                 and self.data("retime-status", "command") == command, "the retimed result")
+        cli_bvh = os.path.join(self.work.name, "cli-retimed.bvh")
+        self.run_cli(command, cli_bvh)
+        offset, frame_time, rows = read_bvh(cli_bvh)
+        c, frames = self.grid
+        self.assertEqual(len(rows), frames)
+
+        self.el("play").click()
+        wait_for(lambda: int(self.data("preview", "output-frame") or 0) >= 60, "playback to pass frame 60")
+        self.el("play").click()
+        wait_for(lambda: self.data("preview", "playing") == "false", "playback to pause")
+        self.el("step-forward").click()
+        j = int(self.data("preview", "output-frame"))
+        self.assertGreater(j, 60)
+
+        shown = [float(v) for v in self.data("preview", "result-root").split(",")]
+        expected = [rows[j][k] + offset[k] for k in range(3)]
+        for a, b in zip(shown, expected):
+            self.assertTrue(close(a, b, FLOAT32_REL), (j, shown, expected))
+        tau = float(self.data("preview", "source-seconds"))
+        expected_tau = closed_form.source_time(self.knots, self.source_duration, j * frame_time, c,
+                                               hold=(1.0, 0.5))
+        self.assertTrue(abs(tau - expected_tau) <= 1e-9, (j, tau, expected_tau))
+        self.assertIn("output frame %d / %d" % (j, frames - 1), self.el("frame-readout").text)
+        self.screenshot("preview-section", "studio-preview.png")
+
+    def test_4_reduction_keeps_as_many_keys_as_the_cli(self):
+        field = self.el("tolerance")
+        field.clear()
+        field.send_keys("0.3", Keys.TAB)
+        wait_for(lambda: self.data("reduce-status", "state") == "done"
+                 and "--tolerance 0.3 " in self.data("reduce-status", "command") + " ", "the reduction")
+        Select(self.el("joint")).select_by_visible_text("RightHip")
+        Select(self.el("channel")).select_by_visible_text("Xrotation")
+        shown = int(self.el("key-count").text)
+
+        out = self.run_cli(self.data("reduce-status", "command"), os.path.join(self.work.name, "cli.anim"))
+
+        keys = int(re.search(r"keys:\s+(\d+) of", out).group(1))
+        self.assertEqual(shown, keys)
+        self.assertIn("RightHip.Xrotation", self.el("reduce-report").text)
+        # Zoom the time axis (wheel) so keys, handles and the ±0.3° band are apart in the picture.
+        for _ in range(2):
+            ActionChains(self.driver).scroll_from_origin(ScrollOrigin.from_element(self.el("curves")), 0, -600).perform()
+        self.screenshot("reduce", "studio-reduction.png")
+
+    def test_5_downloads_are_the_bytes_the_cli_writes(self):
+        retime_command = self.data("retime-status", "command")
+        reduce_command = self.data("reduce-status", "command")
+        cases = [("download-retime-bvh", "131_01-retimed.bvh", retime_command),
+                 ("download-retime-csv", "131_01-retimed.csv", retime_command),
+                 ("download-reduce-json", "131_01-keys.json", reduce_command),
+                 ("download-reduce-anim", "131_01-keys.anim", reduce_command),
+                 ("download-reduce-bvh", "131_01-keys.bvh", reduce_command),
+                 ("download-reduce-csv", "131_01-keys.csv", reduce_command)]
+        for button, name, command in cases:
+            with self.subTest(file=name):
+                self.el(button).click()
+                path = os.path.join(self.downloads, name)
+                wait_for(lambda: os.path.exists(path) and not os.path.exists(path + ".crdownload"),
+                         "the download of " + name)
+                cli_file = os.path.join(self.work.name, "cli-" + name)
+                self.run_cli(command, cli_file)
+                with open(path, "rb") as a, open(cli_file, "rb") as b:
+                    downloaded, written = a.read(), b.read()
+                self.assertGreater(len(written), 1000)
+                self.assertEqual(downloaded, written)
+
+    def test_5b_speed_over_output_time_means_what_the_cli_means(self):
+        source_text = self.el("speed-text").get_attribute("value")
+        before = self.plan_seq()
+
+        Select(self.el("domain")).select_by_value("output")
+
+        self.settled_plan(before)
+        wait_for(lambda: "--speed-over output" in self.el("retime-command").text, "the output-domain command")
+        command = self.el("retime-command").text
+        self.assertNotEqual(self.el("speed-text").get_attribute("value"), source_text)
+        wait_for(lambda: self.data("retime-status", "state") == "done"
+                 and self.data("retime-status", "command") == command, "the output-domain result")
+        out = self.run_cli(command, os.path.join(self.work.name, "cli-output-domain.bvh"))
+        frames = int(re.search(r"output frames:\s+(\d+)", out).group(1))
+        self.assertEqual(int(self.el("frame-count").text), frames)
+        _, _, rows = read_bvh(os.path.join(self.work.name, "cli-output-domain.bvh"))
+        self.assertEqual(len(rows), frames)
+
+    def test_6_malformed_file_shows_the_located_message_and_breaks_nothing(self):
+        with open(CMU) as f:
+            lines = f.read().split("\n")
+        lines[4] = lines[4].replace("Yposition", "Ypozition")
+        broken = os.path.join(self.work.name, "broken.bvh")
+        with open(broken, "w") as f:
+            f.write("\n".join(lines))
+        cli = subprocess.run([CLI, "info", "broken.bvh"], cwd=self.work.name, capture_output=True,
+                             text=True, timeout=DEADLINE_SECONDS)
+        self.assertEqual(cli.returncode, 1)
+        clip_id = self.data("clip-info", "clip-id")
+
+        self.el("file-input").send_keys(broken)
+
+        message = wait_for(lambda: self.el("message").text, "the error message")
+        self.assertEqual("error: " + message, cli.stderr.strip())
+        self.assertTrue(message.startswith("broken.bvh:5:"), message)
+        self.assertEqual(self.data("clip-info", "clip-id"), clip_id)
+        self.assertIn("131_01.bvh", self.el("clip-info").text)
+        before = self.plan_seq()
+        self.el("editor").send_keys(Keys.ARROW_DOWN)
+        self.settled_plan(before)
+        self.driver.save_screenshot(os.path.join(ARTEFACTS, "studio-page.png"))
+
+    def test_7_a_dropped_csv_opens_at_the_rate_given(self):
+        _, _, rows = read_bvh(CMU)
+        text = "Hips.Xposition,Hips.Yposition,Hips.Zrotation\n" + "".join(
+            "%r,%r,%r\n" % (row[0], row[1], row[3]) for row in rows[:120])
+        field = self.el("csv-fps")
+        field.clear()
+        field.send_keys("24")
+
+        # A drop as the browser delivers it: a DragEvent carrying the file.
+        self.driver.execute_script(
+            "const transfer = new DataTransfer();"
+            "transfer.items.add(new File([arguments[0]], 'walk.csv', {type: 'text/csv'}));"
+            "window.dispatchEvent(new DragEvent('drop', {dataTransfer: transfer, bubbles: true, cancelable: true}));",
+            text)
+
+        wait_for(lambda: "walk.csv" in self.el("clip-info").text, "the dropped clip")
+        self.assertIn("walk.csv: 120 frames at 24 fps", self.el("clip-info").text)
+        self.assertEqual([o.text for o in Select(self.el("joint")).options], ["Hips"])
+        self.assertEqual([o.text for o in Select(self.el("channel")).options],
+                         ["Xposition", "Yposition", "Zrotation"])
+        wait_for(lambda: close(float(self.data("duration", "seconds")), 119 / 24, 1e-12),
+                 "the plan of the dropped clip: 119 frame times at 24 fps")
+
+
+if __name__ == "__main__":
+    unittest.main()

@@ -1,0 +1,221 @@
+// Skeleton preview: the source and the retimed result side by side (three.js from Debian's
+// libjs-three: BVHLoader, SkeletonHelper, OrbitControls), both driven by one clock in output
+// frames. Output frame j shows the result's frame j and the source at τ_j, the source time the
+// server's time map gives for that frame (PlanRetime), so the two skeletons hold the same pose
+// when the retime is right. Play runs at 1× (one output frame per output frame time); step
+// moves one frame; the scrub bar picks any frame.
+import * as THREE from '/three/build/three.module.js';
+import {BVHLoader} from '/three/examples/jsm/loaders/BVHLoader.js';
+import {OrbitControls} from '/three/examples/jsm/controls/OrbitControls.js';
+
+const SOURCE_COLOUR = 0x64748b;
+const RESULT_COLOUR = 0xea580c;
+
+// A skeleton parsed by BVHLoader, with a pose setter.
+class Figure {
+  constructor(text, colour, scene) {
+    const parsed = new BVHLoader().parse(text);
+    this.bones = parsed.skeleton.bones;
+    this.root = this.bones[0];
+    this.group = new THREE.Group();
+    this.group.add(this.root);
+    scene.add(this.group);
+    this.helper = new THREE.SkeletonHelper(this.root);
+    this.helper.material.color.setHex(colour);
+    this.helper.material.linewidth = 2;
+    scene.add(this.helper);
+    // BVHLoader names tracks ".bones[<joint>].position" and ".bones[<joint>].quaternion".
+    this.tracks = parsed.clip.tracks.map((track) => {
+      const [, boneName, property] = /^\.bones\[(.*)\]\.(position|quaternion)$/.exec(track.name) || [];
+      const bone = this.bones.find((b) => b.name === boneName);
+      return {bone, property, track, interpolant: track.createInterpolant()};
+    });
+    this.times = parsed.clip.tracks[0].times;  // Float32Array of i * frame time
+    this.frameCount = this.times.length;
+    const geometry = new THREE.SphereBufferGeometry(1, 8, 6);
+    const material = new THREE.MeshBasicMaterial({color: colour});
+    this.joints = this.bones.map((bone) => {
+      const mesh = new THREE.Mesh(geometry, material);
+      bone.add(mesh);
+      return mesh;
+    });
+  }
+  setJointSize(size) {
+    for (const mesh of this.joints) mesh.scale.setScalar(size);
+  }
+  // The pose at `seconds` (three.js's interpolants: linear positions, slerped rotations).
+  poseAt(seconds) {
+    for (const {bone, property, interpolant} of this.tracks) {
+      if (!bone) continue;
+      const value = interpolant.evaluate(seconds);
+      if (property === 'position') bone.position.fromArray(value);
+      else bone.quaternion.fromArray(value);
+    }
+  }
+  // Exactly frame `j` (its stored key time, so no interpolation weight at all).
+  poseAtFrame(j) {
+    this.poseAt(this.times[Math.min(Math.max(j, 0), this.frameCount - 1)]);
+  }
+  dispose(scene) {
+    scene.remove(this.group);
+    scene.remove(this.helper);
+  }
+}
+
+export class Preview {
+  constructor(container, {onFrame}) {
+    this.container = container;
+    this.onFrame = onFrame;
+    this.frame = 0;
+    this.playing = false;
+    this.source = null;
+    this.result = null;
+    this.plan = null;
+    this.spacing = 0;
+    try {
+      this.renderer = new THREE.WebGLRenderer({antialias: true, preserveDrawingBuffer: true});
+    } catch (error) {
+      container.textContent = 'This browser has no WebGL: the skeleton preview is off.';
+      return;
+    }
+    this.renderer.setPixelRatio(window.devicePixelRatio || 1);
+    this.renderer.setClearColor(0xf8fafc);
+    container.appendChild(this.renderer.domElement);
+    this.scene = new THREE.Scene();
+    this.camera = new THREE.PerspectiveCamera(40, 1, 0.1, 10000);
+    this.controls = new OrbitControls(this.camera, this.renderer.domElement);
+    this.controls.addEventListener('change', () => this.render());
+    this.grid = null;
+    new ResizeObserver(() => this.resize()).observe(container);
+    this.resize();
+  }
+
+  resize() {
+    if (!this.renderer) return;
+    const w = this.container.clientWidth;
+    const h = this.container.clientHeight;
+    if (!w || !h) return;
+    this.renderer.setSize(w, h);
+    this.camera.aspect = w / h;
+    this.camera.updateProjectionMatrix();
+    this.render();
+  }
+
+  // The source clip (BVH text, as the server writes it).
+  setSource(text) {
+    if (!this.renderer) return;
+    if (this.source) this.source.dispose(this.scene);
+    if (this.result) this.result.dispose(this.scene);
+    this.result = null;
+    this.source = new Figure(text, SOURCE_COLOUR, this.scene);
+    this.source.poseAtFrame(0);
+    this.frameCamera();
+    this.showFrame(0);
+  }
+
+  // The retimed result (BVH text) and the plan whose map gives τ_j for its frames.
+  setResult(text, plan) {
+    if (!this.renderer || !this.source) return;
+    if (this.result) this.result.dispose(this.scene);
+    this.result = new Figure(text, RESULT_COLOUR, this.scene);
+    this.result.group.position.x = this.spacing;
+    this.result.setJointSize(this.jointSize);
+    this.plan = plan;
+    this.showFrame(Math.min(this.frame, this.frameCount() - 1));
+  }
+
+  frameCount() {
+    if (this.result) return this.result.frameCount;
+    return this.source ? this.source.frameCount : 0;
+  }
+
+  // The source time shown with output frame j: the server's τ_j, or frame j itself without a
+  // result.
+  sourceSeconds(j) {
+    if (this.result && this.plan && this.plan.sourceTimeSeconds.length === this.result.frameCount) {
+      return this.plan.sourceTimeSeconds[j];
+    }
+    return this.source ? this.source.times[Math.min(j, this.source.frameCount - 1)] : 0;
+  }
+
+  frameCamera() {
+    this.scene.updateMatrixWorld(true);
+    const box = new THREE.Box3();
+    const point = new THREE.Vector3();
+    for (const bone of this.source.bones) box.expandByPoint(bone.getWorldPosition(point));
+    const size = box.getSize(new THREE.Vector3());
+    const height = Math.max(size.y, size.x, size.z, 1e-3);
+    this.spacing = height * 0.9;
+    this.jointSize = height * 0.012;
+    this.source.setJointSize(this.jointSize);
+    if (this.grid) this.scene.remove(this.grid);
+    this.grid = new THREE.GridHelper(height * 8, 16, 0xcbd5e1, 0xe2e8f0);
+    this.grid.position.y = box.min.y;
+    this.scene.add(this.grid);
+    const center = box.getCenter(new THREE.Vector3());
+    center.x += this.spacing / 2;
+    this.controls.target.copy(center);
+    this.camera.position.set(center.x + height * 0.4, center.y + height * 0.7, center.z + height * 2.4);
+    this.camera.near = height / 100;
+    this.camera.far = height * 100;
+    this.camera.updateProjectionMatrix();
+    this.controls.update();
+  }
+
+  showFrame(j) {
+    if (!this.source) return;
+    const count = this.frameCount();
+    this.frame = Math.min(Math.max(Math.round(j), 0), count - 1);
+    const sourceSeconds = this.sourceSeconds(this.frame);
+    this.source.poseAt(sourceSeconds);
+    if (this.result) this.result.poseAtFrame(this.frame);
+    this.render();
+    const root = (this.result || this.source).root.position;
+    this.container.dataset.outputFrame = String(this.frame);
+    this.container.dataset.sourceSeconds = String(sourceSeconds);
+    this.container.dataset.resultRoot = this.result ? [root.x, root.y, root.z].join(',') : '';
+    this.container.dataset.sourceRoot = [this.source.root.position.x, this.source.root.position.y,
+      this.source.root.position.z].join(',');
+    this.onFrame(this.frame, sourceSeconds);
+  }
+
+  step(delta) {
+    this.pause();
+    this.showFrame(this.frame + delta);
+  }
+
+  // Plays at 1× from the current frame: frame j is shown at j output frame times after start.
+  play() {
+    if (!this.source || this.playing) return;
+    const frameTime = this.result ? this.result.times[1] - this.result.times[0] || 1 / 30 : 1 / 30;
+    const exact = this.plan ? this.plan.outputFrameTimeSeconds : frameTime;
+    if (this.frame >= this.frameCount() - 1) this.frame = 0;
+    this.playing = true;
+    const start = performance.now();
+    const first = this.frame;
+    const tick = (now) => {
+      if (!this.playing) return;
+      const j = first + Math.floor((now - start) / 1000 / exact + 1e-9);
+      if (j >= this.frameCount() - 1) {
+        this.showFrame(this.frameCount() - 1);
+        this.playing = false;
+        this.container.dataset.playing = 'false';
+        return;
+      }
+      if (j !== this.frame) this.showFrame(j);
+      requestAnimationFrame(tick);
+    };
+    this.container.dataset.playing = 'true';
+    requestAnimationFrame(tick);
+  }
+
+  pause() {
+    this.playing = false;
+    this.container.dataset.playing = 'false';
+  }
+
+  render() {
+    if (!this.renderer) return;
+    this.renderer.render(this.scene, this.camera);
+  }
+}

@@ -1,0 +1,366 @@
+// The velocity editor (the first paper's Figure 5): speed over time as a piecewise-linear curve
+// of knots on the clip's timeline. Speed is linear between knots and flat outside them; two
+// knots at one time make a step. The y axis is logarithmic, so half and double speed sit
+// symmetrically about 1.
+//
+// Mouse: double-click (or Ctrl+click) adds a knot, drag moves one, a click selects. Keyboard (editor focused):
+// Delete removes the selected knot, arrows move it (a frame / 0.01; Shift: ten times), S
+// doubles it into a step, Tab selects the next. Times snap to 0.01 s (or whole frames for knots
+// given in frames) and speeds to 0.01, unless Shift is held while dragging. Speeds are held
+// within the limits [min, max]; knots cannot pass their neighbours.
+//
+// The editor only edits knots; what they mean (durations, the time map) is the server's
+// answer, drawn by the caller through setPlan().
+
+const PAD = {left: 48, right: 14, top: 14, bottom: 28};
+const HIT_RADIUS = 8;
+const VIEW_MIN = 0.05;
+const VIEW_MAX = 20;
+
+export class VelocityEditor {
+  constructor(canvas, {onChange, onSelect}) {
+    this.canvas = canvas;
+    this.onChange = onChange;
+    this.onSelect = onSelect;
+    this.knots = [{t: 0, unit: 's', v: 1}];
+    this.holds = [];
+    this.selected = 0;
+    this.duration = 1;        // x extent, seconds
+    this.frameTime = 1 / 30;  // of the knots' timeline, for frame units and arrow steps
+    this.minSpeed = 0.01;
+    this.maxSpeed = 100;
+    this.drag = null;
+    this.markers = [];        // extra vertical markers [{t, label}]
+    canvas.tabIndex = 0;
+    canvas.addEventListener('pointerdown', (e) => this.pointerDown(e));
+    canvas.addEventListener('pointermove', (e) => this.pointerMove(e));
+    canvas.addEventListener('pointerup', (e) => this.pointerUp(e));
+    canvas.addEventListener('dblclick', (e) => this.doubleClick(e));
+    canvas.addEventListener('keydown', (e) => this.keyDown(e));
+    new ResizeObserver(() => this.draw()).observe(canvas);
+  }
+
+  // ---- state ---------------------------------------------------------------------------------
+  setTimeline(duration, frameTime) {
+    this.duration = Math.max(duration, 1e-6);
+    this.frameTime = frameTime;
+    this.draw();
+  }
+  setLimits(minSpeed, maxSpeed) {
+    this.minSpeed = minSpeed;
+    this.maxSpeed = maxSpeed;
+    for (const k of this.knots) k.v = this.clampSpeed(k.v);
+    this.draw();
+  }
+  setKnots(knots, selected = 0) {
+    this.knots = knots.map((k) => ({...k}));
+    this.selected = Math.min(selected, this.knots.length - 1);
+    this.draw();
+  }
+  setHolds(holds) {
+    this.holds = holds;
+    this.draw();
+  }
+  seconds(k) {
+    return k.unit === 'f' ? k.t * this.frameTime : k.t;
+  }
+  selectedKnot() {
+    return this.knots[this.selected];
+  }
+  // Sets the selected knot from numbers typed by the user (seconds or frames as the knot is).
+  setSelected(time, speed) {
+    const k = this.selectedKnot();
+    if (!k) return;
+    k.t = this.clampTime(this.selected, k.unit === 'f' ? time * this.frameTime : time, k.unit);
+    k.v = this.clampSpeed(speed);
+    this.changed();
+  }
+  clampSpeed(v) {
+    return Math.min(Math.max(v, this.minSpeed), this.maxSpeed);
+  }
+  // A knot's time kept between its neighbours' (equal is a step) and inside the timeline.
+  clampTime(index, seconds, unit) {
+    const lo = index > 0 ? this.seconds(this.knots[index - 1]) : 0;
+    const hi = index < this.knots.length - 1 ? this.seconds(this.knots[index + 1]) : this.duration;
+    const s = Math.min(Math.max(seconds, lo), Math.max(lo, hi));
+    return unit === 'f' ? s / this.frameTime : s;
+  }
+  changed() {
+    this.draw();
+    this.onChange(this.knots);
+    this.onSelect(this.selected);
+  }
+
+  // ---- geometry ------------------------------------------------------------------------------
+  viewRange() {
+    let lo = Math.max(this.minSpeed, VIEW_MIN);
+    let hi = Math.min(this.maxSpeed, VIEW_MAX);
+    for (const k of this.knots) {
+      lo = Math.min(lo, k.v);
+      hi = Math.max(hi, k.v);
+    }
+    return [lo / 1.25, hi * 1.25];
+  }
+  size() {
+    return {w: this.canvas.clientWidth, h: this.canvas.clientHeight};
+  }
+  x(seconds) {
+    const {w} = this.size();
+    return PAD.left + (seconds / this.duration) * (w - PAD.left - PAD.right);
+  }
+  y(speed) {
+    const {h} = this.size();
+    const [lo, hi] = this.viewRange();
+    const f = (Math.log(speed) - Math.log(lo)) / (Math.log(hi) - Math.log(lo));
+    return h - PAD.bottom - f * (h - PAD.top - PAD.bottom);
+  }
+  timeAt(px) {
+    const {w} = this.size();
+    return ((px - PAD.left) / (w - PAD.left - PAD.right)) * this.duration;
+  }
+  speedAt(py) {
+    const {h} = this.size();
+    const [lo, hi] = this.viewRange();
+    const f = (h - PAD.bottom - py) / (h - PAD.top - PAD.bottom);
+    return Math.exp(Math.log(lo) + f * (Math.log(hi) - Math.log(lo)));
+  }
+  hit(px, py) {
+    let best = -1;
+    let bestDistance = HIT_RADIUS;
+    this.knots.forEach((k, i) => {
+      const d = Math.hypot(this.x(this.seconds(k)) - px, this.y(k.v) - py);
+      if (d <= bestDistance) {
+        best = i;
+        bestDistance = d;
+      }
+    });
+    return best;
+  }
+  local(e) {
+    const r = this.canvas.getBoundingClientRect();
+    return [e.clientX - r.left, e.clientY - r.top];
+  }
+
+  // ---- input ---------------------------------------------------------------------------------
+  pointerDown(e) {
+    this.canvas.focus();
+    const [px, py] = this.local(e);
+    const i = this.hit(px, py);
+    if (i < 0) {
+      if (e.ctrlKey || e.metaKey) this.addAt(px, py, false);
+      return;
+    }
+    this.selected = i;
+    this.drag = {index: i, moved: false};
+    this.canvas.setPointerCapture(e.pointerId);
+    this.onSelect(i);
+    this.draw();
+  }
+  pointerMove(e) {
+    if (!this.drag) return;
+    const [px, py] = this.local(e);
+    const k = this.knots[this.drag.index];
+    let seconds = this.timeAt(px);
+    let speed = this.speedAt(py);
+    if (!e.shiftKey) {
+      seconds = k.unit === 'f' ? Math.round(seconds / this.frameTime) * this.frameTime : Math.round(seconds * 100) / 100;
+      speed = Math.round(speed * 100) / 100;
+    }
+    k.t = this.clampTime(this.drag.index, seconds, k.unit);
+    if (k.unit === 'f' && !e.shiftKey) k.t = Math.round(k.t);
+    k.v = this.clampSpeed(speed);
+    this.drag.moved = true;
+    this.changed();
+  }
+  pointerUp(e) {
+    if (!this.drag) return;
+    this.canvas.releasePointerCapture(e.pointerId);
+    this.drag = null;
+  }
+  doubleClick(e) {
+    const [px, py] = this.local(e);
+    if (this.hit(px, py) >= 0) return;
+    this.addAt(px, py, e.shiftKey);
+  }
+  // A new knot at canvas point (px, py), snapped unless `free`.
+  addAt(px, py, free) {
+    let seconds = Math.min(Math.max(this.timeAt(px), 0), this.duration);
+    let speed = this.speedAt(py);
+    if (!free) {
+      seconds = Math.round(seconds * 100) / 100;
+      speed = Math.round(speed * 100) / 100;
+    }
+    const knot = {t: seconds, unit: 's', v: this.clampSpeed(speed)};
+    let at = this.knots.findIndex((k) => this.seconds(k) > seconds);
+    if (at < 0) at = this.knots.length;
+    this.knots.splice(at, 0, knot);
+    this.selected = at;
+    this.changed();
+  }
+  keyDown(e) {
+    const k = this.selectedKnot();
+    if (!k) return;
+    const big = e.shiftKey ? 10 : 1;
+    let handled = true;
+    switch (e.key) {
+      case 'Delete':
+      case 'Backspace':
+        if (this.knots.length > 1) {
+          this.knots.splice(this.selected, 1);
+          this.selected = Math.min(this.selected, this.knots.length - 1);
+        }
+        break;
+      case 'ArrowLeft':
+      case 'ArrowRight': {
+        const step = (e.key === 'ArrowLeft' ? -1 : 1) * big * this.frameTime;
+        k.t = this.clampTime(this.selected, this.seconds(k) + step, k.unit);
+        break;
+      }
+      case 'ArrowUp':
+      case 'ArrowDown': {
+        const step = (e.key === 'ArrowDown' ? -1 : 1) * big * 0.01;
+        k.v = this.clampSpeed(Math.round((k.v + step) * 100) / 100);
+        break;
+      }
+      case 's':
+      case 'S':
+        this.knots.splice(this.selected + 1, 0, {...k});
+        this.selected += 1;
+        break;
+      case 'Tab':
+        this.selected = (this.selected + (e.shiftKey ? this.knots.length - 1 : 1)) % this.knots.length;
+        this.onSelect(this.selected);
+        this.draw();
+        e.preventDefault();
+        return;
+      default:
+        handled = false;
+    }
+    if (handled) {
+      e.preventDefault();
+      this.changed();
+    }
+  }
+
+  // ---- drawing -------------------------------------------------------------------------------
+  draw() {
+    const canvas = this.canvas;
+    const {w, h} = this.size();
+    if (w === 0 || h === 0) return;
+    const ratio = window.devicePixelRatio || 1;
+    canvas.width = Math.round(w * ratio);
+    canvas.height = Math.round(h * ratio);
+    const g = canvas.getContext('2d');
+    g.setTransform(ratio, 0, 0, ratio, 0, 0);
+    g.clearRect(0, 0, w, h);
+    const [lo, hi] = this.viewRange();
+    const x0 = PAD.left;
+    const x1 = w - PAD.right;
+    const yTop = PAD.top;
+    const yBottom = h - PAD.bottom;
+
+    // Speed limits: the region beyond them is hatched.
+    g.fillStyle = 'rgba(200, 60, 60, 0.12)';
+    if (this.maxSpeed < hi) g.fillRect(x0, yTop, x1 - x0, this.y(this.maxSpeed) - yTop);
+    if (this.minSpeed > lo) g.fillRect(x0, this.y(this.minSpeed), x1 - x0, yBottom - this.y(this.minSpeed));
+
+    // Grid: speeds 1-2-5 per decade, times every "nice" step.
+    g.font = '11px system-ui, sans-serif';
+    g.strokeStyle = '#e3e6ea';
+    g.fillStyle = '#6b7280';
+    g.lineWidth = 1;
+    g.textAlign = 'right';
+    g.textBaseline = 'middle';
+    for (let decade = -3; decade <= 3; ++decade) {
+      for (const m of [1, 2, 5]) {
+        const v = m * 10 ** decade;
+        if (v < lo || v > hi) continue;
+        const y = this.y(v);
+        g.strokeStyle = v === 1 ? '#9aa3ad' : '#e3e6ea';
+        g.beginPath();
+        g.moveTo(x0, y);
+        g.lineTo(x1, y);
+        g.stroke();
+        g.fillText(v + '×', x0 - 6, y);
+      }
+    }
+    const step = niceStep(this.duration / 8);
+    g.textAlign = 'center';
+    g.textBaseline = 'top';
+    g.strokeStyle = '#e3e6ea';
+    for (let t = 0; t <= this.duration + 1e-9; t += step) {
+      const x = this.x(t);
+      g.beginPath();
+      g.moveTo(x, yTop);
+      g.lineTo(x, yBottom);
+      g.stroke();
+      g.fillText(formatSeconds(t), x, yBottom + 6);
+    }
+    g.strokeStyle = '#9aa3ad';
+    g.strokeRect(x0, yTop, x1 - x0, yBottom - yTop);
+
+    // Holds (freeze frames) at their source times.
+    for (const hold of this.holds) {
+      const x = this.x(hold.atSeconds);
+      g.fillStyle = 'rgba(234, 145, 30, 0.25)';
+      g.fillRect(x - 3, yTop, 6, yBottom - yTop);
+      g.fillStyle = '#b45309';
+      g.textAlign = 'left';
+      g.fillText(`hold ${hold.duration}s`, x + 5, yTop + 2);
+    }
+    for (const marker of this.markers) {
+      const x = this.x(marker.t);
+      g.strokeStyle = '#2563eb';
+      g.setLineDash([3, 3]);
+      g.beginPath();
+      g.moveTo(x, yTop);
+      g.lineTo(x, yBottom);
+      g.stroke();
+      g.setLineDash([]);
+    }
+
+    // The curve: flat before the first knot and after the last, linear in speed between knots
+    // (curved on the log axis, so each segment is drawn through sub-points).
+    g.strokeStyle = '#0f766e';
+    g.lineWidth = 2;
+    g.beginPath();
+    const first = this.knots[0];
+    g.moveTo(x0, this.y(first.v));
+    g.lineTo(this.x(this.seconds(first)), this.y(first.v));
+    for (let i = 1; i < this.knots.length; ++i) {
+      const a = this.knots[i - 1];
+      const b = this.knots[i];
+      const ta = this.seconds(a);
+      const tb = this.seconds(b);
+      for (let s = 1; s <= 24; ++s) {
+        const f = s / 24;
+        g.lineTo(this.x(ta + f * (tb - ta)), this.y(a.v + f * (b.v - a.v)));
+      }
+    }
+    const last = this.knots[this.knots.length - 1];
+    g.lineTo(x1, this.y(last.v));
+    g.stroke();
+
+    this.knots.forEach((k, i) => {
+      const x = this.x(this.seconds(k));
+      const y = this.y(k.v);
+      g.beginPath();
+      g.arc(x, y, i === this.selected ? 6 : 4.5, 0, 2 * Math.PI);
+      g.fillStyle = i === this.selected ? '#f59e0b' : '#0f766e';
+      g.fill();
+      g.strokeStyle = '#ffffff';
+      g.lineWidth = 1.5;
+      g.stroke();
+    });
+  }
+}
+
+export function niceStep(raw) {
+  const p = 10 ** Math.floor(Math.log10(raw));
+  for (const m of [1, 2, 5, 10]) if (m * p >= raw) return m * p;
+  return 10 * p;
+}
+
+export function formatSeconds(t) {
+  return (Math.abs(t) < 1e-9 ? 0 : +t.toFixed(3)) + 's';
+}
