@@ -16,7 +16,7 @@ build_packages=(
   libabsl-dev libprotobuf-dev protobuf-compiler
   libgrpc++-dev libgrpc-dev protobuf-compiler-grpc
   libspdlog-dev libfmt-dev
-  prometheus-cpp-dev
+  prometheus-cpp-dev libcivetweb-dev
   libgtest-dev libgmock-dev googletest libbenchmark-dev
   libssl-dev openssl procps curl ccache
   python3 python3-grpcio python3-protobuf
@@ -33,7 +33,7 @@ test_packages=(chromium)
 node_packages=(nodejs npm)
 runtime_packages=(
   libgrpc++1.51 libgrpc29 libprotobuf32 libspdlog1.10 libfmt9
-  libabsl20220623 libprometheus-cpp-core1.0 libprometheus-cpp-pull1.0
+  libabsl20220623 libprometheus-cpp-core1.0 libprometheus-cpp-pull1.0 libcivetweb1
   ca-certificates
   libcivetweb1 libjs-three
 )

@@ -4,7 +4,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <iterator>
 #include <limits>
+#include <map>
 #include <string>
 #include <utility>
 
@@ -42,6 +44,31 @@ std::int64_t FirstNonFinite(const double* data, std::int64_t n) {
 }
 
 absl::Status Invalid(std::string message) { return absl::InvalidArgumentError(message); }
+
+// What one out-of-order run costs beyond its samples: a map node and the vector's header.
+constexpr std::int64_t kRunOverheadBytes = 96;
+
+// Memory the layout of `header` takes once built (joints, channels, markers, their names and
+// the assembler's per-channel state), from its counts and string sizes.
+std::int64_t LayoutBytesEstimate(const v1::ClipHeader& header) {
+  constexpr std::int64_t kPerChannel =
+      sizeof(core::Channel) + sizeof(std::map<std::int64_t, std::vector<double>>) + sizeof(int);
+  std::int64_t bytes = static_cast<std::int64_t>(header.name().size()) +
+                       header.channels_size() * kPerChannel +
+                       header.joints_size() * static_cast<std::int64_t>(sizeof(core::Joint)) +
+                       header.markers_size() * static_cast<std::int64_t>(sizeof(core::Marker));
+  for (const v1::Joint& joint : header.joints()) {
+    bytes += static_cast<std::int64_t>(joint.name().size()) +
+             joint.end_site_offsets_size() * static_cast<std::int64_t>(sizeof(core::Vec3));
+  }
+  for (const v1::ChannelInfo& channel : header.channels()) {
+    bytes += static_cast<std::int64_t>(channel.name().size());
+  }
+  for (const v1::Marker& marker : header.markers()) {
+    bytes += static_cast<std::int64_t>(marker.name().size());
+  }
+  return bytes;
+}
 
 // ---- clip header ---------------------------------------------------------------------------------
 
@@ -142,11 +169,11 @@ absl::StatusOr<core::Clip> ClipLayoutFromProto(const v1::ClipHeader& header,
                                                const core::ClipLimits& limits) {
   // Counts first: a hostile header must not make us build large vectors before the checks.
   if (header.joints_size() > limits.max_joints) {
-    return Invalid(absl::StrCat("header has ", header.joints_size(), " joints, over the limit of ",
+    return core::OverLimitError(absl::StrCat("header has ", header.joints_size(), " joints, over the limit of ",
                                 limits.max_joints));
   }
   if (header.channels_size() > limits.max_channels) {
-    return Invalid(absl::StrCat("header has ", header.channels_size(),
+    return core::OverLimitError(absl::StrCat("header has ", header.channels_size(),
                                 " channels, over the limit of ", limits.max_channels));
   }
   core::Clip clip;
@@ -260,16 +287,56 @@ v1::Clip ClipToProto(const core::Clip& clip) {
   return out;
 }
 
-ClipAssembler::ClipAssembler(core::ClipLimits limits) : limits_(limits) {}
+ClipAssembler::ClipAssembler(core::ClipLimits limits, AllocationHook on_allocate)
+    : limits_(limits), on_allocate_(std::move(on_allocate)) {}
+
+absl::Status ClipAssembler::Allocate(std::int64_t bytes) {
+  if (bytes <= 0) return absl::OkStatus();
+  if (on_allocate_) TEMPOKEY_RETURN_IF_ERROR(on_allocate_(bytes));
+  allocated_bytes_ += bytes;
+  return absl::OkStatus();
+}
+
+void ClipAssembler::Free(std::int64_t bytes) {
+  if (bytes <= 0) return;
+  allocated_bytes_ -= bytes;
+  if (on_allocate_) on_allocate_(-bytes).IgnoreError();
+}
+
+absl::Status ClipAssembler::Append(std::vector<double>& dest, const double* data, std::int64_t n,
+                                   std::int64_t cap_limit) {
+  const auto size = static_cast<std::int64_t>(dest.size());
+  const auto capacity = static_cast<std::int64_t>(dest.capacity());
+  if (size + n > capacity) {
+    // Amortized growth, but only ever over samples that arrived: at most twice the new size,
+    // never past what the channel can hold.
+    const std::int64_t grown = std::min(cap_limit, std::max(size + n, 2 * capacity));
+    TEMPOKEY_RETURN_IF_ERROR(
+        Allocate((grown - capacity) * static_cast<std::int64_t>(sizeof(double))));
+    dest.reserve(static_cast<std::size_t>(grown));
+  }
+  dest.insert(dest.end(), data, data + n);
+  return absl::OkStatus();
+}
 
 absl::Status ClipAssembler::AddHeader(const v1::ClipHeader& header) {
   if (has_header_) {
     return Invalid("a second clip header arrived; a clip has exactly one header, sent first");
   }
+  // The layout is charged before it is built (its size follows the header's bytes, which have
+  // arrived); counts over the limits are refused by ClipLayoutFromProto() before it builds.
+  const std::int64_t layout_bytes = header.channels_size() <= limits_.max_channels &&
+                                            header.joints_size() <= limits_.max_joints
+                                        ? LayoutBytesEstimate(header)
+                                        : 0;
+  TEMPOKEY_RETURN_IF_ERROR(Allocate(layout_bytes));
   absl::StatusOr<core::Clip> layout = ClipLayoutFromProto(header, limits_);
-  if (!layout.ok()) return core::Annotate(layout.status(), "clip header");
+  if (!layout.ok()) {
+    Free(layout_bytes);
+    return core::Annotate(layout.status(), "clip header");
+  }
   clip_ = *std::move(layout);
-  received_.assign(clip_.channels.size(), {});
+  runs_.assign(clip_.channels.size(), {});
   has_header_ = true;
   return absl::OkStatus();
 }
@@ -312,22 +379,25 @@ absl::Status ClipAssembler::AddSamples(const v1::ChannelSamples& samples) {
   }
   const std::int64_t end = first + n;
 
-  // Received ranges of the channel: sorted, disjoint, adjacent ones merged, so slices sent in
-  // order keep one range per channel and the check is O(1).
-  auto& ranges = received_[c];
+  // What arrived: the gap-free start [0, start_end) and the runs after it.
+  std::vector<double>& start = clip_.channels[c].samples;
+  const auto start_end = static_cast<std::int64_t>(start.size());
+  Runs& runs = runs_[c];
   auto overlap = [&](std::int64_t begin, std::int64_t stop) {
     return Invalid(absl::StrCat("samples message ", messages_, ": ", core::ChannelLabel(clip_, c),
                                 ": ", FrameRange(first, end), " overlap ", FrameRange(begin, stop),
                                 " already received"));
   };
-  auto next = std::upper_bound(ranges.begin(), ranges.end(), first,
-                               [](std::int64_t f, const auto& r) { return f < r.first; });
-  if (next != ranges.begin()) {
-    const auto& prev = *(next - 1);
-    if (prev.second > first) return overlap(first, std::min(end, prev.second));
+  if (first < start_end) return overlap(first, std::min(end, start_end));
+  auto next = runs.upper_bound(first);
+  auto prev = next == runs.begin() ? runs.end() : std::prev(next);
+  if (prev != runs.end()) {
+    const std::int64_t prev_end = prev->first + static_cast<std::int64_t>(prev->second.size());
+    if (prev_end > first) return overlap(first, std::min(end, prev_end));
   }
-  if (next != ranges.end() && next->first < end) {
-    return overlap(next->first, std::min(end, next->second));
+  if (next != runs.end() && next->first < end) {
+    const std::int64_t next_end = next->first + static_cast<std::int64_t>(next->second.size());
+    return overlap(next->first, std::min(end, next_end));
   }
 
   const double* data = samples.samples().data();
@@ -337,65 +407,51 @@ absl::Status ClipAssembler::AddSamples(const v1::ChannelSamples& samples) {
                                 core::DescribeDouble(data[bad])));
   }
 
-  // Slices sent in order (what every sender does) are appended, so the channel's memory is
-  // written once; the first slice out of order zero-fills the rest of the channel and copies in.
-  std::vector<double>& dest = clip_.channels[c].samples;
-  if (static_cast<std::int64_t>(dest.size()) == first) {
-    if (dest.empty()) dest.reserve(static_cast<std::size_t>(frames));
-    dest.insert(dest.end(), data, data + n);
-  } else {
-    if (static_cast<std::int64_t>(dest.size()) < frames) dest.resize(static_cast<std::size_t>(frames));
-    std::memcpy(dest.data() + first, data, static_cast<std::size_t>(n) * sizeof(double));
+  if (first == start_end) {
+    // In order (what every sender does): append, then take in the runs it now reaches.
+    TEMPOKEY_RETURN_IF_ERROR(Append(start, data, n, frames));
+    while (!runs.empty() && runs.begin()->first == static_cast<std::int64_t>(start.size())) {
+      std::vector<double>& run = runs.begin()->second;
+      TEMPOKEY_RETURN_IF_ERROR(
+          Append(start, run.data(), static_cast<std::int64_t>(run.size()), frames));
+      Free(kRunOverheadBytes +
+           static_cast<std::int64_t>(run.capacity() * sizeof(double)));
+      runs.erase(runs.begin());
+    }
+    return absl::OkStatus();
   }
-
-  const bool joins_prev = next != ranges.begin() && (next - 1)->second == first;
-  const bool joins_next = next != ranges.end() && next->first == end;
-  if (joins_prev && joins_next) {
-    (next - 1)->second = next->second;
-    ranges.erase(next);
-  } else if (joins_prev) {
-    (next - 1)->second = end;
-  } else if (joins_next) {
-    next->first = first;
-  } else {
-    ranges.insert(next, {first, end});
+  if (prev != runs.end() &&
+      prev->first + static_cast<std::int64_t>(prev->second.size()) == first) {
+    return Append(prev->second, data, n, frames - prev->first);
   }
+  // A new run: its own memory, sized by what arrived.
+  TEMPOKEY_RETURN_IF_ERROR(
+      Allocate(kRunOverheadBytes + n * static_cast<std::int64_t>(sizeof(double))));
+  runs.emplace_hint(next, first, std::vector<double>(data, data + n));
   return absl::OkStatus();
 }
 
 absl::StatusOr<core::Clip> ClipAssembler::Finish() && {
   if (!has_header_) return Invalid("no clip header arrived");
-  for (std::size_t c = 0; c < received_.size(); ++c) {
-    std::int64_t next = 0;
-    std::int64_t gap_begin = -1;
-    std::int64_t gap_end = -1;
-    for (const auto& [begin, end] : received_[c]) {
-      if (begin > next) {
-        gap_begin = next;
-        gap_end = begin;
-        break;
-      }
-      next = end;
-    }
-    if (gap_begin < 0 && next < clip_.frame_count) {
-      gap_begin = next;
-      gap_end = clip_.frame_count;
-    }
-    if (gap_begin >= 0) {
+  for (std::size_t c = 0; c < clip_.channels.size(); ++c) {
+    const auto have = static_cast<std::int64_t>(clip_.channels[c].samples.size());
+    if (have < clip_.frame_count) {
+      const std::int64_t gap_end = runs_[c].empty() ? clip_.frame_count : runs_[c].begin()->first;
       return Invalid(absl::StrCat(core::ChannelLabel(clip_, static_cast<int>(c)), ": ",
-                                  FrameRange(gap_begin, gap_end), " never arrived"));
+                                  FrameRange(have, gap_end), " never arrived"));
     }
   }
   // The layout was checked by AddHeader(), every sample by AddSamples() and completeness above:
   // the clip is valid without another pass over its samples.
   has_header_ = false;
-  received_.clear();
+  runs_.clear();
   return std::move(clip_);
 }
 
-absl::StatusOr<core::Clip> ClipFromProto(const v1::Clip& clip, const core::ClipLimits& limits) {
+absl::StatusOr<core::Clip> ClipFromProto(const v1::Clip& clip, const core::ClipLimits& limits,
+                                         AllocationHook on_allocate) {
   if (!clip.has_header()) return Invalid("clip has no header");
-  ClipAssembler assembler(limits);
+  ClipAssembler assembler(limits, std::move(on_allocate));
   TEMPOKEY_RETURN_IF_ERROR(assembler.AddHeader(clip.header()));
   for (const v1::ChannelSamples& samples : clip.samples()) {
     TEMPOKEY_RETURN_IF_ERROR(assembler.AddSamples(samples));
@@ -523,7 +579,7 @@ absl::StatusOr<core::KeyedClip> KeyedClipFromProto(const v1::KeyedClip& keyed,
     }
     total_keys += n;
     if (total_keys > limits.max_samples) {
-      return Invalid(absl::StrCat("keyed clip has more than ", limits.max_samples,
+      return core::OverLimitError(absl::StrCat("keyed clip has more than ", limits.max_samples,
                                   " keys, over the limit"));
     }
     std::vector<core::Key>& keys = out.curves[c].keys;

@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <string_view>
 #include <utility>
 #include <vector>
@@ -68,42 +69,69 @@ absl::StatusOr<core::Clip> ClipLayoutFromProto(const v1::ClipHeader& header,
 v1::ChannelKind ChannelKindToProto(core::ChannelKind kind);
 absl::StatusOr<core::ChannelKind> ChannelKindFromProto(int kind);
 
+// Called before a ClipAssembler allocates memory, with the bytes it is about to take (> 0), and
+// after it frees some (< 0, the returned status ignored). A non-OK status refuses the message
+// that needed the memory, before anything is allocated (the server charges its memory budget).
+using AllocationHook = std::function<absl::Status(std::int64_t bytes)>;
+
 // Rebuilds a clip from a header and slices arriving in any order. Every slice is checked as it
 // arrives (channel index in range, frames in range, no overlap with what arrived before, finite
-// samples), so a bad upload is refused at the first bad message and memory stays bounded by the
-// header's declared size, itself checked against `limits` before anything is allocated.
+// samples), so a bad upload is refused at the first bad message.
+//
+// Memory follows the data that arrived, never the sizes the header declares: slices sent in
+// order are appended to their channel (capacity growing at most to twice what arrived); a slice
+// out of order is kept as its own run until the frames before it arrive, when it is appended in
+// turn. So a header declaring 10 000 000 frames followed by one sample at the last frame holds
+// one sample, not 80 MB. The header's counts are checked against `limits` before its layout is
+// built.
 //
 // Errors: kInvalidArgument naming the channel, frame and value ("samples message 3: channel 7
 // (Hips.Xrotation): frames 100..199 overlap frames 150..199 already received"), also for samples
 // before the header, a second header, or Finish() without a header (a malformed stream is bad
-// input).
+// input); kResourceExhausted for a header over `limits`; any error of the allocation hook.
 class ClipAssembler {
  public:
-  explicit ClipAssembler(core::ClipLimits limits = {});
+  explicit ClipAssembler(core::ClipLimits limits = {}, AllocationHook on_allocate = {});
 
   absl::Status AddHeader(const v1::ClipHeader& header);
   absl::Status AddSamples(const v1::ChannelSamples& samples);
   // Each slice of `batch` in order, as if sent one by one (messages are counted per slice).
   absl::Status AddSampleSlices(const v1::SampleSlices& batch);
   bool has_header() const { return has_header_; }
-  // The clip being assembled: after AddHeader() its full layout. A channel's samples hold the
-  // frames received in order so far, or frame_count values (0 where nothing arrived yet) once a
-  // slice arrived out of order. Read the layout here; take samples from the slices themselves.
+  // The clip being assembled: after AddHeader() its full layout; a channel's samples hold the
+  // frames received from frame 0 on without a gap so far. Read the layout here; take samples
+  // from the slices themselves.
   const core::Clip& clip() const { return clip_; }
+  // Bytes of samples and runs held now (what the hook was told, net).
+  std::int64_t allocated_bytes() const { return allocated_bytes_; }
   // The clip, once every sample of every channel has arrived (valid: ValidateClip() holds).
   // Errors: kInvalidArgument "channel 3 (Hips.Zrotation): frames 512..993 never arrived".
   absl::StatusOr<core::Clip> Finish() &&;
 
  private:
+  // Frames of one channel that arrived beyond its gap-free start (clip_.channels[c].samples),
+  // by first frame; disjoint, none touching the start.
+  using Runs = std::map<std::int64_t, std::vector<double>>;
+
+  absl::Status Allocate(std::int64_t bytes);
+  void Free(std::int64_t bytes);
+  // Appends `n` values to `dest`, whose final size is at most `cap_limit`, growing its capacity
+  // at most to twice its new size (charged to the hook first).
+  absl::Status Append(std::vector<double>& dest, const double* data, std::int64_t n,
+                      std::int64_t cap_limit);
+
   core::ClipLimits limits_;
+  AllocationHook on_allocate_;
   bool has_header_ = false;
   core::Clip clip_;
-  std::vector<std::vector<std::pair<std::int64_t, std::int64_t>>> received_;  // per channel
+  std::vector<Runs> runs_;  // per channel
+  std::int64_t allocated_bytes_ = 0;
   std::int64_t messages_ = 0;
 };
 
 // ClipAssembler over a whole Clip message.
-absl::StatusOr<core::Clip> ClipFromProto(const v1::Clip& clip, const core::ClipLimits& limits = {});
+absl::StatusOr<core::Clip> ClipFromProto(const v1::Clip& clip, const core::ClipLimits& limits = {},
+                                         AllocationHook on_allocate = {});
 
 // ---- keyed clips --------------------------------------------------------------------------------
 

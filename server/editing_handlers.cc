@@ -1,7 +1,10 @@
 // The editing calls of MotionService (editing.proto): clip files parsed by core's readers, stored
 // clips read back, retime plans, the CLI's speed text and results written as files. Like every
 // handler they only check, look up and queue: parsing, planning and formatting run on the job
-// pool, so they share its bounded queue (RESOURCE_EXHAUSTED with a retry hint when full).
+// pool, so they share its bounded queue (RESOURCE_EXHAUSTED with a retry hint when full). Like
+// the other calls they are raw (bytes that are not a request are INVALID_ARGUMENT), see only the
+// caller's own clips and jobs, count what they store in the memory budget, and end a stream whose
+// client takes no message for the idle timeout.
 #include <algorithm>
 #include <memory>
 #include <optional>
@@ -16,8 +19,10 @@
 #include "proto/editing_convert.h"
 #include "proto/jobs_convert.h"
 #include "server/motion_service.h"
+#include "server/memory_size.h"
 #include "server/reactors.h"
 #include "server/status_util.h"
+#include "server/wire_codec.h"
 #include "spdlog/spdlog.h"
 #include "tempokey/core/io/file_formats.h"
 #include "tempokey/core/model/status.h"
@@ -30,34 +35,39 @@ constexpr std::size_t kMaxFileNameBytes = 256;
 constexpr std::size_t kMaxSpeedTextBytes = 64 * 1024;
 constexpr std::int64_t kDefaultChunkBytes = 1 << 20;
 
-grpc::ServerUnaryReactor* FinishNow(grpc::CallbackServerContext* call, const absl::Status& status) {
-  grpc::ServerUnaryReactor* reactor = call->DefaultReactor();
-  reactor->Finish(ToGrpcStatus(status, call));
-  return reactor;
-}
-
-// Runs `work` (returning a status, filling the call's response) on the job pool and finishes the
-// unary call with its status there; a full queue or a draining server finishes it at once.
-template <typename Work>
-grpc::ServerUnaryReactor* FinishOnPool(ServiceContext* service, grpc::CallbackServerContext* call,
-                                       Work work) {
+// Runs `work` (returning the response or why not) on the job pool and answers the unary call
+// with it there; a full queue or a draining server answers at once. `request` and `work` are
+// kept alive by the task.
+template <typename Response, typename Work>
+grpc::ServerUnaryReactor* AnswerOnPool(ServiceContext* service, grpc::CallbackServerContext* call,
+                                       const grpc::ByteBuffer* raw_request,
+                                       grpc::ByteBuffer* raw_response, Work work) {
   if (service->draining.load()) {
-    return FinishNow(call, absl::UnavailableError("the server is shutting down"));
+    return AnswerUnary(*service, call, *raw_request,
+                       absl::UnavailableError("the server is shutting down"), Response(),
+                       raw_response);
   }
+  // Taken once, here: DefaultReactor() rebuilds the reactor when called again, which would undo
+  // a Finish() the pool thread has already made.
   grpc::ServerUnaryReactor* reactor = call->DefaultReactor();
   absl::Status queued = service->pool->TrySubmit(
-      [reactor, call, work = std::move(work)](std::stop_token) mutable {
-        reactor->Finish(ToGrpcStatus(work(), call));
+      [service, reactor, call, raw_request, raw_response,
+       work = std::move(work)](std::stop_token) mutable {
+        absl::StatusOr<Response> response = work();
+        AnswerUnary(*service, reactor, call, *raw_request, response.status(),
+                    response.ok() ? *response : Response(), raw_response);
       });
-  if (!queued.ok()) reactor->Finish(ToGrpcStatus(queued, call));
+  if (!queued.ok()) {
+    return AnswerUnary(*service, reactor, call, *raw_request, queued, Response(), raw_response);
+  }
   return reactor;
 }
 
 absl::Status CheckFileName(const std::string& name) {
   if (name.empty()) return absl::InvalidArgumentError("file_name is empty");
   if (name.size() > kMaxFileNameBytes) {
-    return absl::InvalidArgumentError(absl::StrCat("file_name is ", name.size(),
-                                                   " bytes, over the limit of ", kMaxFileNameBytes));
+    return core::OverLimitError(absl::StrCat("file_name is ", name.size(),
+                                             " bytes, over the limit of ", kMaxFileNameBytes));
   }
   return absl::OkStatus();
 }
@@ -76,20 +86,26 @@ std::string OutputName(const std::variant<core::Clip, core::KeyedClip>& output) 
 }
 
 // GetClip: a stored clip sliced as a sampled result (ResultSlicer), one message in flight.
-class ClipReactor final : public grpc::ServerWriteReactor<v1::ResultPart> {
+class ClipReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
  public:
   ClipReactor(ServiceContext* service, grpc::CallbackServerContext* call,
-              const v1::GetClipRequest& request)
+              const grpc::ByteBuffer& request)
       : service_(service) {
     if (absl::Status status = Open(*call, request); !status.ok()) {
+      slot_.Release();
       Finish(ToGrpcStatus(status, call));
       return;
+    }
+    if (service_->idle != nullptr) {
+      idle_ = service_->idle->NewTimer([call] { call->TryCancel(); });
     }
     WriteNext();
   }
 
   void OnWriteDone(bool ok) override {
+    if (idle_ != nullptr) idle_->Disarm();
     if (!ok) {
+      slot_.Release();
       Finish(ToGrpcStatus(absl::CancelledError("the clip stream broke")));
       return;
     }
@@ -97,70 +113,85 @@ class ClipReactor final : public grpc::ServerWriteReactor<v1::ResultPart> {
   }
 
   void OnDone() override {
-    if (holds_stream_) service_->CloseStream();
+    if (idle_ != nullptr) idle_->Close();
     delete this;
   }
 
  private:
-  absl::Status Open(const grpc::CallbackServerContext& call, const v1::GetClipRequest& request) {
-    TEMPOKEY_RETURN_IF_ERROR(service_->CheckAuth(call));
+  absl::Status Open(const grpc::CallbackServerContext& call, const grpc::ByteBuffer& raw) {
+    TEMPOKEY_ASSIGN_OR_RETURN(const std::string owner, service_->Authenticate(call));
+    v1::GetClipRequest request;
+    TEMPOKEY_RETURN_IF_ERROR(ParseMessage(raw, "GetClip request", &request));
     TEMPOKEY_RETURN_IF_ERROR(CheckId("clip_id", request.clip_id()));
     if (request.slice_bytes() < 0) {
       return absl::InvalidArgumentError(
           absl::StrCat("slice_bytes must be >= 0 (0: 1 MiB), got ", request.slice_bytes()));
     }
     TEMPOKEY_ASSIGN_OR_RETURN(std::shared_ptr<const core::Clip> clip,
-                              service_->clips->Get(request.clip_id()));
-    TEMPOKEY_RETURN_IF_ERROR(service_->AdmitStream(/*allow_while_draining=*/true));
-    holds_stream_ = true;
-    auto result = std::make_shared<core::PipelineResult>();
-    result->output = *clip;
-    slicer_.emplace(std::move(result), request.slice_bytes(), request.batch_parts());
+                              service_->clips->Get(owner, request.clip_id()));
+    TEMPOKEY_RETURN_IF_ERROR(slot_.Claim(*service_, /*allow_while_draining=*/true));
+    // The stream needs the clip as a result: a copy, counted while it streams.
+    TEMPOKEY_ASSIGN_OR_RETURN(MemoryBudget::Reservation memory,
+                              ReserveMemory(*service_, MemoryUse::kResult, "a clip read back"));
+    TEMPOKEY_RETURN_IF_ERROR(memory.Grow(ClipBytes(*clip)));
+    core::PipelineResult result;
+    result.output = *clip;
+    slicer_.emplace(ShareWithReservation(std::move(result), std::move(memory)),
+                    request.slice_bytes(), request.batch_parts());
     return absl::OkStatus();
   }
 
   void WriteNext() {
     if (!slicer_->Next(&part_)) {
+      slot_.Release();
       Finish(grpc::Status::OK);
       return;
     }
-    service_->BytesOut(static_cast<std::int64_t>(part_.ByteSizeLong()));
-    StartWrite(&part_);
+    SerializeMessage(part_, &buffer_);
+    service_->BytesOut(static_cast<std::int64_t>(buffer_.Length()));
+    if (idle_ != nullptr) idle_->Arm();
+    StartWrite(&buffer_);
   }
 
   ServiceContext* const service_;
-  bool holds_stream_ = false;
+  StreamSlot slot_;
+  std::shared_ptr<IdleReaper::Timer> idle_;
   std::optional<wire::ResultSlicer> slicer_;
   v1::ResultPart part_;
+  grpc::ByteBuffer buffer_;
 };
 
 // ExportFile: formats the job result or clip on the pool, then streams the bytes in chunks.
-class ExportReactor final : public grpc::ServerWriteReactor<v1::FileChunk> {
+class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
  public:
   ExportReactor(ServiceContext* service, grpc::CallbackServerContext* call,
-                const v1::ExportFileRequest& request)
+                const grpc::ByteBuffer& request)
       : service_(service), call_(call) {
-    if (absl::Status status = Open(*call, request); !status.ok()) {
-      Finish(ToGrpcStatus(status, call));
+    if (service_->idle != nullptr) {
+      idle_ = service_->idle->NewTimer([call] { call->TryCancel(); });
     }
+    if (absl::Status status = Open(*call, request); !status.ok()) End(ToGrpcStatus(status, call));
   }
 
   void OnWriteDone(bool ok) override {
+    if (idle_ != nullptr) idle_->Disarm();
     if (!ok) {
-      Finish(ToGrpcStatus(absl::CancelledError("the file stream broke")));
+      End(ToGrpcStatus(absl::CancelledError("the file stream broke")));
       return;
     }
     WriteNext();
   }
 
   void OnDone() override {
-    if (holds_stream_) service_->CloseStream();
+    if (idle_ != nullptr) idle_->Close();
     delete this;
   }
 
  private:
-  absl::Status Open(const grpc::CallbackServerContext& call, const v1::ExportFileRequest& request) {
-    TEMPOKEY_RETURN_IF_ERROR(service_->CheckAuth(call));
+  absl::Status Open(const grpc::CallbackServerContext& call, const grpc::ByteBuffer& raw) {
+    TEMPOKEY_ASSIGN_OR_RETURN(const std::string owner, service_->Authenticate(call));
+    v1::ExportFileRequest request;
+    TEMPOKEY_RETURN_IF_ERROR(ParseMessage(raw, "ExportFile request", &request));
     TEMPOKEY_ASSIGN_OR_RETURN(format_, LookUpFormat(request.format()));
     if (request.chunk_bytes() < 0) {
       return absl::InvalidArgumentError(
@@ -172,24 +203,25 @@ class ExportReactor final : public grpc::ServerWriteReactor<v1::FileChunk> {
     switch (request.source_case()) {
       case v1::ExportFileRequest::kJobId: {
         TEMPOKEY_RETURN_IF_ERROR(CheckId("job_id", request.job_id()));
-        TEMPOKEY_ASSIGN_OR_RETURN(result, service_->jobs->Result(request.job_id()));
+        TEMPOKEY_ASSIGN_OR_RETURN(result, service_->jobs->Result(request.job_id(), owner));
         break;
       }
       case v1::ExportFileRequest::kClipId: {
         TEMPOKEY_RETURN_IF_ERROR(CheckId("clip_id", request.clip_id()));
-        TEMPOKEY_ASSIGN_OR_RETURN(clip, service_->clips->Get(request.clip_id()));
+        TEMPOKEY_ASSIGN_OR_RETURN(clip, service_->clips->Get(owner, request.clip_id()));
         break;
       }
       case v1::ExportFileRequest::SOURCE_NOT_SET:
         return absl::InvalidArgumentError("nothing to export: set job_id or clip_id");
     }
-    TEMPOKEY_RETURN_IF_ERROR(service_->AdmitStream(/*allow_while_draining=*/true));
-    holds_stream_ = true;
+    TEMPOKEY_RETURN_IF_ERROR(slot_.Claim(*service_, /*allow_while_draining=*/true));
+    TEMPOKEY_ASSIGN_OR_RETURN(memory_,
+                              ReserveMemory(*service_, MemoryUse::kResult, "an exported file"));
     absl::Status queued = service_->pool->TrySubmit(
         [this, result = std::move(result), clip = std::move(clip)](std::stop_token) {
           absl::Status formatted = clip != nullptr ? Format(*clip) : Format(result->output);
           if (!formatted.ok()) {
-            Finish(ToGrpcStatus(formatted, call_));
+            End(ToGrpcStatus(formatted, call_));
             return;
           }
           WriteNext();
@@ -198,24 +230,30 @@ class ExportReactor final : public grpc::ServerWriteReactor<v1::FileChunk> {
     return absl::OkStatus();
   }
 
-  // Runs on a worker. Only this task touches the members until its first StartWrite.
+  // Runs on a worker. Only this task touches the members until its first StartWrite. The file's
+  // bytes exist once formatted: they are kept only if the budget can count them.
   absl::Status Format(const std::variant<core::Clip, core::KeyedClip>& output) {
     TEMPOKEY_ASSIGN_OR_RETURN(bytes_,
                               core::FormatOutput(output, *format_, service_->clip_limits));
     file_name_ = absl::StrCat(OutputName(output), core::AsAbsl(format_->extension));
-    return absl::OkStatus();
+    return Charge();
   }
   absl::Status Format(const core::Clip& clip) {
     TEMPOKEY_ASSIGN_OR_RETURN(bytes_, core::FormatOutput(std::variant<core::Clip, core::KeyedClip>(clip),
                                                          *format_, service_->clip_limits));
     file_name_ = absl::StrCat(clip.name, core::AsAbsl(format_->extension));
-    return absl::OkStatus();
+    return Charge();
+  }
+  absl::Status Charge() {
+    absl::Status charged = memory_.Grow(static_cast<std::int64_t>(bytes_.capacity()));
+    if (!charged.ok()) std::string().swap(bytes_);
+    return charged;
   }
 
   void WriteNext() {
     const bool first = offset_ == 0 && !started_;
     if (!first && offset_ >= bytes_.size()) {
-      Finish(grpc::Status::OK);
+      End(grpc::Status::OK);
       return;
     }
     started_ = true;
@@ -229,115 +267,142 @@ class ExportReactor final : public grpc::ServerWriteReactor<v1::FileChunk> {
         std::min(bytes_.size() - offset_, static_cast<std::size_t>(chunk_bytes_));
     chunk_.set_data(bytes_.substr(offset_, take));
     offset_ += take;
-    service_->BytesOut(static_cast<std::int64_t>(chunk_.ByteSizeLong()));
-    StartWrite(&chunk_);
+    SerializeMessage(chunk_, &buffer_);
+    service_->BytesOut(static_cast<std::int64_t>(buffer_.Length()));
+    if (idle_ != nullptr) idle_->Arm();
+    StartWrite(&buffer_);
+  }
+
+  void End(const grpc::Status& status) {
+    slot_.Release();
+    Finish(status);
   }
 
   ServiceContext* const service_;
   grpc::CallbackServerContext* const call_;
+  StreamSlot slot_;
+  std::shared_ptr<IdleReaper::Timer> idle_;
+  MemoryBudget::Reservation memory_;  // the formatted file
   const core::ExportFormat* format_ = nullptr;
   std::int64_t chunk_bytes_ = kDefaultChunkBytes;
-  bool holds_stream_ = false;
   bool started_ = false;
   std::string bytes_;
   std::string file_name_;
   std::size_t offset_ = 0;
   v1::FileChunk chunk_;
+  grpc::ByteBuffer buffer_;
 };
 
 }  // namespace
 
 grpc::ServerUnaryReactor* MotionService::ParseClipFile(grpc::CallbackServerContext* call,
-                                                       const v1::ParseClipFileRequest* request,
-                                                       v1::ParseClipFileResponse* response) {
-  if (absl::Status auth = context_->CheckAuth(*call); !auth.ok()) return FinishNow(call, auth);
-  if (absl::Status name = CheckFileName(request->file_name()); !name.ok()) {
-    return FinishNow(call, name);
+                                                       const grpc::ByteBuffer* raw_request,
+                                                       grpc::ByteBuffer* raw_response) {
+  auto request = std::make_shared<v1::ParseClipFileRequest>();
+  absl::StatusOr<std::string> owner =
+      OpenUnary(*context_, *call, *raw_request, "ParseClipFile", request.get());
+  absl::Status checked = owner.ok() ? CheckFileName(request->file_name()) : owner.status();
+  if (!checked.ok()) {
+    return AnswerUnary(*context_, call, *raw_request, checked, v1::ParseClipFileResponse(),
+                       raw_response);
   }
-  context_->BytesIn(static_cast<std::int64_t>(request->ByteSizeLong()));
   ServiceContext* service = context_;
-  return FinishOnPool(service, call, [service, request, response]() -> absl::Status {
-    std::optional<double> csv_frame_time;
-    if (request->csv_frame_time_seconds() != 0.0) csv_frame_time = request->csv_frame_time_seconds();
-    TEMPOKEY_ASSIGN_OR_RETURN(core::Clip clip,
-                              core::ParseClipText(request->content(), request->file_name(),
-                                                  csv_frame_time, service->clip_limits));
-    TEMPOKEY_RETURN_IF_ERROR(core::ValidateClip(clip, service->clip_limits));
-    const std::string id = wire::ClipContentId(clip);
-    *response->mutable_header() = wire::ClipHeaderToProto(clip);
-    response->set_sample_count(clip.sample_count());
-    TEMPOKEY_ASSIGN_OR_RETURN(ClipStore::PutResult stored, service->clips->Put(id, std::move(clip)));
-    response->set_clip_id(id);
-    response->set_already_stored(stored.already_stored);
-    spdlog::info("parse clip file={} clip={} already_stored={}", request->file_name(), id,
-                 stored.already_stored);
-    service->BytesOut(static_cast<std::int64_t>(response->ByteSizeLong()));
-    return absl::OkStatus();
-  });
+  return AnswerOnPool<v1::ParseClipFileResponse>(
+      service, call, raw_request, raw_response,
+      [service, request, owner = *std::move(owner)]() -> absl::StatusOr<v1::ParseClipFileResponse> {
+        std::optional<double> csv_frame_time;
+        if (request->csv_frame_time_seconds() != 0.0) {
+          csv_frame_time = request->csv_frame_time_seconds();
+        }
+        TEMPOKEY_ASSIGN_OR_RETURN(core::Clip clip,
+                                  core::ParseClipText(request->content(), request->file_name(),
+                                                      csv_frame_time, service->clip_limits));
+        TEMPOKEY_RETURN_IF_ERROR(core::ValidateClip(clip, service->clip_limits));
+        // The clip exists once parsed (bounded by the message size): stored only if it fits.
+        TEMPOKEY_ASSIGN_OR_RETURN(MemoryBudget::Reservation memory,
+                                  ReserveMemory(*service, MemoryUse::kStoredClip, "a parsed clip"));
+        TEMPOKEY_RETURN_IF_ERROR(memory.Grow(ClipBytes(clip)));
+        const std::string id = wire::ClipContentId(clip);
+        v1::ParseClipFileResponse response;
+        *response.mutable_header() = wire::ClipHeaderToProto(clip);
+        response.set_sample_count(clip.sample_count());
+        TEMPOKEY_ASSIGN_OR_RETURN(
+            ClipStore::PutResult stored,
+            service->clips->Put(owner, id, ShareWithReservation(std::move(clip), std::move(memory))));
+        response.set_clip_id(id);
+        response.set_already_stored(stored.already_stored);
+        spdlog::info("parse clip file={} clip={} already_stored={}", request->file_name(), id,
+                     stored.already_stored);
+        return response;
+      });
 }
 
-grpc::ServerWriteReactor<v1::ResultPart>* MotionService::GetClip(
-    grpc::CallbackServerContext* call, const v1::GetClipRequest* request) {
+grpc::ServerWriteReactor<grpc::ByteBuffer>* MotionService::GetClip(
+    grpc::CallbackServerContext* call, const grpc::ByteBuffer* request) {
   return new ClipReactor(context_, call, *request);
 }
 
 grpc::ServerUnaryReactor* MotionService::PlanRetime(grpc::CallbackServerContext* call,
-                                                    const v1::PlanRetimeRequest* request,
-                                                    v1::RetimePlan* response) {
+                                                    const grpc::ByteBuffer* raw_request,
+                                                    grpc::ByteBuffer* raw_response) {
   std::shared_ptr<const core::Clip> clip;
   std::optional<core::RetimeStep> step;
   std::int64_t max_points = wire::kDefaultPlanPoints;
   absl::Status checked = [&]() -> absl::Status {
-    TEMPOKEY_RETURN_IF_ERROR(context_->CheckAuth(*call));
-    TEMPOKEY_RETURN_IF_ERROR(CheckId("clip_id", request->clip_id()));
-    if (request->max_points() < 0 || request->max_points() == 1 ||
-        request->max_points() > wire::kMaxPlanPoints) {
+    v1::PlanRetimeRequest request;
+    TEMPOKEY_ASSIGN_OR_RETURN(const std::string owner,
+                              OpenUnary(*context_, *call, *raw_request, "PlanRetime", &request));
+    TEMPOKEY_RETURN_IF_ERROR(CheckId("clip_id", request.clip_id()));
+    if (request.max_points() < 0 || request.max_points() == 1 ||
+        request.max_points() > wire::kMaxPlanPoints) {
       return absl::InvalidArgumentError(absl::StrCat("max_points must be 0 (", wire::kDefaultPlanPoints,
                                                      ") or in [2, ", wire::kMaxPlanPoints, "], got ",
-                                                     request->max_points()));
+                                                     request.max_points()));
     }
-    if (request->max_points() > 0) max_points = request->max_points();
-    TEMPOKEY_ASSIGN_OR_RETURN(clip, context_->clips->Get(request->clip_id()));
-    TEMPOKEY_ASSIGN_OR_RETURN(step, wire::RetimeStepFromProto(request->retime()));
+    if (request.max_points() > 0) max_points = request.max_points();
+    TEMPOKEY_ASSIGN_OR_RETURN(clip, context_->clips->Get(owner, request.clip_id()));
+    TEMPOKEY_ASSIGN_OR_RETURN(step, wire::RetimeStepFromProto(request.retime()));
     return absl::OkStatus();
   }();
-  if (!checked.ok()) return FinishNow(call, checked);
-  context_->BytesIn(static_cast<std::int64_t>(request->ByteSizeLong()));
+  if (!checked.ok()) {
+    return AnswerUnary(*context_, call, *raw_request, checked, v1::RetimePlan(), raw_response);
+  }
   ServiceContext* service = context_;
-  return FinishOnPool(
-      service, call,
-      [service, response, clip = std::move(clip), step = *std::move(step), max_points]() -> absl::Status {
+  return AnswerOnPool<v1::RetimePlan>(
+      service, call, raw_request, raw_response,
+      [service, clip = std::move(clip), step = *std::move(step),
+       max_points]() -> absl::StatusOr<v1::RetimePlan> {
         TEMPOKEY_ASSIGN_OR_RETURN(
             core::RetimePlan plan,
             core::PlanRetime(*clip, step.warp, step.options, service->clip_limits));
-        *response = wire::RetimePlanToProto(plan, step, clip->frame_time_seconds, clip->frame_count,
-                                            max_points);
-        service->BytesOut(static_cast<std::int64_t>(response->ByteSizeLong()));
-        return absl::OkStatus();
+        return wire::RetimePlanToProto(plan, step, clip->frame_time_seconds, clip->frame_count,
+                                       max_points);
       });
 }
 
 grpc::ServerUnaryReactor* MotionService::ParseSpeedKnots(grpc::CallbackServerContext* call,
-                                                         const v1::ParseSpeedKnotsRequest* request,
-                                                         v1::ParseSpeedKnotsResponse* response) {
+                                                         const grpc::ByteBuffer* raw_request,
+                                                         grpc::ByteBuffer* raw_response) {
+  v1::ParseSpeedKnotsResponse response;
   absl::Status status = [&]() -> absl::Status {
-    TEMPOKEY_RETURN_IF_ERROR(context_->CheckAuth(*call));
-    if (request->text().size() > kMaxSpeedTextBytes) {
-      return absl::InvalidArgumentError(absl::StrCat("text is ", request->text().size(),
-                                                     " bytes, over the limit of ",
-                                                     kMaxSpeedTextBytes));
+    v1::ParseSpeedKnotsRequest request;
+    TEMPOKEY_RETURN_IF_ERROR(
+        OpenUnary(*context_, *call, *raw_request, "ParseSpeedKnots", &request).status());
+    if (request.text().size() > kMaxSpeedTextBytes) {
+      return core::OverLimitError(absl::StrCat("text is ", request.text().size(),
+                                               " bytes, over the limit of ", kMaxSpeedTextBytes));
     }
     TEMPOKEY_ASSIGN_OR_RETURN(std::vector<core::SpeedKnot> knots,
-                              core::ParseSpeedKnots(request->text()));
-    for (const core::SpeedKnot& knot : knots) *response->add_knots() = wire::SpeedKnotToProto(knot);
-    response->set_text(core::FormatSpeedKnots(knots));
+                              core::ParseSpeedKnots(request.text()));
+    for (const core::SpeedKnot& knot : knots) *response.add_knots() = wire::SpeedKnotToProto(knot);
+    response.set_text(core::FormatSpeedKnots(knots));
     return absl::OkStatus();
   }();
-  return FinishNow(call, status);
+  return AnswerUnary(*context_, call, *raw_request, status, response, raw_response);
 }
 
-grpc::ServerWriteReactor<v1::FileChunk>* MotionService::ExportFile(
-    grpc::CallbackServerContext* call, const v1::ExportFileRequest* request) {
+grpc::ServerWriteReactor<grpc::ByteBuffer>* MotionService::ExportFile(
+    grpc::CallbackServerContext* call, const grpc::ByteBuffer* request) {
   return new ExportReactor(context_, call, *request);
 }
 

@@ -8,6 +8,7 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "server/memory_size.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::server {
@@ -35,6 +36,9 @@ struct JobManager::JobRecord {
   SteadyTime started_at{};
   std::shared_ptr<const core::PipelineResult> result;
   std::int64_t result_bytes = 0;
+  // The record and its spec in the memory budget (its clip and result carry their own).
+  MemoryBudget::Reservation reservation;
+  std::int64_t spec_bytes = 0;
   std::vector<std::shared_ptr<JobWatcher>> watchers;
   bool removed = false;
 };
@@ -45,15 +49,16 @@ void Notify(const std::vector<std::shared_ptr<JobWatcher>>& watchers, const JobS
   for (const auto& watcher : watchers) watcher->OnJobUpdate(snapshot);
 }
 
-std::int64_t ResultBytes(const core::PipelineResult& result) {
-  if (const auto* clip = std::get_if<core::Clip>(&result.output)) {
-    return clip->sample_count() * static_cast<std::int64_t>(sizeof(double));
-  }
-  std::int64_t keys = 0;
-  for (const core::Curve& curve : std::get<core::KeyedClip>(result.output).curves) {
-    keys += static_cast<std::int64_t>(curve.keys.size());
-  }
-  return keys * static_cast<std::int64_t>(sizeof(core::Key));
+// The key of a request id in by_request_id_: request ids are per owner.
+std::string RequestKey(std::string_view owner, std::string_view request_id) {
+  return absl::StrCat(core::AsAbsl(owner), "\n", core::AsAbsl(request_id));
+}
+
+absl::Status ReusedRequestId(const std::string& request_id, const std::string& job_id) {
+  return absl::AlreadyExistsError(absl::StrCat(
+      "request_id \"", request_id, "\" already named job ", job_id,
+      ", submitted with a different request; a retry must send the same request, a new request "
+      "needs a new request_id"));
 }
 
 }  // namespace
@@ -110,9 +115,10 @@ JobSnapshot JobManager::SnapshotLocked(const JobRecord& record) const {
 }
 
 absl::StatusOr<std::shared_ptr<JobManager::JobRecord>> JobManager::FindLocked(
-    std::string_view job_id) const {
+    std::string_view job_id, std::string_view owner) const {
   auto it = by_id_.find(std::string(job_id));
-  if (it == by_id_.end()) {
+  // Another owner's job answers exactly like an unknown one: ids reveal nothing.
+  if (it == by_id_.end() || it->second->spec->owner != owner) {
     return absl::NotFoundError(absl::StrCat("job \"", core::AsAbsl(job_id),
                                             "\" not found (unknown, deleted, or past its "
                                             "retention time)"));
@@ -124,13 +130,30 @@ absl::StatusOr<JobSnapshot> JobManager::Submit(JobSpec spec, std::shared_ptr<con
                                                bool* deduplicated) {
   if (deduplicated != nullptr) *deduplicated = false;
   if (clip == nullptr) return absl::InvalidArgumentError("a job needs a clip");
+  auto record = std::make_shared<JobRecord>();
+  // The job's own memory is claimed before the lock: the budget may ask this manager to evict.
+  record->spec_bytes = static_cast<std::int64_t>(sizeof(JobRecord) + sizeof(JobSpec)) +
+                       StepsBytes(spec.steps) +
+                       static_cast<std::int64_t>(spec.request_id.size() + spec.owner.size() +
+                                                 spec.request_digest.size());
+  for (const auto& [key, value] : spec.labels) {
+    record->spec_bytes += static_cast<std::int64_t>(key.size() + value.size()) + 64;
+  }
+  if (options_.budget != nullptr) {
+    TEMPOKEY_ASSIGN_OR_RETURN(record->reservation,
+                              options_.budget->Reserve(record->spec_bytes, MemoryUse::kJob, "a job"));
+  }
   std::lock_guard lock(mu_);
   if (draining_) {
     return absl::UnavailableError("the server is shutting down and accepts no new jobs");
   }
   if (!spec.request_id.empty()) {
-    if (auto it = by_request_id_.find(spec.request_id); it != by_request_id_.end()) {
+    if (auto it = by_request_id_.find(RequestKey(spec.owner, spec.request_id));
+        it != by_request_id_.end()) {
       if (auto job = by_id_.find(it->second); job != by_id_.end()) {
+        if (job->second->spec->request_digest != spec.request_digest) {
+          return ReusedRequestId(spec.request_id, job->second->id);
+        }
         if (deduplicated != nullptr) *deduplicated = true;
         return SnapshotLocked(*job->second);
       }
@@ -138,7 +161,6 @@ absl::StatusOr<JobSnapshot> JobManager::Submit(JobSpec spec, std::shared_ptr<con
   }
   EvictLocked();
 
-  auto record = std::make_shared<JobRecord>();
   record->id = NewJobIdLocked();
   record->seq = next_seq_;
   record->spec = std::make_shared<const JobSpec>(std::move(spec));
@@ -150,7 +172,9 @@ absl::StatusOr<JobSnapshot> JobManager::Submit(JobSpec spec, std::shared_ptr<con
   ++next_seq_;
   by_seq_.emplace(record->seq, record);
   by_id_.emplace(record->id, record);
-  if (!record->spec->request_id.empty()) by_request_id_[record->spec->request_id] = record->id;
+  if (!record->spec->request_id.empty()) {
+    by_request_id_[RequestKey(record->spec->owner, record->spec->request_id)] = record->id;
+  }
   return SnapshotLocked(*record);
 }
 
@@ -182,9 +206,32 @@ void JobManager::Run(const std::shared_ptr<JobRecord>& record, std::stop_token p
       },
       record->stop.get_token(), options_.output_limits);
   clip.reset();
+  {
+    // The input is not needed any more: drop it first, so the store may evict it for the result.
+    std::lock_guard lock(mu_);
+    record->clip.reset();
+  }
 
+  // The result exists already; it is kept only if the budget can count it (the budget may first
+  // evict older finished jobs and stored clips to make room).
   std::shared_ptr<const core::PipelineResult> shared_result;
-  if (result.ok()) shared_result = std::make_shared<const core::PipelineResult>(*std::move(result));
+  std::int64_t result_bytes = 0;
+  if (result.ok()) {
+    result_bytes = PipelineResultBytes(*result);
+    MemoryBudget::Reservation reservation;
+    if (options_.budget != nullptr) {
+      absl::StatusOr<MemoryBudget::Reservation> reserved =
+          options_.budget->Reserve(result_bytes, MemoryUse::kResult, "a job's result");
+      if (!reserved.ok()) {
+        result = reserved.status();
+      } else {
+        reservation = *std::move(reserved);
+      }
+    }
+    if (result.ok()) {
+      shared_result = ShareWithReservation(*std::move(result), std::move(reservation));
+    }
+  }
   {
     std::lock_guard lock(mu_);
     record->end_time = Now();
@@ -193,7 +240,7 @@ void JobManager::Run(const std::shared_ptr<JobRecord>& record, std::stop_token p
       record->progress = 1.0;
       record->stage = "done";
       record->result = shared_result;
-      record->result_bytes = ResultBytes(*shared_result);
+      record->result_bytes = result_bytes;
     } else if (result.status().code() == absl::StatusCode::kCancelled &&
                record->stop.stop_requested()) {
       record->state = JobState::kCancelled;
@@ -210,14 +257,14 @@ void JobManager::Run(const std::shared_ptr<JobRecord>& record, std::stop_token p
     watchers = record->watchers;
     finished_.push_back(record);
     ++finished_count_;
-    finished_bytes_ += record->result_bytes;
+    finished_bytes_ += record->result_bytes + record->spec_bytes;
+    ReportEndLocked(snapshot, *record);
     EvictLocked();
   }
   Notify(watchers, snapshot);
-  ReportEnd(snapshot, *record);
 }
 
-void JobManager::ReportEnd(const JobSnapshot& snapshot, const JobRecord& record) {
+void JobManager::ReportEndLocked(const JobSnapshot& snapshot, const JobRecord& record) {
   if (!options_.on_job_end) return;
   std::chrono::duration<double> queue_wait{0};
   std::chrono::duration<double> run_time{0};
@@ -250,23 +297,27 @@ void JobManager::PublishProgress(const std::shared_ptr<JobRecord>& record, doubl
   Notify(watchers, snapshot);
 }
 
-std::optional<JobSnapshot> JobManager::FindByRequestId(const std::string& request_id) {
+absl::StatusOr<std::optional<JobSnapshot>> JobManager::FindByRequestId(
+    std::string_view owner, const std::string& request_id, std::string_view request_digest) {
   std::lock_guard lock(mu_);
-  auto it = by_request_id_.find(request_id);
+  auto it = by_request_id_.find(RequestKey(owner, request_id));
   if (it == by_request_id_.end()) return std::nullopt;
   auto job = by_id_.find(it->second);
   if (job == by_id_.end()) return std::nullopt;
+  if (job->second->spec->request_digest != request_digest) {
+    return ReusedRequestId(request_id, job->second->id);
+  }
   return SnapshotLocked(*job->second);
 }
 
-absl::StatusOr<JobSnapshot> JobManager::Get(std::string_view job_id) {
+absl::StatusOr<JobSnapshot> JobManager::Get(std::string_view job_id, std::string_view owner) {
   std::lock_guard lock(mu_);
   EvictLocked();
-  TEMPOKEY_ASSIGN_OR_RETURN(std::shared_ptr<JobRecord> record, FindLocked(job_id));
+  TEMPOKEY_ASSIGN_OR_RETURN(std::shared_ptr<JobRecord> record, FindLocked(job_id, owner));
   return SnapshotLocked(*record);
 }
 
-absl::StatusOr<ListJobsPage> JobManager::List(const ListJobsQuery& query) {
+absl::StatusOr<ListJobsPage> JobManager::List(const ListJobsQuery& query, std::string_view owner) {
   if (query.page_size < 0) {
     return absl::InvalidArgumentError(
         absl::StrCat("page_size must be >= 0, got ", query.page_size));
@@ -279,6 +330,7 @@ absl::StatusOr<ListJobsPage> JobManager::List(const ListJobsQuery& query) {
         "page_token \"", query.page_token, "\" is not a token this server issued"));
   }
   auto matches = [&](const JobRecord& record) {
+    if (record.spec->owner != owner) return false;
     if (!query.states.empty() &&
         std::find(query.states.begin(), query.states.end(), record.state) == query.states.end()) {
       return false;
@@ -300,6 +352,7 @@ absl::StatusOr<ListJobsPage> JobManager::List(const ListJobsQuery& query) {
       break;
     }
     page.jobs.push_back(SnapshotLocked(*it->second));
+    page.tokens.push_back(absl::StrCat(it->first));
   }
   return page;
 }
@@ -315,17 +368,18 @@ std::vector<std::shared_ptr<JobWatcher>> JobManager::CancelLocked(JobRecord& rec
   return record.watchers;
 }
 
-absl::StatusOr<JobSnapshot> JobManager::Cancel(std::string_view job_id) {
+absl::StatusOr<JobSnapshot> JobManager::Cancel(std::string_view job_id, std::string_view owner) {
   JobSnapshot snapshot;
   std::vector<std::shared_ptr<JobWatcher>> watchers;
   std::shared_ptr<JobRecord> ended;
   {
     std::lock_guard lock(mu_);
-    TEMPOKEY_ASSIGN_OR_RETURN(std::shared_ptr<JobRecord> record, FindLocked(job_id));
+    TEMPOKEY_ASSIGN_OR_RETURN(std::shared_ptr<JobRecord> record, FindLocked(job_id, owner));
     if (record->state == JobState::kQueued) {
       watchers = CancelLocked(*record);
       finished_.push_back(record);
       ++finished_count_;
+      finished_bytes_ += record->spec_bytes;
       ended = record;
     } else if (record->state == JobState::kRunning && !record->stop.stop_requested()) {
       record->stop.request_stop();
@@ -334,29 +388,32 @@ absl::StatusOr<JobSnapshot> JobManager::Cancel(std::string_view job_id) {
       watchers = record->watchers;
     }
     snapshot = SnapshotLocked(*record);
-    if (ended != nullptr) EvictLocked();
+    if (ended != nullptr) {
+      ReportEndLocked(snapshot, *ended);
+      EvictLocked();
+    }
   }
   Notify(watchers, snapshot);
-  if (ended != nullptr) ReportEnd(snapshot, *ended);
   return snapshot;
 }
 
-absl::Status JobManager::Delete(std::string_view job_id) {
+absl::Status JobManager::Delete(std::string_view job_id, std::string_view owner) {
   std::lock_guard lock(mu_);
-  TEMPOKEY_ASSIGN_OR_RETURN(std::shared_ptr<JobRecord> record, FindLocked(job_id));
+  TEMPOKEY_ASSIGN_OR_RETURN(std::shared_ptr<JobRecord> record, FindLocked(job_id, owner));
   if (!IsTerminal(record->state)) {
     return absl::FailedPreconditionError(absl::StrCat(
         "job ", record->id, " is ", core::AsAbsl(JobStateName(record->state)),
         "; cancel it and delete it once it has ended"));
   }
   RemoveLocked(record);
+  DropRemovedLocked();  // its operations are freed now, not at the next eviction
   return absl::OkStatus();
 }
 
 absl::StatusOr<std::shared_ptr<const core::PipelineResult>> JobManager::Result(
-    std::string_view job_id) {
+    std::string_view job_id, std::string_view owner) {
   std::lock_guard lock(mu_);
-  TEMPOKEY_ASSIGN_OR_RETURN(std::shared_ptr<JobRecord> record, FindLocked(job_id));
+  TEMPOKEY_ASSIGN_OR_RETURN(std::shared_ptr<JobRecord> record, FindLocked(job_id, owner));
   switch (record->state) {
     case JobState::kSucceeded:
       return record->result;
@@ -374,10 +431,11 @@ absl::StatusOr<std::shared_ptr<const core::PipelineResult>> JobManager::Result(
 }
 
 absl::StatusOr<JobSnapshot> JobManager::Watch(std::string_view job_id,
-                                              std::shared_ptr<JobWatcher> watcher) {
+                                              std::shared_ptr<JobWatcher> watcher,
+                                              std::string_view owner) {
   std::lock_guard lock(mu_);
   if (draining_) return absl::UnavailableError("the server is shutting down");
-  TEMPOKEY_ASSIGN_OR_RETURN(std::shared_ptr<JobRecord> record, FindLocked(job_id));
+  TEMPOKEY_ASSIGN_OR_RETURN(std::shared_ptr<JobRecord> record, FindLocked(job_id, owner));
   record->watchers.push_back(std::move(watcher));
   return SnapshotLocked(*record);
 }
@@ -413,7 +471,6 @@ bool JobManager::draining() const {
 }
 
 void JobManager::CancelAll() {
-  std::vector<std::pair<JobSnapshot, std::shared_ptr<JobRecord>>> ended;
   std::vector<std::pair<JobSnapshot, std::vector<std::shared_ptr<JobWatcher>>>> updates;
   {
     std::lock_guard lock(mu_);
@@ -422,15 +479,28 @@ void JobManager::CancelAll() {
         auto watchers = CancelLocked(*record);
         finished_.push_back(record);
         ++finished_count_;
-        ended.emplace_back(SnapshotLocked(*record), record);
-        updates.emplace_back(ended.back().first, std::move(watchers));
+        finished_bytes_ += record->spec_bytes;
+        JobSnapshot snapshot = SnapshotLocked(*record);
+        ReportEndLocked(snapshot, *record);
+        updates.emplace_back(std::move(snapshot), std::move(watchers));
       } else if (record->state == JobState::kRunning) {
         record->stop.request_stop();
       }
     }
   }
   for (const auto& [snapshot, watchers] : updates) Notify(watchers, snapshot);
-  for (const auto& [snapshot, record] : ended) ReportEnd(snapshot, *record);
+}
+
+void JobManager::ReclaimFinished(std::int64_t wanted) {
+  std::lock_guard lock(mu_);
+  std::int64_t freed = 0;
+  for (const auto& record : finished_) {
+    if (freed >= wanted) break;
+    if (record->removed || !record->watchers.empty()) continue;
+    freed += record->result_bytes + record->spec_bytes;
+    RemoveLocked(record);
+  }
+  DropRemovedLocked();
 }
 
 std::int64_t JobManager::job_count() const {
@@ -448,9 +518,14 @@ void JobManager::RemoveLocked(const std::shared_ptr<JobRecord>& record) {
     if (it != by_request_id_.end() && it->second == record->id) by_request_id_.erase(it);
   }
   --finished_count_;  // only finished jobs are ever removed
-  finished_bytes_ -= record->result_bytes;
+  finished_bytes_ -= record->result_bytes + record->spec_bytes;
   record->result.reset();
-  // finished_ drops removed records lazily in EvictLocked().
+  // The record (its spec and reservation) goes once finished_ drops it too: EvictLocked() or
+  // DropRemovedLocked(), and once no worker or snapshot holds it.
+}
+
+void JobManager::DropRemovedLocked() {
+  std::erase_if(finished_, [](const std::shared_ptr<JobRecord>& r) { return r->removed; });
 }
 
 void JobManager::EvictLocked() {

@@ -1,6 +1,7 @@
 #include "server/job_pool.h"
 
 #include <algorithm>
+#include <limits>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -8,7 +9,8 @@
 
 namespace tempokey::server {
 
-JobPool::JobPool(int workers, int queue_capacity) : queue_capacity_(std::max(1, queue_capacity)) {
+JobPool::JobPool(int workers, int queue_capacity, Clock clock)
+    : queue_capacity_(std::max(1, queue_capacity)), clock_(std::move(clock)) {
   workers = std::max(1, workers);
   threads_.reserve(static_cast<std::size_t>(workers));
   for (int i = 0; i < workers; ++i) threads_.emplace_back([this] { WorkerLoop(); });
@@ -61,11 +63,24 @@ void JobPool::Shutdown() {
   });
 }
 
+std::chrono::steady_clock::time_point JobPool::Now() const {
+  return clock_ ? clock_() : std::chrono::steady_clock::now();
+}
+
 std::chrono::milliseconds JobPool::RetryAfterHintLocked() const {
-  // A full queue drains at about workers / average_task per second; half of it is a fair wait.
-  const double ms = average_task_ms_ * static_cast<double>(queue_capacity_) /
-                    (2.0 * static_cast<double>(threads_.size()));
-  return std::chrono::milliseconds(static_cast<std::int64_t>(std::clamp(ms, 10.0, 10'000.0)));
+  // A queue slot frees when the first running task ends and a worker takes the next one.
+  const auto now = Now();
+  double soonest_ms = started_.empty() ? average_task_ms_ : std::numeric_limits<double>::max();
+  for (const auto& start : started_) {
+    const double elapsed_ms = std::chrono::duration<double, std::milli>(now - start).count();
+    // Past the usual duration (or with none known yet), a task is expected to run about as
+    // long again: how long it has run is the best guess of how long it takes.
+    const double remaining_ms =
+        average_task_ms_ > elapsed_ms ? average_task_ms_ - elapsed_ms : elapsed_ms;
+    soonest_ms = std::min(soonest_ms, remaining_ms);
+  }
+  return std::chrono::milliseconds(
+      static_cast<std::int64_t>(std::clamp(soonest_ms, 10.0, 60'000.0)));
 }
 
 void JobPool::WorkerLoop() {
@@ -76,15 +91,16 @@ void JobPool::WorkerLoop() {
     Task task = std::move(queue_.front());
     queue_.pop_front();
     ++running_;
+    const auto start = Now();
+    const auto started = started_.insert(started_.end(), start);
     lock.unlock();
 
-    const auto start = std::chrono::steady_clock::now();
     task(stop_all_.get_token());
-    const double ms =
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    const double ms = std::chrono::duration<double, std::milli>(Now() - start).count();
     task = nullptr;  // release captured state before reporting idle
 
     lock.lock();
+    started_.erase(started);
     --running_;
     average_task_ms_ = average_task_ms_ == 0.0 ? ms : 0.9 * average_task_ms_ + 0.1 * ms;
     if (queue_.empty() && running_ == 0) idle_cv_.notify_all();

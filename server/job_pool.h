@@ -7,6 +7,8 @@
 #include <chrono>
 #include <condition_variable>
 #include <deque>
+#include <functional>
+#include <list>
 #include <mutex>
 #include <stop_token>
 #include <thread>
@@ -23,17 +25,22 @@ class JobPool {
   // A unit of work. `pool_stop` is requested by RequestStopAll() (drain deadline); a task that
   // runs long should forward it to its own cancellation.
   using Task = absl::AnyInvocable<void(std::stop_token pool_stop)>;
+  using Clock = std::function<std::chrono::steady_clock::time_point()>;
 
   // Starts `workers` threads (>= 1) over a queue of at most `queue_capacity` (>= 1) tasks.
-  JobPool(int workers, int queue_capacity);
+  // `clock` (tests) replaces steady_clock::now() for task durations and the retry hint.
+  JobPool(int workers, int queue_capacity, Clock clock = {});
   // Shutdown().
   ~JobPool();
   JobPool(const JobPool&) = delete;
   JobPool& operator=(const JobPool&) = delete;
 
   // Queues `task` for a worker; never blocks.
-  // Errors: kResourceExhausted when the queue holds queue_capacity tasks (with a retry hint, see
-  //         SetRetryAfter()); kUnavailable after Shutdown() began.
+  // Errors: kResourceExhausted when the queue holds queue_capacity tasks, with a retry hint
+  //         (wire::SetRetryAfter()): when the first running task should end, so a queue slot
+  //         frees, from how long each has run and how long finished tasks took (a task already
+  //         past the usual duration is expected to run as long again); 10 ms to 60 s.
+  //         kUnavailable after Shutdown() began.
   absl::Status TrySubmit(Task task);
 
   int workers() const { return static_cast<int>(threads_.size()); }
@@ -55,13 +62,17 @@ class JobPool {
  private:
   void WorkerLoop();
   std::chrono::milliseconds RetryAfterHintLocked() const ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+  std::chrono::steady_clock::time_point Now() const;
 
   const int queue_capacity_;
+  const Clock clock_;
   mutable std::mutex mu_;
   std::condition_variable work_cv_;          // a task was queued, or shutdown began
   mutable std::condition_variable idle_cv_;  // the pool became idle
   std::deque<Task> queue_ ABSL_GUARDED_BY(mu_);
   int running_ ABSL_GUARDED_BY(mu_) = 0;
+  // When each running task started.
+  std::list<std::chrono::steady_clock::time_point> started_ ABSL_GUARDED_BY(mu_);
   bool shutting_down_ ABSL_GUARDED_BY(mu_) = false;
   double average_task_ms_ ABSL_GUARDED_BY(mu_) = 0.0;  // exponential moving average
   std::stop_source stop_all_;                // thread-safe by itself

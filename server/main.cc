@@ -1,13 +1,15 @@
 // tempokey-server: serves tempokey.v1.MotionService until SIGTERM or SIGINT, then drains.
 //
-// Prints "tempokey-server listening on <host>:<port>" on stdout once serving, and with
-// --port_file writes the port there atomically, so scripts can wait for either. Exit codes: 0
-// after a clean drain, 1 when the server cannot start, 2 for bad flags.
+// Prints "tempokey-server listening on <host>:<port>" on stdout once serving (and "tempokey-server
+// metrics on <host>:<port>" with --metrics_address), and with --port_file / --metrics_port_file
+// writes the ports there atomically, so scripts can wait for either. Exit codes: 0 after a clean
+// drain, 1 when the server cannot start, 2 for bad flags.
 #include <pthread.h>
 #include <signal.h>
 
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <memory>
 #include <span>
 #include <string>
@@ -32,13 +34,21 @@ ABSL_FLAG(int, workers, 0,
           "Worker threads running pipelines; 0: the CPUs this process may use (affinity and "
           "cgroup quota).");
 ABSL_FLAG(int, queue_capacity, 64, "Jobs waiting for a worker before submits are refused.");
+ABSL_FLAG(int64_t, memory_budget_bytes, 0,
+          "Memory for clips being received, stored clips, jobs and results, in bytes; past it "
+          "requests get RESOURCE_EXHAUSTED. 0: half the memory this process may use (physical "
+          "memory or cgroup limit).");
+ABSL_FLAG(double, stream_idle_timeout_seconds, 30,
+          "End a streaming call whose client sends nothing (or takes no message) for this long; "
+          "0: never.");
 ABSL_FLAG(int64_t, max_message_bytes, int64_t{64} << 20, "Largest message received, in bytes.");
 ABSL_FLAG(int64_t, max_clip_samples, int64_t{32} << 20,
           "Largest clip accepted, in samples (frames x channels).");
 ABSL_FLAG(int64_t, max_stored_clips, 256, "Uploaded clips kept (least recently used evicted).");
 ABSL_FLAG(int64_t, max_stored_clip_bytes, int64_t{2} << 30, "Bytes of uploaded clips kept.");
 ABSL_FLAG(int64_t, max_stored_results, 1000, "Finished jobs kept with their results.");
-ABSL_FLAG(int64_t, max_stored_result_bytes, int64_t{2} << 30, "Bytes of job results kept.");
+ABSL_FLAG(int64_t, max_stored_result_bytes, int64_t{2} << 30,
+          "Bytes of finished jobs kept: their results and operations.");
 ABSL_FLAG(int64_t, job_ttl_seconds, 3600, "Finished jobs are deleted this long after they end.");
 ABSL_FLAG(int64_t, drain_grace_seconds, 25,
           "On SIGTERM, how long queued and running jobs get to finish.");
@@ -46,7 +56,11 @@ ABSL_FLAG(int, max_concurrent_streams, 1024, "Streaming calls open at once.");
 ABSL_FLAG(int64_t, max_connection_age_seconds, 0,
           "Close connections after this long so clients rebalance; 0: never.");
 ABSL_FLAG(std::string, metrics_address, "",
-          "Serve Prometheus metrics on this address (e.g. 127.0.0.1:9464); empty: off.");
+          "Serve Prometheus metrics on this address (e.g. 127.0.0.1:9464; port 0 picks one, see "
+          "--metrics_port_file); plain HTTP, so beyond loopback it needs --allow_insecure_remote; "
+          "with --auth_token_file a scrape needs the bearer token; empty: off.");
+ABSL_FLAG(std::string, metrics_port_file, "",
+          "Write the bound metrics port to this file once serving.");
 ABSL_FLAG(std::string, tls_cert, "", "PEM certificate chain; with --tls_key enables TLS.");
 ABSL_FLAG(std::string, tls_key, "", "PEM private key of --tls_cert.");
 ABSL_FLAG(std::string, tls_client_ca, "",
@@ -55,7 +69,10 @@ ABSL_FLAG(std::string, auth_token_file, "",
           "File of accepted bearer tokens, one per line; calls need "
           "'authorization: Bearer <token>'.");
 ABSL_FLAG(bool, allow_insecure_remote, false,
-          "Allow a non-loopback --address without TLS.");
+          "Allow a non-loopback --address without TLS, and a non-loopback --metrics_address.");
+ABSL_FLAG(bool, open_reflection, false,
+          "Serve gRPC reflection to callers without a token (with --auth_token_file it otherwise "
+          "needs one).");
 ABSL_FLAG(std::string, log_level, "info", "trace, debug, info, warn, error or off.");
 ABSL_FLAG(std::string, http_address, "",
           "Serve the studio page and the HTTP/JSON API here (e.g. 127.0.0.1:8080); empty: off.");
@@ -95,6 +112,14 @@ int Run(int argc, char** argv) {
   options.address = absl::GetFlag(FLAGS_address);
   options.workers = absl::GetFlag(FLAGS_workers);
   options.queue_capacity = absl::GetFlag(FLAGS_queue_capacity);
+  options.memory_budget_bytes = absl::GetFlag(FLAGS_memory_budget_bytes);
+  const double idle_seconds = absl::GetFlag(FLAGS_stream_idle_timeout_seconds);
+  if (!(idle_seconds >= 0.0 && idle_seconds <= 1e6)) {
+    spdlog::error("--stream_idle_timeout_seconds must be in [0, 1e6], got {}", idle_seconds);
+    return 2;
+  }
+  options.stream_idle_timeout =
+      std::chrono::milliseconds(static_cast<std::int64_t>(idle_seconds * 1000.0));
   options.max_message_bytes = absl::GetFlag(FLAGS_max_message_bytes);
   options.max_clip_samples = absl::GetFlag(FLAGS_max_clip_samples);
   options.max_stored_clips = absl::GetFlag(FLAGS_max_stored_clips);
@@ -110,6 +135,7 @@ int Run(int argc, char** argv) {
   options.tls_key_file = absl::GetFlag(FLAGS_tls_key);
   options.tls_client_ca_file = absl::GetFlag(FLAGS_tls_client_ca);
   options.allow_insecure_remote = absl::GetFlag(FLAGS_allow_insecure_remote);
+  options.open_reflection = absl::GetFlag(FLAGS_open_reflection);
   if (const std::string token_file = absl::GetFlag(FLAGS_auth_token_file); !token_file.empty()) {
     absl::StatusOr<std::vector<std::string>> tokens = tempokey::server::ReadTokenFile(token_file);
     if (!tokens.ok()) {
@@ -142,21 +168,37 @@ int Run(int argc, char** argv) {
     spdlog::error("cannot start: {}", tempokey::core::AsStd(server.status().message()));
     return 1;
   }
-  const int port = (*server)->port();
-  std::string host = options.address.substr(0, options.address.rfind(':'));
   auto announce = spdlog::stdout_logger_mt("announce");
   announce->set_pattern("%v");
   announce->set_level(spdlog::level::info);  // the announcement is not subject to --log_level
-  announce->info("tempokey-server listening on {}:{}", host, port);
-  announce->flush();
-  spdlog::info("listening on {}:{}", host, port);
-  if (const std::string port_file = absl::GetFlag(FLAGS_port_file); !port_file.empty()) {
-    if (absl::Status written = tempokey::core::WriteFileAtomically(port_file, absl::StrCat(port, "\n"));
-        !written.ok()) {
-      spdlog::error("--port_file: {}", tempokey::core::AsStd(written.message()));
-      (*server)->Drain();
-      return 1;
-    }
+  // Announces "<what> on host:port" on stdout and in the log.
+  auto announce_port = [&](std::string_view what, const std::string& address, int port) {
+    const std::string host = address.substr(0, address.rfind(':'));
+    announce->info("tempokey-server {} on {}:{}", what, host, port);
+    announce->flush();
+    spdlog::info("{} on {}:{}", what, host, port);
+  };
+  // Writes `port` to `port_file` (if given).
+  auto write_port = [](int port, const std::string& port_file, std::string_view flag) {
+    if (port_file.empty()) return true;
+    absl::Status written = tempokey::core::WriteFileAtomically(port_file, absl::StrCat(port, "\n"));
+    if (!written.ok()) spdlog::error("--{}: {}", flag, tempokey::core::AsStd(written.message()));
+    return written.ok();
+  };
+  // The listening line first (scripts read the first line); both lines before the port files,
+  // and the metrics port file before the main one: once the main port file exists, everything
+  // is there to read.
+  announce_port("listening", options.address, (*server)->port());
+  bool reported = true;
+  if (!options.metrics_address.empty()) {
+    announce_port("metrics", options.metrics_address, (*server)->metrics_port());
+    reported = write_port((*server)->metrics_port(), absl::GetFlag(FLAGS_metrics_port_file),
+                          "metrics_port_file");
+  }
+  reported = reported && write_port((*server)->port(), absl::GetFlag(FLAGS_port_file), "port_file");
+  if (!reported) {
+    (*server)->Drain();
+    return 1;
   }
 
   std::unique_ptr<tempokey::server::http::HttpFrontEnd> studio;
@@ -175,11 +217,16 @@ int Run(int argc, char** argv) {
   int signal_number = 0;
   sigwait(&stop_signals, &signal_number);
   spdlog::info("received {}, draining", signal_number == SIGTERM ? "SIGTERM" : "SIGINT");
-  (*server)->Drain();
+  (*server)->Quiesce();
   if (studio != nullptr) studio->Stop();  // after the drain: HTTP calls get its answers too
-  server->reset();
+  // Nothing is left to answer. Ending the process here instead of shutting gRPC down closes the
+  // connections, which clients see as UNAVAILABLE (and retry elsewhere): gRPC's shutdown would
+  // cancel with CANCELLED any call that arrived in the meantime (its core zombifies calls it
+  // accepts after shutdown began), and clients do not retry CANCELLED.
   spdlog::info("exiting");
-  return 0;
+  spdlog::shutdown();
+  std::fflush(nullptr);
+  std::_Exit(0);
 }
 
 }  // namespace

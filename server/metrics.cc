@@ -1,9 +1,13 @@
 #include "server/metrics.h"
 
 #include <exception>
+#include <map>
+#include <mutex>
 #include <utility>
 #include <vector>
 
+#include "CivetServer.h"
+#include "civetweb.h"
 #include "absl/strings/str_cat.h"
 #include "prometheus/client_metric.h"
 #include "prometheus/collectable.h"
@@ -50,12 +54,62 @@ class GaugeCollectable : public prometheus::Collectable {
       add("tempokey_stored_clips", "Uploaded clips the server holds.",
           static_cast<double>(sources_.stored_clips()));
     }
+    if (sources_.memory_budget) {
+      add("tempokey_memory_budget_bytes", "The server's memory budget (--memory_budget_bytes).",
+          static_cast<double>(sources_.memory_budget()));
+    }
+    if (sources_.memory_used) {
+      prometheus::MetricFamily family;
+      family.name = "tempokey_memory_used_bytes";
+      family.help = "Bytes of the memory budget in use, by what holds them.";
+      family.type = prometheus::MetricType::Gauge;
+      for (const auto& [use, bytes] : sources_.memory_used()) {
+        prometheus::ClientMetric metric;
+        metric.label.push_back({"use", use});
+        metric.gauge.value = static_cast<double>(bytes);
+        family.metric.push_back(std::move(metric));
+      }
+      families.push_back(std::move(family));
+    }
     return families;
   }
 
  private:
   MetricsGaugeSources sources_;
 };
+
+// CivetWeb calls begin_request with its own server as user data, so the auth check of each
+// listening port is found here. Keyed by port: one Metrics per port at a time.
+std::mutex g_auth_mu;
+std::map<int, MetricsAuthCheck>& AuthChecks() {
+  static auto* checks = new std::map<int, MetricsAuthCheck>();
+  return *checks;
+}
+
+// Answers 401 (and ends the request) unless the check of the connection's port accepts it. A
+// port without a check yet (the instant between binding and registering) is refused too.
+int CheckRequest(struct mg_connection* connection) {
+  mg_server_port ports[4];
+  const int count = mg_get_server_ports(mg_get_context(connection), 4, ports);
+  MetricsAuthCheck check;
+  {
+    std::lock_guard lock(g_auth_mu);
+    for (int i = 0; i < count && !check; ++i) {
+      auto it = AuthChecks().find(ports[i].port);
+      if (it != AuthChecks().end()) check = it->second;
+    }
+  }
+  const absl::Status status =
+      check ? check(mg_get_header(connection, "Authorization"))
+            : absl::UnauthenticatedError("the metrics endpoint is not ready");
+  if (status.ok()) return 0;  // CivetWeb goes on and serves it
+  const std::string body = absl::StrCat(status.message(), "\n");
+  mg_printf(connection,
+            "HTTP/1.1 401 Unauthorized\r\nWWW-Authenticate: Bearer\r\n"
+            "Content-Type: text/plain\r\nContent-Length: %zu\r\nConnection: close\r\n\r\n%s",
+            body.size(), body.c_str());
+  return 401;
+}
 
 }  // namespace
 
@@ -67,18 +121,39 @@ struct Metrics::Impl {
   prometheus::Family<prometheus::Histogram>* latency = nullptr;
   prometheus::Counter* bytes_in = nullptr;
   prometheus::Counter* bytes_out = nullptr;
+  int auth_port = 0;  // registered in AuthChecks(), 0: none
 };
 
 absl::StatusOr<std::unique_ptr<Metrics>> Metrics::Start(const std::string& address,
-                                                        MetricsGaugeSources gauges) {
+                                                        MetricsGaugeSources gauges,
+                                                        MetricsAuthCheck check_auth) {
   auto impl = std::make_unique<Impl>();
+  // CivetWeb options (its user manual): several threads, and a connection that has not sent its
+  // request within the timeout is closed; no keep-alive, so a scraper holds no thread between
+  // scrapes.
+  std::vector<std::string> options = {
+      "listening_ports",    address,
+      "num_threads",        absl::StrCat(kMetricsThreads),
+      "request_timeout_ms", absl::StrCat(kMetricsRequestTimeoutMs),
+      "enable_keep_alive",  "no",
+  };
+  CivetCallbacks callbacks{};
+  if (check_auth) callbacks.begin_request = &CheckRequest;
   // prometheus-cpp (CivetWeb) reports a failed bind by throwing; this is the boundary where it
   // becomes a status.
   try {
-    impl->exposer = std::make_unique<prometheus::Exposer>(address, 1);
+    impl->exposer = std::make_unique<prometheus::Exposer>(std::move(options), &callbacks);
   } catch (const std::exception& e) {
     return absl::UnavailableError(
         absl::StrCat("cannot serve metrics on ", address, ": ", e.what()));
+  }
+  if (check_auth) {
+    const std::vector<int> ports = impl->exposer->GetListeningPorts();
+    if (!ports.empty()) {
+      impl->auth_port = ports.front();
+      std::lock_guard lock(g_auth_mu);
+      AuthChecks()[impl->auth_port] = std::move(check_auth);
+    }
   }
   impl->jobs = &prometheus::BuildCounter()
                     .Name("tempokey_jobs_total")
@@ -103,8 +178,12 @@ absl::StatusOr<std::unique_ptr<Metrics>> Metrics::Start(const std::string& addre
 Metrics::Metrics(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 
 Metrics::~Metrics() {
-  // Stop serving before the registry and collectables go away.
+  // Stop serving before the registry, collectables and auth check go away.
   impl_->exposer.reset();
+  if (impl_->auth_port != 0) {
+    std::lock_guard lock(g_auth_mu);
+    AuthChecks().erase(impl_->auth_port);
+  }
 }
 
 int Metrics::port() const {

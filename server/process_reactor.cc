@@ -1,6 +1,10 @@
 // Process: clip header, sample slices and ProcessStart in; Progress and ResultPart out. The
 // pipeline runs on the JobPool like a job, but nothing is stored: the call owns its clip and
 // result, and ending the call (or the client cancelling) stops the pipeline between channels.
+// The clip and the result are charged to the server's memory budget while the call holds them.
+// Messages after ProcessStart are refused (INVALID_ARGUMENT, the pipeline stopped): a Process
+// call takes one clip and one start. A client silent for the idle timeout before its start, or
+// not taking a result message for that long, loses the call.
 #include <chrono>
 #include <cmath>
 #include <memory>
@@ -13,15 +17,17 @@
 #include "proto/clip_convert.h"
 #include "proto/jobs_convert.h"
 #include "server/job_proto.h"
+#include "server/memory_size.h"
 #include "server/reactors.h"
 #include "server/status_util.h"
+#include "server/wire_codec.h"
 #include "spdlog/spdlog.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::server {
 namespace {
 
-using ProcessReactorBase = grpc::ServerBidiReactor<v1::ProcessRequest, v1::ProcessResponse>;
+using ProcessReactorBase = grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>;
 
 // State shared by the reactor (gRPC threads) and the worker running the pipeline; outlives the
 // reactor while the worker holds it.
@@ -31,10 +37,11 @@ class ProcessLink final {
               grpc::CallbackServerContext* call)
       : service_(service), reactor_(reactor), call_(call) {}
 
-  // Sets what the worker runs; before the task is queued.
-  void Prepare(core::Clip clip, std::vector<core::PipelineStep> steps, std::int64_t slice_bytes,
-               bool batch_parts) {
+  // Sets what the worker runs; before the task is queued. `clip_memory` counts the clip.
+  void Prepare(core::Clip clip, MemoryBudget::Reservation clip_memory,
+               std::vector<core::PipelineStep> steps, std::int64_t slice_bytes, bool batch_parts) {
     clip_ = std::move(clip);
+    clip_memory_ = std::move(clip_memory);
     steps_ = std::move(steps);
     slice_bytes_ = slice_bytes;
     batch_parts_ = batch_parts;
@@ -57,6 +64,7 @@ class ProcessLink final {
         [this](double fraction, std::string_view stage) { OnProgress(fraction, stage); },
         stop_.get_token(), service_->clip_limits);
     clip_ = core::Clip();  // the input is no longer needed while the result streams out
+    clip_memory_.Release();
     const auto ended = std::chrono::steady_clock::now();
     const std::string outcome = result.ok()                                             ? "succeeded"
                                 : result.status().code() == absl::StatusCode::kCancelled ? "cancelled"
@@ -74,6 +82,7 @@ class ProcessLink final {
   }
 
   void OnWriteDone(bool ok) {
+    if (idle_ != nullptr) idle_->Disarm();
     std::lock_guard lock(mu_);
     writing_ = false;
     if (finished_) return;
@@ -103,6 +112,25 @@ class ProcessLink final {
     }
   }
 
+  // As FinishNow(), also stopping a queued or running pipeline.
+  void Abort(const absl::Status& status) {
+    stop_.request_stop();
+    FinishNow(status);
+  }
+
+  bool finished() {
+    std::lock_guard lock(mu_);
+    return finished_ || end_status_.has_value();
+  }
+
+  // Armed while a result message is being written; set before the task is queued.
+  void SetIdleTimer(std::shared_ptr<IdleReaper::Timer> idle) { idle_ = std::move(idle); }
+  // The reactor's stream slot, released when the call answers; valid until then.
+  void SetSlot(StreamSlot* slot) {
+    std::lock_guard lock(mu_);
+    slot_ = slot;
+  }
+
  private:
   void OnProgress(double fraction, std::string_view stage) {
     std::lock_guard lock(mu_);
@@ -119,6 +147,19 @@ class ProcessLink final {
   }
 
   void OnResult(absl::StatusOr<core::PipelineResult> result) {
+    // The result exists already: it is streamed only if the budget can count it.
+    std::shared_ptr<const core::PipelineResult> shared;
+    if (result.ok()) {
+      absl::StatusOr<MemoryBudget::Reservation> memory =
+          ReserveMemory(*service_, MemoryUse::kProcess, "a Process result");
+      absl::Status charged =
+          memory.ok() ? memory->Grow(PipelineResultBytes(*result)) : memory.status();
+      if (charged.ok()) {
+        shared = ShareWithReservation(*std::move(result), *std::move(memory));
+      } else {
+        result = charged;
+      }
+    }
     std::lock_guard lock(mu_);
     if (finished_) return;
     result_ready_ = true;
@@ -126,8 +167,7 @@ class ProcessLink final {
     if (!result.ok()) {
       end_status_ = result.status();
     } else {
-      slicer_.emplace(std::make_shared<const core::PipelineResult>(*std::move(result)),
-                      slice_bytes_, batch_parts_);
+      slicer_.emplace(std::move(shared), slice_bytes_, batch_parts_);
     }
     if (writing_) return;
     if (end_status_) {
@@ -151,13 +191,16 @@ class ProcessLink final {
       return;  // nothing to say yet
     }
     writing_ = true;
-    service_->BytesOut(static_cast<std::int64_t>(message_.ByteSizeLong()));
-    reactor_->StartWrite(&message_);
+    SerializeMessage(message_, &buffer_);
+    service_->BytesOut(static_cast<std::int64_t>(buffer_.Length()));
+    if (idle_ != nullptr) idle_->Arm();
+    reactor_->StartWrite(&buffer_);
   }
 
   void FinishLocked(const absl::Status& status) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
     finished_ = true;
     slicer_.reset();
+    if (slot_ != nullptr) slot_->Release();
     reactor_->Finish(ToGrpcStatus(status, call_));
     reactor_ = nullptr;
   }
@@ -165,6 +208,7 @@ class ProcessLink final {
   ServiceContext* const service_;
   // Worker-side inputs: written by Prepare() before the task is queued, read by Run().
   core::Clip clip_;
+  MemoryBudget::Reservation clip_memory_;
   std::vector<core::PipelineStep> steps_;
   std::int64_t slice_bytes_ = 0;
   bool batch_parts_ = false;
@@ -183,57 +227,95 @@ class ProcessLink final {
   std::optional<v1::Progress> pending_progress_ ABSL_GUARDED_BY(mu_);
   std::optional<wire::ResultSlicer> slicer_ ABSL_GUARDED_BY(mu_);
   std::optional<absl::Status> end_status_ ABSL_GUARDED_BY(mu_);
-  v1::ProcessResponse message_ ABSL_GUARDED_BY(mu_);  // the write in flight
+  v1::ProcessResponse message_ ABSL_GUARDED_BY(mu_);
+  grpc::ByteBuffer buffer_ ABSL_GUARDED_BY(mu_);  // the write in flight
+  std::shared_ptr<IdleReaper::Timer> idle_;
+  StreamSlot* slot_ ABSL_GUARDED_BY(mu_) = nullptr;
 };
 
 class ProcessReactor final : public ProcessReactorBase {
  public:
   ProcessReactor(ServiceContext* service, grpc::CallbackServerContext* call)
-      : service_(service),
-        link_(std::make_shared<ProcessLink>(service, this, call)),
-        assembler_(service->clip_limits) {
-    absl::Status admitted = service_->CheckAuth(*call);
-    if (admitted.ok()) admitted = service_->AdmitStream();
+      : service_(service), call_(call), link_(std::make_shared<ProcessLink>(service, this, call)) {
+    absl::Status admitted = Admit();
     if (!admitted.ok()) {
       link_->FinishNow(admitted);
       return;
     }
-    holds_stream_ = true;
-    StartRead(&request_);
+    if (service_->idle != nullptr) {
+      // Before the start: the client's next message is due. After it: the client must take the
+      // result messages (a write outstanding for the whole timeout cancels the call).
+      read_idle_ = service_->idle->NewTimer([this] {
+        link_->FinishNow(IdleError("Process", service_->idle->timeout()));
+      });
+      write_idle_ = service_->idle->NewTimer([call] { call->TryCancel(); });
+      link_->SetIdleTimer(write_idle_);
+    }
+    Read();
   }
 
   void OnReadDone(bool ok) override {
+    if (read_idle_ != nullptr) read_idle_->Disarm();
     if (!ok) {
-      link_->FinishNow(absl::InvalidArgumentError(
-          "the Process stream ended before ProcessStart (send header, samples, then start)"));
+      // After the start a half-close is the normal end of the client's side.
+      if (!started_) {
+        link_->FinishNow(absl::InvalidArgumentError(
+            "the Process stream ended before ProcessStart (send header, samples, then start)"));
+      }
       return;
     }
     ++messages_;
-    service_->BytesIn(static_cast<std::int64_t>(request_.ByteSizeLong()));
-    absl::Status status = Accept();
+    service_->BytesIn(static_cast<std::int64_t>(buffer_.Length()));
+    if (started_) {
+      link_->Abort(absl::InvalidArgumentError(absl::StrCat(
+          "Process message ", messages_,
+          " arrived after ProcessStart; a Process call takes one clip and one start, then the "
+          "client only reads")));
+      return;
+    }
+    absl::Status status =
+        ParseMessage(buffer_, absl::StrCat("Process message ", messages_), &request_);
+    if (status.ok()) status = Accept();
     if (!status.ok()) {
       link_->FinishNow(status);
       return;
     }
-    if (!started_) StartRead(&request_);
+    if (!link_->finished()) Read();
   }
 
   void OnWriteDone(bool ok) override { link_->OnWriteDone(ok); }
   void OnCancel() override { link_->OnCancel(); }
   void OnDone() override {
-    if (holds_stream_) service_->CloseStream();
+    if (read_idle_ != nullptr) read_idle_->Close();
+    if (write_idle_ != nullptr) write_idle_->Close();
     delete this;
   }
 
  private:
+  absl::Status Admit() {
+    TEMPOKEY_RETURN_IF_ERROR(service_->CheckAuth(*call_));
+    TEMPOKEY_ASSIGN_OR_RETURN(clip_memory_,
+                              ReserveMemory(*service_, MemoryUse::kProcess, "a Process clip"));
+    assembler_.emplace(service_->clip_limits, ChargeTo(&clip_memory_));
+    TEMPOKEY_RETURN_IF_ERROR(slot_.Claim(*service_));
+    link_->SetSlot(&slot_);
+    return absl::OkStatus();
+  }
+
+  void Read() {
+    // Only the input phase waits on the client: after the start it may keep its side open.
+    if (read_idle_ != nullptr && !started_) read_idle_->Arm();
+    StartRead(&buffer_);
+  }
+
   absl::Status Accept() {
     switch (request_.part_case()) {
       case v1::ProcessRequest::kHeader:
-        return assembler_.AddHeader(request_.header());
+        return assembler_->AddHeader(request_.header());
       case v1::ProcessRequest::kSamples:
-        return assembler_.AddSamples(request_.samples());
+        return assembler_->AddSamples(request_.samples());
       case v1::ProcessRequest::kSampleSlices:
-        return assembler_.AddSampleSlices(request_.sample_slices());
+        return assembler_->AddSampleSlices(request_.sample_slices());
       case v1::ProcessRequest::kStart:
         return Start(request_.start());
       case v1::ProcessRequest::PART_NOT_SET:
@@ -248,7 +330,7 @@ class ProcessReactor final : public ProcessReactorBase {
       return absl::InvalidArgumentError(
           absl::StrCat("start.slice_bytes must be >= 0 (0: 1 MiB), got ", start.slice_bytes()));
     }
-    if (!assembler_.has_header()) {
+    if (!assembler_->has_header()) {
       return absl::InvalidArgumentError("ProcessStart arrived before the clip header");
     }
     // A call opened before the drain began starts no new work during it: clients retry
@@ -256,10 +338,14 @@ class ProcessReactor final : public ProcessReactorBase {
     if (service_->draining.load()) {
       return absl::UnavailableError("the server is shutting down and accepts no new jobs");
     }
-    TEMPOKEY_ASSIGN_OR_RETURN(core::Clip clip, std::move(assembler_).Finish());
+    TEMPOKEY_ASSIGN_OR_RETURN(core::Clip clip, std::move(*assembler_).Finish());
+    assembler_.reset();
     TEMPOKEY_ASSIGN_OR_RETURN(std::vector<core::PipelineStep> steps,
                               PrepareSteps(start.operations(), clip, service_->clip_limits));
-    link_->Prepare(std::move(clip), std::move(steps), start.slice_bytes(), start.batch_parts());
+    clip_memory_.Settle(ClipBytes(clip));
+    link_->Prepare(std::move(clip), std::move(clip_memory_), std::move(steps), start.slice_bytes(),
+                   start.batch_parts());
+    started_ = true;
     absl::Status queued = service_->pool->TrySubmit(
         [link = link_](std::stop_token pool_stop) { link->Run(std::move(pool_stop)); });
     if (!queued.ok()) {
@@ -268,22 +354,27 @@ class ProcessReactor final : public ProcessReactorBase {
       }
       return queued;
     }
-    started_ = true;
     return absl::OkStatus();
   }
 
   ServiceContext* const service_;
+  grpc::CallbackServerContext* const call_;
   const std::shared_ptr<ProcessLink> link_;
-  bool holds_stream_ = false;
+  std::shared_ptr<IdleReaper::Timer> read_idle_;
+  std::shared_ptr<IdleReaper::Timer> write_idle_;
+  StreamSlot slot_;
   bool started_ = false;
   std::int64_t messages_ = 0;
+  grpc::ByteBuffer buffer_;
   v1::ProcessRequest request_;
-  wire::ClipAssembler assembler_;
+  // Declared before the assembler, which charges it.
+  MemoryBudget::Reservation clip_memory_;
+  std::optional<wire::ClipAssembler> assembler_;
 };
 
 }  // namespace
 
-grpc::ServerBidiReactor<v1::ProcessRequest, v1::ProcessResponse>* NewProcessReactor(
+grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* NewProcessReactor(
     ServiceContext* service, grpc::CallbackServerContext* call) {
   return new ProcessReactor(service, call);
 }

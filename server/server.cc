@@ -1,23 +1,33 @@
 #include "server/server.h"
 
+#include <openssl/err.h>
+#include <openssl/pem.h>
+#include <openssl/x509.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <thread>
 #include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
-#include "grpcpp/ext/proto_server_reflection_plugin.h"
 #include "grpcpp/health_check_service_interface.h"
+#include "grpcpp/impl/server_builder_option.h"
+#include "grpcpp/impl/server_builder_plugin.h"
 #include "grpcpp/security/server_credentials.h"
 #include "grpcpp/server.h"
 #include "grpcpp/server_builder.h"
 #include "server/clip_store.h"
+#include "server/idle_reaper.h"
 #include "server/job_manager.h"
 #include "server/job_pool.h"
+#include "server/memory_budget.h"
 #include "server/metrics.h"
 #include "server/motion_service.h"
 #include "server/reactors.h"
+#include "server/reflection_service.h"
 #include "server/service_context.h"
 #include "spdlog/spdlog.h"
 #include "tempokey/core/io/file_io.h"
@@ -26,7 +36,8 @@
 namespace tempokey::server {
 namespace {
 
-// Calls still open when the gRPC server shuts down get this long before they are cancelled.
+// Streaming calls still open once the jobs are done get this long to end, and calls still open
+// when the gRPC server shuts down get this long again before they are cancelled.
 constexpr std::chrono::seconds kShutdownCallDeadline{2};
 // After the grace period, cancelled jobs get this long to notice (they check between channels).
 constexpr std::chrono::seconds kCancelSettleTime{10};
@@ -40,6 +51,38 @@ absl::StatusOr<std::string> ReadPem(std::string_view flag, const std::string& pa
   return pem;
 }
 
+// The first certificate of `cert_pem` and the key of `key_pem` parse, and the key is the
+// certificate's (gRPC would only fail the bind, with no reason given).
+absl::Status CheckKeyPair(const ServerOptions& o, const std::string& cert_pem,
+                          const std::string& key_pem) {
+  auto bio_of = [](const std::string& pem) {
+    return std::unique_ptr<BIO, decltype(&BIO_free)>(
+        BIO_new_mem_buf(pem.data(), static_cast<int>(pem.size())), &BIO_free);
+  };
+  auto cert_bio = bio_of(cert_pem);
+  std::unique_ptr<X509, decltype(&X509_free)> cert(
+      PEM_read_bio_X509(cert_bio.get(), nullptr, nullptr, nullptr), &X509_free);
+  auto key_bio = bio_of(key_pem);
+  std::unique_ptr<EVP_PKEY, decltype(&EVP_PKEY_free)> key(
+      PEM_read_bio_PrivateKey(key_bio.get(), nullptr, nullptr, nullptr), &EVP_PKEY_free);
+  const bool matches = cert != nullptr && key != nullptr && X509_check_private_key(cert.get(), key.get()) == 1;
+  ERR_clear_error();
+  if (cert == nullptr) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("--tls_cert ", o.tls_cert_file, ": holds no PEM certificate"));
+  }
+  if (key == nullptr) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "--tls_key ", o.tls_key_file, ": holds no PEM private key (or it is encrypted)"));
+  }
+  if (!matches) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "--tls_key ", o.tls_key_file, " is not the private key of the certificate in --tls_cert ",
+        o.tls_cert_file));
+  }
+  return absl::OkStatus();
+}
+
 absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> BuildCredentials(const ServerOptions& o) {
   if (o.tls_cert_file.empty()) return grpc::InsecureServerCredentials();
   grpc::SslServerCredentialsOptions ssl(o.tls_client_ca_file.empty()
@@ -48,12 +91,26 @@ absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> BuildCredentials(const 
   grpc::SslServerCredentialsOptions::PemKeyCertPair pair;
   TEMPOKEY_ASSIGN_OR_RETURN(pair.cert_chain, ReadPem("tls_cert", o.tls_cert_file));
   TEMPOKEY_ASSIGN_OR_RETURN(pair.private_key, ReadPem("tls_key", o.tls_key_file));
+  TEMPOKEY_RETURN_IF_ERROR(CheckKeyPair(o, pair.cert_chain, pair.private_key));
   ssl.pem_key_cert_pairs.push_back(std::move(pair));
   if (!o.tls_client_ca_file.empty()) {
     TEMPOKEY_ASSIGN_OR_RETURN(ssl.pem_root_certs, ReadPem("tls_client_ca", o.tls_client_ca_file));
   }
   return grpc::SslServerCredentials(ssl);
 }
+
+// libgrpc++_reflection installs gRPC's own reflection service in every server it is linked into
+// (a static initializer registers its plugin), and that service cannot check a token. This
+// option takes the plugin out of our builder; ReflectionService serves the protocol instead.
+class WithoutStockReflection final : public grpc::ServerBuilderOption {
+ public:
+  void UpdateArguments(grpc::ChannelArguments*) override {}
+  void UpdatePlugins(std::vector<std::unique_ptr<grpc::ServerBuilderPlugin>>* plugins) override {
+    std::erase_if(*plugins, [](const std::unique_ptr<grpc::ServerBuilderPlugin>& plugin) {
+      return plugin->name() == "proto_server_reflection";
+    });
+  }
+};
 
 std::string_view Outcome(JobState state) {
   switch (state) {
@@ -128,14 +185,27 @@ std::vector<std::string> ProbeOperations() {
 
 absl::StatusOr<std::unique_ptr<Server>> Server::Start(ServerOptions options) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateServerOptions(options));
+  // TLS files are checked before anything starts, so a bad pair is reported as such.
+  TEMPOKEY_ASSIGN_OR_RETURN(std::shared_ptr<grpc::ServerCredentials> credentials,
+                            BuildCredentials(options));
   std::unique_ptr<Server> server(new Server());
   const int workers = options.workers > 0 ? options.workers : DefaultWorkerCount();
+  const std::int64_t budget =
+      options.memory_budget_bytes > 0 ? options.memory_budget_bytes : DefaultMemoryBudget();
+  options.memory_budget_bytes = budget;
+  server->budget_ = std::make_unique<MemoryBudget>(budget);
+  server->idle_ = std::make_unique<IdleReaper>(options.stream_idle_timeout);
   server->pool_ = std::make_unique<JobPool>(workers, options.queue_capacity);
   server->clips_ = std::make_unique<ClipStore>(options.max_stored_clips,
                                                options.max_stored_clip_bytes);
   server->context_ = std::make_unique<ServiceContext>();
   ServiceContext* context = server->context_.get();
   context->options = options;
+  context->budget = server->budget_.get();
+  context->idle = server->idle_.get();
+  for (const std::string& token : options.auth_tokens) {
+    context->owner_ids.push_back(OwnerIdOfToken(token));
+  }
   context->clip_limits.max_samples = options.max_clip_samples;
   context->clip_limits.max_frames = std::min(context->clip_limits.max_frames, options.max_clip_samples);
   context->clip_limits.max_channels =
@@ -146,6 +216,7 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(ServerOptions options) {
   job_options.max_stored_result_bytes = options.max_stored_result_bytes;
   job_options.job_ttl = options.job_ttl;
   job_options.output_limits = context->clip_limits;
+  job_options.budget = server->budget_.get();
   job_options.on_job_start = options.test_hooks.on_job_start;
   job_options.on_job_end = [context](const JobSnapshot& job, std::chrono::duration<double> wait,
                                      std::chrono::duration<double> run) {
@@ -163,30 +234,57 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(ServerOptions options) {
   context->jobs = server->jobs_.get();
   context->clips = server->clips_.get();
   context->operations = ProbeOperations();
+  // Caches give memory back when the budget is short: stored clips first (a client can upload
+  // again), then finished jobs, oldest first.
+  ClipStore* clip_store = server->clips_.get();
+  JobManager* job_manager = server->jobs_.get();
+  server->budget_->AddReclaimer([clip_store](std::int64_t wanted) { clip_store->Reclaim(wanted); });
+  server->budget_->AddReclaimer(
+      [job_manager](std::int64_t wanted) { job_manager->ReclaimFinished(wanted); });
 
   if (!options.metrics_address.empty()) {
     JobPool* pool = server->pool_.get();
     JobManager* jobs = server->jobs_.get();
     ClipStore* clips = server->clips_.get();
+    MemoryBudget* memory = server->budget_.get();
+    MetricsAuthCheck check_auth;
+    if (!options.auth_tokens.empty()) {
+      check_auth = [context](const char* header) { return context->CheckBearer(header); };
+    }
     TEMPOKEY_ASSIGN_OR_RETURN(
         server->metrics_,
-        Metrics::Start(options.metrics_address,
-                       MetricsGaugeSources{.queue_depth = [pool] { return pool->queue_depth(); },
-                                           .running = [pool] { return pool->running(); },
-                                           .stored_jobs = [jobs] { return jobs->job_count(); },
-                                           .stored_clips = [clips] { return clips->size(); }}));
+        Metrics::Start(
+            options.metrics_address,
+            MetricsGaugeSources{
+                .queue_depth = [pool] { return pool->queue_depth(); },
+                .running = [pool] { return pool->running(); },
+                .stored_jobs = [jobs] { return jobs->job_count(); },
+                .stored_clips = [clips] { return clips->size(); },
+                .memory_budget = [memory] { return memory->capacity(); },
+                .memory_used =
+                    [memory] {
+                      std::vector<std::pair<std::string, std::int64_t>> used;
+                      for (int i = 0; i < kMemoryUseCount; ++i) {
+                        const auto use = static_cast<MemoryUse>(i);
+                        used.emplace_back(std::string(MemoryUseName(use)), memory->used(use));
+                      }
+                      return used;
+                    }},
+            std::move(check_auth)));
     context->metrics = server->metrics_.get();
   }
 
   server->service_ = std::make_unique<MotionService>(context);
-  TEMPOKEY_ASSIGN_OR_RETURN(std::shared_ptr<grpc::ServerCredentials> credentials,
-                            BuildCredentials(options));
+  server->reflection_ = std::make_unique<ReflectionService>(
+      context, std::vector<std::string>{kMotionServiceName, "grpc.health.v1.Health",
+                                        "grpc.reflection.v1alpha.ServerReflection"});
   grpc::EnableDefaultHealthCheckService(true);
-  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
   builder.AddListeningPort(options.address, credentials, &server->port_);
   builder.SetMaxReceiveMessageSize(static_cast<int>(options.max_message_bytes));
   builder.RegisterService(server->service_.get());
+  builder.RegisterCallbackGenericService(server->reflection_.get());
+  builder.SetOption(std::make_unique<WithoutStockReflection>());
   if (options.max_connection_age.count() > 0) {
     builder.AddChannelArgument(GRPC_ARG_MAX_CONNECTION_AGE_MS,
                                static_cast<int>(options.max_connection_age.count() * 1000));
@@ -201,10 +299,11 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(ServerOptions options) {
   grpc::HealthCheckServiceInterface* health = server->grpc_server_->GetHealthCheckService();
   health->SetServingStatus("", true);
   health->SetServingStatus(kMotionServiceName, true);
-  spdlog::info("serving on port {} workers={} queue_capacity={} tls={} mtls={} auth_tokens={} "
-               "operations={}",
-               server->port_, workers, options.queue_capacity, !options.tls_cert_file.empty(),
-               !options.tls_client_ca_file.empty(), options.auth_tokens.size(),
+  spdlog::info("serving on port {} workers={} queue_capacity={} memory_budget_bytes={} tls={} "
+               "mtls={} auth_tokens={} open_reflection={} operations={}",
+               server->port_, workers, options.queue_capacity, budget,
+               !options.tls_cert_file.empty(), !options.tls_client_ca_file.empty(),
+               options.auth_tokens.size(), options.open_reflection,
                absl::StrJoin(context->operations, ","));
   return server;
 }
@@ -228,12 +327,9 @@ std::shared_ptr<grpc::Channel> Server::InProcessChannel(const grpc::ChannelArgum
   return grpc_server_->InProcessChannel(args);
 }
 
-void Server::Drain() {
-  std::call_once(drain_once_, [this] {
-    if (grpc_server_ == nullptr) {  // Start() failed half way
-      if (pool_ != nullptr) pool_->Shutdown();
-      return;
-    }
+void Server::Quiesce() {
+  std::call_once(quiesce_once_, [this] {
+    if (grpc_server_ == nullptr) return;  // Start() failed half way
     const auto grace = context_->options.drain_grace;
     spdlog::info("draining: not ready, refusing new work, closing watches; {} queued and {} "
                  "running get {} s to finish",
@@ -248,10 +344,24 @@ void Server::Drain() {
       pool_->RequestStopAll();
       pool_->WaitIdle(std::chrono::steady_clock::now() + kCancelSettleTime);
     }
-    grpc_server_->Shutdown(std::chrono::system_clock::now() + kShutdownCallDeadline);
-    grpc_server_->Wait();
-    pool_->Shutdown();
-    spdlog::info("drained");
+    // Results still streaming (downloads, Process answers) finish while gRPC still serves.
+    const auto streams_deadline = std::chrono::steady_clock::now() + kShutdownCallDeadline;
+    while (context_->open_streams.load() > 0 &&
+           std::chrono::steady_clock::now() < streams_deadline) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    spdlog::info("drained: {} streaming calls still open", context_->open_streams.load());
+  });
+}
+
+void Server::Drain() {
+  std::call_once(drain_once_, [this] {
+    Quiesce();
+    if (grpc_server_ != nullptr) {
+      grpc_server_->Shutdown(std::chrono::system_clock::now() + kShutdownCallDeadline);
+      grpc_server_->Wait();
+    }
+    if (pool_ != nullptr) pool_->Shutdown();
   });
 }
 

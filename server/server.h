@@ -20,10 +20,13 @@ class Server;
 namespace tempokey::server {
 
 class ClipStore;
+class IdleReaper;
 class JobManager;
 class JobPool;
+class MemoryBudget;
 class Metrics;
 class MotionService;
+class ReflectionService;
 struct ServiceContext;
 
 // The name health checks use for readiness.
@@ -38,8 +41,9 @@ class Server {
  public:
   // Validates `options`, starts the workers, binds the address and starts serving; health says
   // SERVING for "" (live) and kMotionServiceName (ready).
-  // Errors: kInvalidArgument bad options; kUnavailable when the address or the metrics address
-  // cannot be bound or a TLS file cannot be read.
+  // Errors: kInvalidArgument bad options, a TLS file that cannot be read or holds no PEM
+  // certificate or key, a key that does not match its certificate; kUnavailable when the address
+  // or the metrics address cannot be bound.
   static absl::StatusOr<std::unique_ptr<Server>> Start(ServerOptions options);
   // Drain() with what is left of the grace period, if it has not run.
   ~Server();
@@ -58,13 +62,20 @@ class Server {
   // Streaming calls open now (uploads, watches, results, Process); tests check nothing leaks.
   int open_streams() const;
   JobPool& pool() { return *pool_; }
+  MemoryBudget& budget() { return *budget_; }
 
-  // Graceful stop (SPEC 5): readiness goes NOT_SERVING; new jobs, uploads, watches and Process
-  // calls get UNAVAILABLE; open watches end with UNAVAILABLE; queued and running jobs get
-  // options.drain_grace to finish, then are cancelled; then the gRPC server shuts down (calls
-  // still open get a short deadline) and the workers stop. Blocks until done. Idempotent and
-  // thread-safe (a second caller waits for the first to finish). Never call it from a signal
-  // handler: main.cc waits for signals on a normal thread.
+  // Graceful stop, first part (SPEC 5): readiness goes NOT_SERVING; new jobs, uploads, watches
+  // and Process calls get UNAVAILABLE; open watches end with UNAVAILABLE; queued and running jobs
+  // get options.drain_grace to finish, then are cancelled; streaming calls still open (result
+  // downloads, Process results) get a short while to end. gRPC keeps serving throughout, so
+  // every call that arrives is answered (UNAVAILABLE for new work). Blocks until done.
+  // Idempotent and thread-safe. Never call it from a signal handler: main.cc waits for signals
+  // on a normal thread.
+  void Quiesce();
+  // Quiesce(), then the gRPC server shuts down (calls still open get a short deadline) and the
+  // workers stop. gRPC cancels with CANCELLED any call it accepts after its shutdown began, so
+  // tempokey-server ends its process after Quiesce() instead (connections then close, which
+  // clients see as UNAVAILABLE); in-process servers (tests, benchmarks) use this.
   void Drain();
 
   // A channel to this server that skips the network (benchmarks, tests).
@@ -74,13 +85,18 @@ class Server {
   Server() = default;
 
   int port_ = 0;
+  // First, so it outlives everything that holds a reservation.
+  std::unique_ptr<MemoryBudget> budget_;
+  std::unique_ptr<IdleReaper> idle_;
   std::unique_ptr<JobPool> pool_;
   std::unique_ptr<JobManager> jobs_;
   std::unique_ptr<ClipStore> clips_;
   std::unique_ptr<Metrics> metrics_;
   std::unique_ptr<ServiceContext> context_;
   std::unique_ptr<MotionService> service_;
+  std::unique_ptr<ReflectionService> reflection_;
   std::unique_ptr<grpc::Server> grpc_server_;
+  std::once_flag quiesce_once_;
   std::once_flag drain_once_;
 };
 

@@ -1,6 +1,11 @@
 #include "server/server_options.h"
 
+#include <arpa/inet.h>
+#include <netdb.h>
+#include <netinet/in.h>
 #include <sched.h>
+#include <sys/socket.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cctype>
@@ -10,6 +15,8 @@
 #include <string>
 
 #include "absl/status/statusor.h"
+#include "absl/strings/ascii.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "tempokey/core/model/status.h"
 
@@ -107,19 +114,130 @@ absl::StatusOr<std::vector<std::string>> ReadTokenFile(const std::string& path) 
   return tokens;
 }
 
-bool IsLoopbackAddress(std::string_view address) {
-  if (address.rfind("unix:", 0) == 0 || address.rfind("unix-abstract:", 0) == 0) return true;
-  std::string_view host = address;
-  if (!host.empty() && host.front() == '[') {
-    const std::size_t close = host.find(']');
-    if (close == std::string_view::npos) return false;
-    host = host.substr(1, close - 1);
-  } else if (const std::size_t colon = host.rfind(':');
-             colon != std::string_view::npos && host.find(':') == colon) {
-    host = host.substr(0, colon);  // "host:port" (a bare IPv6 address has several colons)
+namespace {
+
+bool IsLoopbackSockaddr(const sockaddr* address) {
+  if (address->sa_family == AF_INET) {
+    const auto* v4 = reinterpret_cast<const sockaddr_in*>(address);
+    return (ntohl(v4->sin_addr.s_addr) >> 24) == 127;
   }
-  if (host == "localhost" || host == "::1") return true;
-  return host.rfind("127.", 0) == 0;
+  if (address->sa_family == AF_INET6) {
+    const in6_addr& v6 = reinterpret_cast<const sockaddr_in6*>(address)->sin6_addr;
+    if (IN6_IS_ADDR_LOOPBACK(&v6)) return true;
+    return IN6_IS_ADDR_V4MAPPED(&v6) && v6.s6_addr[12] == 127;  // ::ffff:127.x.y.z
+  }
+  return false;
+}
+
+std::string DescribeSockaddr(const sockaddr* address) {
+  char text[INET6_ADDRSTRLEN] = "?";
+  if (address->sa_family == AF_INET) {
+    inet_ntop(AF_INET, &reinterpret_cast<const sockaddr_in*>(address)->sin_addr, text, sizeof text);
+  } else if (address->sa_family == AF_INET6) {
+    inet_ntop(AF_INET6, &reinterpret_cast<const sockaddr_in6*>(address)->sin6_addr, text,
+              sizeof text);
+  }
+  return text;
+}
+
+// The host part of "host:port", "[v6]:port" or a bare host.
+std::string HostOf(std::string_view address) {
+  if (!address.empty() && address.front() == '[') {
+    const std::size_t close = address.find(']');
+    return std::string(address.substr(1, close == std::string_view::npos ? address.npos : close - 1));
+  }
+  const std::size_t colon = address.rfind(':');
+  if (colon != std::string_view::npos && address.find(':') == colon) {
+    return std::string(address.substr(0, colon));  // "host:port"; a bare IPv6 address has several
+  }
+  return std::string(address);
+}
+
+}  // namespace
+
+absl::Status CheckLoopbackAddress(std::string_view address) {
+  if (address.rfind("unix:", 0) == 0 || address.rfind("unix-abstract:", 0) == 0) {
+    return absl::OkStatus();
+  }
+  // Names are case-insensitive (DNS, /etc/hosts); lower-case them so the resolver sees one form.
+  const std::string host = absl::AsciiStrToLower(HostOf(address));
+  if (host.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "\"", core::AsAbsl(address), "\" has no host: it listens on every interface"));
+  }
+  addrinfo hints{};
+  hints.ai_family = AF_UNSPEC;
+  hints.ai_socktype = SOCK_STREAM;
+  addrinfo* found = nullptr;
+  if (const int error = getaddrinfo(host.c_str(), nullptr, &hints, &found); error != 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(host, " does not resolve (", gai_strerror(error), ")"));
+  }
+  absl::Status verdict = absl::OkStatus();
+  for (const addrinfo* a = found; a != nullptr && verdict.ok(); a = a->ai_next) {
+    if (!IsLoopbackSockaddr(a->ai_addr)) {
+      const std::string resolved = DescribeSockaddr(a->ai_addr);
+      verdict = absl::InvalidArgumentError(
+          resolved == host ? absl::StrCat(host, " is not a loopback address")
+                           : absl::StrCat(host, " resolves to ", resolved,
+                                          ", not a loopback address"));
+    }
+  }
+  freeaddrinfo(found);
+  return verdict;
+}
+
+bool IsLoopbackAddress(std::string_view address) { return CheckLoopbackAddress(address).ok(); }
+
+bool IsLoopbackLiteral(std::string_view host) {
+  if (host.size() >= 2 && host.front() == '[' && host.back() == ']') {
+    host = host.substr(1, host.size() - 2);
+  }
+  const std::string name = absl::AsciiStrToLower(std::string(host));
+  if (name == "localhost") return true;
+  sockaddr_in v4{};
+  if (inet_pton(AF_INET, name.c_str(), &v4.sin_addr) == 1) {
+    v4.sin_family = AF_INET;
+    return IsLoopbackSockaddr(reinterpret_cast<const sockaddr*>(&v4));
+  }
+  sockaddr_in6 v6{};
+  if (inet_pton(AF_INET6, name.c_str(), &v6.sin6_addr) == 1) {
+    v6.sin6_family = AF_INET6;
+    return IsLoopbackSockaddr(reinterpret_cast<const sockaddr*>(&v6));
+  }
+  return false;
+}
+
+std::int64_t MemoryLimitFrom(std::string_view v2_memory_max, std::string_view v1_limit_in_bytes,
+                             std::int64_t physical_bytes) {
+  std::int64_t limit = physical_bytes > 0 ? physical_bytes : 0;
+  auto take = [&](std::int64_t bytes) {
+    if (bytes > 0 && (limit == 0 || bytes < limit)) limit = bytes;
+  };
+  const std::string v2 = Trim(v2_memory_max);
+  std::int64_t bytes = 0;
+  if (!v2.empty()) {
+    if (v2 != "max" && absl::SimpleAtoi(v2, &bytes)) take(bytes);
+  } else if (absl::SimpleAtoi(Trim(v1_limit_in_bytes), &bytes)) {
+    take(bytes);  // "no limit" reads as a page-rounded 2^63 - 1, above any physical memory
+  }
+  return limit;
+}
+
+std::int64_t MemoryLimitBytes() {
+  const long pages = sysconf(_SC_PHYS_PAGES);
+  const long page_size = sysconf(_SC_PAGESIZE);
+  const std::int64_t physical =
+      pages > 0 && page_size > 0 ? static_cast<std::int64_t>(pages) * page_size : 0;
+  std::string v2 = ReadSmallFile(CgroupV2Dir() + "/memory.max");
+  if (v2.empty()) v2 = ReadSmallFile("/sys/fs/cgroup/memory.max");
+  return MemoryLimitFrom(v2, ReadSmallFile("/sys/fs/cgroup/memory/memory.limit_in_bytes"),
+                         physical);
+}
+
+std::int64_t DefaultMemoryBudget() {
+  const std::int64_t limit = MemoryLimitBytes();
+  return limit > 0 ? limit / 2 : std::int64_t{1} << 30;
 }
 
 absl::Status ValidateServerOptions(const ServerOptions& o) {
@@ -159,10 +277,31 @@ absl::Status ValidateServerOptions(const ServerOptions& o) {
   for (const std::string& token : o.auth_tokens) {
     if (token.empty()) return absl::InvalidArgumentError("an auth token is empty");
   }
-  if (o.tls_cert_file.empty() && !o.allow_insecure_remote && !IsLoopbackAddress(o.address)) {
+  if (o.memory_budget_bytes < 0) {
     return absl::InvalidArgumentError(absl::StrCat(
-        "refusing to listen on non-loopback address ", o.address,
-        " without TLS: give --tls_cert and --tls_key, or --allow_insecure_remote"));
+        "--memory_budget_bytes must be >= 0 (0: half the memory the process may use), got ",
+        o.memory_budget_bytes));
+  }
+  if (o.stream_idle_timeout.count() < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "--stream_idle_timeout_seconds must be >= 0 (0: none), got ",
+        static_cast<double>(o.stream_idle_timeout.count()) / 1000.0));
+  }
+  if (o.tls_cert_file.empty() && !o.allow_insecure_remote) {
+    if (absl::Status loopback = CheckLoopbackAddress(o.address); !loopback.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "refusing to listen on non-loopback address ", o.address, " without TLS (",
+          loopback.message(), "): give --tls_cert and --tls_key, or --allow_insecure_remote"));
+    }
+  }
+  // Metrics are plain HTTP whatever the gRPC port does, so only loopback is safe by default.
+  if (!o.metrics_address.empty() && !o.allow_insecure_remote) {
+    if (absl::Status loopback = CheckLoopbackAddress(o.metrics_address); !loopback.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "refusing to serve metrics on non-loopback address ", o.metrics_address, " (",
+          loopback.message(),
+          "): metrics are plain HTTP; scrape over loopback, or give --allow_insecure_remote"));
+    }
   }
   return absl::OkStatus();
 }

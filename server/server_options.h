@@ -29,6 +29,10 @@ struct ServerOptions {
   int workers = 0;
   // Jobs (and Process calls) waiting for a worker; beyond it submits get RESOURCE_EXHAUSTED.
   int queue_capacity = 64;
+  // The one budget for clips being received, stored clips, queued and running jobs (operations
+  // and inputs) and results, in bytes; <= 0 means DefaultMemoryBudget(). Past it, requests get
+  // RESOURCE_EXHAUSTED after stored clips and finished jobs were evicted to make room.
+  std::int64_t memory_budget_bytes = 0;
   // Largest message the server accepts, in bytes (uploads come in slices far below it).
   std::int64_t max_message_bytes = std::int64_t{64} << 20;
   // Largest clip accepted (frames x channels), from uploads, inline clips and Process.
@@ -47,10 +51,16 @@ struct ServerOptions {
   // Streaming calls (uploads, watches, results, Process) open at once; beyond it new ones get
   // RESOURCE_EXHAUSTED.
   int max_concurrent_streams = 1024;
+  // A streaming call whose client sends nothing for this long while the server waits for its
+  // next message (uploads, Process before its start), or does not take a message the server
+  // sends for this long (results, watches, Process output), is ended; 0 disables it.
+  std::chrono::milliseconds stream_idle_timeout{30'000};
   // Connections are closed (GOAWAY) after this long so clients rebalance across replicas;
   // 0 disables it.
   std::chrono::seconds max_connection_age{0};
-  // Prometheus exposition ("127.0.0.1:9464"); empty disables metrics.
+  // Prometheus exposition ("127.0.0.1:9464"); empty disables metrics. Plain HTTP: beyond
+  // loopback it needs allow_insecure_remote, whatever the gRPC port's TLS. With auth_tokens, a
+  // scrape needs "Authorization: Bearer <token>" like every gRPC call.
   std::string metrics_address;
   // PEM files. Certificate and key enable TLS; a client CA additionally requires and verifies
   // client certificates (mTLS).
@@ -59,8 +69,11 @@ struct ServerOptions {
   std::string tls_client_ca_file;
   // Bearer tokens accepted in "authorization: Bearer <token>"; empty disables the check.
   std::vector<std::string> auth_tokens;
-  // Allows listening on a non-loopback address without TLS.
+  // Allows listening on a non-loopback address without TLS (and metrics beyond loopback).
   bool allow_insecure_remote = false;
+  // Serves gRPC server reflection to callers without a token (with auth_tokens, reflection
+  // otherwise needs one like MotionService).
+  bool open_reflection = false;
   TestHooks test_hooks;
 };
 
@@ -74,13 +87,40 @@ int DefaultWorkerCount();
 int CpuQuotaLimit(std::string_view v2_cpu_max, std::string_view v1_quota_us,
                   std::string_view v1_period_us);
 
+// Bytes of memory this process may use: the smaller of the machine's physical memory and the
+// cgroup memory limit (v2 memory.max, v1 memory.limit_in_bytes); 0 when unknown.
+std::int64_t MemoryLimitBytes();
+
+// The memory limit from the texts of cgroup v2's memory.max ("max" or bytes) or, when that is
+// empty, cgroup v1's memory.limit_in_bytes (a huge value means none), and the physical memory in
+// bytes: the smallest that is set, 0 when none is.
+std::int64_t MemoryLimitFrom(std::string_view v2_memory_max, std::string_view v1_limit_in_bytes,
+                             std::int64_t physical_bytes);
+
+// Half of MemoryLimitBytes() (the rest is the pipelines' working memory, gRPC's buffers and the
+// workers' caches), or 1 GiB when the limit is unknown.
+std::int64_t DefaultMemoryBudget();
+
 // Reads bearer tokens from `path`: one per line, blank lines and lines starting with '#'
 // ignored, surrounding whitespace trimmed.
 // Errors: kNotFound / kUnavailable reading the file; kInvalidArgument when it holds no token.
 absl::StatusOr<std::vector<std::string>> ReadTokenFile(const std::string& path);
 
-// True for 127.0.0.0/8, ::1, "localhost" and unix-domain addresses ("unix:...").
+// OK when every address the host of `address` ("host:port", "[v6]:port", "unix:...") resolves
+// to is a loopback address (127.0.0.0/8, ::1, ::ffff:127.0.0.0/104), or for unix-domain
+// sockets. Names are resolved (getaddrinfo), so "LOCALHOST" and "[::ffff:127.0.0.1]" are
+// loopback and "127.attacker.invalid" is not; an empty host ("":port, all interfaces) is not.
+// Errors: kInvalidArgument saying why ("0.0.0.0 is not a loopback address",
+// "127.attacker.invalid does not resolve (Name or service not known)", "example.com resolves
+// to 93.184.216.34, not a loopback address").
+absl::Status CheckLoopbackAddress(std::string_view address);
 bool IsLoopbackAddress(std::string_view address);
+
+// True when `host` (no port; "[::1]" brackets allowed) is itself a loopback name, without asking
+// a resolver: "localhost" in any case, or an IPv4 / IPv6 literal in the loopback ranges above.
+// For names a peer sends (an HTTP Host header): resolving them would let a name that an attacker
+// points at 127.0.0.1 pass (DNS rebinding).
+bool IsLoopbackLiteral(std::string_view host);
 
 // Checks values no server can run with (sizes <= 0, a TLS key without its certificate, a
 // non-loopback address without TLS unless allow_insecure_remote).

@@ -1,10 +1,12 @@
 #include "server/service_context.h"
 
 #include <openssl/crypto.h>
+#include <openssl/sha.h>
 
 #include <string_view>
 
 #include "absl/strings/str_cat.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::server {
 namespace {
@@ -16,23 +18,53 @@ bool ConstantTimeEquals(std::string_view a, std::string_view b) {
 
 }  // namespace
 
-absl::Status ServiceContext::CheckAuth(const grpc::CallbackServerContext& context) const {
-  if (options.auth_tokens.empty()) return absl::OkStatus();
+std::string OwnerIdOfToken(std::string_view token) {
+  unsigned char digest[SHA256_DIGEST_LENGTH];
+  SHA256(reinterpret_cast<const unsigned char*>(token.data()), token.size(), digest);
+  std::string id = "token-";
+  for (int i = 0; i < 8; ++i) absl::StrAppend(&id, absl::Hex(digest[i], absl::kZeroPad2));
+  return id;
+}
+
+namespace {
+
+// The owner id of `value` ("Bearer <token>"), or why it is refused.
+absl::StatusOr<std::string> MatchBearer(const ServiceContext& service, std::string_view value) {
+  constexpr std::string_view kBearer = "Bearer ";
+  if (value.size() <= kBearer.size() || value.substr(0, kBearer.size()) != kBearer) {
+    return absl::UnauthenticatedError("authorization is not \"Bearer <token>\"");
+  }
+  const std::string_view token = value.substr(kBearer.size());
+  // Every token is compared, so the time taken does not say which one matched.
+  int match = -1;
+  for (std::size_t i = 0; i < service.options.auth_tokens.size(); ++i) {
+    if (ConstantTimeEquals(token, service.options.auth_tokens[i]) && match < 0) {
+      match = static_cast<int>(i);
+    }
+  }
+  if (match < 0) return absl::UnauthenticatedError("the bearer token is not accepted");
+  return service.owner_ids[static_cast<std::size_t>(match)];
+}
+
+}  // namespace
+
+absl::StatusOr<std::string> ServiceContext::Authenticate(
+    const grpc::ServerContextBase& context) const {
+  if (options.auth_tokens.empty()) return std::string();
   const auto& metadata = context.client_metadata();
   auto it = metadata.find("authorization");
   if (it == metadata.end()) {
     return absl::UnauthenticatedError("missing \"authorization: Bearer <token>\" metadata");
   }
-  const std::string_view value(it->second.data(), it->second.size());
-  constexpr std::string_view kBearer = "Bearer ";
-  if (value.size() <= kBearer.size() || value.substr(0, kBearer.size()) != kBearer) {
-    return absl::UnauthenticatedError("authorization metadata is not \"Bearer <token>\"");
+  return MatchBearer(*this, std::string_view(it->second.data(), it->second.size()));
+}
+
+absl::Status ServiceContext::CheckBearer(const char* header) const {
+  if (options.auth_tokens.empty()) return absl::OkStatus();
+  if (header == nullptr) {
+    return absl::UnauthenticatedError("missing \"Authorization: Bearer <token>\" header");
   }
-  const std::string_view token = value.substr(kBearer.size());
-  bool accepted = false;
-  for (const std::string& known : options.auth_tokens) accepted |= ConstantTimeEquals(token, known);
-  if (!accepted) return absl::UnauthenticatedError("the bearer token is not accepted");
-  return absl::OkStatus();
+  return MatchBearer(*this, header).status();
 }
 
 bool ServiceContext::TryOpenStream() {
@@ -41,6 +73,16 @@ bool ServiceContext::TryOpenStream() {
     if (open >= options.max_concurrent_streams) return false;
   } while (!open_streams.compare_exchange_weak(open, open + 1, std::memory_order_acq_rel));
   return true;
+}
+
+absl::Status StreamSlot::Claim(ServiceContext& service, bool allow_while_draining) {
+  TEMPOKEY_RETURN_IF_ERROR(service.AdmitStream(allow_while_draining));
+  service_.store(&service);
+  return absl::OkStatus();
+}
+
+void StreamSlot::Release() {
+  if (ServiceContext* service = service_.exchange(nullptr)) service->CloseStream();
 }
 
 void ServiceContext::CloseStream() { open_streams.fetch_sub(1, std::memory_order_acq_rel); }

@@ -1,7 +1,10 @@
 // UploadClip: a ClipHeader, then ChannelSamples slices; each message is checked as it arrives
-// (wire::ClipAssembler) and digested, so a bad upload stops at its first bad message and memory
-// stays bounded by the header's declared size.
+// (wire::ClipAssembler) and digested, so a bad upload stops at its first bad message. Memory is
+// charged to the server's budget as samples arrive, never for the sizes the header declares.
+// A client that sends nothing for the idle timeout while the server waits gets
+// DEADLINE_EXCEEDED and its stream slot back.
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <span>
 #include <utility>
@@ -9,57 +12,90 @@
 #include "absl/strings/str_cat.h"
 #include "proto/clip_convert.h"
 #include "proto/clip_digest.h"
+#include "server/memory_size.h"
 #include "server/reactors.h"
 #include "server/status_util.h"
+#include "server/wire_codec.h"
 #include "spdlog/spdlog.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::server {
 namespace {
 
-class UploadReactor final : public grpc::ServerReadReactor<v1::UploadClipRequest> {
+class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
  public:
   UploadReactor(ServiceContext* service, grpc::CallbackServerContext* call,
-                v1::UploadClipResponse* response)
-      : service_(service), call_(call), response_(response), assembler_(service->clip_limits) {
-    absl::Status admitted = service_->CheckAuth(*call_);
-    if (admitted.ok()) admitted = service_->AdmitStream();
+                grpc::ByteBuffer* response)
+      : service_(service), call_(call), response_(response) {
+    absl::Status admitted = Admit();
     if (!admitted.ok()) {
-      Finish(ToGrpcStatus(admitted, call_));
+      FinishOnce(admitted);
       return;
     }
-    holds_stream_ = true;
-    StartRead(&request_);
+    if (service_->idle != nullptr) {
+      idle_ = service_->idle->NewTimer([this] {
+        FinishOnce(IdleError("UploadClip", service_->idle->timeout()));
+      });
+    }
+    Read();
   }
 
   void OnReadDone(bool ok) override {
+    if (idle_ != nullptr) idle_->Disarm();
+    {
+      std::lock_guard lock(mu_);
+      if (finished_) return;  // the idle timer ended the call; this read was its last
+    }
     if (!ok) {
       // End of the client's stream (or the call broke): the clip is complete or never will be.
-      Finish(ToGrpcStatus(Complete(), call_));
+      FinishOnce(Complete());
       return;
     }
     ++messages_;
-    service_->BytesIn(static_cast<std::int64_t>(request_.ByteSizeLong()));
-    absl::Status status = Accept();
+    service_->BytesIn(static_cast<std::int64_t>(buffer_.Length()));
+    absl::Status status = ParseMessage(buffer_, absl::StrCat("upload message ", messages_), &request_);
+    if (status.ok()) status = Accept();
     if (!status.ok()) {
       spdlog::debug("upload refused at message {}: {}", messages_, status.ToString());
-      Finish(ToGrpcStatus(status, call_));
+      FinishOnce(status);
       return;
     }
-    StartRead(&request_);
+    Read();
   }
 
   void OnDone() override {
-    if (holds_stream_) service_->CloseStream();
+    if (idle_ != nullptr) idle_->Close();
     delete this;
   }
 
  private:
+  absl::Status Admit() {
+    TEMPOKEY_ASSIGN_OR_RETURN(owner_, service_->Authenticate(*call_));
+    TEMPOKEY_ASSIGN_OR_RETURN(reservation_,
+                              ReserveMemory(*service_, MemoryUse::kUpload, "an upload"));
+    assembler_.emplace(service_->clip_limits, ChargeTo(&reservation_));
+    return slot_.Claim(*service_);
+  }
+
+  void Read() {
+    if (idle_ != nullptr) idle_->Arm();
+    StartRead(&buffer_);
+  }
+
+  // Finishes the call once, from a gRPC callback or the idle timer (another thread).
+  void FinishOnce(const absl::Status& status) {
+    std::lock_guard lock(mu_);
+    if (finished_) return;
+    finished_ = true;
+    slot_.Release();
+    Finish(ToGrpcStatus(status, call_));
+  }
+
   absl::Status Accept() {
     switch (request_.part_case()) {
       case v1::UploadClipRequest::kHeader:
-        TEMPOKEY_RETURN_IF_ERROR(assembler_.AddHeader(request_.header()));
-        digest_.emplace(assembler_.clip());
+        TEMPOKEY_RETURN_IF_ERROR(assembler_->AddHeader(request_.header()));
+        digest_.emplace(assembler_->clip());
         return absl::OkStatus();
       case v1::UploadClipRequest::kSamples:
         return AcceptSlice(request_.samples());
@@ -76,7 +112,7 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadClipRequest
   }
 
   absl::Status AcceptSlice(const v1::ChannelSamples& samples) {
-    TEMPOKEY_RETURN_IF_ERROR(assembler_.AddSamples(samples));
+    TEMPOKEY_RETURN_IF_ERROR(assembler_->AddSamples(samples));
     digest_->Offer(samples.channel_index(), samples.first_frame(),
                    std::span<const double>(samples.samples().data(),
                                            static_cast<std::size_t>(samples.samples_size())));
@@ -85,20 +121,27 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadClipRequest
 
   absl::Status Complete() {
     if (call_->IsCancelled()) return absl::CancelledError("the upload was cancelled");
-    if (!assembler_.has_header()) {
+    if (!assembler_->has_header()) {
       return absl::InvalidArgumentError("the upload ended before a clip header arrived");
     }
-    TEMPOKEY_ASSIGN_OR_RETURN(core::Clip clip, std::move(assembler_).Finish());
+    TEMPOKEY_ASSIGN_OR_RETURN(core::Clip clip, std::move(*assembler_).Finish());
+    assembler_.reset();
     const std::string id = digest_->Finish(clip);
     const std::int64_t frames = clip.frame_count;
     const auto channels = static_cast<std::int32_t>(clip.channels.size());
     const std::int64_t samples = clip.sample_count();
-    TEMPOKEY_ASSIGN_OR_RETURN(ClipStore::PutResult stored, service_->clips->Put(id, std::move(clip)));
-    response_->set_clip_id(id);
-    response_->set_frame_count(frames);
-    response_->set_channel_count(channels);
-    response_->set_sample_count(samples);
-    response_->set_already_stored(stored.already_stored);
+    reservation_.Settle(ClipBytes(clip));
+    reservation_.ChangeUse(MemoryUse::kStoredClip);
+    TEMPOKEY_ASSIGN_OR_RETURN(
+        ClipStore::PutResult stored,
+        service_->clips->Put(owner_, id, ShareWithReservation(std::move(clip), std::move(reservation_))));
+    v1::UploadClipResponse response;
+    response.set_clip_id(id);
+    response.set_frame_count(frames);
+    response.set_channel_count(channels);
+    response.set_sample_count(samples);
+    response.set_already_stored(stored.already_stored);
+    SerializeMessage(response, response_);
     spdlog::info("upload clip={} frames={} channels={} messages={} already_stored={}", id, frames,
                  channels, messages_, stored.already_stored);
     return absl::OkStatus();
@@ -106,18 +149,26 @@ class UploadReactor final : public grpc::ServerReadReactor<v1::UploadClipRequest
 
   ServiceContext* const service_;
   grpc::CallbackServerContext* const call_;
-  v1::UploadClipResponse* const response_;
-  bool holds_stream_ = false;
+  grpc::ByteBuffer* const response_;
+  std::string owner_;
+  StreamSlot slot_;
+  std::shared_ptr<IdleReaper::Timer> idle_;
+  grpc::ByteBuffer buffer_;
   v1::UploadClipRequest request_;
-  wire::ClipAssembler assembler_;
+  // Declared before the assembler, which charges it.
+  MemoryBudget::Reservation reservation_;
+  std::optional<wire::ClipAssembler> assembler_;
   std::optional<wire::IncrementalClipDigest> digest_;
   std::int64_t messages_ = 0;
+  std::mutex mu_;
+  bool finished_ ABSL_GUARDED_BY(mu_) = false;
 };
 
 }  // namespace
 
-grpc::ServerReadReactor<v1::UploadClipRequest>* NewUploadReactor(
-    ServiceContext* service, grpc::CallbackServerContext* call, v1::UploadClipResponse* response) {
+grpc::ServerReadReactor<grpc::ByteBuffer>* NewUploadReactor(ServiceContext* service,
+                                                            grpc::CallbackServerContext* call,
+                                                            grpc::ByteBuffer* response) {
   return new UploadReactor(service, call, response);
 }
 

@@ -1,7 +1,8 @@
 // WatchJob: the snapshot at once, then latest-wins updates (a slow reader skips versions, never
 // queues them), ending after the terminal state. The JobManager talks to a WatchLink that
 // outlives the reactor, so an update racing with the end of the call finds the link closed
-// instead of a deleted reactor.
+// instead of a deleted reactor. A client that takes no message for the idle timeout while one
+// is being written is cancelled, so it holds its stream slot no longer.
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -11,6 +12,8 @@
 #include "server/job_proto.h"
 #include "server/reactors.h"
 #include "server/status_util.h"
+#include "server/wire_codec.h"
+#include "tempokey/core/model/status.h"
 
 namespace tempokey::server {
 namespace {
@@ -27,6 +30,8 @@ class WatchLink final : public JobWatcher {
   void OnCancel();
   // Ends the call at once (before any write), e.g. for an unknown job.
   void FinishNow(const absl::Status& status);
+  // Armed while a write is outstanding (set before the first write).
+  void SetIdleTimer(std::shared_ptr<IdleReaper::Timer> idle) { idle_ = std::move(idle); }
 
  private:
   void WriteNextLocked() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
@@ -40,23 +45,34 @@ class WatchLink final : public JobWatcher {
   std::int64_t newest_version_ ABSL_GUARDED_BY(mu_) = 0;
   std::optional<JobSnapshot> pending_ ABSL_GUARDED_BY(mu_);
   std::optional<absl::Status> close_ ABSL_GUARDED_BY(mu_);
-  v1::Job message_ ABSL_GUARDED_BY(mu_);  // the write in flight
+  grpc::ByteBuffer message_ ABSL_GUARDED_BY(mu_);  // the write in flight
+  std::shared_ptr<IdleReaper::Timer> idle_;
 };
 
-class WatchReactor final : public grpc::ServerWriteReactor<v1::Job> {
+class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
  public:
   WatchReactor(ServiceContext* service, grpc::CallbackServerContext* call,
-               const v1::WatchJobRequest* request)
-      : service_(service), job_id_(request->job_id()), link_(std::make_shared<WatchLink>(this)) {
-    absl::Status admitted = service_->CheckAuth(*call);
-    if (admitted.ok()) admitted = CheckId("job_id", job_id_);
-    if (admitted.ok()) admitted = service_->AdmitStream();
+               const grpc::ByteBuffer* raw_request)
+      : service_(service), link_(std::make_shared<WatchLink>(this)) {
+    std::string owner;
+    absl::Status admitted = [&]() -> absl::Status {
+      TEMPOKEY_ASSIGN_OR_RETURN(owner, service_->Authenticate(*call));
+      v1::WatchJobRequest request;
+      TEMPOKEY_RETURN_IF_ERROR(ParseMessage(*raw_request, "WatchJob request", &request));
+      job_id_ = request.job_id();
+      TEMPOKEY_RETURN_IF_ERROR(CheckId("job_id", job_id_));
+      return slot_.Claim(*service_);
+    }();
     if (!admitted.ok()) {
       link_->FinishNow(admitted);
       return;
     }
-    holds_stream_ = true;
-    absl::StatusOr<JobSnapshot> snapshot = service_->jobs->Watch(job_id_, link_);
+    if (service_->idle != nullptr) {
+      // A write outstanding for the whole timeout: the client stopped reading.
+      idle_ = service_->idle->NewTimer([call] { call->TryCancel(); });
+      link_->SetIdleTimer(idle_);
+    }
+    absl::StatusOr<JobSnapshot> snapshot = service_->jobs->Watch(job_id_, link_, owner);
     if (!snapshot.ok()) {
       link_->FinishNow(snapshot.status());
       return;
@@ -68,18 +84,20 @@ class WatchReactor final : public grpc::ServerWriteReactor<v1::Job> {
   void OnWriteDone(bool ok) override { link_->OnWriteDone(ok); }
   void OnCancel() override { link_->OnCancel(); }
   void OnDone() override {
+    if (idle_ != nullptr) idle_->Close();
     if (watching_) service_->jobs->Unwatch(job_id_, link_.get());
-    if (holds_stream_) service_->CloseStream();
     delete this;
   }
 
   ServiceContext* service() const { return service_; }
+  StreamSlot& slot() { return slot_; }
 
  private:
   ServiceContext* const service_;
-  const std::string job_id_;
+  std::string job_id_;
   const std::shared_ptr<WatchLink> link_;
-  bool holds_stream_ = false;
+  std::shared_ptr<IdleReaper::Timer> idle_;
+  StreamSlot slot_;
   bool watching_ = false;
 };
 
@@ -102,6 +120,7 @@ void WatchLink::OnWatchClosed(const absl::Status& status) {
 }
 
 void WatchLink::OnWriteDone(bool ok) {
+  if (idle_ != nullptr) idle_->Disarm();
   std::lock_guard lock(mu_);
   writing_ = false;
   if (finished_) return;
@@ -128,10 +147,11 @@ void WatchLink::FinishNow(const absl::Status& status) {
 }
 
 void WatchLink::WriteNextLocked() {
-  message_ = JobToProto(*pending_);
+  SerializeMessage(JobToProto(*pending_), &message_);
   pending_.reset();
   writing_ = true;
-  reactor_->service()->BytesOut(static_cast<std::int64_t>(message_.ByteSizeLong()));
+  reactor_->service()->BytesOut(static_cast<std::int64_t>(message_.Length()));
+  if (idle_ != nullptr) idle_->Arm();
   reactor_->StartWrite(&message_);
 }
 
@@ -139,14 +159,15 @@ void WatchLink::FinishLocked(const absl::Status& status) {
   finished_ = true;
   WatchReactor* reactor = reactor_;
   reactor_ = nullptr;
+  reactor->slot().Release();
   reactor->Finish(ToGrpcStatus(status));
 }
 
 }  // namespace
 
-grpc::ServerWriteReactor<v1::Job>* NewWatchReactor(ServiceContext* service,
-                                                   grpc::CallbackServerContext* call,
-                                                   const v1::WatchJobRequest* request) {
+grpc::ServerWriteReactor<grpc::ByteBuffer>* NewWatchReactor(ServiceContext* service,
+                                                            grpc::CallbackServerContext* call,
+                                                            const grpc::ByteBuffer* request) {
   return new WatchReactor(service, call, request);
 }
 

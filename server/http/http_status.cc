@@ -113,7 +113,7 @@ absl::Status CheckApiRequest(std::string_view content_type, std::string_view ori
   }
   if (loopback_host_only) {
     const std::string_view name = HostOf(host);
-    if (!IsLoopbackAddress(absl::StrCat(std::string(name), ":0"))) {
+    if (!IsLoopbackLiteral(name)) {
       return absl::PermissionDeniedError(absl::StrCat(
           "Host \"", std::string(host.substr(0, 128)),
           "\" is not a loopback name; this server only answers requests to its loopback address"));

@@ -260,7 +260,7 @@ TEST_F(AssemblerErrorTest, HeaderOverTheSampleLimitIsRefusedBeforeAnyAllocation)
   v1::ClipHeader header = ClipHeaderToProto(clip_);  // 100 frames x 9 channels = 900
 
   EXPECT_THAT(assembler.AddHeader(header),
-              StatusIs(absl::StatusCode::kInvalidArgument,
+              StatusIs(absl::StatusCode::kResourceExhausted,
                        "clip header: clip has 100 frames x 9 channels, over the limit of 500 "
                        "samples"));
   EXPECT_FALSE(assembler.has_header());
@@ -272,7 +272,7 @@ TEST_F(AssemblerErrorTest, HugeDeclaredFrameCountIsRefused) {
   header.set_frame_count(std::numeric_limits<std::int64_t>::max());
 
   EXPECT_THAT(assembler.AddHeader(header),
-              StatusIs(absl::StatusCode::kInvalidArgument, HasSubstr("over the limit")));
+              StatusIs(absl::StatusCode::kResourceExhausted, HasSubstr("over the limit")));
 }
 
 TEST_F(AssemblerErrorTest, UnspecifiedChannelKind) {
@@ -311,6 +311,114 @@ TEST_F(AssemblerErrorTest, NanMarkerTime) {
   EXPECT_THAT(ClipLayoutFromProto(header),
               StatusIs(absl::StatusCode::kInvalidArgument,
                        "marker 0 (\"step\"): time_seconds is NaN"));
+}
+
+// ---- memory follows the data --------------------------------------------------------------------
+
+// A header of `channels` rotation channels x `frames` frames (nothing else sent).
+v1::ClipHeader DeclaredHeader(int channels, std::int64_t frames) {
+  core::Clip layout = MakeClip(1, 1);
+  layout.channels.resize(static_cast<std::size_t>(channels));
+  layout.skeleton.joints[0].channels.resize(static_cast<std::size_t>(std::min(channels, 6)));
+  v1::ClipHeader header = ClipHeaderToProto(layout);
+  header.set_frame_count(frames);
+  return header;
+}
+
+v1::ChannelSamples OneSample(int channel, std::int64_t frame, double value = 1.0) {
+  v1::ChannelSamples slice;
+  slice.set_channel_index(channel);
+  slice.set_first_frame(frame);
+  slice.add_samples(value);
+  return slice;
+}
+
+TEST(ClipAssemblerMemoryTest, DeclaredFramesBuyNoMemoryBeforeTheDataArrives) {
+  std::int64_t charged = 0;
+  ClipAssembler assembler({}, [&](std::int64_t bytes) {
+    charged += bytes;
+    return absl::OkStatus();
+  });
+
+  // 3 channels x 10 000 000 frames declared (240 MB of samples), one sample at the last frame.
+  ASSERT_TRUE(assembler.AddHeader(DeclaredHeader(3, 10'000'000)).ok());
+  const std::int64_t layout = charged;
+  for (int c = 0; c < 3; ++c) ASSERT_TRUE(assembler.AddSamples(OneSample(c, 9'999'999)).ok());
+  const absl::StatusOr<core::Clip> finished = std::move(assembler).Finish();
+
+  EXPECT_LT(layout, 4096);
+  EXPECT_LT(charged, layout + 3 * 256);  // three one-sample runs
+  EXPECT_THAT(finished, StatusIs(absl::StatusCode::kInvalidArgument,
+                                 HasSubstr("frames 0..9999998 never arrived")));
+}
+
+TEST(ClipAssemblerMemoryTest, InOrderSlicesTakeAtMostTwiceWhatArrived) {
+  const core::Clip clip = MakeClip(2, 20'000);  // 9 channels
+  std::int64_t charged = 0;
+  std::int64_t peak = 0;
+  std::int64_t received_bytes = 0;
+  bool within = true;
+  ClipAssembler assembler({}, [&](std::int64_t bytes) {
+    charged += bytes;
+    peak = std::max(peak, charged);
+    return absl::OkStatus();
+  });
+  ASSERT_TRUE(assembler.AddHeader(ClipHeaderToProto(clip)).ok());
+  const std::int64_t layout = charged;
+
+  for (const v1::ChannelSamples& slice : Slices(clip, 8 * 1000)) {
+    ASSERT_TRUE(assembler.AddSamples(slice).ok());
+    received_bytes += 8 * slice.samples_size();
+    within = within && charged - layout <= 2 * received_bytes;
+  }
+  absl::StatusOr<core::Clip> back = std::move(assembler).Finish();
+
+  EXPECT_TRUE(within);
+  EXPECT_LE(peak - layout, 2 * received_bytes);
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_EQ(*back, clip);
+}
+
+TEST(ClipAssemblerMemoryTest, ReversedAndShuffledSlicesAssembleTheSameClip) {
+  const core::Clip clip = MakeClip(3, 777);
+  for (const bool shuffle : {false, true}) {
+    std::vector<v1::ChannelSamples> slices = Slices(clip, 8 * 50);
+    std::reverse(slices.begin(), slices.end());
+    if (shuffle) std::shuffle(slices.begin(), slices.end(), std::mt19937(11));
+    std::int64_t charged = 0;
+    ClipAssembler assembler({}, [&](std::int64_t bytes) {
+      charged += bytes;
+      return absl::OkStatus();
+    });
+    ASSERT_TRUE(assembler.AddHeader(ClipHeaderToProto(clip)).ok());
+
+    for (const v1::ChannelSamples& slice : slices) ASSERT_TRUE(assembler.AddSamples(slice).ok());
+    const std::int64_t held = assembler.allocated_bytes();
+    absl::StatusOr<core::Clip> back = std::move(assembler).Finish();
+
+    ASSERT_TRUE(back.ok()) << back.status();
+    EXPECT_EQ(*back, clip) << (shuffle ? "shuffled" : "reversed");
+    EXPECT_EQ(held, charged);  // what the hook was told is what it holds
+  }
+}
+
+TEST(ClipAssemblerMemoryTest, RefusedAllocationStopsTheMessageBeforeAnythingIsAllocated) {
+  const core::Clip clip = MakeClip(1, 1000);
+  std::int64_t allowed = 0;
+  ClipAssembler assembler({}, [&](std::int64_t bytes) {
+    if (bytes > 0 && bytes > allowed) return absl::ResourceExhaustedError("over the test budget");
+    allowed -= bytes;
+    return absl::OkStatus();
+  });
+  allowed = 1 << 20;
+  ASSERT_TRUE(assembler.AddHeader(ClipHeaderToProto(clip)).ok());
+  allowed = 0;
+  const std::int64_t before = assembler.allocated_bytes();
+
+  const absl::Status refused = assembler.AddSamples(Slices(clip, 8 * 100)[3]);
+
+  EXPECT_THAT(refused, StatusIs(absl::StatusCode::kResourceExhausted, "over the test budget"));
+  EXPECT_EQ(assembler.allocated_bytes(), before);
 }
 
 TEST(ClipConvertTest, ClipWithoutHeaderIsRefused) {

@@ -11,9 +11,11 @@
 #include <thread>
 #include <vector>
 
+#include "absl/strings/str_replace.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "server/job_pool.h"
+#include "server/memory_budget.h"
 #include "tests/server/test_clips.h"
 
 namespace tempokey::server {
@@ -97,10 +99,11 @@ class JobManagerTest : public ::testing::Test {
   }
 
   // Polls until the job is terminal (a deadline guards against hangs; no timing is asserted).
-  JobSnapshot WaitTerminal(const std::string& id) {
+  JobSnapshot WaitTerminal(const std::string& id) { return WaitTerminalOf(id, ""); }
+  JobSnapshot WaitTerminalOf(const std::string& id, const std::string& owner) {
     const auto deadline = std::chrono::steady_clock::now() + kHangGuard;
     for (;;) {
-      absl::StatusOr<JobSnapshot> job = manager_->Get(id);
+      absl::StatusOr<JobSnapshot> job = manager_->Get(id, owner);
       if (!job.ok()) {
         ADD_FAILURE() << job.status();
         return {};
@@ -114,7 +117,15 @@ class JobManagerTest : public ::testing::Test {
     }
   }
 
+  // A memory budget for the manager's jobs; declared before the pool and the manager, so it
+  // outlives every reservation they hold.
+  MemoryBudget& Budget(std::int64_t bytes) {
+    budget_ = std::make_unique<MemoryBudget>(bytes);
+    return *budget_;
+  }
+
   std::atomic<SystemTime> now_{SystemTime(std::chrono::hours(500'000))};
+  std::unique_ptr<MemoryBudget> budget_;
   std::shared_ptr<StartGate> gate_;
   std::unique_ptr<JobPool> pool_;
   std::unique_ptr<JobManager> manager_;
@@ -397,6 +408,166 @@ TEST_F(JobManagerTest, ManyThreadsSubmittingWatchingAndCancellingStayConsistent)
   ASSERT_TRUE(all.ok());
   EXPECT_EQ(static_cast<int>(all->jobs.size()), accepted.load());
   for (const JobSnapshot& job : all->jobs) EXPECT_TRUE(IsTerminal(job.state)) << job.job_id;
+}
+
+TEST_F(JobManagerTest, RequestIdReusedForAnotherRequestIsRefusedNotDeduplicated) {
+  Start(GatedOptions());
+  auto submit = [&](std::string digest) {
+    return manager_->Submit(JobSpec{.clip_id = "sha256:test",
+                                    .steps = {core::ConvertStep{}},
+                                    .request_id = "req-7",
+                                    .request_digest = std::move(digest)},
+                            std::make_shared<const core::Clip>(MakeClip(1, 10)));
+  };
+
+  absl::StatusOr<JobSnapshot> first = submit("digest-a");
+  absl::StatusOr<JobSnapshot> retried = submit("digest-a");
+  absl::StatusOr<JobSnapshot> different = submit("digest-b");
+  absl::StatusOr<std::optional<JobSnapshot>> found = manager_->FindByRequestId("", "req-7", "digest-a");
+  absl::StatusOr<std::optional<JobSnapshot>> mismatch =
+      manager_->FindByRequestId("", "req-7", "digest-b");
+
+  ASSERT_TRUE(first.ok()) << first.status();
+  ASSERT_TRUE(retried.ok()) << retried.status();
+  EXPECT_EQ(retried->job_id, first->job_id);
+  EXPECT_EQ(different.status().code(), absl::StatusCode::kAlreadyExists);
+  EXPECT_THAT(std::string(different.status().message()),
+              HasSubstr("request_id \"req-7\" already named job " + first->job_id));
+  ASSERT_TRUE(found.ok() && found->has_value());
+  EXPECT_EQ((*found)->job_id, first->job_id);
+  EXPECT_EQ(mismatch.status().code(), absl::StatusCode::kAlreadyExists);
+  EXPECT_EQ(manager_->job_count(), 1);
+}
+
+TEST_F(JobManagerTest, JobsOfAnotherOwnerAnswerLikeUnknownJobs) {
+  Start({});
+  absl::StatusOr<JobSnapshot> mine = manager_->Submit(
+      JobSpec{.clip_id = "sha256:test", .steps = {core::ConvertStep{}}, .request_id = "r",
+              .owner = "token-aaaa"},
+      std::make_shared<const core::Clip>(MakeClip(1, 10)));
+  ASSERT_TRUE(mine.ok()) << mine.status();
+  WaitTerminalOf(mine->job_id, "token-aaaa");
+  const std::string unknown_message =
+      std::string(manager_->Get("job-ffffffffffffffff", "token-bbbb").status().message());
+
+  const absl::Status get = manager_->Get(mine->job_id, "token-bbbb").status();
+  const absl::Status cancel = manager_->Cancel(mine->job_id, "token-bbbb").status();
+  const absl::Status result = manager_->Result(mine->job_id, "token-bbbb").status();
+  const absl::Status watch =
+      manager_->Watch(mine->job_id, std::make_shared<RecordingWatcher>(), "token-bbbb").status();
+  const absl::Status del = manager_->Delete(mine->job_id, "token-bbbb");
+  absl::StatusOr<ListJobsPage> theirs = manager_->List({}, "token-bbbb");
+  absl::StatusOr<ListJobsPage> own = manager_->List({}, "token-aaaa");
+  // The same request_id is another owner's own: no deduplication across owners.
+  absl::StatusOr<JobSnapshot> same_request_id = manager_->Submit(
+      JobSpec{.clip_id = "sha256:test", .steps = {core::ConvertStep{}}, .request_id = "r",
+              .owner = "token-bbbb"},
+      std::make_shared<const core::Clip>(MakeClip(1, 10)));
+
+  for (const absl::Status& status : {get, cancel, result, watch, del}) {
+    EXPECT_EQ(status.code(), absl::StatusCode::kNotFound) << status;
+    EXPECT_EQ(status.message(),
+              absl::StrReplaceAll(unknown_message, {{"job-ffffffffffffffff", mine->job_id}}));
+  }
+  ASSERT_TRUE(theirs.ok() && own.ok());
+  EXPECT_TRUE(theirs->jobs.empty());
+  ASSERT_EQ(own->jobs.size(), 1u);
+  EXPECT_TRUE(manager_->Get(mine->job_id, "token-aaaa").ok());
+  ASSERT_TRUE(same_request_id.ok()) << same_request_id.status();
+  EXPECT_NE(same_request_id->job_id, mine->job_id);
+}
+
+TEST_F(JobManagerTest, EndIsReportedBeforeAnyoneSeesTheTerminalState) {
+  std::atomic<int> reported{0};
+  JobManagerOptions options;
+  options.on_job_end = [&](const JobSnapshot&, auto, auto) { reported++; };
+  Start(std::move(options));
+
+  for (int i = 0; i < 20; ++i) {
+    const JobSnapshot job = SubmitWrap();
+    WaitTerminal(job.job_id);  // polls Get() until it sees the terminal state
+
+    // Whoever saw the job end (a watcher, GetJob, a metrics scrape) sees it counted.
+    EXPECT_EQ(reported.load(), i + 1);
+  }
+}
+
+TEST_F(JobManagerTest, StoredJobsCountTheirOperationsInTheMemoryBudget) {
+  MemoryBudget& budget = Budget(std::int64_t{8} << 20);
+  JobManagerOptions options = GatedOptions();
+  options.budget = &budget;
+  Start(std::move(options));
+  // 100 000 speed knots: 2.4 MB of operations in one job.
+  core::RetimeStep retime;
+  retime.warp.domain = core::WarpDomain::kSpeedOverSource;
+  for (int k = 0; k < 100'000; ++k) {
+    retime.warp.speed.push_back(core::SpeedKnot{.time = {.value = k * 1e-4}, .speed = 1.0});
+  }
+  auto submit = [&](int knots_copies) {
+    std::vector<core::PipelineStep> steps(static_cast<std::size_t>(knots_copies), retime);
+    return manager_->Submit(JobSpec{.clip_id = "sha256:test", .steps = std::move(steps)},
+                            std::make_shared<const core::Clip>(MakeClip(1, 10)));
+  };
+
+  absl::StatusOr<JobSnapshot> one = submit(1);
+  const std::int64_t held = budget.used(MemoryUse::kJob);
+  absl::StatusOr<JobSnapshot> too_big = submit(3);  // 7.2 MB more: over the 8 MiB budget
+  ASSERT_TRUE(gate_->WaitArrivals(1));
+  ASSERT_TRUE(manager_->Cancel(one->job_id).ok());
+  gate_->Open();
+  WaitTerminal(one->job_id);
+  ASSERT_TRUE(manager_->Delete(one->job_id).ok());
+
+  ASSERT_TRUE(one.ok()) << one.status();
+  EXPECT_GE(held, 100'000 * static_cast<std::int64_t>(sizeof(core::SpeedKnot)));
+  EXPECT_EQ(too_big.status().code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_THAT(std::string(too_big.status().message()),
+              HasSubstr("memory budget (--memory_budget_bytes=8388608) cannot take a job of"));
+  EXPECT_EQ(budget.used(), 0);
+}
+
+TEST_F(JobManagerTest, ResultThatDoesNotFitTheBudgetFailsTheJobWithResourceExhausted) {
+  MemoryBudget& budget = Budget(std::int64_t{1} << 20);
+  JobManagerOptions options;
+  options.budget = &budget;
+  Start(std::move(options));
+
+  // 40 joints x 3 + 3 channels x 2000 frames: a 2 MB result.
+  absl::StatusOr<JobSnapshot> job = manager_->Submit(
+      JobSpec{.clip_id = "x", .steps = {core::ConvertStep{}}},
+      std::make_shared<const core::Clip>(MakeClip(40, 2000)));
+  ASSERT_TRUE(job.ok());
+  absl::StatusOr<JobSnapshot> small = manager_->Submit(
+      JobSpec{.clip_id = "x", .steps = {core::ConvertStep{}}},
+      std::make_shared<const core::Clip>(MakeClip(1, 10)));
+  ASSERT_TRUE(small.ok());
+  const JobSnapshot failed = WaitTerminal(job->job_id);
+  const JobSnapshot fine = WaitTerminal(small->job_id);
+
+  EXPECT_EQ(failed.state, JobState::kFailed);
+  EXPECT_EQ(failed.error.code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_THAT(std::string(failed.error.message()), HasSubstr("cannot take a job's result of"));
+  EXPECT_EQ(fine.state, JobState::kSucceeded);
+  EXPECT_GT(budget.used(MemoryUse::kResult), 0);
+}
+
+TEST_F(JobManagerTest, ReclaimRemovesTheOldestUnwatchedFinishedJobsFirst) {
+  Start({});
+  std::vector<std::string> ids;
+  for (int i = 0; i < 4; ++i) {
+    ids.push_back(SubmitWrap().job_id);
+    WaitTerminal(ids.back());
+  }
+  auto watcher = std::make_shared<RecordingWatcher>();
+  ASSERT_TRUE(manager_->Watch(ids[0], watcher).ok());
+
+  manager_->ReclaimFinished(1);  // one job's worth: the oldest unwatched one
+
+  EXPECT_TRUE(manager_->Get(ids[0]).ok());  // watched: kept
+  EXPECT_EQ(manager_->Get(ids[1]).status().code(), absl::StatusCode::kNotFound);
+  EXPECT_TRUE(manager_->Get(ids[2]).ok());
+  EXPECT_TRUE(manager_->Get(ids[3]).ok());
+  manager_->Unwatch(ids[0], watcher.get());
 }
 
 }  // namespace

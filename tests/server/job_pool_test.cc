@@ -93,6 +93,100 @@ TEST(JobPoolTest, FullQueueRefusesWithRetryHintAndRecovers) {
   EXPECT_TRUE(pool.TrySubmit([](std::stop_token) {}).ok());
 }
 
+// A clock the test moves by hand, so durations are exact and no test waits for time to pass.
+class ManualClock {
+ public:
+  JobPool::Clock AsClock() {
+    return [this] {
+      return std::chrono::steady_clock::time_point(std::chrono::nanoseconds(now_ns_.load()));
+    };
+  }
+  void Advance(std::chrono::milliseconds by) {
+    now_ns_.fetch_add(std::chrono::duration_cast<std::chrono::nanoseconds>(by).count());
+  }
+
+ private:
+  std::atomic<std::int64_t> now_ns_{std::int64_t{3'600} * 1'000'000'000};
+};
+
+std::int64_t HintMs(const absl::Status& status) {
+  return wire::GetRetryAfter(status).value_or(std::chrono::milliseconds(-1)).count();
+}
+
+TEST(JobPoolTest, RetryHintFollowsHowLongTheRunningTasksHaveRunAndTake) {
+  ManualClock clock;
+  JobPool pool(2, 1, clock.AsClock());
+  // History: one task that took 20 s.
+  Gate first_gate;
+  std::latch first_started(1);
+  ASSERT_TRUE(pool.TrySubmit([&](std::stop_token) {
+                    first_started.count_down();
+                    first_gate.Wait();
+                  })
+                  .ok());
+  first_started.wait();
+  clock.Advance(std::chrono::seconds(20));
+  first_gate.Open();
+  ASSERT_TRUE(pool.WaitIdle(Deadline()));
+  // Now both workers hold a task: one started 16 s ago, one 25 s ago; the queue is full.
+  Gate gate;
+  std::latch first(1);
+  std::latch second(1);
+  ASSERT_TRUE(pool.TrySubmit([&](std::stop_token) {
+                    first.count_down();
+                    gate.Wait();
+                  })
+                  .ok());
+  first.wait();  // started at the clock's time now
+  clock.Advance(std::chrono::seconds(9));
+  ASSERT_TRUE(pool.TrySubmit([&](std::stop_token) {
+                    second.count_down();
+                    gate.Wait();
+                  })
+                  .ok());
+  second.wait();
+  ASSERT_TRUE(pool.TrySubmit([](std::stop_token) {}).ok());  // queued
+  clock.Advance(std::chrono::seconds(16));
+
+  const absl::Status busy = pool.TrySubmit([](std::stop_token) {});
+  clock.Advance(std::chrono::seconds(10));  // 26 s and 35 s: both past the usual 20 s
+  const absl::Status overdue = pool.TrySubmit([](std::stop_token) {});
+  gate.Open();
+  ASSERT_TRUE(pool.WaitIdle(Deadline()));
+
+  // The 16 s task should end in 4 s (finished tasks took 20 s): the first slot frees then.
+  EXPECT_EQ(busy.code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_EQ(HintMs(busy), 4'000);
+  // Past the usual duration, a task is expected to run as long again: 26 s more at least.
+  EXPECT_EQ(HintMs(overdue), 26'000);
+}
+
+TEST(JobPoolTest, RetryHintWithoutHistoryIsHowLongTheTaskHasRun) {
+  ManualClock clock;
+  JobPool pool(1, 1, clock.AsClock());
+  Gate gate;
+  std::latch started(1);
+  ASSERT_TRUE(pool.TrySubmit([&](std::stop_token) {
+                    started.count_down();
+                    gate.Wait();
+                  })
+                  .ok());
+  started.wait();
+  ASSERT_TRUE(pool.TrySubmit([](std::stop_token) {}).ok());
+
+  const absl::Status fresh = pool.TrySubmit([](std::stop_token) {});
+  clock.Advance(std::chrono::seconds(16));
+  const absl::Status long_running = pool.TrySubmit([](std::stop_token) {});
+  clock.Advance(std::chrono::minutes(5));
+  const absl::Status very_long = pool.TrySubmit([](std::stop_token) {});
+  gate.Open();
+  ASSERT_TRUE(pool.WaitIdle(Deadline()));
+
+  EXPECT_EQ(HintMs(fresh), 10);  // the floor
+  EXPECT_EQ(HintMs(long_running), 16'000);
+  EXPECT_EQ(HintMs(very_long), 60'000);  // the ceiling
+}
+
 TEST(JobPoolTest, ShutdownRunsQueuedTasksThenRefusesNewOnes) {
   std::atomic<int> ran{0};
   auto pool = std::make_unique<JobPool>(1, 10);

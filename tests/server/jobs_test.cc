@@ -415,13 +415,14 @@ TEST_F(JobsTest, EveryCallTakingAJobIdRefusesAMalformedOne) {
   const std::string too_long(300, 'j');
 
   for (const std::string& id : {std::string(), too_long}) {
+    // An empty id is malformed; an id over the size limit is refused like every size cap.
     const std::string message =
         id.empty() ? "job_id is empty" : "job_id is 300 bytes, over the limit of 256";
-    EXPECT_THAT(GetJob(*stub_, id).status, GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, message));
-    EXPECT_THAT(WatchJob(*stub_, id).status,
-                GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, message));
-    EXPECT_THAT(GetResult(*stub_, id).status,
-                GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, message));
+    const grpc::StatusCode code =
+        id.empty() ? grpc::StatusCode::INVALID_ARGUMENT : grpc::StatusCode::RESOURCE_EXHAUSTED;
+    EXPECT_THAT(GetJob(*stub_, id).status, GrpcStatusIs(code, message));
+    EXPECT_THAT(WatchJob(*stub_, id).status, GrpcStatusIs(code, message));
+    EXPECT_THAT(GetResult(*stub_, id).status, GrpcStatusIs(code, message));
   }
 }
 
@@ -500,7 +501,9 @@ TEST(JobsGatedTest, WatchDeadlineReleasesServerState) {
   while (reader->Read(&snapshot)) ++reads;
   const grpc::Status status = reader->Finish();
 
-  EXPECT_EQ(reads, 1);  // the snapshot; the job is held, so nothing else happens
+  // The snapshot at most (a loaded machine may reach the deadline before it is written); the
+  // job is held, so nothing else can happen.
+  EXPECT_LE(reads, 1);
   EXPECT_EQ(status.error_code(), grpc::StatusCode::DEADLINE_EXCEEDED);
   EXPECT_TRUE(NoStreamsLeft(*gated.server));
 }

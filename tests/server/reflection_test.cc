@@ -1,5 +1,6 @@
 // Server reflection (what grpcurl and grpc_cli use) on a real server: it lists MotionService and
-// health, and describes MotionService's file. The request and response messages are built from
+// health, and describes MotionService's file with the files it imports; with bearer tokens it
+// needs one, unless --open_reflection opens it. The request and response messages are built from
 // the descriptors libgrpc++_reflection registers, so the test speaks the real protocol without
 // compiling reflection.proto again.
 #include <memory>
@@ -13,7 +14,11 @@
 #include "grpcpp/support/byte_buffer.h"
 #include "gtest/gtest.h"
 #include "server/server.h"
+#include "google/protobuf/descriptor.pb.h"
+#include "tempokey/core/io/file_io.h"
 #include "tests/server/server_test_util.h"
+#include "tests/testing/process_util.h"
+#include "tests/testing/test_paths.h"
 
 namespace tempokey::testing {
 namespace {
@@ -36,8 +41,11 @@ class ReflectionClient {
 
   bool ready() const { return request_type_ != nullptr && response_type_ != nullptr; }
 
-  // Sends a request with string field `field` set to `value`; the parsed response, or null.
-  std::unique_ptr<Message> Ask(const std::string& field, const std::string& value) {
+  // Sends a request with string field `field` set to `value` (with "authorization: Bearer
+  // <token>" unless `token` is empty); the parsed response, or null. `status` (optional) gets
+  // the call's status.
+  std::unique_ptr<Message> Ask(const std::string& field, const std::string& value,
+                               const std::string& token = "", grpc::Status* status_out = nullptr) {
     std::unique_ptr<Message> request(factory_.GetPrototype(request_type_)->New());
     request->GetReflection()->SetString(request.get(), request_type_->FindFieldByName(field),
                                         value);
@@ -46,6 +54,7 @@ class ReflectionClient {
 
     grpc::ClientContext context;
     SetDeadline(context);
+    if (!token.empty()) context.AddMetadata("authorization", "Bearer " + token);
     grpc::CompletionQueue queue;
     std::unique_ptr<grpc::GenericClientAsyncReaderWriter> call =
         stub_.PrepareCall(&context, kMethod, &queue);
@@ -54,16 +63,26 @@ class ReflectionClient {
     grpc::ByteBuffer in;
     grpc::Status status;
     int tag = 0;
+    // Each step runs only if the one before succeeded; the status is read in any case (a server
+    // that refuses the call ends it before the request is written).
     call->StartCall(&tag);
-    if (!Step(queue)) return nullptr;
-    call->Write(out, &tag);
-    if (!Step(queue)) return nullptr;
-    call->WritesDone(&tag);
-    if (!Step(queue)) return nullptr;
-    call->Read(&in, &tag);
-    const bool read = Step(queue);
+    bool open = Step(queue);
+    if (open) {
+      call->Write(out, &tag);
+      open = Step(queue);
+    }
+    if (open) {
+      call->WritesDone(&tag);
+      open = Step(queue);
+    }
+    bool read = false;
+    if (open) {
+      call->Read(&in, &tag);
+      read = Step(queue);
+    }
     call->Finish(&status, &tag);
     Step(queue);
+    if (status_out != nullptr) *status_out = status;
     if (!read || !status.ok()) return nullptr;
 
     std::vector<grpc::Slice> slices;
@@ -127,6 +146,79 @@ TEST(ReflectionTest, ListsTheServicesAndDescribesMotionService) {
   const Message& files = Field(*described, "file_descriptor_response");
   const auto* proto_field = files.GetDescriptor()->FindFieldByName("file_descriptor_proto");
   EXPECT_GE(files.GetReflection()->FieldSize(files, proto_field), 1);
+}
+
+TEST(ReflectionTest, FileByNameComesWithTheFilesItImports) {
+  std::unique_ptr<server::Server> server = StartServer(TestServerOptions());
+  ASSERT_NE(server, nullptr);
+  ReflectionClient client(Connect(server->target()));
+  ASSERT_TRUE(client.ready());
+
+  const std::unique_ptr<Message> described =
+      client.Ask("file_by_filename", "tempokey/v1/motion_service.proto");
+  const std::unique_ptr<Message> missing = client.Ask("file_containing_symbol", "no.Such");
+
+  ASSERT_NE(described, nullptr);
+  const Message& files = Field(*described, "file_descriptor_response");
+  const auto* proto_field = files.GetDescriptor()->FindFieldByName("file_descriptor_proto");
+  std::vector<std::string> names;
+  for (int i = 0; i < files.GetReflection()->FieldSize(files, proto_field); ++i) {
+    google::protobuf::FileDescriptorProto file;
+    ASSERT_TRUE(file.ParseFromString(files.GetReflection()->GetRepeatedString(files, proto_field, i)));
+    names.push_back(file.name());
+  }
+  EXPECT_THAT(names, ::testing::UnorderedElementsAre(
+                         "tempokey/v1/motion_service.proto", "tempokey/v1/clip.proto",
+                         "tempokey/v1/operations.proto", "tempokey/v1/editing.proto",
+                         "google/protobuf/timestamp.proto"));
+  ASSERT_NE(missing, nullptr);
+  const Message& error = Field(*missing, "error_response");
+  EXPECT_EQ(error.GetReflection()->GetInt32(error, error.GetDescriptor()->FindFieldByName("error_code")),
+            static_cast<int>(grpc::StatusCode::NOT_FOUND));
+}
+
+// A tempokey-server child with the bearer token "reflection-token" and `flags`.
+std::unique_ptr<ServerProcess> StartWithToken(const std::vector<std::string>& flags) {
+  const std::string dir = MakeTempDir();
+  EXPECT_TRUE(core::WriteFileAtomically(dir + "/tokens", "reflection-token\n").ok());
+  std::vector<std::string> all = {"--auth_token_file", dir + "/tokens"};
+  all.insert(all.end(), flags.begin(), flags.end());
+  absl::StatusOr<std::unique_ptr<ServerProcess>> server = ServerProcess::Start(dir, all);
+  EXPECT_TRUE(server.ok()) << server.status();
+  return server.ok() ? *std::move(server) : nullptr;
+}
+
+TEST(ReflectionAccessTest, WithTokensReflectionNeedsOneLikeEveryMotionServiceCall) {
+  std::unique_ptr<ServerProcess> server = StartWithToken({});
+  ASSERT_NE(server, nullptr);
+  ReflectionClient client(Connect(server->target()));
+  grpc::Status anonymous;
+  grpc::Status wrong;
+
+  const std::unique_ptr<Message> refused = client.Ask("list_services", "", "", &anonymous);
+  client.Ask("list_services", "", "guessed-token", &wrong);
+  const std::unique_ptr<Message> listed = client.Ask("list_services", "", "reflection-token");
+  // Health stays open: probes carry no token.
+  const absl::StatusOr<int> live = CheckHealth(Connect(server->target()), "");
+
+  EXPECT_EQ(refused, nullptr);
+  EXPECT_THAT(anonymous, GrpcStatusIs(grpc::StatusCode::UNAUTHENTICATED,
+                                      "missing \"authorization: Bearer <token>\" metadata"));
+  EXPECT_THAT(wrong, GrpcStatusIs(grpc::StatusCode::UNAUTHENTICATED,
+                                  "the bearer token is not accepted"));
+  EXPECT_NE(listed, nullptr);
+  ASSERT_TRUE(live.ok()) << live.status();
+  EXPECT_EQ(*live, 1);
+}
+
+TEST(ReflectionAccessTest, OpenReflectionServesCallersWithoutAToken) {
+  std::unique_ptr<ServerProcess> server = StartWithToken({"--open_reflection"});
+  ASSERT_NE(server, nullptr);
+  ReflectionClient client(Connect(server->target()));
+
+  const std::unique_ptr<Message> listed = client.Ask("list_services", "");
+
+  EXPECT_NE(listed, nullptr);
 }
 
 }  // namespace

@@ -8,6 +8,7 @@
 #include <thread>
 #include <vector>
 
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tempokey/core/io/file_io.h"
 #include "tests/testing/test_paths.h"
@@ -58,14 +59,53 @@ TEST(DefaultWorkerCountTest, FollowsTheCpusThisThreadMayUse) {
 }
 
 TEST(IsLoopbackAddressTest, KnowsLoopbackHostsAndUnixSockets) {
-  for (const char* address : {"127.0.0.1:50051", "127.8.9.10:1", "localhost:50051", "[::1]:50051",
-                              "unix:/tmp/tempokey.sock", "unix-abstract:tempokey"}) {
+  for (const char* address :
+       {"127.0.0.1:50051", "127.8.9.10:1", "localhost:50051", "LOCALHOST:50051", "LocalHost:1",
+        "[::1]:50051", "[::ffff:127.0.0.1]:50051", "[::ffff:127.1.2.3]:0", "::1",
+        "unix:/tmp/tempokey.sock", "unix-abstract:tempokey"}) {
     EXPECT_TRUE(IsLoopbackAddress(address)) << address;
   }
-  for (const char* address : {"0.0.0.0:50051", "[::]:50051", "10.0.0.7:50051",
-                              "tempokey.example:443", "128.0.0.1:1"}) {
+  for (const char* address :
+       {"0.0.0.0:50051", "[::]:50051", "10.0.0.7:50051", "tempokey.example:443", "128.0.0.1:1",
+        "127.attacker.invalid:50051", "127.0.0.1.attacker.invalid:1", "[::ffff:10.0.0.1]:1",
+        ":50051", "[::ffff:128.0.0.1]:1"}) {
     EXPECT_FALSE(IsLoopbackAddress(address)) << address;
   }
+}
+
+TEST(IsLoopbackLiteralTest, AcceptsLoopbackNamesWithoutResolvingAnything) {
+  for (const char* host : {"localhost", "LOCALHOST", "127.0.0.1", "127.9.8.7", "::1", "[::1]",
+                           "::ffff:127.0.0.1", "[::ffff:127.0.0.1]"}) {
+    EXPECT_TRUE(IsLoopbackLiteral(host)) << host;
+  }
+  // A name that resolves to 127.0.0.1 is still not a loopback name (DNS rebinding).
+  for (const char* host : {"127.attacker.invalid", "localhost.attacker.invalid", "10.0.0.1",
+                           "0.0.0.0", "::", "", "localhost:80"}) {
+    EXPECT_FALSE(IsLoopbackLiteral(host)) << host;
+  }
+}
+
+TEST(CheckLoopbackAddressTest, SaysWhyAnAddressIsNotLoopback) {
+  EXPECT_EQ(CheckLoopbackAddress("0.0.0.0:1").message(), "0.0.0.0 is not a loopback address");
+  EXPECT_EQ(CheckLoopbackAddress("[::ffff:10.0.0.1]:1").message(),
+            "::ffff:10.0.0.1 is not a loopback address");
+  // .invalid never resolves (RFC 6761 section 6.4): a name that only looks like 127.x.
+  EXPECT_THAT(std::string(CheckLoopbackAddress("127.attacker.invalid:1").message()),
+              ::testing::StartsWith("127.attacker.invalid does not resolve ("));
+  EXPECT_EQ(CheckLoopbackAddress(":50051").message(),
+            "\":50051\" has no host: it listens on every interface");
+}
+
+TEST(MemoryLimitFromTest, TakesTheSmallestOfCgroupAndPhysicalMemory) {
+  constexpr std::int64_t kGiB = std::int64_t{1} << 30;
+
+  EXPECT_EQ(MemoryLimitFrom("2147483648\n", "", 8 * kGiB), 2 * kGiB);
+  EXPECT_EQ(MemoryLimitFrom("max\n", "", 8 * kGiB), 8 * kGiB);
+  EXPECT_EQ(MemoryLimitFrom("", "1073741824\n", 8 * kGiB), kGiB);
+  EXPECT_EQ(MemoryLimitFrom("", "9223372036854771712\n", 8 * kGiB), 8 * kGiB);  // v1: no limit
+  EXPECT_EQ(MemoryLimitFrom("17179869184", "", 8 * kGiB), 8 * kGiB);  // above the machine
+  EXPECT_EQ(MemoryLimitFrom("", "", 0), 0);
+  EXPECT_EQ(MemoryLimitFrom("536870912", "", 0), 512 << 20);
 }
 
 TEST(ReadTokenFileTest, SkipsCommentsAndBlankLinesAndTrims) {
@@ -104,8 +144,24 @@ TEST(ValidateServerOptionsTest, RefusesWhatNoServerCanRunWith) {
        "--tls_client_ca needs --tls_cert and --tls_key (mutual TLS is TLS first)"},
       {[](ServerOptions& o) { o.auth_tokens = {"ok", ""}; }, "an auth token is empty"},
       {[](ServerOptions& o) { o.address = "0.0.0.0:50051"; },
-       "refusing to listen on non-loopback address 0.0.0.0:50051 without TLS: give --tls_cert "
-       "and --tls_key, or --allow_insecure_remote"},
+       "refusing to listen on non-loopback address 0.0.0.0:50051 without TLS (0.0.0.0 is not a "
+       "loopback address): give --tls_cert and --tls_key, or --allow_insecure_remote"},
+      {[](ServerOptions& o) { o.metrics_address = "0.0.0.0:9464"; },
+       "refusing to serve metrics on non-loopback address 0.0.0.0:9464 (0.0.0.0 is not a "
+       "loopback address): metrics are plain HTTP; scrape over loopback, or give "
+       "--allow_insecure_remote"},
+      {[](ServerOptions& o) {
+         o.metrics_address = "0.0.0.0:9464";
+         o.tls_cert_file = "cert.pem";
+         o.tls_key_file = "key.pem";
+       },
+       "refusing to serve metrics on non-loopback address 0.0.0.0:9464 (0.0.0.0 is not a "
+       "loopback address): metrics are plain HTTP; scrape over loopback, or give "
+       "--allow_insecure_remote"},
+      {[](ServerOptions& o) { o.memory_budget_bytes = -1; },
+       "--memory_budget_bytes must be >= 0 (0: half the memory the process may use), got -1"},
+      {[](ServerOptions& o) { o.stream_idle_timeout = std::chrono::milliseconds(-1500); },
+       "--stream_idle_timeout_seconds must be >= 0 (0: none), got -1.5"},
   };
   for (const Case& c : cases) {
     ServerOptions options;
@@ -118,8 +174,20 @@ TEST(ValidateServerOptionsTest, RefusesWhatNoServerCanRunWith) {
   }
   ServerOptions remote;
   remote.address = "0.0.0.0:50051";
+  remote.metrics_address = "0.0.0.0:9464";
   remote.allow_insecure_remote = true;
   EXPECT_TRUE(ValidateServerOptions(remote).ok());
+  ServerOptions look_alike;
+  look_alike.address = "127.attacker.invalid:50051";
+  // The resolver's reason varies (no such name, or no DNS at all); the refusal does not.
+  EXPECT_THAT(std::string(ValidateServerOptions(look_alike).message()),
+              ::testing::StartsWith("refusing to listen on non-loopback address "
+                                    "127.attacker.invalid:50051 without TLS (127.attacker.invalid "
+                                    "does not resolve ("));
+  ServerOptions local_names;
+  local_names.address = "LOCALHOST:50051";
+  local_names.metrics_address = "[::ffff:127.0.0.1]:9464";
+  EXPECT_TRUE(ValidateServerOptions(local_names).ok());
   EXPECT_TRUE(ValidateServerOptions(ServerOptions{}).ok());
 }
 

@@ -1,11 +1,6 @@
 // Admission, size limits and metrics of a real server on 127.0.0.1:0: a full queue answers
 // RESOURCE_EXHAUSTED with a retry hint and the server keeps serving; a 50 MB clip goes up and its
 // result comes back with gRPC's default client limits; the Prometheus port is scraped over HTTP.
-#include <arpa/inet.h>
-#include <netinet/in.h>
-#include <sys/socket.h>
-#include <unistd.h>
-
 #include <chrono>
 #include <cstdint>
 #include <map>
@@ -15,12 +10,12 @@
 #include <vector>
 
 #include "absl/strings/numbers.h"
-#include "absl/strings/str_split.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "server/job_manager.h"
 #include "server/server.h"
 #include "proto/retry_hint.h"
+#include "tests/server/http_util.h"
 #include "tests/server/server_test_util.h"
 
 namespace tempokey::testing {
@@ -138,57 +133,6 @@ TEST(OutputLimitTest, RetimeOrBakeBeyondTheServersClipLimitIsRefusedBeforeQueuei
 
 // ---- metrics ------------------------------------------------------------------------------------
 
-// GET `path` from 127.0.0.1:`port` over a plain socket; the whole response, headers included.
-std::optional<std::string> HttpGet(int port, const std::string& path) {
-  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
-  if (fd < 0) return std::nullopt;
-  timeval timeout{.tv_sec = 30, .tv_usec = 0};
-  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
-  sockaddr_in address{};
-  address.sin_family = AF_INET;
-  address.sin_port = htons(static_cast<std::uint16_t>(port));
-  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  if (::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) {
-    ::close(fd);
-    return std::nullopt;
-  }
-  const std::string request =
-      "GET " + path + " HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n";
-  if (::send(fd, request.data(), request.size(), 0) != static_cast<ssize_t>(request.size())) {
-    ::close(fd);
-    return std::nullopt;
-  }
-  std::string response;
-  char buffer[8192];
-  for (;;) {
-    const ssize_t n = ::recv(fd, buffer, sizeof buffer, 0);
-    if (n <= 0) break;
-    response.append(buffer, static_cast<std::size_t>(n));
-  }
-  ::close(fd);
-  return response;
-}
-
-// Sample lines of a Prometheus text exposition: "name{labels}" -> value.
-std::map<std::string, double> ParseSamples(const std::string& text) {
-  std::map<std::string, double> samples;
-  for (absl::string_view line : absl::StrSplit(text, '\n')) {
-    if (line.empty() || line.front() == '#') continue;
-    const std::size_t space = line.rfind(' ');
-    if (space == absl::string_view::npos) continue;
-    double value = 0.0;
-    if (absl::SimpleAtod(line.substr(space + 1), &value)) {
-      samples[std::string(line.substr(0, space))] = value;
-    }
-  }
-  return samples;
-}
-
-double Sample(const std::map<std::string, double>& samples, const std::string& name) {
-  const auto it = samples.find(name);
-  return it == samples.end() ? 0.0 : it->second;
-}
-
 TEST(MetricsTest, ScrapeShowsJobsBytesAndLatencyMoving) {
   server::ServerOptions options = TestServerOptions();
   options.metrics_address = "127.0.0.1:0";
@@ -203,6 +147,8 @@ TEST(MetricsTest, ScrapeShowsJobsBytesAndLatencyMoving) {
   for (int i = 0; i < 3; ++i) {
     const JobOutcome job = Submit(*stub, SubmitRequest(clip_id));
     TEMPOKEY_ASSERT_GRPC_OK(job.status);
+    // The server counts a job's end before anyone can see it (JobManager reports the end under
+    // its lock), so once the watch has seen the terminal state the scrape below includes it.
     WaitForJob(*stub, job.job.job_id());
     TEMPOKEY_ASSERT_GRPC_OK(GetResult(*stub, job.job.job_id()).status);
   }

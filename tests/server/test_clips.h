@@ -85,17 +85,37 @@ inline constexpr std::int64_t kSanitizerRssAllowanceKiB = std::int64_t{384} * 10
 inline constexpr std::int64_t kSanitizerRssAllowanceKiB = 0;
 #endif
 
-// Reads /proc/self/status VmHWM (peak resident set), in KiB; 0 when unavailable.
-inline std::int64_t PeakRssKiB(const std::string& status_path = "/proc/self/status") {
+// Reads a "<field>: <n> kB" line of a /proc/<pid>/status file, in KiB; 0 when unavailable.
+inline std::int64_t StatusKiB(const std::string& status_path, const char* field) {
   FILE* file = std::fopen(status_path.c_str(), "r");
   if (file == nullptr) return 0;
   char line[256];
   std::int64_t kib = 0;
+  const std::string format = std::string(field) + ": %ld kB";
   while (std::fgets(line, sizeof line, file) != nullptr) {
-    if (std::sscanf(line, "VmHWM: %ld kB", &kib) == 1) break;
+    if (std::sscanf(line, format.c_str(), &kib) == 1) break;
   }
   std::fclose(file);
   return kib;
+}
+
+// Reads /proc/self/status VmHWM (peak resident set), in KiB; 0 when unavailable.
+inline std::int64_t PeakRssKiB(const std::string& status_path = "/proc/self/status") {
+  return StatusKiB(status_path, "VmHWM");
+}
+
+// The resident set now (VmRSS), in KiB; 0 when unavailable.
+inline std::int64_t RssKiB(const std::string& status_path = "/proc/self/status") {
+  return StatusKiB(status_path, "VmRSS");
+}
+
+// Resets the peak resident set (VmHWM) of process `pid` to its current size (Linux >= 4.0:
+// writing 5 to /proc/<pid>/clear_refs). False when the kernel refuses.
+inline bool ResetPeakRss(int pid) {
+  FILE* file = std::fopen(("/proc/" + std::to_string(pid) + "/clear_refs").c_str(), "w");
+  if (file == nullptr) return false;
+  const bool written = std::fputs("5", file) >= 0;
+  return std::fclose(file) == 0 && written;
 }
 
 }  // namespace tempokey::testing

@@ -206,7 +206,7 @@ INSTANTIATE_TEST_SUITE_P(
                       grpc::StatusCode::INVALID_ARGUMENT, "a second clip header arrived"},
         MalformedCase{"HeaderOverLimits",
                       [](auto& r) { r[0].mutable_header()->set_frame_count(1'000'000); },
-                      grpc::StatusCode::INVALID_ARGUMENT,
+                      grpc::StatusCode::RESOURCE_EXHAUSTED,
                       "clip header: clip has 1000000 frames x 9 channels, over the limit of "
                       "4000000 samples"},
         MalformedCase{"NoHeaderAtAll", [](auto& r) { r.clear(); },

@@ -100,26 +100,26 @@ absl::Status ValidateClipLayout(const Clip& clip, const ClipLimits& limits) {
         absl::StrCat("a clip needs at least 1 frame, got ", clip.frame_count));
   }
   if (clip.frame_count > limits.max_frames) {
-    return absl::InvalidArgumentError(absl::StrCat("clip has ", clip.frame_count,
+    return OverLimitError(absl::StrCat("clip has ", clip.frame_count,
                                                    " frames, over the limit of ",
                                                    limits.max_frames));
   }
   if (clip.channels.empty()) return absl::InvalidArgumentError("clip has no channels");
   const auto channel_count = static_cast<std::int64_t>(clip.channels.size());
   if (channel_count > limits.max_channels) {
-    return absl::InvalidArgumentError(absl::StrCat("clip has ", channel_count,
+    return OverLimitError(absl::StrCat("clip has ", channel_count,
                                                    " channels, over the limit of ",
                                                    limits.max_channels));
   }
   if (clip.frame_count > limits.max_samples / channel_count) {
-    return absl::InvalidArgumentError(absl::StrCat(
+    return OverLimitError(absl::StrCat(
         "clip has ", clip.frame_count, " frames x ", channel_count, " channels, over the limit of ",
         limits.max_samples, " samples"));
   }
 
   const auto& joints = clip.skeleton.joints;
   if (static_cast<std::int64_t>(joints.size()) > limits.max_joints) {
-    return absl::InvalidArgumentError(absl::StrCat("skeleton has ", joints.size(),
+    return OverLimitError(absl::StrCat("skeleton has ", joints.size(),
                                                    " joints, over the limit of ",
                                                    limits.max_joints));
   }

@@ -91,7 +91,7 @@ class StepChain {
 absl::Status ValidateStepCount(std::span<const PipelineStep> steps) {
   if (steps.empty()) return absl::InvalidArgumentError("the pipeline has no operations");
   if (steps.size() > kMaxPipelineSteps) {
-    return absl::InvalidArgumentError(absl::StrCat("the pipeline has ", steps.size(),
+    return OverLimitError(absl::StrCat("the pipeline has ", steps.size(),
                                                    " operations, over the limit of ",
                                                    kMaxPipelineSteps));
   }

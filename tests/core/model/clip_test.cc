@@ -27,11 +27,17 @@ Clip ValidClip() {
   return clip;
 }
 
-std::string ValidateMessage(const Clip& clip, const ClipLimits& limits = {}) {
+std::string ValidateMessage(const Clip& clip, const ClipLimits& limits = {},
+                            absl::StatusCode code = absl::StatusCode::kInvalidArgument) {
   const absl::Status status = ValidateClip(clip, limits);
   if (status.ok()) return "ok";
-  EXPECT_EQ(status.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(status.code(), code) << status;
   return std::string(status.message());
+}
+
+// A size over a server limit is RESOURCE_EXHAUSTED (README "Status codes"), not a malformed clip.
+std::string OverLimitMessage(const Clip& clip, const ClipLimits& limits) {
+  return ValidateMessage(clip, limits, absl::StatusCode::kResourceExhausted);
 }
 
 TEST(ValidateClipTest, AcceptsValidClip) {
@@ -105,11 +111,11 @@ TEST(ValidateClipTest, LimitsOnFramesChannelsSamplesAndJoints) {
   depth.max_depth = 1;
   const Clip clip = ValidClip();
 
-  EXPECT_EQ(ValidateMessage(clip, frames), "clip has 3 frames, over the limit of 2");
-  EXPECT_EQ(ValidateMessage(clip, channels), "clip has 3 channels, over the limit of 2");
-  EXPECT_EQ(ValidateMessage(clip, samples),
+  EXPECT_EQ(OverLimitMessage(clip, frames), "clip has 3 frames, over the limit of 2");
+  EXPECT_EQ(OverLimitMessage(clip, channels), "clip has 3 channels, over the limit of 2");
+  EXPECT_EQ(OverLimitMessage(clip, samples),
             "clip has 3 frames x 3 channels, over the limit of 8 samples");
-  EXPECT_EQ(ValidateMessage(clip, joints), "skeleton has 2 joints, over the limit of 1");
+  EXPECT_EQ(OverLimitMessage(clip, joints), "skeleton has 2 joints, over the limit of 1");
   EXPECT_EQ(ValidateMessage(clip, depth), "joint 1 (Spine): nesting deeper than 1");
 }
 

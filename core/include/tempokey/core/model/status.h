@@ -34,6 +34,13 @@ namespace tempokey::core {
 inline absl::string_view AsAbsl(std::string_view s) { return absl::string_view(s.data(), s.size()); }
 inline std::string_view AsStd(absl::string_view s) { return std::string_view(s.data(), s.size()); }
 
+// A value over a size limit (frames, channels, samples, joints, keys, operations): code
+// kResourceExhausted, as gRPC answers a message over its size limit, so callers can tell "too
+// big for this server" from "malformed" (kInvalidArgument).
+inline absl::Status OverLimitError(std::string_view message) {
+  return absl::ResourceExhaustedError(AsAbsl(message));
+}
+
 // Prefixes the message of a non-OK status with `context` ("context: message"), keeping the code.
 absl::Status Annotate(const absl::Status& status, std::string_view context);
 

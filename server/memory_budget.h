@@ -1,0 +1,143 @@
+// One memory budget for everything a server holds on behalf of its clients: clips being uploaded
+// or assembled for Process, stored clips, queued and running jobs (operations and inputs), results
+// stored or in flight. Memory is reserved before it is allocated, from bytes that have arrived,
+// never from sizes a request merely declares; a reservation that does not fit (after the caches
+// were asked to give memory back) is refused with RESOURCE_EXHAUSTED naming the budget.
+//
+// No gRPC in here, so it is unit-tested under ThreadSanitizer with the job manager.
+#ifndef TEMPOKEY_SERVER_MEMORY_BUDGET_H_
+#define TEMPOKEY_SERVER_MEMORY_BUDGET_H_
+
+#include <array>
+#include <condition_variable>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <string_view>
+#include <thread>
+#include <vector>
+
+#include "absl/base/thread_annotations.h"
+#include "absl/status/status.h"
+#include "absl/status/statusor.h"
+
+namespace tempokey::server {
+
+// What a reservation pays for (metrics report the budget's use by kind).
+enum class MemoryUse { kUpload, kStoredClip, kJob, kResult, kProcess };
+inline constexpr int kMemoryUseCount = 5;
+// "upload", "stored_clip", "job", "result", "process".
+std::string_view MemoryUseName(MemoryUse use);
+
+class MemoryBudget {
+ public:
+  // Asked to free memory when a reservation does not fit: release cached data (least recently
+  // used first) worth at least `wanted` bytes if there is that much, and return. Called without
+  // the budget's lock; must not reserve.
+  using Reclaimer = std::function<void(std::int64_t wanted)>;
+
+  // Free heap memory goes back to the system (the trimming thread's malloc_trim) once the bytes
+  // released since the last trim reach a quarter of what the budget holds, and at least this
+  // much: glibc keeps freed chunks below its mmap threshold in its arenas otherwise, so the
+  // resident set would stay at its peak after large deletes.
+  static constexpr std::int64_t kTrimThresholdBytes = std::int64_t{8} << 20;
+
+  // `capacity_bytes` >= 1. Starts the trimming thread.
+  explicit MemoryBudget(std::int64_t capacity_bytes);
+  // Stops the trimming thread. Every reservation must have been released.
+  ~MemoryBudget();
+  MemoryBudget(const MemoryBudget&) = delete;
+  MemoryBudget& operator=(const MemoryBudget&) = delete;
+
+  // A claim on part of the budget, released when destroyed. Move-only. Not thread-safe by
+  // itself: one owner at a time.
+  class Reservation {
+   public:
+    Reservation() = default;  // holds nothing, belongs to no budget
+    Reservation(Reservation&& other) noexcept;
+    Reservation& operator=(Reservation&& other) noexcept;
+    ~Reservation();
+
+    std::int64_t bytes() const { return bytes_; }
+    // Claims `more` bytes (>= 0) on top of what it holds.
+    // Errors: kResourceExhausted as MemoryBudget::Reserve(); the reservation is unchanged.
+    absl::Status Grow(std::int64_t more);
+    // Gives back what it holds beyond `bytes` (no effect when it holds less).
+    void ShrinkTo(std::int64_t bytes);
+    // Sets the claim to exactly `bytes` of memory that exists already (an assembled clip whose
+    // exact size differs from what was claimed while it arrived), even slightly past the budget.
+    void Settle(std::int64_t bytes);
+    void Release() { ShrinkTo(0); }
+    // Counts what it holds under `use` from now on (metrics), e.g. an upload once stored.
+    void ChangeUse(MemoryUse use);
+
+   private:
+    friend class MemoryBudget;
+    Reservation(MemoryBudget* budget, MemoryUse use, std::string_view what)
+        : budget_(budget), use_(use), what_(what) {}
+
+    MemoryBudget* budget_ = nullptr;
+    MemoryUse use_ = MemoryUse::kUpload;
+    std::string_view what_;  // a literal: "an upload", "a job's result", ...
+    std::int64_t bytes_ = 0;
+  };
+
+  // A reservation of `bytes` (>= 0) for `use`; `what` (a string literal) names it in the error.
+  // When it does not fit, the reclaimers are asked for the difference, in order, until it does.
+  // Errors: kResourceExhausted "the server's memory budget (--memory_budget_bytes=N) cannot take
+  // a job's result of 5242880 bytes: 1048576 bytes free; retry later or send less".
+  absl::StatusOr<Reservation> Reserve(std::int64_t bytes, MemoryUse use, std::string_view what);
+
+  // Memory freed outside any reservation (a large request parsed and dropped, a large response
+  // sent) that counts towards the next trim.
+  void NoteFreed(std::int64_t bytes);
+
+  // Adds a reclaimer; call before the budget is shared between threads.
+  void AddReclaimer(Reclaimer reclaimer);
+
+  std::int64_t capacity() const { return capacity_; }
+  std::int64_t used() const;
+  std::int64_t used(MemoryUse use) const;
+  // Times the trimming thread returned memory to the system (tests wait for it).
+  std::int64_t trims() const;
+  // Blocks until the trimming thread has handled every release so far (tests).
+  void WaitForTrim() const;
+
+ private:
+  absl::Status Claim(MemoryUse use, std::string_view what, std::int64_t more);
+  bool TryClaimLocked(MemoryUse use, std::int64_t more) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+  void Return(MemoryUse use, std::int64_t bytes);
+  // Counts `bytes` released; true when a trim is due (the caller notifies the trimmer).
+  bool ReleasedLocked(std::int64_t bytes) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+  void TrimLoop();
+
+  const std::int64_t capacity_;
+  std::vector<Reclaimer> reclaimers_;  // set before serving, then read-only
+
+  mutable std::mutex mu_;
+  mutable std::condition_variable trim_cv_;
+  std::int64_t used_ ABSL_GUARDED_BY(mu_) = 0;
+  std::array<std::int64_t, kMemoryUseCount> used_by_ ABSL_GUARDED_BY(mu_){};
+  std::int64_t released_since_trim_ ABSL_GUARDED_BY(mu_) = 0;
+  std::int64_t trim_requests_ ABSL_GUARDED_BY(mu_) = 0;
+  std::int64_t trims_ ABSL_GUARDED_BY(mu_) = 0;
+  bool stopping_ ABSL_GUARDED_BY(mu_) = false;
+  std::thread trimmer_;
+};
+
+// `value` shared, with `reservation` released when the last reference goes: the budget counts
+// a clip or result exactly as long as the memory exists, whoever holds it.
+template <typename T>
+std::shared_ptr<const T> ShareWithReservation(T value, MemoryBudget::Reservation reservation) {
+  struct Holder {
+    T value;
+    MemoryBudget::Reservation reservation;
+  };
+  auto holder = std::make_shared<Holder>(Holder{std::move(value), std::move(reservation)});
+  return std::shared_ptr<const T>(holder, &holder->value);
+}
+
+}  // namespace tempokey::server
+
+#endif  // TEMPOKEY_SERVER_MEMORY_BUDGET_H_

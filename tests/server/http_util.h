@@ -1,0 +1,91 @@
+// Plain HTTP/1.1 over a loopback socket for the metrics endpoint (no client library of ours in
+// between), and the sample lines of a Prometheus text exposition.
+#ifndef TEMPOKEY_TESTS_SERVER_HTTP_UTIL_H_
+#define TEMPOKEY_TESTS_SERVER_HTTP_UTIL_H_
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <string>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_split.h"
+#include "absl/strings/string_view.h"
+
+namespace tempokey::testing {
+
+// A TCP connection to 127.0.0.1:`port` whose reads give up after 60 s (a hang guard); -1 on
+// failure. The caller closes it.
+inline int ConnectLoopback(int port) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  if (fd < 0) return -1;
+  timeval timeout{.tv_sec = 60, .tv_usec = 0};
+  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &timeout, sizeof timeout);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_port = htons(static_cast<std::uint16_t>(port));
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  if (::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) {
+    ::close(fd);
+    return -1;
+  }
+  return fd;
+}
+
+// Everything the peer sends until it closes the connection (or the hang guard fires).
+inline std::string ReadToEnd(int fd) {
+  std::string response;
+  char buffer[8192];
+  for (;;) {
+    const ssize_t n = ::recv(fd, buffer, sizeof buffer, 0);
+    if (n <= 0) break;
+    response.append(buffer, static_cast<std::size_t>(n));
+  }
+  return response;
+}
+
+// GET `path` from 127.0.0.1:`port` with the extra header lines `headers` ("Name: value\r\n"
+// each); the whole response, headers included.
+inline std::optional<std::string> HttpGet(int port, const std::string& path,
+                                          const std::string& headers = "") {
+  const int fd = ConnectLoopback(port);
+  if (fd < 0) return std::nullopt;
+  const std::string request = "GET " + path + " HTTP/1.1\r\nHost: 127.0.0.1\r\n" + headers +
+                              "Connection: close\r\n\r\n";
+  if (::send(fd, request.data(), request.size(), 0) != static_cast<ssize_t>(request.size())) {
+    ::close(fd);
+    return std::nullopt;
+  }
+  std::string response = ReadToEnd(fd);
+  ::close(fd);
+  return response;
+}
+
+// Sample lines of a Prometheus text exposition: "name{labels}" -> value.
+inline std::map<std::string, double> ParseSamples(const std::string& text) {
+  std::map<std::string, double> samples;
+  for (absl::string_view line : absl::StrSplit(text, '\n')) {
+    if (line.empty() || line.front() == '#') continue;
+    const std::size_t space = line.rfind(' ');
+    if (space == absl::string_view::npos) continue;
+    double value = 0.0;
+    if (absl::SimpleAtod(line.substr(space + 1), &value)) {
+      samples[std::string(line.substr(0, space))] = value;
+    }
+  }
+  return samples;
+}
+
+inline double Sample(const std::map<std::string, double>& samples, const std::string& name) {
+  const auto it = samples.find(name);
+  return it == samples.end() ? 0.0 : it->second;
+}
+
+}  // namespace tempokey::testing
+
+#endif  // TEMPOKEY_TESTS_SERVER_HTTP_UTIL_H_

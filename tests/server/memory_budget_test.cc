@@ -1,0 +1,144 @@
+// MemoryBudget: reservations, refusals that name the budget, caches asked for memory, memory
+// handed back to the system after large releases. No gRPC: runs under ThreadSanitizer.
+#include "server/memory_budget.h"
+
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+
+namespace tempokey::server {
+namespace {
+
+using ::testing::HasSubstr;
+
+TEST(MemoryBudgetTest, ReservationsCountUntilReleasedAndRefuseBeyondTheBudget) {
+  MemoryBudget budget(1000);
+
+  absl::StatusOr<MemoryBudget::Reservation> a = budget.Reserve(600, MemoryUse::kUpload, "an upload");
+  ASSERT_TRUE(a.ok()) << a.status();
+  absl::StatusOr<MemoryBudget::Reservation> b = budget.Reserve(500, MemoryUse::kJob, "a job");
+  const std::int64_t used_while_a = budget.used();
+  a->Release();
+  absl::StatusOr<MemoryBudget::Reservation> c = budget.Reserve(500, MemoryUse::kJob, "a job");
+
+  EXPECT_EQ(b.status().code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_EQ(b.status().message(),
+            "the server's memory budget (--memory_budget_bytes=1000) cannot take a job of 500 "
+            "more bytes: 400 bytes free; retry later or send less");
+  EXPECT_EQ(used_while_a, 600);
+  ASSERT_TRUE(c.ok()) << c.status();
+  EXPECT_EQ(budget.used(), 500);
+  EXPECT_EQ(budget.used(MemoryUse::kJob), 500);
+  EXPECT_EQ(budget.used(MemoryUse::kUpload), 0);
+}
+
+TEST(MemoryBudgetTest, GrowingReservationStopsAtTheBudgetAndKeepsWhatItHad) {
+  MemoryBudget budget(100);
+  MemoryBudget::Reservation upload = *budget.Reserve(0, MemoryUse::kUpload, "an upload");
+
+  const absl::Status first = upload.Grow(60);
+  const absl::Status second = upload.Grow(60);
+
+  EXPECT_TRUE(first.ok());
+  EXPECT_EQ(second.code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_EQ(upload.bytes(), 60);
+  EXPECT_EQ(budget.used(), 60);
+}
+
+TEST(MemoryBudgetTest, ReclaimersAreAskedForWhatIsMissingInOrder) {
+  MemoryBudget budget(1000);
+  // Two caches holding reservations they give up when asked.
+  std::vector<MemoryBudget::Reservation> clips;
+  std::vector<MemoryBudget::Reservation> results;
+  for (int i = 0; i < 3; ++i) clips.push_back(*budget.Reserve(200, MemoryUse::kStoredClip, "a clip"));
+  results.push_back(*budget.Reserve(300, MemoryUse::kResult, "a result"));
+  std::vector<std::int64_t> asked;
+  budget.AddReclaimer([&](std::int64_t wanted) {
+    asked.push_back(wanted);
+    if (!clips.empty()) clips.pop_back();  // frees 200, not enough
+  });
+  budget.AddReclaimer([&](std::int64_t wanted) {
+    asked.push_back(wanted);
+    results.clear();  // frees 300
+  });
+
+  absl::StatusOr<MemoryBudget::Reservation> big = budget.Reserve(500, MemoryUse::kJob, "a job");
+
+  ASSERT_TRUE(big.ok()) << big.status();
+  EXPECT_THAT(asked, ::testing::ElementsAre(400, 200));  // 100 free: 400 missing, then 200
+  EXPECT_EQ(budget.used(), 400 + 500);
+}
+
+TEST(MemoryBudgetTest, SharedValueIsCountedUntilItsLastHolderGoes) {
+  MemoryBudget budget(1 << 20);
+  std::shared_ptr<const std::vector<double>> first = ShareWithReservation(
+      std::vector<double>(1000), *budget.Reserve(8000, MemoryUse::kResult, "a result"));
+  std::shared_ptr<const std::vector<double>> second = first;
+
+  first.reset();
+  const std::int64_t while_held = budget.used();
+  second.reset();
+
+  EXPECT_EQ(while_held, 8000);
+  EXPECT_EQ(budget.used(), 0);
+}
+
+TEST(MemoryBudgetTest, SettleAndChangeUseKeepTheAccountsExact) {
+  MemoryBudget budget(1000);
+  MemoryBudget::Reservation clip = *budget.Reserve(300, MemoryUse::kUpload, "an upload");
+
+  clip.Settle(1200);  // the clip exists: counted even past the budget
+  const std::int64_t over = budget.used();
+  clip.Settle(400);
+  clip.ChangeUse(MemoryUse::kStoredClip);
+
+  EXPECT_EQ(over, 1200);
+  EXPECT_EQ(budget.used(), 400);
+  EXPECT_EQ(budget.used(MemoryUse::kUpload), 0);
+  EXPECT_EQ(budget.used(MemoryUse::kStoredClip), 400);
+}
+
+TEST(MemoryBudgetTest, LargeReleasesHandMemoryBackToTheSystem) {
+  MemoryBudget budget(std::int64_t{1} << 30);
+  const std::int64_t before = budget.trims();
+  {
+    MemoryBudget::Reservation big =
+        *budget.Reserve(MemoryBudget::kTrimThresholdBytes, MemoryUse::kResult, "a result");
+  }
+
+  budget.WaitForTrim();
+
+  EXPECT_EQ(budget.trims(), before + 1);
+}
+
+TEST(MemoryBudgetTest, ManyThreadsNeverOvercommit) {
+  constexpr std::int64_t kCapacity = 10'000;
+  MemoryBudget budget(kCapacity);
+  std::atomic<std::int64_t> peak{0};
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 8; ++t) {
+    threads.emplace_back([&] {
+      for (int i = 0; i < 2000; ++i) {
+        absl::StatusOr<MemoryBudget::Reservation> r = budget.Reserve(700, MemoryUse::kJob, "a job");
+        if (!r.ok()) continue;
+        std::int64_t seen = budget.used();
+        std::int64_t was = peak.load();
+        while (seen > was && !peak.compare_exchange_weak(was, seen)) {
+        }
+      }
+    });
+  }
+  for (std::thread& t : threads) t.join();
+
+  EXPECT_LE(peak.load(), kCapacity);
+  EXPECT_EQ(budget.used(), 0);
+}
+
+}  // namespace
+}  // namespace tempokey::server

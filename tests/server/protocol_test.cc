@@ -1,0 +1,289 @@
+// Codes and protocol on a real server: bytes that are not a request get INVALID_ARGUMENT naming
+// the message (every method); an unknown method gets UNIMPLEMENTED with a message; a request_id
+// reused for another request gets ALREADY_EXISTS; requests over a size limit get
+// RESOURCE_EXHAUSTED; a Process call refuses messages after its start; a TLS key that is not its
+// certificate's stops the server at start-up with that said; a full queue's retry hint follows
+// how long the running job has run.
+#include <chrono>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "gmock/gmock.h"
+#include "grpcpp/generic/generic_stub.h"
+#include "gtest/gtest.h"
+#include "proto/clip_convert.h"
+#include "proto/retry_hint.h"
+#include "server/job_manager.h"
+#include "tests/server/server_test_util.h"
+#include "tests/testing/process_util.h"
+#include "tempokey/core/io/file_io.h"
+#include "tests/testing/test_paths.h"
+
+namespace tempokey::testing {
+namespace {
+
+using ::testing::HasSubstr;
+
+// Not a protobuf message: field 15 with a length far past the end.
+const std::string kGarbage = std::string("\x7a\xff\xff\xff\x0f", 5) + "not a message";
+
+// One call of `method` with the raw request bytes `request`, reading every response.
+grpc::Status RawCall(const std::shared_ptr<grpc::Channel>& channel, const std::string& method,
+                     const std::string& request) {
+  grpc::GenericStub stub(channel);
+  grpc::ClientContext context;
+  SetDeadline(context);
+  grpc::CompletionQueue queue;
+  std::unique_ptr<grpc::GenericClientAsyncReaderWriter> call =
+      stub.PrepareCall(&context, method, &queue);
+  auto step = [&queue] {
+    void* tag = nullptr;
+    bool ok = false;
+    return queue.Next(&tag, &ok) && ok;
+  };
+  int tag = 0;
+  call->StartCall(&tag);
+  step();
+  grpc::Slice slice(request);
+  grpc::ByteBuffer out(&slice, 1);
+  call->Write(out, &tag);
+  step();
+  call->WritesDone(&tag);
+  step();
+  grpc::ByteBuffer in;
+  for (;;) {
+    call->Read(&in, &tag);
+    if (!step()) break;
+  }
+  grpc::Status status;
+  call->Finish(&status, &tag);
+  step();
+  return status;
+}
+
+class ProtocolTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    server::ServerOptions options = TestServerOptions();
+    options.max_clip_samples = 100'000;
+    server_ = StartServer(options);
+    ASSERT_NE(server_, nullptr);
+    channel_ = Connect(server_->target());
+    stub_ = v1::MotionService::NewStub(channel_);
+  }
+
+  std::unique_ptr<server::Server> server_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<v1::MotionService::Stub> stub_;
+};
+
+TEST_F(ProtocolTest, BytesThatAreNotARequestAreInvalidArgumentOnEveryMethod) {
+  const std::vector<std::pair<std::string, std::string>> methods = {
+      {"GetServerInfo", "GetServerInfo request: 18 bytes are not a valid tempokey.v1.GetServerInfoRequest message"},
+      {"SubmitJob", "SubmitJob request: 18 bytes are not a valid tempokey.v1.SubmitJobRequest message"},
+      {"GetJob", "GetJob request: 18 bytes are not a valid tempokey.v1.GetJobRequest message"},
+      {"ListJobs", "ListJobs request: 18 bytes are not a valid tempokey.v1.ListJobsRequest message"},
+      {"CancelJob", "CancelJob request: 18 bytes are not a valid tempokey.v1.CancelJobRequest message"},
+      {"DeleteJob", "DeleteJob request: 18 bytes are not a valid tempokey.v1.DeleteJobRequest message"},
+      {"WatchJob", "WatchJob request: 18 bytes are not a valid tempokey.v1.WatchJobRequest message"},
+      {"GetJobResult", "GetJobResult request: 18 bytes are not a valid tempokey.v1.GetJobResultRequest message"},
+      {"UploadClip", "upload message 1: 18 bytes are not a valid tempokey.v1.UploadClipRequest message"},
+      {"Process", "Process message 1: 18 bytes are not a valid tempokey.v1.ProcessRequest message"},
+  };
+  ASSERT_EQ(kGarbage.size(), 18u);
+
+  for (const auto& [method, message] : methods) {
+    const grpc::Status status = RawCall(channel_, "/tempokey.v1.MotionService/" + method, kGarbage);
+
+    EXPECT_THAT(status, GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, message)) << method;
+  }
+  TEMPOKEY_ASSERT_GRPC_OK(UploadClip(*stub_, MakeClip(1, 10)).status);  // still serving
+}
+
+TEST_F(ProtocolTest, UnknownMethodIsUnimplementedWithAMessage) {
+  const grpc::Status status = RawCall(channel_, "/tempokey.v1.MotionService/Teleport", "");
+
+  EXPECT_THAT(status, GrpcStatusIs(grpc::StatusCode::UNIMPLEMENTED,
+                                   "method /tempokey.v1.MotionService/Teleport is not served by "
+                                   "tempokey-server"));
+}
+
+TEST_F(ProtocolTest, RequestIdReusedForAnotherRequestIsAlreadyExists) {
+  const std::string clip_id = UploadClip(*stub_, MakeClip(1, 40)).response.clip_id();
+  v1::SubmitJobRequest first = SubmitRequest(clip_id);
+  first.set_request_id("5e0c7c6e-import-17");
+  (*first.mutable_labels())["shot"] = "17";
+  (*first.mutable_labels())["take"] = "3";
+  v1::SubmitJobRequest other = first;
+  *other.mutable_operations() = WrapOperations(2);
+  v1::SubmitJobRequest invalid = first;
+  invalid.clear_operations();
+
+  const JobOutcome accepted = Submit(*stub_, first);
+  const JobOutcome retried = Submit(*stub_, first);
+  const JobOutcome different = Submit(*stub_, other);
+  const JobOutcome broken = Submit(*stub_, invalid);
+
+  TEMPOKEY_ASSERT_GRPC_OK(accepted.status);
+  TEMPOKEY_ASSERT_GRPC_OK(retried.status);
+  EXPECT_EQ(retried.job.job_id(), accepted.job.job_id());
+  const std::string refusal = "request_id \"5e0c7c6e-import-17\" already named job " +
+                              accepted.job.job_id() +
+                              ", submitted with a different request; a retry must send the same "
+                              "request, a new request needs a new request_id";
+  EXPECT_THAT(different.status, GrpcStatusIs(grpc::StatusCode::ALREADY_EXISTS, refusal));
+  EXPECT_THAT(broken.status, GrpcStatusIs(grpc::StatusCode::ALREADY_EXISTS, refusal));
+  EXPECT_EQ(server_->jobs().job_count(), 1);
+}
+
+TEST_F(ProtocolTest, RequestsOverASizeLimitAreResourceExhausted) {
+  const std::string clip_id = UploadClip(*stub_, MakeClip(1, 40)).response.clip_id();
+  v1::SubmitJobRequest labels = SubmitRequest(clip_id);
+  for (int i = 0; i < 65; ++i) (*labels.mutable_labels())["k" + std::to_string(i)] = "v";
+  v1::SubmitJobRequest request_id = SubmitRequest(clip_id);
+  request_id.set_request_id(std::string(257, 'r'));
+  v1::SubmitJobRequest operations = SubmitRequest(clip_id, WrapOperations(65));
+  v1::SubmitJobRequest too_big_clip;
+  *too_big_clip.mutable_inline_clip() = wire::ClipToProto(MakeClip(4, 10'000));  // 150 000 samples
+  *too_big_clip.mutable_operations() = WrapOperations();
+
+  EXPECT_THAT(Submit(*stub_, labels).status,
+              GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                           "labels has 65 entries, over the limit of 64"));
+  EXPECT_THAT(Submit(*stub_, request_id).status,
+              GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                           "request_id is 257 bytes, over the limit of 256"));
+  EXPECT_THAT(Submit(*stub_, operations).status,
+              GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                           HasSubstr("the pipeline has 65 operations, over the limit of 64")));
+  EXPECT_THAT(Submit(*stub_, too_big_clip).status,
+              GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                           "inline_clip: clip header: clip has 10000 frames x 15 channels, over "
+                           "the limit of 100000 samples"));
+  EXPECT_THAT(UploadClip(*stub_, MakeClip(4, 10'000)).status,
+              GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                           "clip header: clip has 10000 frames x 15 channels, over the limit of "
+                           "100000 samples"));
+}
+
+TEST(ProcessProtocolTest, ProcessRefusesAMessageAfterItsStart) {
+  // The pipeline is held at its start, so the extra message is read before any result exists.
+  GatedServer gated;
+  ASSERT_NE(gated.server, nullptr);
+  grpc::ClientContext context;
+  SetDeadline(context);
+  auto process = gated.stub->Process(&context);
+  for (const v1::ProcessRequest& request : ProcessClipRequests(MakeClip(1, 40))) {
+    ASSERT_TRUE(process->Write(request));
+  }
+  v1::ProcessRequest start;
+  *start.mutable_start()->mutable_operations() = WrapOperations();
+  ASSERT_TRUE(process->Write(start));
+  // A second clip header after the start: the call takes one clip and one start.
+  process->Write(ProcessClipRequests(MakeClip(1, 40))[0]);
+  process->WritesDone();
+  v1::ProcessResponse response;
+  while (process->Read(&response)) {
+  }
+  const grpc::Status status = process->Finish();
+  gated.gate->Open();
+
+  // Header, 6 slices, start: the 9th message is refused, and the pipeline with it.
+  EXPECT_THAT(status, GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT,
+                                   "Process message 9 arrived after ProcessStart; a Process call "
+                                   "takes one clip and one start, then the client only reads"));
+}
+
+TEST_F(ProtocolTest, HalfClosingAfterTheStartIsTheNormalEnd) {
+  grpc::ClientContext context;
+  SetDeadline(context);
+  auto process = stub_->Process(&context);
+  for (const v1::ProcessRequest& request : ProcessClipRequests(MakeClip(1, 40))) {
+    ASSERT_TRUE(process->Write(request));
+  }
+  v1::ProcessRequest start;
+  *start.mutable_start()->mutable_operations() = WrapOperations();
+  ASSERT_TRUE(process->Write(start));
+  process->WritesDone();
+  std::vector<v1::ResultPart> parts;
+  v1::ProcessResponse response;
+  while (process->Read(&response)) {
+    if (response.has_result()) parts.push_back(response.result());
+  }
+
+  TEMPOKEY_ASSERT_GRPC_OK(process->Finish());
+  absl::StatusOr<core::Clip> result = AssembleClipResult(parts);
+  ASSERT_TRUE(result.ok()) << result.status();
+  EXPECT_EQ(*result, WrappedCopy(MakeClip(1, 40)));
+}
+
+TEST(RetryHintTest, FullQueueHintIsAtLeastHowLongTheRunningJobHasRun) {
+  server::ServerOptions options = TestServerOptions();
+  options.workers = 1;
+  options.queue_capacity = 1;
+  GatedServer gated(options);
+  ASSERT_NE(gated.server, nullptr);
+  const std::string clip_id = UploadClip(*gated.stub, MakeClip(1, 40)).response.clip_id();
+  TEMPOKEY_ASSERT_GRPC_OK(Submit(*gated.stub, SubmitRequest(clip_id)).status);
+  ASSERT_TRUE(gated.gate->WaitArrivals(1));
+  const auto seen_running = std::chrono::steady_clock::now();
+  TEMPOKEY_ASSERT_GRPC_OK(Submit(*gated.stub, SubmitRequest(clip_id)).status);  // queued
+
+  grpc::ClientContext context;
+  SetDeadline(context);
+  v1::Job refused_job;
+  const grpc::Status refused = gated.stub->SubmitJob(&context, SubmitRequest(clip_id), &refused_job);
+  const auto running_at_least = std::chrono::steady_clock::now() - seen_running;
+  const auto& trailers = context.GetServerTrailingMetadata();
+  const auto hint = trailers.find(wire::kRetryAfterMetadataKey);
+  gated.gate->Open();
+
+  EXPECT_THAT(refused, GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED, HasSubstr("queue is full")));
+  ASSERT_NE(hint, trailers.end());
+  const std::optional<std::chrono::milliseconds> hint_ms =
+      wire::ParseRetryAfter(std::string(hint->second.data(), hint->second.size()));
+  ASSERT_TRUE(hint_ms.has_value());
+  // No job has finished yet: the running job is expected to take as long again as it has run,
+  // which is at least as long as this test has seen it running.
+  EXPECT_GE(*hint_ms, std::chrono::duration_cast<std::chrono::milliseconds>(running_at_least));
+}
+
+// ---- TLS start-up ---------------------------------------------------------------------------------
+
+// A self-signed certificate and its key, <stem>.pem and <stem>.key, made by the openssl tool.
+bool MakeSelfSigned(const std::string& dir, const std::string& stem) {
+  const ProcessResult run = RunProcess(
+      {"/usr/bin/openssl", "req", "-x509", "-newkey", "ec", "-pkeyopt",
+       "ec_paramgen_curve:prime256v1", "-nodes", "-keyout", dir + "/" + stem + ".key", "-out",
+       dir + "/" + stem + ".pem", "-days", "2", "-subj", "/CN=localhost"},
+      dir);
+  return run.exit_code == 0;
+}
+
+TEST(TlsStartupTest, KeyOfAnotherCertificateIsNamedAtStartUp) {
+  const std::string dir = MakeTempDir();
+  ASSERT_TRUE(MakeSelfSigned(dir, "a"));
+  ASSERT_TRUE(MakeSelfSigned(dir, "b"));
+  ASSERT_TRUE(core::WriteFileAtomically(dir + "/not.pem", "not a certificate\n").ok());
+
+  const ProcessResult mismatched = RunProcess(
+      {ServerBinary(), "--address=127.0.0.1:0", "--tls_cert=" + dir + "/a.pem",
+       "--tls_key=" + dir + "/b.key"},
+      dir, {}, std::chrono::seconds(60));
+  const ProcessResult garbage = RunProcess(
+      {ServerBinary(), "--address=127.0.0.1:0", "--tls_cert=" + dir + "/not.pem",
+       "--tls_key=" + dir + "/a.key"},
+      dir, {}, std::chrono::seconds(60));
+
+  EXPECT_EQ(mismatched.exit_code, 1);
+  EXPECT_THAT(mismatched.err, HasSubstr("cannot start: --tls_key " + dir +
+                                        "/b.key is not the private key of the certificate in "
+                                        "--tls_cert " + dir + "/a.pem"));
+  EXPECT_THAT(mismatched.err, ::testing::Not(HasSubstr("address in use")));
+  EXPECT_EQ(garbage.exit_code, 1);
+  EXPECT_THAT(garbage.err, HasSubstr("--tls_cert " + dir + "/not.pem: holds no PEM certificate"));
+}
+
+}  // namespace
+}  // namespace tempokey::testing
