@@ -72,10 +72,7 @@ class CsvParser {
         limits_(limits) {}
 
   absl::StatusOr<Clip> Parse() {
-    if (!std::isfinite(frame_time_seconds_) || frame_time_seconds_ <= 0.0) {
-      return absl::InvalidArgumentError(absl::StrFormat(
-          "frame time must be finite and > 0 seconds, got %g", frame_time_seconds_));
-    }
+    TEMPOKEY_RETURN_IF_ERROR(CheckFrameTime(frame_time_seconds_));
     if (std::string_view(begin_, end_ - begin_).substr(0, 3) == "\xEF\xBB\xBF") {
       p_ += 3;
       line_start_ = p_;
@@ -265,6 +262,11 @@ class CsvParser {
         if (error != NumberError::kNone) {
           TEMPOKEY_RETURN_IF_ERROR(CheckText(field));
           return Error(field.location, DescribeNumberError(error, field.text));
+        }
+        if (!(std::abs(value) <= kMaxSampleMagnitude)) {
+          return Error(field.location,
+                       absl::StrCat("sample ", QuoteForMessage(field.text), " is beyond the +-",
+                                    DescribeDouble(kMaxSampleMagnitude), " a clip may hold"));
         }
         clip_.channels[channel++].samples.push_back(value);
       }

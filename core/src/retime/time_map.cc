@@ -200,10 +200,7 @@ class TimeMapBuilder {
 };
 
 absl::Status TimeMapBuilder::CheckTimingAndOptions() {
-  if (!std::isfinite(dt_s()) || dt_s() <= 0.0) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("source frame time must be finite and > 0 seconds, got ", FormatNumber(dt_s())));
-  }
+  TEMPOKEY_RETURN_IF_ERROR(CheckFrameTime(dt_s(), "source frame time"));
   if (frame_count_ < 1) {
     return absl::InvalidArgumentError(
         absl::StrCat("a clip needs at least 1 frame, got ", frame_count_));
@@ -221,9 +218,8 @@ absl::Status TimeMapBuilder::CheckTimingAndOptions() {
   if (options_.fit_seconds && options_.fit_frames) {
     return absl::InvalidArgumentError("fit_seconds and fit_frames are both set; give at most one");
   }
-  if (options_.fit_seconds && !(std::isfinite(*options_.fit_seconds) && *options_.fit_seconds > 0.0)) {
-    return absl::InvalidArgumentError(absl::StrCat("fit_seconds must be finite and > 0, got ",
-                                                   FormatNumber(*options_.fit_seconds)));
+  if (options_.fit_seconds) {
+    TEMPOKEY_RETURN_IF_ERROR(retime_internal::ValidateDuration("fit_seconds", *options_.fit_seconds));
   }
   if (options_.fit_frames && *options_.fit_frames < 2) {
     return absl::InvalidArgumentError(absl::StrCat(
@@ -413,14 +409,10 @@ absl::Status TimeMapBuilder::BuildTimeMapKeys() {
   std::vector<double> x(keys.size());
   for (std::size_t k = 0; k < keys.size(); ++k) {
     const TimeMapKey& key = keys[k];
-    if (!std::isfinite(key.output.value)) {
-      return absl::InvalidArgumentError(absl::StrCat("time-map key ", k + 1, ": output time is ",
-                                                     DescribeDouble(key.output.value)));
-    }
-    if (!std::isfinite(key.source.value)) {
-      return absl::InvalidArgumentError(absl::StrCat("time-map key ", k + 1, ": source time is ",
-                                                     DescribeDouble(key.source.value)));
-    }
+    TEMPOKEY_RETURN_IF_ERROR(retime_internal::ValidateTimePoint(
+        absl::StrCat("time-map key ", k + 1, ": output"), key.output));
+    TEMPOKEY_RETURN_IF_ERROR(retime_internal::ValidateTimePoint(
+        absl::StrCat("time-map key ", k + 1, ": source"), key.source));
     y[k] = OutputFrames(key.output);
     x[k] = SourceFrames(key.source);
     if (k == 0) continue;
@@ -523,15 +515,10 @@ absl::Status TimeMapBuilder::InsertHolds() {
   holds.reserve(warp_.holds.size());
   for (std::size_t i = 0; i < warp_.holds.size(); ++i) {
     const Hold& hold = warp_.holds[i];
-    if (!std::isfinite(hold.at.value)) {
-      return absl::InvalidArgumentError(absl::StrCat("hold ", i + 1, ": source time is ",
-                                                     DescribeDouble(hold.at.value)));
-    }
-    if (!std::isfinite(hold.duration_seconds) || hold.duration_seconds <= 0.0) {
-      return absl::InvalidArgumentError(absl::StrCat(DescribeHold(i, hold),
-                                                     ": duration must be finite and > 0 seconds, got ",
-                                                     FormatNumber(hold.duration_seconds)));
-    }
+    TEMPOKEY_RETURN_IF_ERROR(
+        retime_internal::ValidateTimePoint(absl::StrCat("hold ", i + 1, ": source"), hold.at));
+    TEMPOKEY_RETURN_IF_ERROR(retime_internal::ValidateDuration(
+        absl::StrCat(DescribeHold(i, hold), ": duration"), hold.duration_seconds));
     double x = SourceFrames(hold.at);
     if (x < -kEndSnapFrames || x > x_end() + kEndSnapFrames) {
       return absl::InvalidArgumentError(absl::StrCat(DescribeHold(i, hold),
@@ -588,10 +575,8 @@ absl::Status TimeMapBuilder::SplitAtPins() {
   double previous_frame = -1.0;
   for (std::size_t i = 0; i < pins.size(); ++i) {
     const Pin& pin = pins[i];
-    if (!std::isfinite(pin.source.value)) {
-      return absl::InvalidArgumentError(absl::StrCat("pin ", i + 1, ": source time is ",
-                                                     DescribeDouble(pin.source.value)));
-    }
+    TEMPOKEY_RETURN_IF_ERROR(
+        retime_internal::ValidateTimePoint(absl::StrCat("pin ", i + 1, ": source"), pin.source));
     if (pin.output_frame < 0) {
       return absl::InvalidArgumentError(
           absl::StrCat(DescribePin(i, pin), ": output frame must be >= 0"));

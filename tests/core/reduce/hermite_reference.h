@@ -45,7 +45,8 @@ inline double ReferenceSolve(double x0, double x1, double x2, double x3, double 
 }
 
 inline bool ReferenceFeasible(const core::HermiteKey2D& a, const core::HermiteKey2D& b) {
-  return a.tx > 0.0 && b.tx > 0.0 && a.x < b.x && a.tx + b.tx <= 3.0 * (b.x - a.x);
+  return a.tx >= core::kMinTangentXFrames && b.tx >= core::kMinTangentXFrames && a.x < b.x &&
+         a.tx + b.tx <= 3.0 * (b.x - a.x);
 }
 
 inline double ReferenceSegmentError(std::span<const double> samples, const core::HermiteKey2D& a,

@@ -735,13 +735,33 @@ TEST(RetimeTest, PinnedSourceTimesLandOnTheirOutputFrames) {
 }
 
 TEST(RetimeTest, ValidateRetimeNeedsOnlyTheClipsTiming) {
-  // The pipeline validates later steps against a probe with a frame time and count only.
+  // Cheap enough to check before queueing: no samples are read.
   Clip probe;
   probe.frame_time_seconds = 1.0 / 30;
   probe.frame_count = 2;
 
   EXPECT_TRUE(ValidateRetime(probe, OverSource({Knot(0, 0.5)}), {}).ok());
   EXPECT_TRUE(ValidateRetime(probe, OverSource({Knot(0, 0.5)}), {.method = RetimeMethod::kPaper}).ok());
+}
+
+TEST(RetimeTest, ExtremeFrameTimesRetimeToAnyRateWithoutInternalErrors) {
+  // Every frame time a clip may have, to every output rate a retime may ask for: either a result
+  // with finite samples or a refusal naming the limit, never an internal error (a subnormal
+  // frame time once made the resample plan's ratio infinite).
+  for (double frame_time : {1e-6, 1.0 / 120.0, 3600.0}) {
+    const Clip clip = PlainClip(frame_time, {{0.0, 1.0, -2.0, 3.0, 5.0, 8.0}});
+    for (FrameRate rate : {FrameRate{30, 1}, FrameRate{100000, 1}, FrameRate{1, 3600}}) {
+      const absl::StatusOr<RetimeResult> result =
+          Retime(clip, OverSource({Knot(0, 0.5)}), {.output_rate = rate});
+
+      if (!result.ok()) {
+        EXPECT_EQ(result.status().code(), absl::StatusCode::kInvalidArgument)
+            << frame_time << " s to " << rate.hz() << " Hz: " << result.status();
+        continue;
+      }
+      EXPECT_TRUE(ValidateClip(result->clip).ok()) << frame_time << " s to " << rate.hz();
+    }
+  }
 }
 
 TEST(RetimeTest, SingleFrameClipRetimesToItsPoseAndHolds) {

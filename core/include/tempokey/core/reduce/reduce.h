@@ -93,12 +93,21 @@ struct ReduceResult {
 };
 
 // Checks `options` for the chosen method: the method is known; paper: steps and accuracy in
-// (0, 1e6], 1 <= max_iterations <= 1000, sigma in [0, 1000], 1 <= spacing <= 1000000;
-// tolerance: error bounds finite and > 0, key budget >= 2 when set, a known pose alignment.
+// [1e-300, 1e6] (normal doubles), 1 <= max_iterations <= 1000, sigma in [0, 1000],
+// 1 <= spacing <= 1000000; tolerance: error bounds in [1e-9, 1e9], key budget >= 2 when set, a
+// known pose alignment.
 // Errors: kInvalidArgument naming the field and value, e.g.
 //   "paper.step_y must be > 0, got -1", "paper.max_iterations must be in [1, 1000], got 0".
 // Thread-safe.
 absl::Status ValidateReduceOptions(const ReduceOptions& options);
+
+// ValidateReduceOptions() plus what depends on the layout of the clip to reduce: a key budget
+// covers the keys any fit needs (2 per channel, 1 per channel of a one-frame clip).
+// Errors: those of ValidateReduceOptions(); kInvalidArgument "tolerance.key_budget 2 is below
+// the 192 keys any fit of 96 channels needs (2 per channel)".
+// Thread-safe.
+absl::Status ValidateReduceForLayout(const ReduceOptions& options, std::int64_t channel_count,
+                                     std::int64_t frame_count);
 
 // Fits every channel of `clip` and reports the error against the input (MeasureReduction()).
 // Rotation channels are unwrapped first (UnwrapDegrees()), so the curves carry unwrapped angles;
@@ -118,12 +127,14 @@ absl::Status ValidateReduceOptions(const ReduceOptions& options);
 // key for a one-frame clip).
 //
 // Errors:
-//   kInvalidArgument  `clip` fails ValidateClip(), `options` fail ValidateReduceOptions(), a
-//                     sample's magnitude exceeds 1e100 (its square would overflow the error), or
-//                     a key budget below 2 keys per channel ("tolerance.key_budget 5 is below the
-//                     18 keys any fit of 9 channels needs (2 per channel)").
+//   kInvalidArgument  `clip` fails ValidateClip(), `options` fail ValidateReduceForLayout()
+//                     ("tolerance.key_budget 5 is below the 18 keys any fit of 9 channels needs
+//                     (2 per channel)").
 //   kCancelled        `stop` was requested; checked between channels (between groups of
-//                     pose-aligned channels).
+//                     pose-aligned channels) and inside each channel's fit: every DP pass and
+//                     every few dozen segments of one (paper), every insertion round and every
+//                     few hundred keys (tolerance), so a request is seen within milliseconds.
+//   kInternal         a fit produced a curve outside the keyed clip's ranges (a bug).
 // Progress: once per channel or group, "reduce 12/96".
 //
 // Thread-safe: a pure function of its arguments.
