@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "tempokey/core/io/bvh.h"
 #include "tempokey/core/pipeline/cost.h"
 #include "tempokey/core/pipeline/pipeline.h"
@@ -32,7 +33,7 @@ Clip NoiseClip(int channels, std::int64_t frames, double amplitude, ChannelKind 
   for (int c = 0; c < channels; ++c) {
     Channel channel;
     channel.kind = kind;
-    channel.name = "c" + std::to_string(c);
+    channel.name = absl::StrCat("c", c);
     channel.samples.resize(static_cast<std::size_t>(frames));
     for (double& v : channel.samples) v = noise(random);
     clip.channels.push_back(std::move(channel));

@@ -33,6 +33,7 @@ constexpr FlagSpec kBatchFlags[] = {
     {"--attempts", "", "N", "tries per file when a server is unavailable or full (default 5)"},
     {"--recursive", "-r", "", "also process the sub-folders of DIR, mirrored under OUTDIR"},
     kInputFpsFlag,
+    {"--overwrite", "", "", "allow outputs to replace their own input files (OUTDIR = DIR)"},
 };
 
 // "batch  12/40  1 failed  walk.bvh" on one self-rewriting line of stderr, on a terminal only.
@@ -96,6 +97,10 @@ absl::Status Batch(CommandContext& context) {
       .recursive = context.args().Has("--recursive"),
   };
   TEMPOKEY_ASSIGN_OR_RETURN(std::vector<BatchItem> items, PlanBatch(plan));
+  for (const BatchItem& item : items) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckOutputIsNotTheInput(
+        item.input_path, item.output_path, context.args().Has("--overwrite"), "batch: output"));
+  }
   TEMPOKEY_ASSIGN_OR_RETURN(const Client* client, context.Connect());
 
   BatchSummary summary;

@@ -187,9 +187,11 @@ absl::StatusOr<std::vector<core::PipelineStep>> ParsePipelineJson(std::string_vi
   }
   std::vector<core::PipelineStep> steps;
   for (std::size_t i = 0; i < operations->array->size(); ++i) {
-    TEMPOKEY_ASSIGN_OR_RETURN(core::PipelineStep step,
-                              ParseOperation(at, (*operations->array)[i], i));
-    steps.push_back(std::move(step));
+    // Emplaced from the StatusOr in place: moving the variant out through a local made g++ 12
+    // report -Wmaybe-uninitialized on its inactive alternatives (a false positive).
+    absl::StatusOr<core::PipelineStep> step = ParseOperation(at, (*operations->array)[i], i);
+    if (!step.ok()) return step.status();
+    steps.emplace_back(*std::move(step));
   }
   absl::Status chain = core::ValidateStepChain(steps);
   if (!chain.ok()) return at.Fail(*operations, core::AsStd(chain.message()));
@@ -197,7 +199,7 @@ absl::StatusOr<std::vector<core::PipelineStep>> ParsePipelineJson(std::string_vi
 }
 
 absl::StatusOr<std::vector<core::PipelineStep>> ReadPipelineFile(const std::string& path) {
-  absl::StatusOr<std::string> text = core::ReadFile(path, kMaxPipelineFileBytes);
+  absl::StatusOr<std::string> text = core::ReadTextFile(path, kMaxPipelineFileBytes);
   if (!text.ok()) return AsUsageError(text.status());
   return ParsePipelineJson(*text, path);
 }
