@@ -128,7 +128,9 @@ absl::StatusOr<core::PipelineStep> ParseOperation(const Locator& at, const JsonV
     return at.Fail(operation, absl::StrCat(label, ": expected an object with one member, such as "
                                                   "{\"retime\": {...}}"));
   }
-  const auto& [name, options] = operation.object->front();
+  // Plain references, not a structured binding: clang 14 cannot capture those in a lambda.
+  const std::string& name = operation.object->front().first;
+  const JsonValue& options = operation.object->front().second;
   const auto kind = std::find_if(std::begin(kOperationKinds), std::end(kOperationKinds),
                                  [&](const OperationKind& k) { return k.name == name; });
   if (kind == std::end(kOperationKinds)) {

@@ -20,6 +20,8 @@ build_packages=(
   libssl-dev openssl procps curl ccache
   python3 python3-grpcio python3-protobuf
   python3-yaml
+  # clang and its runtimes (libFuzzer, ASan, UBSan): the fuzz stage, deploy/fuzz.sh
+  clang-14 libclang-rt-14-dev
 )
 runtime_packages=(
   libgrpc++1.51 libgrpc29 libprotobuf32 libspdlog1.10 libfmt9

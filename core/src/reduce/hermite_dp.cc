@@ -168,7 +168,6 @@ KeyGrid MakeGrid(const HermiteKey2D& key, const HermiteSteps& steps, bool x_fixe
 // State s = sx * 9 + sy with sx = ix * 3 + itx and sy = iy * 3 + ity.
 constexpr int XIndex(int sx) { return sx / 3; }
 constexpr int TxIndex(int sx) { return sx % 3; }
-constexpr double Offset(int index) { return static_cast<double>(index - 1); }
 // Offsets of the first and second component of a 9-state index (i * 3 + j).
 constexpr std::array<double, 9> kOffsetHigh = {-1, -1, -1, 0, 0, 0, 1, 1, 1};
 constexpr std::array<double, 9> kOffsetLow = {-1, 0, 1, -1, 0, 1, -1, 0, 1};
@@ -456,6 +455,7 @@ class DpPass {
         keys_(keys),
         steps_(steps),
         scale_(DpTieScale(samples)),
+        last_frame_(static_cast<double>(samples.size()) - 1.0),
         cache_(cache),
         stop_(std::move(stop)) {
     const std::size_t k = keys.size();
@@ -522,6 +522,12 @@ class DpPass {
     }
   };
 
+  // SegmentIsFeasible() with both keys inside the clip (hermite_dp.h): a grid offset can move an
+  // interior key past the first or last frame, where there are no samples to measure it against.
+  bool InsideAndFeasible(double ax, double atx, double bx, double btx) const {
+    return ax >= 0.0 && bx <= last_frame_ && SegmentIsFeasible(ax, atx, bx, btx);
+  }
+
   // Counts `frames` of work (a basis solve or a data sum per frame) and looks at the stop token
   // once per kDpStopCheckFrames of it: a few milliseconds of work, whether the segments are
   // short or a million frames long.
@@ -583,7 +589,7 @@ class DpPass {
             const double atx = ga.tx[itx_a];
             const double bx = gb.x[ix_b];
             const double btx = gb.tx[itx_b];
-            if (!SegmentIsFeasible(ax, atx, bx, btx)) continue;
+            if (!InsideAndFeasible(ax, atx, bx, btx)) continue;
             const int combo = tx * 9 + sx;
             SegmentShape& shape = shapes[combo];
             const auto [first, end] = SegmentFrames(ax, bx, last);
@@ -628,7 +634,7 @@ class DpPass {
         const double atx = ga.tx[TxIndex(sx)];
         const double bx = gb.x[XIndex(tx)];
         const double btx = gb.tx[TxIndex(tx)];
-        if (!SegmentIsFeasible(ax, atx, bx, btx)) continue;
+        if (!InsideAndFeasible(ax, atx, bx, btx)) continue;
         if (Stopping(shapes[tx * 9 + sx].n)) return false;
         const SegmentForm form =
             BuildSegmentForm(samples_, shapes[tx * 9 + sx], y_ref, centre_y, steps_);
@@ -730,6 +736,7 @@ class DpPass {
   std::span<const HermiteKey2D> keys_;
   HermiteSteps steps_;
   double scale_;
+  double last_frame_;
   std::vector<KeyGrid> grids_;
   std::vector<std::array<double, kStates>> cost_;
   std::vector<std::array<std::int8_t, kStates>> predecessor_;

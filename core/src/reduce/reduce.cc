@@ -25,6 +25,7 @@ constexpr double kMaxStep = 1e6;
 constexpr double kMinStep = 1e-300;
 constexpr int kMaxIterations = 1000;
 constexpr double kMaxSigmaFrames = 1000.0;
+constexpr double kMinSigmaFrames = 0.01;
 constexpr int kMaxSpacingFrames = 1'000'000;
 // Error bounds: below 1e-9 no double near the largest sample magnitude (1e9, clip.h) resolves
 // the bound; above 1e9 every channel fits with two keys. Within it, a key budget's search scales
@@ -60,10 +61,13 @@ absl::Status ValidatePaperParams(const PaperParams& p) {
     return absl::InvalidArgumentError(absl::StrCat("paper.max_iterations must be in [1, ",
                                                    kMaxIterations, "], got ", p.max_iterations));
   }
-  if (!(p.smoothing_sigma_frames >= 0.0 && p.smoothing_sigma_frames <= kMaxSigmaFrames)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("paper.smoothing_sigma_frames must be in [0, ", kMaxSigmaFrames, "], got ",
-                     DescribeDouble(p.smoothing_sigma_frames)));
+  // 0 turns smoothing off; a positive sigma below kMinSigmaFrames would square to nothing and
+  // make the Gaussian's centre weight 0/0.
+  const double sigma = p.smoothing_sigma_frames;
+  if (!(sigma == 0.0 || (sigma >= kMinSigmaFrames && sigma <= kMaxSigmaFrames))) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "paper.smoothing_sigma_frames must be 0 or in [", kMinSigmaFrames, ", ", kMaxSigmaFrames,
+        "], got ", DescribeDouble(sigma)));
   }
   if (p.min_key_spacing_frames < 1 || p.min_key_spacing_frames > kMaxSpacingFrames) {
     return absl::InvalidArgumentError(

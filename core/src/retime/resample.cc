@@ -22,6 +22,9 @@ constexpr double kNegligibleWeight = 1e-300;
 
 double Hat(double d) { return std::max(0.0, 1.0 - std::abs(d)); }
 
+// Tent and box half-widths below this (source samples) count as no filter.
+constexpr double kMinKernelWidth = 1e-100;
+
 // Looks at a stop token once per kResampleStopCheckTaps units of work, given the running total.
 class StopCheck {
  public:
@@ -277,6 +280,10 @@ absl::StatusOr<ResamplePlan> MakeResamplePlan(std::span<const double> positions,
         width = std::max(1.0, rho) - 1.0;
         break;
     }
+    // A narrower tent or box changes no sample beyond rounding, and its weights would divide by
+    // a width squared to zero (found by fuzzing: a position 1e-315 frames from the start got a
+    // subnormal width and NaN weights).
+    if (filter != ResampleFilter::kLanczos3 && width < kMinKernelWidth) width = 0.0;
     plan.width[j] = width;
     if (width > 0.0) ++plan.filtered_count;
 

@@ -35,6 +35,10 @@ constexpr double kGridSlack = 1e-9;
 // Source positions within this many frames of the clip's ends (a time typed in seconds for the
 // last frame) are taken as the end itself.
 constexpr double kEndSnapFrames = 1e-9;
+// Speed knots closer than this (in frames of their timeline) are a step, not a ramp: ramps
+// divide by their span, which must not be subnormal (found by fuzzing: a ramp over 1e-313 s of
+// output time made every source position NaN).
+constexpr double kKnotMergeFrames = 1e-9;
 // Relative slack when re-checking scaled speeds against [min_speed, max_speed], so a knot set
 // exactly at a bound is not refused for a rounding error in a scale of 1 ± ulp.
 constexpr double kRangeSlack = 1e-12;
@@ -299,7 +303,11 @@ absl::Status TimeMapBuilder::BuildSpeedOverSource() {
   std::vector<Piece> pieces;
   const std::size_t n = knots.size();
   std::vector<double> x(n);
-  for (std::size_t k = 0; k < n; ++k) x[k] = SourceFrames(knots[k].time);
+  for (std::size_t k = 0; k < n; ++k) {
+    x[k] = SourceFrames(knots[k].time);
+    // Knots closer than this are one step: a ramp over a subnormal span has an infinite slope.
+    if (k > 0 && x[k] - x[k - 1] <= kKnotMergeFrames) x[k] = x[k - 1];
+  }
   pieces.push_back({-inf, x[0], knots[0].speed, knots[0].speed, 0, 0});
   for (std::size_t k = 0; k + 1 < n; ++k) {
     if (x[k + 1] > x[k]) pieces.push_back({x[k], x[k + 1], knots[k].speed, knots[k + 1].speed, k, k + 1});
@@ -341,7 +349,10 @@ absl::Status TimeMapBuilder::BuildSpeedOverOutput() {
   const double inf = std::numeric_limits<double>::infinity();
   const std::size_t n = knots.size();
   std::vector<double> y(n);
-  for (std::size_t k = 0; k < n; ++k) y[k] = OutputFrames(knots[k].time);
+  for (std::size_t k = 0; k < n; ++k) {
+    y[k] = OutputFrames(knots[k].time);
+    if (k > 0 && y[k] - y[k - 1] <= kKnotMergeFrames) y[k] = y[k - 1];  // one step, as above
+  }
   struct Piece {
     double ya, yb, sa, sb;
     std::size_t ka, kb;

@@ -128,7 +128,10 @@ inline ReferencePass ReferenceDpPass(std::span<const double> samples,
         for (int s = 0; s < 81; ++s) {
           if (std::isinf(cost[i][s])) continue;
           const core::HermiteKey2D a = ReferenceState(keys[i], steps, s);
-          if (!ReferenceFeasible(a, b)) continue;
+          if (!ReferenceFeasible(a, b) || a.x < 0.0 ||
+              b.x > static_cast<double>(samples.size()) - 1.0) {
+            continue;
+          }
           candidates[s] = cost[i][s] + ReferenceSegmentError(samples, a, b, last);
         }
       }

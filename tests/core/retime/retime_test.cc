@@ -764,6 +764,43 @@ TEST(RetimeTest, ExtremeFrameTimesRetimeToAnyRateWithoutInternalErrors) {
   }
 }
 
+TEST(RetimeTest, KnotsASubnormalTimeApartAreAStepNotAnInfinitelySteepRamp) {
+  // Found by fuzzing (speed_knots_fuzz): "0s:50,1e-313s:0.01" over output time, reversed, passed
+  // validation, then every resampled position was NaN ("resample plan: output sample 3900 has
+  // position nan") because the ramp between the knots divided by a subnormal span.
+  std::vector<double> ramp;
+  for (int f = 0; f < 40; ++f) ramp.push_back(static_cast<double>(f));
+  const Clip clip = PlainClip(1.0 / 30, {ramp});
+  const TimeWarpSpec warp = {.domain = WarpDomain::kSpeedOverOutput,
+                             .speed = {Knot(0, 50), Knot(1e-313, 0.01)},
+                             .reverse = true};
+
+  ASSERT_TRUE(ValidateRetime(clip, warp, {}).ok());
+  const RetimeResult result = RetimeOrDie(clip, warp, {});
+
+  EXPECT_TRUE(ValidateClip(result.clip).ok()) << ValidateClip(result.clip);
+  EXPECT_EQ(result.clip.channels[0].samples.front(), 39.0);  // reversed: ends first
+  EXPECT_EQ(result.clip.channels[0].samples.back(), 0.0);
+}
+
+TEST(RetimeTest, APositionASubnormalDistanceFromTheStartIsInterpolatedNotFiltered) {
+  // Found by fuzzing (pipeline_proto_fuzz): time-map keys starting at source time 2.49e-317 s put
+  // the first output sample that far from frame 0, whose tent half-width (clamped to the distance
+  // from the end) squared to zero: the first sample came out NaN.
+  std::vector<double> ramp;
+  for (int f = 0; f < 40; ++f) ramp.push_back(static_cast<double>(f));
+  const Clip clip = PlainClip(1.0 / 30, {ramp});
+  const TimeWarpSpec warp = {.domain = WarpDomain::kTimeMapKeys,
+                             .keys = {{.output = {0.0, false}, .source = {2.4931896347706e-317, false}},
+                                      {.output = {2.0, false}, .source = {4.0000000054133125, false}}}};
+
+  const RetimeResult result = RetimeOrDie(clip, warp, {});
+
+  EXPECT_TRUE(ValidateClip(result.clip).ok()) << ValidateClip(result.clip);
+  // The ramp's value there: the position itself, 7.5e-316.
+  EXPECT_LT(std::abs(result.clip.channels[0].samples.front()), 1e-300);
+}
+
 TEST(RetimeTest, SingleFrameClipRetimesToItsPoseAndHolds) {
   const Clip clip = PlainClip(1.0 / 30, {{4.5}});
 

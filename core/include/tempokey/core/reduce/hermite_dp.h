@@ -12,7 +12,8 @@
 //
 //   Feasible segment (monotonic time): with a, b its keys, m = kMinTangentXFrames,
 //       a.tx >= m  &&  b.tx >= m  &&  a.x < b.x  &&  a.tx + b.tx <= 3.0 * (b.x - a.x)
-//     evaluated exactly as written. It says the Bezier x-controls x_a, x_a + tx_a/3,
+//     evaluated exactly as written, and, in a pass, both keys inside the clip:
+//     0 <= a.x  &&  b.x <= samples - 1 (an x offset can move an interior key past an end). It says the Bezier x-controls x_a, x_a + tx_a/3,
 //     x_b - tx_b/3, x_b are non-decreasing (so x(s) is monotonic), keys are in order, and each
 //     tangent has a slope (tx = 0 would be a vertical tangent, which no keyed curve can carry;
 //     a tx under a billionth of a frame is one in all but name, and its slope ty / tx would

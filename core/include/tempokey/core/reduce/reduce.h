@@ -30,7 +30,8 @@ struct PaperParams {
   int max_iterations = 8;
   // Gaussian sigma (frames) of the smoothed copy whose first and second central differences
   // give the initial keys at their zero crossings. Raw captures have a zero crossing at almost
-  // every frame; 2 frames removes the jitter without moving real extrema. [0, 1000], 0 = none.
+  // every frame; 2 frames removes the jitter without moving real extrema. 0 = none, else
+  // [0.01, 1000].
   double smoothing_sigma_frames = 2.0;
   // Minimum distance between initial keys, in frames; candidates closer to an already kept key
   // are dropped (extrema are kept before inflections). [1, 1000000].
@@ -93,7 +94,7 @@ struct ReduceResult {
 };
 
 // Checks `options` for the chosen method: the method is known; paper: steps and accuracy in
-// [1e-300, 1e6] (normal doubles), 1 <= max_iterations <= 1000, sigma in [0, 1000],
+// [1e-300, 1e6] (normal doubles), 1 <= max_iterations <= 1000, sigma 0 or in [0.01, 1000],
 // 1 <= spacing <= 1000000; tolerance: error bounds in [1e-9, 1e9], key budget >= 2 when set, a
 // known pose alignment.
 // Errors: kInvalidArgument naming the field and value, e.g.

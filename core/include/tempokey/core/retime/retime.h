@@ -28,7 +28,7 @@ struct TimePoint {
 };
 
 // A knot of a piecewise-linear speed curve: linear between knots, flat outside; two knots at the
-// same time make a step.
+// same time (within 1e-9 frames of their timeline) make a step.
 struct SpeedKnot {
   TimePoint time;
   double speed = 1.0;
