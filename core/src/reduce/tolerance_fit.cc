@@ -342,6 +342,23 @@ class Fitter {
     return stopped_;
   }
 
+  // Sets `v` to `n` zeros a piece at a time, looking at the stop token between pieces: a noisy
+  // channel keys almost every frame, and its solve's vectors are then hundreds of megabytes to
+  // fault in. False when a stop was seen.
+  template <class T>
+  bool ZeroFill(std::vector<T>& v, std::int64_t n) {
+    const auto size = static_cast<std::size_t>(n);
+    v.clear();
+    v.reserve(size);  // allocation only: pages are touched below
+    for (std::size_t done = 0; done < size;) {
+      const std::size_t next = std::min(size, done + 65536);
+      v.resize(next);
+      if (Stopping(static_cast<std::int64_t>(next - done))) return false;
+      done = next;
+    }
+    return true;
+  }
+
   // ---- least squares ---------------------------------------------------------------------------
 
   // Fits the values and slopes of keys [first, last] of `run` to channel `s` by least squares, the
@@ -351,11 +368,11 @@ class Fitter {
   void Solve(std::span<const double> s, const KeyRun& run, int first, int last,
              const double* weights = nullptr, std::int64_t weights_origin = 0) {
     const int n = last - first + 1;
-    diag_.assign(static_cast<std::size_t>(n), Mat2{});
-    upper_.assign(static_cast<std::size_t>(n), Mat2{});
-    rhs_.assign(static_cast<std::size_t>(n), Vec2{});
+    if (!ZeroFill(diag_, n) || !ZeroFill(upper_, n) || !ZeroFill(rhs_, n)) return;
     auto weight = [&](std::int64_t f) { return weights ? weights[f - weights_origin] : 1.0; };
     for (int i = 0; i < n; ++i) {
+      // A noisy channel keys almost every frame: millions of keys in one solve.
+      if (Stopping(1)) return;
       const std::int64_t f = run.frames[first + i];
       const double w = weight(f) + kRidge;
       diag_[i][0] += w;
@@ -368,6 +385,9 @@ class Fitter {
     for (int j = seg_first; j <= seg_last; ++j) {
       const std::int64_t fa = run.frames[j];
       const std::int64_t length = run.frames[j + 1] - fa;
+      // A whole long channel is one solve: look at the stop token inside it too (the result is
+      // then not used).
+      if (Stopping(length)) return;
       if (length < 2) continue;
       const BasisColumns& basis = basis_.Get(length);
       const bool a_free = j >= first;
@@ -417,6 +437,7 @@ class Fitter {
     // eliminated_[i-1]), then back substitution.
     eliminated_.resize(static_cast<std::size_t>(n));
     for (int i = 0; i < n; ++i) {
+      if (Stopping(1)) return;
       if (i > 0) {
         const Mat2& u = upper_[i - 1];
         const Mat2 lower = {u[0], u[2], u[1], u[3]};  // U_{i-1} transposed
@@ -556,8 +577,8 @@ class Fitter {
     const int count = static_cast<int>(fit.frames.size());
     for (std::size_t c = 0; c < channels_.size(); ++c) {
       if (Stopping(static_cast<std::int64_t>(frame_count_))) return;
-      fit.values[c].assign(fit.frames.size(), 0.0);
-      fit.slopes[c].assign(fit.frames.size(), 0.0);
+      const auto keys = static_cast<std::int64_t>(fit.frames.size());
+      if (!ZeroFill(fit.values[c], keys) || !ZeroFill(fit.slopes[c], keys)) return;
       Solve(channels_[c], RunOf(fit, c), 0, count - 1);
     }
   }
@@ -765,6 +786,7 @@ class Fitter {
         if (Stopping(static_cast<std::int64_t>(frame_count_))) return;
         const KeyRun run = RunOf(fit, c);
         for (int j = 0; j + 1 < count; ++j) {
+          if (Stopping(fit.frames[j + 1] - fit.frames[j])) return;
           const bool over = SegmentMax(channels_[c], run, j) > bounds_[c] ||
                             KeyRatio(fit, c, j) > 1.0 || KeyRatio(fit, c, j + 1) > 1.0;
           if (over) bad.emplace_back(fit.frames[j], fit.frames[j + 1]);

@@ -167,10 +167,12 @@ TEST(HermiteDpTest, KeysNeverLeaveTheClipEvenWhenTheXStepIsWiderThanTheirGaps) {
   // step-x 4, an interior key's grid reached past the last frame and the optimized pass summed
   // samples beyond the end of the channel (a heap overflow the ASan stage reports). Both keys of
   // a segment must lie inside the clip; the result equals the brute force under that rule.
-  std::vector<double> samples;
+  // Sized exactly (no spare capacity), so a read past frame 39 leaves the allocation.
+  std::vector<double> samples(40);
   for (int f = 0; f < 40; ++f) {
     const double t = static_cast<double>(f) / 30.0;
-    samples.push_back(170.0 * std::sin(1.7 * t) + 0.25 * static_cast<double>(f % 5));
+    samples[static_cast<std::size_t>(f)] =
+        170.0 * std::sin(1.7 * t) + 0.25 * static_cast<double>(f % 5);
   }
   HermiteFitOptions options;
   options.steps = {4.0, 2.0, 0.5, 0.25};
