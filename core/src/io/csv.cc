@@ -322,6 +322,11 @@ absl::Status CheckWritableColumnName(const Clip& clip, int index, std::string_vi
   if (first && IsIndexColumnName(name)) {
     return refuse("a first column named time or frame is read back as an index and skipped");
   }
+  // Found by fuzzing: a reader drops a byte order mark at the start of the text, so a first
+  // column whose name begins with one would read back renamed (or, alone, not at all).
+  if (first && name.substr(0, 3) == "\xEF\xBB\xBF") {
+    return refuse("a first column name starting with a byte order mark loses it when read back");
+  }
   const Channel& channel = clip.channels[index];
   const bool reads_as_joint = SplitJointColumn(name).has_value();
   const bool is_joint = channel.joint >= 0 && channel.kind != ChannelKind::kScalar;

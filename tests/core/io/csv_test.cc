@@ -198,6 +198,22 @@ TEST(CsvWriterTest, RefusesNamesThatWouldNotReadBack) {
   EXPECT_EQ(error_for("weight"), "written");
 }
 
+TEST(CsvWriterTest, FirstColumnNamedWithAByteOrderMarkIsRefusedNotRenamed) {
+  // Found by fuzzing (csv_fuzz): "\r\xEF\xBB\xBF\r2" reads as one column named by the byte order
+  // mark (not at the start of the text, so not dropped); written, the mark leads the text, the
+  // reader drops it and finds no rows at all.
+  absl::StatusOr<Clip> clip = ParseCsv("\r\xEF\xBB\xBF\r2", "bom.csv", kFrameTime);
+  ASSERT_TRUE(clip.ok()) << clip.status();
+  ASSERT_EQ(clip->channels.size(), 1u);
+
+  const absl::StatusOr<std::string> text = FormatCsv(*clip);
+
+  EXPECT_EQ(text.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(std::string(text.status().message()),
+            "cannot write CSV: channel 0 (\xEF\xBB\xBF): a first column name starting with a byte "
+            "order mark loses it when read back");
+}
+
 TEST(CsvWriterTest, RefusesTwoChannelsWithOneName) {
   Clip clip;
   clip.frame_count = 1;
