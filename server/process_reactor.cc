@@ -258,7 +258,8 @@ class ProcessReactor final : public ProcessReactorBase {
     }
     TEMPOKEY_ASSIGN_OR_RETURN(core::Clip clip, std::move(assembler_).Finish());
     TEMPOKEY_ASSIGN_OR_RETURN(std::vector<core::PipelineStep> steps,
-                              PrepareSteps(start.operations(), clip, service_->clip_limits));
+                              PrepareSteps(start.operations(), clip, service_->clip_limits,
+                                           service_->options.max_job_cost_seconds));
     link_->Prepare(std::move(clip), std::move(steps), start.slice_bytes(), start.batch_parts());
     absl::Status queued = service_->pool->TrySubmit(
         [link = link_](std::stop_token pool_stop) { link->Run(std::move(pool_stop)); });
