@@ -1,5 +1,6 @@
 #include "client/cli.h"
 
+#include <signal.h>
 #include <unistd.h>
 
 #include <cstdlib>
@@ -12,6 +13,7 @@
 #include "client/cli_errors.h"
 #include "client/command.h"
 #include "grpc/support/log.h"
+#include "tempokey/core/io/file_io.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
@@ -227,7 +229,36 @@ int RunCli(std::span<const std::string> args, const CliIo& io) {
   return ExitCodeFor(status);
 }
 
+namespace {
+
+// SIGINT, SIGTERM, SIGHUP: remove the temporary file of any output being written, then die of
+// the signal as if unhandled (the shell sees 130 for Ctrl-C). Only async-signal-safe calls:
+// RemovePendingTempFiles() (unlink), sigaction(), raise().
+void RemoveTempFilesAndDie(int signal_number) {
+  core::RemovePendingTempFiles();
+  struct sigaction default_action {};
+  default_action.sa_handler = SIG_DFL;
+  sigemptyset(&default_action.sa_mask);
+  sigaction(signal_number, &default_action, nullptr);
+  raise(signal_number);
+}
+
+void InstallSignalHandlers() {
+  struct sigaction action {};
+  action.sa_handler = RemoveTempFilesAndDie;
+  sigemptyset(&action.sa_mask);
+  for (int signal_number : {SIGINT, SIGTERM, SIGHUP}) sigaction(signal_number, &action, nullptr);
+  // Test hook (tests/client): stop the process right after an output's temporary file exists,
+  // so a test can signal it in the middle of the write without racing it.
+  if (std::getenv("TEMPOKEY_TEST_STOP_IN_WRITE") != nullptr) {
+    core::SetTempFileCreatedHookForTesting([] { raise(SIGSTOP); });
+  }
+}
+
+}  // namespace
+
 int Main(int argc, char** argv) {
+  InstallSignalHandlers();
   // gRPC logs connection failures to stderr on its own ("Handshake failed ..."); the CLI reports
   // every failure as one line of its own, so the runtime's log stays off unless asked for.
   if (std::getenv("GRPC_VERBOSITY") == nullptr && std::getenv("GRPC_TRACE") == nullptr) {

@@ -1,5 +1,7 @@
 #include "client/clip_files.h"
 
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <cctype>
 #include <filesystem>
@@ -79,12 +81,30 @@ absl::StatusOr<FileFormat> FormatForPath(std::string_view flag, const std::strin
 absl::StatusOr<core::Clip> ReadClipFile(const std::string& path,
                                         std::optional<double> csv_frame_time_seconds) {
   TEMPOKEY_ASSIGN_OR_RETURN(FileFormat format, FormatForPath("", path, kSampledFormats));
-  if (format == FileFormat::kBvh) return core::ReadBvhFile(path);
-  if (!csv_frame_time_seconds) {
+  if (format == FileFormat::kCsv && !csv_frame_time_seconds) {
     return UsageError(absl::StrCat(path, ": a CSV file does not store its frame rate; give it with "
                                          "--input-fps"));
   }
-  return core::ReadCsvFile(path, *csv_frame_time_seconds);
+  TEMPOKEY_ASSIGN_OR_RETURN(const std::string text,
+                            core::ReadTextFile(path, kMaxInputFileBytes));
+  if (format == FileFormat::kBvh) return core::ParseBvh(text, path);
+  return core::ParseCsv(text, path, *csv_frame_time_seconds);
+}
+
+absl::Status CheckOutputIsNotTheInput(const std::string& input, const std::string& output,
+                                      bool overwrite, std::string_view flag) {
+  if (overwrite) return absl::OkStatus();
+  struct stat in {};
+  struct stat out {};
+  // stat() follows symbolic links: a link to the input is the input.
+  if (::stat(input.c_str(), &in) != 0 || ::stat(output.c_str(), &out) != 0) {
+    return absl::OkStatus();  // no output yet (or no input: reading it reports that)
+  }
+  if (in.st_dev != out.st_dev || in.st_ino != out.st_ino) return absl::OkStatus();
+  const std::string same = input == output ? "" : absl::StrCat(" ", input);
+  return UsageError(absl::StrCat(AsAbsl(flag), " ", output, " is the input", same,
+                                 " (the same file); choose another output, or give --overwrite "
+                                 "to replace the input"));
 }
 
 absl::Status WriteClipFile(const std::string& path, FileFormat format, const core::Clip& clip) {

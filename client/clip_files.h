@@ -4,6 +4,7 @@
 #ifndef TEMPOKEY_CLIENT_CLIP_FILES_H_
 #define TEMPOKEY_CLIENT_CLIP_FILES_H_
 
+#include <cstdint>
 #include <optional>
 #include <span>
 #include <string>
@@ -64,11 +65,29 @@ struct GltfExportSource {
 // stay within 0.5 degrees of the source's, whatever budgets the Euler curves were given).
 double GltfRotationBoundDegrees(const core::ReduceStep& reduce);
 
-// Reads a .bvh, or a .csv at `csv_frame_time_seconds` (the rate is not in the file).
+// The largest input clip file the CLI reads (BVH or CSV text): a quarter of a gigabyte holds
+// some 25 million samples, more than a server accepts by default (32 Mi samples of doubles).
+inline constexpr std::int64_t kMaxInputFileBytes = std::int64_t{256} << 20;
+
+// Reads a .bvh, or a .csv at `csv_frame_time_seconds` (the rate is not in the file), with bounded
+// memory: a regular file over kMaxInputFileBytes is refused from its size before any byte is
+// read, a pipe or FIFO is read up to that cap (and refused when silent for 10 s), a device is
+// refused, and a NUL byte (a binary or sparse file) stops the read at its first chunk
+// (core::ReadTextFile()).
 // Errors: a usage error for another extension, or a .csv without a frame time; the readers'
-// own errors ("walk.bvh:12:7: expected ..."; kNotFound "walk.bvh: no such file").
+// own errors ("walk.bvh:12:7: expected ..."; kNotFound "walk.bvh: no such file"; "big.bvh: file
+// is 1073741824 bytes, over the limit of 268435456"; "/dev/zero: is a character device, not a
+// file").
 absl::StatusOr<core::Clip> ReadClipFile(const std::string& path,
                                         std::optional<double> csv_frame_time_seconds);
+
+// Refuses to write `output` over `input`: the same file by device and inode (the same path,
+// another path to it, a hard link, a symbolic link to it), unless `overwrite`. An output that
+// does not exist yet is never the input.
+// Errors: a usage error "-o walk.bvh is the input walk.bvh (the same file); choose another
+// output, or give --overwrite to replace the input".
+absl::Status CheckOutputIsNotTheInput(const std::string& input, const std::string& output,
+                                      bool overwrite, std::string_view flag = "-o");
 
 // Writes a sampled clip as .bvh or .csv. Errors: kInvalidArgument for a keyed format or a clip
 // BVH cannot hold (no skeleton); write errors naming the path.

@@ -76,17 +76,17 @@ absl::StatusOr<ClientOptions> ClientOptionsFromFlags(const ParsedArgs& args) {
     return UsageError("--cert and --key go together (mutual TLS needs both)");
   }
   if (std::optional<std::string> ca = args.Value("--ca")) {
-    TEMPOKEY_ASSIGN_OR_RETURN(tls.root_ca_pem, core::ReadFile(*ca, kMaxPemBytes));
+    TEMPOKEY_ASSIGN_OR_RETURN(tls.root_ca_pem, core::ReadTextFile(*ca, kMaxPemBytes));
   }
   if (std::optional<std::string> cert = args.Value("--cert")) {
-    TEMPOKEY_ASSIGN_OR_RETURN(tls.cert_chain_pem, core::ReadFile(*cert, kMaxPemBytes));
-    TEMPOKEY_ASSIGN_OR_RETURN(tls.private_key_pem, core::ReadFile(*args.Value("--key"), kMaxPemBytes));
+    TEMPOKEY_ASSIGN_OR_RETURN(tls.cert_chain_pem, core::ReadTextFile(*cert, kMaxPemBytes));
+    TEMPOKEY_ASSIGN_OR_RETURN(tls.private_key_pem, core::ReadTextFile(*args.Value("--key"), kMaxPemBytes));
   }
   if (std::optional<std::string> name = args.Value("--tls-server-name")) {
     tls.target_name_override = *name;
   }
   if (std::optional<std::string> token_file = args.Value("--token-file")) {
-    TEMPOKEY_ASSIGN_OR_RETURN(std::string token, core::ReadFile(*token_file, kMaxPemBytes));
+    TEMPOKEY_ASSIGN_OR_RETURN(std::string token, core::ReadTextFile(*token_file, kMaxPemBytes));
     options.bearer_token = TrimWhitespace(std::move(token));
     if (options.bearer_token.empty()) {
       return absl::InvalidArgumentError(absl::StrCat(*token_file, ": the token file is empty"));

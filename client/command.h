@@ -127,6 +127,8 @@ inline constexpr FlagSpec kInputFpsFlag{"--input-fps", "", "RATE",
                                         "frame rate of a .csv input (CSV files do not store it)"};
 inline constexpr FlagSpec kOutputFlag{"--output", "-o", "FILE",
                                       "output file; its extension chooses the format"};
+inline constexpr FlagSpec kOverwriteFlag{"--overwrite", "", "",
+                                         "allow the output to be the input file itself"};
 
 // Runs `steps` on `clip` through the server as `mode` says, showing progress. Returns the result,
 // or nullopt when detached (the job id has been printed as "job: <id>").

@@ -45,6 +45,7 @@ constexpr FlagSpec kBatchFlags[] = {
     {"--force", "", "", "redo every file, even those whose outputs are up to date"},
     {"--progress", "", "MODE", "auto (default: a bar on a terminal, else a line per file), bar, "
                                "lines or none"},
+    {"--overwrite", "", "", "allow outputs to replace their own input files (OUTDIR = DIR)"},
 };
 constexpr std::string_view kProgressModes[] = {"auto", "bar", "lines", "none"};
 constexpr int kDefaultTerminalWidth = 80;
@@ -115,6 +116,10 @@ absl::Status Batch(CommandContext& context) {
   TEMPOKEY_ASSIGN_OR_RETURN(std::vector<BatchItem> items, PlanBatch(plan));
   if (shard) {
     std::erase_if(items, [&](const BatchItem& item) { return !InShard(item.name, *shard); });
+  }
+  for (const BatchItem& item : items) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckOutputIsNotTheInput(
+        item.input_path, item.output_path, context.args().Has("--overwrite"), "batch: output"));
   }
   TEMPOKEY_ASSIGN_OR_RETURN(const Client* client, context.Connect());
   TEMPOKEY_ASSIGN_OR_RETURN(std::unique_ptr<BatchManifest> manifest,

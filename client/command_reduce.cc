@@ -12,13 +12,15 @@ namespace tempokey::client {
 namespace {
 
 constexpr std::string_view kInArgument[] = {"IN"};
-constexpr FlagSpec kReduceCommandFlags[] = {kOutputFlag};
+constexpr FlagSpec kReduceCommandFlags[] = {kOutputFlag, kOverwriteFlag};
 constexpr FlagSpec kExecutionFlags[] = {kJobFlag, kDetachFlag, kLabelFlag, kInputFpsFlag};
 constexpr auto kReduceFlags = JoinFlags(kReduceCommandFlags, kReduceStepFlags, kExecutionFlags);
 
 absl::Status Reduce(CommandContext& context) {
   TEMPOKEY_ASSIGN_OR_RETURN(std::vector<std::string> inputs, context.Positionals(kInArgument));
   TEMPOKEY_ASSIGN_OR_RETURN(std::string output, context.Required("--output"));
+  TEMPOKEY_RETURN_IF_ERROR(
+      CheckOutputIsNotTheInput(inputs[0], output, context.args().Has("--overwrite")));
   TEMPOKEY_ASSIGN_OR_RETURN(FileFormat format, FormatForPath("-o", output, kAllFormats));
   TEMPOKEY_ASSIGN_OR_RETURN(ExecutionMode mode, ExecutionModeFromFlags(context.args()));
   TEMPOKEY_ASSIGN_OR_RETURN(core::ReduceStep reduce, ReduceStepFromArgs(context.args()));

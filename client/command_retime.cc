@@ -11,13 +11,15 @@ namespace tempokey::client {
 namespace {
 
 constexpr std::string_view kInArgument[] = {"IN"};
-constexpr FlagSpec kRetimeCommandFlags[] = {kOutputFlag};
+constexpr FlagSpec kRetimeCommandFlags[] = {kOutputFlag, kOverwriteFlag};
 constexpr FlagSpec kExecutionFlags[] = {kJobFlag, kDetachFlag, kLabelFlag, kInputFpsFlag};
 constexpr auto kRetimeFlags = JoinFlags(kRetimeCommandFlags, kRetimeStepFlags, kExecutionFlags);
 
 absl::Status Retime(CommandContext& context) {
   TEMPOKEY_ASSIGN_OR_RETURN(std::vector<std::string> inputs, context.Positionals(kInArgument));
   TEMPOKEY_ASSIGN_OR_RETURN(std::string output, context.Required("--output"));
+  TEMPOKEY_RETURN_IF_ERROR(
+      CheckOutputIsNotTheInput(inputs[0], output, context.args().Has("--overwrite")));
   TEMPOKEY_ASSIGN_OR_RETURN(FileFormat format, FormatForPath("-o", output, kSampledOutputFormats));
   TEMPOKEY_ASSIGN_OR_RETURN(ExecutionMode mode, ExecutionModeFromFlags(context.args()));
   TEMPOKEY_ASSIGN_OR_RETURN(core::RetimeStep step, RetimeStepFromArgs(context.args()));

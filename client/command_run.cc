@@ -16,6 +16,7 @@ constexpr std::string_view kInArgument[] = {"IN"};
 
 constexpr FlagSpec kRunCommandFlags[] = {
     kOutputFlag,
+    kOverwriteFlag,
 };
 constexpr FlagSpec kRunModeFlags[] = {
     {"--process", "", "", "use one stateless Process call instead of a stored job"},
@@ -28,6 +29,8 @@ constexpr auto kRunFlags = JoinFlags(kRunCommandFlags, kConvertStepFlags, kRunMo
 absl::Status Run(CommandContext& context) {
   TEMPOKEY_ASSIGN_OR_RETURN(std::vector<std::string> inputs, context.Positionals(kInArgument));
   TEMPOKEY_ASSIGN_OR_RETURN(std::string output, context.Required("--output"));
+  TEMPOKEY_RETURN_IF_ERROR(
+      CheckOutputIsNotTheInput(inputs[0], output, context.args().Has("--overwrite")));
   TEMPOKEY_ASSIGN_OR_RETURN(FileFormat format, FormatForPath("-o", output, kSampledFormats));
   ExecutionMode mode;
   mode.as_job = !context.args().Has("--process");

@@ -128,7 +128,9 @@ absl::StatusOr<core::PipelineStep> ParseOperation(const Locator& at, const JsonV
     return at.Fail(operation, absl::StrCat(label, ": expected an object with one member, such as "
                                                   "{\"retime\": {...}}"));
   }
-  const auto& [name, options] = operation.object->front();
+  // Plain references, not a structured binding: clang 14 cannot capture those in a lambda.
+  const std::string& name = operation.object->front().first;
+  const JsonValue& options = operation.object->front().second;
   const auto kind = std::find_if(std::begin(kOperationKinds), std::end(kOperationKinds),
                                  [&](const OperationKind& k) { return k.name == name; });
   if (kind == std::end(kOperationKinds)) {
@@ -188,9 +190,11 @@ absl::StatusOr<std::vector<core::PipelineStep>> ParsePipelineJson(std::string_vi
   std::vector<core::PipelineStep> steps;
   steps.reserve(operations->array->size());
   for (std::size_t i = 0; i < operations->array->size(); ++i) {
+    // Emplaced from the StatusOr in place: moving the variant out through a local made g++ 12
+    // report -Wmaybe-uninitialized on its inactive alternatives (a false positive).
     absl::StatusOr<core::PipelineStep> step = ParseOperation(at, (*operations->array)[i], i);
     if (!step.ok()) return step.status();
-    steps.push_back(*std::move(step));
+    steps.emplace_back(*std::move(step));
   }
   absl::Status chain = core::ValidateStepChain(steps);
   if (!chain.ok()) return at.Fail(*operations, core::AsStd(chain.message()));
@@ -198,7 +202,7 @@ absl::StatusOr<std::vector<core::PipelineStep>> ParsePipelineJson(std::string_vi
 }
 
 absl::StatusOr<std::vector<core::PipelineStep>> ReadPipelineFile(const std::string& path) {
-  absl::StatusOr<std::string> text = core::ReadFile(path, kMaxPipelineFileBytes);
+  absl::StatusOr<std::string> text = core::ReadTextFile(path, kMaxPipelineFileBytes);
   if (!text.ok()) return AsUsageError(text.status());
   return ParsePipelineJson(*text, path);
 }

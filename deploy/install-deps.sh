@@ -25,6 +25,8 @@ build_packages=(
   python3-yaml
   libcivetweb-dev libjs-three
   chromium chromium-driver python3-selenium
+  # clang and its runtimes (libFuzzer, ASan, UBSan): the fuzz stage, deploy/fuzz.sh
+  clang-14 libclang-rt-14-dev
 )
 # Export checks (ctest -L export): a real browser for the glTF page, and tools that are not ours
 # under node: the Khronos glTF validator and three.js, pinned in tests/export/package-lock.json

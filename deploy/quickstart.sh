@@ -9,7 +9,8 @@
 #                               (TEMPOKEY_STUDIO_PORT) until Ctrl-C, then drain the server
 #
 # Environment: TEMPOKEY_BUILD_DIR (default: build), TEMPOKEY_JOBS (default: nproc),
-# TEMPOKEY_SANITIZER_TESTS=0 skips the sanitizer stage of `test`.
+# TEMPOKEY_SANITIZER_TESTS=0 skips the sanitizer stage of `test`, TEMPOKEY_FUZZ_SECONDS (seconds
+# per fuzz target, default 12; 0 skips the fuzz stage, deploy/fuzz.sh).
 set -euo pipefail
 
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -82,6 +83,7 @@ test_suite() {
   if [[ "${TEMPOKEY_SANITIZER_TESTS:-1}" != "0" ]]; then
     deploy/sanitizer-tests.sh
   fi
+  deploy/fuzz.sh  # bounded: TEMPOKEY_FUZZ_SECONDS per target, 0 skips
 }
 
 studio() {

@@ -26,19 +26,22 @@ std::int64_t ValuesPerSlice(std::int64_t slice_bytes, std::int64_t bytes_per_val
   return std::max<std::int64_t>(1, slice_bytes / bytes_per_value);
 }
 
-// Index of the first non-finite value in [data, data + n), or n. The exponent test vectorizes;
-// the scan runs over every sample that comes off the wire.
-std::int64_t FirstNonFinite(const double* data, std::int64_t n) {
+// Index of the first value in [data, data + n) that is not finite or lies beyond
+// core::kMaxSampleMagnitude, or n. The exponent test vectorizes; the scan runs over every sample
+// that comes off the wire. |x| < 2^29 (biased exponent below 1023 + 29) is always within the
+// bound (2^29 < 1e9 < 2^30); only a slice holding a larger exponent is scanned exactly.
+std::int64_t FirstOutOfRange(const double* data, std::int64_t n) {
   constexpr std::uint64_t kExponent = 0x7ff0000000000000ull;
+  constexpr std::uint64_t kFirstUnsafe = std::uint64_t{1023 + 29} << 52;
   std::uint64_t any = 0;
   for (std::int64_t i = 0; i < n; ++i) {
     std::uint64_t bits;
     std::memcpy(&bits, &data[i], sizeof bits);
-    any |= static_cast<std::uint64_t>((bits & kExponent) == kExponent);
+    any |= static_cast<std::uint64_t>((bits & kExponent) >= kFirstUnsafe);
   }
   if (any == 0) return n;
   for (std::int64_t i = 0; i < n; ++i) {
-    if (!std::isfinite(data[i])) return i;
+    if (!(std::abs(data[i]) <= core::kMaxSampleMagnitude)) return i;
   }
   return n;
 }
@@ -401,10 +404,14 @@ absl::Status ClipAssembler::AddSamples(const v1::ChannelSamples& samples) {
   }
 
   const double* data = samples.samples().data();
-  if (const std::int64_t bad = FirstNonFinite(data, n); bad < n) {
-    return Invalid(absl::StrCat("samples message ", messages_, ": ", core::ChannelLabel(clip_, c),
-                                ": sample at frame ", first + bad, " is ",
-                                core::DescribeDouble(data[bad])));
+  if (const std::int64_t bad = FirstOutOfRange(data, n); bad < n) {
+    return Invalid(absl::StrCat(
+        "samples message ", messages_, ": ", core::ChannelLabel(clip_, c), ": sample at frame ",
+        first + bad, " is ", core::DescribeDouble(data[bad]),
+        std::isfinite(data[bad])
+            ? absl::StrCat(", beyond the +-", core::DescribeDouble(core::kMaxSampleMagnitude),
+                           " a clip may hold")
+            : ""));
   }
 
   if (first == start_end) {

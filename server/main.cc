@@ -52,6 +52,9 @@ ABSL_FLAG(int64_t, max_stored_result_bytes, int64_t{2} << 30,
 ABSL_FLAG(int64_t, job_ttl_seconds, 3600, "Finished jobs are deleted this long after they end.");
 ABSL_FLAG(int64_t, drain_grace_seconds, 25,
           "On SIGTERM, how long queued and running jobs get to finish.");
+ABSL_FLAG(double, max_job_cost_seconds, 60.0,
+          "Refuse (RESOURCE_EXHAUSTED, before queueing) requests whose predicted work is over "
+          "this many seconds of one core; 0: no limit.");
 ABSL_FLAG(int, max_concurrent_streams, 1024, "Streaming calls open at once.");
 ABSL_FLAG(int64_t, max_connection_age_seconds, 0,
           "Close connections after this long so clients rebalance; 0: never.");
@@ -128,6 +131,7 @@ int Run(int argc, char** argv) {
   options.max_stored_result_bytes = absl::GetFlag(FLAGS_max_stored_result_bytes);
   options.job_ttl = std::chrono::seconds(absl::GetFlag(FLAGS_job_ttl_seconds));
   options.drain_grace = std::chrono::seconds(absl::GetFlag(FLAGS_drain_grace_seconds));
+  options.max_job_cost_seconds = absl::GetFlag(FLAGS_max_job_cost_seconds);
   options.max_concurrent_streams = absl::GetFlag(FLAGS_max_concurrent_streams);
   options.max_connection_age = std::chrono::seconds(absl::GetFlag(FLAGS_max_connection_age_seconds));
   options.metrics_address = absl::GetFlag(FLAGS_metrics_address);

@@ -20,6 +20,7 @@
 #include "server/wire_codec.h"
 #include "spdlog/spdlog.h"
 #include "tempokey/core/model/status.h"
+#include "tempokey/core/pipeline/cost.h"
 
 namespace tempokey::server {
 namespace {
@@ -131,10 +132,18 @@ absl::Status CheckId(std::string_view field, const std::string& id) {
 
 absl::StatusOr<std::vector<core::PipelineStep>> PrepareSteps(
     const google::protobuf::RepeatedPtrField<v1::Operation>& operations, const core::Clip& clip,
-    const core::ClipLimits& limits) {
+    const core::ClipLimits& limits, double max_cost_seconds) {
   TEMPOKEY_ASSIGN_OR_RETURN(std::vector<core::PipelineStep> steps,
                             wire::PipelineFromProto(operations));
-  TEMPOKEY_RETURN_IF_ERROR(core::ValidatePipeline(clip, steps, limits));
+  TEMPOKEY_ASSIGN_OR_RETURN(core::PipelineCost cost,
+                            core::EstimatePipelineCost(clip, steps, limits));
+  if (max_cost_seconds > 0.0 && cost.seconds > max_cost_seconds) {
+    return absl::ResourceExhaustedError(absl::StrCat(
+        "the request is over this server's work limit: ", cost.Describe(),
+        ", over the limit of ", max_cost_seconds,
+        " s (--max_job_cost_seconds); ask for less work (fewer iterations, a shorter clip, "
+        "a coarser accuracy) or use a server with a higher limit"));
+  }
   return steps;
 }
 
@@ -254,7 +263,8 @@ grpc::ServerUnaryReactor* MotionService::SubmitJob(grpc::CallbackServerContext* 
             return absl::InvalidArgumentError("the job has no clip: set clip_id or inline_clip");
         }
         TEMPOKEY_ASSIGN_OR_RETURN(std::vector<core::PipelineStep> steps,
-                                  PrepareSteps(request.operations(), *clip, context_->clip_limits));
+                                  PrepareSteps(request.operations(), *clip, context_->clip_limits,
+                                               context_->options.max_job_cost_seconds));
 
         JobSpec spec{.clip_id = clip_id,
                      .steps = std::move(steps),

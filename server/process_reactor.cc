@@ -341,7 +341,8 @@ class ProcessReactor final : public ProcessReactorBase {
     TEMPOKEY_ASSIGN_OR_RETURN(core::Clip clip, std::move(*assembler_).Finish());
     assembler_.reset();
     TEMPOKEY_ASSIGN_OR_RETURN(std::vector<core::PipelineStep> steps,
-                              PrepareSteps(start.operations(), clip, service_->clip_limits));
+                              PrepareSteps(start.operations(), clip, service_->clip_limits,
+                                           service_->options.max_job_cost_seconds));
     clip_memory_.Settle(ClipBytes(clip));
     link_->Prepare(std::move(clip), std::move(clip_memory_), std::move(steps), start.slice_bytes(),
                    start.batch_parts());

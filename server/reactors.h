@@ -65,11 +65,15 @@ grpc::ServerUnaryReactor* AnswerUnary(ServiceContext& service, grpc::ServerUnary
                                       grpc::ByteBuffer* raw_response);
 
 // Operations off the wire, checked against `clip` and what the server lets a pipeline produce
-// (wire::PipelineFromProto() then core::ValidatePipeline()), before anything is queued.
-// Errors: kInvalidArgument naming the operation, field and value.
+// (wire::PipelineFromProto() then core::EstimatePipelineCost(), which validates every step
+// against the exact shape of its input), and refused when their predicted work is over
+// `max_cost_seconds` (0: no limit), before anything is queued.
+// Errors: kInvalidArgument naming the operation, field and value; kResourceExhausted "the
+// request is over this server's work limit: predicted 143 s of work (operation 1, ...), over
+// the limit of 60 s (--max_job_cost_seconds) ..." (no retry hint: retrying cannot help).
 absl::StatusOr<std::vector<core::PipelineStep>> PrepareSteps(
     const google::protobuf::RepeatedPtrField<v1::Operation>& operations, const core::Clip& clip,
-    const core::ClipLimits& limits);
+    const core::ClipLimits& limits, double max_cost_seconds);
 
 // Checks an id field of a request (job_id, clip_id): not empty, at most kMaxIdBytes.
 // Errors: kInvalidArgument "job_id is empty"; kResourceExhausted "job_id is 300 bytes, over the

@@ -267,6 +267,11 @@ absl::Status ValidateServerOptions(const ServerOptions& o) {
     return absl::InvalidArgumentError(
         absl::StrCat("--drain_grace_seconds must be >= 0, got ", o.drain_grace.count()));
   }
+  if (!(o.max_job_cost_seconds >= 0.0 && std::isfinite(o.max_job_cost_seconds))) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "--max_job_cost_seconds must be finite and >= 0 (0: no limit), got ",
+        o.max_job_cost_seconds));
+  }
   if (o.tls_cert_file.empty() != o.tls_key_file.empty()) {
     return absl::InvalidArgumentError("--tls_cert and --tls_key must be given together");
   }

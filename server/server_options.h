@@ -48,6 +48,9 @@ struct ServerOptions {
   std::chrono::seconds job_ttl{3600};
   // SIGTERM: how long running and queued jobs get to finish before they are cancelled.
   std::chrono::seconds drain_grace{25};
+  // Requests whose predicted work (core/pipeline/cost.h: seconds of one core, pessimistic) is
+  // over this are refused before they are queued, with RESOURCE_EXHAUSTED; 0 disables the check.
+  double max_job_cost_seconds = 60.0;
   // Streaming calls (uploads, watches, results, Process) open at once; beyond it new ones get
   // RESOURCE_EXHAUSTED.
   int max_concurrent_streams = 1024;

@@ -295,13 +295,17 @@ TEST_F(CliEndToEndTest, ServerRefusalIsOneLineWithTheCodeAndLeavesTheOldOutput) 
   const std::string output = Path("keep.json");
   ASSERT_TRUE(core::WriteFileAtomically(output, "old contents").ok());
 
-  // Only the fit itself can tell that 100 keys cannot cover 132 channels.
-  ProcessResult run = Tempokey({"reduce", BandaiClip(), "-o", output, "--key-budget", "100"});
+  // Only the server knows its work limit (60 s by default): 1000 passes of the paper's fit over
+  // 132 channels are predicted above it.
+  ProcessResult run = Tempokey(
+      {"reduce", BandaiClip(), "-o", output, "--method", "paper", "--iterations", "1000"});
 
   EXPECT_EQ(run.exit_code, 1);
   EXPECT_EQ(run.out, "");
   EXPECT_THAT(run.err, IsOneErrorLine());
-  EXPECT_THAT(run.err, StartsWith("error: server: INVALID_ARGUMENT: operation 1 (reduce): "));
+  EXPECT_THAT(run.err, StartsWith("error: server: RESOURCE_EXHAUSTED: the request is over this "
+                                  "server's work limit: predicted "));
+  EXPECT_THAT(run.err, HasSubstr("reduce (paper): 132 channels x "));
   EXPECT_EQ(*core::ReadFile(output), "old contents");
 }
 
@@ -499,14 +503,14 @@ TEST_F(CliEndToEndTest, ReduceWithAKeyBudgetKeepsIt) {
   EXPECT_TRUE(FileExists(output));
 }
 
-TEST_F(CliEndToEndTest, ReduceRefusesAKeyBudgetBelowTwoKeysPerChannel) {
+TEST_F(CliEndToEndTest, ReduceRefusesAKeyBudgetBelowTwoKeysPerChannelBeforeSendingAnything) {
   ProcessResult run = Tempokey({"reduce", BandaiClip(), "-o", Path("x.json"), "--key-budget", "100"});
 
   EXPECT_EQ(run.exit_code, 1);
   EXPECT_THAT(run.err, IsOneErrorLine());
   EXPECT_EQ(run.err,
-            "error: server: INVALID_ARGUMENT: operation 1 (reduce): tolerance.key_budget 100 is "
-            "below the 264 keys any fit of 132 channels needs (2 per channel)\n");
+            "error: operation 1 (reduce): tolerance.key_budget 100 is below the 264 keys any fit "
+            "of 132 channels needs (2 per channel)\n");
   EXPECT_FALSE(FileExists(Path("x.json")));
 }
 

@@ -160,6 +160,21 @@ TEST_F(AssemblerErrorTest, InfiniteSampleIsRefused) {
                        HasSubstr("channel 0 (joint0.Xposition): sample at frame 13 is -infinity")));
 }
 
+TEST_F(AssemblerErrorTest, SampleBeyondABillionIsRefused) {
+  ClipAssembler assembler;
+  ASSERT_TRUE(assembler.AddHeader(ClipHeaderToProto(clip_)).ok());
+  v1::ChannelSamples near = SamplesSliceToProto(clip_, 1, 0, 20);
+  near.set_samples(2, 1.07e9);  // under 2^30, so only the exact test catches it
+  v1::ChannelSamples edge = SamplesSliceToProto(clip_, 2, 0, 20);
+  edge.set_samples(5, -1e9);
+
+  EXPECT_THAT(assembler.AddSamples(near),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       HasSubstr("sample at frame 2 is 1.07e+09, beyond the +-1e+09 a clip may "
+                                 "hold")));
+  EXPECT_TRUE(assembler.AddSamples(edge).ok());
+}
+
 TEST_F(AssemblerErrorTest, OverlapNamesBothRanges) {
   ClipAssembler assembler;
   ASSERT_TRUE(assembler.AddHeader(ClipHeaderToProto(clip_)).ok());
@@ -310,7 +325,16 @@ TEST_F(AssemblerErrorTest, NanMarkerTime) {
 
   EXPECT_THAT(ClipLayoutFromProto(header),
               StatusIs(absl::StatusCode::kInvalidArgument,
-                       "marker 0 (\"step\"): time_seconds is NaN"));
+                       "marker 0 (\"step\"): time_seconds must be in [-1e+11, 1e+11], got NaN"));
+}
+
+TEST_F(AssemblerErrorTest, SubnormalFrameTime) {
+  v1::ClipHeader header = ClipHeaderToProto(clip_);
+  header.set_frame_time_seconds(1e-320);
+
+  EXPECT_THAT(ClipLayoutFromProto(header),
+              StatusIs(absl::StatusCode::kInvalidArgument,
+                       "frame time must be in [1e-06, 3600] seconds, got 9.99989e-321"));
 }
 
 // ---- memory follows the data --------------------------------------------------------------------

@@ -178,6 +178,12 @@ class BvhParser {
 
   // --- Numbers ------------------------------------------------------------------------------
 
+  // "sample 1e12 is beyond the +-1e+09 a clip may hold" (clip.h says why).
+  static std::string OutOfRangeMessage(std::string_view what, std::string_view word) {
+    return absl::StrCat(AsAbsl(what), " ", QuoteForMessage(word), " is beyond the +-",
+                        DescribeDouble(kMaxSampleMagnitude), " a clip may hold");
+  }
+
   // Reads one number at the cursor; it must end at whitespace or the end of the file.
   absl::StatusOr<double> TakeNumber() {
     const std::string_view word = WordAt(p_);
@@ -196,7 +202,12 @@ class BvhParser {
       if (AtLineEnd()) {
         return Error(Here(), absl::StrCat("expected 3 numbers after OFFSET, found ", i));
       }
+      const Location at = Here();
+      const std::string_view word = WordAt(p_);
       TEMPOKEY_ASSIGN_OR_RETURN(offset[i], TakeNumber());
+      if (!(std::abs(offset[i]) <= kMaxSampleMagnitude)) {
+        return Error(at, OutOfRangeMessage("offset", word));
+      }
     }
     TEMPOKEY_ASSIGN_OR_RETURN(Token extra, NextTokenOnLine());
     if (!extra.text.empty()) {
@@ -457,6 +468,9 @@ class BvhParser {
       return Error(time_location, absl::StrCat("expected a frame time > 0 seconds, got ",
                                                QuoteForMessage(time_text)));
     }
+    if (absl::Status in_range = CheckFrameTime(frame_time); !in_range.ok()) {
+      return Error(time_location, AsStd(in_range.message()));
+    }
     TEMPOKEY_RETURN_IF_ERROR(ExpectLineEnd("the frame time"));
 
     const auto channels = static_cast<std::int64_t>(clip_.channels.size());
@@ -522,12 +536,16 @@ class BvhParser {
         }
         double value;
         const auto [next, ec] = std::from_chars(p, end, value);
-        if (ec != std::errc() || (next != end && !IsSpace(*next)) || !std::isfinite(value))
-            [[unlikely]] {
+        // One comparison catches NaN, infinities and magnitudes beyond a clip's range.
+        if (ec != std::errc() || (next != end && !IsSpace(*next)) ||
+            !(std::abs(value) <= kMaxSampleMagnitude)) [[unlikely]] {
           // Slow path: a leading '+' is fine; everything else is an error with its reason.
           const std::string_view word = WordAt(p);
           const NumberError error = ParseDoubleToken(word, value);
           if (error != NumberError::kNone) return BadNumber(p, error);
+          if (!(std::abs(value) <= kMaxSampleMagnitude)) {
+            return Error(Location{line_, p - line_start_ + 1}, OutOfRangeMessage("sample", word));
+          }
           columns[c][f] = value;
           p = word.data() + word.size();
           continue;

@@ -1,15 +1,19 @@
 #include "tempokey/core/io/file_io.h"
 
 #include <fcntl.h>
+#include <poll.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <chrono>
 #include <cstdint>
 #include <cstring>
 #include <random>
+#include <string_view>
+#include <utility>
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
@@ -108,8 +112,33 @@ absl::Status WriteAll(int fd, std::string_view contents, const std::string& path
 
 }  // namespace
 
-absl::StatusOr<std::string> ReadFile(const std::string& path, std::int64_t max_bytes) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+namespace {
+
+std::string_view KindOfFile(mode_t mode) {
+  if (S_ISCHR(mode)) return "a character device";
+  if (S_ISBLK(mode)) return "a block device";
+  if (S_ISSOCK(mode)) return "a socket";
+  return "not a regular file";
+}
+
+// Line and column (from 1) of byte `offset` of `text`.
+std::pair<std::int64_t, std::int64_t> LineAndColumn(std::string_view text, std::size_t offset) {
+  std::int64_t line = 1;
+  std::size_t line_start = 0;
+  for (std::size_t i = 0; i < offset; ++i) {
+    if (text[i] == '\n') {
+      ++line;
+      line_start = i + 1;
+    }
+  }
+  return {line, static_cast<std::int64_t>(offset - line_start) + 1};
+}
+
+absl::StatusOr<std::string> ReadWhole(const std::string& path, std::int64_t max_bytes, bool text) {
+  // O_NONBLOCK: opening a FIFO for reading would otherwise wait for a writer, forever if none
+  // comes. Reads then block as usual (the flag is cleared below), and a FIFO without a writer
+  // reads as empty.
+  const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK | O_NOCTTY);
   if (fd < 0) {
     const int error = errno;
     if (error == ENOENT) return absl::NotFoundError(absl::StrCat(path, ": no such file"));
@@ -121,28 +150,72 @@ absl::StatusOr<std::string> ReadFile(const std::string& path, std::int64_t max_b
   if (S_ISDIR(info.st_mode)) {
     return absl::InvalidArgumentError(absl::StrCat(path, ": is a directory, not a file"));
   }
+  if (!S_ISREG(info.st_mode) && !S_ISFIFO(info.st_mode)) {
+    // /dev/zero and friends never end; sockets and terminals are not files to read whole.
+    return absl::InvalidArgumentError(
+        absl::StrCat(path, ": is ", AsAbsl(KindOfFile(info.st_mode)), ", not a file"));
+  }
   if (S_ISREG(info.st_mode) && info.st_size > max_bytes) {
     return absl::InvalidArgumentError(absl::StrCat(path, ": file is ", info.st_size,
                                                    " bytes, over the limit of ", max_bytes));
+  }
+  const bool stream = S_ISFIFO(info.st_mode);
+  if (!stream) {
+    const int flags = ::fcntl(fd, F_GETFL);
+    if (flags < 0 || ::fcntl(fd, F_SETFL, flags & ~O_NONBLOCK) != 0) {
+      return ErrnoError(errno, path, "cannot read: ");
+    }
   }
 
   // Read to the end rather than trusting st_size: pipes and /proc files report 0, and a file
   // may grow while we read it. The cap is enforced on what actually arrives. A regular file's
   // buffer is its size plus one byte, so the read that meets the end needs no more room and a
   // file that grew shows at once; the buffer grows (doubling) only when more bytes arrive.
+  // Text is checked chunk by chunk as it arrives, so a binary file stops at its first chunk.
   std::string contents;
-  contents.resize(S_ISREG(info.st_mode) && info.st_size > 0
-                      ? static_cast<std::size_t>(info.st_size) + 1
-                      : kReadChunk);
+  const bool sized = S_ISREG(info.st_mode) && info.st_size > 0;
+  contents.resize(sized && !text ? static_cast<std::size_t>(info.st_size) + 1 : kReadChunk);
   std::size_t used = 0;
   for (;;) {
-    if (used == contents.size()) contents.resize(std::max(2 * used, used + kReadChunk));
-    const ssize_t n = ::read(fd, contents.data() + used, contents.size() - used);
+    if (used == contents.size()) {
+      const std::size_t grown = sized ? std::min<std::size_t>(
+                                            std::max(2 * used, used + kReadChunk),
+                                            static_cast<std::size_t>(info.st_size) + 1)
+                                      : std::max(2 * used, used + kReadChunk);
+      contents.resize(std::max(grown, used + 1));
+    }
+    const std::size_t room = text ? std::min(contents.size() - used, kReadChunk)
+                                  : contents.size() - used;
+    if (stream) {
+      // A FIFO stays non-blocking: wait for data (or its writer closing) a bounded time, so one
+      // that nobody writes to is refused instead of read forever.
+      pollfd ready{fd, POLLIN, 0};
+      const int polled = ::poll(&ready, 1, kStreamIdleTimeoutMs);
+      if (polled < 0) {
+        if (errno == EINTR) continue;
+        return ErrnoError(errno, path, "cannot read: ");
+      }
+      if (polled == 0) {
+        return absl::DeadlineExceededError(absl::StrCat(
+            path, ": is a FIFO and nothing arrived for ", kStreamIdleTimeoutMs / 1000,
+            " s (no writer?)"));
+      }
+    }
+    const ssize_t n = ::read(fd, contents.data() + used, room);
     if (n < 0) {
-      if (errno == EINTR) continue;
+      if (errno == EINTR || errno == EAGAIN) continue;
       return ErrnoError(errno, path, "cannot read: ");
     }
     if (n == 0) break;
+    if (text) {
+      const std::string_view chunk(contents.data() + used, static_cast<std::size_t>(n));
+      if (const std::size_t nul = chunk.find('\0'); nul != std::string_view::npos) {
+        const auto [line, column] =
+            LineAndColumn(std::string_view(contents.data(), used + nul), used + nul);
+        return absl::InvalidArgumentError(absl::StrCat(
+            path, ":", line, ":", column, ": unexpected byte 0x00; the file looks binary, not text"));
+      }
+    }
     used += static_cast<std::size_t>(n);
     if (static_cast<std::int64_t>(used) > max_bytes) {
       return absl::InvalidArgumentError(absl::StrCat(path, ": file is over the limit of ",
@@ -155,6 +228,60 @@ absl::StatusOr<std::string> ReadFile(const std::string& path, std::int64_t max_b
   if (contents.capacity() > used + 1) contents.shrink_to_fit();
   return contents;
 }
+
+}  // namespace
+
+absl::StatusOr<std::string> ReadFile(const std::string& path, std::int64_t max_bytes) {
+  return ReadWhole(path, max_bytes, /*text=*/false);
+}
+
+absl::StatusOr<std::string> ReadTextFile(const std::string& path, std::int64_t max_bytes) {
+  return ReadWhole(path, max_bytes, /*text=*/true);
+}
+
+// ---- temporary files a signal handler may remove --------------------------------------------
+
+namespace {
+
+// A slot holds a temporary file's path while its write is in flight. States: free, claimed (the
+// writer fills the path), live (a signal handler may unlink it). Lock-free atomics only, so
+// RemovePendingTempFiles() is async-signal-safe.
+struct TempSlot {
+  enum : int { kFree = 0, kClaimed = 1, kLive = 2 };
+  std::atomic<int> state{kFree};
+  char path[4096];
+};
+static_assert(std::atomic<int>::is_always_lock_free);
+TempSlot g_temp_slots[kTrackedTempFiles];
+std::atomic<void (*)()> g_temp_created_hook{nullptr};
+
+// Registers `path`; returns its slot, or -1 when every slot is taken or the path is too long.
+int RegisterTemp(const std::string& path) {
+  if (path.size() >= sizeof(TempSlot::path)) return -1;
+  for (int i = 0; i < kTrackedTempFiles; ++i) {
+    int expected = TempSlot::kFree;
+    if (g_temp_slots[i].state.compare_exchange_strong(expected, TempSlot::kClaimed)) {
+      std::memcpy(g_temp_slots[i].path, path.c_str(), path.size() + 1);
+      g_temp_slots[i].state.store(TempSlot::kLive, std::memory_order_release);
+      return i;
+    }
+  }
+  return -1;
+}
+
+void UnregisterTemp(int slot) {
+  if (slot >= 0) g_temp_slots[slot].state.store(TempSlot::kFree, std::memory_order_release);
+}
+
+}  // namespace
+
+void RemovePendingTempFiles() {
+  for (TempSlot& slot : g_temp_slots) {
+    if (slot.state.load(std::memory_order_acquire) == TempSlot::kLive) ::unlink(slot.path);
+  }
+}
+
+void SetTempFileCreatedHookForTesting(void (*hook)()) { g_temp_created_hook.store(hook); }
 
 bool IsAtomicWriteTemporary(std::string_view file_name, std::string_view target_name) {
   constexpr std::string_view kMark = ".tmp-";
@@ -188,8 +315,12 @@ absl::Status WriteFileAtomically(const std::string& path, std::string_view conte
   }
 
   FdCloser closer(fd);
+  // From here until the rename (or the unlink on failure), a signal handler may remove it.
+  const int slot = RegisterTemp(temp_path);
+  if (void (*hook)() = g_temp_created_hook.load(); hook != nullptr) hook();
   auto fail = [&](absl::Status status) {
     ::unlink(temp_path.c_str());
+    UnregisterTemp(slot);
     return status;
   };
   // Replacing a file keeps its permission bits.
@@ -207,6 +338,8 @@ absl::Status WriteFileAtomically(const std::string& path, std::string_view conte
   if (::rename(temp_path.c_str(), path.c_str()) != 0) {
     return fail(ErrnoError(errno, path, "cannot replace the file: "));
   }
+  // A signal between the rename and this line unlinks a name that no longer exists: harmless.
+  UnregisterTemp(slot);
   // Make the rename itself durable. Some file systems refuse fsync on a directory; the data is
   // already safe in the file, so that is not an error.
   const int dir_fd = ::open(directory.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);

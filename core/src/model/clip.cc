@@ -90,11 +90,40 @@ std::string ChannelLabel(const Clip& clip, int channel_index) {
   return absl::StrCat("channel ", channel_index, " (", ChannelName(clip, channel_index), ")");
 }
 
-absl::Status ValidateClipLayout(const Clip& clip, const ClipLimits& limits) {
-  if (!std::isfinite(clip.frame_time_seconds) || clip.frame_time_seconds <= 0.0) {
-    return absl::InvalidArgumentError(absl::StrFormat(
-        "frame time must be finite and > 0 seconds, got %g", clip.frame_time_seconds));
+absl::Status CheckFrameTime(double seconds, std::string_view what) {
+  // Written so that NaN fails too.
+  if (seconds >= kMinFrameTimeSeconds && seconds <= kMaxFrameTimeSeconds) {
+    return absl::OkStatus();
   }
+  return absl::InvalidArgumentError(absl::StrCat(AsAbsl(what), " must be in [",
+                                                 DescribeDouble(kMinFrameTimeSeconds), ", ",
+                                                 DescribeDouble(kMaxFrameTimeSeconds),
+                                                 "] seconds, got ", DescribeDouble(seconds)));
+}
+
+namespace {
+
+// A joint offset or end site: finite and within kMaxSampleMagnitude.
+absl::Status CheckOffset(std::size_t j, const Joint& joint, std::string_view what,
+                         const Vec3& offset) {
+  for (double v : offset) {
+    if (!std::isfinite(v)) {
+      return absl::InvalidArgumentError(absl::StrCat("joint ", j, " (", joint.name, "): ",
+                                                     AsAbsl(what), " is ", DescribeDouble(v)));
+    }
+    if (std::abs(v) > kMaxSampleMagnitude) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "joint ", j, " (", joint.name, "): ", AsAbsl(what), " ", DescribeDouble(v),
+          " is beyond the +-", DescribeDouble(kMaxSampleMagnitude), " a clip may hold"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::Status ValidateClipLayout(const Clip& clip, const ClipLimits& limits) {
+  TEMPOKEY_RETURN_IF_ERROR(CheckFrameTime(clip.frame_time_seconds));
   if (clip.frame_count < 1) {
     return absl::InvalidArgumentError(
         absl::StrCat("a clip needs at least 1 frame, got ", clip.frame_count));
@@ -141,19 +170,9 @@ absl::Status ValidateClipLayout(const Clip& clip, const ClipLimits& limits) {
       return absl::InvalidArgumentError(absl::StrCat("joint ", j, " (", joint.name,
                                                      "): nesting deeper than ", limits.max_depth));
     }
-    for (double v : joint.offset) {
-      if (!std::isfinite(v)) {
-        return absl::InvalidArgumentError(
-            absl::StrCat("joint ", j, " (", joint.name, "): offset is ", DescribeDouble(v)));
-      }
-    }
+    TEMPOKEY_RETURN_IF_ERROR(CheckOffset(j, joint, "offset", joint.offset));
     for (const Vec3& end_site : joint.end_sites) {
-      for (double v : end_site) {
-        if (!std::isfinite(v)) {
-          return absl::InvalidArgumentError(absl::StrCat(
-              "joint ", j, " (", joint.name, "): end site offset is ", DescribeDouble(v)));
-        }
-      }
+      TEMPOKEY_RETURN_IF_ERROR(CheckOffset(j, joint, "end site offset", end_site));
     }
     unsigned rotation_axes = 0;
     unsigned position_axes = 0;
@@ -199,16 +218,16 @@ absl::Status ValidateClipLayout(const Clip& clip, const ClipLimits& limits) {
 
   for (std::size_t m = 0; m < clip.markers.size(); ++m) {
     const Marker& marker = clip.markers[m];
-    if (!std::isfinite(marker.time_seconds)) {
-      return absl::InvalidArgumentError(absl::StrCat("marker ", m, " (",
-                                                     QuoteForMessage(marker.name),
-                                                     "): time_seconds is ",
-                                                     DescribeDouble(marker.time_seconds)));
+    if (!(std::abs(marker.time_seconds) <= kMaxTimeSeconds)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "marker ", m, " (", QuoteForMessage(marker.name), "): time_seconds must be in [-",
+          DescribeDouble(kMaxTimeSeconds), ", ", DescribeDouble(kMaxTimeSeconds), "], got ",
+          DescribeDouble(marker.time_seconds)));
     }
-    if (!(marker.duration_seconds >= 0.0) || !std::isfinite(marker.duration_seconds)) {
+    if (!(marker.duration_seconds >= 0.0 && marker.duration_seconds <= kMaxTimeSeconds)) {
       return absl::InvalidArgumentError(absl::StrCat(
           "marker ", m, " (", QuoteForMessage(marker.name),
-          "): duration_seconds must be finite and >= 0, got ",
+          "): duration_seconds must be in [0, ", DescribeDouble(kMaxTimeSeconds), "], got ",
           DescribeDouble(marker.duration_seconds)));
     }
   }
@@ -226,10 +245,17 @@ absl::Status ValidateClip(const Clip& clip, const ClipLimits& limits) {
                                                      " frames"));
     }
     for (std::size_t i = 0; i < samples.size(); ++i) {
-      if (!std::isfinite(samples[i])) {
-        return absl::InvalidArgumentError(absl::StrCat(ChannelLabel(clip, static_cast<int>(c)),
-                                                       ": sample ", i, " is ",
-                                                       DescribeDouble(samples[i])));
+      // One comparison in the loop; which rule failed is sorted out only on failure.
+      if (!(std::abs(samples[i]) <= kMaxSampleMagnitude)) {
+        if (!std::isfinite(samples[i])) {
+          return absl::InvalidArgumentError(absl::StrCat(ChannelLabel(clip, static_cast<int>(c)),
+                                                         ": sample ", i, " is ",
+                                                         DescribeDouble(samples[i])));
+        }
+        return absl::InvalidArgumentError(absl::StrCat(
+            ChannelLabel(clip, static_cast<int>(c)), ": sample ", i, " is ",
+            DescribeDouble(samples[i]), ", beyond the +-", DescribeDouble(kMaxSampleMagnitude),
+            " a clip may hold"));
       }
     }
   }

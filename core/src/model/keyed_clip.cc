@@ -13,12 +13,25 @@ namespace tempokey::core {
 namespace {
 
 constexpr double kDefaultWeight = 1.0 / 3.0;
+// Samples baked between two looks at the stop token: well under a millisecond of work.
+constexpr std::size_t kBakePiece = 65536;
 
 absl::Status CheckFinite(std::string_view label, std::size_t key, std::string_view field,
                          double value) {
   if (std::isfinite(value)) return absl::OkStatus();
   return absl::InvalidArgumentError(absl::StrCat(AsAbsl(label), ": key ", key, ": ",
                                                  AsAbsl(field), " is ", DescribeDouble(value)));
+}
+
+// Finite and |value| <= bound (clip.h says why each bound).
+absl::Status CheckBounded(std::string_view label, std::size_t key, std::string_view field,
+                          double value, double bound) {
+  TEMPOKEY_RETURN_IF_ERROR(CheckFinite(label, key, field, value));
+  if (std::abs(value) <= bound) return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrCat(AsAbsl(label), ": key ", key, ": ",
+                                                 AsAbsl(field), " ", DescribeDouble(value),
+                                                 " is beyond the +-", DescribeDouble(bound),
+                                                 " a keyed clip may hold"));
 }
 
 absl::Status CheckWeight(std::string_view label, std::size_t key, std::string_view field,
@@ -95,10 +108,13 @@ absl::Status ValidateCurve(const Curve& curve, std::string_view label) {
   }
   for (std::size_t k = 0; k < curve.keys.size(); ++k) {
     const Key& key = curve.keys[k];
-    TEMPOKEY_RETURN_IF_ERROR(CheckFinite(label, k, "time", key.time_seconds));
-    TEMPOKEY_RETURN_IF_ERROR(CheckFinite(label, k, "value", key.value));
-    TEMPOKEY_RETURN_IF_ERROR(CheckFinite(label, k, "in tangent", key.in_tangent));
-    TEMPOKEY_RETURN_IF_ERROR(CheckFinite(label, k, "out tangent", key.out_tangent));
+    TEMPOKEY_RETURN_IF_ERROR(CheckBounded(label, k, "time", key.time_seconds, kMaxTimeSeconds));
+    TEMPOKEY_RETURN_IF_ERROR(
+        CheckBounded(label, k, "value", key.value, kMaxKeyValueMagnitude));
+    TEMPOKEY_RETURN_IF_ERROR(
+        CheckBounded(label, k, "in tangent", key.in_tangent, kMaxKeyTangent));
+    TEMPOKEY_RETURN_IF_ERROR(
+        CheckBounded(label, k, "out tangent", key.out_tangent, kMaxKeyTangent));
     TEMPOKEY_RETURN_IF_ERROR(CheckWeight(label, k, "in weight", key.in_weight));
     TEMPOKEY_RETURN_IF_ERROR(CheckWeight(label, k, "out weight", key.out_weight));
     if (k == 0) continue;
@@ -147,7 +163,8 @@ double EvaluateCurve(const Curve& curve, double time_seconds) {
   return EvaluateSegment(a, b, time_seconds);
 }
 
-void SampleCurve(const Curve& curve, double frame_time_seconds, std::span<double> out) {
+void SampleCurve(const Curve& curve, double frame_time_seconds, std::span<double> out,
+                 std::int64_t first_frame) {
   const std::vector<Key>& keys = curve.keys;
   if (keys.empty()) {
     std::fill(out.begin(), out.end(), 0.0);
@@ -156,8 +173,17 @@ void SampleCurve(const Curve& curve, double frame_time_seconds, std::span<double
   // `next` is the first key strictly after the current time, as EvaluateCurve()'s search finds
   // it; times only grow, so it only moves forward.
   std::size_t next = 1;
+  if (first_frame > 0 && keys.size() > 1) {
+    // A later piece starts its walk where its first time falls, not at the first key.
+    const double t0 = static_cast<double>(first_frame) * frame_time_seconds;
+    const auto after = std::upper_bound(keys.begin(), keys.end(), t0,
+                                        [](double t, const Key& key) { return t < key.time_seconds; });
+    next = std::clamp<std::size_t>(static_cast<std::size_t>(after - keys.begin()), 1,
+                                   keys.size() - 1);
+  }
   for (std::size_t i = 0; i < out.size(); ++i) {
-    const double t = static_cast<double>(i) * frame_time_seconds;
+    const double t = static_cast<double>(first_frame + static_cast<std::int64_t>(i)) *
+                     frame_time_seconds;
     if (!(t > keys.front().time_seconds)) {
       out[i] = keys.front().value;
       continue;
@@ -174,31 +200,49 @@ void SampleCurve(const Curve& curve, double frame_time_seconds, std::span<double
   }
 }
 
-absl::StatusOr<Clip> Bake(const KeyedClip& keyed, std::optional<double> frame_time_seconds,
-                          const ClipLimits& limits) {
-  TEMPOKEY_RETURN_IF_ERROR(ValidateKeyedClip(keyed));
-  const double frame_time = frame_time_seconds.value_or(keyed.layout.frame_time_seconds);
-  if (!std::isfinite(frame_time) || frame_time <= 0.0) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "bake frame time must be finite and > 0 seconds, got ", DescribeDouble(frame_time)));
-  }
-  const double duration = keyed.layout.duration_seconds();
+absl::StatusOr<std::int64_t> BakedFrameCount(double duration, std::size_t channel_count,
+                                             double frame_time, const ClipLimits& limits) {
+  TEMPOKEY_RETURN_IF_ERROR(CheckFrameTime(frame_time, "bake frame time"));
   const double last_index = std::floor(duration / frame_time + 1e-9);
-  const auto channel_count = static_cast<double>(keyed.layout.channels.size());
+  const auto channels = static_cast<double>(std::max<std::size_t>(1, channel_count));
   if (last_index + 1.0 > static_cast<double>(limits.max_frames) ||
-      last_index + 1.0 > static_cast<double>(limits.max_samples) / channel_count) {
+      last_index + 1.0 > static_cast<double>(limits.max_samples) / channels) {
     return absl::InvalidArgumentError(absl::StrCat(
         "bake at ", frame_time, " s per frame gives ", last_index + 1.0, " frames x ",
-        keyed.layout.channels.size(), " channels, over the limit of ", limits.max_samples,
-        " samples"));
+        channel_count, " channels, over the limit of ", limits.max_samples, " samples"));
   }
+  return static_cast<std::int64_t>(last_index) + 1;
+}
+
+absl::StatusOr<Clip> Bake(const KeyedClip& keyed, std::optional<double> frame_time_seconds,
+                          const ClipLimits& limits, std::stop_token stop) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateKeyedClip(keyed));
+  const double frame_time = frame_time_seconds.value_or(keyed.layout.frame_time_seconds);
+  TEMPOKEY_ASSIGN_OR_RETURN(const std::int64_t frame_count,
+                            BakedFrameCount(keyed.layout.duration_seconds(),
+                                            keyed.layout.channels.size(), frame_time, limits));
   Clip clip = keyed.layout;
   clip.frame_time_seconds = frame_time;
-  clip.frame_count = static_cast<std::int64_t>(last_index) + 1;
+  clip.frame_count = frame_count;
   for (std::size_t c = 0; c < clip.channels.size(); ++c) {
+    if (stop.stop_requested()) return absl::CancelledError("cancelled");
     std::vector<double>& samples = clip.channels[c].samples;
     samples.resize(static_cast<std::size_t>(clip.frame_count));
-    SampleCurve(keyed.curves[c], frame_time, samples);
+    // In pieces, so a stop request is seen within one piece's work on the longest channel.
+    for (std::size_t first = 0; first < samples.size(); first += kBakePiece) {
+      if (stop.stop_requested()) return absl::CancelledError("cancelled");
+      const std::size_t count = std::min(kBakePiece, samples.size() - first);
+      SampleCurve(keyed.curves[c], frame_time, std::span<double>(samples).subspan(first, count),
+                  static_cast<std::int64_t>(first));
+    }
+    for (std::size_t f = 0; f < samples.size(); ++f) {
+      if (!(std::abs(samples[f]) <= kMaxSampleMagnitude)) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            ChannelLabel(clip, static_cast<int>(c)), ": baked sample ", f, " is ",
+            DescribeDouble(samples[f]), ", beyond the +-", DescribeDouble(kMaxSampleMagnitude),
+            " a clip may hold (the curve's tangents overshoot)"));
+      }
+    }
   }
   return clip;
 }

@@ -8,6 +8,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "tempokey/core/model/status.h"
+#include "tempokey/core/pipeline/cost.h"
 
 namespace tempokey::core {
 namespace {
@@ -28,23 +29,11 @@ std::string StepContext(std::size_t index, const PipelineStep& step) {
   return absl::StrCat("operation ", index + 1, " (", AsAbsl(StepName(step)), ")");
 }
 
-absl::Status ValidateRate(const std::optional<FrameRate>& rate) {
-  if (!rate) return absl::OkStatus();
-  if (rate->numerator <= 0 || rate->denominator <= 0) {
-    return absl::InvalidArgumentError(absl::StrCat("frame rate ", rate->numerator, "/",
-                                                   rate->denominator,
-                                                   " must have a positive numerator and denominator"));
-  }
-  if (rate->hz() > 100'000.0) {
-    return absl::InvalidArgumentError(absl::StrCat("frame rate ", rate->hz(),
-                                                   " Hz is over the limit of 100000 Hz"));
-  }
-  return absl::OkStatus();
-}
-
-// Wraps every rotation angle into (-180, 180].
-Clip WrapRotations(Clip clip) {
+// Wraps every rotation angle into (-180, 180]; stops (the clip half wrapped) when `stop` is
+// requested, which the caller checks.
+Clip WrapRotations(Clip clip, const std::stop_token& stop) {
   for (Channel& channel : clip.channels) {
+    if (stop.stop_requested()) break;
     if (!IsRotation(channel.kind)) continue;
     for (double& v : channel.samples) {
       double w = std::remainder(v, 360.0);  // [-180, 180]
@@ -111,31 +100,8 @@ absl::Status ValidateStepChain(std::span<const PipelineStep> steps) {
 
 absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> steps,
                               const ClipLimits& limits) {
-  TEMPOKEY_RETURN_IF_ERROR(ValidateStepCount(steps));
-  StepChain chain;
-  // Step by step, so the first operation at fault is the one named.
-  for (std::size_t i = 0; i < steps.size(); ++i) {
-    const PipelineStep& step = steps[i];
-    TEMPOKEY_RETURN_IF_ERROR(chain.Accept(i, step));
-    absl::Status status = std::visit(
-        Overloaded{
-            [&](const RetimeStep& s) {
-              // Later retimes see a clip whose timing is only known at run time; the first is
-              // checked fully here, the rest again when they run.
-              if (i == 0) return ValidateRetime(clip, s.warp, s.options, limits);
-              Clip probe;
-              probe.frame_time_seconds = clip.frame_time_seconds;
-              probe.frame_count = 2;
-              return ValidateRetime(probe, s.warp, s.options, limits);
-            },
-            [&](const ReduceStep& s) { return ValidateReduceOptionsForClip(clip, s.options); },
-            [](const BakeStep& s) { return ValidateRate(s.rate); },
-            [](const ConvertStep&) { return absl::OkStatus(); },
-        },
-        step);
-    if (!status.ok()) return Annotate(status, StepContext(i, step));
-  }
-  return absl::OkStatus();
+  // One walk validates and predicts (cost.h): every step against the exact shape of its input.
+  return EstimatePipelineCost(clip, steps, limits).status();
 }
 
 bool ProducesKeyedOutput(std::span<const PipelineStep> steps) {
@@ -198,7 +164,8 @@ absl::StatusOr<PipelineResult> RunPipeline(const Clip& clip, std::span<const Pip
                              static_cast<double>(s.rate->numerator);
               }
               TEMPOKEY_ASSIGN_OR_RETURN(
-                  Clip baked, Bake(std::get<KeyedClip>(result.output), frame_time, limits));
+                  Clip baked,
+                  Bake(std::get<KeyedClip>(result.output), frame_time, limits, stop));
               result.output = std::move(baked);
               input = std::get_if<Clip>(&result.output);
               return absl::OkStatus();
@@ -206,8 +173,8 @@ absl::StatusOr<PipelineResult> RunPipeline(const Clip& clip, std::span<const Pip
             [&](const ConvertStep& s) -> absl::Status {
               Clip& owned = own_input();
               if (s.euler_filter) TEMPOKEY_RETURN_IF_ERROR(ApplyEulerFilter(owned).status());
-              if (s.wrap_rotations) owned = WrapRotations(std::move(owned));
-              return absl::OkStatus();
+              if (s.wrap_rotations) owned = WrapRotations(std::move(owned), stop);
+              return CheckNotCancelled(stop);
             },
         },
         step);

@@ -9,10 +9,13 @@
 #include <limits>
 #include <memory>
 #include <numeric>
+#include <optional>
+#include <stop_token>
 #include <utility>
 
 #include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
+#include "tempokey/core/model/progress.h"
 #include "tempokey/core/model/status.h"
 #include "simd.h"
 
@@ -26,7 +29,11 @@ constexpr int kMaxIterationsLimit = 1000;
 
 // ---- initial keys -------------------------------------------------------------------------------
 
-std::vector<double> GaussianSmooth(std::span<const double> samples, double sigma) {
+// Kernel taps of the smoothing between two looks at the stop token.
+constexpr std::int64_t kSmoothStopCheckTaps = std::int64_t{1} << 20;
+
+std::vector<double> GaussianSmooth(std::span<const double> samples, double sigma,
+                                   const std::stop_token& stop = {}) {
   std::vector<double> out(samples.begin(), samples.end());
   if (sigma <= 0.0 || samples.size() < 2) return out;
   const int n = static_cast<int>(samples.size());
@@ -35,7 +42,11 @@ std::vector<double> GaussianSmooth(std::span<const double> samples, double sigma
   for (int k = 0; k <= radius; ++k) {
     kernel[k] = std::exp(-0.5 * (k * k) / (sigma * sigma));
   }
+  // Wide kernels on long channels are seconds of work: look at the stop token every so many taps.
+  const int frames_per_check =
+      static_cast<int>(std::max<std::int64_t>(1, kSmoothStopCheckTaps / (2 * radius + 1)));
   for (int f = 0; f < n; ++f) {
+    if (f % frames_per_check == 0 && stop.stop_requested()) return out;
     double sum = 0.0;
     double weight = 0.0;
     for (int k = -radius; k <= radius; ++k) {
@@ -157,7 +168,6 @@ KeyGrid MakeGrid(const HermiteKey2D& key, const HermiteSteps& steps, bool x_fixe
 // State s = sx * 9 + sy with sx = ix * 3 + itx and sy = iy * 3 + ity.
 constexpr int XIndex(int sx) { return sx / 3; }
 constexpr int TxIndex(int sx) { return sx % 3; }
-constexpr double Offset(int index) { return static_cast<double>(index - 1); }
 // Offsets of the first and second component of a 9-state index (i * 3 + j).
 constexpr std::array<double, 9> kOffsetHigh = {-1, -1, -1, 0, 0, 0, 1, 1, 1};
 constexpr std::array<double, 9> kOffsetLow = {-1, 0, 1, -1, 0, 1, -1, 0, 1};
@@ -440,12 +450,14 @@ TEMPOKEY_AVX_CLONES void UpdateLaneMinima(
 class DpPass {
  public:
   DpPass(std::span<const double> samples, std::span<const HermiteKey2D> keys,
-         const HermiteSteps& steps, ShapeCache& cache)
+         const HermiteSteps& steps, ShapeCache& cache, std::stop_token stop = {})
       : samples_(samples),
         keys_(keys),
         steps_(steps),
         scale_(DpTieScale(samples)),
-        cache_(cache) {
+        last_frame_(static_cast<double>(samples.size()) - 1.0),
+        cache_(cache),
+        stop_(std::move(stop)) {
     const std::size_t k = keys.size();
     grids_.reserve(k);
     for (std::size_t i = 0; i < k; ++i) {
@@ -455,12 +467,15 @@ class DpPass {
     predecessor_.assign(k, {});
   }
 
-  HermiteDpPass Run() {
+  // The Viterbi path; nullopt when `stop` was requested part way (see Stopping()).
+  std::optional<HermiteDpPass> Run() {
     const std::size_t k = keys_.size();
     for (int s = 0; s < kStates; ++s) {
       cost_[0][s] = XIndex(s / 9) == 1 ? 0.0 : kInf;
     }
-    for (std::size_t i = 0; i + 1 < k; ++i) Advance(i);
+    for (std::size_t i = 0; i + 1 < k; ++i) {
+      if (!Advance(i)) return std::nullopt;
+    }
     const double lowest = *std::min_element(cost_[k - 1].begin(), cost_[k - 1].end());
     const auto [best, state] = ChooseCandidate(cost_[k - 1].data(), lowest, scale_);
     HermiteDpPass pass;
@@ -507,8 +522,26 @@ class DpPass {
     }
   };
 
-  // Fills cost_[i + 1] and predecessor_[i + 1] from cost_[i] through segment i.
-  void Advance(std::size_t i) {
+  // SegmentIsFeasible() with both keys inside the clip (hermite_dp.h): a grid offset can move an
+  // interior key past the first or last frame, where there are no samples to measure it against.
+  bool InsideAndFeasible(double ax, double atx, double bx, double btx) const {
+    return ax >= 0.0 && bx <= last_frame_ && SegmentIsFeasible(ax, atx, bx, btx);
+  }
+
+  // Counts `frames` of work (a basis solve or a data sum per frame) and looks at the stop token
+  // once per kDpStopCheckFrames of it: a few milliseconds of work, whether the segments are
+  // short or a million frames long.
+  bool Stopping(std::int64_t frames) {
+    work_ += frames;
+    if (work_ < kDpStopCheckFrames) return false;
+    work_ = 0;
+    return stop_.stop_requested();
+  }
+
+  // Fills cost_[i + 1] and predecessor_[i + 1] from cost_[i] through segment i; false when a
+  // stop was requested part way.
+  bool Advance(std::size_t i) {
+    if (Stopping(1)) return false;
     const bool last = i + 2 == keys_.size();
     const KeyGrid& ga = grids_[i];
     const KeyGrid& gb = grids_[i + 1];
@@ -556,7 +589,7 @@ class DpPass {
             const double atx = ga.tx[itx_a];
             const double bx = gb.x[ix_b];
             const double btx = gb.tx[itx_b];
-            if (!SegmentIsFeasible(ax, atx, bx, btx)) continue;
+            if (!InsideAndFeasible(ax, atx, bx, btx)) continue;
             const int combo = tx * 9 + sx;
             SegmentShape& shape = shapes[combo];
             const auto [first, end] = SegmentFrames(ax, bx, last);
@@ -581,6 +614,7 @@ class DpPass {
     }
     std::array<ShapeEntry, kStates> entries;
     for (int k = 0; k < key_count; ++k) {
+      if (Stopping(static_cast<std::int64_t>(keys[k].length))) return false;
       entries[k] = cache_.Get(keys[k]);
       __builtin_prefetch(entries[k].record);
     }
@@ -600,7 +634,8 @@ class DpPass {
         const double atx = ga.tx[TxIndex(sx)];
         const double bx = gb.x[XIndex(tx)];
         const double btx = gb.tx[TxIndex(tx)];
-        if (!SegmentIsFeasible(ax, atx, bx, btx)) continue;
+        if (!InsideAndFeasible(ax, atx, bx, btx)) continue;
+        if (Stopping(shapes[tx * 9 + sx].n)) return false;
         const SegmentForm form =
             BuildSegmentForm(samples_, shapes[tx * 9 + sx], y_ref, centre_y, steps_);
         PredecessorRow& row = rows_[row_count_++];
@@ -613,6 +648,7 @@ class DpPass {
         predecessor_[i + 1][tx * 9 + ty] = static_cast<std::int8_t>(state);
       }
     }
+    return true;
   }
 
   static void FillRow(const SegmentForm& form, const double* in_row, int sx,
@@ -700,10 +736,13 @@ class DpPass {
   std::span<const HermiteKey2D> keys_;
   HermiteSteps steps_;
   double scale_;
+  double last_frame_;
   std::vector<KeyGrid> grids_;
   std::vector<std::array<double, kStates>> cost_;
   std::vector<std::array<std::int8_t, kStates>> predecessor_;
   ShapeCache& cache_;
+  std::stop_token stop_;
+  std::int64_t work_ = 0;  // frames of work since the last look at stop_
   LaneMinima minima_;
   std::array<PredecessorRow, 9> rows_;
   int row_count_ = 0;
@@ -747,8 +786,9 @@ std::vector<int> InitialKeyFrames(std::span<const double> samples, double sigma_
 }
 
 std::vector<HermiteKey2D> InitialHermiteKeys(std::span<const double> samples, double sigma_frames,
-                                             int min_spacing_frames) {
-  const std::vector<double> smooth = GaussianSmooth(samples, sigma_frames);
+                                             int min_spacing_frames, std::stop_token stop) {
+  const std::vector<double> smooth = GaussianSmooth(samples, sigma_frames, stop);
+  if (stop.stop_requested()) return {};
   const std::vector<int> frames = KeyFramesOfSmoothed(smooth, min_spacing_frames);
   std::vector<HermiteKey2D> keys;
   keys.reserve(frames.size());
@@ -852,12 +892,13 @@ HermiteDpPass RunHermiteDpPass(std::span<const double> samples,
                                std::span<const HermiteKey2D> keys, const HermiteSteps& steps) {
   ShapeCache& cache = ThreadShapeCache();
   cache.TrimIfLarge();
-  return DpPass(samples, keys, steps, cache).Run();
+  return *DpPass(samples, keys, steps, cache).Run();  // no stop token: always a path
 }
 
 absl::StatusOr<HermiteFitResult> FitHermiteDp(std::span<const double> samples,
                                               std::vector<HermiteKey2D> initial,
-                                              const HermiteFitOptions& options) {
+                                              const HermiteFitOptions& options,
+                                              std::stop_token stop) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateHermiteKeys(samples, initial));
   TEMPOKEY_RETURN_IF_ERROR(CheckStep("x", options.steps.x));
   TEMPOKEY_RETURN_IF_ERROR(CheckStep("y", options.steps.y));
@@ -883,8 +924,11 @@ absl::StatusOr<HermiteFitResult> FitHermiteDp(std::span<const double> samples,
     const double largest =
         std::max({steps.x, steps.y, steps.tangent_x, steps.tangent_y});
     if (largest < options.accuracy) break;
+    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
     cache.TrimIfLarge();
-    HermiteDpPass pass = DpPass(samples, result.keys, steps, cache).Run();
+    std::optional<HermiteDpPass> run = DpPass(samples, result.keys, steps, cache, stop).Run();
+    if (!run) return absl::CancelledError("cancelled");
+    HermiteDpPass pass = *std::move(run);
     ++result.iterations;
     bool taken = false;
     if (pass.moved) {

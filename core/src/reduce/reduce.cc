@@ -26,14 +26,22 @@ namespace tempokey::core {
 namespace {
 
 constexpr double kMaxStep = 1e6;
+// Steps and accuracy stay normal doubles: halving a step below this would only reach subnormal
+// numbers (every key already moves by less than one ulp long before).
+constexpr double kMinStep = 1e-300;
 constexpr int kMaxIterations = 1000;
 constexpr double kMaxSigmaFrames = 1000.0;
+constexpr double kMinSigmaFrames = 0.01;
 constexpr int kMaxSpacingFrames = 1'000'000;
-// Squares of larger samples overflow the squared error.
-constexpr double kMaxSampleMagnitude = 1e100;
+// Error bounds: below 1e-9 no double near the largest sample magnitude (1e9, clip.h) resolves
+// the bound; above 1e9 every channel fits with two keys. Within it, a key budget's search scales
+// the bounds by at most 2^62.
+constexpr double kMinErrorBound = 1e-9;
+constexpr double kMaxErrorBound = 1e9;
 
-// "paper.step_y must be > 0, got -1" for a value that must lie in (0, max].
-absl::Status CheckPositive(std::string_view field, double value, double max) {
+// "paper.step_y must be > 0, got -1" for a value that must lie in [min, max] with min > 0.
+absl::Status CheckPositive(std::string_view field, double value, double max,
+                           double min = kMinStep) {
   if (!(value > 0.0)) {
     return absl::InvalidArgumentError(
         absl::StrCat(AsAbsl(field), " must be > 0, got ", DescribeDouble(value)));
@@ -41,6 +49,10 @@ absl::Status CheckPositive(std::string_view field, double value, double max) {
   if (!(value <= max)) {
     return absl::InvalidArgumentError(
         absl::StrCat(AsAbsl(field), " must be <= ", max, ", got ", DescribeDouble(value)));
+  }
+  if (!(value >= min)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(AsAbsl(field), " must be >= ", min, ", got ", DescribeDouble(value)));
   }
   return absl::OkStatus();
 }
@@ -55,10 +67,13 @@ absl::Status ValidatePaperParams(const PaperParams& p) {
     return absl::InvalidArgumentError(absl::StrCat("paper.max_iterations must be in [1, ",
                                                    kMaxIterations, "], got ", p.max_iterations));
   }
-  if (!(p.smoothing_sigma_frames >= 0.0 && p.smoothing_sigma_frames <= kMaxSigmaFrames)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("paper.smoothing_sigma_frames must be in [0, ", kMaxSigmaFrames, "], got ",
-                     DescribeDouble(p.smoothing_sigma_frames)));
+  // 0 turns smoothing off; a positive sigma below kMinSigmaFrames would square to nothing and
+  // make the Gaussian's centre weight 0/0.
+  const double sigma = p.smoothing_sigma_frames;
+  if (!(sigma == 0.0 || (sigma >= kMinSigmaFrames && sigma <= kMaxSigmaFrames))) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "paper.smoothing_sigma_frames must be 0 or in [", kMinSigmaFrames, ", ", kMaxSigmaFrames,
+        "], got ", DescribeDouble(sigma)));
   }
   if (p.min_key_spacing_frames < 1 || p.min_key_spacing_frames > kMaxSpacingFrames) {
     return absl::InvalidArgumentError(
@@ -73,11 +88,24 @@ absl::Status CheckBound(std::string_view field, double value) {
     return absl::InvalidArgumentError(
         absl::StrCat(AsAbsl(field), " must be > 0, got ", DescribeDouble(value)));
   }
-  if (!std::isfinite(value)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(AsAbsl(field), " must be finite, got ", DescribeDouble(value)));
+  if (!(value >= kMinErrorBound && value <= kMaxErrorBound)) {
+    return absl::InvalidArgumentError(absl::StrCat(AsAbsl(field), " must be in [",
+                                                   kMinErrorBound, ", ", kMaxErrorBound,
+                                                   "], got ", DescribeDouble(value)));
   }
   return absl::OkStatus();
+}
+
+// A key budget of at least the keys any fit of the layout needs: 2 per channel (1 for one frame).
+absl::Status CheckKeyBudget(const ToleranceParams& t, std::int64_t channel_count,
+                            std::int64_t frame_count) {
+  if (!t.key_budget) return absl::OkStatus();
+  const std::int64_t per_channel = frame_count > 1 ? 2 : 1;
+  const std::int64_t minimum = channel_count * per_channel;
+  if (*t.key_budget >= minimum) return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrCat(
+      "tolerance.key_budget ", *t.key_budget, " is below the ", minimum, " keys any fit of ",
+      channel_count, " channels needs (", per_channel, " per channel)"));
 }
 
 absl::Status ValidateToleranceParams(const ToleranceParams& t) {
@@ -103,17 +131,6 @@ absl::Status ValidateToleranceParams(const ToleranceParams& t) {
   return absl::InvalidArgumentError(absl::StrCat("tolerance.pose_alignment ",
                                                  static_cast<int>(t.pose_alignment),
                                                  " is not a known alignment"));
-}
-
-absl::Status CheckMagnitudes(const Clip& clip, int c, std::span<const double> samples) {
-  for (std::size_t f = 0; f < samples.size(); ++f) {
-    if (std::abs(samples[f]) > kMaxSampleMagnitude) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          ChannelLabel(clip, c), ": sample ", f, " is ", samples[f],
-          ", beyond the +-1e100 that curve fitting supports"));
-    }
-  }
-  return absl::OkStatus();
 }
 
 bool IsConstant(std::span<const double> samples) {
@@ -143,19 +160,19 @@ ChannelFit FlatFit(std::size_t frame_count, double value, double frame_time) {
 }
 
 absl::StatusOr<ChannelFit> PaperFit(std::span<const double> samples, double frame_time,
-                                    const PaperParams& params) {
+                                    const PaperParams& params, std::stop_token stop) {
   if (IsConstant(samples)) return FlatFit(samples.size(), samples.front(), frame_time);
   HermiteFitOptions options;
   options.steps = {params.step_x_frames, params.step_y, params.step_tangent_x,
                    params.step_tangent_y};
   options.accuracy = params.accuracy;
   options.max_iterations = params.max_iterations;
-  TEMPOKEY_ASSIGN_OR_RETURN(
-      HermiteFitResult fit,
-      FitHermiteDp(samples,
-                   InitialHermiteKeys(samples, params.smoothing_sigma_frames,
-                                      params.min_key_spacing_frames),
-                   options));
+  std::vector<HermiteKey2D> initial = InitialHermiteKeys(
+      samples, params.smoothing_sigma_frames, params.min_key_spacing_frames, stop);
+  // The initial keys are incomplete when a stop cut the smoothing short.
+  TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+  TEMPOKEY_ASSIGN_OR_RETURN(HermiteFitResult fit,
+                            FitHermiteDp(samples, std::move(initial), options, stop));
   return ChannelFit{HermiteKeysToCurve(fit.keys, frame_time),
                     std::move(fit.squared_error_history), fit.iterations};
 }
@@ -407,13 +424,8 @@ absl::StatusOr<ToleranceCurves> ToleranceFit(const Clip& clip,
   if (!params.key_budget) return fitter.Fit(1.0, progress, stop);
 
   const std::int64_t budget = *params.key_budget;
-  const std::int64_t minimum =
-      static_cast<std::int64_t>(clip.channels.size()) * (clip.frame_count > 1 ? 2 : 1);
-  if (budget < minimum) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "tolerance.key_budget ", budget, " is below the ", minimum, " keys any fit of ",
-        clip.channels.size(), " channels needs (", clip.frame_count > 1 ? 2 : 1, " per channel)"));
-  }
+  TEMPOKEY_RETURN_IF_ERROR(CheckKeyBudget(params, static_cast<std::int64_t>(clip.channels.size()),
+                                          clip.frame_count));
   const ProgressFn quiet;
   auto fit = [&](double scale) { return fitter.Fit(scale, quiet, stop); };
   // Bracket: `within` keeps to the budget, `over` does not.
@@ -499,6 +511,13 @@ absl::Status ValidateReduceOptionsForClip(const Clip& layout, const ReduceOption
   return absl::OkStatus();
 }
 
+absl::Status ValidateReduceForLayout(const ReduceOptions& options, std::int64_t channel_count,
+                                     std::int64_t frame_count) {
+  TEMPOKEY_RETURN_IF_ERROR(ValidateReduceOptions(options));
+  if (options.method != ReduceMethod::kTolerance) return absl::OkStatus();
+  return CheckKeyBudget(options.tolerance, channel_count, frame_count);
+}
+
 absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& options,
                                         const ProgressFn& progress, std::stop_token stop) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateClip(clip));
@@ -531,9 +550,6 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
   // Rotations unwrapped into copies, every other channel read in place.
   const reduce_internal::FittedSamples fitted(filtered ? *filtered : clip);
   const std::span<const std::span<const double>> inputs = fitted.channels();
-  for (int c = 0; c < channel_count; ++c) {
-    TEMPOKEY_RETURN_IF_ERROR(CheckMagnitudes(clip, c, inputs[c]));
-  }
   // Measures joints through the skeleton: the report's world error, and the joint bound's
   // verification.
   std::optional<reduce_internal::WorldErrorMeter> meter;
@@ -559,7 +575,7 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
     for (int c = 0; c < channel_count; ++c) {
       TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
       absl::StatusOr<ChannelFit> fit =
-          PaperFit(inputs[c], clip.frame_time_seconds, options.paper);
+          PaperFit(inputs[c], clip.frame_time_seconds, options.paper, stop);
       if (!fit.ok()) return Annotate(fit.status(), ChannelLabel(clip, c));
       iterations = std::max(iterations, fit->iterations);
       result.keyed.curves.push_back(std::move(fit->curve));
@@ -568,11 +584,22 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
                      absl::StrCat("reduce ", c + 1, "/", channel_count));
     }
   }
+  // Every number a fit produces lies in the keyed clip's ranges (clip.h) for every input
+  // ValidateClip() and ValidateReduceOptions() accept; a curve that does not is a broken
+  // invariant, reported as such rather than handed on as infinite tangents or key times.
+  for (int c = 0; c < channel_count; ++c) {
+    if (absl::Status valid = ValidateCurve(result.keyed.curves[c], ChannelLabel(clip, c));
+        !valid.ok()) {
+      return absl::InternalError(absl::StrCat("the fit produced an invalid curve: ",
+                                              valid.message()));
+    }
+  }
   // The clip was validated above and the curves are ours: measure without MeasureReduction()'s
   // checks and copies.
   const std::int64_t euler_filtered_frames = result.report.euler_filtered_frames;
   result.report =
-      reduce_internal::MeasureFitted(inputs, result.keyed.curves, clip.frame_time_seconds);
+      reduce_internal::MeasureFitted(inputs, result.keyed.curves, clip.frame_time_seconds, stop);
+  TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
   result.report.iterations = iterations;
   result.report.euler_filtered_frames = euler_filtered_frames;
   for (std::size_t c = 0; c < noise.sigmas.size(); ++c) {

@@ -4,6 +4,7 @@
 #define TEMPOKEY_CORE_SRC_REDUCE_REDUCTION_INTERNAL_H_
 
 #include <span>
+#include <stop_token>
 #include <vector>
 
 #include "tempokey/core/model/clip.h"
@@ -32,8 +33,10 @@ class FittedSamples {
 // MeasureReduction()'s report of `curves` against `samples` (one curve per channel, sampled at
 // f * frame_time_seconds), without its checks. Precondition: as many curves as channels, each
 // valid (ValidateCurve()). Thread-safe.
+// Returns early, the report incomplete, when `stop` is requested (the caller checks it).
 ReductionReport MeasureFitted(std::span<const std::span<const double>> samples,
-                              std::span<const Curve> curves, double frame_time_seconds);
+                              std::span<const Curve> curves, double frame_time_seconds,
+                              std::stop_token stop = {});
 
 // Checks that `keyed` holds one curve per channel of `clip`, of the same kinds.
 // Errors: kInvalidArgument "keyed clip has 1 channels, the clip has 2", "channel 3 (Hips.Xrotation):

@@ -22,14 +22,22 @@ struct ChannelErrors {
   double squared_sum = 0.0;
 };
 
+// Samples evaluated between two looks at the stop token.
+constexpr std::size_t kMeasurePiece = 65536;
+
 ChannelErrors MeasureChannel(std::span<const double> samples, int c, const Curve& curve,
-                             double frame_time_seconds) {
+                             double frame_time_seconds, const std::stop_token& stop) {
   ChannelErrors out;
   out.summary.channel_index = c;
   out.summary.key_count = static_cast<std::int64_t>(curve.keys.size());
   out.summary.sample_count = static_cast<std::int64_t>(samples.size());
   std::vector<double> fitted(samples.size());
-  SampleCurve(curve, frame_time_seconds, fitted);
+  for (std::size_t first = 0; first < fitted.size(); first += kMeasurePiece) {
+    if (stop.stop_requested()) return out;
+    const std::size_t count = std::min(kMeasurePiece, fitted.size() - first);
+    SampleCurve(curve, frame_time_seconds, std::span<double>(fitted).subspan(first, count),
+                static_cast<std::int64_t>(first));
+  }
   for (std::size_t f = 0; f < samples.size(); ++f) {
     const double error = std::abs(fitted[f] - samples[f]);
     out.squared_sum += error * error;
@@ -63,12 +71,14 @@ FittedSamples::FittedSamples(const Clip& clip) {
 }
 
 ReductionReport MeasureFitted(std::span<const std::span<const double>> samples,
-                              std::span<const Curve> curves, double frame_time_seconds) {
+                              std::span<const Curve> curves, double frame_time_seconds,
+                              std::stop_token stop) {
   ReductionReport report;
   double squared_sum = 0.0;
   for (std::size_t c = 0; c < samples.size(); ++c) {
+    if (stop.stop_requested()) return report;
     const ChannelErrors errors =
-        MeasureChannel(samples[c], static_cast<int>(c), curves[c], frame_time_seconds);
+        MeasureChannel(samples[c], static_cast<int>(c), curves[c], frame_time_seconds, stop);
     const ChannelReduction& channel = errors.summary;
     report.key_count += channel.key_count;
     report.sample_count += channel.sample_count;

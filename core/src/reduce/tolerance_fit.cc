@@ -28,6 +28,9 @@ constexpr double kBoundMargin = 1e-9;
 constexpr double kRidge = 1e-9;
 // Insertion rounds at most; each round at least halves every segment over the bound.
 constexpr int kMaxInsertionRounds = 64;
+// Samples of work (frames x channels fitted or measured) between two looks at the stop token:
+// about a millisecond.
+constexpr std::int64_t kStopCheckSamples = std::int64_t{1} << 16;
 // A removal whose window misses the bound by up to this factor is worth reweighting.
 constexpr double kLawsonReach = 1.5;
 // Window of a removal: up to kWindowSide keys on each side of the removed one (fewer at the
@@ -304,6 +307,7 @@ class Fitter {
   }
 
   absl::StatusOr<SplineFit> Run(std::stop_token stop) {
+    stop_ = std::move(stop);
     SplineFit fit;
     const std::size_t c_count = channels_.size();
     fit.values.resize(c_count);
@@ -316,15 +320,45 @@ class Fitter {
       }
       return fit;
     }
+    // Each phase returns early, its fit incomplete, once a stop was seen.
     Insert(fit);
-    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop_));
     Remove(fit);
-    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop_));
     Repair(fit);
+    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop_));
     return fit;
   }
 
  private:
+  // Counts `samples` of work (one channel's frames fitted or measured) and looks at the stop
+  // token once per kStopCheckSamples of it, so a stop is seen within milliseconds on any input.
+  bool Stopping(std::int64_t samples) {
+    if (stopped_) return true;
+    work_ += samples;
+    if (work_ < kStopCheckSamples) return false;
+    work_ = 0;
+    stopped_ = stop_.stop_requested();
+    return stopped_;
+  }
+
+  // Sets `v` to `n` zeros a piece at a time, looking at the stop token between pieces: a noisy
+  // channel keys almost every frame, and its solve's vectors are then hundreds of megabytes to
+  // fault in. False when a stop was seen.
+  template <class T>
+  bool ZeroFill(std::vector<T>& v, std::int64_t n) {
+    const auto size = static_cast<std::size_t>(n);
+    v.clear();
+    v.reserve(size);  // allocation only: pages are touched below
+    for (std::size_t done = 0; done < size;) {
+      const std::size_t next = std::min(size, done + 65536);
+      v.resize(next);
+      if (Stopping(static_cast<std::int64_t>(next - done))) return false;
+      done = next;
+    }
+    return true;
+  }
+
   // ---- least squares ---------------------------------------------------------------------------
 
   // Fits the values and slopes of keys [first, last] of `run` to channel `s` by least squares, the
@@ -334,11 +368,11 @@ class Fitter {
   void Solve(std::span<const double> s, const KeyRun& run, int first, int last,
              const double* weights = nullptr, std::int64_t weights_origin = 0) {
     const int n = last - first + 1;
-    diag_.assign(static_cast<std::size_t>(n), Mat2{});
-    upper_.assign(static_cast<std::size_t>(n), Mat2{});
-    rhs_.assign(static_cast<std::size_t>(n), Vec2{});
+    if (!ZeroFill(diag_, n) || !ZeroFill(upper_, n) || !ZeroFill(rhs_, n)) return;
     auto weight = [&](std::int64_t f) { return weights ? weights[f - weights_origin] : 1.0; };
     for (int i = 0; i < n; ++i) {
+      // A noisy channel keys almost every frame: millions of keys in one solve.
+      if (Stopping(1)) return;
       const std::int64_t f = run.frames[first + i];
       const double w = weight(f) + kRidge;
       diag_[i][0] += w;
@@ -351,6 +385,9 @@ class Fitter {
     for (int j = seg_first; j <= seg_last; ++j) {
       const std::int64_t fa = run.frames[j];
       const std::int64_t length = run.frames[j + 1] - fa;
+      // A whole long channel is one solve: look at the stop token inside it too (the result is
+      // then not used).
+      if (Stopping(length)) return;
       if (length < 2) continue;
       const BasisColumns& basis = basis_.Get(length);
       const bool a_free = j >= first;
@@ -400,6 +437,7 @@ class Fitter {
     // eliminated_[i-1]), then back substitution.
     eliminated_.resize(static_cast<std::size_t>(n));
     for (int i = 0; i < n; ++i) {
+      if (Stopping(1)) return;
       if (i > 0) {
         const Mat2& u = upper_[i - 1];
         const Mat2 lower = {u[0], u[2], u[1], u[3]};  // U_{i-1} transposed
@@ -493,11 +531,13 @@ class Fitter {
     for (int round = 0; round < kMaxInsertionRounds; ++round) {
       const int count = static_cast<int>(fit.frames.size());
       FitAll(fit);
+      if (stopped_) return;
       next.clear();
       bool inserted = false;
       for (int j = 0; j + 1 < count; ++j) {
         next.push_back(fit.frames[j]);
         const std::int64_t length = fit.frames[j + 1] - fit.frames[j];
+        if (Stopping(length * static_cast<std::int64_t>(channels_.size()))) return;
         if (length < 2) continue;
         // The channel most over its bound decides where the new key goes: at its worst frame,
         // or mid-segment when it is a key frame that is over (it is its segments' problem too).
@@ -536,8 +576,9 @@ class Fitter {
   void FitAll(SplineFit& fit) {
     const int count = static_cast<int>(fit.frames.size());
     for (std::size_t c = 0; c < channels_.size(); ++c) {
-      fit.values[c].assign(fit.frames.size(), 0.0);
-      fit.slopes[c].assign(fit.frames.size(), 0.0);
+      if (Stopping(static_cast<std::int64_t>(frame_count_))) return;
+      const auto keys = static_cast<std::int64_t>(fit.frames.size());
+      if (!ZeroFill(fit.values[c], keys) || !ZeroFill(fit.slopes[c], keys)) return;
       Solve(channels_[c], RunOf(fit, c), 0, count - 1);
     }
   }
@@ -648,6 +689,11 @@ class Fitter {
     Window base = trial;
     Window miss = trial;
     for (int i = 1; i + 1 < count; ++i) {
+      // The window's frames, every channel, a few trials each.
+      if (Stopping(4 * (fit.frames[i + 1] - out.frames.back()) *
+                   static_cast<std::int64_t>(c_count))) {
+        return;
+      }
       // Keys around the candidate: up to two accepted ones before, two remaining after.
       const int before = std::min<int>(kWindowSide, static_cast<int>(out.frames.size()));
       const int after = std::min(kWindowSide, count - 1 - i);
@@ -737,8 +783,10 @@ class Fitter {
       std::vector<std::pair<std::int64_t, std::int64_t>> bad;
       const int count = static_cast<int>(fit.frames.size());
       for (std::size_t c = 0; c < channels_.size(); ++c) {
+        if (Stopping(static_cast<std::int64_t>(frame_count_))) return;
         const KeyRun run = RunOf(fit, c);
         for (int j = 0; j + 1 < count; ++j) {
+          if (Stopping(fit.frames[j + 1] - fit.frames[j])) return;
           const bool over = SegmentMax(channels_[c], run, j) > bounds_[c] ||
                             KeyRatio(fit, c, j) > 1.0 || KeyRatio(fit, c, j + 1) > 1.0;
           if (over) bad.emplace_back(fit.frames[j], fit.frames[j + 1]);
@@ -772,6 +820,9 @@ class Fitter {
   }
 
   std::span<const std::span<const double>> channels_;
+  std::stop_token stop_;
+  std::int64_t work_ = 0;   // samples of work since the last look at stop_
+  bool stopped_ = false;    // a stop was seen: every phase returns at once
   std::vector<double> bounds_;
   ToleranceFitOptions options_;
   std::size_t frame_count_;

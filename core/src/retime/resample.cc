@@ -22,6 +22,25 @@ constexpr double kNegligibleWeight = 1e-300;
 
 double Hat(double d) { return std::max(0.0, 1.0 - std::abs(d)); }
 
+// Tent and box half-widths below this (source samples) count as no filter.
+constexpr double kMinKernelWidth = 1e-100;
+
+// Looks at a stop token once per kResampleStopCheckTaps units of work, given the running total.
+class StopCheck {
+ public:
+  explicit StopCheck(const std::stop_token& stop) : stop_(stop) {}
+  // True when `work` passed the next check point and a stop was requested.
+  bool After(std::int64_t work) {
+    if (work < next_) return false;
+    next_ = work + kResampleStopCheckTaps;
+    return stop_.stop_requested();
+  }
+
+ private:
+  const std::stop_token& stop_;
+  std::int64_t next_ = 0;
+};
+
 // Adds weight `w` for virtual index `i` to `taps`, folding indices outside [0, last] by odd
 // reflection about the end sample: f(-k) = 2f(0) - f(k), f(L + k) = 2f(L) - f(L - k).
 void AddFolded(std::int64_t i, double w, std::int64_t last, std::vector<std::pair<std::int64_t, double>>& taps) {
@@ -201,7 +220,8 @@ double Lanczos3(double u) {
 
 absl::StatusOr<ResamplePlan> MakeResamplePlan(std::span<const double> positions,
                                               std::span<const double> ratios,
-                                              std::int64_t source_count, ResampleFilter filter) {
+                                              std::int64_t source_count, ResampleFilter filter,
+                                              std::stop_token stop) {
   if (positions.size() != ratios.size()) {
     return absl::InvalidArgumentError(absl::StrCat("resample plan: ", positions.size(),
                                                    " positions but ", ratios.size(), " ratios"));
@@ -224,7 +244,11 @@ absl::StatusOr<ResamplePlan> MakeResamplePlan(std::span<const double> positions,
   const std::int64_t last = source_count - 1;
   const auto last_d = static_cast<double>(last);
 
+  StopCheck check(stop);
   for (std::size_t j = 0; j < m; ++j) {
+    if (check.After(static_cast<std::int64_t>(plan.weights.size()))) {
+      return absl::CancelledError("cancelled");
+    }
     const double rho = ratios[j];
     if (!std::isfinite(positions[j]) || !std::isfinite(rho) || rho < 0.0) {
       return absl::InvalidArgumentError(absl::StrCat("resample plan: output sample ", j,
@@ -256,6 +280,10 @@ absl::StatusOr<ResamplePlan> MakeResamplePlan(std::span<const double> positions,
         width = std::max(1.0, rho) - 1.0;
         break;
     }
+    // A narrower tent or box changes no sample beyond rounding, and its weights would divide by
+    // a width squared to zero (found by fuzzing: a position 1e-315 frames from the start got a
+    // subnormal width and NaN weights).
+    if (filter != ResampleFilter::kLanczos3 && width < kMinKernelWidth) width = 0.0;
     plan.width[j] = width;
     if (width > 0.0) ++plan.filtered_count;
 
@@ -294,13 +322,15 @@ absl::StatusOr<ResamplePlan> MakeResamplePlan(std::span<const double> positions,
 }
 
 void ResampleScalar(const ResamplePlan& plan, std::span<const double> source,
-                    std::span<double> out) {
+                    std::span<double> out, std::stop_token stop) {
   const double* src = source.data();
   const double* weights = plan.weights.data();
   const std::int64_t* first = plan.first.data();
   const std::int64_t* offset = plan.offset.data();
   const std::size_t m = out.size();
+  StopCheck check(stop);
   for (std::size_t j = 0; j < m; ++j) {
+    if (check.After(offset[j])) return;
     const double* s = src + first[j];
     const double* w = weights + offset[j];
     const std::int64_t n = offset[j + 1] - offset[j];
@@ -311,14 +341,15 @@ void ResampleScalar(const ResamplePlan& plan, std::span<const double> source,
 }
 
 void ResampleAngle(const ResamplePlan& plan, std::span<const double> degrees,
-                   std::span<double> out) {
+                   std::span<double> out, std::stop_token stop) {
   Unwrapped unwrapped;
   Unwrap(degrees, unwrapped);
   if (!unwrapped.wraps) {
-    ResampleScalar(plan, degrees, out);
+    ResampleScalar(plan, degrees, out, stop);
     return;
   }
-  ResampleScalar(plan, unwrapped.values, out);
+  ResampleScalar(plan, unwrapped.values, out, stop);
+  if (stop.stop_requested()) return;
   const std::int64_t last = plan.source_count - 1;
   for (std::size_t j = 0; j < out.size(); ++j) {
     const auto k = static_cast<std::size_t>(NearestIndex(plan.position[j], last));
@@ -330,7 +361,7 @@ void ResampleAngle(const ResamplePlan& plan, std::span<const double> degrees,
 
 void ResampleRotation(const ResamplePlan& plan, const EulerOrder& order,
                       const std::array<std::span<const double>, 3>& source,
-                      const std::array<std::span<double>, 3>& out) {
+                      const std::array<std::span<double>, 3>& out, std::stop_token stop) {
   const auto n = static_cast<std::size_t>(plan.source_count);
   const std::int64_t last = plan.source_count - 1;
   const std::size_t m = plan.position.size();
@@ -372,7 +403,10 @@ void ResampleRotation(const ResamplePlan& plan, const EulerOrder& order,
   };
   std::vector<Quat> taps;
 
+  StopCheck check(stop);
   for (std::size_t j = 0; j < m; ++j) {
+    // Rotations cost tens of nanoseconds a tap: look at the stop token more often.
+    if (check.After(16 * plan.offset[j])) return;
     const double x = plan.position[j];
     const std::int64_t first = plan.first[j];
     if (plan.kind[j] == SampleKind::kCopy) {

@@ -47,13 +47,15 @@ std::string DescribePin(std::size_t index, const Pin& pin) {
 }
 
 absl::Status ValidateSpeedRange(const RetimeOptions& options) {
-  if (!std::isfinite(options.min_speed) || options.min_speed <= 0.0) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("min_speed must be finite and > 0, got ", FormatNumber(options.min_speed)));
+  const std::string range =
+      absl::StrCat("[", FormatNumber(kMinSpeedBound), ", ", FormatNumber(kMaxSpeedBound), "]");
+  if (!(options.min_speed >= kMinSpeedBound && options.min_speed <= kMaxSpeedBound)) {
+    return absl::InvalidArgumentError(absl::StrCat("min_speed must be in ", range, ", got ",
+                                                   FormatNumber(options.min_speed)));
   }
-  if (!std::isfinite(options.max_speed)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("max_speed must be finite, got ", FormatNumber(options.max_speed)));
+  if (!(options.max_speed >= kMinSpeedBound && options.max_speed <= kMaxSpeedBound)) {
+    return absl::InvalidArgumentError(absl::StrCat("max_speed must be in ", range, ", got ",
+                                                   FormatNumber(options.max_speed)));
   }
   if (options.max_speed < options.min_speed) {
     return absl::InvalidArgumentError(absl::StrCat(
@@ -74,7 +76,34 @@ absl::Status ValidateOutputRate(const FrameRate& rate) {
                                                    " Hz is over the limit of ",
                                                    FormatNumber(kMaxOutputRateHz), " Hz"));
   }
+  if (rate.hz() < kMinOutputRateHz) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "output rate ", rate.numerator, "/", rate.denominator, " (", FormatNumber(rate.hz()),
+        " Hz) is under the limit of one frame an hour (", FormatNumber(kMinOutputRateHz),
+        " Hz)"));
+  }
   return absl::OkStatus();
+}
+
+absl::Status ValidateTimePoint(std::string_view what, const TimePoint& time) {
+  if (!std::isfinite(time.value)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(AsAbsl(what), ": time is ", DescribeDouble(time.value)));
+  }
+  const double bound = time.in_frames ? kMaxTimeFrames : kMaxTimeSeconds;
+  if (std::abs(time.value) > bound) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        AsAbsl(what), ": time ", DescribeTimePoint(time), " is outside [-", FormatNumber(bound),
+        ", ", FormatNumber(bound), "] ", time.in_frames ? "frames" : "s"));
+  }
+  return absl::OkStatus();
+}
+
+absl::Status ValidateDuration(std::string_view what, double seconds) {
+  if (seconds > 0.0 && seconds <= kMaxTimeSeconds) return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrCat(AsAbsl(what), " must be in (0, ",
+                                                 FormatNumber(kMaxTimeSeconds),
+                                                 "] seconds, got ", FormatNumber(seconds)));
 }
 
 absl::Status ValidateSpeedKnots(std::span<const SpeedKnot> knots, double frame_time_seconds,
@@ -82,10 +111,7 @@ absl::Status ValidateSpeedKnots(std::span<const SpeedKnot> knots, double frame_t
   double previous = 0.0;
   for (std::size_t k = 0; k < knots.size(); ++k) {
     const SpeedKnot& knot = knots[k];
-    if (!std::isfinite(knot.time.value)) {
-      return absl::InvalidArgumentError(absl::StrCat("speed knot ", k + 1, ": time is ",
-                                                     DescribeDouble(knot.time.value)));
-    }
+    TEMPOKEY_RETURN_IF_ERROR(ValidateTimePoint(absl::StrCat("speed knot ", k + 1), knot.time));
     if (!std::isfinite(knot.speed)) {
       return absl::InvalidArgumentError(absl::StrCat("speed knot ", k + 1, ": speed is ",
                                                      DescribeDouble(knot.speed)));
@@ -165,12 +191,13 @@ struct Schedule {
 };
 
 absl::StatusOr<Schedule> MakeSchedule(const Clip& clip, const TimeWarpSpec& warp,
-                                      const RetimeOptions& options) {
+                                      const RetimeOptions& options, std::stop_token stop) {
   Schedule schedule;
   if (options.method == RetimeMethod::kPaper) {
-    TEMPOKEY_ASSIGN_OR_RETURN(
-        retime_internal::PaperSchedule paper,
-        retime_internal::MakePaperSchedule(clip.frame_time_seconds, clip.frame_count, warp, options));
+    TEMPOKEY_ASSIGN_OR_RETURN(retime_internal::PaperSchedule paper,
+                              retime_internal::MakePaperSchedule(clip.frame_time_seconds,
+                                                                 clip.frame_count, warp, options,
+                                                                 stop));
     schedule.positions = std::move(paper.positions);
     schedule.ratios = std::move(paper.ratios);
     schedule.output_frame_time = clip.frame_time_seconds;
@@ -236,19 +263,33 @@ std::vector<Marker> MapMarkers(const Clip& clip, const Schedule& schedule) {
 
 absl::Status ValidateRetime(const Clip& clip, const TimeWarpSpec& warp,
                             const RetimeOptions& options, const ClipLimits& limits) {
+  return PlanRetimeOutput(clip.frame_time_seconds, clip.frame_count, clip.channels.size(), warp,
+                          options, limits)
+      .status();
+}
+
+absl::StatusOr<RetimeOutputShape> PlanRetimeOutput(double frame_time_seconds,
+                                                   std::int64_t frame_count,
+                                                   std::size_t channel_count,
+                                                   const TimeWarpSpec& warp,
+                                                   const RetimeOptions& options,
+                                                   const ClipLimits& limits) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateEnums(options));
-  std::int64_t frames = 0;
+  RetimeOutputShape shape;
   if (options.method == RetimeMethod::kPaper) {
     TEMPOKEY_ASSIGN_OR_RETURN(retime_internal::PaperSchedule paper,
-                              retime_internal::PlanPaperRegions(clip.frame_time_seconds,
-                                                                clip.frame_count, warp, options));
-    frames = paper.output_count;
+                              retime_internal::PlanPaperRegions(frame_time_seconds, frame_count,
+                                                                warp, options));
+    shape.frame_count = paper.output_count;
+    shape.frame_time_seconds = frame_time_seconds;
   } else {
-    TEMPOKEY_ASSIGN_OR_RETURN(
-        TimeMap map, TimeMap::Compile(clip.frame_time_seconds, clip.frame_count, warp, options));
-    frames = map.output_frame_count();
+    TEMPOKEY_ASSIGN_OR_RETURN(TimeMap map,
+                              TimeMap::Compile(frame_time_seconds, frame_count, warp, options));
+    shape.frame_count = map.output_frame_count();
+    shape.frame_time_seconds = map.output_frame_time_seconds();
   }
-  return CheckOutputSize(frames, clip.channels.size(), limits);
+  TEMPOKEY_RETURN_IF_ERROR(CheckOutputSize(shape.frame_count, channel_count, limits));
+  return shape;
 }
 
 absl::StatusOr<RetimeResult> Retime(const Clip& clip, const TimeWarpSpec& warp,
@@ -256,12 +297,13 @@ absl::StatusOr<RetimeResult> Retime(const Clip& clip, const TimeWarpSpec& warp,
                                     std::stop_token stop, const ClipLimits& limits) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateClip(clip));
   TEMPOKEY_RETURN_IF_ERROR(ValidateEnums(options));
-  TEMPOKEY_ASSIGN_OR_RETURN(Schedule schedule, MakeSchedule(clip, warp, options));
+  TEMPOKEY_ASSIGN_OR_RETURN(Schedule schedule, MakeSchedule(clip, warp, options, stop));
   const auto m = static_cast<std::int64_t>(schedule.positions.size());
   TEMPOKEY_RETURN_IF_ERROR(CheckOutputSize(m, clip.channels.size(), limits));
   TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
-  TEMPOKEY_ASSIGN_OR_RETURN(ResamplePlan plan, MakeResamplePlan(schedule.positions, schedule.ratios,
-                                                                clip.frame_count, schedule.filter));
+  TEMPOKEY_ASSIGN_OR_RETURN(ResamplePlan plan,
+                            MakeResamplePlan(schedule.positions, schedule.ratios, clip.frame_count,
+                                             schedule.filter, stop));
 
   RetimeResult result;
   Clip& out = result.clip;
@@ -307,15 +349,17 @@ absl::StatusOr<RetimeResult> Retime(const Clip& clip, const TimeWarpSpec& warp,
         source[k] = clip.channels[index].samples;
         target[k] = out.channels[index].samples;
       }
-      ResampleRotation(plan, rotation.order, source, target);
+      ResampleRotation(plan, rotation.order, source, target, stop);
       done += 3;
     } else if (IsRotation(channel.kind)) {
-      ResampleAngle(plan, channel.samples, out.channels[c].samples);
+      ResampleAngle(plan, channel.samples, out.channels[c].samples, stop);
       ++done;
     } else {
-      ResampleScalar(plan, channel.samples, out.channels[c].samples);
+      ResampleScalar(plan, channel.samples, out.channels[c].samples, stop);
       ++done;
     }
+    // The resamplers return early, their output incomplete, when a stop was requested.
+    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
     ReportProgress(progress, static_cast<double>(done) / total,
                    absl::StrCat("retime ", done, "/", clip.channels.size()));
   }
@@ -332,7 +376,7 @@ absl::StatusOr<RetimeResult> Retime(const Clip& clip, const TimeWarpSpec& warp,
 absl::StatusOr<RetimePlan> PlanRetime(const Clip& clip, const TimeWarpSpec& warp,
                                       const RetimeOptions& options, const ClipLimits& limits) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateEnums(options));
-  TEMPOKEY_ASSIGN_OR_RETURN(Schedule schedule, MakeSchedule(clip, warp, options));
+  TEMPOKEY_ASSIGN_OR_RETURN(Schedule schedule, MakeSchedule(clip, warp, options, {}));
   const auto m = static_cast<std::int64_t>(schedule.positions.size());
   TEMPOKEY_RETURN_IF_ERROR(CheckOutputSize(m, clip.channels.size(), limits));
   TEMPOKEY_ASSIGN_OR_RETURN(ResamplePlan kernels,

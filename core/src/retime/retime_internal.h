@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <string_view>
 
 #include "absl/status/status.h"
 #include "tempokey/core/retime/retime.h"
@@ -32,10 +33,26 @@ std::string DescribeHold(std::size_t index, const Hold& hold);
 // "pin 2 (3s -> frame 100)".
 std::string DescribePin(std::size_t index, const Pin& pin);
 
-// min_speed finite and > 0, max_speed finite and >= min_speed.
+// Allowed speed ranges lie within [kMinSpeedBound, kMaxSpeedBound]: output durations (source
+// span / speed) stay within 1e13 frames, and speeds in frame units finite.
+inline constexpr double kMinSpeedBound = 1e-6;
+inline constexpr double kMaxSpeedBound = 1e6;
+// Lowest output rate accepted: one frame an hour (kMaxFrameTimeSeconds, clip.h).
+inline constexpr double kMinOutputRateHz = 1.0 / 3600.0;
+// The largest |value| of a time given in frames ("75f"): kMaxTimeSeconds at the smallest frame
+// time, exactly convertible to a 64-bit frame index.
+inline constexpr double kMaxTimeFrames = 1e17;
+
+// min_speed and max_speed in [kMinSpeedBound, kMaxSpeedBound], max_speed >= min_speed.
 absl::Status ValidateSpeedRange(const RetimeOptions& options);
-// Numerator and denominator > 0, rate <= kMaxOutputRateHz.
+// Numerator and denominator > 0, rate in [kMinOutputRateHz, kMaxOutputRateHz].
 absl::Status ValidateOutputRate(const FrameRate& rate);
+// `time` finite and within +-kMaxTimeSeconds (seconds) or +-kMaxTimeFrames (frames).
+// Errors: kInvalidArgument "<what>: time is NaN", "<what>: time 1e+300s is outside
+// [-1e+11, 1e+11] s".
+absl::Status ValidateTimePoint(std::string_view what, const TimePoint& time);
+// A duration in (0, kMaxTimeSeconds]. Errors: "<what> must be in (0, 1e+11] seconds, got -1".
+absl::Status ValidateDuration(std::string_view what, double seconds);
 // Every knot: time and speed finite, speed > 0 and in [min_speed, max_speed], times (converted
 // to seconds with `frame_time_seconds` for times in frames) non-decreasing.
 absl::Status ValidateSpeedKnots(std::span<const SpeedKnot> knots, double frame_time_seconds,

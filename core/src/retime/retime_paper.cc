@@ -13,6 +13,8 @@ namespace {
 
 // Bisection steps for the discrete integral's constant g: enough to pin a double.
 constexpr int kMaxBisections = 200;
+// Integration steps between two looks at the stop token.
+constexpr std::int64_t kStopCheckSteps = 65536;
 
 // A piece of the speed curve inside the clip, linear from va at xa to vb at xb (source frames).
 struct Piece {
@@ -72,10 +74,7 @@ absl::Status CheckSupported(const TimeWarpSpec& warp, const RetimeOptions& optio
 absl::StatusOr<PaperSchedule> PlanPaperRegions(double dt, std::int64_t frame_count,
                                                const TimeWarpSpec& warp,
                                                const RetimeOptions& options) {
-  if (!std::isfinite(dt) || dt <= 0.0) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("source frame time must be finite and > 0 seconds, got ", FormatNumber(dt)));
-  }
+  TEMPOKEY_RETURN_IF_ERROR(CheckFrameTime(dt, "source frame time"));
   if (frame_count < 1) {
     return absl::InvalidArgumentError(absl::StrCat("a clip needs at least 1 frame, got ", frame_count));
   }
@@ -141,7 +140,8 @@ absl::StatusOr<PaperSchedule> PlanPaperRegions(double dt, std::int64_t frame_cou
 
 absl::StatusOr<PaperSchedule> MakePaperSchedule(double dt, std::int64_t frame_count,
                                                 const TimeWarpSpec& warp,
-                                                const RetimeOptions& options) {
+                                                const RetimeOptions& options,
+                                                std::stop_token stop) {
   TEMPOKEY_ASSIGN_OR_RETURN(PaperSchedule schedule,
                             PlanPaperRegions(dt, frame_count, warp, options));
   std::vector<SpeedKnot> knots = warp.speed;
@@ -168,6 +168,10 @@ absl::StatusOr<PaperSchedule> MakePaperSchedule(double dt, std::int64_t frame_co
       double p = region.x0;
       std::size_t piece = region_first_piece;
       for (std::int64_t k = 0; k < n; ++k) {
+        // A bisection integrates a long region some sixty times: look at the stop token.
+        if (k % kStopCheckSteps == 0 && stop.stop_requested()) {
+          return std::numeric_limits<double>::quiet_NaN();
+        }
         while (piece + 1 < pieces.size() && p >= pieces[piece].xb) ++piece;
         const double step = g * SpeedIn(pieces[piece], std::min(p, pieces[piece].xb));
         if (positions != nullptr) {
@@ -184,8 +188,10 @@ absl::StatusOr<PaperSchedule> MakePaperSchedule(double dt, std::int64_t frame_co
       const double mid = 0.5 * (lo + hi);
       (integrate(mid, nullptr, nullptr) < region.x1 ? lo : hi) = mid;
     }
+    if (stop.stop_requested()) return absl::CancelledError("cancelled");
     const double g = 0.5 * (lo + hi);
     integrate(g, &schedule.positions, &schedule.ratios);
+    if (stop.stop_requested()) return absl::CancelledError("cancelled");
     last_g = g;
   }
   schedule.positions.push_back(x_end);

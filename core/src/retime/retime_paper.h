@@ -18,6 +18,7 @@
 #define TEMPOKEY_CORE_SRC_RETIME_RETIME_PAPER_H_
 
 #include <cstdint>
+#include <stop_token>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -48,11 +49,14 @@ absl::StatusOr<PaperSchedule> PlanPaperRegions(double source_frame_time_seconds,
                                                const TimeWarpSpec& warp,
                                                const RetimeOptions& options);
 
-// PlanPaperRegions() plus every output sample's source position and step.
+// PlanPaperRegions() plus every output sample's source position and step (a bisection per
+// region over its discrete integral: about sixty passes over the region's output samples).
+// Errors: those of PlanPaperRegions(); kCancelled when `stop` is requested.
 absl::StatusOr<PaperSchedule> MakePaperSchedule(double source_frame_time_seconds,
                                                 std::int64_t source_frame_count,
                                                 const TimeWarpSpec& warp,
-                                                const RetimeOptions& options);
+                                                const RetimeOptions& options,
+                                                std::stop_token stop = {});
 
 }  // namespace tempokey::core::retime_internal
 

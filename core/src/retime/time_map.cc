@@ -35,6 +35,10 @@ constexpr double kGridSlack = 1e-9;
 // Source positions within this many frames of the clip's ends (a time typed in seconds for the
 // last frame) are taken as the end itself.
 constexpr double kEndSnapFrames = 1e-9;
+// Speed knots closer than this (in frames of their timeline) are a step, not a ramp: ramps
+// divide by their span, which must not be subnormal (found by fuzzing: a ramp over 1e-313 s of
+// output time made every source position NaN).
+constexpr double kKnotMergeFrames = 1e-9;
 // Relative slack when re-checking scaled speeds against [min_speed, max_speed], so a knot set
 // exactly at a bound is not refused for a rounding error in a scale of 1 ± ulp.
 constexpr double kRangeSlack = 1e-12;
@@ -200,10 +204,7 @@ class TimeMapBuilder {
 };
 
 absl::Status TimeMapBuilder::CheckTimingAndOptions() {
-  if (!std::isfinite(dt_s()) || dt_s() <= 0.0) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("source frame time must be finite and > 0 seconds, got ", FormatNumber(dt_s())));
-  }
+  TEMPOKEY_RETURN_IF_ERROR(CheckFrameTime(dt_s(), "source frame time"));
   if (frame_count_ < 1) {
     return absl::InvalidArgumentError(
         absl::StrCat("a clip needs at least 1 frame, got ", frame_count_));
@@ -221,9 +222,8 @@ absl::Status TimeMapBuilder::CheckTimingAndOptions() {
   if (options_.fit_seconds && options_.fit_frames) {
     return absl::InvalidArgumentError("fit_seconds and fit_frames are both set; give at most one");
   }
-  if (options_.fit_seconds && !(std::isfinite(*options_.fit_seconds) && *options_.fit_seconds > 0.0)) {
-    return absl::InvalidArgumentError(absl::StrCat("fit_seconds must be finite and > 0, got ",
-                                                   FormatNumber(*options_.fit_seconds)));
+  if (options_.fit_seconds) {
+    TEMPOKEY_RETURN_IF_ERROR(retime_internal::ValidateDuration("fit_seconds", *options_.fit_seconds));
   }
   if (options_.fit_frames && *options_.fit_frames < 2) {
     return absl::InvalidArgumentError(absl::StrCat(
@@ -303,7 +303,11 @@ absl::Status TimeMapBuilder::BuildSpeedOverSource() {
   std::vector<Piece> pieces;
   const std::size_t n = knots.size();
   std::vector<double> x(n);
-  for (std::size_t k = 0; k < n; ++k) x[k] = SourceFrames(knots[k].time);
+  for (std::size_t k = 0; k < n; ++k) {
+    x[k] = SourceFrames(knots[k].time);
+    // Knots closer than this are one step: a ramp over a subnormal span has an infinite slope.
+    if (k > 0 && x[k] - x[k - 1] <= kKnotMergeFrames) x[k] = x[k - 1];
+  }
   pieces.push_back({-inf, x[0], knots[0].speed, knots[0].speed, 0, 0});
   for (std::size_t k = 0; k + 1 < n; ++k) {
     if (x[k + 1] > x[k]) pieces.push_back({x[k], x[k + 1], knots[k].speed, knots[k + 1].speed, k, k + 1});
@@ -345,7 +349,10 @@ absl::Status TimeMapBuilder::BuildSpeedOverOutput() {
   const double inf = std::numeric_limits<double>::infinity();
   const std::size_t n = knots.size();
   std::vector<double> y(n);
-  for (std::size_t k = 0; k < n; ++k) y[k] = OutputFrames(knots[k].time);
+  for (std::size_t k = 0; k < n; ++k) {
+    y[k] = OutputFrames(knots[k].time);
+    if (k > 0 && y[k] - y[k - 1] <= kKnotMergeFrames) y[k] = y[k - 1];  // one step, as above
+  }
   struct Piece {
     double ya, yb, sa, sb;
     std::size_t ka, kb;
@@ -413,14 +420,10 @@ absl::Status TimeMapBuilder::BuildTimeMapKeys() {
   std::vector<double> x(keys.size());
   for (std::size_t k = 0; k < keys.size(); ++k) {
     const TimeMapKey& key = keys[k];
-    if (!std::isfinite(key.output.value)) {
-      return absl::InvalidArgumentError(absl::StrCat("time-map key ", k + 1, ": output time is ",
-                                                     DescribeDouble(key.output.value)));
-    }
-    if (!std::isfinite(key.source.value)) {
-      return absl::InvalidArgumentError(absl::StrCat("time-map key ", k + 1, ": source time is ",
-                                                     DescribeDouble(key.source.value)));
-    }
+    TEMPOKEY_RETURN_IF_ERROR(retime_internal::ValidateTimePoint(
+        absl::StrCat("time-map key ", k + 1, ": output"), key.output));
+    TEMPOKEY_RETURN_IF_ERROR(retime_internal::ValidateTimePoint(
+        absl::StrCat("time-map key ", k + 1, ": source"), key.source));
     y[k] = OutputFrames(key.output);
     x[k] = SourceFrames(key.source);
     if (k == 0) continue;
@@ -523,15 +526,10 @@ absl::Status TimeMapBuilder::InsertHolds() {
   holds.reserve(warp_.holds.size());
   for (std::size_t i = 0; i < warp_.holds.size(); ++i) {
     const Hold& hold = warp_.holds[i];
-    if (!std::isfinite(hold.at.value)) {
-      return absl::InvalidArgumentError(absl::StrCat("hold ", i + 1, ": source time is ",
-                                                     DescribeDouble(hold.at.value)));
-    }
-    if (!std::isfinite(hold.duration_seconds) || hold.duration_seconds <= 0.0) {
-      return absl::InvalidArgumentError(absl::StrCat(DescribeHold(i, hold),
-                                                     ": duration must be finite and > 0 seconds, got ",
-                                                     FormatNumber(hold.duration_seconds)));
-    }
+    TEMPOKEY_RETURN_IF_ERROR(
+        retime_internal::ValidateTimePoint(absl::StrCat("hold ", i + 1, ": source"), hold.at));
+    TEMPOKEY_RETURN_IF_ERROR(retime_internal::ValidateDuration(
+        absl::StrCat(DescribeHold(i, hold), ": duration"), hold.duration_seconds));
     double x = SourceFrames(hold.at);
     if (x < -kEndSnapFrames || x > x_end() + kEndSnapFrames) {
       return absl::InvalidArgumentError(absl::StrCat(DescribeHold(i, hold),
@@ -588,10 +586,8 @@ absl::Status TimeMapBuilder::SplitAtPins() {
   double previous_frame = -1.0;
   for (std::size_t i = 0; i < pins.size(); ++i) {
     const Pin& pin = pins[i];
-    if (!std::isfinite(pin.source.value)) {
-      return absl::InvalidArgumentError(absl::StrCat("pin ", i + 1, ": source time is ",
-                                                     DescribeDouble(pin.source.value)));
-    }
+    TEMPOKEY_RETURN_IF_ERROR(
+        retime_internal::ValidateTimePoint(absl::StrCat("pin ", i + 1, ": source"), pin.source));
     if (pin.output_frame < 0) {
       return absl::InvalidArgumentError(
           absl::StrCat(DescribePin(i, pin), ": output frame must be >= 0"));

@@ -305,14 +305,15 @@ Clip AwkwardClip() {
   add_joint("Hips", -1, {0.1, 0.2, 0.30000000000000004},
             {ChannelKind::kXPosition, ChannelKind::kYPosition, ChannelKind::kZPosition,
              ChannelKind::kYRotation, ChannelKind::kXRotation, ChannelKind::kZRotation});
-  const int spine = add_joint("Spine", 0, {-0.0, 1e-300, 1e300},
+  // Every number within the ranges a clip may hold (clip.h), the extremes included.
+  const int spine = add_joint("Spine", 0, {-0.0, 1e-300, 1e9},
                               {ChannelKind::kXRotation, ChannelKind::kZRotation,
                                ChannelKind::kYRotation});
   clip.skeleton.joints[spine].end_sites = {{1.0 / 3.0, 2.0 / 3.0, -5e-324}, {7, 8, 9}};
   add_joint("Prop", -1, {3, 2, 1}, {ChannelKind::kZRotation});
-  const double awkward[] = {0.1, -0.0, 5e-324, 1.0 / 3.0, 1e21, -123456789.123456789,
-                            2.2250738585072014e-308, 1.7976931348623157e308, 0.30000000000000004,
-                            6.02214076e23};
+  const double awkward[] = {0.1, -0.0, 5e-324, 1.0 / 3.0, 1e9, -123456789.123456789,
+                            2.2250738585072014e-308, 999999999.99999988, 0.30000000000000004,
+                            6.02214076e-23};
   for (std::size_t c = 0; c < clip.channels.size(); ++c) {
     for (std::size_t f = 0; f < 3; ++f) {
       const double value = awkward[(3 * c + f) % 10];
@@ -351,7 +352,7 @@ TEST(BvhWriterTest, WritesTabIndentedHierarchyAndShortestNumbers) {
   clip.channels = {
       Channel{0, ChannelKind::kYPosition, "", {1.5, 2}},
       Channel{0, ChannelKind::kZRotation, "", {-0.0, 0.1}},
-      Channel{1, ChannelKind::kXRotation, "", {1e-07, 1e21}},
+      Channel{1, ChannelKind::kXRotation, "", {1e-07, 1e9}},
   };
 
   absl::StatusOr<std::string> text = FormatBvh(clip);
@@ -377,7 +378,7 @@ TEST(BvhWriterTest, WritesTabIndentedHierarchyAndShortestNumbers) {
             "Frames: 2\n"
             "Frame Time: 0.0083333\n"
             "1.5 -0 1e-07\n"
-            "2 0.1 1e+21\n");
+            "2 0.1 1e+09\n");
 }
 
 TEST(BvhWriterTest, WritesJointsDepthFirstWhateverTheirOrder) {

@@ -1,5 +1,6 @@
 // Whole-file reads with a cap; atomic writes that leave the old file or the new one.
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <filesystem>
@@ -136,6 +137,84 @@ TEST(ReadFileTest, StreamWithoutSizeIsCappedOnWhatArrives) {
   EXPECT_EQ(read.status().code(), absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(std::string(read.status().message()),
             "/proc/self/maps: file is over the limit of 10 bytes");
+}
+
+TEST(ReadFileTest, DevicesAreRefusedWithoutReadingThem) {
+  // /dev/zero never ends: once read whole until memory ran out.
+  absl::StatusOr<std::string> zero = ReadFile("/dev/zero");
+  absl::StatusOr<std::string> null = ReadTextFile("/dev/null");
+
+  EXPECT_EQ(zero.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(std::string(zero.status().message()), "/dev/zero: is a character device, not a file");
+  EXPECT_EQ(std::string(null.status().message()), "/dev/null: is a character device, not a file");
+}
+
+TEST(ReadFileTest, FifoWithoutAWriterIsRefusedInsteadOfWaitedForForever) {
+  const std::string path = testing::MakeTempDir() + "/silent";
+  ASSERT_EQ(::mkfifo(path.c_str(), 0600), 0);
+
+  absl::StatusOr<std::string> read = ReadFile(path);
+
+  EXPECT_EQ(read.status().code(), absl::StatusCode::kDeadlineExceeded);
+  EXPECT_EQ(std::string(read.status().message()),
+            path + ": is a FIFO and nothing arrived for 10 s (no writer?)");
+}
+
+TEST(ReadTextFileTest, ReadsTextLikeReadFile) {
+  const std::string path = testing::MakeTempDir() + "/clip.bvh";
+  std::string contents;
+  for (int i = 0; i < 300000; ++i) contents += static_cast<char>('a' + i % 26);
+  WritePlain(path, contents);
+
+  absl::StatusOr<std::string> read = ReadTextFile(path);
+
+  ASSERT_TRUE(read.ok()) << read.status();
+  EXPECT_EQ(*read, contents);
+}
+
+TEST(ReadTextFileTest, NulByteIsRefusedWithItsLineAndColumn) {
+  const std::string path = testing::MakeTempDir() + "/binary.bvh";
+  WritePlain(path, std::string("HIERARCHY\nROOT \0x\n", 18));
+
+  absl::StatusOr<std::string> read = ReadTextFile(path);
+
+  EXPECT_EQ(read.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(std::string(read.status().message()),
+            path + ":2:6: unexpected byte 0x00; the file looks binary, not text");
+}
+
+TEST(ReadTextFileTest, SparseFileUnderTheCapIsRefusedAtItsFirstChunk) {
+  // 512 MiB of holes: refused after one 64 KiB read, so memory stays at a chunk, not the size.
+  const std::string path = testing::MakeTempDir() + "/sparse.bvh";
+  { std::ofstream touch(path); }
+  ASSERT_EQ(::truncate(path.c_str(), std::int64_t{512} << 20), 0);
+
+  absl::StatusOr<std::string> read = ReadTextFile(path, std::int64_t{1} << 30);
+
+  EXPECT_EQ(std::string(read.status().message()),
+            path + ":1:1: unexpected byte 0x00; the file looks binary, not text");
+}
+
+TEST(RemovePendingTempFilesTest, RemovesAWriteInFlightAndTheWriteThenFails) {
+  // The hook runs inside WriteFileAtomically() with its temporary registered: what a signal
+  // handler calling RemovePendingTempFiles() at that moment does.
+  const std::string dir = testing::MakeTempDir();
+  SetTempFileCreatedHookForTesting([] { RemovePendingTempFiles(); });
+
+  const absl::Status status = WriteFileAtomically(dir + "/out.bvh", "data");
+  SetTempFileCreatedHookForTesting(nullptr);
+
+  EXPECT_FALSE(status.ok());
+  EXPECT_TRUE(DirectoryEntries(dir).empty());
+}
+
+TEST(RemovePendingTempFilesTest, LeavesFinishedWritesAlone) {
+  const std::string dir = testing::MakeTempDir();
+  ASSERT_TRUE(WriteFileAtomically(dir + "/a.bvh", "a").ok());
+
+  RemovePendingTempFiles();
+
+  EXPECT_EQ(DirectoryEntries(dir), std::vector<std::string>{"a.bvh"});
 }
 
 TEST(WriteFileAtomicallyTest, WritesNewFileAndLeavesNoTemporary) {

@@ -41,7 +41,7 @@ KeyedClip SmallKeyed() {
   Key b;
   b.time_seconds = 1.0;
   b.value = -2.5e-300;
-  b.in_tangent = 1e300;
+  b.in_tangent = 1e100;  // the largest tangent a keyed clip may hold (clip.h)
   b.in_weight = 0.2;
   b.out_weight = 0.7;
   keyed.curves = {Curve{{a, b}}};
@@ -86,7 +86,7 @@ TEST(KeyedJsonTest, RoundTripKeepsOneSidedWeightsUnset) {
 
   EXPECT_NE(text->find("[0, 0.1, 0, 0.30000000000000004, null, 0.5]"), std::string::npos)
       << *text;
-  EXPECT_NE(text->find("[1, -2.5e-300, 1e+300, 0, 0.25, null]"), std::string::npos) << *text;
+  EXPECT_NE(text->find("[1, -2.5e-300, 1e+100, 0, 0.25, null]"), std::string::npos) << *text;
   ASSERT_TRUE(back.ok()) << back.status();
   EXPECT_EQ(*back, keyed);
   EXPECT_FALSE(back->curves[0].keys[0].in_weight.has_value());
@@ -103,10 +103,11 @@ TEST(KeyedJsonTest, ClipWithABadMarkerIsRefusedBeforeWriting) {
   const absl::StatusOr<std::string> negative_text = FormatKeyedClipJson(negative);
 
   EXPECT_EQ(nan_text.status().code(), absl::StatusCode::kInvalidArgument);
-  EXPECT_EQ(nan_text.status().message(), "marker 0 (\"contact\"): time_seconds is NaN");
+  EXPECT_EQ(nan_text.status().message(),
+            "marker 0 (\"contact\"): time_seconds must be in [-1e+11, 1e+11], got NaN");
   EXPECT_EQ(negative_text.status().code(), absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(negative_text.status().message(),
-            "marker 0 (\"contact\"): duration_seconds must be finite and >= 0, got -0.5");
+            "marker 0 (\"contact\"): duration_seconds must be in [0, 1e+11], got -0.5");
 }
 
 TEST(KeyedJsonTest, MalformedDocumentsAreRefusedWithPlaceAndReason) {
@@ -136,12 +137,17 @@ TEST(KeyedJsonTest, MalformedDocumentsAreRefusedWithPlaceAndReason) {
       {replaced("0.2, 0.7]", "0.2, true]"),
        "k.json:9:128: channel 0 key 1 weight must be a number or null"},
       {replaced("\"duration_seconds\": 0.25", "\"duration_seconds\": -1"),
-       "k.json: marker 0 (\"contact\"): duration_seconds must be finite and >= 0, got -1"},
+       "k.json: marker 0 (\"contact\"): duration_seconds must be in [0, 1e+11], got -1"},
       {replaced("\"kind\": \"scalar\"", "\"kind\": \"Wrotation\""),
        "k.json:9:27: channel 0 kind \"Wrotation\" is not a channel kind"},
       {replaced("0.2, 0.7]", "0.2]"), "k.json:9:97: channel 0 key 1 must have 4 or 6 numbers, got 5"},
       {replaced("\"frame_time_seconds\": 0.03333333333333333", "\"frame_time_seconds\": -1"),
-       "k.json: frame time must be finite and > 0 seconds, got -1"},
+       "k.json: frame time must be in [1e-06, 3600] seconds, got -1"},
+      {replaced("\"frame_time_seconds\": 0.03333333333333333", "\"frame_time_seconds\": 1e-320"),
+       "k.json: frame time must be in [1e-06, 3600] seconds, got 9.99989e-321"},
+      {replaced("1e+100", "1e+101"),
+       "k.json: channel 0 (blend): key 1: in tangent 1e+101 is beyond the +-1e+100 a keyed clip "
+       "may hold"},
       {replaced("[1, -2.5e-300", "[0, -2.5e-300"),
        "k.json: channel 0 (blend): key 1: time 0 s is not after the previous key's 0 s"},
   };

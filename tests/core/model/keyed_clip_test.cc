@@ -174,12 +174,16 @@ TEST(BakeTest, RefusesBadFrameTimesAndHugeResults) {
   const KeyedClip keyed{TwoChannelLayout(), {Curve{{Key{}}}, Curve{{Key{}}}}};
 
   EXPECT_EQ(Bake(keyed, 0.0).status().message(),
-            "bake frame time must be finite and > 0 seconds, got 0");
+            "bake frame time must be in [1e-06, 3600] seconds, got 0");
   EXPECT_EQ(Bake(keyed, NAN).status().message(),
-            "bake frame time must be finite and > 0 seconds, got NaN");
+            "bake frame time must be in [1e-06, 3600] seconds, got NaN");
   EXPECT_EQ(Bake(keyed, 1e-10).status().message(),
-            "bake at 1e-10 s per frame gives 1e+10 frames x 2 channels, over the limit of "
-            "200000000 samples");
+            "bake frame time must be in [1e-06, 3600] seconds, got 1e-10");
+  ClipLimits small;
+  small.max_samples = 1000;
+  EXPECT_EQ(Bake(keyed, 1e-3, small).status().message(),
+            "bake at 0.001 s per frame gives 1001 frames x 2 channels, over the limit of "
+            "1000 samples");
 }
 
 }  // namespace

@@ -163,6 +163,38 @@ TEST(HermiteDpTest, OptimizedFitEqualsBruteForceOnRandomChannels) {
   }
 }
 
+TEST(HermiteDpTest, KeysNeverLeaveTheClipEvenWhenTheXStepIsWiderThanTheirGaps) {
+  // Found by fuzzing (pipeline_file_fuzz, requests_fuzz): with keys a frame or two apart and
+  // step-x 4, an interior key's grid reached past the last frame and the optimized pass summed
+  // samples beyond the end of the channel (a heap overflow the ASan stage reports). Both keys of
+  // a segment must lie inside the clip; the result equals the brute force under that rule.
+  // Sized exactly (no spare capacity), so a read past frame 39 leaves the allocation.
+  std::vector<double> samples(40);
+  for (int f = 0; f < 40; ++f) {
+    const double t = static_cast<double>(f) / 30.0;
+    samples[static_cast<std::size_t>(f)] =
+        170.0 * std::sin(1.7 * t) + 0.25 * static_cast<double>(f % 5);
+  }
+  HermiteFitOptions options;
+  options.steps = {4.0, 2.0, 0.5, 0.25};
+  options.max_iterations = 3;
+  // Key 2 sits 2 frames before the last: its grid offers x = 41, past frame 39.
+  std::vector<HermiteKey2D> start;
+  for (auto [x, tx] : {std::pair{0.0, 20.0}, {20.0, 17.0}, {37.0, 2.0}, {39.0, 2.0}}) {
+    start.push_back({x, samples[static_cast<std::size_t>(x)], tx, 0.0});
+  }
+
+  const absl::StatusOr<HermiteFitResult> fit = FitHermiteDp(samples, start, options);
+  const testing::ReferenceFit reference = ReferenceFitHermiteDp(samples, start, options);
+
+  ASSERT_TRUE(fit.ok()) << fit.status();
+  for (const HermiteKey2D& key : fit->keys) {
+    EXPECT_GE(key.x, 0.0);
+    EXPECT_LE(key.x, 39.0);
+  }
+  EXPECT_EQ(fit->keys, reference.keys);
+}
+
 TEST(HermiteDpTest, OptimizedFitEqualsBruteForceOnCmuSlices) {
   absl::StatusOr<Clip> clip = ReadBvhFile(testing::SharedBvh("cmu/131_01.bvh"));
   ASSERT_TRUE(clip.ok()) << clip.status();

@@ -45,7 +45,8 @@ inline double ReferenceSolve(double x0, double x1, double x2, double x3, double 
 }
 
 inline bool ReferenceFeasible(const core::HermiteKey2D& a, const core::HermiteKey2D& b) {
-  return a.tx > 0.0 && b.tx > 0.0 && a.x < b.x && a.tx + b.tx <= 3.0 * (b.x - a.x);
+  return a.tx >= core::kMinTangentXFrames && b.tx >= core::kMinTangentXFrames && a.x < b.x &&
+         a.tx + b.tx <= 3.0 * (b.x - a.x);
 }
 
 inline double ReferenceSegmentError(std::span<const double> samples, const core::HermiteKey2D& a,
@@ -127,7 +128,10 @@ inline ReferencePass ReferenceDpPass(std::span<const double> samples,
         for (int s = 0; s < 81; ++s) {
           if (std::isinf(cost[i][s])) continue;
           const core::HermiteKey2D a = ReferenceState(keys[i], steps, s);
-          if (!ReferenceFeasible(a, b)) continue;
+          if (!ReferenceFeasible(a, b) || a.x < 0.0 ||
+              b.x > static_cast<double>(samples.size()) - 1.0) {
+            continue;
+          }
           candidates[s] = cost[i][s] + ReferenceSegmentError(samples, a, b, last);
         }
       }

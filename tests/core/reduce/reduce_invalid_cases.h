@@ -29,9 +29,13 @@ inline std::vector<BadPaperParams> BadPaperParamsTable() {
       {[](PaperParams& p) { p.max_iterations = 1'000'000; },
        "paper.max_iterations must be in [1, 1000], got 1000000"},
       {[](PaperParams& p) { p.smoothing_sigma_frames = NAN; },
-       "paper.smoothing_sigma_frames must be in [0, 1000], got NaN"},
+       "paper.smoothing_sigma_frames must be 0 or in [0.01, 1000], got NaN"},
       {[](PaperParams& p) { p.smoothing_sigma_frames = -1; },
-       "paper.smoothing_sigma_frames must be in [0, 1000], got -1"},
+       "paper.smoothing_sigma_frames must be 0 or in [0.01, 1000], got -1"},
+      // Found by fuzzing: a subnormal sigma squared to 0 made the smoothing kernel 0/0, every
+      // initial key NaN, and a validated reduction fail when it ran.
+      {[](PaperParams& p) { p.smoothing_sigma_frames = 3.2e-312; },
+       "paper.smoothing_sigma_frames must be 0 or in [0.01, 1000], got 3.2e-312"},
       {[](PaperParams& p) { p.min_key_spacing_frames = 0; },
        "paper.min_key_spacing_frames must be in [1, 1000000], got 0"},
   };

@@ -61,7 +61,7 @@ TEST(ValidateReduceOptionsTest, MalformedToleranceParamsAreNamed) {
   EXPECT_EQ(ValidateReduceOptions(nan_bound).message(),
             "tolerance.max_position_error must be > 0, got NaN");
   EXPECT_EQ(ValidateReduceOptions(infinite_bound).message(),
-            "tolerance.max_scalar_error must be finite, got +infinity");
+            "tolerance.max_scalar_error must be in [1e-09, 1e+09], got +infinity");
   EXPECT_EQ(ValidateReduceOptions(tiny_budget).message(),
             "tolerance.key_budget must be >= 2 when set, got 1");
   EXPECT_TRUE(ValidateReduceOptions(ReduceOptions{}).ok());
@@ -257,13 +257,38 @@ TEST(ReduceKeysTest, BadClipsAreRefusedWithTheirChannel) {
   Clip with_nan = ScalarClip({{0, 1, 2, 3}, {0, 1, NAN, 3}});
   Clip empty = ScalarClip({{0.0}});
   empty.channels.clear();
-  Clip huge = ScalarClip({{0, 1e200, 2}});
+  Clip huge = ScalarClip({{0, 1e10, 2}});
 
   EXPECT_EQ(ReduceKeys(with_nan, PaperOptions()).status().message(),
             "channel 1 (c1): sample 2 is NaN");
   EXPECT_EQ(ReduceKeys(empty, PaperOptions()).status().message(), "clip has no channels");
   EXPECT_EQ(ReduceKeys(huge, PaperOptions()).status().message(),
-            "channel 0 (c0): sample 1 is 1e+200, beyond the +-1e100 that curve fitting supports");
+            "channel 0 (c0): sample 1 is 1e+10, beyond the +-1e+09 a clip may hold");
+}
+
+TEST(ReduceKeysTest, ExtremeValidClipsGiveFiniteKeysWithBothMethods) {
+  // The smallest frame time and the largest samples a clip may hold, alternating: the steepest
+  // slopes any valid input has (2e9 per microsecond). Paper's accuracy at its floor lets its
+  // steps shrink to nothing, which without a floor on tangent x made slopes overflow.
+  std::vector<double> zigzag;
+  for (int f = 0; f < 40; ++f) zigzag.push_back(f % 2 == 0 ? 1e9 : -1e9);
+  const Clip clip = ScalarClip({zigzag}, 1e-6);
+  ReduceOptions paper = PaperOptions();
+  paper.paper.accuracy = 1e-300;
+  paper.paper.max_iterations = 200;
+  paper.paper.min_key_spacing_frames = 1;
+
+  for (const ReduceOptions& options : {ReduceOptions{}, paper}) {
+    const absl::StatusOr<ReduceResult> result = ReduceKeys(clip, options);
+
+    ASSERT_TRUE(result.ok()) << result.status();
+    EXPECT_TRUE(ValidateKeyedClip(result->keyed).ok()) << ValidateKeyedClip(result->keyed);
+    for (const Key& key : result->keyed.curves[0].keys) {
+      EXPECT_TRUE(std::isfinite(key.in_tangent) && std::isfinite(key.out_tangent));
+      EXPECT_TRUE(std::isfinite(key.time_seconds));
+    }
+    EXPECT_TRUE(std::isfinite(result->report.rms_error));
+  }
 }
 
 TEST(ReduceKeysTest, ConstantChannelsGetTwoFlatKeys) {

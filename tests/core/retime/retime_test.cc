@@ -735,13 +735,70 @@ TEST(RetimeTest, PinnedSourceTimesLandOnTheirOutputFrames) {
 }
 
 TEST(RetimeTest, ValidateRetimeNeedsOnlyTheClipsTiming) {
-  // The pipeline validates later steps against a probe with a frame time and count only.
+  // Cheap enough to check before queueing: no samples are read.
   Clip probe;
   probe.frame_time_seconds = 1.0 / 30;
   probe.frame_count = 2;
 
   EXPECT_TRUE(ValidateRetime(probe, OverSource({Knot(0, 0.5)}), {}).ok());
   EXPECT_TRUE(ValidateRetime(probe, OverSource({Knot(0, 0.5)}), {.method = RetimeMethod::kPaper}).ok());
+}
+
+TEST(RetimeTest, ExtremeFrameTimesRetimeToAnyRateWithoutInternalErrors) {
+  // Every frame time a clip may have, to every output rate a retime may ask for: either a result
+  // with finite samples or a refusal naming the limit, never an internal error (a subnormal
+  // frame time once made the resample plan's ratio infinite).
+  for (double frame_time : {1e-6, 1.0 / 120.0, 3600.0}) {
+    const Clip clip = PlainClip(frame_time, {{0.0, 1.0, -2.0, 3.0, 5.0, 8.0}});
+    for (FrameRate rate : {FrameRate{30, 1}, FrameRate{100000, 1}, FrameRate{1, 3600}}) {
+      const absl::StatusOr<RetimeResult> result =
+          Retime(clip, OverSource({Knot(0, 0.5)}), {.output_rate = rate});
+
+      if (!result.ok()) {
+        EXPECT_EQ(result.status().code(), absl::StatusCode::kInvalidArgument)
+            << frame_time << " s to " << rate.hz() << " Hz: " << result.status();
+        continue;
+      }
+      EXPECT_TRUE(ValidateClip(result->clip).ok()) << frame_time << " s to " << rate.hz();
+    }
+  }
+}
+
+TEST(RetimeTest, KnotsASubnormalTimeApartAreAStepNotAnInfinitelySteepRamp) {
+  // Found by fuzzing (speed_knots_fuzz): "0s:50,1e-313s:0.01" over output time, reversed, passed
+  // validation, then every resampled position was NaN ("resample plan: output sample 3900 has
+  // position nan") because the ramp between the knots divided by a subnormal span.
+  std::vector<double> ramp;
+  for (int f = 0; f < 40; ++f) ramp.push_back(static_cast<double>(f));
+  const Clip clip = PlainClip(1.0 / 30, {ramp});
+  const TimeWarpSpec warp = {.domain = WarpDomain::kSpeedOverOutput,
+                             .speed = {Knot(0, 50), Knot(1e-313, 0.01)},
+                             .reverse = true};
+
+  ASSERT_TRUE(ValidateRetime(clip, warp, {}).ok());
+  const RetimeResult result = RetimeOrDie(clip, warp, {});
+
+  EXPECT_TRUE(ValidateClip(result.clip).ok()) << ValidateClip(result.clip);
+  EXPECT_EQ(result.clip.channels[0].samples.front(), 39.0);  // reversed: ends first
+  EXPECT_EQ(result.clip.channels[0].samples.back(), 0.0);
+}
+
+TEST(RetimeTest, APositionASubnormalDistanceFromTheStartIsInterpolatedNotFiltered) {
+  // Found by fuzzing (pipeline_proto_fuzz): time-map keys starting at source time 2.49e-317 s put
+  // the first output sample that far from frame 0, whose tent half-width (clamped to the distance
+  // from the end) squared to zero: the first sample came out NaN.
+  std::vector<double> ramp;
+  for (int f = 0; f < 40; ++f) ramp.push_back(static_cast<double>(f));
+  const Clip clip = PlainClip(1.0 / 30, {ramp});
+  const TimeWarpSpec warp = {.domain = WarpDomain::kTimeMapKeys,
+                             .keys = {{.output = {0.0, false}, .source = {2.4931896347706e-317, false}},
+                                      {.output = {2.0, false}, .source = {4.0000000054133125, false}}}};
+
+  const RetimeResult result = RetimeOrDie(clip, warp, {});
+
+  EXPECT_TRUE(ValidateClip(result.clip).ok()) << ValidateClip(result.clip);
+  // The ramp's value there: the position itself, 7.5e-316.
+  EXPECT_LT(std::abs(result.clip.channels[0].samples.front()), 1e-300);
 }
 
 TEST(RetimeTest, SingleFrameClipRetimesToItsPoseAndHolds) {

@@ -40,7 +40,8 @@ absl::StatusOr<Clip> ReadCsvFile(const std::string& path, double frame_time_seco
 // skeleton's hierarchy, offsets and end sites are not kept: joints read back as flat roots.
 // Errors: kInvalidArgument when ValidateClip() fails, or a column name would not read back as
 // the same channel (empty; contains ',', '"' or a line break; starts or ends with whitespace;
-// a scalar named like "X.Xrotation"; a first column named time or frame; two equal names).
+// a scalar named like "X.Xrotation"; a first column named time or frame, or starting with a
+// UTF-8 byte order mark; two equal names).
 // Thread-safe.
 absl::StatusOr<std::string> FormatCsv(const Clip& clip);
 

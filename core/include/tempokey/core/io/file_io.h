@@ -11,15 +11,30 @@
 
 namespace tempokey::core {
 
-// Reads all of `path` (any readable file, including pipes; the cap applies to the bytes read).
-// Messages start with `path`.
+// How long a pipe or FIFO may stay silent (no byte, no end) while ReadFile() reads it.
+inline constexpr int kStreamIdleTimeoutMs = 10'000;
+
+// Reads all of `path`: a regular file, or a pipe or FIFO read to its end (the cap applies to the
+// bytes read). A FIFO is opened without waiting for a writer, and each read of it waits at most
+// kStreamIdleTimeoutMs for data: one nobody writes to is refused, never read forever. Messages
+// start with `path`.
 // Errors: kNotFound missing file ("walk.bvh: no such file"); kInvalidArgument a directory
-// ("walk.bvh: is a directory, not a file") or larger than `max_bytes` ("walk.bvh: file is
-// 3000000000 bytes, over the limit of 1073741824"); kPermissionDenied unreadable; kUnavailable
-// other I/O errors.
+// ("walk.bvh: is a directory, not a file"), a device or socket ("/dev/zero: is a character
+// device, not a file") or larger than `max_bytes` ("walk.bvh: file is 3000000000 bytes, over
+// the limit of 1073741824"); kDeadlineExceeded a silent FIFO ("in.bvh: is a FIFO and nothing
+// arrived for 10 s (no writer?)"); kPermissionDenied unreadable; kUnavailable other I/O errors.
 // Thread-safe.
 absl::StatusOr<std::string> ReadFile(const std::string& path,
                                      std::int64_t max_bytes = std::int64_t{1} << 30);
+
+// ReadFile() for text formats (BVH, CSV, JSON, PEM): also refuses, as soon as the chunk holding
+// it arrives, a NUL byte, which no text file holds. So a large sparse or binary file costs one
+// read chunk (64 KiB) of memory, not its size, before it is refused.
+// Errors: those of ReadFile(); kInvalidArgument "big.bvh:1:1: unexpected byte 0x00; the file
+// looks binary, not text" (line and column of the first NUL, counted from 1).
+// Thread-safe.
+absl::StatusOr<std::string> ReadTextFile(const std::string& path,
+                                         std::int64_t max_bytes = std::int64_t{1} << 30);
 
 // Writes `contents` to a temporary file beside `path` ("<path>.tmp-<8 random characters>",
 // created exclusively, permissions from the umask or kept from the file it replaces), fsyncs
@@ -34,6 +49,17 @@ absl::Status WriteFileAtomically(const std::string& path, std::string_view conte
 // Whether `file_name` is the name of a temporary WriteFileAtomically() makes for a file named
 // `target_name` (both without folders): what a killed writer leaves behind. Thread-safe.
 bool IsAtomicWriteTemporary(std::string_view file_name, std::string_view target_name);
+// Removes every temporary file WriteFileAtomically() has created and not yet renamed or removed,
+// in this process. Async-signal-safe (it only reads lock-free slots and calls unlink()): a
+// program's SIGINT / SIGTERM handler calls it so an interrupted write leaves no "*.tmp-*" file.
+// At most kTrackedTempFiles writes at once are tracked (paths up to 4095 bytes); beyond that a
+// temporary is still removed by its writer on any error, but not by this function.
+inline constexpr int kTrackedTempFiles = 64;
+void RemovePendingTempFiles();
+
+// Test hook: called on the writing thread right after WriteFileAtomically() created (and
+// registered) its temporary file, before any byte is written. Set once, before any write.
+void SetTempFileCreatedHookForTesting(void (*hook)());
 
 }  // namespace tempokey::core
 

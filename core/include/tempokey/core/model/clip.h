@@ -100,6 +100,33 @@ std::string ChannelName(const Clip& clip, int channel_index);
 // "channel 14 (LeftKnee.Xrotation)": how messages refer to a channel.
 std::string ChannelLabel(const Clip& clip, int channel_index);
 
+// Ranges every number of a clip or keyed clip must lie in, checked by ValidateClipLayout(),
+// ValidateClip() and ValidateKeyedClip(), chosen so that every operation's arithmetic stays
+// finite and meaningful (no overflow to infinity, no ratio of a subnormal):
+//   - frame time in [1e-6 s, 3600 s]: one megahertz (a hundred times any capture rate) to one
+//     frame an hour (time-lapse). Slopes divide value differences by it (at most 2e9 / 1e-6 =
+//     2e15 per second), retiming divides output by source frame times (a ratio within
+//     [1e-5 / 3600, 3600 / 1e-6], speeds in frames therefore finite), and a clip of the most
+//     frames (10^7) lasts at most 3.6e10 s, inside kMaxTimeSeconds.
+//   - |sample| and |offset| <= 1e9 (file units or degrees): squared errors summed over the
+//     largest clip stay below 1e27, distances through 256 nested joints below 1e12, and a
+//     double still resolves 1e-7 at that magnitude.
+//   - |time| <= 1e11 s for marker times and durations and key times: divided by the smallest
+//     frame time that is 1e17 frames, exactly convertible to a 64-bit frame index.
+//   - keyed clips: |value| <= 1e12 (room above the sample bound for unwrapped rotations and a
+//     fit's overshoot) and |tangent| <= 1e100 per second, so a segment of the longest duration
+//     evaluates below 1e112 and its squared error is finite.
+inline constexpr double kMinFrameTimeSeconds = 1e-6;
+inline constexpr double kMaxFrameTimeSeconds = 3600.0;
+inline constexpr double kMaxSampleMagnitude = 1e9;
+inline constexpr double kMaxTimeSeconds = 1e11;
+inline constexpr double kMaxKeyValueMagnitude = 1e12;
+inline constexpr double kMaxKeyTangent = 1e100;
+
+// OK when `seconds` is a frame time in [kMinFrameTimeSeconds, kMaxFrameTimeSeconds].
+// Errors: kInvalidArgument "<what> must be in [1e-06, 3600] seconds, got 1e-320".
+absl::Status CheckFrameTime(double seconds, std::string_view what = "frame time");
+
 // Limits on untrusted input (server uploads, files). Defaults suit the largest real captures
 // many times over.
 struct ClipLimits {
@@ -110,16 +137,19 @@ struct ClipLimits {
   int max_depth = 256;                       // joint nesting
 };
 
-// Checks every invariant of SPEC 1: frame time finite and > 0; frame_count >= 1; every channel
-// has frame_count finite samples; joint indices valid, parents before children, joint names
-// non-empty and unique; each joint's channel list names channels of that joint, and every joint
-// channel is in its joint's list; rotation channels of one joint name distinct axes; every
-// marker has a finite time and a finite duration >= 0.
+// Checks every invariant of SPEC 1: frame time in [kMinFrameTimeSeconds, kMaxFrameTimeSeconds];
+// frame_count >= 1; every channel has frame_count finite samples of magnitude at most
+// kMaxSampleMagnitude; joint indices valid, parents before children, joint names non-empty and
+// unique, offsets and end sites finite and within kMaxSampleMagnitude; each joint's channel list
+// names channels of that joint, and every joint channel is in its joint's list; rotation channels
+// of one joint name distinct axes; every marker has a time within +-kMaxTimeSeconds and a
+// duration in [0, kMaxTimeSeconds].
 //
 // Errors: kInvalidArgument naming the channel, joint, marker (0-based index and quoted name),
 // frame and value, e.g.
 //   "channel 14 (LeftKnee.Xrotation): sample 40 is NaN",
-//   "marker 2 (\"contact\"): duration_seconds must be finite and >= 0, got -0.5".
+//   "channel 3 (Hips.Xposition): sample 7 is 2e+12, beyond the +-1e9 a clip may hold",
+//   "marker 2 (\"contact\"): duration_seconds must be in [0, 1e11], got -0.5".
 absl::Status ValidateClip(const Clip& clip, const ClipLimits& limits = {});
 
 // Same checks as ValidateClip() on the layout only (everything but the sample values, markers

@@ -14,8 +14,10 @@
 #define TEMPOKEY_CORE_MODEL_KEYED_CLIP_H_
 
 #include <cmath>
+#include <cstdint>
 #include <optional>
 #include <span>
+#include <stop_token>
 #include <string_view>
 #include <vector>
 
@@ -59,7 +61,9 @@ struct KeyedClip {
 inline constexpr double kWeightSumSlack = 1e-9;
 
 // Checks a keyed clip: ValidateClipLayout() on the layout; one curve per channel; each curve has
-// at least one key; every time, value, tangent and weight is finite; times strictly increase;
+// at least one key; every time, value, tangent and weight is finite, times within
+// +-kMaxTimeSeconds, values within +-kMaxKeyValueMagnitude and tangents within +-kMaxKeyTangent
+// (clip.h); times strictly increase;
 // weights, when present, are in (0, 1]; within each segment out_weight(a) + in_weight(b) <= 1
 // (+ kWeightSumSlack), unset weights counting as 1/3, which keeps time monotonic in s.
 //
@@ -115,23 +119,36 @@ inline double SolveMonotonicCubic(double a, double b, double c, double span, dou
 // Thread-safe.
 double EvaluateCurve(const Curve& curve, double time_seconds);
 
-// out[i] = EvaluateCurve(curve, i * frame_time_seconds) for every i, bit for bit, in one pass
-// over the keys (O(keys + out.size()) instead of a search per sample): what baking and error
-// measurement use. Precondition: ValidateCurve() passed; frame_time_seconds > 0. Thread-safe.
-void SampleCurve(const Curve& curve, double frame_time_seconds, std::span<double> out);
+// out[i] = EvaluateCurve(curve, (first_frame + i) * frame_time_seconds) for every i, bit for
+// bit, in one pass over the keys (O(keys + out.size()) instead of a search per sample): what
+// baking and error measurement use; a long channel is sampled in pieces by giving each piece's
+// first frame. Precondition: ValidateCurve() passed; frame_time_seconds > 0; first_frame >= 0.
+// Thread-safe.
+void SampleCurve(const Curve& curve, double frame_time_seconds, std::span<double> out,
+                 std::int64_t first_frame = 0);
 
 // Samples every curve at i * frame_time_seconds for i = 0 .. floor(duration / frame_time + 1e-9),
 // where duration is the layout's ((frame_count - 1) * layout frame time); unset
 // `frame_time_seconds` keeps the layout's frame time. The result has the layout's skeleton,
 // channels (with samples), name and markers.
 //
-// Errors: kInvalidArgument from ValidateKeyedClip(), a frame time that is not finite and > 0, or
-// a result over `limits` ("bake at 1e-09 s per frame gives 1000000001 frames x 96 channels,
-// over the limit of 200000000 samples").
+// Errors: kInvalidArgument from ValidateKeyedClip(), a frame time outside CheckFrameTime()'s
+// range, a result over `limits` ("bake at 0.001 s per frame gives 1000000001 frames x 96
+// channels, over the limit of 200000000 samples"), or a baked sample beyond kMaxSampleMagnitude
+// (curves whose tangents overshoot); kCancelled when `stop` is requested (checked every 65536
+// samples).
 // Thread-safe.
+// How many frames Bake() gives for a keyed clip lasting `duration_seconds` with `channel_count`
+// channels at `frame_time_seconds`: floor(duration / frame time + 1e-9) + 1, checked against
+// CheckFrameTime() and `limits` (frames, and frames x channels). Errors: those of Bake() on
+// sizes. Thread-safe.
+absl::StatusOr<std::int64_t> BakedFrameCount(double duration_seconds, std::size_t channel_count,
+                                             double frame_time_seconds,
+                                             const ClipLimits& limits = {});
+
 absl::StatusOr<Clip> Bake(const KeyedClip& keyed,
                           std::optional<double> frame_time_seconds = std::nullopt,
-                          const ClipLimits& limits = {});
+                          const ClipLimits& limits = {}, std::stop_token stop = {});
 
 }  // namespace tempokey::core
 

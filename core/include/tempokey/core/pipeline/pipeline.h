@@ -68,9 +68,13 @@ bool ProducesKeyedOutput(std::span<const PipelineStep> steps);
 
 // Checks, before anything is queued, that the steps fit together (retime, reduce and convert
 // take a sampled clip; bake takes a keyed clip), that each step's options are valid (a reduce's
-// against `clip`'s layout: ValidateReduceOptionsForClip()), and the first step against `clip`'s
-// timing (ValidateRetime()).
-// Errors: kInvalidArgument "operation 2 (bake): needs a keyed clip, got a sampled clip";
+// also against `clip`'s layout: ValidateReduceOptionsForClip(), ValidateReduceForLayout()), and
+// every step against the exact shape of its input: the first against `clip`, each later one
+// against what the steps before it produce, computed from their options alone (a retime's output
+// frames from its time map, a bake's from its rate; cost.h). So a chain of retimes whose output
+// would exceed `limits` and a key budget below the keys the clip's channels need are refused here.
+// Errors: kInvalidArgument "operation 2 (bake): needs a keyed clip, got a sampled clip",
+// "operation 2 (retime): the retimed clip would have 40000001 frames, over the limit of ...";
 // kFailedPrecondition for a joint tolerance on a clip without a skeleton.
 // `limits` caps what the steps may produce (a retime's or bake's frames and samples).
 absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> steps,
@@ -78,7 +82,9 @@ absl::Status ValidatePipeline(const Clip& clip, std::span<const PipelineStep> st
 
 // Runs `steps` in order on `clip` (read, not copied, unless a step must change it in place).
 // Progress is reported over the whole pipeline; cancellation is checked between steps and,
-// inside them, between channels. Outputs are held to `limits`.
+// inside them, often enough to answer within milliseconds (retime.h, reduce.h, Bake()), so a
+// cancelled job frees its worker promptly. Outputs are held to `limits`.
+// Errors: kCancelled "cancelled" once `stop` is requested.
 // Errors: those of ValidatePipeline() and of each step, prefixed "operation 1 (retime): ".
 absl::StatusOr<PipelineResult> RunPipeline(const Clip& clip, std::span<const PipelineStep> steps,
                                            const ProgressFn& progress = {},

@@ -10,11 +10,14 @@
 // Definitions every implementation of the fit follows, so that the optimized pass below and the
 // brute-force reference in tests/core/reduce/hermite_reference.h choose the same keys:
 //
-//   Feasible segment (monotonic time): with a, b its keys,
-//       a.tx > 0  &&  b.tx > 0  &&  a.x < b.x  &&  a.tx + b.tx <= 3.0 * (b.x - a.x)
-//     evaluated exactly as written. It says the Bezier x-controls x_a, x_a + tx_a/3,
+//   Feasible segment (monotonic time): with a, b its keys, m = kMinTangentXFrames,
+//       a.tx >= m  &&  b.tx >= m  &&  a.x < b.x  &&  a.tx + b.tx <= 3.0 * (b.x - a.x)
+//     evaluated exactly as written, and, in a pass, both keys inside the clip:
+//     0 <= a.x  &&  b.x <= samples - 1 (an x offset can move an interior key past an end). It says the Bezier x-controls x_a, x_a + tx_a/3,
 //     x_b - tx_b/3, x_b are non-decreasing (so x(s) is monotonic), keys are in order, and each
-//     tangent has a slope (tx = 0 would be a vertical tangent, which no keyed curve can carry).
+//     tangent has a slope (tx = 0 would be a vertical tangent, which no keyed curve can carry;
+//     a tx under a billionth of a frame is one in all but name, and its slope ty / tx would
+//     overflow once divided by the frame time: the published tx > 0 with a floor).
 //   Frames of a segment: the integers f with a.x <= f < b.x; the last segment also takes b.x.
 //   Segment error: sum over its frames of (y(s_f) - sample[f])^2 with x(s_f) = f.
 //   Search grid of one pass: each key offers x + {-1, 0, +1} * step.x (first and last key: x
@@ -42,6 +45,7 @@
 #define TEMPOKEY_CORE_REDUCE_HERMITE_DP_H_
 
 #include <span>
+#include <stop_token>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -75,6 +79,9 @@ struct HermiteFitOptions {
   double accuracy = 0.01;   // stop once every step is below this
   int max_iterations = 8;   // DP passes at most
 };
+
+// The smallest tangent x-component (frames) of a feasible segment (definition above).
+inline constexpr double kMinTangentXFrames = 1e-9;
 
 inline constexpr double kDpTieRelative = 1e-10;
 inline constexpr double kDpTieAbsolute = 1e-13;
@@ -110,13 +117,16 @@ std::vector<int> InitialKeyFrames(std::span<const double> samples, double sigma_
 
 // Keys at InitialKeyFrames(): p = (f, sample[f]); tangent tx = the shorter adjacent key gap (so
 // the start is feasible), ty = tx * the smoothed copy's central difference at f (one-sided at the
-// ends). Preconditions as InitialKeyFrames(), at least 2 samples. Thread-safe.
+// ends). Preconditions as InitialKeyFrames(), at least 2 samples. The smoothing looks at `stop`
+// every few thousand frames and returns early, the keys incomplete, when it is requested (the
+// caller checks it). Thread-safe.
 std::vector<HermiteKey2D> InitialHermiteKeys(std::span<const double> samples, double sigma_frames,
-                                             int min_spacing_frames);
+                                             int min_spacing_frames, std::stop_token stop = {});
 
 // True when the segment from `a` to `b` is feasible (definition above).
 inline bool SegmentIsFeasible(double ax, double atx, double bx, double btx) {
-  return atx > 0.0 && btx > 0.0 && ax < bx && atx + btx <= 3.0 * (bx - ax);
+  return atx >= kMinTangentXFrames && btx >= kMinTangentXFrames && ax < bx &&
+         atx + btx <= 3.0 * (bx - ax);
 }
 
 // The curve's value at `frame`, which must lie in [a.x, b.x] of a feasible segment.
@@ -151,11 +161,15 @@ HermiteDpPass RunHermiteDpPass(std::span<const double> samples,
 
 // The iteration (step 6) from `initial` keys.
 // Errors: kInvalidArgument from ValidateHermiteKeys(), non-finite samples, steps not finite and
-// > 0, accuracy not finite and > 0, max_iterations outside [0, 1000].
+// > 0, accuracy not finite and > 0, max_iterations outside [0, 1000]; kCancelled when `stop` is
+// requested, checked before every pass and, inside one, after every kDpStopCheckFrames frames of
+// basis solves and data sums (a few milliseconds of work on any input).
 // Thread-safe.
+inline constexpr std::int64_t kDpStopCheckFrames = 8192;
 absl::StatusOr<HermiteFitResult> FitHermiteDp(std::span<const double> samples,
                                               std::vector<HermiteKey2D> initial,
-                                              const HermiteFitOptions& options);
+                                              const HermiteFitOptions& options,
+                                              std::stop_token stop = {});
 
 // The fitted spline as keys of a Curve over time = x * frame_time_seconds, such that
 // EvaluateCurve() reproduces the 2D Hermite (to rounding): value = y; in and out tangent =

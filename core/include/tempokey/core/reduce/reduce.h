@@ -32,7 +32,8 @@ struct PaperParams {
   int max_iterations = 8;
   // Gaussian sigma (frames) of the smoothed copy whose first and second central differences
   // give the initial keys at their zero crossings. Raw captures have a zero crossing at almost
-  // every frame; 2 frames removes the jitter without moving real extrema. [0, 1000], 0 = none.
+  // every frame; 2 frames removes the jitter without moving real extrema. 0 = none, else
+  // [0.01, 1000].
   double smoothing_sigma_frames = 2.0;
   // Minimum distance between initial keys, in frames; candidates closer to an already kept key
   // are dropped (extrema are kept before inflections). [1, 1000000].
@@ -136,9 +137,9 @@ struct ReduceResult {
 };
 
 // Checks `options` for the chosen method: the method is known; paper: steps and accuracy in
-// (0, 1e6], 1 <= max_iterations <= 1000, sigma in [0, 1000], 1 <= spacing <= 1000000;
-// tolerance: error bounds finite and > 0 when set, key budget >= 2 when set, a known pose
-// alignment, a joint tolerance finite and > 0 when set (ValidateJointTolerance());
+// [1e-300, 1e6] (normal doubles), 1 <= max_iterations <= 1000, sigma 0 or in [0.01, 1000],
+// 1 <= spacing <= 1000000; tolerance: error bounds in [1e-9, 1e9], key budget >= 2 when set, a
+// known pose alignment, a joint tolerance finite and > 0 when set (ValidateJointTolerance());
 // noise: given sigmas and min_sigma finite and > 0, guard_sigmas in [2, 100], key_sigmas in
 // [0.01, 10].
 // Errors: kInvalidArgument naming the field and value, e.g.
@@ -151,6 +152,13 @@ absl::Status ValidateReduceOptions(const ReduceOptions& options);
 // Errors: as ValidateReduceOptions(); kFailedPrecondition "tolerance.joint_tolerance needs a
 // skeleton, the clip has none". Thread-safe.
 absl::Status ValidateReduceOptionsForClip(const Clip& layout, const ReduceOptions& options);
+// ValidateReduceOptions() plus what depends on the layout of the clip to reduce: a key budget
+// covers the keys any fit needs (2 per channel, 1 per channel of a one-frame clip).
+// Errors: those of ValidateReduceOptions(); kInvalidArgument "tolerance.key_budget 2 is below
+// the 192 keys any fit of 96 channels needs (2 per channel)".
+// Thread-safe.
+absl::Status ValidateReduceForLayout(const ReduceOptions& options, std::int64_t channel_count,
+                                     std::int64_t frame_count);
 
 // Fits every channel of `clip` and reports the error against the input (MeasureReduction()).
 // Rotation channels are unwrapped first (UnwrapDegrees()), so the curves carry unwrapped angles;
@@ -180,15 +188,17 @@ absl::Status ValidateReduceOptionsForClip(const Clip& layout, const ReduceOption
 // key for a one-frame clip).
 //
 // Errors:
-//   kInvalidArgument  `clip` fails ValidateClip(), `options` fail ValidateReduceOptions(), a
-//                     sample's magnitude exceeds 1e100 (its square would overflow the error), or
-//                     a key budget below 2 keys per channel ("tolerance.key_budget 5 is below the
-//                     18 keys any fit of 9 channels needs (2 per channel)").
+//   kInvalidArgument  `clip` fails ValidateClip(), `options` fail ValidateReduceForLayout()
+//                     ("tolerance.key_budget 5 is below the 18 keys any fit of 9 channels needs
+//                     (2 per channel)").
 //   kFailedPrecondition  a joint tolerance on a clip without a skeleton ("tolerance.joint_tolerance
 //                     needs a skeleton, the clip has none"), or in percent of a figure whose height
 //                     is 0 (ResolveJointTolerance()).
 //   kCancelled        `stop` was requested; checked between channels (between groups of
-//                     pose-aligned channels).
+//                     pose-aligned channels) and inside each channel's fit: every DP pass and
+//                     every few dozen segments of one (paper), every insertion round and every
+//                     few hundred keys (tolerance), so a request is seen within milliseconds.
+//   kInternal         a fit produced a curve outside the keyed clip's ranges (a bug).
 // The report's `world` measures every joint and end site through the skeleton
 // (MeasureWorldError()) for every method, when the clip has a skeleton.
 // Progress: once per channel or group, "reduce 12/96".

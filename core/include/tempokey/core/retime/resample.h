@@ -40,6 +40,7 @@
 #include <array>
 #include <cstdint>
 #include <span>
+#include <stop_token>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -83,30 +84,39 @@ double BoxWeight(double d, double b);
 // The Lanczos-3 kernel sinc(u)·sinc(u/3) for |u| < 3, else 0.
 double Lanczos3(double u);
 
+// Cancellation: the functions below look at `stop` after every kResampleStopCheckTaps kernel
+// taps (a few milliseconds of work at most, whatever the decimation ratio), so a request is seen
+// promptly even on a channel of millions of samples.
+inline constexpr std::int64_t kResampleStopCheckTaps = 1 << 16;
+
 // Plans the kernels for output samples at `positions` (source frames) with local decimation
 // ratios `ratios`, over a source of `source_count` samples.
 // Errors: kInvalidArgument when the spans differ in length, source_count < 1, or a position or
-// ratio is not finite (ratios must be >= 0).
+// ratio is not finite (ratios must be >= 0); kCancelled when `stop` is requested.
 // Thread-safe: a pure function of its arguments.
 absl::StatusOr<ResamplePlan> MakeResamplePlan(std::span<const double> positions,
                                               std::span<const double> ratios,
-                                              std::int64_t source_count, ResampleFilter filter);
+                                              std::int64_t source_count, ResampleFilter filter,
+                                              std::stop_token stop = {});
 
 // out[j] = Σ weights · source over sample j's span. Preconditions: source has
-// plan.source_count values, out has plan.output_count().
-void ResampleScalar(const ResamplePlan& plan, std::span<const double> source, std::span<double> out);
+// plan.source_count values, out has plan.output_count(). When `stop` is requested it returns
+// early with `out` incomplete: the caller checks `stop` afterwards.
+void ResampleScalar(const ResamplePlan& plan, std::span<const double> source, std::span<double> out,
+                    std::stop_token stop = {});
 
 // Angles in degrees treated as a scalar after unwrapping: resamples the unwrapped channel and
 // moves each result by whole turns to within 180° of the source's value at the nearest sample;
-// copies are the raw source values. Same preconditions as ResampleScalar().
-void ResampleAngle(const ResamplePlan& plan, std::span<const double> degrees, std::span<double> out);
+// copies are the raw source values. Same preconditions and cancellation as ResampleScalar().
+void ResampleAngle(const ResamplePlan& plan, std::span<const double> degrees, std::span<double> out,
+                   std::stop_token stop = {});
 
 // One joint's three rotation channels (degrees, listed in `order`), resampled as rotations (see
 // the file comment). Preconditions: valid order, each source span has plan.source_count values,
-// each output span plan.output_count().
+// each output span plan.output_count(). Cancellation as ResampleScalar().
 void ResampleRotation(const ResamplePlan& plan, const EulerOrder& order,
                       const std::array<std::span<const double>, 3>& source,
-                      const std::array<std::span<double>, 3>& out);
+                      const std::array<std::span<double>, 3>& out, std::stop_token stop = {});
 
 }  // namespace tempokey::core
 

@@ -30,7 +30,7 @@ struct TimePoint {
 };
 
 // A knot of a piecewise-linear speed curve: linear between knots, flat outside; two knots at the
-// same time make a step.
+// same time (within 1e-9 frames of their timeline) make a step.
 struct SpeedKnot {
   TimePoint time;
   double speed = 1.0;
@@ -156,7 +156,8 @@ struct RetimeResult {
 //                     outside [min_speed, max_speed], times decreasing, NaN, both fits set, a fit
 //                     needing a speed outside the range, ...): the message names the knot; the
 //                     output would exceed `limits` (frames, or frames x channels).
-//   kCancelled        `stop` was requested; checked between channels (and joints).
+//   kCancelled        `stop` was requested; checked between channels (and joints) and inside
+//                     long channels every kResampleStopCheckTaps kernel taps (resample.h).
 // Progress: `progress` is called after each channel (or joint) with the fraction done.
 //
 // Thread-safe: a pure function of its arguments.
@@ -168,6 +169,26 @@ absl::StatusOr<RetimeResult> Retime(const Clip& clip, const TimeWarpSpec& warp,
 // (frame time and frame count; samples are not read): cheap enough to run before queueing.
 absl::Status ValidateRetime(const Clip& clip, const TimeWarpSpec& warp,
                             const RetimeOptions& options, const ClipLimits& limits = {});
+
+// What a retime produces, known from the time map (or the paper's regions) before any sample is
+// resampled.
+struct RetimeOutputShape {
+  std::int64_t frame_count = 0;
+  double frame_time_seconds = 0.0;
+};
+
+// ValidateRetime() for a clip of `frame_count` frames `frame_time_seconds` apart with
+// `channel_count` channels, returning the output's frame count and frame time: what a pipeline
+// needs to check the next step (a chain of retimes) before anything runs. Cost: compiling the
+// time map, O(knots + keys + holds + pins).
+// Errors: those of ValidateRetime().
+// Thread-safe.
+absl::StatusOr<RetimeOutputShape> PlanRetimeOutput(double frame_time_seconds,
+                                                   std::int64_t frame_count,
+                                                   std::size_t channel_count,
+                                                   const TimeWarpSpec& warp,
+                                                   const RetimeOptions& options,
+                                                   const ClipLimits& limits = {});
 
 // Parses the CLI / pipeline speed syntax: comma-separated `time:speed` knots, time in seconds or
 // frames ("2.5s", "75f"), e.g. "0s:1,2s:1,2s:0.5,4s:0.5,4s:1" (2 s to 4 s at half speed);

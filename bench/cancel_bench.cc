@@ -1,0 +1,134 @@
+// How long a stop request takes to end the slowest work core does (one core, this machine): each
+// pipeline below runs on a thread, a stop is requested after a delay (so it lands inside a
+// channel's inner loops), and the time from the request to RunPipeline's return is printed, for
+// several delays. The target is ~0.1 s; these are the figures behind the server's cancel,
+// Process-disconnect and drain-deadline behaviour.
+//
+//   cancel_bench [filter]
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <future>
+#include <random>
+#include <stop_token>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "tempokey/core/pipeline/pipeline.h"
+
+namespace tempokey::core {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+Clip NoiseClip(int channels, std::int64_t frames, bool rotations) {
+  Clip clip;
+  clip.name = "noise";
+  clip.frame_time_seconds = 1.0 / 120.0;
+  clip.frame_count = frames;
+  std::mt19937_64 random(5);
+  std::normal_distribution<double> noise(0.0, 10.0);
+  if (rotations) {
+    Joint joint;
+    joint.name = "J";
+    clip.skeleton.joints.push_back(joint);
+  }
+  for (int c = 0; c < channels; ++c) {
+    Channel channel;
+    if (rotations) {
+      channel.joint = 0;
+      channel.kind = static_cast<ChannelKind>(static_cast<int>(ChannelKind::kZRotation) - c % 3);
+      clip.skeleton.joints[0].channels.push_back(c);
+    } else {
+      channel.name = absl::StrCat("c", c);
+    }
+    channel.samples.resize(static_cast<std::size_t>(frames));
+    for (double& v : channel.samples) v = noise(random);
+    clip.channels.push_back(std::move(channel));
+  }
+  return clip;
+}
+
+struct Workload {
+  std::string name;
+  Clip clip;
+  std::vector<PipelineStep> steps;
+};
+
+int Run(const std::string& filter) {
+  ReduceStep paper;
+  paper.options.method = ReduceMethod::kPaper;
+  paper.options.paper.max_iterations = 1000;
+  paper.options.paper.accuracy = 1e-300;
+  ReduceStep smooth_only = paper;
+  smooth_only.options.paper.smoothing_sigma_frames = 1000.0;
+  smooth_only.options.paper.max_iterations = 1;
+  ReduceStep clip_aligned;
+  clip_aligned.options.tolerance.pose_alignment = PoseAlignment::kClip;
+  RetimeStep lanczos;
+  lanczos.warp.domain = WarpDomain::kSpeedOverSource;
+  lanczos.warp.speed = {SpeedKnot{{0.0, false}, 3.0}};
+  lanczos.options.filter = ResampleFilter::kLanczos3;
+  RetimeStep paper_retime;
+  paper_retime.warp.domain = WarpDomain::kSpeedOverSource;
+  paper_retime.warp.speed = {SpeedKnot{{0.0, false}, 0.5}, SpeedKnot{{10000.0, false}, 0.9}};
+  paper_retime.options.method = RetimeMethod::kPaper;
+  ReduceStep two_keys;
+  two_keys.options.tolerance.max_scalar_error = 1e9;
+
+  std::vector<Workload> workloads;
+  workloads.push_back({"paper fit, 1 x 16000 frames, 1000 passes, accuracy 1e-300",
+                       NoiseClip(1, 16000, false), {paper}});
+  workloads.push_back({"paper smoothing, 1 x 1M frames, sigma 1000", NoiseClip(1, 1'000'000, false),
+                       {smooth_only}});
+  workloads.push_back({"tolerance fit, 1 x 4M frames of noise", NoiseClip(1, 4'000'000, false),
+                       {ReduceStep{}}});
+  workloads.push_back({"tolerance fit, pose-aligned clip, 64 x 60000 frames",
+                       NoiseClip(64, 60'000, false), {clip_aligned}});
+  workloads.push_back({"retime lanczos3 x3, rotation-aware joint, 3 x 3M frames",
+                       NoiseClip(3, 3'000'000, true), {lanczos}});
+  workloads.push_back({"retime paper method, 1 x 4M frames", NoiseClip(1, 4'000'000, false),
+                       {paper_retime}});
+  workloads.push_back({"bake, 1 channel to 10M frames", NoiseClip(1, 83'000, false),
+                       {two_keys, BakeStep{FrameRate{100000, 1}}}});
+
+  const int delays_ms[] = {50, 200, 500};
+  std::printf("%-60s %s\n", "work", "stop -> return, ms (stop requested after 50 / 200 / 500 ms)");
+  for (const Workload& w : workloads) {
+    if (w.name.find(filter) == std::string::npos) continue;
+    std::string row;
+    double worst = 0.0;
+    for (int delay : delays_ms) {
+      std::stop_source stop;
+      std::future<absl::StatusOr<PipelineResult>> run = std::async(
+          std::launch::async, [&] { return RunPipeline(w.clip, w.steps, {}, stop.get_token()); });
+      const bool finished_early =
+          run.wait_for(std::chrono::milliseconds(delay)) == std::future_status::ready;
+      const Clock::time_point requested = Clock::now();
+      stop.request_stop();
+      const absl::StatusOr<PipelineResult> result = run.get();
+      const double ms = std::chrono::duration<double, std::milli>(Clock::now() - requested).count();
+      if (finished_early) {
+        absl::StrAppend(&row, "  (done before the stop)");
+        continue;
+      }
+      if (result.status().code() != absl::StatusCode::kCancelled) {
+        absl::StrAppend(&row, "  NOT CANCELLED: ", result.status().ToString());
+        continue;
+      }
+      worst = std::max(worst, ms);
+      absl::StrAppend(&row, absl::StrFormat("  %7.2f", ms));
+    }
+    std::printf("%-60s%s   worst %.2f ms\n", w.name.c_str(), row.c_str(), worst);
+    std::fflush(stdout);
+  }
+  return 0;
+}
+
+}  // namespace
+}  // namespace tempokey::core
+
+int main(int argc, char** argv) { return tempokey::core::Run(argc > 1 ? argv[1] : ""); }

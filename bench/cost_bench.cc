@@ -1,0 +1,150 @@
+// The cost model (core/pipeline/cost.h) against real runs: for pipelines that stress each inner
+// loop (the paper's DP passes once steps are fractional, the tolerance fit on white noise,
+// rotation-aware retimes, wide smoothing, baking), the predicted seconds next to the measured
+// ones on this machine, one core. The model's constants are chosen so that the worst workload of
+// each kind is predicted at or above its measured time (ratio >= 1) and typical ones are
+// over-predicted by a bounded factor.
+//
+//   cost_bench [filter]      runs every workload whose name contains `filter`; those named
+//                            slow/... (minutes) only when `filter` starts with slow/
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "tempokey/core/io/bvh.h"
+#include "tempokey/core/pipeline/cost.h"
+#include "tempokey/core/pipeline/pipeline.h"
+
+namespace tempokey::core {
+namespace {
+
+Clip NoiseClip(int channels, std::int64_t frames, double amplitude, ChannelKind kind,
+               double frame_time = 1.0 / 120.0) {
+  Clip clip;
+  clip.name = "noise";
+  clip.frame_time_seconds = frame_time;
+  clip.frame_count = frames;
+  std::mt19937_64 random(7);
+  std::normal_distribution<double> noise(0.0, amplitude);
+  for (int c = 0; c < channels; ++c) {
+    Channel channel;
+    channel.kind = kind;
+    channel.name = absl::StrCat("c", c);
+    channel.samples.resize(static_cast<std::size_t>(frames));
+    for (double& v : channel.samples) v = noise(random);
+    clip.channels.push_back(std::move(channel));
+  }
+  return clip;
+}
+
+struct Workload {
+  std::string name;
+  const Clip* clip;
+  std::vector<PipelineStep> steps;
+};
+
+ReduceStep Paper(int iterations, double accuracy, double sigma = 2.0) {
+  ReduceStep step;
+  step.options.method = ReduceMethod::kPaper;
+  step.options.paper.max_iterations = iterations;
+  step.options.paper.accuracy = accuracy;
+  step.options.paper.smoothing_sigma_frames = sigma;
+  return step;
+}
+
+ReduceStep Tolerance(double bound, std::optional<std::int64_t> budget = std::nullopt) {
+  ReduceStep step;
+  step.options.tolerance.max_rotation_error_degrees = bound;
+  step.options.tolerance.max_position_error = bound;
+  step.options.tolerance.max_scalar_error = bound;
+  step.options.tolerance.key_budget = budget;
+  return step;
+}
+
+RetimeStep Speed(double speed, ResampleFilter filter = ResampleFilter::kTent,
+                 RetimeMethod method = RetimeMethod::kExact) {
+  RetimeStep step;
+  step.warp.domain = WarpDomain::kSpeedOverSource;
+  step.warp.speed = {SpeedKnot{{0.0, false}, speed}};
+  step.options.filter = filter;
+  step.options.method = method;
+  return step;
+}
+
+RetimeStep Ramp(RetimeMethod method) {
+  RetimeStep step;
+  step.warp.domain = WarpDomain::kSpeedOverSource;
+  step.warp.speed = {SpeedKnot{{0.0, false}, 0.25}, SpeedKnot{{8.0, false}, 4.0}};
+  step.options.method = method;
+  return step;
+}
+
+int Run(const std::string& filter) {
+  const std::string cmu_path = std::string(TEMPOKEY_SHARED_DIR) + "/data/bvh/cmu/131_01.bvh";
+  absl::StatusOr<Clip> cmu = ReadBvhFile(cmu_path);
+  if (!cmu.ok()) {
+    std::fprintf(stderr, "error: %s\n", std::string(cmu.status().message()).c_str());
+    return 1;
+  }
+  const Clip noise_16k = NoiseClip(1, 16000, 10.0, ChannelKind::kXRotation);
+  const Clip noise_4k = NoiseClip(1, 4000, 10.0, ChannelKind::kXRotation);
+  const Clip noise_1m = NoiseClip(1, 1'000'000, 10.0, ChannelKind::kXPosition);
+  const Clip noise_100k = NoiseClip(1, 100'000, 10.0, ChannelKind::kXPosition);
+  RetimeStep to_30fps;
+  to_30fps.options.output_rate = FrameRate{30, 1};
+
+  const std::vector<Workload> workloads = {
+      {"paper/noise16k/30passes/acc1e-300", &noise_16k, {Paper(30, 1e-300)}},
+      {"slow/paper/noise16k/1000passes/acc1e-300", &noise_16k, {Paper(1000, 1e-300)}},
+      {"paper/noise4k/100passes/acc1e-300", &noise_4k, {Paper(100, 1e-300)}},
+      {"paper/cmu/default", &*cmu, {Paper(8, 0.01)}},
+      {"paper/cmu/50passes", &*cmu, {Paper(50, 0.01)}},
+      {"paper/noise100k/sigma1000/1pass", &noise_100k, {Paper(1, 1e6, 1000.0)}},
+      {"tolerance/cmu/0.5", &*cmu, {Tolerance(0.5)}},
+      {"tolerance/noise1m/0.5", &noise_1m, {Tolerance(0.5)}},
+      {"tolerance/noise1m/1e-9", &noise_1m, {Tolerance(1e-9)}},
+      {"tolerance/cmu/budget3000", &*cmu, {Tolerance(0.5, 3000)}},
+      {"tolerance/noise100k/budget1000", &noise_100k, {Tolerance(0.5, 1000)}},
+      {"retime/cmu/slow0.5", &*cmu, {Speed(0.5)}},
+      {"retime/cmu/fast3", &*cmu, {Speed(3.0)}},
+      {"retime/cmu/fast3/lanczos3", &*cmu, {Speed(3.0, ResampleFilter::kLanczos3)}},
+      {"retime/cmu/slow0.1/cubic", &*cmu, {Speed(0.1, ResampleFilter::kCubic)}},
+      {"retime/cmu/30fps", &*cmu, {to_30fps}},
+      {"retime/cmu/ramp/paper", &*cmu, {Ramp(RetimeMethod::kPaper)}},
+      {"reduce+bake/cmu/paper", &*cmu, {Paper(8, 0.01), BakeStep{FrameRate{1000, 1}}}},
+      {"convert/cmu", &*cmu, {ConvertStep{true}}},
+  };
+  std::printf("%-40s %12s %12s %8s\n", "workload", "predicted s", "measured s", "ratio");
+  for (const Workload& w : workloads) {
+    // Workloads named slow/... run only when asked for by name (minutes each).
+    if (w.name.find(filter) == std::string::npos) continue;
+    if (w.name.rfind("slow/", 0) == 0 && filter.rfind("slow/", 0) != 0) continue;
+    absl::StatusOr<PipelineCost> cost = EstimatePipelineCost(*w.clip, w.steps);
+    if (!cost.ok()) {
+      std::printf("%-40s error: %s\n", w.name.c_str(), std::string(cost.status().message()).c_str());
+      continue;
+    }
+    const auto start = std::chrono::steady_clock::now();
+    absl::StatusOr<PipelineResult> result = RunPipeline(*w.clip, w.steps);
+    const double measured =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (!result.ok()) {
+      std::printf("%-40s run error: %s\n", w.name.c_str(),
+                  std::string(result.status().message()).c_str());
+      continue;
+    }
+    std::printf("%-40s %12.4f %12.4f %8.2f   %s\n", w.name.c_str(), cost->seconds, measured,
+                cost->seconds / measured, cost->Describe().c_str());
+    std::fflush(stdout);
+  }
+  return 0;
+}
+
+}  // namespace
+}  // namespace tempokey::core
+
+int main(int argc, char** argv) { return tempokey::core::Run(argc > 1 ? argv[1] : ""); }

@@ -1,0 +1,196 @@
+// The pipeline's up-front validation walk and cost prediction (cost.h): every step checked
+// against the exact shape its input will have, and the work predicted from the options alone.
+#include "tempokey/core/pipeline/cost.h"
+
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "gmock/gmock.h"
+#include "gtest/gtest.h"
+#include "tempokey/core/io/bvh.h"
+#include "tempokey/core/pipeline/pipeline.h"
+#include "tests/testing/test_paths.h"
+
+namespace tempokey::core {
+namespace {
+
+using ::testing::HasSubstr;
+
+Clip ScalarClip(int channels, std::int64_t frames, double frame_time = 1.0 / 120.0) {
+  Clip clip;
+  clip.name = "scalars";
+  clip.frame_time_seconds = frame_time;
+  clip.frame_count = frames;
+  for (int c = 0; c < channels; ++c) {
+    Channel channel;
+    channel.name = "c" + std::to_string(c);
+    for (std::int64_t f = 0; f < frames; ++f) {
+      channel.samples.push_back(std::sin(0.01 * static_cast<double>(f * (c + 1))));
+    }
+    clip.channels.push_back(std::move(channel));
+  }
+  return clip;
+}
+
+RetimeStep ConstantSpeed(double speed) {
+  RetimeStep step;
+  step.warp.domain = WarpDomain::kSpeedOverSource;
+  step.warp.speed = {SpeedKnot{{0.0, false}, speed}};
+  return step;
+}
+
+ReduceStep Paper(int iterations, double accuracy) {
+  ReduceStep step;
+  step.options.method = ReduceMethod::kPaper;
+  step.options.paper.max_iterations = iterations;
+  step.options.paper.accuracy = accuracy;
+  return step;
+}
+
+ReduceStep Budget(std::int64_t keys) {
+  ReduceStep step;
+  step.options.tolerance.key_budget = keys;
+  return step;
+}
+
+TEST(ValidatePipelineTest, ChainedRetimesOverTheOutputCapAreRefusedBeforeAnyResampling) {
+  // Each retime at speed 0.01 makes the clip 100 times longer; only the second is over the cap.
+  const Clip clip = ScalarClip(96, 994);
+  const std::vector<PipelineStep> steps = {ConstantSpeed(0.01), ConstantSpeed(0.01)};
+
+  const absl::Status status = ValidatePipeline(clip, steps);
+
+  EXPECT_EQ(status.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(status.message(),
+            "operation 2 (retime): the retimed clip would have 9930001 frames x 96 channels, over "
+            "the limit of 200000000 samples");
+}
+
+TEST(ValidatePipelineTest, LaterRetimesAreCheckedAgainstWhatTheFirstProduces) {
+  // A pin at frame 500 of the second retime lies outside a clip the first made 5 s long.
+  const Clip clip = ScalarClip(2, 121);  // 1 s at 120 fps
+  RetimeStep stretch = ConstantSpeed(0.2);
+  RetimeStep pinned;
+  pinned.options.pins = {Pin{{9.0, false}, 500}};
+  const std::vector<PipelineStep> steps = {stretch, pinned};
+
+  const absl::Status status = ValidatePipeline(clip, steps);
+
+  EXPECT_EQ(status.message(),
+            "operation 2 (retime): pin 1 (9s -> frame 500): outside the clip's source time "
+            "0s..5s");
+}
+
+TEST(ValidatePipelineTest, KeyBudgetBelowTwoKeysPerChannelIsRefusedBeforeAnyFit) {
+  const Clip clip = ScalarClip(96, 200);
+  const std::vector<PipelineStep> steps = {Budget(2)};
+
+  const absl::Status status = ValidatePipeline(clip, steps);
+
+  EXPECT_EQ(status.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(status.message(),
+            "operation 1 (reduce): tolerance.key_budget 2 is below the 192 keys any fit of 96 "
+            "channels needs (2 per channel)");
+  EXPECT_TRUE(ValidatePipeline(clip, std::vector<PipelineStep>{Budget(192)}).ok());
+}
+
+TEST(ValidatePipelineTest, BakeRateOutsideAFrameAnHourToOneHundredKilohertzIsRefused) {
+  const Clip clip = ScalarClip(1, 10);
+  const std::vector<PipelineStep> slow = {ReduceStep{}, BakeStep{FrameRate{1, 7200}}};
+  const std::vector<PipelineStep> fast = {ReduceStep{}, BakeStep{FrameRate{200000, 1}}};
+
+  EXPECT_EQ(ValidatePipeline(clip, slow).message(),
+            "operation 2 (bake): frame rate 1/7200 is under the limit of one frame an hour");
+  EXPECT_EQ(ValidatePipeline(clip, fast).message(),
+            "operation 2 (bake): frame rate 200000 Hz is over the limit of 100000 Hz");
+}
+
+TEST(ValidatePipelineTest, TheFirstOperationAtFaultIsNamed) {
+  const Clip clip = ScalarClip(1, 10);
+  ReduceStep bad = Paper(0, 0.01);
+  const std::vector<PipelineStep> steps = {bad, BakeStep{}, BakeStep{}};
+
+  EXPECT_EQ(ValidatePipeline(clip, steps).message(),
+            "operation 1 (reduce): paper.max_iterations must be in [1, 1000], got 0");
+}
+
+TEST(EstimatePipelineCostTest, PaperWorkGrowsWithPassesAndFrames) {
+  const Clip short_clip = ScalarClip(1, 1000);
+  const Clip long_clip = ScalarClip(1, 16000);
+
+  const absl::StatusOr<PipelineCost> few = EstimatePipelineCost(short_clip, {{Paper(8, 0.01)}});
+  const absl::StatusOr<PipelineCost> many =
+      EstimatePipelineCost(short_clip, {{Paper(1000, 0.01)}});
+  const absl::StatusOr<PipelineCost> longer =
+      EstimatePipelineCost(long_clip, {{Paper(1000, 1e-300)}});
+
+  ASSERT_TRUE(few.ok() && many.ok() && longer.ok());
+  EXPECT_GT(many->seconds, 100.0 * few->seconds);
+  EXPECT_GT(longer->seconds, 15.0 * many->seconds);
+  EXPECT_EQ(longer->steps.size(), 1u);
+  EXPECT_EQ(longer->steps[0].work, "reduce (paper): 1 channel x 16000 frames x up to 1000 passes");
+  EXPECT_THAT(longer->Describe(),
+              ::testing::MatchesRegex("predicted [0-9.]+ s of work \\(operation 1, reduce "
+                                      "\\(paper\\): 1 channel x 16000 frames x up to 1000 "
+                                      "passes: [0-9.]+ s\\)"));
+}
+
+TEST(EstimatePipelineCostTest, RetimeWorkFollowsTheOutputTheTimeMapGives) {
+  const Clip clip = ScalarClip(10, 1000);
+
+  const absl::StatusOr<PipelineCost> same = EstimatePipelineCost(clip, {{ConstantSpeed(1.0)}});
+  const absl::StatusOr<PipelineCost> slow = EstimatePipelineCost(clip, {{ConstantSpeed(0.1)}});
+
+  ASSERT_TRUE(same.ok() && slow.ok());
+  EXPECT_EQ(slow->steps[0].work, "retime: 10 channels x (1000 source + 9991 output frames)");
+  // (1000 + 9991) / (1000 + 1000) times the work.
+  EXPECT_NEAR(slow->seconds / same->seconds, 10991.0 / 2000.0, 1e-9);
+}
+
+TEST(EstimatePipelineCostTest, KeyBudgetSearchCountsItsFitsFromTheChannelsRanges) {
+  const Clip clip = ScalarClip(4, 500);  // sines of range 2, bound 0.5: scale 4 covers them
+
+  const absl::StatusOr<PipelineCost> plain = EstimatePipelineCost(clip, {{ReduceStep{}}});
+  const absl::StatusOr<PipelineCost> budget = EstimatePipelineCost(clip, {{Budget(100)}});
+
+  ASSERT_TRUE(plain.ok() && budget.ok());
+  // 1 + max(19 halvings, 2 doublings) + 12 bisections.
+  EXPECT_EQ(budget->steps[0].work, "reduce (tolerance): 4 channels x 500 frames x up to 32 fits "
+                                   "(key budget)");
+  EXPECT_GT(budget->seconds, 20.0 * plain->seconds);
+}
+
+TEST(EstimatePipelineCostTest, EveryStepIsCostedOnTheShapeItReceives) {
+  const Clip clip = ScalarClip(3, 121);
+  const std::vector<PipelineStep> steps = {ConstantSpeed(0.5), ReduceStep{},
+                                           BakeStep{FrameRate{240, 1}}, ConvertStep{true}};
+
+  const absl::StatusOr<PipelineCost> cost = EstimatePipelineCost(clip, steps);
+
+  ASSERT_TRUE(cost.ok()) << cost.status();
+  ASSERT_EQ(cost->steps.size(), 4u);
+  EXPECT_EQ(cost->steps[0].work, "retime: 3 channels x (121 source + 241 output frames)");
+  EXPECT_EQ(cost->steps[1].work, "reduce (tolerance): 3 channels x 241 frames");
+  EXPECT_EQ(cost->steps[2].work, "bake: 3 channels x 481 frames");
+  EXPECT_EQ(cost->steps[3].work, "convert: 3 channels x 481 frames");
+  double sum = 0.0;
+  for (const StepCost& step : cost->steps) sum += step.seconds;
+  EXPECT_DOUBLE_EQ(cost->seconds, sum);
+}
+
+TEST(EstimatePipelineCostTest, RealCaptureWithDefaultsIsFarBelowAMinute) {
+  absl::StatusOr<Clip> clip = ReadBvhFile(testing::SharedBvh("cmu/131_01.bvh"));
+  ASSERT_TRUE(clip.ok()) << clip.status();
+
+  const absl::StatusOr<PipelineCost> tolerance = EstimatePipelineCost(*clip, {{ReduceStep{}}});
+  const absl::StatusOr<PipelineCost> paper = EstimatePipelineCost(*clip, {{Paper(8, 0.01)}});
+
+  ASSERT_TRUE(tolerance.ok() && paper.ok());
+  EXPECT_LT(tolerance->seconds, 1.0);
+  EXPECT_LT(paper->seconds, 60.0);
+  EXPECT_GT(paper->seconds, tolerance->seconds);
+}
+
+}  // namespace
+}  // namespace tempokey::core
