@@ -329,6 +329,7 @@ class StudioBrowserTest(unittest.TestCase):
                 self.assertGreater(len(written), 1000)
                 self.assertEqual(downloaded, written)
 
+
     def test_5b_speed_over_output_time_means_what_the_cli_means(self):
         source_text = self.el("speed-text").get_attribute("value")
         before = self.plan_seq()
@@ -346,6 +347,35 @@ class StudioBrowserTest(unittest.TestCase):
         self.assertEqual(int(self.el("frame-count").text), frames)
         _, _, rows = read_bvh(os.path.join(self.work.name, "cli-output-domain.bvh"))
         self.assertEqual(len(rows), frames)
+
+    def test_5c_joint_and_noise_methods_keep_the_clis_keys_and_show_world_error(self):
+        # Per-joint bound in percent of the figure's height, then the noise-aware method: the page
+        # sends each to the server and shows the command; the CLI run of that command must keep
+        # exactly as many keys, and the report shows the world-space error of the joints.
+        Select(self.el("reduce-method")).select_by_visible_text("joint")
+        self.assertTrue(self.el("joint-tolerance").is_displayed())
+        self.assertFalse(self.el("tolerance").is_displayed())
+        field = self.el("joint-tolerance")
+        field.clear()
+        field.send_keys("1", Keys.TAB)
+        for flag in ("--joint-tolerance 1%", "--method noise"):
+            with self.subTest(flag=flag):
+                if flag == "--method noise":
+                    Select(self.el("reduce-method")).select_by_visible_text("noise")
+                wait_for(lambda: self.data("reduce-status", "state") == "done"
+                         and flag in self.data("reduce-status", "command"), "the reduction " + flag)
+                shown = int(self.el("key-count").text)
+                out = self.run_cli(self.data("reduce-status", "command"),
+                                   os.path.join(self.work.name, "cli-method.anim"))
+                keys = int(re.search(r"keys:\s+(\d+) of", out).group(1))
+                self.assertEqual(shown, keys)
+                report = self.el("reduce-report").text
+                self.assertIn("joints (world space)", report)
+                self.assertIn("worstPoint", report)
+        self.screenshot("reduce", "studio-reduction-noise.png")
+        Select(self.el("reduce-method")).select_by_visible_text("tolerance")
+        wait_for(lambda: self.data("reduce-status", "state") == "done"
+                 and "--tolerance " in self.data("reduce-status", "command"), "the tolerance reduction")
 
     def test_6_malformed_file_shows_the_located_message_and_breaks_nothing(self):
         with open(CMU) as f:

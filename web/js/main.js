@@ -448,28 +448,45 @@ function fillChannels() {
   fillChannelsOf(Number(joints.value), preferred);
 }
 
+// The reduce operation the settings ask for. An empty position bound is left unset: the server's
+// default, 0.3 % of the figure's height (the CLI's too).
 function reduceOperation() {
-  if ($('reduce-method').value === 'paper') return {method: 'REDUCE_METHOD_PAPER', paper: {}};
-  return {
-    method: 'REDUCE_METHOD_TOLERANCE',
-    tolerance: {
-      maxRotationErrorDegrees: Number($('tolerance').value),
-      maxPositionError: Number($('position-tolerance').value),
-    },
-  };
+  const method = $('reduce-method').value;
+  if (method === 'paper') return {method: 'REDUCE_METHOD_PAPER', paper: {}};
+  if (method === 'noise') return {method: 'REDUCE_METHOD_NOISE', noise: {}};
+  if (method === 'joint') {
+    return {method: 'REDUCE_METHOD_TOLERANCE',
+      tolerance: {maxJointErrorPercentOfHeight: Number($('joint-tolerance').value)}};
+  }
+  const tolerance = {maxRotationErrorDegrees: Number($('tolerance').value)};
+  if ($('position-tolerance').value.trim() !== '') tolerance.maxPositionError = Number($('position-tolerance').value);
+  return {method: 'REDUCE_METHOD_TOLERANCE', tolerance};
 }
 
+// The same reduction as a CLI command (its flags are the CLI's own).
 function reduceCommand() {
   const c = state.clip;
   const stem = c.fileName.replace(/\.[^.]*$/, '');
   const flags = [`tempokey reduce ${c.fileName} -o ${stem}-keys.anim`];
-  if ($('reduce-method').value === 'paper') {
-    flags.push('--method paper');
+  const method = $('reduce-method').value;
+  if (method === 'paper' || method === 'noise') {
+    flags.push(`--method ${method}`);
+  } else if (method === 'joint') {
+    flags.push(`--joint-tolerance ${Number($('joint-tolerance').value)}%`);
   } else {
     flags.push(`--tolerance ${Number($('tolerance').value)}`);
-    flags.push(`--position-tolerance ${Number($('position-tolerance').value)}`);
+    if ($('position-tolerance').value.trim() !== '') {
+      flags.push(`--position-tolerance ${Number($('position-tolerance').value)}`);
+    }
   }
   return flags.join(' ');
+}
+
+// Shows the inputs of the chosen method only.
+function showReduceInputs() {
+  const method = $('reduce-method').value;
+  document.querySelectorAll('.tolerance-only').forEach((e) => (e.hidden = method !== 'tolerance'));
+  document.querySelectorAll('.joint-only').forEach((e) => (e.hidden = method !== 'joint'));
 }
 
 let reduceTimer = 0;
@@ -478,7 +495,9 @@ let reduceRun = 0;
 function scheduleReduce(delay = REDUCE_DELAY_MS) {
   clearTimeout(reduceTimer);
   if (!state.clip) return;
-  if ($('tolerance').value.trim() === '' || $('position-tolerance').value.trim() === '') return;
+  const method = $('reduce-method').value;
+  if (method === 'tolerance' && $('tolerance').value.trim() === '') return;
+  if (method === 'joint' && $('joint-tolerance').value.trim() === '') return;
   $('reduce-status').dataset.state = 'pending';
   reduceTimer = setTimeout(runReduce, delay);
 }
@@ -488,7 +507,7 @@ async function runReduce() {
   const clip = state.clip;
   const op = reduceOperation();
   const command = reduceCommand();
-  document.querySelectorAll('.tolerance-only').forEach((e) => (e.hidden = op.method === 'REDUCE_METHOD_PAPER'));
+  showReduceInputs();
   $('reduce-status').dataset.state = 'running';
   $('reduce-status').textContent = 'reducing on the server…';
   const done = await guarded('reduce', async () => {
@@ -537,6 +556,11 @@ function renderReport(channel) {
     if (name === 'worstChannelIndex') text += ` (${api.channelName(state.clip.header, Number(value))})`;
     row(name, text);
   }
+  if (report.worldError) {
+    // Where the audience sees it: every joint and end site through the skeleton, in file units.
+    row('joints (world space)', '', true);
+    for (const [name, value] of Object.entries(report.worldError)) row(name, show(value));
+  }
   const own = (report.channels || []).find((c) => Number(c.channelIndex) === channel);
   if (own) {
     row(api.channelName(state.clip.header, channel), '', true);
@@ -555,8 +579,10 @@ function showChannel() {
   if (reduced) {
     curve = reduced.curves[channel];
     const own = (reduced.report.channels || []).find((c) => Number(c.channelIndex) === channel);
-    if (reduced.op.method === 'REDUCE_METHOD_TOLERANCE') {
-      bound = rotation ? reduced.op.tolerance.maxRotationErrorDegrees : reduced.op.tolerance.maxPositionError;
+    const tolerance = reduced.op.tolerance;
+    const perChannel = tolerance && (rotation ? tolerance.maxRotationErrorDegrees : tolerance.maxPositionError);
+    if (perChannel !== undefined && perChannel !== null) {
+      bound = perChannel;
     } else if (own) {
       bound = own.maxError;
     }
@@ -665,7 +691,8 @@ $('joint').addEventListener('change', () => {
   fillChannelsOf(Number($('joint').value));
   showChannel();
 });
-for (const id of ['reduce-method', 'tolerance', 'position-tolerance']) $(id).addEventListener('change', () => scheduleReduce());
+for (const id of ['reduce-method', 'tolerance', 'position-tolerance', 'joint-tolerance']) $(id).addEventListener('change', () => scheduleReduce());
+$('reduce-method').addEventListener('change', showReduceInputs);
 $('run-reduce').addEventListener('click', () => scheduleReduce(0));
 $('token').addEventListener('change', (e) => {
   api.setToken(e.target.value.trim());
