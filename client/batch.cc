@@ -217,10 +217,13 @@ absl::StatusOr<std::vector<BatchItem>> PlanBatch(const BatchPlanOptions& options
 
 std::vector<core::PipelineStep> StepsForFormat(std::span<const core::PipelineStep> steps,
                                                FileFormat format) {
-  std::vector<core::PipelineStep> result(steps.begin(), steps.end());
-  if (core::ProducesKeyedOutput(steps) && !IsKeyedFormat(format) && !IsGltfFormat(format)) {
-    result.push_back(core::BakeStep{});
-  }
+  const bool bake =
+      core::ProducesKeyedOutput(steps) && !IsKeyedFormat(format) && !IsGltfFormat(format);
+  // Sized once and filled in place: growing a vector of variants by push_back made g++ 12 at -O2
+  // report -Wmaybe-uninitialized on the inactive alternatives it moves (a false positive).
+  std::vector<core::PipelineStep> result(steps.size() + (bake ? 1 : 0),
+                                         core::PipelineStep(core::BakeStep{}));
+  std::copy(steps.begin(), steps.end(), result.begin());
   return result;
 }
 
