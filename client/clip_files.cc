@@ -12,6 +12,7 @@
 #include "client/cli_errors.h"
 #include "tempokey/core/io/bvh.h"
 #include "tempokey/core/io/csv.h"
+#include "tempokey/core/io/file_formats.h"
 #include "tempokey/core/io/file_io.h"
 #include "tempokey/core/io/gltf.h"
 #include "tempokey/core/io/keyed_json.h"
@@ -173,8 +174,7 @@ absl::Status WriteOutput(const std::string& path, FileFormat format,
 }
 
 double GltfRotationBoundDegrees(const core::ReduceStep& reduce) {
-  return reduce.options.tolerance.max_rotation_error_degrees.value_or(
-      core::kDefaultMaxRotationErrorDegrees);
+  return core::GltfRotationBoundDegrees(reduce.options);
 }
 
 }  // namespace tempokey::client

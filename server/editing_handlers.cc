@@ -204,6 +204,10 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
       case v1::ExportFileRequest::kJobId: {
         TEMPOKEY_RETURN_IF_ERROR(CheckId("job_id", request.job_id()));
         TEMPOKEY_ASSIGN_OR_RETURN(result, service_->jobs->Result(request.job_id(), owner));
+        if (format_->content == core::FileContent::kEither &&
+            std::holds_alternative<core::KeyedClip>(result->output)) {
+          TEMPOKEY_RETURN_IF_ERROR(FindGltfSource(request.job_id(), owner));
+        }
         break;
       }
       case v1::ExportFileRequest::kClipId: {
@@ -232,9 +236,34 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
 
   // Runs on a worker. Only this task touches the members until its first StartWrite. The file's
   // bytes exist once formatted: they are kept only if the budget can count them.
+  // A keyed glTF is fitted against the clip the curves were reduced from (as the CLI's is): the
+  // job's stored input, when the job is one reduce of it. The same bound as the CLI's.
+  absl::Status FindGltfSource(const std::string& job_id, const std::string& owner) {
+    TEMPOKEY_ASSIGN_OR_RETURN(const JobSnapshot job, service_->jobs->Get(job_id, owner));
+    const std::vector<core::PipelineStep>& steps = job.spec->steps;
+    const auto* reduce =
+        steps.size() == 1 ? std::get_if<core::ReduceStep>(&steps.front()) : nullptr;
+    if (reduce == nullptr) {
+      return absl::FailedPreconditionError(absl::StrCat(
+          "a keyed ", core::AsAbsl(format_->name), " file needs a job that is one reduce of a "
+          "stored clip; job ", job_id, " runs ", steps.size(), " operations"));
+    }
+    absl::StatusOr<std::shared_ptr<const core::Clip>> clip =
+        service_->clips->Get(owner, job.spec->clip_id);
+    if (!clip.ok()) {
+      return absl::FailedPreconditionError(absl::StrCat(
+          "a keyed ", core::AsAbsl(format_->name), " file is fitted against the reduced clip ",
+          job.spec->clip_id, ", which this server no longer holds; upload it again"));
+    }
+    gltf_clip_ = *std::move(clip);
+    gltf_source_ = {.clip = gltf_clip_.get(),
+                    .max_rotation_error_degrees = core::GltfRotationBoundDegrees(reduce->options)};
+    return absl::OkStatus();
+  }
+
   absl::Status Format(const std::variant<core::Clip, core::KeyedClip>& output) {
-    TEMPOKEY_ASSIGN_OR_RETURN(bytes_,
-                              core::FormatOutput(output, *format_, service_->clip_limits));
+    TEMPOKEY_ASSIGN_OR_RETURN(
+        bytes_, core::FormatOutput(output, *format_, service_->clip_limits, gltf_source_));
     file_name_ = absl::StrCat(OutputName(output), core::AsAbsl(format_->extension));
     return Charge();
   }
@@ -284,6 +313,8 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
   std::shared_ptr<IdleReaper::Timer> idle_;
   MemoryBudget::Reservation memory_;  // the formatted file
   const core::ExportFormat* format_ = nullptr;
+  std::shared_ptr<const core::Clip> gltf_clip_;  // a keyed glTF's source, held while formatting
+  core::ExportSource gltf_source_;
   std::int64_t chunk_bytes_ = kDefaultChunkBytes;
   bool started_ = false;
   std::string bytes_;

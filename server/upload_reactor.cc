@@ -57,6 +57,12 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
     if (status.ok()) status = Accept();
     if (!status.ok()) {
       spdlog::debug("upload refused at message {}: {}", messages_, status.ToString());
+      // What the refused upload holds goes back to the budget now, before the client sees the
+      // refusal, not when gRPC destroys the call: the client's other uploads may need it at once.
+      // No read is pending, so nothing else touches these.
+      digest_.reset();
+      assembler_.reset();
+      reservation_.Release();
       FinishOnce(status);
       return;
     }

@@ -303,7 +303,7 @@ TEST_F(EditingServiceTest, ExportRefusesUnknownFormatsAndCurvesOfASampledClip) {
   Export(anim, &s2);
   const std::string text = Export(bvh, &s3);
 
-  EXPECT_THAT(s1, GrpcStatusIs(grpc::INVALID_ARGUMENT, "format \"gif\" is not one of bvh, csv, json, anim"));
+  EXPECT_THAT(s1, GrpcStatusIs(grpc::INVALID_ARGUMENT, "format \"gif\" is not one of bvh, csv, json, anim, gltf, glb"));
   EXPECT_THAT(s2, GrpcStatusIs(grpc::INVALID_ARGUMENT, HasSubstr("a sampled clip has none")));
   TEMPOKEY_ASSERT_GRPC_OK(s3);
   EXPECT_EQ(text, *core::FormatBvh(*core::ReadBvhFile(Cmu())));
@@ -364,7 +364,7 @@ TEST_F(EditingServiceTest, ServerInfoListsTheExportFormats) {
 
   std::vector<std::string> names;
   for (const v1::ExportFormat& format : info.export_formats()) names.push_back(format.name());
-  EXPECT_EQ(names, (std::vector<std::string>{"bvh", "csv", "json", "anim"}));
+  EXPECT_EQ(names, (std::vector<std::string>{"bvh", "csv", "json", "anim", "gltf", "glb"}));
   EXPECT_TRUE(info.export_formats(2).keyed());
   EXPECT_FALSE(info.export_formats(0).keyed());
 }

@@ -93,7 +93,7 @@ class HttpApiTest(unittest.TestCase):
         over_grpc = self.stub.GetServerInfo(motion_service_pb2.GetServerInfoRequest(),
                                             timeout=CALL_TIMEOUT_SECONDS)
         self.assertEqual(over_http, over_grpc)
-        self.assertEqual([f.name for f in over_http.export_formats], ["bvh", "csv", "json", "anim"])
+        self.assertEqual([f.name for f in over_http.export_formats], ["bvh", "csv", "json", "anim", "gltf", "glb"])
 
     def test_errors_are_grpc_codes_as_http_statuses_with_the_same_message(self):
         cases = [("GetJob", {"jobId": "job-unknown"}, motion_service_pb2.GetJobRequest, 404, "NOT_FOUND"),

@@ -315,7 +315,9 @@ class StudioBrowserTest(unittest.TestCase):
                  ("download-reduce-json", "131_01-keys.json", reduce_command),
                  ("download-reduce-anim", "131_01-keys.anim", reduce_command),
                  ("download-reduce-bvh", "131_01-keys.bvh", reduce_command),
-                 ("download-reduce-csv", "131_01-keys.csv", reduce_command)]
+                 ("download-reduce-csv", "131_01-keys.csv", reduce_command),
+                 ("download-retime-gltf", "131_01-retimed.gltf", retime_command),
+                 ("download-reduce-glb", "131_01-keys.glb", reduce_command)]
         for button, name, command in cases:
             with self.subTest(file=name):
                 self.el(button).click()

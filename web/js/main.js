@@ -602,7 +602,8 @@ function renderDownloads(id, keyed) {
     const button = document.createElement('button');
     button.id = `download-${keyed ? 'reduce' : 'retime'}-${format.name}`;
     button.textContent = format.extension;
-    button.title = keyed && !format.keyed ? 'the curves baked at the source rate' : format.mediaType;
+    const gltf = format.mediaType.startsWith('model/gltf');
+    button.title = keyed && !format.keyed && !gltf ? 'the curves baked at the source rate' : format.mediaType;
     button.addEventListener('click', () => download(keyed, format));
     row.appendChild(button);
   }

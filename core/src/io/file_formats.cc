@@ -2,10 +2,12 @@
 
 #include <algorithm>
 #include <cctype>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "tempokey/core/io/bvh.h"
 #include "tempokey/core/io/csv.h"
+#include "tempokey/core/io/gltf.h"
 #include "tempokey/core/io/keyed_json.h"
 #include "tempokey/core/io/maya_anim.h"
 #include "tempokey/core/model/status.h"
@@ -25,6 +27,12 @@ constexpr ExportFormat kExportFormats[] = {
      .content = FileContent::kKeyed, .format_keyed = &FormatKeyedClipJson},
     {.name = "anim", .extension = ".anim", .media_type = kText, .content = FileContent::kKeyed,
      .format_keyed = &FormatMayaAnim},
+    // Media types registered with IANA by Khronos (glTF 2.0 specification, "File Extensions and
+    // Media Types").
+    {.name = "gltf", .extension = ".gltf", .media_type = "model/gltf+json",
+     .content = FileContent::kEither, .gltf = GltfContainer::kText},
+    {.name = "glb", .extension = ".glb", .media_type = "model/gltf-binary",
+     .content = FileContent::kEither, .gltf = GltfContainer::kBinary},
 };
 
 bool EqualsIgnoringCase(std::string_view a, std::string_view b) {
@@ -58,8 +66,37 @@ const ExportFormat* FindExportFormat(std::string_view name) {
   return nullptr;
 }
 
+double GltfRotationBoundDegrees(const ReduceOptions& options) {
+  return options.tolerance.max_rotation_error_degrees.value_or(kDefaultMaxRotationErrorDegrees);
+}
+
+namespace {
+
+absl::StatusOr<std::string> FormatGltf(const std::variant<Clip, KeyedClip>& output,
+                                       const ExportFormat& format, const ExportSource& source) {
+  if (const auto* clip = std::get_if<Clip>(&output)) {
+    TEMPOKEY_ASSIGN_OR_RETURN(GltfFile file, FormatGltfSampled(*clip, format.gltf));
+    return std::move(file.bytes);
+  }
+  if (source.clip == nullptr) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        "a keyed ", AsAbsl(format.name), " file is fitted against the clip the curves were "
+        "reduced from, which is not available"));
+  }
+  TEMPOKEY_ASSIGN_OR_RETURN(
+      GltfFile file,
+      FormatGltfKeyed(*source.clip, std::get<KeyedClip>(output),
+                      GltfKeyedOptions{.max_rotation_error_degrees = source.max_rotation_error_degrees},
+                      format.gltf));
+  return std::move(file.bytes);
+}
+
+}  // namespace
+
 absl::StatusOr<std::string> FormatOutput(const std::variant<Clip, KeyedClip>& output,
-                                         const ExportFormat& format, const ClipLimits& limits) {
+                                         const ExportFormat& format, const ClipLimits& limits,
+                                         const ExportSource& source) {
+  if (format.content == FileContent::kEither) return FormatGltf(output, format, source);
   if (const auto* keyed = std::get_if<KeyedClip>(&output)) {
     if (format.content == FileContent::kKeyed) return format.format_keyed(*keyed);
     TEMPOKEY_ASSIGN_OR_RETURN(Clip baked, Bake(*keyed, std::nullopt, limits));

@@ -9,6 +9,7 @@
 #include "tempokey/core/io/csv.h"
 #include "tempokey/core/io/file_formats.h"
 #include "tempokey/core/io/file_io.h"
+#include "tempokey/core/io/gltf.h"
 #include "tempokey/core/io/keyed_json.h"
 #include "tempokey/core/io/maya_anim.h"
 #include "tempokey/core/reduce/reduce.h"
@@ -36,7 +37,7 @@ TEST(FileFormatsTest, ListsTheCliOutputFormatsInOrder) {
     EXPECT_EQ(format.format_keyed != nullptr, format.content == FileContent::kKeyed);
   }
 
-  EXPECT_EQ(names, (std::vector<std::string>{"bvh", "csv", "json", "anim"}));
+  EXPECT_EQ(names, (std::vector<std::string>{"bvh", "csv", "json", "anim", "gltf", "glb"}));
   EXPECT_EQ(FindExportFormat("BVH"), FindExportFormat(".bvh"));
   EXPECT_EQ(FindExportFormat("gif"), nullptr);
 }
@@ -52,6 +53,32 @@ TEST(FileFormatsTest, EachFormatWritesWhatItsOwnFunctionWrites) {
   EXPECT_EQ(*FormatOutput(keyed, *FindExportFormat("anim")), *FormatMayaAnim(Keyed()));
   EXPECT_EQ(*FormatOutput(keyed, *FindExportFormat("bvh")), *FormatBvh(baked));
   EXPECT_EQ(*FormatOutput(keyed, *FindExportFormat("csv")), *FormatCsv(baked));
+}
+
+TEST(FileFormatsTest, GltfWritesSampledClipsAndCurvesFittedAgainstTheirSource) {
+  const std::variant<Clip, KeyedClip> sampled = Bandai();
+  const std::variant<Clip, KeyedClip> keyed = Keyed();
+  const ExportSource source{.clip = &Bandai(), .max_rotation_error_degrees = 0.25};
+
+  EXPECT_EQ(*FormatOutput(sampled, *FindExportFormat("gltf")),
+            FormatGltfSampled(Bandai(), GltfContainer::kText)->bytes);
+  EXPECT_EQ(*FormatOutput(keyed, *FindExportFormat("glb"), {}, source),
+            FormatGltfKeyed(Bandai(), Keyed(), {.max_rotation_error_degrees = 0.25},
+                            GltfContainer::kBinary)
+                ->bytes);
+  const absl::StatusOr<std::string> unsourced = FormatOutput(keyed, *FindExportFormat("gltf"));
+  EXPECT_EQ(unsourced.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(unsourced.status().message(),
+            "a keyed gltf file is fitted against the clip the curves were reduced from, which is "
+            "not available");
+}
+
+TEST(FileFormatsTest, GltfRotationBoundIsTheRotationToleranceOrHalfADegree) {
+  ReduceOptions set;
+  set.tolerance.max_rotation_error_degrees = 0.3;
+
+  EXPECT_EQ(GltfRotationBoundDegrees(set), 0.3);
+  EXPECT_EQ(GltfRotationBoundDegrees(ReduceOptions{}), 0.5);
 }
 
 TEST(FileFormatsTest, SampledClipHasNoCurvesToWrite) {

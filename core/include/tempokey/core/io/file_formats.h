@@ -14,8 +14,10 @@
 #include <variant>
 
 #include "absl/status/statusor.h"
+#include "tempokey/core/io/gltf.h"
 #include "tempokey/core/model/clip.h"
 #include "tempokey/core/model/keyed_clip.h"
+#include "tempokey/core/reduce/reduce.h"
 
 namespace tempokey::core {
 
@@ -23,9 +25,11 @@ namespace tempokey::core {
 enum class FileContent {
   kSampled,  // uniformly sampled channels (.bvh, .csv)
   kKeyed,    // key-frame curves (.json, .anim)
+  kEither,   // either, as it comes (.gltf, .glb: LINEAR or CUBICSPLINE samplers, core/io/gltf.h)
 };
 
-// One output format. Exactly one of the two formatters is set, the one of `content`.
+// One output format. Exactly one of the two formatters is set, the one of `content`; a kEither
+// format (glTF) has neither and writes through gltf.h in the `gltf` container.
 struct ExportFormat {
   std::string_view name;        // "bvh": what requests name
   std::string_view extension;   // ".bvh"
@@ -33,7 +37,21 @@ struct ExportFormat {
   FileContent content = FileContent::kSampled;
   absl::StatusOr<std::string> (*format_sampled)(const Clip& clip) = nullptr;
   absl::StatusOr<std::string> (*format_keyed)(const KeyedClip& keyed) = nullptr;
+  GltfContainer gltf = GltfContainer::kText;
 };
+
+// What a keyed glTF needs besides the curves: the clip they were reduced from (its rotations are
+// fitted again in glTF's quaternion semantics) and the rotation bound of that fit.
+struct ExportSource {
+  const Clip* clip = nullptr;
+  double max_rotation_error_degrees = GltfKeyedOptions{}.max_rotation_error_degrees;
+};
+
+// The rotation bound a keyed glTF of a reduction with `options` is fitted to: its rotation
+// tolerance, or the default 0.5 degrees when unset (also under a joint tolerance and for the other
+// methods: the glTF's rotations then stay within 0.5 degrees of the source's). The CLI and the
+// server's downloads both use it, so their files are the same bytes.
+double GltfRotationBoundDegrees(const ReduceOptions& options);
 
 // Every output format of this build, in a stable order (bvh, csv, json, anim, ...).
 std::span<const ExportFormat> ExportFormats();
@@ -44,12 +62,15 @@ const ExportFormat* FindExportFormat(std::string_view name);
 
 // The file bytes of a pipeline output in `format`. A keyed output in a sampled format is baked at
 // the rate of the clip its curves came from first (Bake() with no rate, held to `limits`): what
-// `tempokey reduce IN -o OUT.bvh` gets from the server's reduce + bake.
+// `tempokey reduce IN -o OUT.bvh` gets from the server's reduce + bake. A keyed output in glTF is
+// fitted against `source` (FormatGltfKeyed()).
 // Errors: kInvalidArgument for a sampled output in a keyed format ("json holds key-frame curves;
-// a sampled clip has none: reduce it first"), and the formatter's and Bake()'s errors.
+// a sampled clip has none: reduce it first"); kFailedPrecondition for a keyed output in glTF
+// without a source clip; the formatter's and Bake()'s errors.
 // Thread-safe: a pure function of its arguments.
 absl::StatusOr<std::string> FormatOutput(const std::variant<Clip, KeyedClip>& output,
-                                         const ExportFormat& format, const ClipLimits& limits = {});
+                                         const ExportFormat& format, const ClipLimits& limits = {},
+                                         const ExportSource& source = {});
 
 // Parses the text of a clip file named `file_name` with the reader its extension picks (.bvh:
 // ParseBvh(); .csv: ParseCsv() at `csv_frame_time_seconds`, which a CSV file does not store).
