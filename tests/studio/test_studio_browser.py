@@ -13,6 +13,7 @@ the bytes with the CLI's files, then open a malformed file. Every wait polls the
 with a deadline that only bounds a hang; nothing asserts a time.
 """
 
+import json
 import os
 import re
 import shlex
@@ -40,6 +41,8 @@ ARTEFACTS = env_path("TEMPOKEY_ARTEFACTS_DIR")
 CHROMIUM = os.environ.get("TEMPOKEY_CHROMIUM", "/usr/bin/chromium")
 CHROMEDRIVER = os.environ.get("TEMPOKEY_CHROMEDRIVER", "/usr/bin/chromedriver")
 CMU = os.path.join(SHARED_DIR, "data", "bvh", "cmu", "131_01.bvh")
+# The Khronos glTF validator under node (tests/export, pinned there; deploy/install-deps.sh).
+GLTF_VALIDATE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "export", "validate.mjs")
 
 # Bounds on waits: generous for a loaded 2-core machine, never a performance claim.
 DEADLINE_SECONDS = 90
@@ -330,6 +333,15 @@ class StudioBrowserTest(unittest.TestCase):
                     downloaded, written = a.read(), b.read()
                 self.assertGreater(len(written), 1000)
                 self.assertEqual(downloaded, written)
+        # Equal to the CLI's is not yet right: the glTF downloads also pass Khronos's validator.
+        gltf_files = [os.path.join(self.downloads, name) for name in ("131_01-retimed.gltf", "131_01-keys.glb")]
+        done = subprocess.run(["node", GLTF_VALIDATE] + gltf_files, capture_output=True, text=True,
+                              cwd=os.path.dirname(GLTF_VALIDATE), timeout=DEADLINE_SECONDS)
+        self.assertEqual(done.returncode, 0, done.stderr)
+        reports = [json.loads(line) for line in done.stdout.splitlines()]
+        self.assertEqual(len(reports), 2)
+        for report in reports:
+            self.assertEqual((report["errors"], report["warnings"]), (0, 0), report)
 
 
     def test_5b_speed_over_output_time_means_what_the_cli_means(self):
