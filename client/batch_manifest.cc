@@ -7,6 +7,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "client/json_members.h"
 #include "google/protobuf/io/coded_stream.h"
 #include "google/protobuf/io/zero_copy_stream_impl_lite.h"
 #include "proto/clip_digest.h"
@@ -42,27 +43,12 @@ void AppendOperation(std::string& out, const v1::Operation& operation) {
   absl::StrAppend(&out, bytes.size(), ":", bytes);
 }
 
-// Reports a problem at a value of a manifest document.
-class Place {
- public:
-  explicit Place(std::string_view source) : source_(source) {}
-
-  absl::Status Fail(const JsonValue& at, std::string_view what) const {
-    return absl::InvalidArgumentError(
-        absl::StrCat(AsAbsl(source_), ":", at.line, ":", at.column, ": ", AsAbsl(what)));
-  }
-
- private:
-  std::string_view source_;
-};
+using Place = JsonPlace;
 
 absl::StatusOr<std::string> StringMember(const Place& place, const JsonValue& object,
                                          std::string_view name) {
-  const JsonValue* value = object.Find(name);
-  if (value == nullptr) return place.Fail(object, absl::StrCat("missing \"", AsAbsl(name), "\""));
-  if (value->type != JsonValue::Type::kString) {
-    return place.Fail(*value, absl::StrCat("\"", AsAbsl(name), "\" must be a string"));
-  }
+  TEMPOKEY_ASSIGN_OR_RETURN(const JsonValue* value,
+                            JsonMember(place, object, name, JsonValue::Type::kString, true));
   return value->text;
 }
 

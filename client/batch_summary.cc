@@ -7,6 +7,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "client/batch_shard.h"
+#include "client/json_members.h"
 #include "tempokey/core/io/json.h"
 #include "tempokey/core/model/status.h"
 
@@ -16,40 +17,12 @@ namespace {
 using core::AsAbsl;
 using core::JsonValue;
 
-class Place {
- public:
-  explicit Place(std::string_view source) : source_(source) {}
-
-  absl::Status Fail(const JsonValue& at, std::string_view what) const {
-    return absl::InvalidArgumentError(
-        absl::StrCat(AsAbsl(source_), ":", at.line, ":", at.column, ": ", AsAbsl(what)));
-  }
-
- private:
-  std::string_view source_;
-};
-
-absl::StatusOr<const JsonValue*> Member(const Place& place, const JsonValue& object,
-                                        std::string_view name, JsonValue::Type type,
-                                        bool required) {
-  const JsonValue* value = object.Find(name);
-  if (value == nullptr) {
-    if (!required) return nullptr;
-    return place.Fail(object, absl::StrCat("missing \"", AsAbsl(name), "\""));
-  }
-  if (value->type != type) {
-    static constexpr std::string_view kTypeNames[] = {"null",   "true or false", "a number",
-                                                      "a string", "an array",    "an object"};
-    return place.Fail(*value, absl::StrCat("\"", AsAbsl(name), "\" must be ",
-                                           AsAbsl(kTypeNames[static_cast<int>(type)])));
-  }
-  return value;
-}
+using Place = JsonPlace;
 
 absl::StatusOr<double> NumberOr(const Place& place, const JsonValue& object,
                                 std::string_view name, double fallback) {
   TEMPOKEY_ASSIGN_OR_RETURN(const JsonValue* value,
-                            Member(place, object, name, JsonValue::Type::kNumber, false));
+                            JsonMember(place, object, name, JsonValue::Type::kNumber, false));
   return value ? value->number : fallback;
 }
 
@@ -65,18 +38,18 @@ absl::StatusOr<BatchFileResult> ParseResult(const Place& place, const JsonValue&
   if (item.type != JsonValue::Type::kObject) return place.Fail(item, "a result must be an object");
   BatchFileResult file;
   TEMPOKEY_ASSIGN_OR_RETURN(const JsonValue* input,
-                            Member(place, item, "input", JsonValue::Type::kString, true));
+                            JsonMember(place, item, "input", JsonValue::Type::kString, true));
   TEMPOKEY_ASSIGN_OR_RETURN(const JsonValue* status,
-                            Member(place, item, "status", JsonValue::Type::kString, true));
+                            JsonMember(place, item, "status", JsonValue::Type::kString, true));
   TEMPOKEY_ASSIGN_OR_RETURN(const JsonValue* output,
-                            Member(place, item, "output", JsonValue::Type::kString, false));
+                            JsonMember(place, item, "output", JsonValue::Type::kString, false));
   file.name = input->text;
   if (output != nullptr) file.output_path = output->text;
   if (status->text == "failed") {
     TEMPOKEY_ASSIGN_OR_RETURN(const JsonValue* code,
-                              Member(place, item, "code", JsonValue::Type::kString, true));
+                              JsonMember(place, item, "code", JsonValue::Type::kString, true));
     TEMPOKEY_ASSIGN_OR_RETURN(const JsonValue* error,
-                              Member(place, item, "error", JsonValue::Type::kString, true));
+                              JsonMember(place, item, "error", JsonValue::Type::kString, true));
     const std::optional<absl::StatusCode> status_code = CodeNamed(code->text);
     if (!status_code || *status_code == absl::StatusCode::kOk) {
       return place.Fail(*code, absl::StrCat("unknown status code '", code->text, "'"));
@@ -96,7 +69,7 @@ absl::StatusOr<BatchFileResult> ParseResult(const Place& place, const JsonValue&
   file.frames = static_cast<std::int64_t>(frames);
   file.keys = static_cast<std::int64_t>(keys);
   TEMPOKEY_ASSIGN_OR_RETURN(const JsonValue* max_error,
-                            Member(place, item, "max_error", JsonValue::Type::kNumber, false));
+                            JsonMember(place, item, "max_error", JsonValue::Type::kNumber, false));
   if (max_error != nullptr) file.max_error = max_error->number;
   return file;
 }
@@ -105,7 +78,7 @@ absl::StatusOr<BatchFileResult> ParseResult(const Place& place, const JsonValue&
 absl::Status CheckCount(const Place& place, const JsonValue& root, std::string_view name,
                         int expected) {
   TEMPOKEY_ASSIGN_OR_RETURN(const JsonValue* value,
-                            Member(place, root, name, JsonValue::Type::kNumber, false));
+                            JsonMember(place, root, name, JsonValue::Type::kNumber, false));
   if (value != nullptr && value->number != expected) {
     return place.Fail(*value, absl::StrCat("\"", AsAbsl(name), "\" is ", value->text,
                                            " but the results count ", expected));
@@ -121,14 +94,14 @@ absl::StatusOr<BatchSummary> ParseBatchSummary(std::string_view text, std::strin
   if (root.type != JsonValue::Type::kObject) return place.Fail(root, "expected an object");
   BatchSummary summary;
   TEMPOKEY_ASSIGN_OR_RETURN(const JsonValue* results,
-                            Member(place, root, "results", JsonValue::Type::kArray, true));
+                            JsonMember(place, root, "results", JsonValue::Type::kArray, true));
   for (const JsonValue& item : *results->array) {
     TEMPOKEY_ASSIGN_OR_RETURN(BatchFileResult file, ParseResult(place, item));
     summary.files.push_back(std::move(file));
   }
   TEMPOKEY_ASSIGN_OR_RETURN(summary.seconds, NumberOr(place, root, "seconds", 0));
   TEMPOKEY_ASSIGN_OR_RETURN(const JsonValue* shard,
-                            Member(place, root, "shard", JsonValue::Type::kString, false));
+                            JsonMember(place, root, "shard", JsonValue::Type::kString, false));
   if (shard != nullptr) {
     absl::StatusOr<BatchShard> parsed = ParseShard(shard->text);
     if (!parsed.ok()) return place.Fail(*shard, absl::StrCat("\"shard\" must be I/N, got '",
@@ -136,7 +109,7 @@ absl::StatusOr<BatchSummary> ParseBatchSummary(std::string_view text, std::strin
     summary.shard = *parsed;
   }
   TEMPOKEY_ASSIGN_OR_RETURN(const JsonValue* pipeline,
-                            Member(place, root, "pipeline", JsonValue::Type::kString, false));
+                            JsonMember(place, root, "pipeline", JsonValue::Type::kString, false));
   if (pipeline != nullptr) summary.pipeline = pipeline->text;
   TEMPOKEY_RETURN_IF_ERROR(
       CheckCount(place, root, "files", static_cast<int>(summary.files.size())));

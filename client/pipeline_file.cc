@@ -47,8 +47,7 @@ class Locator {
   explicit Locator(std::string_view source) : source_(source) {}
 
   absl::Status Fail(const JsonValue& at, std::string_view what) const {
-    return UsageError(absl::StrCat(AsAbsl(source_), ":", at.line, ":", at.column, ": ",
-                                   AsAbsl(what)));
+    return AsUsageError(core::JsonErrorAt(source_, at, what));
   }
 
  private:

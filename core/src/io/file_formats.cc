@@ -85,9 +85,10 @@ absl::StatusOr<std::string> FormatGltf(const std::variant<Clip, KeyedClip>& outp
   }
   TEMPOKEY_ASSIGN_OR_RETURN(
       GltfFile file,
-      FormatGltfKeyed(*source.clip, std::get<KeyedClip>(output),
-                      GltfKeyedOptions{.max_rotation_error_degrees = source.max_rotation_error_degrees},
-                      format.gltf));
+      FormatGltfKeyed(
+          *source.clip, std::get<KeyedClip>(output),
+          GltfKeyedOptions{.max_rotation_error_degrees = source.max_rotation_error_degrees},
+          format.gltf));
   return std::move(file.bytes);
 }
 

@@ -203,6 +203,11 @@ class JsonReader {
 
 }  // namespace
 
+absl::Status JsonErrorAt(std::string_view source, const JsonValue& at, std::string_view what) {
+  return absl::InvalidArgumentError(
+      absl::StrCat(AsAbsl(source), ":", at.line, ":", at.column, ": ", AsAbsl(what)));
+}
+
 void AppendJsonString(std::string& out, std::string_view text) {
   out += '"';
   for (char ch : text) {

@@ -67,8 +67,7 @@ class Decoder {
   explicit Decoder(std::string_view source) : source_(source) {}
 
   absl::Status Fail(const JsonValue& at, std::string_view what) const {
-    return absl::InvalidArgumentError(
-        absl::StrCat(AsAbsl(source_), ":", at.line, ":", at.column, ": ", AsAbsl(what)));
+    return JsonErrorAt(source_, at, what);
   }
 
   // The members of `object` by name, refusing unknown or repeated ones.

@@ -10,6 +10,7 @@
 #include <utility>
 #include <vector>
 
+#include "absl/status/status.h"
 #include "absl/status/statusor.h"
 
 namespace tempokey::core {
@@ -40,6 +41,10 @@ struct JsonValue {
 // Errors: kInvalidArgument "<source>:<line>:<column>: expected ',' or '}', got 'x'".
 // Thread-safe: a pure function.
 absl::StatusOr<JsonValue> ParseJson(std::string_view text, std::string_view source);
+
+// The error of a reader that refuses `at`: kInvalidArgument "<source>:<line>:<column>: <what>",
+// the place of the value in the document it was parsed from.
+absl::Status JsonErrorAt(std::string_view source, const JsonValue& at, std::string_view what);
 
 // Appends `text` to `out` as a JSON string literal (quotes, escapes of '"', '\\' and controls).
 void AppendJsonString(std::string& out, std::string_view text);
