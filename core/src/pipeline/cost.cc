@@ -12,6 +12,7 @@
 #include "absl/strings/str_format.h"
 #include "tempokey/core/model/keyed_clip.h"
 #include "tempokey/core/model/status.h"
+#include "tempokey/core/pipeline/pipeline.h"
 
 namespace tempokey::core {
 namespace {
@@ -217,12 +218,7 @@ std::string PipelineCost::Describe() const {
 absl::StatusOr<PipelineCost> EstimatePipelineCost(const Clip& clip,
                                                   std::span<const PipelineStep> steps,
                                                   const ClipLimits& limits) {
-  if (steps.empty()) return absl::InvalidArgumentError("the pipeline has no operations");
-  if (steps.size() > kMaxPipelineSteps) {
-    return OverLimitError(absl::StrCat("the pipeline has ", steps.size(),
-                                                   " operations, over the limit of ",
-                                                   kMaxPipelineSteps));
-  }
+  TEMPOKEY_RETURN_IF_ERROR(ValidateStepCount(steps));
   Shape shape;
   shape.frame_time = clip.frame_time_seconds;
   shape.frames = clip.frame_count;

@@ -77,17 +77,16 @@ class StepChain {
   bool keyed_ = false;
 };
 
+}  // namespace
+
 absl::Status ValidateStepCount(std::span<const PipelineStep> steps) {
   if (steps.empty()) return absl::InvalidArgumentError("the pipeline has no operations");
   if (steps.size() > kMaxPipelineSteps) {
     return OverLimitError(absl::StrCat("the pipeline has ", steps.size(),
-                                                   " operations, over the limit of ",
-                                                   kMaxPipelineSteps));
+                                       " operations, over the limit of ", kMaxPipelineSteps));
   }
   return absl::OkStatus();
 }
-
-}  // namespace
 
 absl::Status ValidateStepChain(std::span<const PipelineStep> steps) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateStepCount(steps));

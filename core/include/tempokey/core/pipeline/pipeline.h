@@ -58,6 +58,11 @@ std::string_view StepName(const PipelineStep& step);
 // At most this many operations in one pipeline.
 inline constexpr std::size_t kMaxPipelineSteps = 64;
 
+// Checks the number of operations: 1..kMaxPipelineSteps.
+// Errors: kInvalidArgument "the pipeline has no operations"; kResourceExhausted "the pipeline has
+// 65 operations, over the limit of 64".
+absl::Status ValidateStepCount(std::span<const PipelineStep> steps);
+
 // Checks the shape of a pipeline without a clip: 1..kMaxPipelineSteps operations, each taking
 // what the one before produces (retime, reduce and convert a sampled clip, bake a keyed one).
 // Errors: kInvalidArgument "operation 2 (bake): needs a keyed clip, got a sampled clip".
