@@ -51,6 +51,7 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "bench/server_child.h"
 #include "client/client.h"
 #include "grpcpp/create_channel.h"
 #include "grpcpp/security/credentials.h"
@@ -58,8 +59,6 @@
 #include "proto/retry_hint.h"
 #include "tempokey/core/io/bvh.h"
 #include "tempokey/core/pipeline/pipeline.h"
-
-extern char** environ;
 
 namespace tempokey::bench {
 namespace {
@@ -71,9 +70,6 @@ constexpr char kDefaultClip[] = TEMPOKEY_SHARED_DIR "/data/bvh/bandai/dataset-1_
 constexpr int kChannels = 132;
 constexpr std::int64_t kFrames = 128;
 constexpr int kServerWorkers = 2;
-// A server that never announces itself within this long is broken, not slow.
-constexpr std::chrono::seconds kStartTimeout{30};
-constexpr std::chrono::seconds kStopTimeout{40};  // beyond the server's 25 s drain grace
 // A refused flood client waits at most this long, whatever the server's hint says, so the
 // queue stays under pressure.
 constexpr std::chrono::milliseconds kFloodMaxBackoff{20};
@@ -142,115 +138,6 @@ std::optional<BenchFlags> ParseFlags(int argc, char** argv) {
   }
   return flags;
 }
-
-std::string DefaultServerBinary() {
-  std::error_code error;
-  const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", error);
-  return (self.parent_path().parent_path() / "server" / "tempokey-server").string();
-}
-
-// ---- the server child ---------------------------------------------------------------------------
-
-// A tempokey-server child process on 127.0.0.1:0. Its stdout is a pipe we read the announcement
-// from; its log goes to a file. Stopped with SIGTERM (its graceful drain) when destroyed.
-class ServerChild {
- public:
-  static absl::StatusOr<std::unique_ptr<ServerChild>> Start(const std::string& binary,
-                                                            const std::vector<std::string>& flags,
-                                                            const std::string& log_path) {
-    auto child = std::unique_ptr<ServerChild>(new ServerChild());
-    child->log_path_ = log_path;
-    int out[2];
-    if (pipe2(out, O_CLOEXEC) != 0) return absl::InternalError("pipe2 failed");
-    child->stdout_fd_ = out[0];
-
-    std::vector<std::string> argv = {binary, "--address", "127.0.0.1:0"};
-    argv.insert(argv.end(), flags.begin(), flags.end());
-    std::vector<char*> args;
-    for (std::string& arg : argv) args.push_back(arg.data());
-    args.push_back(nullptr);
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, STDIN_FILENO, "/dev/null", O_RDONLY, 0);
-    posix_spawn_file_actions_adddup2(&actions, out[1], STDOUT_FILENO);
-    posix_spawn_file_actions_addopen(&actions, STDERR_FILENO, log_path.c_str(),
-                                     O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    const int error = posix_spawn(&child->pid_, binary.c_str(), &actions, nullptr, args.data(),
-                                  environ);
-    posix_spawn_file_actions_destroy(&actions);
-    close(out[1]);  // only the child writes; EOF then means it exited
-    if (error != 0) {
-      child->pid_ = -1;
-      return absl::InternalError(absl::StrCat("posix_spawn ", binary, ": ", std::strerror(error)));
-    }
-    absl::StatusOr<std::string> target = child->ReadAnnouncement();
-    if (!target.ok()) return target.status();
-    child->target_ = *std::move(target);
-    return child;
-  }
-
-  ~ServerChild() {
-    Stop();
-    if (stdout_fd_ >= 0) close(stdout_fd_);
-  }
-  ServerChild(const ServerChild&) = delete;
-  ServerChild& operator=(const ServerChild&) = delete;
-
-  const std::string& target() const { return target_; }
-  pid_t pid() const { return pid_; }
-  const std::string& log_path() const { return log_path_; }
-
-  // SIGTERM, then a bounded wait (SIGKILL after it). Returns the exit code, -1 for a signal.
-  int Stop() {
-    if (pid_ <= 0) return exit_code_;
-    kill(pid_, SIGTERM);
-    const auto deadline = Clock::now() + kStopTimeout;
-    int status = 0;
-    pid_t done = 0;
-    while ((done = waitpid(pid_, &status, WNOHANG)) == 0) {
-      if (Clock::now() >= deadline) {
-        kill(pid_, SIGKILL);
-        done = waitpid(pid_, &status, 0);
-        break;
-      }
-      std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-    exit_code_ = done == pid_ && WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    pid_ = -1;
-    return exit_code_;
-  }
-
- private:
-  ServerChild() = default;
-
-  // Reads stdout until "tempokey-server listening on HOST:PORT\n"; returns "HOST:PORT".
-  absl::StatusOr<std::string> ReadAnnouncement() {
-    constexpr std::string_view kPrefix = "tempokey-server listening on ";
-    const auto deadline = Clock::now() + kStartTimeout;
-    std::string text;
-    while (Clock::now() < deadline) {
-      pollfd fd{.fd = stdout_fd_, .events = POLLIN, .revents = 0};
-      if (poll(&fd, 1, 100) <= 0) continue;
-      char buffer[256];
-      const ssize_t n = read(stdout_fd_, buffer, sizeof buffer);
-      if (n <= 0) break;  // the child closed its stdout: it exited
-      text.append(buffer, static_cast<std::size_t>(n));
-      const auto start = text.find(kPrefix);
-      const auto end = text.find('\n', start);
-      if (start != std::string::npos && end != std::string::npos) {
-        return text.substr(start + kPrefix.size(), end - start - kPrefix.size());
-      }
-    }
-    return absl::InternalError(absl::StrCat("tempokey-server did not announce itself; see ",
-                                            log_path_));
-  }
-
-  pid_t pid_ = -1;
-  int exit_code_ = -1;
-  int stdout_fd_ = -1;
-  std::string target_;
-  std::string log_path_;
-};
 
 // ---- process figures ----------------------------------------------------------------------------
 

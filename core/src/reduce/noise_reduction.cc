@@ -8,6 +8,7 @@
 #include "absl/strings/str_cat.h"
 #include "tempokey/core/model/numbers.h"
 #include "tempokey/core/model/status.h"
+#include "noise_smoother.h"
 #include "tempokey/core/reduce/noise_fit.h"
 
 namespace tempokey::core::reduce_internal {
@@ -73,6 +74,7 @@ absl::StatusOr<NoiseCurves> FitNoiseCurves(const Clip& clip,
   NoiseCurves out;
   const int count = static_cast<int>(inputs.size());
   NoiseFitOptions options;
+  SmootherFactors factors;  // shared by the channels: they have the same length
   options.guard_sigmas = params.guard_sigmas;
   options.key_sigmas = params.key_sigmas;
   for (int c = 0; c < count; ++c) {
@@ -88,7 +90,7 @@ absl::StatusOr<NoiseCurves> FitNoiseCurves(const Clip& clip,
                     [&](double v) { return v == samples.front(); })) {
       out.curves.push_back(FlatCurve(samples.size(), samples.front(), clip.frame_time_seconds));
     } else {
-      absl::StatusOr<SplineFit> fit = FitToNoise(samples, sigma, options, stop);
+      absl::StatusOr<SplineFit> fit = FitToNoise(samples, sigma, options, stop, factors);
       if (!fit.ok()) return Annotate(fit.status(), ChannelLabel(clip, c));
       out.curves.push_back(CurveOf(*fit, clip.frame_time_seconds));
     }

@@ -1,0 +1,46 @@
+// The noise method's smoother with its constant-level factors shared between channels
+// (noise_fit.h describes the method). At a constant level the smoother's band matrix depends only
+// on the level and the number of frames, so one reduction factors each (level, length) once and
+// every channel of the clip of that length, and every block window, reuses the factor: the
+// results are bit for bit those of factoring each time.
+#ifndef TEMPOKEY_CORE_SRC_REDUCE_NOISE_SMOOTHER_H_
+#define TEMPOKEY_CORE_SRC_REDUCE_NOISE_SMOOTHER_H_
+
+#include <memory>
+#include <span>
+#include <stop_token>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "tempokey/core/reduce/noise_fit.h"
+
+namespace tempokey::core::reduce_internal {
+
+// Factors kept for reuse, at most kMaxSmootherFactorBytes of them (beyond, the oldest go).
+// Not thread-safe: one per thread (one reduction).
+class SmootherFactors {
+ public:
+  SmootherFactors();
+  ~SmootherFactors();
+  SmootherFactors(const SmootherFactors&) = delete;
+  SmootherFactors& operator=(const SmootherFactors&) = delete;
+
+  struct Store;  // defined in noise_fit.cc
+  Store& store() { return *store_; }
+
+ private:
+  std::unique_ptr<Store> store_;
+};
+
+inline constexpr std::size_t kMaxSmootherFactorBytes = std::size_t{32} << 20;
+
+// SmoothToNoise() and FitToNoise() (noise_fit.h) reusing `factors`.
+std::vector<double> SmoothToNoise(std::span<const double> samples, double sigma,
+                                  const NoiseFitOptions& options, SmootherFactors& factors);
+absl::StatusOr<SplineFit> FitToNoise(std::span<const double> samples, double sigma,
+                                     const NoiseFitOptions& options, std::stop_token stop,
+                                     SmootherFactors& factors);
+
+}  // namespace tempokey::core::reduce_internal
+
+#endif  // TEMPOKEY_CORE_SRC_REDUCE_NOISE_SMOOTHER_H_
