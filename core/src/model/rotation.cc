@@ -1,6 +1,8 @@
 #include "tempokey/core/model/rotation.h"
 
 #include <algorithm>
+#include <bit>
+#include <cstdint>
 #include <cmath>
 #include <numbers>
 #include <string>
@@ -59,23 +61,39 @@ Candidate NearestCandidate(double a, double b, double c, const Vec3& reference) 
 }
 
 // Cyclic Jacobi eigen-decomposition of a symmetric 4x4 matrix; returns the eigenvector of the
-// largest eigenvalue.
+// largest eigenvalue. The sweeps go on until the off-diagonal part is below 1e-300, long after
+// the eigenvectors and eigenvalues stop changing: each sweep squares the off-diagonal entries, so
+// once a sweep leaves every eigenvector entry and every diagonal entry bit for bit as it was, with
+// every rotation a tiny one (|tan| < 2^-30: the eigenvalue gaps dwarf what is left off the
+// diagonal) and none skipped, the later sweeps' still smaller rotations cannot change them either,
+// and the result is known without running them.
 std::array<double, 4> PrincipalEigenvector(std::array<std::array<double, 4>, 4> a) {
+  constexpr double kTinyRotation = 0x1p-30;
   std::array<std::array<double, 4>, 4> v{};
   for (int i = 0; i < 4; ++i) v[i][i] = 1.0;
+  auto same_bits = [](double x, double y) {
+    return std::bit_cast<std::uint64_t>(x) == std::bit_cast<std::uint64_t>(y);
+  };
   for (int sweep = 0; sweep < 64; ++sweep) {
     double off = 0.0;
     for (int p = 0; p < 4; ++p) {
       for (int q = p + 1; q < 4; ++q) off += a[p][q] * a[p][q];
     }
     if (off < 1e-300) break;
+    bool settled = true;
     for (int p = 0; p < 4; ++p) {
       for (int q = p + 1; q < 4; ++q) {
-        if (a[p][q] == 0.0) continue;
+        if (a[p][q] == 0.0) {
+          settled = false;
+          continue;
+        }
         const double theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
         const double t = (theta >= 0 ? 1.0 : -1.0) / (std::abs(theta) + std::sqrt(theta * theta + 1.0));
         const double c = 1.0 / std::sqrt(t * t + 1.0);
         const double s = t * c;
+        if (!(std::abs(t) < kTinyRotation)) settled = false;
+        const double app = a[p][p];
+        const double aqq = a[q][q];
         for (int k = 0; k < 4; ++k) {
           const double akp = a[k][p];
           const double akq = a[k][q];
@@ -88,14 +106,17 @@ std::array<double, 4> PrincipalEigenvector(std::array<std::array<double, 4>, 4> 
           a[p][k] = c * apk - s * aqk;
           a[q][k] = s * apk + c * aqk;
         }
+        if (!same_bits(a[p][p], app) || !same_bits(a[q][q], aqq)) settled = false;
         for (int k = 0; k < 4; ++k) {
           const double vkp = v[k][p];
           const double vkq = v[k][q];
           v[k][p] = c * vkp - s * vkq;
           v[k][q] = s * vkp + c * vkq;
+          if (!same_bits(v[k][p], vkp) || !same_bits(v[k][q], vkq)) settled = false;
         }
       }
     }
+    if (settled) break;
   }
   int best = 0;
   for (int i = 1; i < 4; ++i) {

@@ -4,8 +4,10 @@
 #include <cmath>
 #include <numbers>
 #include <utility>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "rotation_batch.h"
 
 namespace tempokey::core {
 namespace {
@@ -171,18 +173,17 @@ void Unwrap(std::span<const double> degrees, Unwrapped& out) {
 // source's own convention (wrapped into ±180, or unwrapped, whatever the file uses).
 double InSourceTurn(double angle, double source_value) { return NearestTurn(angle, source_value); }
 
+// std::llround(x) clamped to [0, last], for x >= 0 (positions are): halves away from zero, as
+// llround does, without its libm call. x - trunc(x) is exact.
 std::int64_t NearestIndex(double x, std::int64_t last) {
-  return std::clamp(static_cast<std::int64_t>(std::llround(x)), std::int64_t{0}, last);
+  auto i = static_cast<std::int64_t>(x);
+  if (x - static_cast<double>(i) >= 0.5) ++i;
+  return std::min(i, last);
 }
 
-// Linear interpolation of `values` at x.
-double LerpAt(std::span<const double> values, double x) {
-  const auto last = static_cast<std::int64_t>(values.size()) - 1;
-  if (last <= 0) return values[0];
-  const std::int64_t i0 = std::min(static_cast<std::int64_t>(std::floor(x)), last - 1);
-  const double t = x - static_cast<double>(i0);
-  const auto i = static_cast<std::size_t>(i0);
-  return values[i] + t * (values[i + 1] - values[i]);
+// Dot() of rotation.h, inlined here: the per-sample loops call it for every tap.
+inline double QuatDot(const Quat& a, const Quat& b) {
+  return a.w * b.w + a.x * b.x + a.y * b.y + a.z * b.z;
 }
 
 }  // namespace
@@ -359,102 +360,383 @@ void ResampleAngle(const ResamplePlan& plan, std::span<const double> degrees,
   }
 }
 
+struct RotationSchedule::Data {
+  // Runs [begin, end) of the source samples some output reads.
+  std::vector<std::pair<std::size_t, std::size_t>> runs;
+  // Output samples that copy a source sample: output index, source index.
+  std::vector<std::size_t> copy_output, copy_source;
+  // Output samples that interpolate, in output order: output index j; the interval of the
+  // reference's linear interpolation (and of a slerp or squad), i0 = min(floor(x), last - 1) and
+  // t = x - i0; the nearest source sample; for a weighted one, its pivot (source index).
+  std::vector<std::size_t> output, i0, nearest;
+  std::vector<double> t;
+  std::vector<std::int64_t> pivot;
+};
+
+namespace {
+
+// Outputs converted back to Euler angles per batch: bounds the scratch memory of a long clip.
+constexpr std::size_t kRotationBatch = 1024;
+
+// The source quaternions the plan reads (RotationSchedule's runs), converted once each: a copy
+// reads none. No global sign continuity is imposed: each use aligns signs locally (slerp takes the
+// short arc, the weighted mean aligns to its pivot, squad aligns its four inputs).
+class SourceQuats {
+ public:
+  SourceQuats(const RotationSchedule::Data& schedule, const EulerOrder& order,
+              const std::array<std::span<const double>, 3>& source)
+      : quats_(4 * source[0].size()) {
+    for (const auto& [begin, end] : schedule.runs) {
+      retime_internal::EulerToQuats(order, source[0].data() + begin, source[1].data() + begin,
+                                    source[2].data() + begin, end - begin,
+                                    quats_.data() + 4 * begin);
+    }
+  }
+
+  Quat operator[](std::size_t i) const {
+    const double* q = quats_.data() + 4 * i;
+    return {q[0], q[1], q[2], q[3]};
+  }
+  // (w, x, y, z) of every quaternion, one after the other (EulerToQuats()).
+  const double* data() const { return quats_.data(); }
+
+ private:
+  std::vector<double> quats_;
+};
+
+// Quaternion columns of a fixed size.
+struct QuatColumns {
+  std::vector<double> w, x, y, z;
+
+  void Resize(std::size_t n) {
+    for (std::vector<double>* c : {&w, &x, &y, &z}) c->resize(n);
+  }
+  void Set(std::size_t i, const Quat& q) {
+    w[i] = q.w;
+    x[i] = q.x;
+    y[i] = q.y;
+    z[i] = q.z;
+  }
+  Quat Get(std::size_t i) const { return {w[i], x[i], y[i], z[i]}; }
+  retime_internal::QuatArrays Arrays() { return {w.data(), x.data(), y.data(), z.data()}; }
+  retime_internal::ConstQuatArrays Arrays() const { return {w.data(), x.data(), y.data(), z.data()}; }
+};
+
+// WeightedMeanRotation() with its default spread (whose cosine it takes every call, here once).
+Quat WeightedMean(std::span<const Quat> quats, std::span<const double> weights, std::size_t pivot,
+                  double min_dot) {
+  const Quat& ref = quats[pivot];
+  Quat sum{0.0, 0.0, 0.0, 0.0};
+  for (std::size_t n = 0; n < quats.size(); ++n) {
+    const double w = QuatDot(quats[n], ref) < 0.0 ? -weights[n] : weights[n];
+    sum = {sum.w + quats[n].w * w, sum.x + quats[n].x * w, sum.y + quats[n].y * w,
+           sum.z + quats[n].z * w};
+  }
+  const double norm = std::sqrt(QuatDot(sum, sum));
+  if (!(norm > 1e-9)) return MarkleyMean(quats, weights, pivot);
+  const double inverse = 1.0 / norm;
+  const Quat mean{sum.w * inverse, sum.x * inverse, sum.y * inverse, sum.z * inverse};
+  for (std::size_t n = 0; n < quats.size(); ++n) {
+    if (weights[n] != 0.0 && std::abs(QuatDot(quats[n], mean)) < min_dot) {
+      return MarkleyMean(quats, weights, pivot);
+    }
+  }
+  return mean;
+}
+
+// The per-sample path with the scalar functions throughout, the source converted by
+// EulerToQuat() itself: for the samples near gimbal lock, where the batched conversion's few
+// units in the last place would be magnified (rotation_batch.h).
+class ScalarRotationPath {
+ public:
+  ScalarRotationPath(const ResamplePlan& plan, const EulerOrder& order,
+                     const std::array<std::span<const double>, 3>& source, double min_dot)
+      : plan_(plan), order_(order), source_(source), min_dot_(min_dot) {}
+
+  // The interpolated rotation of output sample j (not a copy, not across a discontinuity).
+  Quat Interpolated(std::size_t j) {
+    const double x = plan_.position[j];
+    const std::int64_t last = plan_.source_count - 1;
+    const std::int64_t first = plan_.first[j];
+    auto aligned = [](const Quat& q, const Quat& to) { return QuatDot(q, to) < 0.0 ? Negated(q) : q; };
+    if (plan_.kind[j] == SampleKind::kLerp || plan_.kind[j] == SampleKind::kCubic) {
+      const std::int64_t i0 = std::min(static_cast<std::int64_t>(std::floor(x)), last - 1);
+      const double t = x - static_cast<double>(i0);
+      const Quat q1 = At(i0);
+      const Quat q2 = aligned(At(i0 + 1), q1);
+      if (plan_.kind[j] == SampleKind::kLerp) return Slerp(q1, q2, t);
+      const Quat q0 = aligned(At(i0 - 1), q1);
+      const Quat q3 = aligned(At(i0 + 2), q2);
+      const bool smooth = QuatDot(q0, q1) >= kDiscontinuityDot && QuatDot(q2, q3) >= kDiscontinuityDot;
+      return smooth ? Squad(q0, q1, q2, q3, t) : Slerp(q1, q2, t);
+    }
+    const std::int64_t count = plan_.offset[j + 1] - plan_.offset[j];
+    taps_.resize(static_cast<std::size_t>(count));
+    for (std::int64_t tap = 0; tap < count; ++tap) taps_[static_cast<std::size_t>(tap)] = At(first + tap);
+    const std::span<const double> w(plan_.weights.data() + plan_.offset[j],
+                                    static_cast<std::size_t>(count));
+    const auto k = NearestIndex(x, last);
+    const std::int64_t pivot = std::clamp(k - first, std::int64_t{0}, count - 1);
+    return WeightedMean(taps_, w, static_cast<std::size_t>(pivot), min_dot_);
+  }
+
+ private:
+  // Source rotation i, past the ends by reflection (q0·q1*·q0).
+  Quat At(std::int64_t i) {
+    const std::int64_t last = plan_.source_count - 1;
+    if (i < 0) return Multiply(Multiply(Converted(0), Conjugate(Converted(1))), Converted(0));
+    if (i > last) {
+      return Multiply(Multiply(Converted(last), Conjugate(Converted(last - 1))), Converted(last));
+    }
+    return Converted(i);
+  }
+
+  const Quat& Converted(std::int64_t i) {
+    if (quats_.empty()) {
+      quats_.resize(static_cast<std::size_t>(plan_.source_count));
+      converted_.assign(quats_.size(), 0);
+    }
+    const auto u = static_cast<std::size_t>(i);
+    if (!converted_[u]) {
+      quats_[u] = EulerToQuat(order_, {source_[0][u], source_[1][u], source_[2][u]});
+      converted_[u] = 1;
+    }
+    return quats_[u];
+  }
+
+  const ResamplePlan& plan_;
+  const EulerOrder& order_;
+  const std::array<std::span<const double>, 3>& source_;
+  double min_dot_;
+  std::vector<Quat> quats_;
+  std::vector<unsigned char> converted_;
+  std::vector<Quat> taps_;
+};
+
+}  // namespace
+
+
+RotationSchedule::RotationSchedule(const ResamplePlan& plan) : data_(std::make_unique<Data>()) {
+  Data& d = *data_;
+  const auto n = static_cast<std::size_t>(plan.source_count);
+  const std::int64_t last = plan.source_count - 1;
+  std::vector<unsigned char> needed(n, 0);
+  auto need = [&](std::int64_t i) {
+    needed[static_cast<std::size_t>(std::clamp<std::int64_t>(i, 0, last))] = 1;
+  };
+  for (std::size_t j = 0; j < plan.position.size(); ++j) {
+    const std::int64_t first = plan.first[j];
+    if (plan.kind[j] == SampleKind::kCopy) {
+      d.copy_output.push_back(j);
+      d.copy_source.push_back(static_cast<std::size_t>(first));
+      continue;
+    }
+    const double x = plan.position[j];
+    const std::int64_t i0 = std::max<std::int64_t>(
+        0, std::min(static_cast<std::int64_t>(std::floor(x)), last - 1));
+    const std::int64_t k = NearestIndex(x, last);
+    d.output.push_back(j);
+    d.i0.push_back(static_cast<std::size_t>(i0));
+    d.t.push_back(x - static_cast<double>(i0));
+    d.nearest.push_back(static_cast<std::size_t>(k));
+    if (plan.kind[j] == SampleKind::kWeighted) {
+      const std::int64_t count = plan.offset[j + 1] - plan.offset[j];
+      d.pivot.push_back(first + std::clamp(k - first, std::int64_t{0}, count - 1));
+      for (std::int64_t i = first; i < first + count; ++i) need(i);
+    } else {
+      d.pivot.push_back(-1);
+      for (std::int64_t i = i0 - 1; i <= i0 + 2; ++i) need(i);
+    }
+  }
+  for (std::size_t i = 0; i < n;) {
+    if (!needed[i]) {
+      ++i;
+      continue;
+    }
+    std::size_t end = i;
+    while (end < n && needed[end]) ++end;
+    d.runs.emplace_back(i, end);
+    i = end;
+  }
+}
+
+RotationSchedule::~RotationSchedule() = default;
+RotationSchedule::RotationSchedule(RotationSchedule&&) noexcept = default;
+RotationSchedule& RotationSchedule::operator=(RotationSchedule&&) noexcept = default;
+
 void ResampleRotation(const ResamplePlan& plan, const EulerOrder& order,
                       const std::array<std::span<const double>, 3>& source,
                       const std::array<std::span<double>, 3>& out, std::stop_token stop) {
-  const auto n = static_cast<std::size_t>(plan.source_count);
-  const std::int64_t last = plan.source_count - 1;
-  const std::size_t m = plan.position.size();
   if (plan.copy_count == plan.output_count()) {
-    for (std::size_t j = 0; j < m; ++j) {
+    for (std::size_t j = 0; j < plan.position.size(); ++j) {
       const auto i = static_cast<std::size_t>(plan.first[j]);
       for (int c = 0; c < 3; ++c) out[c][j] = source[c][i];
     }
     return;
   }
+  ResampleRotation(plan, RotationSchedule(plan), order, source, out, stop);
+}
 
-  // Source quaternions, converted only when an output reads them (a copy never does). No
-  // global sign continuity is imposed: each use aligns signs locally (slerp takes the short
-  // arc, the weighted mean aligns to its pivot, squad aligns its four inputs).
-  std::vector<Quat> quats(n);
-  std::vector<unsigned char> converted(n, 0);
-  auto quat = [&](std::size_t i) -> const Quat& {
-    if (!converted[i]) {
-      quats[i] = EulerToQuat(order, {source[0][i], source[1][i], source[2][i]});
-      converted[i] = 1;
-    }
-    return quats[i];
-  };
+void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule,
+                      const EulerOrder& order,
+                      const std::array<std::span<const double>, 3>& source,
+                      const std::array<std::span<double>, 3>& out, std::stop_token stop) {
+  const RotationSchedule::Data& d = schedule.data();
+  const std::int64_t last = plan.source_count - 1;
+  for (std::size_t r = 0; r < d.copy_output.size(); ++r) {
+    for (int c = 0; c < 3; ++c) out[c][d.copy_output[r]] = source[c][d.copy_source[r]];
+  }
+  if (d.output.empty()) return;
+
+  const SourceQuats quats(d, order, source);
   std::array<Unwrapped, 3> unwrapped;
   for (int c = 0; c < 3; ++c) Unwrap(source[c], unwrapped[c]);
-  auto reference_values = [&](int c) -> std::span<const double> {
-    return unwrapped[c].wraps ? std::span<const double>(unwrapped[c].values) : source[c];
-  };
-  auto aligned = [](const Quat& q, const Quat& to) { return Dot(q, to) < 0.0 ? Negated(q) : q; };
+  std::array<const double*, 3> reference_values;
+  for (int c = 0; c < 3; ++c) {
+    reference_values[c] = unwrapped[c].wraps ? unwrapped[c].values.data() : source[c].data();
+  }
+  auto aligned = [](const Quat& q, const Quat& to) { return QuatDot(q, to) < 0.0 ? Negated(q) : q; };
   // Neighbours past the ends by reflection (q0·q1*·q0), matching the scalar path's odd
   // reflection.
   auto quat_at = [&](std::int64_t i) -> Quat {
-    if (i < 0) return Multiply(Multiply(quat(0), Conjugate(quat(1))), quat(0));
+    if (i < 0) return Multiply(Multiply(quats[0], Conjugate(quats[1])), quats[0]);
     if (i > last) {
       const auto l = static_cast<std::size_t>(last);
-      return Multiply(Multiply(quat(l), Conjugate(quat(l - 1))), quat(l));
+      return Multiply(Multiply(quats[l], Conjugate(quats[l - 1])), quats[l]);
     }
-    return quat(static_cast<std::size_t>(i));
+    return quats[static_cast<std::size_t>(i)];
   };
-  std::vector<Quat> taps;
+  // WeightedMeanRotation()'s default: a rotation of angle theta from the mean has
+  // |dot| = cos(theta / 2).
+  const double min_dot = std::cos(0.5 * 30.0 * (std::numbers::pi / 180.0));
+  ScalarRotationPath scalar_path(plan, order, source, min_dot);
 
-  StopCheck check(stop);
-  for (std::size_t j = 0; j < m; ++j) {
-    // Rotations cost tens of nanoseconds a tap: look at the stop token more often.
-    if (check.After(16 * plan.offset[j])) return;
-    const double x = plan.position[j];
-    const std::int64_t first = plan.first[j];
-    if (plan.kind[j] == SampleKind::kCopy) {
-      for (int c = 0; c < 3; ++c) out[c][j] = source[c][static_cast<std::size_t>(first)];
-      continue;
+  // Per batch of interpolating outputs, each in its slot: the interpolated rotations (slerps and
+  // weighted means batched), then all of them back to Euler angles.
+  QuatColumns rotations, slerp_from, slerp_to, slerped, means;
+  std::vector<double> slerp_t;
+  std::vector<std::size_t> slerp_slot, weighted_slot;
+  std::vector<retime_internal::WeightedMeanJob> weighted;
+  std::vector<unsigned char> copied, needs_markley, ill_conditioned;
+  std::array<std::vector<double>, 3> reference, turn, angles;
+  std::vector<Quat> taps;
+  for (QuatColumns* q : {&rotations, &slerp_from, &slerp_to, &slerped, &means}) {
+    q->Resize(kRotationBatch);
+  }
+  slerp_t.resize(kRotationBatch);
+  slerp_slot.resize(kRotationBatch);
+  weighted_slot.resize(kRotationBatch);
+  weighted.resize(kRotationBatch);
+  copied.resize(kRotationBatch);
+  needs_markley.resize(kRotationBatch);
+  ill_conditioned.resize(kRotationBatch);
+  for (int c = 0; c < 3; ++c) {
+    reference[c].resize(kRotationBatch);
+    turn[c].resize(kRotationBatch);
+    angles[c].resize(kRotationBatch);
+  }
+  // A batch also ends once its samples read kRotationStopTaps source rotations, and the stop
+  // token is looked at between batches: a few milliseconds of work at most, whatever the
+  // decimation ratio (batching changes no result: every step is per sample).
+  constexpr std::int64_t kRotationStopTaps = kResampleStopCheckTaps / 16;
+  for (std::size_t batch = 0, count = 0; batch < d.output.size(); batch += count) {
+    if (stop.stop_requested()) return;
+    count = 0;
+    for (std::int64_t taps_read = 0; batch + count < d.output.size() && count < kRotationBatch &&
+                                     taps_read < kRotationStopTaps;
+         ++count) {
+      const std::size_t j = d.output[batch + count];
+      taps_read += plan.offset[j + 1] - plan.offset[j];
     }
-    Quat q;
-    const auto k = static_cast<std::size_t>(NearestIndex(x, last));
-    switch (plan.kind[j]) {
-      case SampleKind::kLerp:
-      case SampleKind::kCubic: {
-        const std::int64_t i0 = std::min(static_cast<std::int64_t>(std::floor(x)), last - 1);
-        const auto i = static_cast<std::size_t>(i0);
-        const double t = x - static_cast<double>(i0);
-        const Quat& q1 = quat(i);
-        const Quat q2 = aligned(quat(i + 1), q1);
-        if (Dot(q1, q2) < kDiscontinuityDot) {
-          for (int c = 0; c < 3; ++c) out[c][j] = source[c][k];
-          continue;
-        }
-        if (plan.kind[j] == SampleKind::kLerp) {
-          q = Slerp(q1, q2, t);
-          break;
-        }
-        const Quat q0 = aligned(quat_at(i0 - 1), q1);
-        const Quat q3 = aligned(quat_at(i0 + 2), q2);
-        const bool smooth = Dot(q0, q1) >= kDiscontinuityDot && Dot(q2, q3) >= kDiscontinuityDot;
-        q = smooth ? Squad(q0, q1, q2, q3, t) : Slerp(q1, q2, t);
-        break;
+    std::size_t slerps = 0, weights = 0;
+    for (std::size_t slot = 0; slot < count; ++slot) {
+      const std::size_t r = batch + slot;
+      const std::size_t j = d.output[r];
+      copied[slot] = 0;
+      if (plan.kind[j] == SampleKind::kWeighted) {
+        weighted[weights] = {plan.first[j], plan.offset[j + 1] - plan.offset[j], plan.offset[j],
+                             d.pivot[r]};
+        weighted_slot[weights++] = slot;
+        continue;
       }
-      default: {
-        const std::int64_t count = plan.offset[j + 1] - plan.offset[j];
-        taps.resize(static_cast<std::size_t>(count));
-        for (std::int64_t tap = 0; tap < count; ++tap) {
-          taps[static_cast<std::size_t>(tap)] = quat(static_cast<std::size_t>(first + tap));
+      const std::size_t i = d.i0[r];
+      const Quat q1 = quats[i];
+      const Quat q2 = aligned(quats[i + 1], q1);
+      if (QuatDot(q1, q2) < kDiscontinuityDot) {
+        // Across a discontinuity: the nearer source pose.
+        for (int c = 0; c < 3; ++c) out[c][j] = source[c][d.nearest[r]];
+        copied[slot] = 1;
+        rotations.Set(slot, q1);
+        continue;
+      }
+      if (plan.kind[j] == SampleKind::kLerp) {
+        slerp_from.Set(slerps, q1);
+        slerp_to.Set(slerps, q2);
+        slerp_t[slerps] = d.t[r];
+        slerp_slot[slerps++] = slot;
+        continue;
+      }
+      const auto i0 = static_cast<std::int64_t>(i);
+      const Quat q0 = aligned(quat_at(i0 - 1), q1);
+      const Quat q3 = aligned(quat_at(i0 + 2), q2);
+      const bool smooth =
+          QuatDot(q0, q1) >= kDiscontinuityDot && QuatDot(q2, q3) >= kDiscontinuityDot;
+      rotations.Set(slot, smooth ? Squad(q0, q1, q2, q3, d.t[r]) : Slerp(q1, q2, d.t[r]));
+    }
+    retime_internal::SlerpQuats(std::as_const(slerp_from).Arrays(),
+                                std::as_const(slerp_to).Arrays(), slerp_t.data(), slerps,
+                                slerped.Arrays());
+    for (std::size_t s = 0; s < slerps; ++s) rotations.Set(slerp_slot[s], slerped.Get(s));
+    // The weighted means; Markley's where their spread asks for it.
+    retime_internal::WeightedMeans(quats.data(), plan.weights.data(), weighted.data(), weights,
+                                   min_dot, means.Arrays(), needs_markley.data());
+    for (std::size_t s = 0; s < weights; ++s) {
+      Quat mean = means.Get(s);
+      if (needs_markley[s]) {
+        const retime_internal::WeightedMeanJob& job = weighted[s];
+        taps.resize(static_cast<std::size_t>(job.count));
+        for (std::int64_t tap = 0; tap < job.count; ++tap) {
+          taps[static_cast<std::size_t>(tap)] = quats[static_cast<std::size_t>(job.first + tap)];
         }
-        const std::span<const double> w(plan.weights.data() + plan.offset[j],
-                                        static_cast<std::size_t>(count));
-        const std::int64_t pivot =
-            std::clamp(static_cast<std::int64_t>(k) - first, std::int64_t{0}, count - 1);
-        q = WeightedMeanRotation(taps, w, static_cast<std::size_t>(pivot));
-        break;
+        mean = MarkleyMean(taps,
+                           {plan.weights.data() + job.weight_offset,
+                            static_cast<std::size_t>(job.count)},
+                           static_cast<std::size_t>(job.pivot - job.first));
+      }
+      rotations.Set(weighted_slot[s], mean);
+    }
+    // Back to Euler angles nearest the source's unwrapped angles at x (linearly interpolated),
+    // each then within 180 degrees of the source's value at the nearest sample (the source's own
+    // convention).
+    for (std::size_t slot = 0; slot < count; ++slot) {
+      const std::size_t r = batch + slot;
+      const std::size_t i = d.i0[r];
+      const double t = d.t[r];
+      for (int c = 0; c < 3; ++c) {
+        const double* v = reference_values[c];
+        reference[c][slot] = last <= 0 ? v[0] : v[i] + t * (v[i + 1] - v[i]);
+        turn[c][slot] = source[c][d.nearest[r]];
       }
     }
-    const Vec3 reference = {LerpAt(reference_values(0), x), LerpAt(reference_values(1), x),
-                            LerpAt(reference_values(2), x)};
-    const Vec3 angles = QuatToEulerNearest(q, order, reference);
-    for (int c = 0; c < 3; ++c) out[c][j] = InSourceTurn(angles[c], source[c][k]);
+    const double* const reference_columns[3] = {reference[0].data(), reference[1].data(),
+                                                 reference[2].data()};
+    const double* const turn_columns[3] = {turn[0].data(), turn[1].data(), turn[2].data()};
+    double* const angle_columns[3] = {angles[0].data(), angles[1].data(), angles[2].data()};
+    retime_internal::QuatsToEulerNearest(order, std::as_const(rotations).Arrays(),
+                                         reference_columns, turn_columns, count, angle_columns,
+                                         ill_conditioned.data());
+    for (std::size_t slot = 0; slot < count; ++slot) {
+      if (copied[slot]) continue;
+      const std::size_t j = d.output[batch + slot];
+      if (ill_conditioned[slot]) {
+        const Vec3 exact =
+            QuatToEulerNearest(scalar_path.Interpolated(j), order,
+                               {reference[0][slot], reference[1][slot], reference[2][slot]});
+        for (int c = 0; c < 3; ++c) out[c][j] = NearestTurn(exact[c], turn[c][slot]);
+        continue;
+      }
+      for (int c = 0; c < 3; ++c) out[c][j] = angles[c][slot];
+    }
   }
 }
 

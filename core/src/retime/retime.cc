@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -331,6 +332,8 @@ absl::StatusOr<RetimeResult> Retime(const Clip& clip, const TimeWarpSpec& warp,
       groups.push_back(std::move(rotation));
     }
   }
+  // What every joint's rotation resampling shares: made once, when a joint needs it.
+  std::optional<RotationSchedule> rotation_schedule;
   const auto total = static_cast<double>(clip.channels.size());
   std::size_t done = 0;
   std::vector<bool> group_done(groups.size(), false);
@@ -349,7 +352,8 @@ absl::StatusOr<RetimeResult> Retime(const Clip& clip, const TimeWarpSpec& warp,
         source[k] = clip.channels[index].samples;
         target[k] = out.channels[index].samples;
       }
-      ResampleRotation(plan, rotation.order, source, target, stop);
+      if (!rotation_schedule) rotation_schedule.emplace(plan);
+      ResampleRotation(plan, *rotation_schedule, rotation.order, source, target, stop);
       done += 3;
     } else if (IsRotation(channel.kind)) {
       ResampleAngle(plan, channel.samples, out.channels[c].samples, stop);

@@ -16,6 +16,7 @@
 #include <string>
 #include <vector>
 
+#include "absl/strings/str_format.h"
 #include "gtest/gtest.h"
 #include "tempokey/core/io/bvh.h"
 #include "tempokey/core/model/kinematics.h"
@@ -212,7 +213,7 @@ TEST(RetimeIdentityTest, RotationAwareRetimeMatchesTheReferenceOnEverySharedClip
       const absl::StatusOr<RetimeResult> fast = Retime(clip, w.spec, w.options);
 
       ASSERT_TRUE(fast.ok()) << c.name << ": " << fast.status();
-      double worst = 0.0;
+      double worst = 0.0, worst_got = 0.0, worst_expected = 0.0;
       std::size_t worst_channel = 0, worst_frame = 0;
       for (std::size_t ch = 0; ch < clip.channels.size(); ++ch) {
         if (rotations[ch].empty()) continue;
@@ -224,11 +225,15 @@ TEST(RetimeIdentityTest, RotationAwareRetimeMatchesTheReferenceOnEverySharedClip
             worst = d;
             worst_channel = ch;
             worst_frame = f;
+            worst_got = got[f];
+            worst_expected = rotations[ch][f];
           }
         }
       }
-      EXPECT_LE(worst, kRotationTolerance) << c.name << " " << clip.name << " channel "
-                                           << worst_channel << " frame " << worst_frame;
+      EXPECT_LE(worst, kRotationTolerance)
+          << c.name << " " << clip.name << " channel " << worst_channel << " frame " << worst_frame
+          << ": " << absl::StrFormat("%.17g", worst_got) << ", reference "
+          << absl::StrFormat("%.17g", worst_expected);
     }
   }
 }

@@ -39,6 +39,7 @@
 
 #include <array>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <stop_token>
 #include <vector>
@@ -115,6 +116,29 @@ void ResampleAngle(const ResamplePlan& plan, std::span<const double> degrees, st
 // the file comment). Preconditions: valid order, each source span has plan.source_count values,
 // each output span plan.output_count(). Cancellation as ResampleScalar().
 void ResampleRotation(const ResamplePlan& plan, const EulerOrder& order,
+                      const std::array<std::span<const double>, 3>& source,
+                      const std::array<std::span<double>, 3>& out, std::stop_token stop = {});
+
+// The part of ResampleRotation() that depends on the plan alone (which source samples the joints'
+// rotations are read at; for each output sample that interpolates, between which samples and
+// where), made once per plan and shared by every joint. Retime() makes one per call.
+class RotationSchedule {
+ public:
+  explicit RotationSchedule(const ResamplePlan& plan);
+  ~RotationSchedule();
+  RotationSchedule(RotationSchedule&&) noexcept;
+  RotationSchedule& operator=(RotationSchedule&&) noexcept;
+
+  struct Data;  // resample.cc
+  const Data& data() const { return *data_; }
+
+ private:
+  std::unique_ptr<Data> data_;
+};
+
+// ResampleRotation() with the schedule of `plan` made beforehand. Same results and cancellation.
+void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule,
+                      const EulerOrder& order,
                       const std::array<std::span<const double>, 3>& source,
                       const std::array<std::span<double>, 3>& out, std::stop_token stop = {});
 

@@ -1,0 +1,380 @@
+#include "rotation_batch.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <numbers>
+
+#include "vector_trig.h"
+
+// As simd.h's TEMPOKEY_AVX2_CLONES, with AVX2: the kernels select lanes by masks, which are
+// 256-bit integer vectors (AVX alone splits them into 128-bit halves).
+#if defined(TEMPOKEY_SANITIZED)
+#define TEMPOKEY_AVX2_CLONES
+#else
+#define TEMPOKEY_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
+#endif
+
+namespace tempokey::core::retime_internal {
+namespace {
+
+// Eight lanes per step, two AVX registers: two independent chains of dependent operations in
+// flight through every polynomial and division.
+using V = vector_trig::V4;
+using Mask = vector_trig::MaskOf<V>;
+constexpr std::size_t kLanes = 4;
+
+// As rotation.cc.
+constexpr double kDegToRad = std::numbers::pi / 180.0;
+constexpr double kRadToDeg = 180.0 / std::numbers::pi;
+constexpr double kSinRatioSeriesLimit = 0.5;
+
+// Quaternions, one per lane.
+struct QuatLanes {
+  V w, x, y, z;
+};
+
+[[gnu::always_inline]] inline V Broadcast(double v) { return vector_trig::Splat<V>(v); }
+
+// Lanes [0, count) of `p` (count <= kLanes), the missing lanes repeating lane 0: a partial group
+// computes its padding on real values.
+[[gnu::always_inline]] inline V LoadPartial(const double* p, std::size_t count) {
+  V v;
+  if (count >= kLanes) {
+    std::memcpy(&v, p, sizeof v);
+    return v;
+  }
+  v = Broadcast(p[0]);
+  for (std::size_t lane = 1; lane < count; ++lane) v[lane] = p[lane];
+  return v;
+}
+
+[[gnu::always_inline]] inline void StorePartial(double* p, V v, std::size_t count) {
+  if (count >= kLanes) {
+    std::memcpy(p, &v, sizeof v);
+    return;
+  }
+  for (std::size_t lane = 0; lane < count; ++lane) p[lane] = v[lane];
+}
+
+[[gnu::always_inline]] inline QuatLanes LoadQuats(ConstQuatArrays q, std::size_t i, std::size_t count) {
+  return {LoadPartial(q.w + i, count), LoadPartial(q.x + i, count), LoadPartial(q.y + i, count),
+          LoadPartial(q.z + i, count)};
+}
+
+[[gnu::always_inline]] inline void StoreQuats(QuatArrays q, std::size_t i, const QuatLanes& v,
+                                              std::size_t count) {
+  StorePartial(q.w + i, v.w, count);
+  StorePartial(q.x + i, v.x, count);
+  StorePartial(q.y + i, v.y, count);
+  StorePartial(q.z + i, v.z, count);
+}
+
+// The scalar functions of rotation.cc, lane by lane, in their order of operations.
+
+[[gnu::always_inline]] inline V Dot(const QuatLanes& a, const QuatLanes& b) {
+  return a.w * b.w + a.x * b.x + a.y * b.y + a.z * b.z;
+}
+
+[[gnu::always_inline]] inline QuatLanes Scaled(const QuatLanes& q, V s) {
+  return {q.w * s, q.x * s, q.y * s, q.z * s};
+}
+
+[[gnu::always_inline]] inline QuatLanes Normalized(const QuatLanes& q) {
+  V norm;
+  const V squared = Dot(q, q);
+  for (std::size_t lane = 0; lane < kLanes; ++lane) norm[lane] = std::sqrt(squared[lane]);
+  return Scaled(q, 1.0 / norm);
+}
+
+// The half angle's sine and cosine of AxisRotation(axis, degrees): the rotation is
+// (cos, sin along the axis).
+[[gnu::always_inline]] inline void HalfAngle(V degrees, V& s, V& c) {
+  vector_trig::SinCos(0.5 * degrees * kDegToRad, s, c);
+}
+
+// Multiply(q, AxisRotation(axis, .)) for the rotation (c, s along `axis`): Multiply()'s four
+// products per component less the ones by the rotation's zero components. Those are exact zeros,
+// and adding or subtracting an exact zero leaves a sum as it is, so every component has
+// Multiply()'s value (up to the sign of a zero result).
+[[gnu::always_inline]] inline QuatLanes MultiplyByAxis(const QuatLanes& q, int axis, V s, V c) {
+  switch (axis) {
+    case 0:
+      return {q.w * c - q.x * s, q.w * s + q.x * c, q.y * c + q.z * s, q.z * c - q.y * s};
+    case 1:
+      return {q.w * c - q.y * s, q.x * c - q.z * s, q.w * s + q.y * c, q.x * s + q.z * c};
+    default:
+      return {q.w * c - q.z * s, q.x * c + q.y * s, q.y * c - q.x * s, q.w * s + q.z * c};
+  }
+}
+
+[[gnu::always_inline]] inline V SinRatio(V x) {
+  const V x2 = x * x;
+  return 1.0 + x2 * (-1.0 / 6 + x2 * (1.0 / 120 + x2 * (-1.0 / 5040 + x2 * (1.0 / 362880 +
+         x2 * (-1.0 / 39916800 + x2 * (1.0 / 6227020800 + x2 * (-1.0 / 1307674368000.0)))))));
+}
+
+[[gnu::always_inline]] inline V Sin(V x) {
+  V s, c;
+  vector_trig::SinCos(x, s, c);
+  return s;
+}
+
+[[gnu::always_inline]] inline V NearestTurn(V angle, V reference) {
+  return angle + 360.0 * vector_trig::RoundSmall((reference - angle) * (1.0 / 360.0));
+}
+
+// True when every lane of `v` is below `limit` in size (the vector sine's accurate range).
+[[gnu::always_inline]] inline bool AllReducible(V v, double limit) {
+  const Mask ok = vector_trig::Abs(v) < limit;
+  for (std::size_t lane = 0; lane < kLanes; ++lane) {
+    if (!ok[lane]) return false;
+  }
+  return true;
+}
+
+// (w, x, y, z) of the lanes' quaternions as consecutive (w, x, y, z) groups.
+[[gnu::always_inline]] inline void StoreInterleaved(double* out, const QuatLanes& q, std::size_t count) {
+  for (std::size_t lane = 0; lane < count; ++lane) {
+    out[4 * lane] = q.w[lane];
+    out[4 * lane + 1] = q.x[lane];
+    out[4 * lane + 2] = q.y[lane];
+    out[4 * lane + 3] = q.z[lane];
+  }
+}
+
+// Quaternions (w, x, y, z) from `quats` at the indices `at`, one per lane.
+[[gnu::always_inline]] inline QuatLanes Gather(const double* quats, const std::int64_t at[kLanes]) {
+  QuatLanes q;
+  for (std::size_t lane = 0; lane < kLanes; ++lane) {
+    const double* p = quats + 4 * at[lane];
+    q.w[lane] = p[0];
+    q.x[lane] = p[1];
+    q.y[lane] = p[2];
+    q.z[lane] = p[3];
+  }
+  return q;
+}
+
+TEMPOKEY_AVX2_CLONES void EulerToQuatsKernel(const EulerOrder& order, const double* a,
+                                            const double* b, const double* c, std::size_t count,
+                                            double* out) {
+  // Half angles (radians) beyond kMaxReducedRadians: far beyond any rotation channel's values.
+  constexpr double kMaxDegrees = 2.0 * vector_trig::kMaxReducedRadians / kDegToRad;
+  for (std::size_t i = 0; i < count; i += kLanes) {
+    const std::size_t lanes = std::min(kLanes, count - i);
+    const V angle[3] = {LoadPartial(a + i, lanes), LoadPartial(b + i, lanes),
+                         LoadPartial(c + i, lanes)};
+    if (!AllReducible(angle[0], kMaxDegrees) || !AllReducible(angle[1], kMaxDegrees) ||
+        !AllReducible(angle[2], kMaxDegrees)) {
+      for (std::size_t lane = 0; lane < lanes; ++lane) {
+        const Quat q = EulerToQuat(order, {a[i + lane], b[i + lane], c[i + lane]});
+        double* p = out + 4 * (i + lane);
+        p[0] = q.w;
+        p[1] = q.x;
+        p[2] = q.y;
+        p[3] = q.z;
+      }
+      continue;
+    }
+    // EulerToQuat(): Multiply(Multiply(R0, R1), R2) with R_n = AxisRotation(order[n], angle[n]).
+    V sine[3], cosine[3];
+    for (int n = 0; n < 3; ++n) HalfAngle(angle[n], sine[n], cosine[n]);
+    const V zero = Broadcast(0.0);
+    const QuatLanes first = {cosine[0], order[0] == 0 ? sine[0] : zero,
+                             order[0] == 1 ? sine[0] : zero, order[0] == 2 ? sine[0] : zero};
+    const QuatLanes q = MultiplyByAxis(MultiplyByAxis(first, order[1], sine[1], cosine[1]),
+                                       order[2], sine[2], cosine[2]);
+    StoreInterleaved(out + 4 * i, q, lanes);
+  }
+}
+
+TEMPOKEY_AVX2_CLONES void SlerpKernel(ConstQuatArrays from, ConstQuatArrays to, const double* t,
+                                     std::size_t count, QuatArrays out) {
+  for (std::size_t i = 0; i < count; i += kLanes) {
+    const std::size_t lanes = std::min(kLanes, count - i);
+    const QuatLanes qa = LoadQuats(from, i, lanes);
+    QuatLanes qb = LoadQuats(to, i, lanes);
+    const V tt = LoadPartial(t + i, lanes);
+    const Mask flip = Dot(qa, qb) < 0.0;
+    qb = {flip ? -qb.w : qb.w, flip ? -qb.x : qb.x, flip ? -qb.y : qb.y, flip ? -qb.z : qb.z};
+    const QuatLanes diff = {qa.w - qb.w, qa.x - qb.x, qa.y - qb.y, qa.z - qb.z};
+    const QuatLanes sum = {qa.w + qb.w, qa.x + qb.x, qa.y + qb.y, qa.z + qb.z};
+    const V diff_squared = Dot(diff, diff);
+    const V sum_squared = Dot(sum, sum);
+    V diff_norm, sum_norm;
+    for (std::size_t lane = 0; lane < kLanes; ++lane) {
+      diff_norm[lane] = std::sqrt(diff_squared[lane]);
+      sum_norm[lane] = std::sqrt(sum_squared[lane]);
+    }
+    const V angle = 2.0 * vector_trig::Atan2(diff_norm, sum_norm);
+    V wa = 1.0 - tt;
+    V wb = tt;
+    const Mask series = angle <= kSinRatioSeriesLimit;
+    V series_wa, series_wb;
+    {
+      const V inv = 1.0 / SinRatio(angle);
+      series_wa = wa * (SinRatio(wa * angle) * inv);
+      series_wb = wb * (SinRatio(wb * angle) * inv);
+    }
+    bool all_series = true;
+    for (std::size_t lane = 0; lane < kLanes; ++lane) all_series = all_series && series[lane];
+    if (all_series) {
+      wa = series_wa;
+      wb = series_wb;
+    } else {
+      const V inv_sin = 1.0 / Sin(angle);
+      const V sine_wa = Sin((1.0 - tt) * angle) * inv_sin;
+      const V sine_wb = Sin(tt * angle) * inv_sin;
+      wa = series ? series_wa : sine_wa;
+      wb = series ? series_wb : sine_wb;
+    }
+    const QuatLanes mixed = Normalized({qa.w * wa + qb.w * wb, qa.x * wa + qb.x * wb,
+                                    qa.y * wa + qb.y * wb, qa.z * wa + qb.z * wb});
+    // Exact ends: t <= 0 gives `from`, t >= 1 gives `to` (aligned).
+    const Mask at_start = tt <= 0.0;
+    const Mask at_end = tt >= 1.0;
+    auto pick = [&](V start, V end, V middle) {
+      return at_start ? start : (at_end ? end : middle);
+    };
+    StoreQuats(out, i,
+               {pick(qa.w, qb.w, mixed.w), pick(qa.x, qb.x, mixed.x), pick(qa.y, qb.y, mixed.y),
+                pick(qa.z, qb.z, mixed.z)},
+               lanes);
+  }
+}
+
+TEMPOKEY_AVX2_CLONES void ToEulerKernel(const EulerOrder& order, ConstQuatArrays quats,
+                                       const double* const reference[3],
+                                       const double* const turn[3], std::size_t count,
+                                       double* const out[3], unsigned char* ill_conditioned) {
+  const int i = order[0];
+  const int j = order[1];
+  const int k = order[2];
+  const double sign = ((j - i + 3) % 3 == 1) ? 1.0 : -1.0;
+  for (std::size_t first = 0; first < count; first += kLanes) {
+    const std::size_t lanes = std::min(kLanes, count - first);
+    const QuatLanes q = Normalized(LoadQuats(quats, first, lanes));
+    // QuatToMatrix().
+    const V xx = q.x * q.x, yy = q.y * q.y, zz = q.z * q.z;
+    const V xy = q.x * q.y, xz = q.x * q.z, yz = q.y * q.z;
+    const V wx = q.w * q.x, wy = q.w * q.y, wz = q.w * q.z;
+    const V r[3][3] = {{1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)},
+                        {2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)},
+                        {2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)}};
+    V sin_b = sign * r[i][k];
+    sin_b = sin_b < -1.0 ? Broadcast(-1.0) : (1.0 < sin_b ? Broadcast(1.0) : sin_b);
+    const V cos_squared = r[i][i] * r[i][i] + r[i][j] * r[i][j];
+    V cos_b;
+    for (std::size_t lane = 0; lane < kLanes; ++lane) cos_b[lane] = std::sqrt(cos_squared[lane]);
+    const V ref[3] = {LoadPartial(reference[0] + first, lanes),
+                       LoadPartial(reference[1] + first, lanes),
+                       LoadPartial(reference[2] + first, lanes)};
+    const V b = vector_trig::Atan2(sin_b, cos_b);
+    const V a = vector_trig::Atan2(-sign * r[j][k], r[k][k]);
+    const V c = vector_trig::Atan2(-sign * r[i][j], r[i][i]);
+    // The two Tait-Bryan solutions, each angle moved to the turn nearest the reference; the
+    // nearer wins (NearestCandidate()).
+    V first_angles[3] = {NearestTurn(a * kRadToDeg, ref[0]), NearestTurn(b * kRadToDeg, ref[1]),
+                          NearestTurn(c * kRadToDeg, ref[2])};
+    V second_angles[3] = {NearestTurn((a + std::numbers::pi) * kRadToDeg, ref[0]),
+                           NearestTurn((std::numbers::pi - b) * kRadToDeg, ref[1]),
+                           NearestTurn((c + std::numbers::pi) * kRadToDeg, ref[2])};
+    V first_cost = Broadcast(0.0), second_cost = Broadcast(0.0);
+    for (int axis = 0; axis < 3; ++axis) {
+      const V d1 = first_angles[axis] - ref[axis];
+      first_cost += d1 * d1;
+      const V d2 = second_angles[axis] - ref[axis];
+      second_cost += d2 * d2;
+    }
+    const Mask second = second_cost < first_cost;
+    for (int axis = 0; axis < 3; ++axis) {
+      const V angle = second ? second_angles[axis] : first_angles[axis];
+      StorePartial(out[axis] + first,
+                   NearestTurn(angle, LoadPartial(turn[axis] + first, lanes)), lanes);
+    }
+    // Near gimbal lock: the caller's (gimbal lock itself, cos_b < 1e-12, among them).
+    const Mask near_lock = cos_b < kBatchedMinMiddleCos;
+    for (std::size_t lane = 0; lane < lanes; ++lane) {
+      ill_conditioned[first + lane] = near_lock[lane] ? 1 : 0;
+    }
+  }
+}
+
+// WeightedMeanRotation()'s arithmetic for several jobs at once, one per lane; a lane past its job's
+// taps adds its pivot with weight 0, which leaves every sum as it is.
+TEMPOKEY_AVX2_CLONES void WeightedMeansKernel(const double* quats, const double* weights,
+                                             const WeightedMeanJob* jobs, std::size_t count,
+                                             double min_dot, QuatArrays out,
+                                             unsigned char* needs_markley) {
+  for (std::size_t first = 0; first < count; first += kLanes) {
+    const std::size_t lanes = std::min(kLanes, count - first);
+    const WeightedMeanJob* job[kLanes];
+    std::int64_t longest = 0;
+    std::int64_t pivot[kLanes];
+    for (std::size_t lane = 0; lane < kLanes; ++lane) {
+      job[lane] = &jobs[first + std::min(lane, lanes - 1)];
+      pivot[lane] = job[lane]->pivot;
+      longest = std::max(longest, job[lane]->count);
+    }
+    const QuatLanes ref = Gather(quats, pivot);
+    QuatLanes sum = {Broadcast(0.0), Broadcast(0.0), Broadcast(0.0), Broadcast(0.0)};
+    auto tap = [&](std::int64_t n, QuatLanes& q, V& w) {
+      std::int64_t at[kLanes];
+      for (std::size_t lane = 0; lane < kLanes; ++lane) {
+        const bool real = n < job[lane]->count;
+        at[lane] = real ? job[lane]->first + n : pivot[lane];
+        w[lane] = real ? weights[job[lane]->weight_offset + n] : 0.0;
+      }
+      q = Gather(quats, at);
+    };
+    for (std::int64_t n = 0; n < longest; ++n) {
+      QuatLanes q;
+      V w;
+      tap(n, q, w);
+      const V signed_w = Dot(q, ref) < 0.0 ? -w : w;
+      sum = {sum.w + q.w * signed_w, sum.x + q.x * signed_w, sum.y + q.y * signed_w,
+             sum.z + q.z * signed_w};
+    }
+    const V squared = Dot(sum, sum);
+    V norm;
+    for (std::size_t lane = 0; lane < kLanes; ++lane) norm[lane] = std::sqrt(squared[lane]);
+    const V inverse = 1.0 / norm;
+    const QuatLanes mean = Scaled(sum, inverse);
+    Mask markley = !(norm > 1e-9);
+    for (std::int64_t n = 0; n < longest; ++n) {
+      QuatLanes q;
+      V w;
+      tap(n, q, w);
+      markley = markley || (w != 0.0 && vector_trig::Abs(Dot(q, mean)) < min_dot);
+    }
+    StoreQuats(out, first, mean, lanes);
+    for (std::size_t lane = 0; lane < lanes; ++lane) needs_markley[first + lane] = markley[lane] ? 1 : 0;
+  }
+}
+
+}  // namespace
+
+void EulerToQuats(const EulerOrder& order, const double* a, const double* b, const double* c,
+                  std::size_t count, double* out) {
+  EulerToQuatsKernel(order, a, b, c, count, out);
+}
+
+void WeightedMeans(const double* quats, const double* weights, const WeightedMeanJob* jobs,
+                   std::size_t count, double min_dot, QuatArrays out, unsigned char* needs_markley) {
+  WeightedMeansKernel(quats, weights, jobs, count, min_dot, out, needs_markley);
+}
+
+void SlerpQuats(ConstQuatArrays from, ConstQuatArrays to, const double* t, std::size_t count,
+                QuatArrays out) {
+  SlerpKernel(from, to, t, count, out);
+}
+
+void QuatsToEulerNearest(const EulerOrder& order, ConstQuatArrays q,
+                         const double* const reference[3], const double* const turn[3],
+                         std::size_t count, double* const out[3], unsigned char* ill_conditioned) {
+  ToEulerKernel(order, q, reference, turn, count, out, ill_conditioned);
+}
+
+}  // namespace tempokey::core::retime_internal

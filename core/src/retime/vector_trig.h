@@ -1,0 +1,166 @@
+// Sine, cosine and arctangent on vectors of doubles (GCC vector extensions of any width: the
+// kernels use 8 lanes, two AVX registers, so that two independent chains of dependent operations
+// are in flight), for the batched rotation conversions of the rotation-aware resampling
+// (rotation_batch.h). Plain IEEE arithmetic only, so the AVX and portable clones of a kernel give
+// the same bits (simd.h).
+//
+// Accuracy (tests/core/retime/vector_trig_test.cc, against x87 long-double sinl, cosl, atan2l):
+// within 2.5 units in the last place, where libm's are within one: the conversions that
+// use them differ from the scalar ones (std::sin, std::cos, std::atan2) by a few units in the last
+// place of their results.
+//
+// The polynomials are Chebyshev economizations, in exact rational arithmetic, of the Taylor series
+// on the reduced ranges below (truncated where the dropped Chebyshev coefficients sum below
+// 2e-17, a tenth of a unit in the last place), rounded to double.
+#ifndef TEMPOKEY_CORE_SRC_RETIME_VECTOR_TRIG_H_
+#define TEMPOKEY_CORE_SRC_RETIME_VECTOR_TRIG_H_
+
+#include <cstdint>
+
+namespace tempokey::core::vector_trig {
+
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"
+
+// 4 and 8 lanes of doubles, and the masks their comparisons give (all bits set where true).
+using V4 = double __attribute__((vector_size(32)));
+using V8 = double __attribute__((vector_size(64)));
+template <class V>
+using MaskOf = decltype(V{} < V{});
+
+template <class V>
+[[gnu::always_inline]] inline V Splat(double x) {
+  return V{} + x;
+}
+
+template <class V>
+[[gnu::always_inline]] inline V Abs(V v) {
+  return v < 0.0 ? -v : v;
+}
+
+// Below this size an argument reduces exactly enough by three-part pi/2 (Cody and Waite): k pi/2
+// with |k| < 2^23 is exact in each part.
+inline constexpr double kMaxReducedRadians = 1.0e7;
+
+// pi/2 in three parts, the first two of 30 significant bits.
+inline constexpr double kHalfPi1 = 1.5707963276654482;
+inline constexpr double kHalfPi2 = -8.705515692000731e-10;
+inline constexpr double kHalfPi3 = -3.50343439808993e-19;
+inline constexpr double kTwoOverPi = 0.6366197723675814;
+// pi/4: the double nearest it has 50 significant bits, so 2, 3 and 4 times it are exact.
+inline constexpr double kQuarterPiHi = 0.7853981633974483;
+inline constexpr double kQuarterPiLo = 3.061616997868383e-17;
+// tan(pi/8) = sqrt(2) - 1.
+inline constexpr double kTanEighthPi = 0.41421356237309503;
+
+// Rounds each lane to the nearest integer (ties to even) for |x| < 2^51: adding 1.5 * 2^52 leaves
+// no fraction bits (as rotation.cc's RoundSmall()).
+template <class V>
+[[gnu::always_inline]] inline V RoundSmall(V x) {
+  const V shifter = Splat<V>(6755399441055744.0);
+  return (x + shifter) - shifter;
+}
+
+// Lanes whose sign bit is set (negative numbers and -0).
+template <class V>
+[[gnu::always_inline]] inline MaskOf<V> SignBit(V x) {
+  return (MaskOf<V>)x < 0;
+}
+
+// sin(r) and cos(r) for |r| <= pi/4 (reduced arguments).
+template <class V>
+[[gnu::always_inline]] inline void SinCosReduced(V r, V& sine, V& cosine) {
+  const V z = r * r;
+  // (sin(r) - r) / r^3 as a polynomial in z = r^2 on [0, 0.617].
+  V s = Splat<V>(1.5918101877910613e-10);
+  s = s * z + -2.5051131474663988e-08;
+  s = s * z + 2.7557316100836803e-06;
+  s = s * z + -0.00019841269836755419;
+  s = s * z + 0.008333333333330946;
+  s = s * z + -0.16666666666666666;
+  sine = r + (r * z) * s;
+  // (cos(r) - 1 + z / 2) / z^2 on the same range.
+  V c = Splat<V>(-1.1382614811253895e-11);
+  c = c * z + 2.0876146029590015e-09;
+  c = c * z + -2.755731727061801e-07;
+  c = c * z + 2.480158729876363e-05;
+  c = c * z + -0.0013888888888887395;
+  c = c * z + 0.041666666666666664;
+  // 1 - z/2 + z^2 c, with the rounding of 1 - z/2 carried into the small part.
+  const V half_z = 0.5 * z;
+  const V w = 1.0 - half_z;
+  cosine = w + (((1.0 - w) - half_z) + (z * z) * c);
+}
+
+// sin(x) and cos(x) for |x| < kMaxReducedRadians (larger lanes are not reduced accurately: the
+// caller checks). x = k pi/2 + r, |r| <= pi/4, then the quadrant k mod 4 swaps and negates.
+template <class V>
+[[gnu::always_inline]] inline void SinCos(V x, V& sine, V& cosine) {
+  const V k = RoundSmall(x * kTwoOverPi);
+  const V r = ((x - k * kHalfPi1) - k * kHalfPi2) - k * kHalfPi3;
+  V s, c;
+  SinCosReduced(r, s, c);
+  // q = k mod 4 in 0..3: floor(k / 4) is the nearest integer to k / 4 - 3/8 (no ties).
+  const V q = k - 4.0 * RoundSmall(k * 0.25 - 0.375);
+  const MaskOf<V> odd = q == 1.0 || q == 3.0;
+  const V sin_base = odd ? c : s;
+  const V cos_base = odd ? s : c;
+  sine = q >= 2.0 ? -sin_base : sin_base;
+  cosine = q == 1.0 || q == 2.0 ? -cos_base : cos_base;
+}
+
+// atan(u) for |u| <= tan(pi/8).
+template <class V>
+[[gnu::always_inline]] inline V AtanReduced(V u) {
+  const V z = u * u;
+  // (atan(u) / u - 1) / z as a polynomial in z = u^2 on [0, 0.1716].
+  V h = Splat<V>(0.016305609739836996);
+  h = h * z + -0.03458942456554059;
+  h = h * z + 0.04552367231875368;
+  h = h * z + -0.05230633784275726;
+  h = h * z + 0.05878954854801641;
+  h = h * z + -0.06666427278780239;
+  h = h * z + 0.07692296517303976;
+  h = h * z + -0.09090908758775827;
+  h = h * z + 0.11111111105269593;
+  h = h * z + -0.14285714285661094;
+  h = h * z + 0.1999999999999981;
+  h = h * z + -0.3333333333333333;
+  return u + (u * z) * h;
+}
+
+// atan2(y, x) in [-pi, pi], with std::atan2's signs and zeros: atan2(+-0, +0) = +-0,
+// atan2(+-0, -0) = +-pi. Finite arguments.
+template <class V>
+[[gnu::always_inline]] inline V Atan2(V y, V x) {
+  using Mask = MaskOf<V>;
+  const V ax = Abs(x);
+  const V ay = Abs(y);
+  const Mask swap = ay > ax;
+  const V num = swap ? ax : ay;
+  const V den = swap ? ay : ax;
+  const V zero = Splat<V>(0.0);
+  const V t = den > 0.0 ? num / den : zero;  // in [0, 1]
+  // atan(t) = m pi/4 + sigma atan(u) with m = 0 or 1, then the octant: the angle stays
+  // m pi/4 + sigma atan(u) with m in 0..4 and sigma = +-1, summed once at the end.
+  const Mask big = t > kTanEighthPi;
+  // (t - 1) / (t + 1) from the operands: num - den is exact for num >= den / 2 (Sterbenz).
+  const V u = big ? (num - den) / (num + den) : t;
+  const V p = AtanReduced(u);
+  const V one = Splat<V>(1.0);
+  V m = big ? one : zero;  // atan(t)
+  V sigma = one;
+  m = swap ? 2.0 - m : m;  // pi/2 - atan(t) when |y| > |x|
+  sigma = swap ? -sigma : sigma;
+  const Mask negative_x = SignBit(x);
+  m = negative_x ? 4.0 - m : m;  // pi - angle when x < 0 or x is -0
+  sigma = negative_x ? -sigma : sigma;
+  const V angle = m * kQuarterPiHi + (sigma * p + m * kQuarterPiLo);  // in [0, pi]
+  return SignBit(y) ? -angle : angle;
+}
+
+#pragma GCC diagnostic pop
+
+}  // namespace tempokey::core::vector_trig
+
+#endif  // TEMPOKEY_CORE_SRC_RETIME_VECTOR_TRIG_H_
