@@ -131,12 +131,25 @@ double NearestTurn(double angle, double reference) {
   return angle + 360.0 * RoundSmall((reference - angle) * (1.0 / 360.0));
 }
 
+namespace {
+
+// std::round(x) (halves away from zero) without its libm call: for |x| < 2^52, x - trunc(x) is
+// exact; beyond, x has no fraction.
+inline double RoundHalfAway(double x) {
+  if (!(std::abs(x) < 0x1p52)) return x;
+  const auto whole = static_cast<double>(static_cast<std::int64_t>(x));
+  const double fraction = x - whole;
+  return fraction >= 0.5 ? whole + 1.0 : fraction <= -0.5 ? whole - 1.0 : whole;
+}
+
+}  // namespace
+
 void UnwrapDegrees(std::span<double> degrees) {
   double shift = 0.0;
   for (std::size_t i = 1; i < degrees.size(); ++i) {
     const double raw_step = degrees[i] - (degrees[i - 1] - shift);
     // Turns to add so the step lands in [-180, 180].
-    shift -= 360.0 * std::round(raw_step / 360.0);
+    shift -= 360.0 * RoundHalfAway(raw_step / 360.0);
     degrees[i] += shift;
   }
 }

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <numbers>
 #include <utility>
 #include <vector>
@@ -385,23 +386,24 @@ class SourceQuats {
  public:
   SourceQuats(const RotationSchedule::Data& schedule, const EulerOrder& order,
               const std::array<std::span<const double>, 3>& source)
-      : quats_(4 * source[0].size()) {
+      : quats_(std::make_unique_for_overwrite<double[]>(4 * source[0].size())) {
     for (const auto& [begin, end] : schedule.runs) {
       retime_internal::EulerToQuats(order, source[0].data() + begin, source[1].data() + begin,
                                     source[2].data() + begin, end - begin,
-                                    quats_.data() + 4 * begin);
+                                    quats_.get() + 4 * begin);
     }
   }
 
   Quat operator[](std::size_t i) const {
-    const double* q = quats_.data() + 4 * i;
+    const double* q = quats_.get() + 4 * i;
     return {q[0], q[1], q[2], q[3]};
   }
-  // (w, x, y, z) of every quaternion, one after the other (EulerToQuats()).
-  const double* data() const { return quats_.data(); }
+  // (w, x, y, z) of every quaternion, one after the other (EulerToQuats()); only the runs' are
+  // set.
+  const double* data() const { return quats_.get(); }
 
  private:
-  std::vector<double> quats_;
+  std::unique_ptr<double[]> quats_;
 };
 
 // Quaternion columns of a fixed size.
