@@ -80,6 +80,13 @@ namespace {
 
 constexpr double kRadiansPerDegree = std::numbers::pi / 180.0;
 
+// MatVec() of rotation.h, here where every frame's pose calls it for every point.
+inline Vec3 Rotated(const Mat3& m, const Vec3& v) {
+  return {m[0][0] * v[0] + m[0][1] * v[1] + m[0][2] * v[2],
+          m[1][0] * v[0] + m[1][1] * v[1] + m[1][2] * v[2],
+          m[2][0] * v[0] + m[2][1] * v[1] + m[2][2] * v[2]};
+}
+
 // m = m · AxisMatrix(axis, degrees), in place. Right-multiplying by a rotation about one axis
 // mixes only the other two columns: with (i, k) the axes after `axis` in cyclic order,
 // column i becomes c·i + s·k and column k becomes c·k - s·i (12 products instead of 27).
@@ -116,14 +123,14 @@ void ForwardKinematics::Pose(std::span<const std::span<const double>> samples, s
     } else {
       const auto p = static_cast<std::size_t>(plan.parent);
       world = world_rotation_[p];
-      const Vec3 moved = MatVec(world, translation);
+      const Vec3 moved = Rotated(world, translation);
       out[j] = {out[p][0] + moved[0], out[p][1] + moved[1], out[p][2] + moved[2]};
     }
     for (const auto& [axis, c] : plan.rotations) {
       RotateColumns(world, axis, samples[static_cast<std::size_t>(c)][frame]);
     }
     for (std::size_t e = 0; e < plan.end_sites.size(); ++e) {
-      const Vec3 moved = MatVec(world_rotation_[j], plan.end_sites[e]);
+      const Vec3 moved = Rotated(world_rotation_[j], plan.end_sites[e]);
       out[plan.first_end_site_point + e] = {out[j][0] + moved[0], out[j][1] + moved[1],
                                             out[j][2] + moved[2]};
     }

@@ -281,8 +281,18 @@ struct KeyRun {
   int count;
 };
 
+// InteriorGram() of recent lengths. Its entries are exact functions of the length, so one table
+// per thread, shared by every fit the thread runs, changes no result.
 class GramCache {
  public:
+  static GramCache& ForThread() {
+    // On the heap: a 70 KB thread_local object would sit in every thread's static TLS block, and
+    // a library that starts threads with small stacks (CivetWeb's metrics threads) would then
+    // fail to start them.
+    thread_local const std::unique_ptr<GramCache> cache = std::make_unique<GramCache>();
+    return *cache;
+  }
+
   const std::array<double, 16>& Get(std::int64_t length) {
     Entry& entry = entries_[static_cast<std::size_t>(length) % entries_.size()];
     if (entry.length != length) entry = {length, InteriorGram(length)};
@@ -829,7 +839,7 @@ class Fitter {
   std::vector<Mat2> diag_, upper_, eliminated_;
   std::vector<Vec2> rhs_;
   std::vector<double> lawson_;
-  GramCache grams_;
+  GramCache& grams_ = GramCache::ForThread();
   BasisSource basis_;
   std::array<double, 16> weighted_gram_;
 };
