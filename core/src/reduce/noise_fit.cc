@@ -290,12 +290,17 @@ TEMPOKEY_AVX_CLONES void SubstituteConstantLevels(std::size_t n, const Substitut
 // summed frame by frame in order as a scalar loop would.
 TEMPOKEY_AVX_CLONES void LaneResiduals(const LaneValues* y, const double* x, std::size_t b0,
                                        std::size_t b1, double* rss) {
-  Lanes sum{};
+  using simd::V4;
+  const double* __restrict values = reinterpret_cast<const double*>(y);
+  V4 sum[kLanes / 4] = {};
   for (std::size_t f = b0; f < b1; ++f) {
-    const Lanes r = y[f].value - x[f];
-    sum += r * r;
+    const V4 xf = simd::Broadcast(x[f]);
+    for (std::size_t q = 0; q < kLanes / 4; ++q) {
+      const V4 r = simd::Load(values + f * kLanes + 4 * q) - xf;
+      sum[q] += r * r;
+    }
   }
-  for (int lane = 0; lane < kLanes; ++lane) rss[lane] = sum[lane];
+  for (std::size_t q = 0; q < kLanes / 4; ++q) simd::Store(rss + 4 * q, sum[q]);
 }
 
 }  // namespace
@@ -564,6 +569,10 @@ class NoiseSmoother {
   void Interpolate(const std::vector<double>& block_log, std::vector<double>& lambda) const {
     const auto block = static_cast<double>(block_);
     const auto last = static_cast<std::ptrdiff_t>(block_log.size()) - 1;
+    // Between two blocks of the same level, and beyond the first and last, the exponent repeats:
+    // its power is reused.
+    double exponent = std::numeric_limits<double>::quiet_NaN();
+    double power = 0.0;
     for (std::size_t r = 0; r < lambda.size(); ++r) {
       const double position = (static_cast<double>(r) + 1.5 - 0.5 * block) / block;
       const double below = std::floor(position);
@@ -572,7 +581,12 @@ class NoiseSmoother {
       const double l0 = block_log[static_cast<std::size_t>(std::clamp<std::ptrdiff_t>(k, 0, last))];
       const double l1 =
           block_log[static_cast<std::size_t>(std::clamp<std::ptrdiff_t>(k + 1, 0, last))];
-      lambda[r] = std::pow(10.0, l0 + t * (l1 - l0));
+      const double e = l0 + t * (l1 - l0);
+      if (!(e == exponent)) {
+        exponent = e;
+        power = std::pow(10.0, e);
+      }
+      lambda[r] = power;
     }
   }
 
