@@ -420,6 +420,14 @@ TEMPOKEY_AVX_CLONES void UpdateLaneMinima(
     const double* a, const double* b_lanes, const double* z0_lanes, const double* z1_lanes,
     double state_base, double* least_lanes, double* second_lanes, double* state_lanes) {
   using V = double __attribute__((vector_size(32)));
+  // The nine states and the row's terms of key a, broadcast once for the three lane groups.
+  V states[9];
+  V a_lanes[9];
+  for (int sy = 0; sy < 9; ++sy) {
+    const double s = state_base + static_cast<double>(sy);
+    states[sy] = V{s, s, s, s};
+    a_lanes[sy] = V{a[sy], a[sy], a[sy], a[sy]};
+  }
   for (int lane = 0; lane < 12; lane += 4) {
     V least, second, state, b, z0, z1;
     std::memcpy(&least, least_lanes + lane, sizeof(V));
@@ -432,12 +440,11 @@ TEMPOKEY_AVX_CLONES void UpdateLaneMinima(
     const V with_u[3] = {b + (zero - z0), b + zero, b + z0};
     const V with_v[3] = {zero - z1, zero, z1};
     for (int sy = 0; sy < 9; ++sy) {
-      const V c = a[sy] + (with_u[sy / 3] + with_v[sy % 3]);
+      const V c = a_lanes[sy] + (with_u[sy / 3] + with_v[sy % 3]);
       const V larger = c > least ? c : least;
       second = larger < second ? larger : second;
-      const double s = state_base + static_cast<double>(sy);
       const auto smaller = c < least;
-      state = smaller ? V{s, s, s, s} : state;
+      state = smaller ? states[sy] : state;
       least = smaller ? c : least;
     }
     std::memcpy(least_lanes + lane, &least, sizeof(V));
