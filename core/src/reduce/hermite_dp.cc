@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -206,9 +207,15 @@ struct SegmentForm {
 struct ShapeKey {
   double length, atx, btx, t0;
   friend bool operator==(const ShapeKey&, const ShapeKey&) = default;
+  // One 64-bit word folded from the four values' bits (adding +0.0 first maps -0.0 to 0.0, which
+  // == does not tell apart), then the table's own mixing: one combine instead of four.
   template <typename H>
   friend H AbslHashValue(H h, const ShapeKey& k) {
-    return H::combine(std::move(h), k.length, k.atx, k.btx, k.t0);
+    const auto bits = [](double v) { return std::bit_cast<std::uint64_t>(v + 0.0); };
+    const std::uint64_t folded = bits(k.length) * 0x9e3779b97f4a7c15u ^
+                                 bits(k.atx) * 0xc2b2ae3d27d4eb4fu ^
+                                 bits(k.btx) * 0x165667b19e3779f9u ^ bits(k.t0) * 0xd6e8feb86659fd93u;
+    return H::combine(std::move(h), folded);
   }
 };
 
@@ -416,7 +423,9 @@ SegmentForm BuildSegmentForm(std::span<const double> samples, const SegmentShape
 // {-z, 0, +z}, folded into the smallest, second smallest and arg-smallest per lane. Written
 // with vector extensions and cloned for AVX, where the machine has it; both clones compute the
 // same values (no contraction into FMA: -ffp-contract follows -std=c++20).
-TEMPOKEY_AVX_CLONES void UpdateLaneMinima(
+// Returns the largest of the nine smallest candidates (lanes 0..8; none is NaN, so the order of
+// the comparisons does not matter).
+TEMPOKEY_AVX_CLONES double UpdateLaneMinima(
     const double* a, const double* b_lanes, const double* z0_lanes, const double* z1_lanes,
     double state_base, double* least_lanes, double* second_lanes, double* state_lanes) {
   using V = double __attribute__((vector_size(32)));
@@ -428,6 +437,8 @@ TEMPOKEY_AVX_CLONES void UpdateLaneMinima(
     states[sy] = V{s, s, s, s};
     a_lanes[sy] = V{a[sy], a[sy], a[sy], a[sy]};
   }
+  V largest = {};
+  double tail = 0.0;
   for (int lane = 0; lane < 12; lane += 4) {
     V least, second, state, b, z0, z1;
     std::memcpy(&least, least_lanes + lane, sizeof(V));
@@ -450,7 +461,17 @@ TEMPOKEY_AVX_CLONES void UpdateLaneMinima(
     std::memcpy(least_lanes + lane, &least, sizeof(V));
     std::memcpy(second_lanes + lane, &second, sizeof(V));
     std::memcpy(state_lanes + lane, &state, sizeof(V));
+    if (lane == 0) {
+      largest = least;
+    } else if (lane == 4) {
+      largest = least > largest ? least : largest;
+    } else {
+      tail = least[0];
+    }
   }
+  double out = tail;
+  for (int k = 0; k < 4; ++k) out = largest[k] > out ? largest[k] : out;
+  return out;
 }
 
 // Viterbi tables of one pass.
@@ -631,11 +652,11 @@ class DpPass {
       minima_.Reset();
       row_count_ = 0;
       const bool allowed = !gb.x_fixed || XIndex(tx) == 1;
+      // The largest of minima_.least[0..8]: the widest tie window of the nine targets is that of
+      // the largest smallest candidate (TieTolerance() rounds monotonically).
+      double largest = kInf;
       for (int sx : order) {
         if (!allowed || cheapest[sx] == kInf) break;
-        // The widest tie window of the nine targets; TieTolerance() rounds monotonically, so
-        // it is the window of the largest smallest candidate.
-        const double largest = *std::max_element(minima_.least.begin(), minima_.least.begin() + 9);
         if (cheapest[sx] > largest + TieTolerance(largest, scale_)) break;
         const double ax = ga.x[XIndex(sx)];
         const double atx = ga.tx[TxIndex(sx)];
@@ -647,7 +668,7 @@ class DpPass {
             BuildSegmentForm(samples_, shapes[tx * 9 + sx], y_ref, centre_y, steps_);
         PredecessorRow& row = rows_[row_count_++];
         FillRow(form, in.data() + sx * 9, sx, row);
-        UpdateMinima(row, minima_);
+        largest = UpdateMinima(row, minima_);
       }
       for (int ty = 0; ty < 9; ++ty) {
         const auto [value, state] = ChooseForTarget(ty);
@@ -708,8 +729,9 @@ class DpPass {
     return row.a[sy] + ((row.b[ty] + u) + v);
   }
 
-  static void UpdateMinima(const PredecessorRow& row, LaneMinima& minima) {
-    UpdateLaneMinima(row.a.data(), row.b.data(), row.z0.data(), row.z1.data(),
+  // Returns the largest of the nine smallest candidates after the update.
+  static double UpdateMinima(const PredecessorRow& row, LaneMinima& minima) {
+    return UpdateLaneMinima(row.a.data(), row.b.data(), row.z0.data(), row.z1.data(),
                      static_cast<double>(row.sx * 9), minima.least.data(), minima.second.data(),
                      minima.state.data());
   }
