@@ -423,20 +423,30 @@ SegmentForm BuildSegmentForm(std::span<const double> samples, const SegmentShape
 // {-z, 0, +z}, folded into the smallest, second smallest and arg-smallest per lane. Written
 // with vector extensions and cloned for AVX, where the machine has it; both clones compute the
 // same values (no contraction into FMA: -ffp-contract follows -std=c++20).
+// The states 0 .. 80 as 4-lane vectors of their number: the state lanes of UpdateLaneMinima().
+struct alignas(32) StateLanes {
+  double lane[kStates][4];
+};
+constexpr StateLanes kStateLaneTable = [] {
+  StateLanes table{};
+  for (int s = 0; s < kStates; ++s) {
+    for (int l = 0; l < 4; ++l) table.lane[s][l] = static_cast<double>(s);
+  }
+  return table;
+}();
+const auto* const kStateLanes =
+    reinterpret_cast<const double __attribute__((vector_size(32)))*>(kStateLaneTable.lane);
+
 // Returns the largest of the nine smallest candidates (lanes 0..8; none is NaN, so the order of
 // the comparisons does not matter).
 TEMPOKEY_AVX_CLONES double UpdateLaneMinima(
     const double* a, const double* b_lanes, const double* z0_lanes, const double* z1_lanes,
-    double state_base, double* least_lanes, double* second_lanes, double* state_lanes) {
+    int state_first, double* least_lanes, double* second_lanes, double* state_lanes) {
   using V = double __attribute__((vector_size(32)));
-  // The nine states and the row's terms of key a, broadcast once for the three lane groups.
-  V states[9];
+  // The row's terms of key a, broadcast once for the three lane groups.
   V a_lanes[9];
-  for (int sy = 0; sy < 9; ++sy) {
-    const double s = state_base + static_cast<double>(sy);
-    states[sy] = V{s, s, s, s};
-    a_lanes[sy] = V{a[sy], a[sy], a[sy], a[sy]};
-  }
+  for (int sy = 0; sy < 9; ++sy) a_lanes[sy] = V{a[sy], a[sy], a[sy], a[sy]};
+  const V* states = kStateLanes + state_first;
   V largest = {};
   double tail = 0.0;
   for (int lane = 0; lane < 12; lane += 4) {
@@ -605,6 +615,15 @@ class DpPass {
     std::array<std::int8_t, kStates> combos;
     int combo_count = 0;
     int key_count = 0;
+    // Whether each combination passes InsideAndFeasible(), for the rows below.
+    std::array<bool, kStates> feasible{};
+    // SegmentFrames() of the three x values of each key: the first frame depends on key a's x
+    // alone, the end on key b's.
+    std::array<std::int64_t, 3> first_of, end_of;
+    for (int o = 0; o < 3; ++o) {
+      first_of[o] = SegmentFrames(ga.x[o], gb.x[o], last).first;
+      end_of[o] = SegmentFrames(ga.x[o], gb.x[o], last).second;
+    }
     for (int itx_a = 0; itx_a < 3; ++itx_a) {
       for (int itx_b = 0; itx_b < 3; ++itx_b) {
         for (int difference = -2; difference <= 2; ++difference) {
@@ -619,8 +638,10 @@ class DpPass {
             const double btx = gb.tx[itx_b];
             if (!InsideAndFeasible(ax, atx, bx, btx)) continue;
             const int combo = tx * 9 + sx;
+            feasible[combo] = true;
             SegmentShape& shape = shapes[combo];
-            const auto [first, end] = SegmentFrames(ax, bx, last);
+            const std::int64_t first = first_of[ix_a];
+            const std::int64_t end = end_of[ix_b];
             shape.first = first;
             shape.n = static_cast<int>(std::max<std::int64_t>(0, end - first));
             if (shape.n == 0) continue;
@@ -658,11 +679,9 @@ class DpPass {
       for (int sx : order) {
         if (!allowed || cheapest[sx] == kInf) break;
         if (cheapest[sx] > largest + TieTolerance(largest, scale_)) break;
-        const double ax = ga.x[XIndex(sx)];
-        const double atx = ga.tx[TxIndex(sx)];
-        const double bx = gb.x[XIndex(tx)];
-        const double btx = gb.tx[TxIndex(tx)];
-        if (!InsideAndFeasible(ax, atx, bx, btx)) continue;
+        // Rows reached here passed the same tests as in the sweep above (finite cheapest state,
+        // allowed target), so its verdict stands.
+        if (!feasible[tx * 9 + sx]) continue;
         if (Stopping(shapes[tx * 9 + sx].n)) return false;
         const SegmentForm form =
             BuildSegmentForm(samples_, shapes[tx * 9 + sx], y_ref, centre_y, steps_);
@@ -732,7 +751,7 @@ class DpPass {
   // Returns the largest of the nine smallest candidates after the update.
   static double UpdateMinima(const PredecessorRow& row, LaneMinima& minima) {
     return UpdateLaneMinima(row.a.data(), row.b.data(), row.z0.data(), row.z1.data(),
-                     static_cast<double>(row.sx * 9), minima.least.data(), minima.second.data(),
+                     row.sx * 9, minima.least.data(), minima.second.data(),
                      minima.state.data());
   }
 
