@@ -237,6 +237,7 @@ struct SubstitutionJob {
   const double* x;
   const BandRow* band;
   LaneValues* y;
+  std::size_t quarters;  // lanes solved, in fours (1 to 4): a partly filled batch solves fewer
 };
 
 // Solves L L^T y = x for every job (each of n frames): forward, then back substitution, as
@@ -249,7 +250,6 @@ struct SubstitutionJob {
 TEMPOKEY_AVX_CLONES void SubstituteConstantLevels(std::size_t n, const SubstitutionJob* jobs,
                                                   std::size_t count) {
   using simd::V4;
-  constexpr std::size_t kQuarters = kLanes / 4;
   // Doubles from one frame (or one band entry) to the next.
   constexpr std::size_t kStride = kLanes;
   constexpr std::size_t kRowStride = sizeof(BandRow) / sizeof(double);
@@ -259,7 +259,7 @@ TEMPOKEY_AVX_CLONES void SubstituteConstantLevels(std::size_t n, const Substitut
       const double* __restrict row = reinterpret_cast<const double*>(&jobs[j].band[i]);
       double* __restrict y = reinterpret_cast<double*>(jobs[j].y);
       const V4 xi = simd::Broadcast(jobs[j].x[i]);
-      for (std::size_t q = 0; q < kQuarters; ++q) {
+      for (std::size_t q = 0; q < jobs[j].quarters; ++q) {
         const std::size_t at = i * kStride + 4 * q;
         V4 f = xi;
         for (std::size_t k = 1; k <= kOrder && i >= k; ++k) {
@@ -273,7 +273,7 @@ TEMPOKEY_AVX_CLONES void SubstituteConstantLevels(std::size_t n, const Substitut
     for (std::size_t j = 0; j < count; ++j) {
       const double* __restrict band = reinterpret_cast<const double*>(jobs[j].band);
       double* __restrict y = reinterpret_cast<double*>(jobs[j].y);
-      for (std::size_t q = 0; q < kQuarters; ++q) {
+      for (std::size_t q = 0; q < jobs[j].quarters; ++q) {
         const std::size_t at = i * kStride + 4 * q;
         V4 s = simd::Load(y + at);
         for (std::size_t k = 1; k <= kOrder && i + k < n; ++k) {
@@ -286,16 +286,17 @@ TEMPOKEY_AVX_CLONES void SubstituteConstantLevels(std::size_t n, const Substitut
   }
 }
 
-// Residual sums of squares of the sixteen solutions `y` (of x[0 ...]) over frames [b0, b1), each
-// summed frame by frame in order as a scalar loop would.
+// Residual sums of squares of the first 4 * `quarters` of the sixteen solutions `y` (of x[0 ...])
+// over frames [b0, b1), each summed frame by frame in order as a scalar loop would; the other
+// lanes of `rss` are left at 0.
 TEMPOKEY_AVX_CLONES void LaneResiduals(const LaneValues* y, const double* x, std::size_t b0,
-                                       std::size_t b1, double* rss) {
+                                       std::size_t b1, std::size_t quarters, double* rss) {
   using simd::V4;
   const double* __restrict values = reinterpret_cast<const double*>(y);
   V4 sum[kLanes / 4] = {};
   for (std::size_t f = b0; f < b1; ++f) {
     const V4 xf = simd::Broadcast(x[f]);
-    for (std::size_t q = 0; q < kLanes / 4; ++q) {
+    for (std::size_t q = 0; q < quarters; ++q) {
       const V4 r = simd::Load(values + f * kLanes + 4 * q) - xf;
       sum[q] += r * r;
     }
@@ -439,11 +440,13 @@ class NoiseSmoother {
     for (std::size_t first_batch = 0; first_batch < batches; first_batch += batches_per_step) {
       const std::size_t step_batches = std::min(batches_per_step, batches - first_batch);
       std::array<double, kLanes> level[kMaxBatches];
+      std::array<double, kLanes> dof[kMaxBatches];  // degrees of freedom per frame
       std::shared_ptr<const std::vector<BandRow>> factor[kMaxBatches];
       for (std::size_t b = 0; b < step_batches; ++b) {
         const std::size_t first = (first_batch + b) * kLanes;
         for (std::size_t lane = 0; lane < kLanes; ++lane) {
           level[b][lane] = std::pow(10.0, logs[std::min(first + lane, count - 1)]);
+          dof[b][lane] = CachedDofPerFrame(level[b][lane]);
         }
         factor[b] = factors_.Get(n, level[b].data());
       }
@@ -458,8 +461,9 @@ class NoiseSmoother {
         jobs_.clear();
         for (std::size_t w = 0; w < step_windows; ++w) {
           for (std::size_t b = 0; b < step_batches; ++b) {
+            const std::size_t used = std::min<std::size_t>(kLanes, count - (first_batch + b) * kLanes);
             jobs_.push_back({x_.data() + windows[first_window + w].a0, factor[b]->data(),
-                             lanes_y_.data() + jobs_.size() * n});
+                             lanes_y_.data() + jobs_.size() * n, (used + 3) / 4});
           }
         }
         SubstituteConstantLevels(n, jobs_.data(), jobs);
@@ -467,13 +471,14 @@ class NoiseSmoother {
           const Window& window = windows[first_window + w];
           for (std::size_t b = 0; b < step_batches; ++b) {
             double rss[kLanes];
-            LaneResiduals(jobs_[w * step_batches + b].y, x_.data() + window.a0,
-                          window.b0 - window.a0, window.b1 - window.a0, rss);
+            const SubstitutionJob& job = jobs_[w * step_batches + b];
+            LaneResiduals(job.y, x_.data() + window.a0, window.b0 - window.a0,
+                          window.b1 - window.a0, job.quarters, rss);
             const std::size_t first = (first_batch + b) * kLanes;
             for (std::size_t lane = 0; lane < kLanes && first + lane < count; ++lane) {
               risks[(first_window + w) * count + first + lane] =
                   rss[lane] + 2.0 * sigma2_ * static_cast<double>(window.b1 - window.b0) *
-                                  CachedDofPerFrame(level[b][lane]);
+                                  dof[b][lane];
             }
           }
         }
