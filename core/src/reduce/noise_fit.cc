@@ -86,14 +86,19 @@ class BandSolver {
   void Solve(std::span<const double> x, std::span<const double> lambda, std::span<double> y) {
     const std::size_t n = x.size();
     band_.assign(n, {1.0, 0.0, 0.0, 0.0});  // band_[i][k] = A(i, i - k)
-    for (std::size_t r = 0; r + kOrder < n; ++r) {
-      const double l = lambda[r];
-      for (int a = 0; a <= kOrder; ++a) {
-        for (int b = 0; b <= a; ++b) band_[r + a][a - b] += l * kDifference[a] * kDifference[b];
-      }
-    }
-    // In place: band_ becomes L with A = L L^T.
+    // One sweep assembles, factors and forward-substitutes: row i of the matrix is complete once
+    // the penalty rows up to r = i are added (their terms still in increasing r), row i of L
+    // needs rows i - 3 .. i of it, and the forward step at i row i of L. The factor's chain of
+    // divisions and square roots and the substitution's then overlap instead of running one
+    // after the other.
     for (std::size_t i = 0; i < n; ++i) {
+      if (i + kOrder < n) {
+        const double l = lambda[i];
+        for (int a = 0; a <= kOrder; ++a) {
+          for (int b = 0; b <= a; ++b) band_[i + a][a - b] += l * kDifference[a] * kDifference[b];
+        }
+      }
+      // In place: band_ row i becomes row i of L with A = L L^T.
       for (int k = kOrder; k >= 1; --k) {
         if (i < static_cast<std::size_t>(k)) continue;
         const std::size_t j = i - static_cast<std::size_t>(k);
@@ -108,13 +113,11 @@ class BandSolver {
         s -= band_[i][k] * band_[i][k];
       }
       band_[i][0] = std::sqrt(s);
-    }
-    for (std::size_t i = 0; i < n; ++i) {
-      double s = x[i];
+      double f = x[i];
       for (int k = 1; k <= kOrder && i >= static_cast<std::size_t>(k); ++k) {
-        s -= band_[i][k] * y[i - static_cast<std::size_t>(k)];
+        f -= band_[i][k] * y[i - static_cast<std::size_t>(k)];
       }
-      y[i] = s / band_[i][0];
+      y[i] = f / band_[i][0];
     }
     for (std::size_t i = n; i-- > 0;) {
       double s = y[i];
