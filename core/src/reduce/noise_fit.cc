@@ -356,6 +356,9 @@ struct reduce_internal::SmootherFactors::Store {
 
   std::vector<Entry> entries;
   std::size_t bytes = 0;
+  // The level searches' solutions: one buffer for every search of the reduction, so a channel
+  // does not fault in fresh pages for it.
+  std::vector<LaneValues> solutions;
 };
 
 reduce_internal::SmootherFactors::SmootherFactors() : store_(std::make_unique<Store>()) {}
@@ -474,13 +477,14 @@ class NoiseSmoother {
            first_window += windows_per_step) {
         const std::size_t step_windows = std::min(windows_per_step, windows.size() - first_window);
         const std::size_t jobs = step_windows * step_batches;
-        lanes_y_.resize(jobs * n);
+        std::vector<LaneValues>& solutions = factors_.solutions;
+        if (solutions.size() < jobs * n) solutions.resize(jobs * n);
         jobs_.clear();
         for (std::size_t w = 0; w < step_windows; ++w) {
           for (std::size_t b = 0; b < step_batches; ++b) {
             const std::size_t used = std::min<std::size_t>(kLanes, count - (first_batch + b) * kLanes);
             jobs_.push_back({x_.data() + windows[first_window + w].a0, factor[b]->data(),
-                             lanes_y_.data() + jobs_.size() * n, (used + 3) / 4});
+                             solutions.data() + jobs_.size() * n, (used + 3) / 4});
           }
         }
         SubstituteConstantLevels(n, jobs_.data(), jobs);
@@ -619,7 +623,6 @@ class NoiseSmoother {
   std::size_t block_;
   BandSolver solver_;
   reduce_internal::SmootherFactors::Store& factors_;
-  std::vector<LaneValues> lanes_y_;
   std::vector<SubstitutionJob> jobs_;
 };
 
