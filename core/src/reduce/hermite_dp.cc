@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -206,9 +207,15 @@ struct SegmentForm {
 struct ShapeKey {
   double length, atx, btx, t0;
   friend bool operator==(const ShapeKey&, const ShapeKey&) = default;
+  // One 64-bit word folded from the four values' bits (adding +0.0 first maps -0.0 to 0.0, which
+  // == does not tell apart), then the table's own mixing: one combine instead of four.
   template <typename H>
   friend H AbslHashValue(H h, const ShapeKey& k) {
-    return H::combine(std::move(h), k.length, k.atx, k.btx, k.t0);
+    const auto bits = [](double v) { return std::bit_cast<std::uint64_t>(v + 0.0); };
+    const std::uint64_t folded = bits(k.length) * 0x9e3779b97f4a7c15u ^
+                                 bits(k.atx) * 0xc2b2ae3d27d4eb4fu ^
+                                 bits(k.btx) * 0x165667b19e3779f9u ^ bits(k.t0) * 0xd6e8feb86659fd93u;
+    return H::combine(std::move(h), folded);
   }
 };
 
@@ -416,10 +423,32 @@ SegmentForm BuildSegmentForm(std::span<const double> samples, const SegmentShape
 // {-z, 0, +z}, folded into the smallest, second smallest and arg-smallest per lane. Written
 // with vector extensions and cloned for AVX, where the machine has it; both clones compute the
 // same values (no contraction into FMA: -ffp-contract follows -std=c++20).
-TEMPOKEY_AVX_CLONES void UpdateLaneMinima(
+// The states 0 .. 80 as 4-lane vectors of their number: the state lanes of UpdateLaneMinima().
+struct alignas(32) StateLanes {
+  double lane[kStates][4];
+};
+constexpr StateLanes kStateLaneTable = [] {
+  StateLanes table{};
+  for (int s = 0; s < kStates; ++s) {
+    for (int l = 0; l < 4; ++l) table.lane[s][l] = static_cast<double>(s);
+  }
+  return table;
+}();
+const auto* const kStateLanes =
+    reinterpret_cast<const double __attribute__((vector_size(32)))*>(kStateLaneTable.lane);
+
+// Returns the largest of the nine smallest candidates (lanes 0..8; none is NaN, so the order of
+// the comparisons does not matter).
+TEMPOKEY_AVX_CLONES double UpdateLaneMinima(
     const double* a, const double* b_lanes, const double* z0_lanes, const double* z1_lanes,
-    double state_base, double* least_lanes, double* second_lanes, double* state_lanes) {
+    int state_first, double* least_lanes, double* second_lanes, double* state_lanes) {
   using V = double __attribute__((vector_size(32)));
+  // The row's terms of key a, broadcast once for the three lane groups.
+  V a_lanes[9];
+  for (int sy = 0; sy < 9; ++sy) a_lanes[sy] = V{a[sy], a[sy], a[sy], a[sy]};
+  const V* states = kStateLanes + state_first;
+  V largest = {};
+  double tail = 0.0;
   for (int lane = 0; lane < 12; lane += 4) {
     V least, second, state, b, z0, z1;
     std::memcpy(&least, least_lanes + lane, sizeof(V));
@@ -432,18 +461,27 @@ TEMPOKEY_AVX_CLONES void UpdateLaneMinima(
     const V with_u[3] = {b + (zero - z0), b + zero, b + z0};
     const V with_v[3] = {zero - z1, zero, z1};
     for (int sy = 0; sy < 9; ++sy) {
-      const V c = a[sy] + (with_u[sy / 3] + with_v[sy % 3]);
+      const V c = a_lanes[sy] + (with_u[sy / 3] + with_v[sy % 3]);
       const V larger = c > least ? c : least;
       second = larger < second ? larger : second;
-      const double s = state_base + static_cast<double>(sy);
       const auto smaller = c < least;
-      state = smaller ? V{s, s, s, s} : state;
+      state = smaller ? states[sy] : state;
       least = smaller ? c : least;
     }
     std::memcpy(least_lanes + lane, &least, sizeof(V));
     std::memcpy(second_lanes + lane, &second, sizeof(V));
     std::memcpy(state_lanes + lane, &state, sizeof(V));
+    if (lane == 0) {
+      largest = least;
+    } else if (lane == 4) {
+      largest = least > largest ? least : largest;
+    } else {
+      tail = least[0];
+    }
   }
+  double out = tail;
+  for (int k = 0; k < 4; ++k) out = largest[k] > out ? largest[k] : out;
+  return out;
 }
 
 // Viterbi tables of one pass.
@@ -577,6 +615,15 @@ class DpPass {
     std::array<std::int8_t, kStates> combos;
     int combo_count = 0;
     int key_count = 0;
+    // Whether each combination passes InsideAndFeasible(), for the rows below.
+    std::array<bool, kStates> feasible{};
+    // SegmentFrames() of the three x values of each key: the first frame depends on key a's x
+    // alone, the end on key b's.
+    std::array<std::int64_t, 3> first_of, end_of;
+    for (int o = 0; o < 3; ++o) {
+      first_of[o] = SegmentFrames(ga.x[o], gb.x[o], last).first;
+      end_of[o] = SegmentFrames(ga.x[o], gb.x[o], last).second;
+    }
     for (int itx_a = 0; itx_a < 3; ++itx_a) {
       for (int itx_b = 0; itx_b < 3; ++itx_b) {
         for (int difference = -2; difference <= 2; ++difference) {
@@ -591,8 +638,10 @@ class DpPass {
             const double btx = gb.tx[itx_b];
             if (!InsideAndFeasible(ax, atx, bx, btx)) continue;
             const int combo = tx * 9 + sx;
+            feasible[combo] = true;
             SegmentShape& shape = shapes[combo];
-            const auto [first, end] = SegmentFrames(ax, bx, last);
+            const std::int64_t first = first_of[ix_a];
+            const std::int64_t end = end_of[ix_b];
             shape.first = first;
             shape.n = static_cast<int>(std::max<std::int64_t>(0, end - first));
             if (shape.n == 0) continue;
@@ -624,23 +673,21 @@ class DpPass {
       minima_.Reset();
       row_count_ = 0;
       const bool allowed = !gb.x_fixed || XIndex(tx) == 1;
+      // The largest of minima_.least[0..8]: the widest tie window of the nine targets is that of
+      // the largest smallest candidate (TieTolerance() rounds monotonically).
+      double largest = kInf;
       for (int sx : order) {
         if (!allowed || cheapest[sx] == kInf) break;
-        // The widest tie window of the nine targets; TieTolerance() rounds monotonically, so
-        // it is the window of the largest smallest candidate.
-        const double largest = *std::max_element(minima_.least.begin(), minima_.least.begin() + 9);
         if (cheapest[sx] > largest + TieTolerance(largest, scale_)) break;
-        const double ax = ga.x[XIndex(sx)];
-        const double atx = ga.tx[TxIndex(sx)];
-        const double bx = gb.x[XIndex(tx)];
-        const double btx = gb.tx[TxIndex(tx)];
-        if (!InsideAndFeasible(ax, atx, bx, btx)) continue;
+        // Rows reached here passed the same tests as in the sweep above (finite cheapest state,
+        // allowed target), so its verdict stands.
+        if (!feasible[tx * 9 + sx]) continue;
         if (Stopping(shapes[tx * 9 + sx].n)) return false;
         const SegmentForm form =
             BuildSegmentForm(samples_, shapes[tx * 9 + sx], y_ref, centre_y, steps_);
         PredecessorRow& row = rows_[row_count_++];
         FillRow(form, in.data() + sx * 9, sx, row);
-        UpdateMinima(row, minima_);
+        largest = UpdateMinima(row, minima_);
       }
       for (int ty = 0; ty < 9; ++ty) {
         const auto [value, state] = ChooseForTarget(ty);
@@ -701,9 +748,10 @@ class DpPass {
     return row.a[sy] + ((row.b[ty] + u) + v);
   }
 
-  static void UpdateMinima(const PredecessorRow& row, LaneMinima& minima) {
-    UpdateLaneMinima(row.a.data(), row.b.data(), row.z0.data(), row.z1.data(),
-                     static_cast<double>(row.sx * 9), minima.least.data(), minima.second.data(),
+  // Returns the largest of the nine smallest candidates after the update.
+  static double UpdateMinima(const PredecessorRow& row, LaneMinima& minima) {
+    return UpdateLaneMinima(row.a.data(), row.b.data(), row.z0.data(), row.z1.data(),
+                     row.sx * 9, minima.least.data(), minima.second.data(),
                      minima.state.data());
   }
 

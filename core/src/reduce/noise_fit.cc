@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <numbers>
 #include <utility>
 #include <vector>
@@ -85,14 +86,19 @@ class BandSolver {
   void Solve(std::span<const double> x, std::span<const double> lambda, std::span<double> y) {
     const std::size_t n = x.size();
     band_.assign(n, {1.0, 0.0, 0.0, 0.0});  // band_[i][k] = A(i, i - k)
-    for (std::size_t r = 0; r + kOrder < n; ++r) {
-      const double l = lambda[r];
-      for (int a = 0; a <= kOrder; ++a) {
-        for (int b = 0; b <= a; ++b) band_[r + a][a - b] += l * kDifference[a] * kDifference[b];
-      }
-    }
-    // In place: band_ becomes L with A = L L^T.
+    // One sweep assembles, factors and forward-substitutes: row i of the matrix is complete once
+    // the penalty rows up to r = i are added (their terms still in increasing r), row i of L
+    // needs rows i - 3 .. i of it, and the forward step at i row i of L. The factor's chain of
+    // divisions and square roots and the substitution's then overlap instead of running one
+    // after the other.
     for (std::size_t i = 0; i < n; ++i) {
+      if (i + kOrder < n) {
+        const double l = lambda[i];
+        for (int a = 0; a <= kOrder; ++a) {
+          for (int b = 0; b <= a; ++b) band_[i + a][a - b] += l * kDifference[a] * kDifference[b];
+        }
+      }
+      // In place: band_ row i becomes row i of L with A = L L^T.
       for (int k = kOrder; k >= 1; --k) {
         if (i < static_cast<std::size_t>(k)) continue;
         const std::size_t j = i - static_cast<std::size_t>(k);
@@ -107,13 +113,11 @@ class BandSolver {
         s -= band_[i][k] * band_[i][k];
       }
       band_[i][0] = std::sqrt(s);
-    }
-    for (std::size_t i = 0; i < n; ++i) {
-      double s = x[i];
+      double f = x[i];
       for (int k = 1; k <= kOrder && i >= static_cast<std::size_t>(k); ++k) {
-        s -= band_[i][k] * y[i - static_cast<std::size_t>(k)];
+        f -= band_[i][k] * y[i - static_cast<std::size_t>(k)];
       }
-      y[i] = s / band_[i][0];
+      y[i] = f / band_[i][0];
     }
     for (std::size_t i = n; i-- > 0;) {
       double s = y[i];
@@ -205,75 +209,116 @@ TEMPOKEY_AVX_CLONES void FactorConstantLevels(std::size_t n, const double* level
     for (int k = 1; k <= kOrder && i >= static_cast<std::size_t>(k); ++k) s -= row[k] * row[k];
     row[0] = Root(s);
   }
+  // The other rows on 4-lane vectors, a quarter of the batch at a time (kept in registers, where
+  // 16-lane ones go through the stack), with the same operations per lane.
+  using simd::V4;
+  constexpr std::size_t kCount = kLanes;
+  const double* interior_values = reinterpret_cast<const double*>(interior);
   for (std::size_t i = kOrder; i < n; ++i) {
-    const bool inside = i <= last_penalty;
-    const Lanes a0 = inside ? interior[0] : entry(i, 0);
-    const Lanes a1 = inside ? interior[1] : entry(i, 1);
-    const Lanes a2 = inside ? interior[2] : entry(i, 2);
-    const Lanes a3 = inside ? interior[3] : entry(i, 3);
-    const Lanes* r1 = band[i - 1].entry;
-    const Lanes* r2 = band[i - 2].entry;
-    const Lanes* r3 = band[i - 3].entry;
-    const Lanes e3 = a3 / r3[0];
-    const Lanes e2 = (a2 - e3 * r2[1]) / r2[0];
-    Lanes s1 = a1 - e2 * r1[1];
-    s1 -= e3 * r1[2];
-    const Lanes e1 = s1 / r1[0];
-    Lanes s0 = a0 - e1 * e1;
-    s0 -= e2 * e2;
-    s0 -= e3 * e3;
-    Lanes* row = band[i].entry;
-    row[0] = Root(s0);
-    row[1] = e1;
-    row[2] = e2;
-    row[3] = e3;
+    Lanes edge[kOrder + 1];
+    const double* a = interior_values;
+    if (i > last_penalty) {
+      for (int k = 0; k <= kOrder; ++k) edge[k] = entry(i, k);
+      a = reinterpret_cast<const double*>(edge);
+    }
+    const double* __restrict r1 = reinterpret_cast<const double*>(&band[i - 1]);
+    const double* __restrict r2 = reinterpret_cast<const double*>(&band[i - 2]);
+    const double* __restrict r3 = reinterpret_cast<const double*>(&band[i - 3]);
+    double* __restrict row = reinterpret_cast<double*>(&band[i]);
+    for (std::size_t q = 0; q < kCount; q += 4) {
+      // Entry k of a row is at k * kCount + lane.
+      const auto at = [q](const double* values, std::size_t k) {
+        return simd::Load(values + k * kCount + q);
+      };
+      const V4 e3 = at(a, 3) / at(r3, 0);
+      const V4 e2 = (at(a, 2) - e3 * at(r2, 1)) / at(r2, 0);
+      V4 s1 = at(a, 1) - e2 * at(r1, 1);
+      s1 -= e3 * at(r1, 2);
+      const V4 e1 = s1 / at(r1, 0);
+      V4 s0 = at(a, 0) - e1 * e1;
+      s0 -= e2 * e2;
+      s0 -= e3 * e3;
+      V4 root;
+      for (int lane = 0; lane < 4; ++lane) root[lane] = std::sqrt(s0[lane]);
+      simd::Store(row + q, root);
+      simd::Store(row + kCount + q, e1);
+      simd::Store(row + 2 * kCount + q, e2);
+      simd::Store(row + 3 * kCount + q, e3);
+    }
   }
 }
 
-// Solves L L^T y = x for the sixteen factors of `band` (FactorConstantLevels()): forward, then back
-// substitution, as BandSolver does. y[i].value[l] is level l's solution at frame i.
-TEMPOKEY_AVX_CLONES void SubstituteConstantLevels(const double* x, std::size_t n,
-                                                  const BandRow* band, LaneValues* y) {
+// One solve of a window's samples `x` at one batch of sixteen levels: `band` is the factor of the
+// window's length at those levels (FactorConstantLevels()), `y` receives the solutions.
+struct SubstitutionJob {
+  const double* x;
+  const BandRow* band;
+  LaneValues* y;
+  std::size_t quarters;  // lanes solved, in fours (1 to 4): a partly filled batch solves fewer
+};
+
+// Solves L L^T y = x for every job (each of n frames): forward, then back substitution, as
+// BandSolver does. y[i].value[l] is level l's solution at frame i. One solve is a chain of
+// dependent divisions from frame to frame; the jobs are independent, so stepping all of them frame
+// by frame keeps several chains in flight and the divider busy. Each lane of each job performs
+// exactly the scalar operations in the scalar order. Written on 4-lane vectors (a quarter of a
+// batch at a time): the compiler keeps those in registers, where it moves 16-lane ones through
+// the stack.
+TEMPOKEY_AVX_CLONES void SubstituteConstantLevels(std::size_t n, const SubstitutionJob* jobs,
+                                                  std::size_t count) {
+  using simd::V4;
+  // Doubles from one frame (or one band entry) to the next.
+  constexpr std::size_t kStride = kLanes;
+  constexpr std::size_t kRowStride = sizeof(BandRow) / sizeof(double);
+  static_assert(sizeof(LaneValues) == kStride * sizeof(double));
   for (std::size_t i = 0; i < n; ++i) {
-    const Lanes* row = band[i].entry;
-    Lanes f = Broadcast(x[i]);
-    if (i >= kOrder) {
-      f -= row[1] * y[i - 1].value;
-      f -= row[2] * y[i - 2].value;
-      f -= row[3] * y[i - 3].value;
-    } else {
-      for (int k = 1; k <= kOrder && i >= static_cast<std::size_t>(k); ++k) {
-        f -= row[k] * y[i - static_cast<std::size_t>(k)].value;
+    for (std::size_t j = 0; j < count; ++j) {
+      const double* __restrict row = reinterpret_cast<const double*>(&jobs[j].band[i]);
+      double* __restrict y = reinterpret_cast<double*>(jobs[j].y);
+      const V4 xi = simd::Broadcast(jobs[j].x[i]);
+      for (std::size_t q = 0; q < jobs[j].quarters; ++q) {
+        const std::size_t at = i * kStride + 4 * q;
+        V4 f = xi;
+        for (std::size_t k = 1; k <= kOrder && i >= k; ++k) {
+          f -= simd::Load(row + k * kStride + 4 * q) * simd::Load(y + at - k * kStride);
+        }
+        simd::Store(y + at, f / simd::Load(row + 4 * q));
       }
     }
-    y[i].value = f / row[0];
   }
   for (std::size_t i = n; i-- > 0;) {
-    Lanes s = y[i].value;
-    if (i + kOrder < n) {
-      s -= band[i + 1].entry[1] * y[i + 1].value;
-      s -= band[i + 2].entry[2] * y[i + 2].value;
-      s -= band[i + 3].entry[3] * y[i + 3].value;
-    } else {
-      for (int k = 1; k <= kOrder && i + static_cast<std::size_t>(k) < n; ++k) {
-        const auto uk = static_cast<std::size_t>(k);
-        s -= band[i + uk].entry[k] * y[i + uk].value;
+    for (std::size_t j = 0; j < count; ++j) {
+      const double* __restrict band = reinterpret_cast<const double*>(jobs[j].band);
+      double* __restrict y = reinterpret_cast<double*>(jobs[j].y);
+      for (std::size_t q = 0; q < jobs[j].quarters; ++q) {
+        const std::size_t at = i * kStride + 4 * q;
+        V4 s = simd::Load(y + at);
+        for (std::size_t k = 1; k <= kOrder && i + k < n; ++k) {
+          s -= simd::Load(band + (i + k) * kRowStride + k * kStride + 4 * q) *
+               simd::Load(y + at + k * kStride);
+        }
+        simd::Store(y + at, s / simd::Load(band + i * kRowStride + 4 * q));
       }
     }
-    y[i].value = s / band[i].entry[0];
   }
 }
 
-// Residual sums of squares of the sixteen solutions `y` (of x[0 ...]) over frames [b0, b1), each
-// summed frame by frame in order as a scalar loop would.
+// Residual sums of squares of the first 4 * `quarters` of the sixteen solutions `y` (of x[0 ...])
+// over frames [b0, b1), each summed frame by frame in order as a scalar loop would; the other
+// lanes of `rss` are left at 0.
 TEMPOKEY_AVX_CLONES void LaneResiduals(const LaneValues* y, const double* x, std::size_t b0,
-                                       std::size_t b1, double* rss) {
-  Lanes sum{};
+                                       std::size_t b1, std::size_t quarters, double* rss) {
+  using simd::V4;
+  const double* __restrict values = reinterpret_cast<const double*>(y);
+  V4 sum[kLanes / 4] = {};
   for (std::size_t f = b0; f < b1; ++f) {
-    const Lanes r = y[f].value - x[f];
-    sum += r * r;
+    const V4 xf = simd::Broadcast(x[f]);
+    for (std::size_t q = 0; q < quarters; ++q) {
+      const V4 r = simd::Load(values + f * kLanes + 4 * q) - xf;
+      sum[q] += r * r;
+    }
   }
-  for (int lane = 0; lane < kLanes; ++lane) rss[lane] = sum[lane];
+  for (std::size_t q = 0; q < kLanes / 4; ++q) simd::Store(rss + 4 * q, sum[q]);
 }
 
 }  // namespace
@@ -283,33 +328,37 @@ struct reduce_internal::SmootherFactors::Store {
   struct Entry {
     std::size_t n;
     std::array<double, kLanes> level;
-    std::vector<BandRow> rows;
+    std::shared_ptr<const std::vector<BandRow>> rows;
   };
 
-  // The factor of n frames at the sixteen levels `level`, computed on first use. Valid until the
-  // next call.
-  const BandRow* Get(std::size_t n, const double* level) {
+  // The factor of n frames at the sixteen levels `level`, computed on first use. Shared: it stays
+  // valid for its holder when the store lets it go.
+  std::shared_ptr<const std::vector<BandRow>> Get(std::size_t n, const double* level) {
     for (const Entry& entry : entries) {
       if (entry.n == n && std::equal(entry.level.begin(), entry.level.end(), level)) {
-        return entry.rows.data();
+        return entry.rows;
       }
     }
     const std::size_t size = n * sizeof(BandRow);
     while (!entries.empty() && bytes + size > kMaxSmootherFactorBytes) {
-      bytes -= entries.front().rows.size() * sizeof(BandRow);
+      bytes -= entries.front().rows->size() * sizeof(BandRow);
       entries.erase(entries.begin());
     }
+    auto rows = std::make_shared<std::vector<BandRow>>(n);
+    FactorConstantLevels(n, level, rows->data());
     Entry& entry = entries.emplace_back();
     entry.n = n;
     std::copy(level, level + kLanes, entry.level.begin());
-    entry.rows.resize(n);
-    FactorConstantLevels(n, level, entry.rows.data());
+    entry.rows = std::move(rows);
     bytes += size;
-    return entry.rows.data();
+    return entry.rows;
   }
 
   std::vector<Entry> entries;
   std::size_t bytes = 0;
+  // The level searches' solutions: one buffer for every search of the reduction, so a channel
+  // does not fault in fresh pages for it.
+  std::vector<LaneValues> solutions;
 };
 
 reduce_internal::SmootherFactors::SmootherFactors() : store_(std::make_unique<Store>()) {}
@@ -320,6 +369,14 @@ namespace {
 // Frames above which a search solves level by level with BandSolver instead of sixteen levels at
 // once: sixteen factors of that many frames would take more than kMaxSmootherFactorBytes.
 constexpr std::size_t kMaxLaneFrames = reduce_internal::kMaxSmootherFactorBytes / sizeof(BandRow);
+// Batches of sixteen levels a search has at most: the coarse grid, 29 levels.
+constexpr std::size_t kMaxBatches =
+    static_cast<std::size_t>((kMaxLogLambda - kMinLogLambda) / kCoarseStep + 1 + kLanes - 1) /
+    kLanes;
+static_assert(kMaxBatches == 2);
+// Solutions computed at once (bytes): windows step together until theirs fill about half of a
+// second-level cache.
+constexpr std::size_t kMaxSolutionBytes = std::size_t{256} << 10;
 
 class NoiseSmoother {
  public:
@@ -337,8 +394,7 @@ class NoiseSmoother {
     if (n_ <= kOrder + 1) return y;
     const double global = BestSingleLevel();
     // Per block: the level of least SURE on the block, solved with context on both sides.
-    std::vector<double> block_log;
-    for (std::size_t b0 = 0; b0 < n_; b0 += block_) block_log.push_back(BestBlockLevel(b0, global));
+    std::vector<double> block_log = BestBlockLevels(global);
     std::vector<double> lambda(n_ - kOrder);
     for (int round = 0;; ++round) {
       Interpolate(block_log, lambda);
@@ -361,44 +417,109 @@ class NoiseSmoother {
   }
 
  private:
-  // SURE on frames [b0, b1) of the solutions of x_[a0, a1) at the constant levels 10^logs[i], up
-  // to the constant -n sigma^2: each one's residual there plus 2 sigma^2 times its degrees of
-  // freedom. Sixteen levels per solve.
-  std::vector<double> Risks(std::span<const double> logs, std::size_t a0, std::size_t a1,
-                            std::size_t b0, std::size_t b1) {
-    const std::size_t n = a1 - a0;
-    std::vector<double> risks(logs.size());
+  // A block and the frames it is solved on: SURE counts frames [b0, b1) of the solution of
+  // x_[a0, a1).
+  struct Window {
+    std::size_t a0, a1, b0, b1;
+  };
+
+  // SURE on each window's block of the solutions of its frames at the constant levels
+  // 10^logs[i], up to the constant -n sigma^2: each one's residual there plus 2 sigma^2 times its
+  // degrees of freedom. risks[w * logs.size() + i] is window w's at level i. Every window has n
+  // frames, so they share the factors; sixteen levels per factor, and the solves of several
+  // windows and batches of levels step together (SubstituteConstantLevels()).
+  std::vector<double> Risks(std::span<const double> logs, std::size_t n,
+                            std::span<const Window> windows) {
+    const std::size_t count = logs.size();
+    std::vector<double> risks(windows.size() * count);
     if (n > kMaxLaneFrames) {
       std::vector<double> y(n);
       std::vector<double> lambda(n - kOrder);
-      for (std::size_t i = 0; i < logs.size(); ++i) {
-        const double level = std::pow(10.0, logs[i]);
-        std::fill(lambda.begin(), lambda.end(), level);
-        solver_.Solve(x_.subspan(a0, n), lambda, y);
-        double rss = 0.0;
-        for (std::size_t f = b0; f < b1; ++f) {
-          const double r = y[f - a0] - x_[f];
-          rss += r * r;
+      for (std::size_t w = 0; w < windows.size(); ++w) {
+        const Window& window = windows[w];
+        for (std::size_t i = 0; i < count; ++i) {
+          const double level = std::pow(10.0, logs[i]);
+          std::fill(lambda.begin(), lambda.end(), level);
+          solver_.Solve(x_.subspan(window.a0, n), lambda, y);
+          double rss = 0.0;
+          for (std::size_t f = window.b0; f < window.b1; ++f) {
+            const double r = y[f - window.a0] - x_[f];
+            rss += r * r;
+          }
+          risks[w * count + i] = rss + 2.0 * sigma2_ * static_cast<double>(window.b1 - window.b0) *
+                                           CachedDofPerFrame(level);
         }
-        risks[i] = rss + 2.0 * sigma2_ * static_cast<double>(b1 - b0) * CachedDofPerFrame(level);
       }
       return risks;
     }
-    lanes_y_.resize(n);
-    for (std::size_t first = 0; first < logs.size(); first += kLanes) {
-      double level[kLanes];
-      for (std::size_t lane = 0; lane < kLanes; ++lane) {
-        level[lane] = std::pow(10.0, logs[std::min(first + lane, logs.size() - 1)]);
+    const std::size_t batches = (count + kLanes - 1) / kLanes;
+    // Batches whose factors are held at once, and windows solved at once, within the byte bounds.
+    const std::size_t factor_bytes = n * sizeof(BandRow);
+    const std::size_t batches_per_step =
+        std::clamp<std::size_t>(reduce_internal::kMaxSmootherFactorBytes / factor_bytes, 1, batches);
+    for (std::size_t first_batch = 0; first_batch < batches; first_batch += batches_per_step) {
+      const std::size_t step_batches = std::min(batches_per_step, batches - first_batch);
+      std::array<double, kLanes> level[kMaxBatches];
+      std::array<double, kLanes> dof[kMaxBatches];  // degrees of freedom per frame
+      std::shared_ptr<const std::vector<BandRow>> factor[kMaxBatches];
+      for (std::size_t b = 0; b < step_batches; ++b) {
+        const std::size_t first = (first_batch + b) * kLanes;
+        for (std::size_t lane = 0; lane < kLanes; ++lane) {
+          level[b][lane] = std::pow(10.0, logs[std::min(first + lane, count - 1)]);
+          dof[b][lane] = CachedDofPerFrame(level[b][lane]);
+        }
+        factor[b] = factors_.Get(n, level[b].data());
       }
-      SubstituteConstantLevels(x_.data() + a0, n, factors_.Get(n, level), lanes_y_.data());
-      double rss[kLanes];
-      LaneResiduals(lanes_y_.data(), x_.data() + a0, b0 - a0, b1 - a0, rss);
-      for (std::size_t lane = 0; lane < kLanes && first + lane < logs.size(); ++lane) {
-        risks[first + lane] = rss[lane] + 2.0 * sigma2_ * static_cast<double>(b1 - b0) *
-                                              CachedDofPerFrame(level[lane]);
+      const std::size_t solution_bytes = n * sizeof(LaneValues) * step_batches;
+      const std::size_t windows_per_step =
+          std::clamp<std::size_t>(kMaxSolutionBytes / solution_bytes, 1, windows.size());
+      for (std::size_t first_window = 0; first_window < windows.size();
+           first_window += windows_per_step) {
+        const std::size_t step_windows = std::min(windows_per_step, windows.size() - first_window);
+        const std::size_t jobs = step_windows * step_batches;
+        std::vector<LaneValues>& solutions = factors_.solutions;
+        if (solutions.size() < jobs * n) solutions.resize(jobs * n);
+        jobs_.clear();
+        for (std::size_t w = 0; w < step_windows; ++w) {
+          for (std::size_t b = 0; b < step_batches; ++b) {
+            const std::size_t used = std::min<std::size_t>(kLanes, count - (first_batch + b) * kLanes);
+            jobs_.push_back({x_.data() + windows[first_window + w].a0, factor[b]->data(),
+                             solutions.data() + jobs_.size() * n, (used + 3) / 4});
+          }
+        }
+        SubstituteConstantLevels(n, jobs_.data(), jobs);
+        for (std::size_t w = 0; w < step_windows; ++w) {
+          const Window& window = windows[first_window + w];
+          for (std::size_t b = 0; b < step_batches; ++b) {
+            double rss[kLanes];
+            const SubstitutionJob& job = jobs_[w * step_batches + b];
+            LaneResiduals(job.y, x_.data() + window.a0, window.b0 - window.a0,
+                          window.b1 - window.a0, job.quarters, rss);
+            const std::size_t first = (first_batch + b) * kLanes;
+            for (std::size_t lane = 0; lane < kLanes && first + lane < count; ++lane) {
+              risks[(first_window + w) * count + first + lane] =
+                  rss[lane] + 2.0 * sigma2_ * static_cast<double>(window.b1 - window.b0) *
+                                  dof[b][lane];
+            }
+          }
+        }
       }
     }
     return risks;
+  }
+
+  // The index of the least of `risks`, the first of equals; `none` when none is below infinity.
+  static constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
+  static std::size_t Least(std::span<const double> risks) {
+    std::size_t best = kNone;
+    double best_risk = std::numeric_limits<double>::infinity();
+    for (std::size_t i = 0; i < risks.size(); ++i) {
+      if (risks[i] < best_risk) {
+        best_risk = risks[i];
+        best = i;
+      }
+    }
+    return best;
   }
 
   // log10 of the single level of least SURE over the whole channel.
@@ -407,22 +528,18 @@ class NoiseSmoother {
     for (double l = kMinLogLambda; l <= kMaxLogLambda + 1e-9; l += kCoarseStep) {
       coarse_logs.push_back(l);
     }
-    double best = kMinLogLambda;
-    double best_risk = std::numeric_limits<double>::infinity();
-    const std::vector<double> coarse_risks = Risks(coarse_logs, 0, n_, 0, n_);
-    for (std::size_t i = 0; i < coarse_logs.size(); ++i) {
-      if (coarse_risks[i] < best_risk) {
-        best_risk = coarse_risks[i];
-        best = coarse_logs[i];
-      }
-    }
-    const double coarse = best;
+    const Window whole{0, n_, 0, n_};
+    const std::vector<double> coarse_risks = Risks(coarse_logs, n_, {&whole, 1});
+    const std::size_t coarse = Least(coarse_risks);
+    double best = coarse == kNone ? kMinLogLambda : coarse_logs[coarse];
+    double best_risk =
+        coarse == kNone ? std::numeric_limits<double>::infinity() : coarse_risks[coarse];
     std::vector<double> fine_logs;
-    for (double l : {coarse - kFineStep, coarse + kFineStep}) {
+    for (double l : {best - kFineStep, best + kFineStep}) {
       if (l < kMinLogLambda || l > kMaxLogLambda) continue;
       fine_logs.push_back(l);
     }
-    const std::vector<double> fine_risks = Risks(fine_logs, 0, n_, 0, n_);
+    const std::vector<double> fine_risks = Risks(fine_logs, n_, {&whole, 1});
     for (std::size_t i = 0; i < fine_logs.size(); ++i) {
       if (fine_risks[i] < best_risk) {
         best_risk = fine_risks[i];
@@ -432,27 +549,45 @@ class NoiseSmoother {
     return best;
   }
 
-  // log10 of the level of least SURE on the block starting at b0, within kBlockReach decades of
-  // `global`.
-  double BestBlockLevel(std::size_t b0, double global) {
-    const std::size_t b1 = std::min(n_, b0 + block_);
-    const std::size_t a0 = b0 >= block_ ? b0 - block_ : 0;
-    const std::size_t a1 = std::min(n_, b1 + block_);
-    if (a1 - a0 <= kOrder + 1) return global;
-    double best = global;
-    double best_risk = std::numeric_limits<double>::infinity();
+  // log10 of the level of least SURE on each block, within kBlockReach decades of `global`. The
+  // windows of equal length are searched together.
+  std::vector<double> BestBlockLevels(double global) {
     const double low = std::max(kMinLogLambda, global - kBlockReach);
     const double high = std::min(kMaxLogLambda, global + kBlockReach);
     std::vector<double> logs;
     for (double l = low; l <= high + 1e-9; l += kFineStep) logs.push_back(l);
-    const std::vector<double> risks = Risks(logs, a0, a1, b0, b1);
-    for (std::size_t i = 0; i < logs.size(); ++i) {
-      if (risks[i] < best_risk) {
-        best_risk = risks[i];
-        best = logs[i];
+    std::vector<double> block_log;
+    std::vector<Window> windows;
+    for (std::size_t b0 = 0; b0 < n_; b0 += block_) {
+      const std::size_t b1 = std::min(n_, b0 + block_);
+      const std::size_t a0 = b0 >= block_ ? b0 - block_ : 0;
+      const std::size_t a1 = std::min(n_, b1 + block_);
+      windows.push_back({a0, a1, b0, b1});
+      block_log.push_back(global);  // kept where the window is too short to solve
+    }
+    std::vector<bool> done(windows.size(), false);
+    std::vector<Window> group;
+    std::vector<std::size_t> members;
+    for (std::size_t w = 0; w < windows.size(); ++w) {
+      const std::size_t n = windows[w].a1 - windows[w].a0;
+      if (done[w] || n <= kOrder + 1) continue;
+      group.clear();
+      members.clear();
+      for (std::size_t v = w; v < windows.size(); ++v) {
+        if (!done[v] && windows[v].a1 - windows[v].a0 == n) {
+          group.push_back(windows[v]);
+          members.push_back(v);
+          done[v] = true;
+        }
+      }
+      const std::vector<double> risks = Risks(logs, n, group);
+      for (std::size_t m = 0; m < members.size(); ++m) {
+        const std::span<const double> own(risks.data() + m * logs.size(), logs.size());
+        const std::size_t least = Least(own);
+        if (least != kNone) block_log[members[m]] = logs[least];
       }
     }
-    return best;
+    return block_log;
   }
 
   // The level of each penalty row (its centre at r + 1.5) from the block levels, geometrically
@@ -460,6 +595,10 @@ class NoiseSmoother {
   void Interpolate(const std::vector<double>& block_log, std::vector<double>& lambda) const {
     const auto block = static_cast<double>(block_);
     const auto last = static_cast<std::ptrdiff_t>(block_log.size()) - 1;
+    // Between two blocks of the same level, and beyond the first and last, the exponent repeats:
+    // its power is reused.
+    double exponent = std::numeric_limits<double>::quiet_NaN();
+    double power = 0.0;
     for (std::size_t r = 0; r < lambda.size(); ++r) {
       const double position = (static_cast<double>(r) + 1.5 - 0.5 * block) / block;
       const double below = std::floor(position);
@@ -468,7 +607,12 @@ class NoiseSmoother {
       const double l0 = block_log[static_cast<std::size_t>(std::clamp<std::ptrdiff_t>(k, 0, last))];
       const double l1 =
           block_log[static_cast<std::size_t>(std::clamp<std::ptrdiff_t>(k + 1, 0, last))];
-      lambda[r] = std::pow(10.0, l0 + t * (l1 - l0));
+      const double e = l0 + t * (l1 - l0);
+      if (!(e == exponent)) {
+        exponent = e;
+        power = std::pow(10.0, e);
+      }
+      lambda[r] = power;
     }
   }
 
@@ -479,7 +623,7 @@ class NoiseSmoother {
   std::size_t block_;
   BandSolver solver_;
   reduce_internal::SmootherFactors::Store& factors_;
-  std::vector<LaneValues> lanes_y_;
+  std::vector<SubstitutionJob> jobs_;
 };
 
 absl::Status ValidateOptions(const NoiseFitOptions& options) {

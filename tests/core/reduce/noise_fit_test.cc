@@ -7,6 +7,7 @@
 #include <cmath>
 #include <numbers>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "tempokey/core/io/bvh.h"
@@ -170,6 +171,43 @@ TEST(NoiseReductionTest, ReportCarriesEachChannelsEstimatedOrGivenNoise) {
     const double frame = key.time_seconds / clip.frame_time_seconds;
     EXPECT_NEAR(frame, std::round(frame), 1e-9);
     EXPECT_EQ(key.in_tangent, key.out_tangent);
+  }
+}
+
+// A reduction shares the smoother's factors between channels and solves many levels and block
+// windows together; each channel must still come out exactly as it does smoothed on its own.
+TEST(NoiseReductionTest, ChannelsOfOneClipComeOutAsEachDoesAlone) {
+  constexpr int kFrames = 1000;  // 16 blocks of 60 and one of 40: windows of four lengths
+  Clip clip;
+  clip.name = "noise";
+  clip.frame_time_seconds = 1.0 / 120.0;
+  clip.frame_count = kFrames;
+  const double sigmas[] = {0.5, 0.05, 2.0, 0.2};
+  for (int c = 0; c < 4; ++c) {
+    std::vector<double> samples = WithNoise(Truth(kFrames), sigmas[c], 20 + c);
+    for (int f = 0; f < kFrames; ++f) samples[f] *= 1.0 + 0.5 * c;
+    clip.channels.push_back({.joint = -1, .kind = ChannelKind::kXPosition,
+                             .name = "p" + std::to_string(c), .samples = std::move(samples)});
+  }
+  ReduceOptions options;
+  options.method = ReduceMethod::kNoise;
+
+  absl::StatusOr<ReduceResult> together = ReduceKeys(clip, options);
+
+  ASSERT_TRUE(together.ok()) << together.status();
+  // Backwards, so that no channel finds the factors the clip left behind in the same order.
+  for (int c = 3; c >= 0; --c) {
+    SCOPED_TRACE(c);
+    const double sigma = together->report.channels[c].noise_sigma;
+    absl::StatusOr<SplineFit> alone = FitToNoise(clip.channels[c].samples, sigma);
+    ASSERT_TRUE(alone.ok()) << alone.status();
+    const std::vector<Key>& keys = together->keyed.curves[c].keys;
+    ASSERT_EQ(keys.size(), alone->frames.size());
+    for (std::size_t k = 0; k < keys.size(); ++k) {
+      EXPECT_EQ(keys[k].time_seconds,
+                static_cast<double>(alone->frames[k]) * clip.frame_time_seconds);
+      EXPECT_EQ(keys[k].value, alone->values[0][k]);
+    }
   }
 }
 
