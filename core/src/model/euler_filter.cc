@@ -1,6 +1,7 @@
 // The Euler filter (SPEC 4.3); definitions in euler_filter.h.
 #include "tempokey/core/model/euler_filter.h"
 
+#include <cmath>
 #include <vector>
 
 #include "tempokey/core/model/kinematics.h"
@@ -9,13 +10,15 @@
 namespace tempokey::core {
 namespace {
 
-double SquaredDistance(const Vec3& a, const Vec3& b) {
-  double sum = 0.0;
-  for (int i = 0; i < 3; ++i) {
-    const double d = a[i] - b[i];
-    sum += d * d;
-  }
-  return sum;
+// The sum of absolute differences (L1). Not the squared (L2) distance: at a real rotation jump
+// both branches jump, and L2, which weighs one large step more than several moderate ones, picks
+// the branch that spreads the jump over all three angles; L1 picks the one whose steps are
+// smaller in total, which keeps the jump in fewer curves. On CMU 131_01's right thumb (frame
+// 237, a 171 degree rotation change) L2 kept the branch whose three angles all step by 78-155
+// degrees where L1 keeps the one whose steps add up to 16 degrees less; the tolerance fit keeps
+// 2 keys fewer (bench/euler_filter_bench).
+double AbsoluteDistance(const Vec3& a, const Vec3& b) {
+  return std::abs(a[0] - b[0]) + std::abs(a[1] - b[1]) + std::abs(a[2] - b[2]);
 }
 
 }  // namespace
@@ -27,7 +30,7 @@ Vec3 NearestEquivalentEuler(const Vec3& degrees, const Vec3& previous) {
   const Vec3 flipped = {NearestTurn(degrees[0] + 180.0, previous[0]),
                         NearestTurn(180.0 - degrees[1], previous[1]),
                         NearestTurn(degrees[2] + 180.0, previous[2])};
-  return SquaredDistance(flipped, previous) < SquaredDistance(same, previous) ? flipped : same;
+  return AbsoluteDistance(flipped, previous) < AbsoluteDistance(same, previous) ? flipped : same;
 }
 
 absl::StatusOr<EulerFilterReport> ApplyEulerFilter(Clip& clip) {

@@ -21,10 +21,6 @@
 namespace tempokey::core {
 namespace {
 
-// The 0.75 quantile of the standard normal: the median of |z| for z ~ N(0, 1).
-constexpr double kNormalMedianAbs = 0.6744897501960817;
-// Variance of a third difference of unit white noise: 1 + 9 + 9 + 1.
-constexpr double kThirdDifferenceVariance = 20.0;
 // The penalty's difference order and its coefficients (third difference of y at r:
 // y_{r+3} - 3 y_{r+2} + 3 y_{r+1} - y_r).
 constexpr int kOrder = 3;
@@ -643,21 +639,6 @@ absl::Status ValidateOptions(const NoiseFitOptions& options) {
 }
 
 }  // namespace
-
-double EstimateNoiseSigma(std::span<const double> samples) {
-  if (samples.size() < kOrder + 1) return 0.0;
-  std::vector<double> d(samples.size() - kOrder);
-  for (std::size_t f = 0; f < d.size(); ++f) {
-    d[f] = std::abs(samples[f + 3] - 3.0 * samples[f + 2] + 3.0 * samples[f + 1] - samples[f]);
-  }
-  const auto middle = static_cast<std::ptrdiff_t>(d.size() / 2);
-  std::nth_element(d.begin(), d.begin() + middle, d.end());
-  double median = d[static_cast<std::size_t>(middle)];
-  if (d.size() % 2 == 0) {
-    median = 0.5 * (median + *std::max_element(d.begin(), d.begin() + middle));
-  }
-  return median / (kNormalMedianAbs * std::sqrt(kThirdDifferenceVariance));
-}
 
 std::vector<double> SmoothToNoise(std::span<const double> samples, double sigma,
                                   const NoiseFitOptions& options) {

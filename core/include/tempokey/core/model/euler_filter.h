@@ -8,10 +8,17 @@
 // (a + 180 + 360 p, 180 - b + 360 q, c + 180 + 360 s) for all integers p, q, s (away from gimbal
 // lock, b = +-90, where infinitely many triples share the rotation and only these are
 // considered). Frame by frame from the first, which is kept, each frame's triple becomes the one
-// of these nearest (least sum of squared differences) the previous frame's filtered triple; on a
-// tie the unflipped branch is kept. Each angle is only moved by adding 180 or 360 multiples or
-// negated around 90, so the rotation matrices agree to rounding (about 1e-13 for angles below a
-// few thousand degrees).
+// of these nearest the previous frame's filtered triple in the sum of absolute differences of
+// the three angles; on a tie the unflipped branch is kept. Each angle of a branch is first
+// brought within 180 of the previous one (whole turns), so a frame already continuous with the
+// previous one is left as it is (unless the other branch is nearer still, which only happens
+// near gimbal lock). This is what Maya's Euler filter does (`filterCurve -f euler`: "demangles
+// discontinuous rotation anim curves into smooth curves", Autodesk Maya command reference,
+// https://help.autodesk.com/cloudhelp/2016/ENU/Maya-Tech-Docs/Commands/filterCurve.html); the
+// reference names no distance, and the absolute one is the choice that keeps a real rotation
+// jump in as few curves as it can (the squared one spreads it over all three; euler_filter.cc).
+// Each angle is only moved by adding 180 or 360 multiples or negated around 90, so the rotation
+// matrices agree to rounding (about 1e-13 for angles below a few thousand degrees).
 #ifndef TEMPOKEY_CORE_MODEL_EULER_FILTER_H_
 #define TEMPOKEY_CORE_MODEL_EULER_FILTER_H_
 
