@@ -53,6 +53,8 @@
 //    sigma from the data, the block's lambda is divided by 10 until none does (Gaussian noise
 //    exceeds 5 sigma at one frame in 1.7 million, so with the default 5 the guard keeps real
 //    motion the smoother would cut, impacts and quick turns, and almost never reacts to noise).
+//    A block still over the guard at the lowest level searched (10^-3: a real jump, e.g. a
+//    170-degree Euler flip, is moved by about lambda * 10 times its height) drops to 10^-12.
 //
 // 3. Keys: FitWithinTolerance() (tolerance_fit.h) on the denoised curve with the bound
 //    key_sigmas * sigma: the fewest least-squares C1 Hermite keys on frames, slopes free, within
