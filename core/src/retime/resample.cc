@@ -406,12 +406,19 @@ class SourceQuats {
   std::unique_ptr<double[]> quats_;
 };
 
+// An array of n values left uninitialized: every batch writes its slots before reading them, and
+// zeroing the scratch of every joint cost more than the short clips' whole resampling.
+template <class T>
+std::unique_ptr<T[]> Scratch(std::size_t n) {
+  return std::make_unique_for_overwrite<T[]>(n);
+}
+
 // Quaternion columns of a fixed size.
 struct QuatColumns {
-  std::vector<double> w, x, y, z;
+  std::unique_ptr<double[]> w, x, y, z;
 
   void Resize(std::size_t n) {
-    for (std::vector<double>* c : {&w, &x, &y, &z}) c->resize(n);
+    for (std::unique_ptr<double[]>* c : {&w, &x, &y, &z}) *c = Scratch<double>(n);
   }
   void Set(std::size_t i, const Quat& q) {
     w[i] = q.w;
@@ -420,8 +427,8 @@ struct QuatColumns {
     z[i] = q.z;
   }
   Quat Get(std::size_t i) const { return {w[i], x[i], y[i], z[i]}; }
-  retime_internal::QuatArrays Arrays() { return {w.data(), x.data(), y.data(), z.data()}; }
-  retime_internal::ConstQuatArrays Arrays() const { return {w.data(), x.data(), y.data(), z.data()}; }
+  retime_internal::QuatArrays Arrays() { return {w.get(), x.get(), y.get(), z.get()}; }
+  retime_internal::ConstQuatArrays Arrays() const { return {w.get(), x.get(), y.get(), z.get()}; }
 };
 
 // WeightedMeanRotation() with its default spread (whose cosine it takes every call, here once).
@@ -615,28 +622,27 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
 
   // Per batch of interpolating outputs, each in its slot: the interpolated rotations (slerps and
   // weighted means batched), then all of them back to Euler angles.
+  // Sized for the batches this joint has, not the largest batch.
+  const std::size_t capacity = std::min(kRotationBatch, d.output.size());
   QuatColumns rotations, slerp_from, slerp_to, slerped, means;
-  std::vector<double> slerp_t;
-  std::vector<std::size_t> slerp_slot, weighted_slot;
-  std::vector<retime_internal::WeightedMeanJob> weighted;
-  std::vector<unsigned char> copied, needs_markley, ill_conditioned;
-  std::array<std::vector<double>, 3> reference, turn, angles;
-  std::vector<Quat> taps;
   for (QuatColumns* q : {&rotations, &slerp_from, &slerp_to, &slerped, &means}) {
-    q->Resize(kRotationBatch);
+    q->Resize(capacity);
   }
-  slerp_t.resize(kRotationBatch);
-  slerp_slot.resize(kRotationBatch);
-  weighted_slot.resize(kRotationBatch);
-  weighted.resize(kRotationBatch);
-  copied.resize(kRotationBatch);
-  needs_markley.resize(kRotationBatch);
-  ill_conditioned.resize(kRotationBatch);
+  const std::unique_ptr<double[]> slerp_t = Scratch<double>(capacity);
+  const std::unique_ptr<std::size_t[]> slerp_slot = Scratch<std::size_t>(capacity);
+  const std::unique_ptr<std::size_t[]> weighted_slot = Scratch<std::size_t>(capacity);
+  const std::unique_ptr<retime_internal::WeightedMeanJob[]> weighted =
+      Scratch<retime_internal::WeightedMeanJob>(capacity);
+  const std::unique_ptr<unsigned char[]> copied = Scratch<unsigned char>(capacity);
+  const std::unique_ptr<unsigned char[]> needs_markley = Scratch<unsigned char>(capacity);
+  const std::unique_ptr<unsigned char[]> ill_conditioned = Scratch<unsigned char>(capacity);
+  std::array<std::unique_ptr<double[]>, 3> reference, turn, angles;
   for (int c = 0; c < 3; ++c) {
-    reference[c].resize(kRotationBatch);
-    turn[c].resize(kRotationBatch);
-    angles[c].resize(kRotationBatch);
+    reference[c] = Scratch<double>(capacity);
+    turn[c] = Scratch<double>(capacity);
+    angles[c] = Scratch<double>(capacity);
   }
+  std::vector<Quat> taps;
   // A batch also ends once its samples read kRotationStopTaps source rotations, and the stop
   // token is looked at between batches: a few milliseconds of work at most, whatever the
   // decimation ratio (batching changes no result: every step is per sample).
@@ -686,12 +692,12 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
       rotations.Set(slot, smooth ? Squad(q0, q1, q2, q3, d.t[r]) : Slerp(q1, q2, d.t[r]));
     }
     retime_internal::SlerpQuats(std::as_const(slerp_from).Arrays(),
-                                std::as_const(slerp_to).Arrays(), slerp_t.data(), slerps,
+                                std::as_const(slerp_to).Arrays(), slerp_t.get(), slerps,
                                 slerped.Arrays());
     for (std::size_t s = 0; s < slerps; ++s) rotations.Set(slerp_slot[s], slerped.Get(s));
     // The weighted means; Markley's where their spread asks for it.
-    retime_internal::WeightedMeans(quats.data(), plan.weights.data(), weighted.data(), weights,
-                                   min_dot, means.Arrays(), needs_markley.data());
+    retime_internal::WeightedMeans(quats.data(), plan.weights.data(), weighted.get(), weights,
+                                   min_dot, means.Arrays(), needs_markley.get());
     for (std::size_t s = 0; s < weights; ++s) {
       Quat mean = means.Get(s);
       if (needs_markley[s]) {
@@ -720,13 +726,13 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
         turn[c][slot] = source[c][d.nearest[r]];
       }
     }
-    const double* const reference_columns[3] = {reference[0].data(), reference[1].data(),
-                                                 reference[2].data()};
-    const double* const turn_columns[3] = {turn[0].data(), turn[1].data(), turn[2].data()};
-    double* const angle_columns[3] = {angles[0].data(), angles[1].data(), angles[2].data()};
+    const double* const reference_columns[3] = {reference[0].get(), reference[1].get(),
+                                                 reference[2].get()};
+    const double* const turn_columns[3] = {turn[0].get(), turn[1].get(), turn[2].get()};
+    double* const angle_columns[3] = {angles[0].get(), angles[1].get(), angles[2].get()};
     retime_internal::QuatsToEulerNearest(order, std::as_const(rotations).Arrays(),
                                          reference_columns, turn_columns, count, angle_columns,
-                                         ill_conditioned.data());
+                                         ill_conditioned.get());
     for (std::size_t slot = 0; slot < count; ++slot) {
       if (copied[slot]) continue;
       const std::size_t j = d.output[batch + slot];
