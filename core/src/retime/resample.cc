@@ -13,11 +13,11 @@
 namespace tempokey::core {
 namespace {
 
-// Adjacent source rotations further apart than this are a discontinuity (a capture glitch or a
-// flipped solve: no joint turns 90 degrees in one frame at mocap rates). Interpolating across
-// one would invent a pose on an arbitrary geodesic, so samples between them take the nearer
-// source pose instead. Compared as |q_i·q_{i+1}| < cos(90° / 2).
-constexpr double kDiscontinuityDot = 0.70710678118654752;
+// Adjacent source rotations further apart than retime_internal::kDiscontinuityDot are a
+// discontinuity (a capture glitch or a flipped solve: no joint turns 90 degrees in one frame at
+// mocap rates). Interpolating across one would invent a pose on an arbitrary geodesic, so samples
+// between them take the nearer source pose instead. Compared as |q_i·q_{i+1}| < cos(90° / 2).
+using retime_internal::kDiscontinuityDot;
 
 // Weights below this are dropped from the ends of a span; they are exact zeros analytically
 // (outside the kernel's support) and only rounding makes them non-zero.
@@ -366,18 +366,35 @@ struct RotationSchedule::Data {
   std::vector<std::pair<std::size_t, std::size_t>> runs;
   // Output samples that copy a source sample: output index, source index.
   std::vector<std::size_t> copy_output, copy_source;
-  // Output samples that interpolate, in output order: output index j; the interval of the
-  // reference's linear interpolation (and of a slerp or squad), i0 = min(floor(x), last - 1) and
-  // t = x - i0; the nearest source sample; for a weighted one, its pivot (source index).
-  std::vector<std::size_t> output, i0, nearest;
+  // Output samples that interpolate, in slots: batch by batch (Batch), and within a batch the
+  // slerps, then the squads, then the weighted means. Per slot: the output index; the interval of
+  // the reference's linear interpolation (and of a slerp or squad), i0 = min(floor(x), last - 1)
+  // and t = x - i0; the nearest source sample.
+  std::vector<std::int64_t> output, i0, nearest;
   std::vector<double> t;
-  std::vector<std::int64_t> pivot;
+  struct Batch {
+    std::size_t begin, cubic_begin, weighted_begin, end;  // slots
+    std::size_t first_job;    // the batch's weighted means are jobs[first_job ...]
+    std::size_t first_group;  // and their mean groups groups[first_group ...]
+  };
+  std::vector<Batch> batches;
+  // The weighted means in slot order: their kernels (for Markley's mean and the scalar path),
+  // and the lane-major tables of the batched means.
+  struct Job {
+    std::int64_t first, count, weight_offset, pivot;
+  };
+  std::vector<Job> jobs;
+  std::vector<retime_internal::MeanGroup> groups;
+  std::vector<std::int64_t> tap_source;
+  std::vector<double> tap_weight;
 };
 
 namespace {
 
 // Outputs converted back to Euler angles per batch: bounds the scratch memory of a long clip.
 constexpr std::size_t kRotationBatch = 1024;
+// Most source rotations the samples of one batch read (see the schedule's batches).
+constexpr std::int64_t kRotationStopTaps = kResampleStopCheckTaps / 16;
 
 // The source quaternions the plan reads (RotationSchedule's runs), converted once each: a copy
 // reads none. No global sign continuity is imposed: each use aligns signs locally (slerp takes the
@@ -525,6 +542,51 @@ class ScalarRotationPath {
 }  // namespace
 
 
+namespace {
+
+// The interpolation interval and the nearest sample of output sample j (not a copy).
+struct SlotPlace {
+  std::int64_t i0;
+  double t;
+  std::int64_t nearest;
+};
+
+SlotPlace PlaceOf(const ResamplePlan& plan, std::size_t j) {
+  const std::int64_t last = plan.source_count - 1;
+  const double x = plan.position[j];
+  const std::int64_t i0 =
+      std::max<std::int64_t>(0, std::min(static_cast<std::int64_t>(std::floor(x)), last - 1));
+  return {i0, x - static_cast<double>(i0), NearestIndex(x, last)};
+}
+
+// Lays out the lane-major tables of the weighted means jobs[first, end) (RotationSchedule::Data).
+void AddMeanGroups(const ResamplePlan& plan, std::size_t first, std::size_t end,
+                   RotationSchedule::Data& d) {
+  constexpr std::size_t kLanes = retime_internal::kMeanLanes;
+  for (std::size_t g = first; g < end; g += kLanes) {
+    retime_internal::MeanGroup group{.tap_begin = d.tap_source.size(), .taps = 0, .pivot = {}};
+    const RotationSchedule::Data::Job* lane_job[kLanes];
+    for (std::size_t lane = 0; lane < kLanes; ++lane) {
+      // Lanes past the last job repeat the first one, at weight 0 (see MeanGroup).
+      lane_job[lane] = &d.jobs[g + lane < end ? g + lane : g];
+      group.pivot[lane] = lane_job[lane]->pivot;
+      if (g + lane < end) group.taps = std::max(group.taps, lane_job[lane]->count);
+    }
+    for (std::int64_t n = 0; n < group.taps; ++n) {
+      for (std::size_t lane = 0; lane < kLanes; ++lane) {
+        const RotationSchedule::Data::Job& job = *lane_job[lane];
+        const bool real = g + lane < end && n < job.count;
+        d.tap_source.push_back(real ? job.first + n : job.pivot);
+        d.tap_weight.push_back(real ? plan.weights[static_cast<std::size_t>(job.weight_offset + n)]
+                                    : 0.0);
+      }
+    }
+    d.groups.push_back(group);
+  }
+}
+
+}  // namespace
+
 RotationSchedule::RotationSchedule(const ResamplePlan& plan) : data_(std::make_unique<Data>()) {
   Data& d = *data_;
   const auto n = static_cast<std::size_t>(plan.source_count);
@@ -533,6 +595,7 @@ RotationSchedule::RotationSchedule(const ResamplePlan& plan) : data_(std::make_u
   auto need = [&](std::int64_t i) {
     needed[static_cast<std::size_t>(std::clamp<std::int64_t>(i, 0, last))] = 1;
   };
+  std::vector<std::size_t> interpolating;
   for (std::size_t j = 0; j < plan.position.size(); ++j) {
     const std::int64_t first = plan.first[j];
     if (plan.kind[j] == SampleKind::kCopy) {
@@ -540,22 +603,52 @@ RotationSchedule::RotationSchedule(const ResamplePlan& plan) : data_(std::make_u
       d.copy_source.push_back(static_cast<std::size_t>(first));
       continue;
     }
-    const double x = plan.position[j];
-    const std::int64_t i0 = std::max<std::int64_t>(
-        0, std::min(static_cast<std::int64_t>(std::floor(x)), last - 1));
-    const std::int64_t k = NearestIndex(x, last);
-    d.output.push_back(j);
-    d.i0.push_back(static_cast<std::size_t>(i0));
-    d.t.push_back(x - static_cast<double>(i0));
-    d.nearest.push_back(static_cast<std::size_t>(k));
+    interpolating.push_back(j);
     if (plan.kind[j] == SampleKind::kWeighted) {
-      const std::int64_t count = plan.offset[j + 1] - plan.offset[j];
-      d.pivot.push_back(first + std::clamp(k - first, std::int64_t{0}, count - 1));
-      for (std::int64_t i = first; i < first + count; ++i) need(i);
+      for (std::int64_t i = first; i < plan.first[j] + plan.offset[j + 1] - plan.offset[j]; ++i) need(i);
     } else {
-      d.pivot.push_back(-1);
+      const std::int64_t i0 = PlaceOf(plan, j).i0;
       for (std::int64_t i = i0 - 1; i <= i0 + 2; ++i) need(i);
     }
+  }
+  // A batch also ends once its samples read kRotationStopTaps source rotations, and the stop token
+  // is looked at between batches: a few milliseconds of work at most, whatever the decimation
+  // ratio (batching changes no result: every step is per sample).
+  for (std::size_t begin = 0; begin < interpolating.size();) {
+    std::size_t end = begin;
+    for (std::int64_t taps_read = 0; end < interpolating.size() &&
+                                     end - begin < kRotationBatch && taps_read < kRotationStopTaps;
+         ++end) {
+      const std::size_t j = interpolating[end];
+      taps_read += plan.offset[j + 1] - plan.offset[j];
+    }
+    Data::Batch batch{.begin = d.output.size(), .cubic_begin = 0, .weighted_begin = 0, .end = 0,
+                      .first_job = d.jobs.size(), .first_group = d.groups.size()};
+    auto add_slots = [&](SampleKind kind) {
+      for (std::size_t r = begin; r < end; ++r) {
+        const std::size_t j = interpolating[r];
+        if (plan.kind[j] != kind) continue;
+        const SlotPlace place = PlaceOf(plan, j);
+        d.output.push_back(static_cast<std::int64_t>(j));
+        d.i0.push_back(place.i0);
+        d.t.push_back(place.t);
+        d.nearest.push_back(place.nearest);
+        if (kind != SampleKind::kWeighted) continue;
+        const std::int64_t first = plan.first[j];
+        const std::int64_t count = plan.offset[j + 1] - plan.offset[j];
+        d.jobs.push_back({first, count, plan.offset[j],
+                          first + std::clamp(place.nearest - first, std::int64_t{0}, count - 1)});
+      }
+    };
+    add_slots(SampleKind::kLerp);
+    batch.cubic_begin = d.output.size();
+    add_slots(SampleKind::kCubic);
+    batch.weighted_begin = d.output.size();
+    add_slots(SampleKind::kWeighted);
+    batch.end = d.output.size();
+    AddMeanGroups(plan, batch.first_job, d.jobs.size(), d);
+    d.batches.push_back(batch);
+    begin = end;
   }
   for (std::size_t i = 0; i < n;) {
     if (!needed[i]) {
@@ -620,130 +713,95 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
   const double min_dot = std::cos(0.5 * 30.0 * (std::numbers::pi / 180.0));
   ScalarRotationPath scalar_path(plan, order, source, min_dot);
 
-  // Per batch of interpolating outputs, each in its slot: the interpolated rotations (slerps and
-  // weighted means batched), then all of them back to Euler angles.
-  // Sized for the batches this joint has, not the largest batch.
-  const std::size_t capacity = std::min(kRotationBatch, d.output.size());
-  QuatColumns rotations, slerp_from, slerp_to, slerped, means;
-  for (QuatColumns* q : {&rotations, &slerp_from, &slerp_to, &slerped, &means}) {
-    q->Resize(capacity);
+  // Per batch, each output in its slot: the interpolated rotations (slerps and weighted means
+  // batched), then all of them back to Euler angles, written in place; then the few samples the
+  // batched steps leave to the scalar ones.
+  std::size_t capacity = 0;
+  for (const RotationSchedule::Data::Batch& batch : d.batches) {
+    capacity = std::max(capacity, batch.end - batch.begin);
   }
-  const std::unique_ptr<double[]> slerp_t = Scratch<double>(capacity);
-  const std::unique_ptr<std::size_t[]> slerp_slot = Scratch<std::size_t>(capacity);
-  const std::unique_ptr<std::size_t[]> weighted_slot = Scratch<std::size_t>(capacity);
-  const std::unique_ptr<retime_internal::WeightedMeanJob[]> weighted =
-      Scratch<retime_internal::WeightedMeanJob>(capacity);
+  QuatColumns rotations;
+  rotations.Resize(capacity);
   const std::unique_ptr<unsigned char[]> copied = Scratch<unsigned char>(capacity);
-  const std::unique_ptr<unsigned char[]> needs_markley = Scratch<unsigned char>(capacity);
   const std::unique_ptr<unsigned char[]> ill_conditioned = Scratch<unsigned char>(capacity);
-  std::array<std::unique_ptr<double[]>, 3> reference, turn, angles;
-  for (int c = 0; c < 3; ++c) {
-    reference[c] = Scratch<double>(capacity);
-    turn[c] = Scratch<double>(capacity);
-    angles[c] = Scratch<double>(capacity);
-  }
   std::vector<Quat> taps;
-  // A batch also ends once its samples read kRotationStopTaps source rotations, and the stop
-  // token is looked at between batches: a few milliseconds of work at most, whatever the
-  // decimation ratio (batching changes no result: every step is per sample).
-  constexpr std::int64_t kRotationStopTaps = kResampleStopCheckTaps / 16;
-  for (std::size_t batch = 0, count = 0; batch < d.output.size(); batch += count) {
+  for (const RotationSchedule::Data::Batch& batch : d.batches) {
     if (stop.stop_requested()) return;
-    count = 0;
-    for (std::int64_t taps_read = 0; batch + count < d.output.size() && count < kRotationBatch &&
-                                     taps_read < kRotationStopTaps;
-         ++count) {
-      const std::size_t j = d.output[batch + count];
-      taps_read += plan.offset[j + 1] - plan.offset[j];
-    }
-    std::size_t slerps = 0, weights = 0;
-    for (std::size_t slot = 0; slot < count; ++slot) {
-      const std::size_t r = batch + slot;
-      const std::size_t j = d.output[r];
-      copied[slot] = 0;
-      if (plan.kind[j] == SampleKind::kWeighted) {
-        weighted[weights] = {plan.first[j], plan.offset[j + 1] - plan.offset[j], plan.offset[j],
-                             d.pivot[r]};
-        weighted_slot[weights++] = slot;
-        continue;
-      }
-      const std::size_t i = d.i0[r];
-      const Quat q1 = quats[i];
-      const Quat q2 = aligned(quats[i + 1], q1);
-      if (QuatDot(q1, q2) < kDiscontinuityDot) {
-        // Across a discontinuity: the nearer source pose.
-        for (int c = 0; c < 3; ++c) out[c][j] = source[c][d.nearest[r]];
-        copied[slot] = 1;
-        rotations.Set(slot, q1);
-        continue;
-      }
-      if (plan.kind[j] == SampleKind::kLerp) {
-        slerp_from.Set(slerps, q1);
-        slerp_to.Set(slerps, q2);
-        slerp_t[slerps] = d.t[r];
-        slerp_slot[slerps++] = slot;
-        continue;
-      }
-      const auto i0 = static_cast<std::int64_t>(i);
+    const std::size_t count = batch.end - batch.begin;
+    const std::size_t slerps = batch.cubic_begin - batch.begin;
+    retime_internal::SlerpQuats(quats.data(), d.i0.data() + batch.begin, d.t.data() + batch.begin,
+                                slerps, rotations.Arrays(), copied.get());
+    for (std::size_t slot = slerps; slot < batch.weighted_begin - batch.begin; ++slot) {
+      const std::size_t r = batch.begin + slot;
+      const auto i0 = d.i0[r];
+      const Quat q1 = quats[static_cast<std::size_t>(i0)];
+      const Quat q2 = aligned(quats[static_cast<std::size_t>(i0) + 1], q1);
+      copied[slot] = QuatDot(q1, q2) < kDiscontinuityDot;
       const Quat q0 = aligned(quat_at(i0 - 1), q1);
       const Quat q3 = aligned(quat_at(i0 + 2), q2);
       const bool smooth =
           QuatDot(q0, q1) >= kDiscontinuityDot && QuatDot(q2, q3) >= kDiscontinuityDot;
-      rotations.Set(slot, smooth ? Squad(q0, q1, q2, q3, d.t[r]) : Slerp(q1, q2, d.t[r]));
+      rotations.Set(slot, copied[slot]          ? q1
+                          : smooth ? Squad(q0, q1, q2, q3, d.t[r])
+                                   : Slerp(q1, q2, d.t[r]));
     }
-    retime_internal::SlerpQuats(std::as_const(slerp_from).Arrays(),
-                                std::as_const(slerp_to).Arrays(), slerp_t.get(), slerps,
-                                slerped.Arrays());
-    for (std::size_t s = 0; s < slerps; ++s) rotations.Set(slerp_slot[s], slerped.Get(s));
     // The weighted means; Markley's where their spread asks for it.
-    retime_internal::WeightedMeans(quats.data(), plan.weights.data(), weighted.get(), weights,
-                                   min_dot, means.Arrays(), needs_markley.get());
-    for (std::size_t s = 0; s < weights; ++s) {
-      Quat mean = means.Get(s);
-      if (needs_markley[s]) {
-        const retime_internal::WeightedMeanJob& job = weighted[s];
-        taps.resize(static_cast<std::size_t>(job.count));
-        for (std::int64_t tap = 0; tap < job.count; ++tap) {
-          taps[static_cast<std::size_t>(tap)] = quats[static_cast<std::size_t>(job.first + tap)];
-        }
-        mean = MarkleyMean(taps,
-                           {plan.weights.data() + job.weight_offset,
-                            static_cast<std::size_t>(job.count)},
-                           static_cast<std::size_t>(job.pivot - job.first));
+    const std::size_t weighted_slot = batch.weighted_begin - batch.begin;
+    const std::size_t means = batch.end - batch.weighted_begin;
+    const retime_internal::QuatArrays all = rotations.Arrays();
+    const retime_internal::QuatArrays mean_slots = {all.w + weighted_slot, all.x + weighted_slot,
+                                                    all.y + weighted_slot, all.z + weighted_slot};
+    unsigned char* const needs_markley = copied.get() + weighted_slot;
+    retime_internal::WeightedMeans(quats.data(),
+                                   {d.groups.data() + batch.first_group, d.tap_source.data(),
+                                    d.tap_weight.data()},
+                                   means, min_dot, mean_slots, needs_markley);
+    for (std::size_t s = 0; s < means; ++s) {
+      if (!needs_markley[s]) continue;
+      // Not a copy: the slot's flag served as Markley's.
+      needs_markley[s] = 0;
+      const RotationSchedule::Data::Job& job = d.jobs[batch.first_job + s];
+      taps.resize(static_cast<std::size_t>(job.count));
+      for (std::int64_t tap = 0; tap < job.count; ++tap) {
+        taps[static_cast<std::size_t>(tap)] = quats[static_cast<std::size_t>(job.first + tap)];
       }
-      rotations.Set(weighted_slot[s], mean);
+      rotations.Set(weighted_slot + s,
+                    MarkleyMean(taps,
+                                {plan.weights.data() + job.weight_offset,
+                                 static_cast<std::size_t>(job.count)},
+                                static_cast<std::size_t>(job.pivot - job.first)));
     }
     // Back to Euler angles nearest the source's unwrapped angles at x (linearly interpolated),
     // each then within 180 degrees of the source's value at the nearest sample (the source's own
     // convention).
-    for (std::size_t slot = 0; slot < count; ++slot) {
-      const std::size_t r = batch + slot;
-      const std::size_t i = d.i0[r];
-      const double t = d.t[r];
-      for (int c = 0; c < 3; ++c) {
-        const double* v = reference_values[c];
-        reference[c][slot] = last <= 0 ? v[0] : v[i] + t * (v[i + 1] - v[i]);
-        turn[c][slot] = source[c][d.nearest[r]];
-      }
-    }
-    const double* const reference_columns[3] = {reference[0].get(), reference[1].get(),
-                                                 reference[2].get()};
-    const double* const turn_columns[3] = {turn[0].get(), turn[1].get(), turn[2].get()};
-    double* const angle_columns[3] = {angles[0].get(), angles[1].get(), angles[2].get()};
-    retime_internal::QuatsToEulerNearest(order, std::as_const(rotations).Arrays(),
-                                         reference_columns, turn_columns, count, angle_columns,
+    const retime_internal::EulerTargets targets = {
+        .i0 = d.i0.data() + batch.begin,
+        .t = d.t.data() + batch.begin,
+        .nearest = d.nearest.data() + batch.begin,
+        .output = d.output.data() + batch.begin,
+        .reference = {reference_values[0], reference_values[1], reference_values[2]},
+        .turn = {source[0].data(), source[1].data(), source[2].data()},
+        .out = {out[0].data(), out[1].data(), out[2].data()}};
+    retime_internal::QuatsToEulerNearest(order, std::as_const(rotations).Arrays(), targets, count,
                                          ill_conditioned.get());
     for (std::size_t slot = 0; slot < count; ++slot) {
-      if (copied[slot]) continue;
-      const std::size_t j = d.output[batch + slot];
-      if (ill_conditioned[slot]) {
-        const Vec3 exact =
-            QuatToEulerNearest(scalar_path.Interpolated(j), order,
-                               {reference[0][slot], reference[1][slot], reference[2][slot]});
-        for (int c = 0; c < 3; ++c) out[c][j] = NearestTurn(exact[c], turn[c][slot]);
+      if (!copied[slot] && !ill_conditioned[slot]) continue;
+      const std::size_t r = batch.begin + slot;
+      const auto j = static_cast<std::size_t>(d.output[r]);
+      const auto nearest = static_cast<std::size_t>(d.nearest[r]);
+      if (copied[slot]) {
+        // Across a discontinuity: the nearer source pose.
+        for (int c = 0; c < 3; ++c) out[c][j] = source[c][nearest];
         continue;
       }
-      for (int c = 0; c < 3; ++c) out[c][j] = angles[c][slot];
+      const auto i = static_cast<std::size_t>(d.i0[r]);
+      Vec3 reference;
+      for (int c = 0; c < 3; ++c) {
+        const double* v = reference_values[c];
+        reference[c] = v[i] + d.t[r] * (v[i + 1] - v[i]);
+      }
+      const Vec3 exact = QuatToEulerNearest(scalar_path.Interpolated(j), order, reference);
+      for (int c = 0; c < 3; ++c) out[c][j] = NearestTurn(exact[c], source[c][nearest]);
     }
   }
 }

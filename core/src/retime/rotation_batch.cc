@@ -134,27 +134,53 @@ struct QuatLanes {
   return true;
 }
 
+// Lane selectors for __builtin_shuffle on V.
+using Selector = std::int64_t __attribute__((vector_size(sizeof(V))));
+
+// The 4x4 transpose of rows a, b, c, d: quaternions stored (w, x, y, z) one after the other become
+// one vector per component, and back. Shuffles only: no arithmetic, every bit kept.
+[[gnu::always_inline]] inline void Transpose(V& a, V& b, V& c, V& d) {
+  const V ab_even = __builtin_shuffle(a, b, Selector{0, 4, 2, 6});
+  const V ab_odd = __builtin_shuffle(a, b, Selector{1, 5, 3, 7});
+  const V cd_even = __builtin_shuffle(c, d, Selector{0, 4, 2, 6});
+  const V cd_odd = __builtin_shuffle(c, d, Selector{1, 5, 3, 7});
+  a = __builtin_shuffle(ab_even, cd_even, Selector{0, 1, 4, 5});
+  b = __builtin_shuffle(ab_odd, cd_odd, Selector{0, 1, 4, 5});
+  c = __builtin_shuffle(ab_even, cd_even, Selector{2, 3, 6, 7});
+  d = __builtin_shuffle(ab_odd, cd_odd, Selector{2, 3, 6, 7});
+}
+
+// The kLanes doubles at p, and back: unaligned vector loads and stores (a V held in an array
+// and copied lane by lane goes through the stack, and its loads then wait on the stores).
+using UnalignedV =
+    double __attribute__((vector_size(sizeof(V)), aligned(alignof(double)), may_alias));
+[[gnu::always_inline]] inline V LoadV(const double* p) { return *reinterpret_cast<const UnalignedV*>(p); }
+[[gnu::always_inline]] inline void StoreV(double* p, V v) { *reinterpret_cast<UnalignedV*>(p) = v; }
+
 // (w, x, y, z) of the lanes' quaternions as consecutive (w, x, y, z) groups.
 [[gnu::always_inline]] inline void StoreInterleaved(double* out, const QuatLanes& q, std::size_t count) {
-  for (std::size_t lane = 0; lane < count; ++lane) {
-    out[4 * lane] = q.w[lane];
-    out[4 * lane + 1] = q.x[lane];
-    out[4 * lane + 2] = q.y[lane];
-    out[4 * lane + 3] = q.z[lane];
-  }
+  static_assert(kLanes == 4);
+  V a = q.w, b = q.x, c = q.y, d = q.z;
+  Transpose(a, b, c, d);
+  StoreV(out, a);
+  if (count > 1) StoreV(out + 4, b);
+  if (count > 2) StoreV(out + 8, c);
+  if (count > 3) StoreV(out + 12, d);
 }
 
 // Quaternions (w, x, y, z) from `quats` at the indices `at`, one per lane.
-[[gnu::always_inline]] inline QuatLanes Gather(const double* quats, const std::int64_t at[kLanes]) {
-  QuatLanes q;
-  for (std::size_t lane = 0; lane < kLanes; ++lane) {
-    const double* p = quats + 4 * at[lane];
-    q.w[lane] = p[0];
-    q.x[lane] = p[1];
-    q.y[lane] = p[2];
-    q.z[lane] = p[3];
-  }
-  return q;
+[[gnu::always_inline]] inline QuatLanes Gather(const double* quats, const std::int64_t* at) {
+  static_assert(kLanes == 4);
+  V a = LoadV(quats + 4 * at[0]), b = LoadV(quats + 4 * at[1]), c = LoadV(quats + 4 * at[2]),
+    d = LoadV(quats + 4 * at[3]);
+  Transpose(a, b, c, d);
+  return {a, b, c, d};
+}
+
+// Lanes [0, count) of index array `p` into `at`, the missing lanes repeating lane 0.
+[[gnu::always_inline]] inline void LoadIndices(const std::int64_t* p, std::size_t count,
+                                               std::int64_t at[kLanes]) {
+  for (std::size_t lane = 0; lane < kLanes; ++lane) at[lane] = p[lane < count ? lane : 0];
 }
 
 TEMPOKEY_AVX2_CLONES void EulerToQuatsKernel(const EulerOrder& order, const double* a,
@@ -190,15 +216,23 @@ TEMPOKEY_AVX2_CLONES void EulerToQuatsKernel(const EulerOrder& order, const doub
   }
 }
 
-TEMPOKEY_AVX2_CLONES void SlerpKernel(ConstQuatArrays from, ConstQuatArrays to, const double* t,
-                                     std::size_t count, QuatArrays out) {
+TEMPOKEY_AVX2_CLONES void SlerpKernel(const double* quats, const std::int64_t* i0, const double* t,
+                                     std::size_t count, QuatArrays out,
+                                     unsigned char* discontinuous) {
   for (std::size_t i = 0; i < count; i += kLanes) {
     const std::size_t lanes = std::min(kLanes, count - i);
-    const QuatLanes qa = LoadQuats(from, i, lanes);
-    QuatLanes qb = LoadQuats(to, i, lanes);
+    std::int64_t at[kLanes], next[kLanes];
+    LoadIndices(i0 + i, lanes, at);
+    for (std::size_t lane = 0; lane < kLanes; ++lane) next[lane] = at[lane] + 1;
+    const QuatLanes qa = Gather(quats, at);
+    QuatLanes qb = Gather(quats, next);
     const V tt = LoadPartial(t + i, lanes);
-    const Mask flip = Dot(qa, qb) < 0.0;
+    // b's sign aligned to a; the aligned dot product is the negated one, exactly.
+    const V dot = Dot(qa, qb);
+    const Mask flip = dot < 0.0;
     qb = {flip ? -qb.w : qb.w, flip ? -qb.x : qb.x, flip ? -qb.y : qb.y, flip ? -qb.z : qb.z};
+    const Mask apart = (flip ? -dot : dot) < kDiscontinuityDot;
+    for (std::size_t lane = 0; lane < lanes; ++lane) discontinuous[i + lane] = apart[lane] ? 1 : 0;
     const QuatLanes diff = {qa.w - qb.w, qa.x - qb.x, qa.y - qb.y, qa.z - qb.z};
     const QuatLanes sum = {qa.w + qb.w, qa.x + qb.x, qa.y + qb.y, qa.z + qb.z};
     const V diff_squared = Dot(diff, diff);
@@ -246,9 +280,8 @@ TEMPOKEY_AVX2_CLONES void SlerpKernel(ConstQuatArrays from, ConstQuatArrays to, 
 }
 
 TEMPOKEY_AVX2_CLONES void ToEulerKernel(const EulerOrder& order, ConstQuatArrays quats,
-                                       const double* const reference[3],
-                                       const double* const turn[3], std::size_t count,
-                                       double* const out[3], unsigned char* ill_conditioned) {
+                                       const EulerTargets& targets, std::size_t count,
+                                       unsigned char* ill_conditioned) {
   const int i = order[0];
   const int j = order[1];
   const int k = order[2];
@@ -256,6 +289,11 @@ TEMPOKEY_AVX2_CLONES void ToEulerKernel(const EulerOrder& order, ConstQuatArrays
   for (std::size_t first = 0; first < count; first += kLanes) {
     const std::size_t lanes = std::min(kLanes, count - first);
     const QuatLanes q = Normalized(LoadQuats(quats, first, lanes));
+    std::int64_t at[kLanes], nearest[kLanes], output[kLanes];
+    LoadIndices(targets.i0 + first, lanes, at);
+    LoadIndices(targets.nearest + first, lanes, nearest);
+    LoadIndices(targets.output + first, lanes, output);
+    const V tt = LoadPartial(targets.t + first, lanes);
     // QuatToMatrix().
     const V xx = q.x * q.x, yy = q.y * q.y, zz = q.z * q.z;
     const V xy = q.x * q.y, xz = q.x * q.z, yz = q.y * q.z;
@@ -268,9 +306,18 @@ TEMPOKEY_AVX2_CLONES void ToEulerKernel(const EulerOrder& order, ConstQuatArrays
     const V cos_squared = r[i][i] * r[i][i] + r[i][j] * r[i][j];
     V cos_b;
     for (std::size_t lane = 0; lane < kLanes; ++lane) cos_b[lane] = std::sqrt(cos_squared[lane]);
-    const V ref[3] = {LoadPartial(reference[0] + first, lanes),
-                       LoadPartial(reference[1] + first, lanes),
-                       LoadPartial(reference[2] + first, lanes)};
+    // The source's unwrapped angles interpolated linearly at the sample, and its values at the
+    // nearest sample.
+    V ref[3], turn[3];
+    for (int axis = 0; axis < 3; ++axis) {
+      V v0, v1;
+      for (std::size_t lane = 0; lane < kLanes; ++lane) {
+        v0[lane] = targets.reference[axis][at[lane]];
+        v1[lane] = targets.reference[axis][at[lane] + 1];
+        turn[axis][lane] = targets.turn[axis][nearest[lane]];
+      }
+      ref[axis] = v0 + tt * (v1 - v0);
+    }
     const V b = vector_trig::Atan2(sin_b, cos_b);
     const V a = vector_trig::Atan2(-sign * r[j][k], r[k][k]);
     const V c = vector_trig::Atan2(-sign * r[i][j], r[i][i]);
@@ -290,9 +337,8 @@ TEMPOKEY_AVX2_CLONES void ToEulerKernel(const EulerOrder& order, ConstQuatArrays
     }
     const Mask second = second_cost < first_cost;
     for (int axis = 0; axis < 3; ++axis) {
-      const V angle = second ? second_angles[axis] : first_angles[axis];
-      StorePartial(out[axis] + first,
-                   NearestTurn(angle, LoadPartial(turn[axis] + first, lanes)), lanes);
+      const V angle = NearestTurn(second ? second_angles[axis] : first_angles[axis], turn[axis]);
+      for (std::size_t lane = 0; lane < lanes; ++lane) targets.out[axis][output[lane]] = angle[lane];
     }
     // Near gimbal lock: the caller's (gimbal lock itself, cos_b < 1e-12, among them).
     const Mask near_lock = cos_b < kBatchedMinMiddleCos;
@@ -302,37 +348,22 @@ TEMPOKEY_AVX2_CLONES void ToEulerKernel(const EulerOrder& order, ConstQuatArrays
   }
 }
 
-// WeightedMeanRotation()'s arithmetic for several jobs at once, one per lane; a lane past its job's
-// taps adds its pivot with weight 0, which leaves every sum as it is.
-TEMPOKEY_AVX2_CLONES void WeightedMeansKernel(const double* quats, const double* weights,
-                                             const WeightedMeanJob* jobs, std::size_t count,
-                                             double min_dot, QuatArrays out,
+// WeightedMeanRotation()'s arithmetic for kLanes output samples at once, one per lane, in its order
+// of operations for every lane.
+TEMPOKEY_AVX2_CLONES void WeightedMeansKernel(const double* quats, MeanTables tables,
+                                             std::size_t count, double min_dot, QuatArrays out,
                                              unsigned char* needs_markley) {
-  for (std::size_t first = 0; first < count; first += kLanes) {
+  static_assert(kLanes == kMeanLanes);
+  for (std::size_t first = 0, g = 0; first < count; first += kLanes, ++g) {
     const std::size_t lanes = std::min(kLanes, count - first);
-    const WeightedMeanJob* job[kLanes];
-    std::int64_t longest = 0;
-    std::int64_t pivot[kLanes];
-    for (std::size_t lane = 0; lane < kLanes; ++lane) {
-      job[lane] = &jobs[first + std::min(lane, lanes - 1)];
-      pivot[lane] = job[lane]->pivot;
-      longest = std::max(longest, job[lane]->count);
-    }
-    const QuatLanes ref = Gather(quats, pivot);
+    const MeanGroup& group = tables.groups[g];
+    const std::int64_t* source = tables.source + group.tap_begin;
+    const double* weight = tables.weight + group.tap_begin;
+    const QuatLanes ref = Gather(quats, group.pivot);
     QuatLanes sum = {Broadcast(0.0), Broadcast(0.0), Broadcast(0.0), Broadcast(0.0)};
-    auto tap = [&](std::int64_t n, QuatLanes& q, V& w) {
-      std::int64_t at[kLanes];
-      for (std::size_t lane = 0; lane < kLanes; ++lane) {
-        const bool real = n < job[lane]->count;
-        at[lane] = real ? job[lane]->first + n : pivot[lane];
-        w[lane] = real ? weights[job[lane]->weight_offset + n] : 0.0;
-      }
-      q = Gather(quats, at);
-    };
-    for (std::int64_t n = 0; n < longest; ++n) {
-      QuatLanes q;
-      V w;
-      tap(n, q, w);
+    for (std::int64_t n = 0; n < group.taps; ++n) {
+      const QuatLanes q = Gather(quats, source + kLanes * n);
+      const V w = LoadV(weight + kLanes * n);
       const V signed_w = Dot(q, ref) < 0.0 ? -w : w;
       sum = {sum.w + q.w * signed_w, sum.x + q.x * signed_w, sum.y + q.y * signed_w,
              sum.z + q.z * signed_w};
@@ -343,10 +374,9 @@ TEMPOKEY_AVX2_CLONES void WeightedMeansKernel(const double* quats, const double*
     const V inverse = 1.0 / norm;
     const QuatLanes mean = Scaled(sum, inverse);
     Mask markley = !(norm > 1e-9);
-    for (std::int64_t n = 0; n < longest; ++n) {
-      QuatLanes q;
-      V w;
-      tap(n, q, w);
+    for (std::int64_t n = 0; n < group.taps; ++n) {
+      const QuatLanes q = Gather(quats, source + kLanes * n);
+      const V w = LoadV(weight + kLanes * n);
       markley = markley || (w != 0.0 && vector_trig::Abs(Dot(q, mean)) < min_dot);
     }
     StoreQuats(out, first, mean, lanes);
@@ -361,20 +391,19 @@ void EulerToQuats(const EulerOrder& order, const double* a, const double* b, con
   EulerToQuatsKernel(order, a, b, c, count, out);
 }
 
-void WeightedMeans(const double* quats, const double* weights, const WeightedMeanJob* jobs,
-                   std::size_t count, double min_dot, QuatArrays out, unsigned char* needs_markley) {
-  WeightedMeansKernel(quats, weights, jobs, count, min_dot, out, needs_markley);
+void WeightedMeans(const double* quats, const MeanTables& tables, std::size_t count, double min_dot,
+                   QuatArrays out, unsigned char* needs_markley) {
+  WeightedMeansKernel(quats, tables, count, min_dot, out, needs_markley);
 }
 
-void SlerpQuats(ConstQuatArrays from, ConstQuatArrays to, const double* t, std::size_t count,
-                QuatArrays out) {
-  SlerpKernel(from, to, t, count, out);
+void SlerpQuats(const double* quats, const std::int64_t* i0, const double* t, std::size_t count,
+                QuatArrays out, unsigned char* discontinuous) {
+  SlerpKernel(quats, i0, t, count, out, discontinuous);
 }
 
-void QuatsToEulerNearest(const EulerOrder& order, ConstQuatArrays q,
-                         const double* const reference[3], const double* const turn[3],
-                         std::size_t count, double* const out[3], unsigned char* ill_conditioned) {
-  ToEulerKernel(order, q, reference, turn, count, out, ill_conditioned);
+void QuatsToEulerNearest(const EulerOrder& order, ConstQuatArrays q, const EulerTargets& targets,
+                         std::size_t count, unsigned char* ill_conditioned) {
+  ToEulerKernel(order, q, targets, count, ill_conditioned);
 }
 
 }  // namespace tempokey::core::retime_internal
