@@ -88,11 +88,8 @@ struct QuatLanes {
   return Scaled(q, 1.0 / norm);
 }
 
-// The half angle's sine and cosine of AxisRotation(axis, degrees): the rotation is
-// (cos, sin along the axis).
-[[gnu::always_inline]] inline void HalfAngle(V degrees, V& s, V& c) {
-  vector_trig::SinCos(0.5 * degrees * kDegToRad, s, c);
-}
+// AxisRotation(axis, degrees) is (cos, sin along the axis) of the half angle
+// 0.5 * degrees * kDegToRad.
 
 // Multiply(q, AxisRotation(axis, .)) for the rotation (c, s along `axis`): Multiply()'s four
 // products per component less the ones by the rotation's zero components. Those are exact zeros,
@@ -113,12 +110,6 @@ struct QuatLanes {
   const V x2 = x * x;
   return 1.0 + x2 * (-1.0 / 6 + x2 * (1.0 / 120 + x2 * (-1.0 / 5040 + x2 * (1.0 / 362880 +
          x2 * (-1.0 / 39916800 + x2 * (1.0 / 6227020800 + x2 * (-1.0 / 1307674368000.0)))))));
-}
-
-[[gnu::always_inline]] inline V Sin(V x) {
-  V s, c;
-  vector_trig::SinCos(x, s, c);
-  return s;
 }
 
 [[gnu::always_inline]] inline V NearestTurn(V angle, V reference) {
@@ -206,7 +197,9 @@ TEMPOKEY_AVX2_CLONES void EulerToQuatsKernel(const EulerOrder& order, const doub
     }
     // EulerToQuat(): Multiply(Multiply(R0, R1), R2) with R_n = AxisRotation(order[n], angle[n]).
     V sine[3], cosine[3];
-    for (int n = 0; n < 3; ++n) HalfAngle(angle[n], sine[n], cosine[n]);
+    vector_trig::SinCos<3>({0.5 * angle[0] * kDegToRad, 0.5 * angle[1] * kDegToRad,
+                            0.5 * angle[2] * kDegToRad},
+                           sine, cosine);
     const V zero = Broadcast(0.0);
     const QuatLanes first = {cosine[0], order[0] == 0 ? sine[0] : zero,
                              order[0] == 1 ? sine[0] : zero, order[0] == 2 ? sine[0] : zero};
@@ -258,9 +251,11 @@ TEMPOKEY_AVX2_CLONES void SlerpKernel(const double* quats, const std::int64_t* i
       wa = series_wa;
       wb = series_wb;
     } else {
-      const V inv_sin = 1.0 / Sin(angle);
-      const V sine_wa = Sin((1.0 - tt) * angle) * inv_sin;
-      const V sine_wb = Sin(tt * angle) * inv_sin;
+      V sine[3], cosine[3];
+      vector_trig::SinCos<3>({angle, (1.0 - tt) * angle, tt * angle}, sine, cosine);
+      const V inv_sin = 1.0 / sine[0];
+      const V sine_wa = sine[1] * inv_sin;
+      const V sine_wb = sine[2] * inv_sin;
       wa = series ? series_wa : sine_wa;
       wb = series ? series_wb : sine_wb;
     }
@@ -318,9 +313,10 @@ TEMPOKEY_AVX2_CLONES void ToEulerKernel(const EulerOrder& order, ConstQuatArrays
       }
       ref[axis] = v0 + tt * (v1 - v0);
     }
-    const V b = vector_trig::Atan2(sin_b, cos_b);
-    const V a = vector_trig::Atan2(-sign * r[j][k], r[k][k]);
-    const V c = vector_trig::Atan2(-sign * r[i][j], r[i][i]);
+    V bac[3];
+    vector_trig::Atan2<3>({sin_b, -sign * r[j][k], -sign * r[i][j]}, {cos_b, r[k][k], r[i][i]},
+                          bac);
+    const V b = bac[0], a = bac[1], c = bac[2];
     // The two Tait-Bryan solutions, each angle moved to the turn nearest the reference; the
     // nearer wins (NearestCandidate()).
     V first_angles[3] = {NearestTurn(a * kRadToDeg, ref[0]), NearestTurn(b * kRadToDeg, ref[1]),
