@@ -157,8 +157,19 @@ struct Unwrapped {
 };
 
 bool HasWrap(std::span<const double> degrees) {
-  for (std::size_t i = 1; i < degrees.size(); ++i) {
-    if (std::abs(degrees[i] - degrees[i - 1]) > 180.0) return true;
+  // Blocks of steps without an early exit inside, so that the block vectorises: most channels
+  // have no seam and are read to the end.
+  constexpr std::size_t kBlock = 16;
+  const double* d = degrees.data();
+  const std::size_t n = degrees.size();
+  std::size_t i = 1;
+  for (; i + kBlock <= n; i += kBlock) {
+    bool wraps = false;
+    for (std::size_t k = 0; k < kBlock; ++k) wraps |= std::abs(d[i + k] - d[i + k - 1]) > 180.0;
+    if (wraps) return true;
+  }
+  for (; i < n; ++i) {
+    if (std::abs(d[i] - d[i - 1]) > 180.0) return true;
   }
   return false;
 }
