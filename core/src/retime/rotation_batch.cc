@@ -174,9 +174,13 @@ using UnalignedV =
   for (std::size_t lane = 0; lane < kLanes; ++lane) at[lane] = p[lane < count ? lane : 0];
 }
 
-TEMPOKEY_AVX2_CLONES void EulerToQuatsKernel(const EulerOrder& order, const double* a,
-                                            const double* b, const double* c, std::size_t count,
-                                            double* out) {
+// The kernels below are written for one Euler order (axes I, J, K) at a time: the axes then pick
+// matrix entries and products at compile time rather than through memory.
+template <int I, int J, int K>
+[[gnu::always_inline]] inline void EulerToQuatsBody(const double* a, const double* b,
+                                                    const double* c, std::size_t count,
+                                                    double* out) {
+  constexpr EulerOrder order = {I, J, K};
   // Half angles (radians) beyond kMaxReducedRadians: far beyond any rotation channel's values.
   constexpr double kMaxDegrees = 2.0 * vector_trig::kMaxReducedRadians / kDegToRad;
   for (std::size_t i = 0; i < count; i += kLanes) {
@@ -207,6 +211,27 @@ TEMPOKEY_AVX2_CLONES void EulerToQuatsKernel(const EulerOrder& order, const doub
                                        order[2], sine[2], cosine[2]);
     StoreInterleaved(out + 4 * i, q, lanes);
   }
+}
+
+// The order's axes (0 X, 1 Y, 2 Z) as one number, for a switch over the six orders.
+constexpr int OrderCode(int i, int j, int k) { return 9 * i + 3 * j + k; }
+constexpr int OrderCode(const EulerOrder& order) { return OrderCode(order[0], order[1], order[2]); }
+
+// Calls body<I, J, K>(args...) for the order's axes. Precondition: valid order.
+#define TEMPOKEY_FOR_ORDER(order, body, ...)                              \
+  switch (OrderCode(order)) {                                              \
+    case OrderCode(0, 1, 2): return body<0, 1, 2>(__VA_ARGS__);            \
+    case OrderCode(0, 2, 1): return body<0, 2, 1>(__VA_ARGS__);            \
+    case OrderCode(1, 0, 2): return body<1, 0, 2>(__VA_ARGS__);            \
+    case OrderCode(1, 2, 0): return body<1, 2, 0>(__VA_ARGS__);            \
+    case OrderCode(2, 0, 1): return body<2, 0, 1>(__VA_ARGS__);            \
+    default: return body<2, 1, 0>(__VA_ARGS__);                            \
+  }
+
+TEMPOKEY_AVX2_CLONES void EulerToQuatsKernel(const EulerOrder& order, const double* a,
+                                            const double* b, const double* c, std::size_t count,
+                                            double* out) {
+  TEMPOKEY_FOR_ORDER(order, EulerToQuatsBody, a, b, c, count, out);
 }
 
 TEMPOKEY_AVX2_CLONES void SlerpKernel(const double* quats, const std::int64_t* i0, const double* t,
@@ -274,13 +299,13 @@ TEMPOKEY_AVX2_CLONES void SlerpKernel(const double* quats, const std::int64_t* i
   }
 }
 
-TEMPOKEY_AVX2_CLONES void ToEulerKernel(const EulerOrder& order, ConstQuatArrays quats,
-                                       const EulerTargets& targets, std::size_t count,
-                                       unsigned char* ill_conditioned) {
-  const int i = order[0];
-  const int j = order[1];
-  const int k = order[2];
-  const double sign = ((j - i + 3) % 3 == 1) ? 1.0 : -1.0;
+template <int I, int J, int K>
+[[gnu::always_inline]] inline void ToEulerBody(ConstQuatArrays quats, const EulerTargets& targets,
+                                               std::size_t count, unsigned char* ill_conditioned) {
+  constexpr int i = I;
+  constexpr int j = J;
+  constexpr int k = K;
+  constexpr double sign = ((j - i + 3) % 3 == 1) ? 1.0 : -1.0;
   for (std::size_t first = 0; first < count; first += kLanes) {
     const std::size_t lanes = std::min(kLanes, count - first);
     const QuatLanes q = Normalized(LoadQuats(quats, first, lanes));
@@ -301,8 +326,12 @@ TEMPOKEY_AVX2_CLONES void ToEulerKernel(const EulerOrder& order, ConstQuatArrays
     const V cos_squared = r[i][i] * r[i][i] + r[i][j] * r[i][j];
     V cos_b;
     for (std::size_t lane = 0; lane < kLanes; ++lane) cos_b[lane] = std::sqrt(cos_squared[lane]);
+    V bac[3];
+    vector_trig::Atan2<3>({sin_b, -sign * r[j][k], -sign * r[i][j]}, {cos_b, r[k][k], r[i][i]},
+                          bac);
+    const V b = bac[0], a = bac[1], c = bac[2];
     // The source's unwrapped angles interpolated linearly at the sample, and its values at the
-    // nearest sample.
+    // nearest sample (read after the arctangents, which need every register).
     V ref[3], turn[3];
     for (int axis = 0; axis < 3; ++axis) {
       V v0, v1;
@@ -313,10 +342,6 @@ TEMPOKEY_AVX2_CLONES void ToEulerKernel(const EulerOrder& order, ConstQuatArrays
       }
       ref[axis] = v0 + tt * (v1 - v0);
     }
-    V bac[3];
-    vector_trig::Atan2<3>({sin_b, -sign * r[j][k], -sign * r[i][j]}, {cos_b, r[k][k], r[i][i]},
-                          bac);
-    const V b = bac[0], a = bac[1], c = bac[2];
     // The two Tait-Bryan solutions, each angle moved to the turn nearest the reference; the
     // nearer wins (NearestCandidate()).
     V first_angles[3] = {NearestTurn(a * kRadToDeg, ref[0]), NearestTurn(b * kRadToDeg, ref[1]),
@@ -343,6 +368,14 @@ TEMPOKEY_AVX2_CLONES void ToEulerKernel(const EulerOrder& order, ConstQuatArrays
     }
   }
 }
+
+TEMPOKEY_AVX2_CLONES void ToEulerKernel(const EulerOrder& order, ConstQuatArrays quats,
+                                       const EulerTargets& targets, std::size_t count,
+                                       unsigned char* ill_conditioned) {
+  TEMPOKEY_FOR_ORDER(order, ToEulerBody, quats, targets, count, ill_conditioned);
+}
+
+#undef TEMPOKEY_FOR_ORDER
 
 // WeightedMeanRotation()'s arithmetic for kLanes output samples at once, one per lane, in its order
 // of operations for every lane.
