@@ -391,9 +391,7 @@ struct RotationSchedule::Data {
   std::vector<Batch> batches;
   // The weighted means in slot order: their kernels (for Markley's mean and the scalar path),
   // and the lane-major tables of the batched means.
-  struct Job {
-    std::int64_t first, count, weight_offset, pivot;
-  };
+  using Job = retime_internal::WeightedMeanJob;
   std::vector<Job> jobs;
   std::vector<retime_internal::MeanGroup> groups;
   std::vector<std::int64_t> tap_source;
@@ -735,7 +733,12 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
   rotations.Resize(capacity);
   const std::unique_ptr<unsigned char[]> copied = Scratch<unsigned char>(capacity);
   const std::unique_ptr<unsigned char[]> ill_conditioned = Scratch<unsigned char>(capacity);
-  std::vector<Quat> taps;
+  // The weighted means whose spread asks for Markley's mean, and their slots.
+  QuatColumns markley_means;
+  markley_means.Resize(capacity);
+  const std::unique_ptr<retime_internal::WeightedMeanJob[]> markley_jobs =
+      Scratch<retime_internal::WeightedMeanJob>(capacity);
+  const std::unique_ptr<std::size_t[]> markley_slot = Scratch<std::size_t>(capacity);
   for (const RotationSchedule::Data::Batch& batch : d.batches) {
     if (stop.stop_requested()) return;
     const std::size_t count = batch.end - batch.begin;
@@ -767,21 +770,17 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
                                    {d.groups.data() + batch.first_group, d.tap_source.data(),
                                     d.tap_weight.data()},
                                    means, min_dot, mean_slots, needs_markley);
+    std::size_t markleys = 0;
     for (std::size_t s = 0; s < means; ++s) {
       if (!needs_markley[s]) continue;
       // Not a copy: the slot's flag served as Markley's.
       needs_markley[s] = 0;
-      const RotationSchedule::Data::Job& job = d.jobs[batch.first_job + s];
-      taps.resize(static_cast<std::size_t>(job.count));
-      for (std::int64_t tap = 0; tap < job.count; ++tap) {
-        taps[static_cast<std::size_t>(tap)] = quats[static_cast<std::size_t>(job.first + tap)];
-      }
-      rotations.Set(weighted_slot + s,
-                    MarkleyMean(taps,
-                                {plan.weights.data() + job.weight_offset,
-                                 static_cast<std::size_t>(job.count)},
-                                static_cast<std::size_t>(job.pivot - job.first)));
+      markley_jobs[markleys] = d.jobs[batch.first_job + s];
+      markley_slot[markleys++] = weighted_slot + s;
     }
+    retime_internal::MarkleyMeans(quats.data(), plan.weights.data(), markley_jobs.get(), markleys,
+                                  markley_means.Arrays());
+    for (std::size_t s = 0; s < markleys; ++s) rotations.Set(markley_slot[s], markley_means.Get(s));
     // Back to Euler angles nearest the source's unwrapped angles at x (linearly interpolated),
     // each then within 180 degrees of the source's value at the nearest sample (the source's own
     // convention).

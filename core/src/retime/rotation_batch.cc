@@ -413,7 +413,137 @@ TEMPOKEY_AVX2_CLONES void WeightedMeansKernel(const double* quats, MeanTables ta
   }
 }
 
+// Lanes whose two vectors differ in any bit (-0 and +0 differ; no NaN arises here).
+using Bits = std::int64_t __attribute__((vector_size(sizeof(V))));
+[[gnu::always_inline]] inline Mask Differ(V a, V b) { return (Bits)a != (Bits)b; }
+[[gnu::always_inline]] inline bool Any(Mask m) {
+  bool any = false;
+  for (std::size_t lane = 0; lane < kLanes; ++lane) any = any || m[lane] != 0;
+  return any;
+}
+
+// PrincipalEigenvector() of rotation.cc, one symmetric 4x4 matrix per lane: the cyclic Jacobi
+// sweeps with its stopping rules, each lane stopping where the scalar function would (a lane that
+// has stopped, or whose rotation the scalar function skips, keeps its values).
+[[gnu::always_inline]] inline void PrincipalEigenvectors(V a[4][4], V e[4]) {
+  constexpr double kTinyRotation = 0x1p-30;
+  const V zero = Broadcast(0.0);
+  const V one = Broadcast(1.0);
+  V v[4][4];
+  for (int r = 0; r < 4; ++r) {
+    for (int c = 0; c < 4; ++c) v[r][c] = r == c ? one : zero;
+  }
+  Mask done = zero != zero;
+  for (int sweep = 0; sweep < 64; ++sweep) {
+    V off = zero;
+    for (int p = 0; p < 4; ++p) {
+      for (int q = p + 1; q < 4; ++q) off += a[p][q] * a[p][q];
+    }
+    done = done || off < 1e-300;
+    if (!Any(!done)) break;
+    Mask settled = !done;
+    for (int p = 0; p < 4; ++p) {
+      for (int q = p + 1; q < 4; ++q) {
+        const Mask skipped = a[p][q] == 0.0;
+        settled = settled && !skipped;
+        const Mask rotate = !done && !skipped;
+        const V theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+        V root;
+        const V root_squared = theta * theta + 1.0;
+        for (std::size_t lane = 0; lane < kLanes; ++lane) root[lane] = std::sqrt(root_squared[lane]);
+        const V t = (theta >= 0 ? one : -one) / (vector_trig::Abs(theta) + root);
+        V norm;
+        const V norm_squared = t * t + 1.0;
+        for (std::size_t lane = 0; lane < kLanes; ++lane) norm[lane] = std::sqrt(norm_squared[lane]);
+        const V c = 1.0 / norm;
+        const V s = t * c;
+        settled = settled && !(rotate && !(vector_trig::Abs(t) < kTinyRotation));
+        const V app = a[p][p];
+        const V aqq = a[q][q];
+        for (int k = 0; k < 4; ++k) {
+          const V akp = a[k][p];
+          const V akq = a[k][q];
+          a[k][p] = rotate ? c * akp - s * akq : akp;
+          a[k][q] = rotate ? s * akp + c * akq : akq;
+        }
+        for (int k = 0; k < 4; ++k) {
+          const V apk = a[p][k];
+          const V aqk = a[q][k];
+          a[p][k] = rotate ? c * apk - s * aqk : apk;
+          a[q][k] = rotate ? s * apk + c * aqk : aqk;
+        }
+        settled = settled && !(Differ(a[p][p], app) || Differ(a[q][q], aqq));
+        for (int k = 0; k < 4; ++k) {
+          const V vkp = v[k][p];
+          const V vkq = v[k][q];
+          v[k][p] = rotate ? c * vkp - s * vkq : vkp;
+          v[k][q] = rotate ? s * vkp + c * vkq : vkq;
+          settled = settled && !(Differ(v[k][p], vkp) || Differ(v[k][q], vkq));
+        }
+      }
+    }
+    done = done || settled;
+  }
+  V best = a[0][0];
+  for (int r = 0; r < 4; ++r) e[r] = v[r][0];
+  for (int i = 1; i < 4; ++i) {
+    const Mask larger = a[i][i] > best;
+    best = larger ? a[i][i] : best;
+    for (int r = 0; r < 4; ++r) e[r] = larger ? v[r][i] : e[r];
+  }
+}
+
+// MarkleyMean() for kLanes jobs at once; a lane past its job's taps adds its pivot with weight 0,
+// which leaves every sum as it is.
+TEMPOKEY_AVX2_CLONES void MarkleyMeansKernel(const double* quats, const double* weights,
+                                            const WeightedMeanJob* jobs, std::size_t count,
+                                            QuatArrays out) {
+  for (std::size_t first = 0; first < count; first += kLanes) {
+    const std::size_t lanes = std::min(kLanes, count - first);
+    const WeightedMeanJob* job[kLanes];
+    std::int64_t pivot[kLanes];
+    std::int64_t longest = 0;
+    for (std::size_t lane = 0; lane < kLanes; ++lane) {
+      job[lane] = &jobs[first + std::min(lane, lanes - 1)];
+      pivot[lane] = job[lane]->pivot;
+      longest = std::max(longest, job[lane]->count);
+    }
+    // Σ w q qᵀ, every entry summed over the taps in order, as (w q_r) q_c.
+    V m[4][4];
+    for (int r = 0; r < 4; ++r) {
+      for (int c = 0; c < 4; ++c) m[r][c] = Broadcast(0.0);
+    }
+    for (std::int64_t n = 0; n < longest; ++n) {
+      std::int64_t at[kLanes];
+      V w;
+      for (std::size_t lane = 0; lane < kLanes; ++lane) {
+        const bool real = n < job[lane]->count;
+        at[lane] = real ? job[lane]->first + n : pivot[lane];
+        w[lane] = real ? weights[job[lane]->weight_offset + n] : 0.0;
+      }
+      const QuatLanes q = Gather(quats, at);
+      const V component[4] = {q.w, q.x, q.y, q.z};
+      for (int r = 0; r < 4; ++r) {
+        const V weighted = w * component[r];
+        for (int c = 0; c < 4; ++c) m[r][c] += weighted * component[c];
+      }
+    }
+    V e[4];
+    PrincipalEigenvectors(m, e);
+    QuatLanes mean = Normalized({e[0], e[1], e[2], e[3]});
+    const Mask flip = Dot(mean, Gather(quats, pivot)) < 0.0;
+    mean = {flip ? -mean.w : mean.w, flip ? -mean.x : mean.x, flip ? -mean.y : mean.y,
+            flip ? -mean.z : mean.z};
+    StoreQuats(out, first, mean, lanes);
+  }
+}
+
 }  // namespace
+
+void MarkleyMeans(const double* quats, const double* weights, const WeightedMeanJob* jobs,
+                  std::size_t count, QuatArrays out) {
+  MarkleyMeansKernel(quats, weights, jobs, count, out);
+}
 
 void EulerToQuats(const EulerOrder& order, const double* a, const double* b, const double* c,
                   std::size_t count, double* out) {

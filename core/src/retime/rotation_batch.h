@@ -63,6 +63,21 @@ struct MeanTables {
 void WeightedMeans(const double* quats, const MeanTables& tables, std::size_t count, double min_dot,
                    QuatArrays out, unsigned char* needs_markley);
 
+// A weighted output sample: the source quaternions first .. first + count - 1 with the weights
+// weights[weight_offset ...], signs aligned to the source quaternion `pivot`.
+struct WeightedMeanJob {
+  std::int64_t first;
+  std::int64_t count;
+  std::int64_t weight_offset;
+  std::int64_t pivot;
+};
+
+// For i < count: MarkleyMean() (rotation.h) of job i's quaternions of `quats` (as EulerToQuats()
+// writes them) into out[i], bit for bit: the same Jacobi sweeps, lane by lane, for several jobs at
+// once.
+void MarkleyMeans(const double* quats, const double* weights, const WeightedMeanJob* jobs,
+                  std::size_t count, QuatArrays out);
+
 // Adjacent source rotations with |q_i·q_{i+1}| below this are a discontinuity (resample.cc).
 inline constexpr double kDiscontinuityDot = 0.70710678118654752;
 
