@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <limits>
 #include <memory>
 #include <numbers>
 #include <utility>
@@ -9,6 +11,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "rotation_batch.h"
+#include "vector_trig.h"
 
 namespace tempokey::core {
 namespace {
@@ -157,16 +160,27 @@ struct Unwrapped {
 };
 
 bool HasWrap(std::span<const double> degrees) {
-  // Blocks of steps without an early exit inside, so that the block vectorises: most channels
+  // Blocks of steps, two at a time on SSE2 vectors, without an early exit inside: most channels
   // have no seam and are read to the end.
-  constexpr std::size_t kBlock = 16;
+  using V = double __attribute__((vector_size(16)));
+  using Mask = vector_trig::MaskOf<V>;
+  using Bits = std::int64_t __attribute__((vector_size(16)));
+  constexpr std::size_t kLanes = sizeof(V) / sizeof(double);
+  constexpr std::size_t kBlock = 8 * kLanes;
   const double* d = degrees.data();
   const std::size_t n = degrees.size();
   std::size_t i = 1;
   for (; i + kBlock <= n; i += kBlock) {
-    bool wraps = false;
-    for (std::size_t k = 0; k < kBlock; ++k) wraps |= std::abs(d[i + k] - d[i + k - 1]) > 180.0;
-    if (wraps) return true;
+    Mask wraps = {};
+    for (std::size_t k = 0; k < kBlock; k += kLanes) {
+      V next, previous;
+      std::memcpy(&next, d + i + k, sizeof next);
+      std::memcpy(&previous, d + i + k - 1, sizeof previous);
+      // |step| by clearing the sign bit.
+      const V step = (V)((Bits)(next - previous) & std::numeric_limits<std::int64_t>::max());
+      wraps |= step > 180.0;
+    }
+    if (wraps[0] || wraps[1]) return true;
   }
   for (; i < n; ++i) {
     if (std::abs(d[i] - d[i - 1]) > 180.0) return true;
