@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 #include <numbers>
 
 #include "vector_trig.h"
@@ -116,13 +117,16 @@ struct QuatLanes {
   return angle + 360.0 * vector_trig::RoundSmall((reference - angle) * (1.0 / 360.0));
 }
 
-// True when every lane of `v` is below `limit` in size (the vector sine's accurate range).
-[[gnu::always_inline]] inline bool AllReducible(V v, double limit) {
-  const Mask ok = vector_trig::Abs(v) < limit;
-  for (std::size_t lane = 0; lane < kLanes; ++lane) {
-    if (!ok[lane]) return false;
-  }
-  return true;
+// True when every lane of the three `v` is below `limit` in size (the vector sine's accurate
+// range).
+[[gnu::always_inline]] inline bool AllReducible(const V (&v)[3], double limit) {
+  // |v| by clearing the sign bit; one test of the three masks together.
+  using Bits = std::int64_t __attribute__((vector_size(sizeof(V))));
+  auto abs = [](V x) { return (V)((Bits)x & std::numeric_limits<std::int64_t>::max()); };
+  const Mask ok = (abs(v[0]) < limit) & (abs(v[1]) < limit) & (abs(v[2]) < limit);
+  bool all = true;
+  for (std::size_t lane = 0; lane < kLanes; ++lane) all = all && ok[lane] != 0;
+  return all;
 }
 
 // Lane selectors for __builtin_shuffle on V.
@@ -187,8 +191,7 @@ template <int I, int J, int K>
     const std::size_t lanes = std::min(kLanes, count - i);
     const V angle[3] = {LoadPartial(a + i, lanes), LoadPartial(b + i, lanes),
                          LoadPartial(c + i, lanes)};
-    if (!AllReducible(angle[0], kMaxDegrees) || !AllReducible(angle[1], kMaxDegrees) ||
-        !AllReducible(angle[2], kMaxDegrees)) {
+    if (!AllReducible(angle, kMaxDegrees)) {
       for (std::size_t lane = 0; lane < lanes; ++lane) {
         const Quat q = EulerToQuat(order, {a[i + lane], b[i + lane], c[i + lane]});
         double* p = out + 4 * (i + lane);
