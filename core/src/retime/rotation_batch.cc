@@ -302,6 +302,10 @@ TEMPOKEY_AVX2_CLONES void SlerpKernel(const double* quats, const std::int64_t* i
   }
 }
 
+// Groups of kLanes samples converted back together, their arctangents side by side: one group's
+// chain of divisions and polynomials alone leaves the processor waiting.
+constexpr int kEulerGroups = 2;
+
 template <int I, int J, int K>
 [[gnu::always_inline]] inline void ToEulerBody(ConstQuatArrays quats, const EulerTargets& targets,
                                                std::size_t count, unsigned char* ill_conditioned) {
@@ -309,65 +313,84 @@ template <int I, int J, int K>
   constexpr int j = J;
   constexpr int k = K;
   constexpr double sign = ((j - i + 3) % 3 == 1) ? 1.0 : -1.0;
-  for (std::size_t first = 0; first < count; first += kLanes) {
-    const std::size_t lanes = std::min(kLanes, count - first);
-    const QuatLanes q = Normalized(LoadQuats(quats, first, lanes));
-    std::int64_t at[kLanes], nearest[kLanes], output[kLanes];
-    LoadIndices(targets.i0 + first, lanes, at);
-    LoadIndices(targets.nearest + first, lanes, nearest);
-    LoadIndices(targets.output + first, lanes, output);
-    const V tt = LoadPartial(targets.t + first, lanes);
-    // QuatToMatrix().
-    const V xx = q.x * q.x, yy = q.y * q.y, zz = q.z * q.z;
-    const V xy = q.x * q.y, xz = q.x * q.z, yz = q.y * q.z;
-    const V wx = q.w * q.x, wy = q.w * q.y, wz = q.w * q.z;
-    const V r[3][3] = {{1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)},
-                        {2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)},
-                        {2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)}};
-    V sin_b = sign * r[i][k];
-    sin_b = sin_b < -1.0 ? Broadcast(-1.0) : (1.0 < sin_b ? Broadcast(1.0) : sin_b);
-    const V cos_squared = r[i][i] * r[i][i] + r[i][j] * r[i][j];
-    V cos_b;
-    for (std::size_t lane = 0; lane < kLanes; ++lane) cos_b[lane] = std::sqrt(cos_squared[lane]);
-    V bac[3];
-    vector_trig::Atan2<3>({sin_b, -sign * r[j][k], -sign * r[i][j]}, {cos_b, r[k][k], r[i][i]},
-                          bac);
-    const V b = bac[0], a = bac[1], c = bac[2];
-    // The source's unwrapped angles interpolated linearly at the sample, and its values at the
-    // nearest sample (read after the arctangents, which need every register).
-    V ref[3], turn[3];
-    for (int axis = 0; axis < 3; ++axis) {
-      V v0, v1;
-      for (std::size_t lane = 0; lane < kLanes; ++lane) {
-        v0[lane] = targets.reference[axis][at[lane]];
-        v1[lane] = targets.reference[axis][at[lane] + 1];
-        turn[axis][lane] = targets.turn[axis][nearest[lane]];
+  constexpr int G = kEulerGroups;
+  for (std::size_t start = 0; start < count; start += G * kLanes) {
+    // Group g's samples start at first[g]; a group past the end repeats group 0 and stores
+    // nothing.
+    std::size_t first[G], lanes[G];
+    V sin_b[G], cos_b[G], y[3 * G], x[3 * G];
+    for (int g = 0; g < G; ++g) {
+      const std::size_t begin = start + static_cast<std::size_t>(g) * kLanes;
+      first[g] = begin < count ? begin : start;
+      lanes[g] = begin < count ? std::min(kLanes, count - begin) : 0;
+      const QuatLanes q =
+          Normalized(LoadQuats(quats, first[g], std::max<std::size_t>(lanes[g], 1)));
+      // QuatToMatrix().
+      const V xx = q.x * q.x, yy = q.y * q.y, zz = q.z * q.z;
+      const V xy = q.x * q.y, xz = q.x * q.z, yz = q.y * q.z;
+      const V wx = q.w * q.x, wy = q.w * q.y, wz = q.w * q.z;
+      const V r[3][3] = {{1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)},
+                          {2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)},
+                          {2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)}};
+      V sb = sign * r[i][k];
+      sin_b[g] = sb < -1.0 ? Broadcast(-1.0) : (1.0 < sb ? Broadcast(1.0) : sb);
+      const V cos_squared = r[i][i] * r[i][i] + r[i][j] * r[i][j];
+      for (std::size_t lane = 0; lane < kLanes; ++lane) cos_b[g][lane] = std::sqrt(cos_squared[lane]);
+      y[3 * g] = sin_b[g];
+      x[3 * g] = cos_b[g];
+      y[3 * g + 1] = -sign * r[j][k];
+      x[3 * g + 1] = r[k][k];
+      y[3 * g + 2] = -sign * r[i][j];
+      x[3 * g + 2] = r[i][i];
+    }
+    V bac[3 * G];
+    vector_trig::Atan2<3 * G>(y, x, bac);
+    for (int g = 0; g < G; ++g) {
+      const V b = bac[3 * g], a = bac[3 * g + 1], c = bac[3 * g + 2];
+      const std::size_t n = std::max<std::size_t>(lanes[g], 1);
+      std::int64_t at[kLanes], nearest[kLanes], output[kLanes];
+      LoadIndices(targets.i0 + first[g], n, at);
+      LoadIndices(targets.nearest + first[g], n, nearest);
+      LoadIndices(targets.output + first[g], n, output);
+      const V tt = LoadPartial(targets.t + first[g], n);
+      // The source's unwrapped angles interpolated linearly at the sample, and its values at the
+      // nearest sample.
+      V ref[3], turn[3];
+      for (int axis = 0; axis < 3; ++axis) {
+        V v0, v1;
+        for (std::size_t lane = 0; lane < kLanes; ++lane) {
+          v0[lane] = targets.reference[axis][at[lane]];
+          v1[lane] = targets.reference[axis][at[lane] + 1];
+          turn[axis][lane] = targets.turn[axis][nearest[lane]];
+        }
+        ref[axis] = v0 + tt * (v1 - v0);
       }
-      ref[axis] = v0 + tt * (v1 - v0);
-    }
-    // The two Tait-Bryan solutions, each angle moved to the turn nearest the reference; the
-    // nearer wins (NearestCandidate()).
-    V first_angles[3] = {NearestTurn(a * kRadToDeg, ref[0]), NearestTurn(b * kRadToDeg, ref[1]),
-                          NearestTurn(c * kRadToDeg, ref[2])};
-    V second_angles[3] = {NearestTurn((a + std::numbers::pi) * kRadToDeg, ref[0]),
-                           NearestTurn((std::numbers::pi - b) * kRadToDeg, ref[1]),
-                           NearestTurn((c + std::numbers::pi) * kRadToDeg, ref[2])};
-    V first_cost = Broadcast(0.0), second_cost = Broadcast(0.0);
-    for (int axis = 0; axis < 3; ++axis) {
-      const V d1 = first_angles[axis] - ref[axis];
-      first_cost += d1 * d1;
-      const V d2 = second_angles[axis] - ref[axis];
-      second_cost += d2 * d2;
-    }
-    const Mask second = second_cost < first_cost;
-    for (int axis = 0; axis < 3; ++axis) {
-      const V angle = NearestTurn(second ? second_angles[axis] : first_angles[axis], turn[axis]);
-      for (std::size_t lane = 0; lane < lanes; ++lane) targets.out[axis][output[lane]] = angle[lane];
-    }
-    // Near gimbal lock: the caller's (gimbal lock itself, cos_b < 1e-12, among them).
-    const Mask near_lock = cos_b < kBatchedMinMiddleCos;
-    for (std::size_t lane = 0; lane < lanes; ++lane) {
-      ill_conditioned[first + lane] = near_lock[lane] ? 1 : 0;
+      // The two Tait-Bryan solutions, each angle moved to the turn nearest the reference; the
+      // nearer wins (NearestCandidate()).
+      V first_angles[3] = {NearestTurn(a * kRadToDeg, ref[0]), NearestTurn(b * kRadToDeg, ref[1]),
+                            NearestTurn(c * kRadToDeg, ref[2])};
+      V second_angles[3] = {NearestTurn((a + std::numbers::pi) * kRadToDeg, ref[0]),
+                             NearestTurn((std::numbers::pi - b) * kRadToDeg, ref[1]),
+                             NearestTurn((c + std::numbers::pi) * kRadToDeg, ref[2])};
+      V first_cost = Broadcast(0.0), second_cost = Broadcast(0.0);
+      for (int axis = 0; axis < 3; ++axis) {
+        const V d1 = first_angles[axis] - ref[axis];
+        first_cost += d1 * d1;
+        const V d2 = second_angles[axis] - ref[axis];
+        second_cost += d2 * d2;
+      }
+      const Mask second = second_cost < first_cost;
+      for (int axis = 0; axis < 3; ++axis) {
+        const V angle = NearestTurn(second ? second_angles[axis] : first_angles[axis], turn[axis]);
+        for (std::size_t lane = 0; lane < lanes[g]; ++lane) {
+          targets.out[axis][output[lane]] = angle[lane];
+        }
+      }
+      // Near gimbal lock: the caller's (gimbal lock itself, cos_b < 1e-12, among them).
+      const Mask near_lock = cos_b[g] < kBatchedMinMiddleCos;
+      for (std::size_t lane = 0; lane < lanes[g]; ++lane) {
+        ill_conditioned[first[g] + lane] = near_lock[lane] ? 1 : 0;
+      }
     }
   }
 }
