@@ -237,68 +237,91 @@ TEMPOKEY_AVX2_CLONES void EulerToQuatsKernel(const EulerOrder& order, const doub
   TEMPOKEY_FOR_ORDER(order, EulerToQuatsBody, a, b, c, count, out);
 }
 
+// Groups of kLanes samples one slerp step takes together.
+constexpr int kSlerpGroups = 2;
+
 TEMPOKEY_AVX2_CLONES void SlerpKernel(const double* quats, const std::int64_t* i0, const double* t,
                                      std::size_t count, QuatArrays out,
                                      unsigned char* discontinuous) {
-  for (std::size_t i = 0; i < count; i += kLanes) {
-    const std::size_t lanes = std::min(kLanes, count - i);
-    std::int64_t at[kLanes], next[kLanes];
-    LoadIndices(i0 + i, lanes, at);
-    for (std::size_t lane = 0; lane < kLanes; ++lane) next[lane] = at[lane] + 1;
-    const QuatLanes qa = Gather(quats, at);
-    QuatLanes qb = Gather(quats, next);
-    const V tt = LoadPartial(t + i, lanes);
-    // b's sign aligned to a; the aligned dot product is the negated one, exactly.
-    const V dot = Dot(qa, qb);
-    const Mask flip = dot < 0.0;
-    qb = {flip ? -qb.w : qb.w, flip ? -qb.x : qb.x, flip ? -qb.y : qb.y, flip ? -qb.z : qb.z};
-    const Mask apart = (flip ? -dot : dot) < kDiscontinuityDot;
-    for (std::size_t lane = 0; lane < lanes; ++lane) discontinuous[i + lane] = apart[lane] ? 1 : 0;
-    const QuatLanes diff = {qa.w - qb.w, qa.x - qb.x, qa.y - qb.y, qa.z - qb.z};
-    const QuatLanes sum = {qa.w + qb.w, qa.x + qb.x, qa.y + qb.y, qa.z + qb.z};
-    const V diff_squared = Dot(diff, diff);
-    const V sum_squared = Dot(sum, sum);
-    V diff_norm, sum_norm;
-    for (std::size_t lane = 0; lane < kLanes; ++lane) {
-      diff_norm[lane] = std::sqrt(diff_squared[lane]);
-      sum_norm[lane] = std::sqrt(sum_squared[lane]);
+  // As ToEulerBody(): groups of samples side by side through the arctangent.
+  constexpr int G = kSlerpGroups;
+  for (std::size_t start = 0; start < count; start += G * kLanes) {
+    std::size_t first[G], lanes[G];
+    QuatLanes qa[G], qb[G];
+    V tt[G], diff_norm[G], sum_norm[G];
+    for (int g = 0; g < G; ++g) {
+      const std::size_t begin = start + static_cast<std::size_t>(g) * kLanes;
+      first[g] = begin < count ? begin : start;
+      lanes[g] = begin < count ? std::min(kLanes, count - begin) : 0;
+      const std::size_t n = std::max<std::size_t>(lanes[g], 1);
+      std::int64_t at[kLanes], next[kLanes];
+      LoadIndices(i0 + first[g], n, at);
+      for (std::size_t lane = 0; lane < kLanes; ++lane) next[lane] = at[lane] + 1;
+      qa[g] = Gather(quats, at);
+      QuatLanes b = Gather(quats, next);
+      tt[g] = LoadPartial(t + first[g], n);
+      // b's sign aligned to a; the aligned dot product is the negated one, exactly.
+      const V dot = Dot(qa[g], b);
+      const Mask flip = dot < 0.0;
+      qb[g] = {flip ? -b.w : b.w, flip ? -b.x : b.x, flip ? -b.y : b.y, flip ? -b.z : b.z};
+      const Mask apart = (flip ? -dot : dot) < kDiscontinuityDot;
+      for (std::size_t lane = 0; lane < lanes[g]; ++lane) {
+        discontinuous[first[g] + lane] = apart[lane] ? 1 : 0;
+      }
+      const QuatLanes& a = qa[g];
+      const QuatLanes diff = {a.w - qb[g].w, a.x - qb[g].x, a.y - qb[g].y, a.z - qb[g].z};
+      const QuatLanes sum = {a.w + qb[g].w, a.x + qb[g].x, a.y + qb[g].y, a.z + qb[g].z};
+      const V diff_squared = Dot(diff, diff);
+      const V sum_squared = Dot(sum, sum);
+      for (std::size_t lane = 0; lane < kLanes; ++lane) {
+        diff_norm[g][lane] = std::sqrt(diff_squared[lane]);
+        sum_norm[g][lane] = std::sqrt(sum_squared[lane]);
+      }
     }
-    const V angle = 2.0 * vector_trig::Atan2(diff_norm, sum_norm);
-    V wa = 1.0 - tt;
-    V wb = tt;
-    const Mask series = angle <= kSinRatioSeriesLimit;
-    V series_wa, series_wb;
-    {
-      const V inv = 1.0 / SinRatio(angle);
-      series_wa = wa * (SinRatio(wa * angle) * inv);
-      series_wb = wb * (SinRatio(wb * angle) * inv);
+    V half_angle[G];
+    vector_trig::Atan2<G>(diff_norm, sum_norm, half_angle);
+    for (int g = 0; g < G; ++g) {
+      const QuatLanes& qa_g = qa[g];
+      const QuatLanes& qb_g = qb[g];
+      const V angle = 2.0 * half_angle[g];
+      V wa = 1.0 - tt[g];
+      V wb = tt[g];
+      const Mask series = angle <= kSinRatioSeriesLimit;
+      V series_wa, series_wb;
+      {
+        const V inv = 1.0 / SinRatio(angle);
+        series_wa = wa * (SinRatio(wa * angle) * inv);
+        series_wb = wb * (SinRatio(wb * angle) * inv);
+      }
+      bool all_series = true;
+      for (std::size_t lane = 0; lane < kLanes; ++lane) all_series = all_series && series[lane];
+      if (all_series) {
+        wa = series_wa;
+        wb = series_wb;
+      } else {
+        V sine[3], cosine[3];
+        vector_trig::SinCos<3>({angle, (1.0 - tt[g]) * angle, tt[g] * angle}, sine, cosine);
+        const V inv_sin = 1.0 / sine[0];
+        const V sine_wa = sine[1] * inv_sin;
+        const V sine_wb = sine[2] * inv_sin;
+        wa = series ? series_wa : sine_wa;
+        wb = series ? series_wb : sine_wb;
+      }
+      const QuatLanes mixed =
+          Normalized({qa_g.w * wa + qb_g.w * wb, qa_g.x * wa + qb_g.x * wb,
+                      qa_g.y * wa + qb_g.y * wb, qa_g.z * wa + qb_g.z * wb});
+      // Exact ends: t <= 0 gives `from`, t >= 1 gives `to` (aligned).
+      const Mask at_start = tt[g] <= 0.0;
+      const Mask at_end = tt[g] >= 1.0;
+      auto pick = [&](V from, V to, V middle) {
+        return at_start ? from : (at_end ? to : middle);
+      };
+      if (lanes[g] == 0) continue;
+      StoreQuats(out, first[g],
+                 {pick(qa_g.w, qb_g.w, mixed.w), pick(qa_g.x, qb_g.x, mixed.x),
+                  pick(qa_g.y, qb_g.y, mixed.y), pick(qa_g.z, qb_g.z, mixed.z)},
+                 lanes[g]);
     }
-    bool all_series = true;
-    for (std::size_t lane = 0; lane < kLanes; ++lane) all_series = all_series && series[lane];
-    if (all_series) {
-      wa = series_wa;
-      wb = series_wb;
-    } else {
-      V sine[3], cosine[3];
-      vector_trig::SinCos<3>({angle, (1.0 - tt) * angle, tt * angle}, sine, cosine);
-      const V inv_sin = 1.0 / sine[0];
-      const V sine_wa = sine[1] * inv_sin;
-      const V sine_wb = sine[2] * inv_sin;
-      wa = series ? series_wa : sine_wa;
-      wb = series ? series_wb : sine_wb;
-    }
-    const QuatLanes mixed = Normalized({qa.w * wa + qb.w * wb, qa.x * wa + qb.x * wb,
-                                    qa.y * wa + qb.y * wb, qa.z * wa + qb.z * wb});
-    // Exact ends: t <= 0 gives `from`, t >= 1 gives `to` (aligned).
-    const Mask at_start = tt <= 0.0;
-    const Mask at_end = tt >= 1.0;
-    auto pick = [&](V start, V end, V middle) {
-      return at_start ? start : (at_end ? end : middle);
-    };
-    StoreQuats(out, i,
-               {pick(qa.w, qb.w, mixed.w), pick(qa.x, qb.x, mixed.x), pick(qa.y, qb.y, mixed.y),
-                pick(qa.z, qb.z, mixed.z)},
-               lanes);
   }
 }
 
