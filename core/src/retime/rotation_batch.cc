@@ -181,38 +181,64 @@ using UnalignedV =
 // The kernels below are written for one Euler order (axes I, J, K) at a time: the axes then pick
 // matrix entries and products at compile time rather than through memory.
 template <int I, int J, int K>
+[[gnu::always_inline]] inline QuatLanes AxesProduct(const V (&sine)[3], const V (&cosine)[3]) {
+  // EulerToQuat(): Multiply(Multiply(R0, R1), R2) with R_n = AxisRotation(axis n, angle n).
+  const V zero = Broadcast(0.0);
+  const QuatLanes first = {cosine[0], I == 0 ? sine[0] : zero, I == 1 ? sine[0] : zero,
+                           I == 2 ? sine[0] : zero};
+  return MultiplyByAxis(MultiplyByAxis(first, J, sine[1], cosine[1]), K, sine[2], cosine[2]);
+}
+
+template <int I, int J, int K>
 [[gnu::always_inline]] inline void EulerToQuatsBody(const double* a, const double* b,
                                                     const double* c, std::size_t count,
                                                     double* out) {
   constexpr EulerOrder order = {I, J, K};
   // Half angles (radians) beyond kMaxReducedRadians: far beyond any rotation channel's values.
   constexpr double kMaxDegrees = 2.0 * vector_trig::kMaxReducedRadians / kDegToRad;
-  for (std::size_t i = 0; i < count; i += kLanes) {
+  auto scalar = [&](std::size_t i, std::size_t lanes) {
+    for (std::size_t lane = 0; lane < lanes; ++lane) {
+      const Quat q = EulerToQuat(order, {a[i + lane], b[i + lane], c[i + lane]});
+      double* p = out + 4 * (i + lane);
+      p[0] = q.w;
+      p[1] = q.x;
+      p[2] = q.y;
+      p[3] = q.z;
+    }
+  };
+  auto half_radians = [](V degrees) { return 0.5 * degrees * kDegToRad; };
+  std::size_t i = 0;
+  // Two groups per step, their six sines and cosines side by side.
+  for (; i + 2 * kLanes <= count; i += 2 * kLanes) {
+    const V angle[2][3] = {{LoadV(a + i), LoadV(b + i), LoadV(c + i)},
+                           {LoadV(a + i + kLanes), LoadV(b + i + kLanes), LoadV(c + i + kLanes)}};
+    if (!AllReducible(angle[0], kMaxDegrees) || !AllReducible(angle[1], kMaxDegrees)) {
+      scalar(i, 2 * kLanes);
+      continue;
+    }
+    V sine[6], cosine[6];
+    vector_trig::SinCos<6>({half_radians(angle[0][0]), half_radians(angle[0][1]),
+                            half_radians(angle[0][2]), half_radians(angle[1][0]),
+                            half_radians(angle[1][1]), half_radians(angle[1][2])},
+                           sine, cosine);
+    for (std::size_t g = 0; g < 2; ++g) {
+      const V s[3] = {sine[3 * g], sine[3 * g + 1], sine[3 * g + 2]};
+      const V co[3] = {cosine[3 * g], cosine[3 * g + 1], cosine[3 * g + 2]};
+      StoreInterleaved(out + 4 * (i + g * kLanes), AxesProduct<I, J, K>(s, co), kLanes);
+    }
+  }
+  for (; i < count; i += kLanes) {
     const std::size_t lanes = std::min(kLanes, count - i);
     const V angle[3] = {LoadPartial(a + i, lanes), LoadPartial(b + i, lanes),
                          LoadPartial(c + i, lanes)};
     if (!AllReducible(angle, kMaxDegrees)) {
-      for (std::size_t lane = 0; lane < lanes; ++lane) {
-        const Quat q = EulerToQuat(order, {a[i + lane], b[i + lane], c[i + lane]});
-        double* p = out + 4 * (i + lane);
-        p[0] = q.w;
-        p[1] = q.x;
-        p[2] = q.y;
-        p[3] = q.z;
-      }
+      scalar(i, lanes);
       continue;
     }
-    // EulerToQuat(): Multiply(Multiply(R0, R1), R2) with R_n = AxisRotation(order[n], angle[n]).
     V sine[3], cosine[3];
-    vector_trig::SinCos<3>({0.5 * angle[0] * kDegToRad, 0.5 * angle[1] * kDegToRad,
-                            0.5 * angle[2] * kDegToRad},
+    vector_trig::SinCos<3>({half_radians(angle[0]), half_radians(angle[1]), half_radians(angle[2])},
                            sine, cosine);
-    const V zero = Broadcast(0.0);
-    const QuatLanes first = {cosine[0], order[0] == 0 ? sine[0] : zero,
-                             order[0] == 1 ? sine[0] : zero, order[0] == 2 ? sine[0] : zero};
-    const QuatLanes q = MultiplyByAxis(MultiplyByAxis(first, order[1], sine[1], cosine[1]),
-                                       order[2], sine[2], cosine[2]);
-    StoreInterleaved(out + 4 * i, q, lanes);
+    StoreInterleaved(out + 4 * i, AxesProduct<I, J, K>(sine, cosine), lanes);
   }
 }
 
