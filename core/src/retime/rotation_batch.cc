@@ -454,6 +454,30 @@ TEMPOKEY_AVX2_CLONES void ToEulerKernel(const EulerOrder& order, ConstQuatArrays
 
 // WeightedMeanRotation()'s arithmetic for kLanes output samples at once, one per lane, in its order
 // of operations for every lane.
+// True when the spread test of every lane's weighted mean is known to pass without testing each
+// tap: with half-angles phi(p, q) = acos|p·q| (a metric on rotations), every tap is within
+// phi(tap, pivot) + phi(pivot, mean) of the mean, so when the largest tap's and the mean's
+// half-angles from the pivot add up to less than the spread's half-angle, by a margin far above
+// rounding, no tap is outside it (and the tap-by-tap test, run otherwise, would say so too).
+// `tap_cos` is min |tap·pivot|, `mean_cos` |mean·pivot|, `norm` the sum's norm (the test also
+// fails a sum that does not normalize).
+[[gnu::always_inline]] inline bool WithinSpread(V tap_cos, V mean_cos, V norm, double min_dot) {
+  constexpr double kMargin = 1e-9;
+  const V zero = Broadcast(0.0);
+  const V tap_sin_squared = 1.0 - tap_cos * tap_cos;
+  const V mean_sin_squared = 1.0 - mean_cos * mean_cos;
+  const V sines_squared = (tap_sin_squared > 0.0 ? tap_sin_squared : zero) *
+                          (mean_sin_squared > 0.0 ? mean_sin_squared : zero);
+  V sines;
+  for (std::size_t lane = 0; lane < kLanes; ++lane) sines[lane] = std::sqrt(sines_squared[lane]);
+  // cos(phi_tap + phi_mean).
+  const V sum_cos = tap_cos * mean_cos - sines;
+  const Mask within = sum_cos >= min_dot + kMargin && norm > 1e-9;
+  bool all = true;
+  for (std::size_t lane = 0; lane < kLanes; ++lane) all = all && within[lane] != 0;
+  return all;
+}
+
 TEMPOKEY_AVX2_CLONES void WeightedMeansKernel(const double* quats, MeanTables tables,
                                              std::size_t count, double min_dot, QuatArrays out,
                                              unsigned char* needs_markley) {
@@ -465,12 +489,16 @@ TEMPOKEY_AVX2_CLONES void WeightedMeansKernel(const double* quats, MeanTables ta
     const double* weight = tables.weight + group.tap_begin;
     const QuatLanes ref = Gather(quats, group.pivot);
     QuatLanes sum = {Broadcast(0.0), Broadcast(0.0), Broadcast(0.0), Broadcast(0.0)};
+    V nearest_pivot = Broadcast(1.0);  // min |q·pivot| over the taps
     for (std::int64_t n = 0; n < group.taps; ++n) {
       const QuatLanes q = Gather(quats, source + kLanes * n);
       const V w = LoadV(weight + kLanes * n);
-      const V signed_w = Dot(q, ref) < 0.0 ? -w : w;
+      const V dot = Dot(q, ref);
+      const V signed_w = dot < 0.0 ? -w : w;
       sum = {sum.w + q.w * signed_w, sum.x + q.x * signed_w, sum.y + q.y * signed_w,
              sum.z + q.z * signed_w};
+      const V size = vector_trig::Abs(dot);
+      nearest_pivot = size < nearest_pivot ? size : nearest_pivot;
     }
     const V squared = Dot(sum, sum);
     V norm;
@@ -478,10 +506,12 @@ TEMPOKEY_AVX2_CLONES void WeightedMeansKernel(const double* quats, MeanTables ta
     const V inverse = 1.0 / norm;
     const QuatLanes mean = Scaled(sum, inverse);
     Mask markley = !(norm > 1e-9);
-    for (std::int64_t n = 0; n < group.taps; ++n) {
-      const QuatLanes q = Gather(quats, source + kLanes * n);
-      const V w = LoadV(weight + kLanes * n);
-      markley = markley || (w != 0.0 && vector_trig::Abs(Dot(q, mean)) < min_dot);
+    if (!WithinSpread(nearest_pivot, vector_trig::Abs(Dot(mean, ref)), norm, min_dot)) {
+      for (std::int64_t n = 0; n < group.taps; ++n) {
+        const QuatLanes q = Gather(quats, source + kLanes * n);
+        const V w = LoadV(weight + kLanes * n);
+        markley = markley || (w != 0.0 && vector_trig::Abs(Dot(q, mean)) < min_dot);
+      }
     }
     StoreQuats(out, first, mean, lanes);
     for (std::size_t lane = 0; lane < lanes; ++lane) needs_markley[first + lane] = markley[lane] ? 1 : 0;
