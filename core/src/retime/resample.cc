@@ -628,7 +628,8 @@ RotationSchedule::RotationSchedule(const ResamplePlan& plan) : data_(std::make_u
     }
     interpolating.push_back(j);
     if (plan.kind[j] == SampleKind::kWeighted) {
-      for (std::int64_t i = first; i < plan.first[j] + plan.offset[j + 1] - plan.offset[j]; ++i) need(i);
+      const std::int64_t end = first + plan.offset[j + 1] - plan.offset[j];
+      for (std::int64_t i = first; i < end; ++i) need(i);
     } else {
       const std::int64_t i0 = PlaceOf(plan, j).i0;
       for (std::int64_t i = i0 - 1; i <= i0 + 2; ++i) need(i);

@@ -20,8 +20,9 @@
 namespace tempokey::core::retime_internal {
 namespace {
 
-// Eight lanes per step, two AVX registers: two independent chains of dependent operations in
-// flight through every polynomial and division.
+// Four lanes, one AVX register (GCC's lowering of wider vectors to two registers handles lane
+// accesses poorly); the kernels take several vectors per step instead, so that independent chains
+// of dependent operations are in flight through every polynomial and division.
 using V = vector_trig::V4;
 using Mask = vector_trig::MaskOf<V>;
 constexpr std::size_t kLanes = 4;
@@ -80,6 +81,13 @@ struct QuatLanes {
 
 [[gnu::always_inline]] inline QuatLanes Scaled(const QuatLanes& q, V s) {
   return {q.w * s, q.x * s, q.y * s, q.z * s};
+}
+
+// std::sqrt lane by lane (one vsqrtpd where the target has it).
+[[gnu::always_inline]] inline V Sqrt(V v) {
+  V root;
+  for (std::size_t lane = 0; lane < kLanes; ++lane) root[lane] = std::sqrt(v[lane]);
+  return root;
 }
 
 [[gnu::always_inline]] inline QuatLanes Normalized(const QuatLanes& q) {
@@ -149,11 +157,16 @@ using Selector = std::int64_t __attribute__((vector_size(sizeof(V))));
 // and copied lane by lane goes through the stack, and its loads then wait on the stores).
 using UnalignedV =
     double __attribute__((vector_size(sizeof(V)), aligned(alignof(double)), may_alias));
-[[gnu::always_inline]] inline V LoadV(const double* p) { return *reinterpret_cast<const UnalignedV*>(p); }
-[[gnu::always_inline]] inline void StoreV(double* p, V v) { *reinterpret_cast<UnalignedV*>(p) = v; }
+[[gnu::always_inline]] inline V LoadV(const double* p) {
+  return *reinterpret_cast<const UnalignedV*>(p);
+}
+[[gnu::always_inline]] inline void StoreV(double* p, V v) {
+  *reinterpret_cast<UnalignedV*>(p) = v;
+}
 
 // (w, x, y, z) of the lanes' quaternions as consecutive (w, x, y, z) groups.
-[[gnu::always_inline]] inline void StoreInterleaved(double* out, const QuatLanes& q, std::size_t count) {
+[[gnu::always_inline]] inline void StoreInterleaved(double* out, const QuatLanes& q,
+                                                    std::size_t count) {
   static_assert(kLanes == 4);
   V a = q.w, b = q.x, c = q.y, d = q.z;
   Transpose(a, b, c, d);
@@ -384,7 +397,7 @@ template <int I, int J, int K>
       V sb = sign * r[i][k];
       sin_b[g] = sb < -1.0 ? Broadcast(-1.0) : (1.0 < sb ? Broadcast(1.0) : sb);
       const V cos_squared = r[i][i] * r[i][i] + r[i][j] * r[i][j];
-      for (std::size_t lane = 0; lane < kLanes; ++lane) cos_b[g][lane] = std::sqrt(cos_squared[lane]);
+      cos_b[g] = Sqrt(cos_squared);
       y[3 * g] = sin_b[g];
       x[3 * g] = cos_b[g];
       y[3 * g + 1] = -sign * r[j][k];
@@ -468,10 +481,8 @@ TEMPOKEY_AVX2_CLONES void ToEulerKernel(const EulerOrder& order, ConstQuatArrays
   const V mean_sin_squared = 1.0 - mean_cos * mean_cos;
   const V sines_squared = (tap_sin_squared > 0.0 ? tap_sin_squared : zero) *
                           (mean_sin_squared > 0.0 ? mean_sin_squared : zero);
-  V sines;
-  for (std::size_t lane = 0; lane < kLanes; ++lane) sines[lane] = std::sqrt(sines_squared[lane]);
   // cos(phi_tap + phi_mean).
-  const V sum_cos = tap_cos * mean_cos - sines;
+  const V sum_cos = tap_cos * mean_cos - Sqrt(sines_squared);
   const Mask within = sum_cos >= min_dot + kMargin && norm > 1e-9;
   bool all = true;
   for (std::size_t lane = 0; lane < kLanes; ++lane) all = all && within[lane] != 0;
@@ -553,14 +564,9 @@ using Bits = std::int64_t __attribute__((vector_size(sizeof(V))));
         settled = settled && !skipped;
         const Mask rotate = !done && !skipped;
         const V theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-        V root;
-        const V root_squared = theta * theta + 1.0;
-        for (std::size_t lane = 0; lane < kLanes; ++lane) root[lane] = std::sqrt(root_squared[lane]);
-        const V t = (theta >= 0 ? one : -one) / (vector_trig::Abs(theta) + root);
-        V norm;
-        const V norm_squared = t * t + 1.0;
-        for (std::size_t lane = 0; lane < kLanes; ++lane) norm[lane] = std::sqrt(norm_squared[lane]);
-        const V c = 1.0 / norm;
+        const V t =
+            (theta >= 0 ? one : -one) / (vector_trig::Abs(theta) + Sqrt(theta * theta + 1.0));
+        const V c = 1.0 / Sqrt(t * t + 1.0);
         const V s = t * c;
         settled = settled && !(rotate && !(vector_trig::Abs(t) < kTinyRotation));
         const V app = a[p][p];
