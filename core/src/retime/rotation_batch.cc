@@ -538,114 +538,146 @@ using Bits = std::int64_t __attribute__((vector_size(sizeof(V))));
   return any;
 }
 
-// PrincipalEigenvector() of rotation.cc, one symmetric 4x4 matrix per lane: the cyclic Jacobi
-// sweeps with its stopping rules, each lane stopping where the scalar function would (a lane that
-// has stopped, or whose rotation the scalar function skips, keeps its values).
-[[gnu::always_inline]] inline void PrincipalEigenvectors(V a[4][4], V e[4]) {
+// PrincipalEigenvector() of rotation.cc, one symmetric 4x4 matrix per lane of each of G groups:
+// the cyclic Jacobi sweeps with its stopping rules, each lane stopping where the scalar function
+// would (a lane that has stopped, or whose rotation the scalar function skips, keeps its values).
+// Every rotation waits on the previous one's divisions and square roots: the G groups' chains run
+// side by side.
+template <int G>
+[[gnu::always_inline]] inline void PrincipalEigenvectors(V (&a)[G][4][4], V (&e)[G][4]) {
   constexpr double kTinyRotation = 0x1p-30;
   const V zero = Broadcast(0.0);
   const V one = Broadcast(1.0);
-  V v[4][4];
-  for (int r = 0; r < 4; ++r) {
-    for (int c = 0; c < 4; ++c) v[r][c] = r == c ? one : zero;
-  }
-  Mask done = zero != zero;
-  for (int sweep = 0; sweep < 64; ++sweep) {
-    V off = zero;
-    for (int p = 0; p < 4; ++p) {
-      for (int q = p + 1; q < 4; ++q) off += a[p][q] * a[p][q];
+  V v[G][4][4];
+  Mask done[G];
+  for (int g = 0; g < G; ++g) {
+    for (int r = 0; r < 4; ++r) {
+      for (int c = 0; c < 4; ++c) v[g][r][c] = r == c ? one : zero;
     }
-    done = done || off < 1e-300;
-    if (!Any(!done)) break;
-    Mask settled = !done;
+    done[g] = zero != zero;
+  }
+  for (int sweep = 0; sweep < 64; ++sweep) {
+    bool any_active = false;
+    Mask settled[G];
+    for (int g = 0; g < G; ++g) {
+      V off = zero;
+      for (int p = 0; p < 4; ++p) {
+        for (int q = p + 1; q < 4; ++q) off += a[g][p][q] * a[g][p][q];
+      }
+      done[g] = done[g] || off < 1e-300;
+      any_active = any_active || Any(!done[g]);
+      settled[g] = !done[g];
+    }
+    if (!any_active) break;
     for (int p = 0; p < 4; ++p) {
       for (int q = p + 1; q < 4; ++q) {
-        const Mask skipped = a[p][q] == 0.0;
-        settled = settled && !skipped;
-        const Mask rotate = !done && !skipped;
-        const V theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
-        const V t =
-            (theta >= 0 ? one : -one) / (vector_trig::Abs(theta) + Sqrt(theta * theta + 1.0));
-        const V c = 1.0 / Sqrt(t * t + 1.0);
-        const V s = t * c;
-        settled = settled && !(rotate && !(vector_trig::Abs(t) < kTinyRotation));
-        const V app = a[p][p];
-        const V aqq = a[q][q];
-        for (int k = 0; k < 4; ++k) {
-          const V akp = a[k][p];
-          const V akq = a[k][q];
-          a[k][p] = rotate ? c * akp - s * akq : akp;
-          a[k][q] = rotate ? s * akp + c * akq : akq;
+        V c[G], s[G];
+        Mask rotate[G];
+        for (int g = 0; g < G; ++g) {
+          const Mask skipped = a[g][p][q] == 0.0;
+          settled[g] = settled[g] && !skipped;
+          rotate[g] = !done[g] && !skipped;
+          const V theta = (a[g][q][q] - a[g][p][p]) / (2.0 * a[g][p][q]);
+          const V t =
+              (theta >= 0 ? one : -one) / (vector_trig::Abs(theta) + Sqrt(theta * theta + 1.0));
+          c[g] = 1.0 / Sqrt(t * t + 1.0);
+          s[g] = t * c[g];
+          settled[g] = settled[g] && !(rotate[g] && !(vector_trig::Abs(t) < kTinyRotation));
         }
-        for (int k = 0; k < 4; ++k) {
-          const V apk = a[p][k];
-          const V aqk = a[q][k];
-          a[p][k] = rotate ? c * apk - s * aqk : apk;
-          a[q][k] = rotate ? s * apk + c * aqk : aqk;
-        }
-        settled = settled && !(Differ(a[p][p], app) || Differ(a[q][q], aqq));
-        for (int k = 0; k < 4; ++k) {
-          const V vkp = v[k][p];
-          const V vkq = v[k][q];
-          v[k][p] = rotate ? c * vkp - s * vkq : vkp;
-          v[k][q] = rotate ? s * vkp + c * vkq : vkq;
-          settled = settled && !(Differ(v[k][p], vkp) || Differ(v[k][q], vkq));
+        for (int g = 0; g < G; ++g) {
+          const V app = a[g][p][p];
+          const V aqq = a[g][q][q];
+          for (int k = 0; k < 4; ++k) {
+            const V akp = a[g][k][p];
+            const V akq = a[g][k][q];
+            a[g][k][p] = rotate[g] ? c[g] * akp - s[g] * akq : akp;
+            a[g][k][q] = rotate[g] ? s[g] * akp + c[g] * akq : akq;
+          }
+          for (int k = 0; k < 4; ++k) {
+            const V apk = a[g][p][k];
+            const V aqk = a[g][q][k];
+            a[g][p][k] = rotate[g] ? c[g] * apk - s[g] * aqk : apk;
+            a[g][q][k] = rotate[g] ? s[g] * apk + c[g] * aqk : aqk;
+          }
+          settled[g] = settled[g] && !(Differ(a[g][p][p], app) || Differ(a[g][q][q], aqq));
+          for (int k = 0; k < 4; ++k) {
+            const V vkp = v[g][k][p];
+            const V vkq = v[g][k][q];
+            v[g][k][p] = rotate[g] ? c[g] * vkp - s[g] * vkq : vkp;
+            v[g][k][q] = rotate[g] ? s[g] * vkp + c[g] * vkq : vkq;
+            settled[g] = settled[g] && !(Differ(v[g][k][p], vkp) || Differ(v[g][k][q], vkq));
+          }
         }
       }
     }
-    done = done || settled;
+    for (int g = 0; g < G; ++g) done[g] = done[g] || settled[g];
   }
-  V best = a[0][0];
-  for (int r = 0; r < 4; ++r) e[r] = v[r][0];
-  for (int i = 1; i < 4; ++i) {
-    const Mask larger = a[i][i] > best;
-    best = larger ? a[i][i] : best;
-    for (int r = 0; r < 4; ++r) e[r] = larger ? v[r][i] : e[r];
+  for (int g = 0; g < G; ++g) {
+    V best = a[g][0][0];
+    for (int r = 0; r < 4; ++r) e[g][r] = v[g][r][0];
+    for (int i = 1; i < 4; ++i) {
+      const Mask larger = a[g][i][i] > best;
+      best = larger ? a[g][i][i] : best;
+      for (int r = 0; r < 4; ++r) e[g][r] = larger ? v[g][r][i] : e[g][r];
+    }
   }
 }
 
-// MarkleyMean() for kLanes jobs at once; a lane past its job's taps adds its pivot with weight 0,
-// which leaves every sum as it is.
+// Groups of kLanes jobs one Markley step takes together.
+constexpr int kMarkleyGroups = 2;
+
+// MarkleyMean() for several jobs at once, one per lane; a lane past its job's taps adds its pivot
+// with weight 0, which leaves every sum as it is (a group past the last job repeats it and stores
+// nothing).
 TEMPOKEY_AVX2_CLONES void MarkleyMeansKernel(const double* quats, const double* weights,
                                             const WeightedMeanJob* jobs, std::size_t count,
                                             QuatArrays out) {
-  for (std::size_t first = 0; first < count; first += kLanes) {
-    const std::size_t lanes = std::min(kLanes, count - first);
-    const WeightedMeanJob* job[kLanes];
-    std::int64_t pivot[kLanes];
-    std::int64_t longest = 0;
-    for (std::size_t lane = 0; lane < kLanes; ++lane) {
-      job[lane] = &jobs[first + std::min(lane, lanes - 1)];
-      pivot[lane] = job[lane]->pivot;
-      longest = std::max(longest, job[lane]->count);
-    }
-    // Σ w q qᵀ, every entry summed over the taps in order, as (w q_r) q_c.
-    V m[4][4];
-    for (int r = 0; r < 4; ++r) {
-      for (int c = 0; c < 4; ++c) m[r][c] = Broadcast(0.0);
-    }
-    for (std::int64_t n = 0; n < longest; ++n) {
-      std::int64_t at[kLanes];
-      V w;
+  constexpr int G = kMarkleyGroups;
+  for (std::size_t start = 0; start < count; start += G * kLanes) {
+    std::size_t first[G], lanes[G];
+    std::int64_t pivot[G][kLanes];
+    V m[G][4][4];
+    for (int g = 0; g < G; ++g) {
+      const std::size_t begin = start + static_cast<std::size_t>(g) * kLanes;
+      first[g] = begin < count ? begin : start;
+      lanes[g] = begin < count ? std::min(kLanes, count - begin) : 0;
+      const WeightedMeanJob* job[kLanes];
+      std::int64_t longest = 0;
       for (std::size_t lane = 0; lane < kLanes; ++lane) {
-        const bool real = n < job[lane]->count;
-        at[lane] = real ? job[lane]->first + n : pivot[lane];
-        w[lane] = real ? weights[job[lane]->weight_offset + n] : 0.0;
+        job[lane] = &jobs[first[g] + std::min(lane, std::max<std::size_t>(lanes[g], 1) - 1)];
+        pivot[g][lane] = job[lane]->pivot;
+        longest = std::max(longest, job[lane]->count);
       }
-      const QuatLanes q = Gather(quats, at);
-      const V component[4] = {q.w, q.x, q.y, q.z};
+      // Σ w q qᵀ, every entry summed over the taps in order, as (w q_r) q_c.
       for (int r = 0; r < 4; ++r) {
-        const V weighted = w * component[r];
-        for (int c = 0; c < 4; ++c) m[r][c] += weighted * component[c];
+        for (int c = 0; c < 4; ++c) m[g][r][c] = Broadcast(0.0);
+      }
+      for (std::int64_t n = 0; n < longest; ++n) {
+        std::int64_t at[kLanes];
+        V w;
+        for (std::size_t lane = 0; lane < kLanes; ++lane) {
+          const bool real = n < job[lane]->count;
+          at[lane] = real ? job[lane]->first + n : pivot[g][lane];
+          w[lane] = real ? weights[job[lane]->weight_offset + n] : 0.0;
+        }
+        const QuatLanes q = Gather(quats, at);
+        const V component[4] = {q.w, q.x, q.y, q.z};
+        for (int r = 0; r < 4; ++r) {
+          const V weighted = w * component[r];
+          for (int c = 0; c < 4; ++c) m[g][r][c] += weighted * component[c];
+        }
       }
     }
-    V e[4];
-    PrincipalEigenvectors(m, e);
-    QuatLanes mean = Normalized({e[0], e[1], e[2], e[3]});
-    const Mask flip = Dot(mean, Gather(quats, pivot)) < 0.0;
-    mean = {flip ? -mean.w : mean.w, flip ? -mean.x : mean.x, flip ? -mean.y : mean.y,
-            flip ? -mean.z : mean.z};
-    StoreQuats(out, first, mean, lanes);
+    V e[G][4];
+    PrincipalEigenvectors<G>(m, e);
+    for (int g = 0; g < G; ++g) {
+      if (lanes[g] == 0) continue;
+      QuatLanes mean = Normalized({e[g][0], e[g][1], e[g][2], e[g][3]});
+      const Mask flip = Dot(mean, Gather(quats, pivot[g])) < 0.0;
+      mean = {flip ? -mean.w : mean.w, flip ? -mean.x : mean.x, flip ? -mean.y : mean.y,
+              flip ? -mean.z : mean.z};
+      StoreQuats(out, first[g], mean, lanes[g]);
+    }
   }
 }
 
