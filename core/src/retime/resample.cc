@@ -652,6 +652,7 @@ RotationSchedule::RotationSchedule(const ResamplePlan& plan) : data_(std::make_u
     needed[static_cast<std::size_t>(std::clamp<std::int64_t>(i, 0, last))] = 1;
   };
   std::vector<std::size_t> interpolating;
+  interpolating.reserve(plan.position.size() - static_cast<std::size_t>(plan.copy_count));
   for (std::size_t j = 0; j < plan.position.size(); ++j) {
     const std::int64_t first = plan.first[j];
     if (plan.kind[j] == SampleKind::kCopy) {
@@ -668,6 +669,13 @@ RotationSchedule::RotationSchedule(const ResamplePlan& plan) : data_(std::make_u
       for (std::int64_t i = i0 - 1; i <= i0 + 2; ++i) need(i);
     }
   }
+  for (std::vector<std::int64_t>* slots : {&d.output, &d.i0, &d.nearest}) {
+    slots->reserve(interpolating.size());
+  }
+  d.t.reserve(interpolating.size());
+  // The tap tables hold each weighted sample's taps, padded to its group's longest.
+  d.tap_source.reserve(plan.weights.size() + plan.weights.size() / 4);
+  d.tap_weight.reserve(d.tap_source.capacity());
   // A batch also ends once its samples read kRotationStopTaps source rotations, and the stop token
   // is looked at between batches: a few milliseconds of work at most, whatever the decimation
   // ratio (batching changes no result: every step is per sample).
