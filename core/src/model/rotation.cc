@@ -148,7 +148,13 @@ void UnwrapDegrees(std::span<double> degrees) {
   double shift = 0.0;
   for (std::size_t i = 1; i < degrees.size(); ++i) {
     const double raw_step = degrees[i] - (degrees[i - 1] - shift);
-    // Turns to add so the step lands in [-180, 180].
+    // Turns to add so the step lands in [-180, 180]. A step under 180 degrees in size has a
+    // quotient under 1/2 (correctly rounded: 180 - ulp(180) over 360 stays below 1/2), which
+    // rounds to no turn: the division is skipped, the shift the same.
+    if (std::abs(raw_step) < 180.0) {
+      degrees[i] += shift;
+      continue;
+    }
     shift -= 360.0 * RoundHalfAway(raw_step / 360.0);
     degrees[i] += shift;
   }

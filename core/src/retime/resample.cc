@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <limits>
 #include <memory>
 #include <numbers>
 #include <utility>
@@ -9,15 +11,16 @@
 
 #include "absl/strings/str_cat.h"
 #include "rotation_batch.h"
+#include "vector_trig.h"
 
 namespace tempokey::core {
 namespace {
 
-// Adjacent source rotations further apart than this are a discontinuity (a capture glitch or a
-// flipped solve: no joint turns 90 degrees in one frame at mocap rates). Interpolating across
-// one would invent a pose on an arbitrary geodesic, so samples between them take the nearer
-// source pose instead. Compared as |q_i·q_{i+1}| < cos(90° / 2).
-constexpr double kDiscontinuityDot = 0.70710678118654752;
+// Adjacent source rotations further apart than retime_internal::kDiscontinuityDot are a
+// discontinuity (a capture glitch or a flipped solve: no joint turns 90 degrees in one frame at
+// mocap rates). Interpolating across one would invent a pose on an arbitrary geodesic, so samples
+// between them take the nearer source pose instead. Compared as |q_i·q_{i+1}| < cos(90° / 2).
+using retime_internal::kDiscontinuityDot;
 
 // Weights below this are dropped from the ends of a span; they are exact zeros analytically
 // (outside the kernel's support) and only rounding makes them non-zero.
@@ -157,8 +160,30 @@ struct Unwrapped {
 };
 
 bool HasWrap(std::span<const double> degrees) {
-  for (std::size_t i = 1; i < degrees.size(); ++i) {
-    if (std::abs(degrees[i] - degrees[i - 1]) > 180.0) return true;
+  // Blocks of steps, two at a time on SSE2 vectors, without an early exit inside: most channels
+  // have no seam and are read to the end.
+  using V = double __attribute__((vector_size(16)));
+  using Mask = vector_trig::MaskOf<V>;
+  using Bits = std::int64_t __attribute__((vector_size(16)));
+  constexpr std::size_t kLanes = sizeof(V) / sizeof(double);
+  constexpr std::size_t kBlock = 8 * kLanes;
+  const double* d = degrees.data();
+  const std::size_t n = degrees.size();
+  std::size_t i = 1;
+  for (; i + kBlock <= n; i += kBlock) {
+    Mask wraps = {};
+    for (std::size_t k = 0; k < kBlock; k += kLanes) {
+      V next, previous;
+      std::memcpy(&next, d + i + k, sizeof next);
+      std::memcpy(&previous, d + i + k - 1, sizeof previous);
+      // |step| by clearing the sign bit.
+      const V step = (V)((Bits)(next - previous) & std::numeric_limits<std::int64_t>::max());
+      wraps |= step > 180.0;
+    }
+    if (wraps[0] || wraps[1]) return true;
+  }
+  for (; i < n; ++i) {
+    if (std::abs(d[i] - d[i - 1]) > 180.0) return true;
   }
   return false;
 }
@@ -366,18 +391,66 @@ struct RotationSchedule::Data {
   std::vector<std::pair<std::size_t, std::size_t>> runs;
   // Output samples that copy a source sample: output index, source index.
   std::vector<std::size_t> copy_output, copy_source;
-  // Output samples that interpolate, in output order: output index j; the interval of the
-  // reference's linear interpolation (and of a slerp or squad), i0 = min(floor(x), last - 1) and
-  // t = x - i0; the nearest source sample; for a weighted one, its pivot (source index).
-  std::vector<std::size_t> output, i0, nearest;
+  // Output samples that interpolate, in slots: batch by batch (Batch), and within a batch the
+  // slerps, then the squads, then the weighted means. Per slot: the output index; the interval of
+  // the reference's linear interpolation (and of a slerp or squad), i0 = min(floor(x), last - 1)
+  // and t = x - i0; the nearest source sample.
+  std::vector<std::int64_t> output, i0, nearest;
   std::vector<double> t;
-  std::vector<std::int64_t> pivot;
+  struct Batch {
+    std::size_t begin, cubic_begin, weighted_begin, end;  // slots
+    std::size_t first_job;    // the batch's weighted means are jobs[first_job ...]
+    std::size_t first_group;  // and their mean groups groups[first_group ...]
+  };
+  std::vector<Batch> batches;
+  // The weighted means in slot order: their kernels (for Markley's mean and the scalar path),
+  // and the lane-major tables of the batched means.
+  using Job = retime_internal::WeightedMeanJob;
+  std::vector<Job> jobs;
+  std::vector<retime_internal::MeanGroup> groups;
+  std::vector<std::int64_t> tap_source;
+  std::vector<double> tap_weight;
 };
 
 namespace {
 
+// True when every source sample of `channel` has the first one's value (bit for bit).
+bool IsConstant(std::span<const double> channel) {
+  // Blocks without an early exit inside, so that they vectorise: most channels are read to the
+  // end or differ early.
+  constexpr std::size_t kBlock = 16;
+  const double first = channel[0];
+  std::size_t i = 0;
+  for (; i + kBlock <= channel.size(); i += kBlock) {
+    bool differs = false;
+    for (std::size_t k = 0; k < kBlock; ++k) differs |= channel[i + k] != first;
+    if (differs) return false;
+  }
+  for (; i < channel.size(); ++i) {
+    if (channel[i] != first) return false;
+  }
+  return true;
+}
+
+// A joint whose three angles never change (end effectors and unused joints of a skeleton: a
+// quarter of CMU's) interpolates to its own rotation at every output. Its samples are then the
+// source's angles themselves: the exact answer, where the conversions to a quaternion and back
+// give it to a few units in the last place (the reference's results, within 1e-13 degrees of
+// it while the middle angle's cosine stays above kBatchedMinMiddleCos, which bounds how much a
+// rotation's rounding moves the outer angles; nearer gimbal lock the general path's own
+// safeguards apply).
+bool IsFixedRotation(const std::array<std::span<const double>, 3>& source) {
+  for (const std::span<const double>& channel : source) {
+    if (!IsConstant(channel)) return false;
+  }
+  const double middle_cos = std::cos(source[1][0] * (std::numbers::pi / 180.0));
+  return std::abs(middle_cos) >= retime_internal::kBatchedMinMiddleCos;
+}
+
 // Outputs converted back to Euler angles per batch: bounds the scratch memory of a long clip.
 constexpr std::size_t kRotationBatch = 1024;
+// Most source rotations the samples of one batch read (see the schedule's batches).
+constexpr std::int64_t kRotationStopTaps = kResampleStopCheckTaps / 16;
 
 // The source quaternions the plan reads (RotationSchedule's runs), converted once each: a copy
 // reads none. No global sign continuity is imposed: each use aligns signs locally (slerp takes the
@@ -406,12 +479,19 @@ class SourceQuats {
   std::unique_ptr<double[]> quats_;
 };
 
+// An array of n values left uninitialized: every batch writes its slots before reading them, and
+// zeroing the scratch of every joint cost more than the short clips' whole resampling.
+template <class T>
+std::unique_ptr<T[]> Scratch(std::size_t n) {
+  return std::make_unique_for_overwrite<T[]>(n);
+}
+
 // Quaternion columns of a fixed size.
 struct QuatColumns {
-  std::vector<double> w, x, y, z;
+  std::unique_ptr<double[]> w, x, y, z;
 
   void Resize(std::size_t n) {
-    for (std::vector<double>* c : {&w, &x, &y, &z}) c->resize(n);
+    for (std::unique_ptr<double[]>* c : {&w, &x, &y, &z}) *c = Scratch<double>(n);
   }
   void Set(std::size_t i, const Quat& q) {
     w[i] = q.w;
@@ -420,8 +500,8 @@ struct QuatColumns {
     z[i] = q.z;
   }
   Quat Get(std::size_t i) const { return {w[i], x[i], y[i], z[i]}; }
-  retime_internal::QuatArrays Arrays() { return {w.data(), x.data(), y.data(), z.data()}; }
-  retime_internal::ConstQuatArrays Arrays() const { return {w.data(), x.data(), y.data(), z.data()}; }
+  retime_internal::QuatArrays Arrays() { return {w.get(), x.get(), y.get(), z.get()}; }
+  retime_internal::ConstQuatArrays Arrays() const { return {w.get(), x.get(), y.get(), z.get()}; }
 };
 
 // WeightedMeanRotation() with its default spread (whose cosine it takes every call, here once).
@@ -518,6 +598,51 @@ class ScalarRotationPath {
 }  // namespace
 
 
+namespace {
+
+// The interpolation interval and the nearest sample of output sample j (not a copy).
+struct SlotPlace {
+  std::int64_t i0;
+  double t;
+  std::int64_t nearest;
+};
+
+SlotPlace PlaceOf(const ResamplePlan& plan, std::size_t j) {
+  const std::int64_t last = plan.source_count - 1;
+  const double x = plan.position[j];
+  const std::int64_t i0 =
+      std::max<std::int64_t>(0, std::min(static_cast<std::int64_t>(std::floor(x)), last - 1));
+  return {i0, x - static_cast<double>(i0), NearestIndex(x, last)};
+}
+
+// Lays out the lane-major tables of the weighted means jobs[first, end) (RotationSchedule::Data).
+void AddMeanGroups(const ResamplePlan& plan, std::size_t first, std::size_t end,
+                   RotationSchedule::Data& d) {
+  constexpr std::size_t kLanes = retime_internal::kMeanLanes;
+  for (std::size_t g = first; g < end; g += kLanes) {
+    retime_internal::MeanGroup group{.tap_begin = d.tap_source.size(), .taps = 0, .pivot = {}};
+    const RotationSchedule::Data::Job* lane_job[kLanes];
+    for (std::size_t lane = 0; lane < kLanes; ++lane) {
+      // Lanes past the last job repeat the first one, at weight 0 (see MeanGroup).
+      lane_job[lane] = &d.jobs[g + lane < end ? g + lane : g];
+      group.pivot[lane] = lane_job[lane]->pivot;
+      if (g + lane < end) group.taps = std::max(group.taps, lane_job[lane]->count);
+    }
+    for (std::int64_t n = 0; n < group.taps; ++n) {
+      for (std::size_t lane = 0; lane < kLanes; ++lane) {
+        const RotationSchedule::Data::Job& job = *lane_job[lane];
+        const bool real = g + lane < end && n < job.count;
+        d.tap_source.push_back(real ? job.first + n : job.pivot);
+        d.tap_weight.push_back(real ? plan.weights[static_cast<std::size_t>(job.weight_offset + n)]
+                                    : 0.0);
+      }
+    }
+    d.groups.push_back(group);
+  }
+}
+
+}  // namespace
+
 RotationSchedule::RotationSchedule(const ResamplePlan& plan) : data_(std::make_unique<Data>()) {
   Data& d = *data_;
   const auto n = static_cast<std::size_t>(plan.source_count);
@@ -526,6 +651,8 @@ RotationSchedule::RotationSchedule(const ResamplePlan& plan) : data_(std::make_u
   auto need = [&](std::int64_t i) {
     needed[static_cast<std::size_t>(std::clamp<std::int64_t>(i, 0, last))] = 1;
   };
+  std::vector<std::size_t> interpolating;
+  interpolating.reserve(plan.position.size() - static_cast<std::size_t>(plan.copy_count));
   for (std::size_t j = 0; j < plan.position.size(); ++j) {
     const std::int64_t first = plan.first[j];
     if (plan.kind[j] == SampleKind::kCopy) {
@@ -533,22 +660,60 @@ RotationSchedule::RotationSchedule(const ResamplePlan& plan) : data_(std::make_u
       d.copy_source.push_back(static_cast<std::size_t>(first));
       continue;
     }
-    const double x = plan.position[j];
-    const std::int64_t i0 = std::max<std::int64_t>(
-        0, std::min(static_cast<std::int64_t>(std::floor(x)), last - 1));
-    const std::int64_t k = NearestIndex(x, last);
-    d.output.push_back(j);
-    d.i0.push_back(static_cast<std::size_t>(i0));
-    d.t.push_back(x - static_cast<double>(i0));
-    d.nearest.push_back(static_cast<std::size_t>(k));
+    interpolating.push_back(j);
     if (plan.kind[j] == SampleKind::kWeighted) {
-      const std::int64_t count = plan.offset[j + 1] - plan.offset[j];
-      d.pivot.push_back(first + std::clamp(k - first, std::int64_t{0}, count - 1));
-      for (std::int64_t i = first; i < first + count; ++i) need(i);
+      const std::int64_t end = first + plan.offset[j + 1] - plan.offset[j];
+      for (std::int64_t i = first; i < end; ++i) need(i);
     } else {
-      d.pivot.push_back(-1);
+      const std::int64_t i0 = PlaceOf(plan, j).i0;
       for (std::int64_t i = i0 - 1; i <= i0 + 2; ++i) need(i);
     }
+  }
+  for (std::vector<std::int64_t>* slots : {&d.output, &d.i0, &d.nearest}) {
+    slots->reserve(interpolating.size());
+  }
+  d.t.reserve(interpolating.size());
+  // The tap tables hold each weighted sample's taps, padded to its group's longest.
+  d.tap_source.reserve(plan.weights.size() + plan.weights.size() / 4);
+  d.tap_weight.reserve(d.tap_source.capacity());
+  // A batch also ends once its samples read kRotationStopTaps source rotations, and the stop token
+  // is looked at between batches: a few milliseconds of work at most, whatever the decimation
+  // ratio (batching changes no result: every step is per sample).
+  for (std::size_t begin = 0; begin < interpolating.size();) {
+    std::size_t end = begin;
+    for (std::int64_t taps_read = 0; end < interpolating.size() &&
+                                     end - begin < kRotationBatch && taps_read < kRotationStopTaps;
+         ++end) {
+      const std::size_t j = interpolating[end];
+      taps_read += plan.offset[j + 1] - plan.offset[j];
+    }
+    Data::Batch batch{.begin = d.output.size(), .cubic_begin = 0, .weighted_begin = 0, .end = 0,
+                      .first_job = d.jobs.size(), .first_group = d.groups.size()};
+    auto add_slots = [&](SampleKind kind) {
+      for (std::size_t r = begin; r < end; ++r) {
+        const std::size_t j = interpolating[r];
+        if (plan.kind[j] != kind) continue;
+        const SlotPlace place = PlaceOf(plan, j);
+        d.output.push_back(static_cast<std::int64_t>(j));
+        d.i0.push_back(place.i0);
+        d.t.push_back(place.t);
+        d.nearest.push_back(place.nearest);
+        if (kind != SampleKind::kWeighted) continue;
+        const std::int64_t first = plan.first[j];
+        const std::int64_t count = plan.offset[j + 1] - plan.offset[j];
+        d.jobs.push_back({first, count, plan.offset[j],
+                          first + std::clamp(place.nearest - first, std::int64_t{0}, count - 1)});
+      }
+    };
+    add_slots(SampleKind::kLerp);
+    batch.cubic_begin = d.output.size();
+    add_slots(SampleKind::kCubic);
+    batch.weighted_begin = d.output.size();
+    add_slots(SampleKind::kWeighted);
+    batch.end = d.output.size();
+    AddMeanGroups(plan, batch.first_job, d.jobs.size(), d);
+    d.batches.push_back(batch);
+    begin = end;
   }
   for (std::size_t i = 0; i < n;) {
     if (!needed[i]) {
@@ -589,6 +754,12 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
     for (int c = 0; c < 3; ++c) out[c][d.copy_output[r]] = source[c][d.copy_source[r]];
   }
   if (d.output.empty()) return;
+  if (IsFixedRotation(source)) {
+    for (const std::int64_t j : d.output) {
+      for (int c = 0; c < 3; ++c) out[c][static_cast<std::size_t>(j)] = source[c][0];
+    }
+    return;
+  }
 
   const SourceQuats quats(d, order, source);
   std::array<Unwrapped, 3> unwrapped;
@@ -613,131 +784,96 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
   const double min_dot = std::cos(0.5 * 30.0 * (std::numbers::pi / 180.0));
   ScalarRotationPath scalar_path(plan, order, source, min_dot);
 
-  // Per batch of interpolating outputs, each in its slot: the interpolated rotations (slerps and
-  // weighted means batched), then all of them back to Euler angles.
-  QuatColumns rotations, slerp_from, slerp_to, slerped, means;
-  std::vector<double> slerp_t;
-  std::vector<std::size_t> slerp_slot, weighted_slot;
-  std::vector<retime_internal::WeightedMeanJob> weighted;
-  std::vector<unsigned char> copied, needs_markley, ill_conditioned;
-  std::array<std::vector<double>, 3> reference, turn, angles;
-  std::vector<Quat> taps;
-  for (QuatColumns* q : {&rotations, &slerp_from, &slerp_to, &slerped, &means}) {
-    q->Resize(kRotationBatch);
+  // Per batch, each output in its slot: the interpolated rotations (slerps and weighted means
+  // batched), then all of them back to Euler angles, written in place; then the few samples the
+  // batched steps leave to the scalar ones.
+  std::size_t capacity = 0;
+  for (const RotationSchedule::Data::Batch& batch : d.batches) {
+    capacity = std::max(capacity, batch.end - batch.begin);
   }
-  slerp_t.resize(kRotationBatch);
-  slerp_slot.resize(kRotationBatch);
-  weighted_slot.resize(kRotationBatch);
-  weighted.resize(kRotationBatch);
-  copied.resize(kRotationBatch);
-  needs_markley.resize(kRotationBatch);
-  ill_conditioned.resize(kRotationBatch);
-  for (int c = 0; c < 3; ++c) {
-    reference[c].resize(kRotationBatch);
-    turn[c].resize(kRotationBatch);
-    angles[c].resize(kRotationBatch);
-  }
-  // A batch also ends once its samples read kRotationStopTaps source rotations, and the stop
-  // token is looked at between batches: a few milliseconds of work at most, whatever the
-  // decimation ratio (batching changes no result: every step is per sample).
-  constexpr std::int64_t kRotationStopTaps = kResampleStopCheckTaps / 16;
-  for (std::size_t batch = 0, count = 0; batch < d.output.size(); batch += count) {
+  QuatColumns rotations;
+  rotations.Resize(capacity);
+  const std::unique_ptr<unsigned char[]> copied = Scratch<unsigned char>(capacity);
+  const std::unique_ptr<unsigned char[]> ill_conditioned = Scratch<unsigned char>(capacity);
+  // The weighted means whose spread asks for Markley's mean, and their slots.
+  QuatColumns markley_means;
+  markley_means.Resize(capacity);
+  const std::unique_ptr<retime_internal::WeightedMeanJob[]> markley_jobs =
+      Scratch<retime_internal::WeightedMeanJob>(capacity);
+  const std::unique_ptr<std::size_t[]> markley_slot = Scratch<std::size_t>(capacity);
+  for (const RotationSchedule::Data::Batch& batch : d.batches) {
     if (stop.stop_requested()) return;
-    count = 0;
-    for (std::int64_t taps_read = 0; batch + count < d.output.size() && count < kRotationBatch &&
-                                     taps_read < kRotationStopTaps;
-         ++count) {
-      const std::size_t j = d.output[batch + count];
-      taps_read += plan.offset[j + 1] - plan.offset[j];
-    }
-    std::size_t slerps = 0, weights = 0;
-    for (std::size_t slot = 0; slot < count; ++slot) {
-      const std::size_t r = batch + slot;
-      const std::size_t j = d.output[r];
-      copied[slot] = 0;
-      if (plan.kind[j] == SampleKind::kWeighted) {
-        weighted[weights] = {plan.first[j], plan.offset[j + 1] - plan.offset[j], plan.offset[j],
-                             d.pivot[r]};
-        weighted_slot[weights++] = slot;
-        continue;
-      }
-      const std::size_t i = d.i0[r];
-      const Quat q1 = quats[i];
-      const Quat q2 = aligned(quats[i + 1], q1);
-      if (QuatDot(q1, q2) < kDiscontinuityDot) {
-        // Across a discontinuity: the nearer source pose.
-        for (int c = 0; c < 3; ++c) out[c][j] = source[c][d.nearest[r]];
-        copied[slot] = 1;
-        rotations.Set(slot, q1);
-        continue;
-      }
-      if (plan.kind[j] == SampleKind::kLerp) {
-        slerp_from.Set(slerps, q1);
-        slerp_to.Set(slerps, q2);
-        slerp_t[slerps] = d.t[r];
-        slerp_slot[slerps++] = slot;
-        continue;
-      }
-      const auto i0 = static_cast<std::int64_t>(i);
+    const std::size_t count = batch.end - batch.begin;
+    const std::size_t slerps = batch.cubic_begin - batch.begin;
+    retime_internal::SlerpQuats(quats.data(), d.i0.data() + batch.begin, d.t.data() + batch.begin,
+                                slerps, rotations.Arrays(), copied.get());
+    for (std::size_t slot = slerps; slot < batch.weighted_begin - batch.begin; ++slot) {
+      const std::size_t r = batch.begin + slot;
+      const auto i0 = d.i0[r];
+      const Quat q1 = quats[static_cast<std::size_t>(i0)];
+      const Quat q2 = aligned(quats[static_cast<std::size_t>(i0) + 1], q1);
+      copied[slot] = QuatDot(q1, q2) < kDiscontinuityDot;
       const Quat q0 = aligned(quat_at(i0 - 1), q1);
       const Quat q3 = aligned(quat_at(i0 + 2), q2);
       const bool smooth =
           QuatDot(q0, q1) >= kDiscontinuityDot && QuatDot(q2, q3) >= kDiscontinuityDot;
-      rotations.Set(slot, smooth ? Squad(q0, q1, q2, q3, d.t[r]) : Slerp(q1, q2, d.t[r]));
+      rotations.Set(slot, copied[slot]          ? q1
+                          : smooth ? Squad(q0, q1, q2, q3, d.t[r])
+                                   : Slerp(q1, q2, d.t[r]));
     }
-    retime_internal::SlerpQuats(std::as_const(slerp_from).Arrays(),
-                                std::as_const(slerp_to).Arrays(), slerp_t.data(), slerps,
-                                slerped.Arrays());
-    for (std::size_t s = 0; s < slerps; ++s) rotations.Set(slerp_slot[s], slerped.Get(s));
     // The weighted means; Markley's where their spread asks for it.
-    retime_internal::WeightedMeans(quats.data(), plan.weights.data(), weighted.data(), weights,
-                                   min_dot, means.Arrays(), needs_markley.data());
-    for (std::size_t s = 0; s < weights; ++s) {
-      Quat mean = means.Get(s);
-      if (needs_markley[s]) {
-        const retime_internal::WeightedMeanJob& job = weighted[s];
-        taps.resize(static_cast<std::size_t>(job.count));
-        for (std::int64_t tap = 0; tap < job.count; ++tap) {
-          taps[static_cast<std::size_t>(tap)] = quats[static_cast<std::size_t>(job.first + tap)];
-        }
-        mean = MarkleyMean(taps,
-                           {plan.weights.data() + job.weight_offset,
-                            static_cast<std::size_t>(job.count)},
-                           static_cast<std::size_t>(job.pivot - job.first));
-      }
-      rotations.Set(weighted_slot[s], mean);
+    const std::size_t weighted_slot = batch.weighted_begin - batch.begin;
+    const std::size_t means = batch.end - batch.weighted_begin;
+    const retime_internal::QuatArrays all = rotations.Arrays();
+    const retime_internal::QuatArrays mean_slots = {all.w + weighted_slot, all.x + weighted_slot,
+                                                    all.y + weighted_slot, all.z + weighted_slot};
+    unsigned char* const needs_markley = copied.get() + weighted_slot;
+    retime_internal::WeightedMeans(quats.data(),
+                                   {d.groups.data() + batch.first_group, d.tap_source.data(),
+                                    d.tap_weight.data()},
+                                   means, min_dot, mean_slots, needs_markley);
+    std::size_t markleys = 0;
+    for (std::size_t s = 0; s < means; ++s) {
+      if (!needs_markley[s]) continue;
+      // Not a copy: the slot's flag served as Markley's.
+      needs_markley[s] = 0;
+      markley_jobs[markleys] = d.jobs[batch.first_job + s];
+      markley_slot[markleys++] = weighted_slot + s;
     }
+    retime_internal::MarkleyMeans(quats.data(), plan.weights.data(), markley_jobs.get(), markleys,
+                                  markley_means.Arrays());
+    for (std::size_t s = 0; s < markleys; ++s) rotations.Set(markley_slot[s], markley_means.Get(s));
     // Back to Euler angles nearest the source's unwrapped angles at x (linearly interpolated),
     // each then within 180 degrees of the source's value at the nearest sample (the source's own
     // convention).
+    const retime_internal::EulerTargets targets = {
+        .i0 = d.i0.data() + batch.begin,
+        .t = d.t.data() + batch.begin,
+        .nearest = d.nearest.data() + batch.begin,
+        .output = d.output.data() + batch.begin,
+        .reference = {reference_values[0], reference_values[1], reference_values[2]},
+        .turn = {source[0].data(), source[1].data(), source[2].data()},
+        .out = {out[0].data(), out[1].data(), out[2].data()}};
+    retime_internal::QuatsToEulerNearest(order, std::as_const(rotations).Arrays(), targets, count,
+                                         ill_conditioned.get());
     for (std::size_t slot = 0; slot < count; ++slot) {
-      const std::size_t r = batch + slot;
-      const std::size_t i = d.i0[r];
-      const double t = d.t[r];
-      for (int c = 0; c < 3; ++c) {
-        const double* v = reference_values[c];
-        reference[c][slot] = last <= 0 ? v[0] : v[i] + t * (v[i + 1] - v[i]);
-        turn[c][slot] = source[c][d.nearest[r]];
-      }
-    }
-    const double* const reference_columns[3] = {reference[0].data(), reference[1].data(),
-                                                 reference[2].data()};
-    const double* const turn_columns[3] = {turn[0].data(), turn[1].data(), turn[2].data()};
-    double* const angle_columns[3] = {angles[0].data(), angles[1].data(), angles[2].data()};
-    retime_internal::QuatsToEulerNearest(order, std::as_const(rotations).Arrays(),
-                                         reference_columns, turn_columns, count, angle_columns,
-                                         ill_conditioned.data());
-    for (std::size_t slot = 0; slot < count; ++slot) {
-      if (copied[slot]) continue;
-      const std::size_t j = d.output[batch + slot];
-      if (ill_conditioned[slot]) {
-        const Vec3 exact =
-            QuatToEulerNearest(scalar_path.Interpolated(j), order,
-                               {reference[0][slot], reference[1][slot], reference[2][slot]});
-        for (int c = 0; c < 3; ++c) out[c][j] = NearestTurn(exact[c], turn[c][slot]);
+      if (!copied[slot] && !ill_conditioned[slot]) continue;
+      const std::size_t r = batch.begin + slot;
+      const auto j = static_cast<std::size_t>(d.output[r]);
+      const auto nearest = static_cast<std::size_t>(d.nearest[r]);
+      if (copied[slot]) {
+        // Across a discontinuity: the nearer source pose.
+        for (int c = 0; c < 3; ++c) out[c][j] = source[c][nearest];
         continue;
       }
-      for (int c = 0; c < 3; ++c) out[c][j] = angles[c][slot];
+      const auto i = static_cast<std::size_t>(d.i0[r]);
+      Vec3 reference;
+      for (int c = 0; c < 3; ++c) {
+        const double* v = reference_values[c];
+        reference[c] = v[i] + d.t[r] * (v[i + 1] - v[i]);
+      }
+      const Vec3 exact = QuatToEulerNearest(scalar_path.Interpolated(j), order, reference);
+      for (int c = 0; c < 3; ++c) out[c][j] = NearestTurn(exact[c], source[c][nearest]);
     }
   }
 }

@@ -1,9 +1,11 @@
 // Batched rotation conversions for the rotation-aware resampling (resample.cc): the scalar
-// functions of rotation.h (EulerToQuat(), Slerp(), QuatToEulerNearest() then NearestTurn()) over
-// many samples, eight at a time. Each performs the scalar function's arithmetic in the same order,
-// with the sines, cosines and arctangents of vector_trig.h instead of libm's: results within a
-// few units in the last place of the scalar ones, the same branch choices except where a value
-// lies within such rounding of a threshold.
+// functions of rotation.h (EulerToQuat(), Slerp(), WeightedMeanRotation(), MarkleyMean(),
+// QuatToEulerNearest() then NearestTurn()) over many samples, four to a vector and several
+// vectors per step. Each performs the scalar function's arithmetic in the same order. The weighted
+// and Markley means use no trigonometry and give the scalar functions' bits; the others use the
+// sines, cosines and arctangents of vector_trig.h instead of libm's: results within a few units
+// in the last place of the scalar ones, the same branch choices except where a value lies within
+// such rounding of a threshold. tests/core/retime/rotation_batch_test.cc checks both.
 #ifndef TEMPOKEY_CORE_SRC_RETIME_ROTATION_BATCH_H_
 #define TEMPOKEY_CORE_SRC_RETIME_ROTATION_BATCH_H_
 
@@ -33,8 +35,38 @@ struct ConstQuatArrays {
 void EulerToQuats(const EulerOrder& order, const double* a, const double* b, const double* c,
                   std::size_t count, double* out);
 
-// A weighted output sample: the quaternions first .. first + count - 1 of the source, with the
-// weights weights[weight_offset ...], each aligned to the sign of the source quaternion `pivot`.
+// Weighted means are computed kMeanLanes at a time, one output sample per lane, from tables laid
+// out lane-major so that every tap of a group is one contiguous load of weights and four of
+// quaternions. The tables depend on the resampling plan alone: they are made once and shared by
+// every joint (resample.cc's RotationSchedule).
+inline constexpr std::size_t kMeanLanes = 4;
+
+// kMeanLanes output samples of at most `taps` taps each: tap n of lane l reads the source
+// quaternion source[tap_begin + kMeanLanes * n + l] with weight weight[tap_begin + kMeanLanes * n
+// + l]. A lane with fewer taps (or a lane past the last sample) is padded with its pivot at weight
+// 0, which leaves every sum as it is.
+struct MeanGroup {
+  std::size_t tap_begin;
+  std::int64_t taps;
+  std::int64_t pivot[kMeanLanes];  // source index each lane aligns its quaternions' signs to
+};
+struct MeanTables {
+  const MeanGroup* groups;
+  const std::int64_t* source;
+  const double* weight;
+};
+
+// For the samples i < count of the groups (sample i is lane i % kMeanLanes of group
+// i / kMeanLanes): WeightedMeanRotation() (rotation.h) of its taps of `quats` (as EulerToQuats()
+// writes them) into out[i], where its spread test passes: no quaternion with a non-zero weight
+// farther than min_dot (the cosine of half the spread) from the mean, and a sum that normalizes.
+// Elsewhere needs_markley[i] is set to 1 (otherwise 0) and out[i] is unspecified: the caller takes
+// Markley's mean.
+void WeightedMeans(const double* quats, const MeanTables& tables, std::size_t count, double min_dot,
+                   QuatArrays out, unsigned char* needs_markley);
+
+// A weighted output sample: the source quaternions first .. first + count - 1 with the weights
+// weights[weight_offset ...], signs aligned to the source quaternion `pivot`.
 struct WeightedMeanJob {
   std::int64_t first;
   std::int64_t count;
@@ -42,17 +74,20 @@ struct WeightedMeanJob {
   std::int64_t pivot;
 };
 
-// For i < count: WeightedMeanRotation() (rotation.h) of job i's quaternions (`quats` as
-// EulerToQuats() writes them) into out[i], where its spread test passes: no quaternion with a
-// non-zero weight farther than min_dot (the cosine of half the spread) from the mean, and a sum
-// that normalizes. Elsewhere needs_markley[i] is set to 1 (otherwise 0) and out[i] is unspecified:
-// the caller takes Markley's mean.
-void WeightedMeans(const double* quats, const double* weights, const WeightedMeanJob* jobs,
-                   std::size_t count, double min_dot, QuatArrays out, unsigned char* needs_markley);
+// For i < count: MarkleyMean() (rotation.h) of job i's quaternions of `quats` (as EulerToQuats()
+// writes them) into out[i], bit for bit: the same Jacobi sweeps, lane by lane, for several jobs at
+// once.
+void MarkleyMeans(const double* quats, const double* weights, const WeightedMeanJob* jobs,
+                  std::size_t count, QuatArrays out);
 
-// out[i] = Slerp(from[i], to[i], t[i]) for i < count.
-void SlerpQuats(ConstQuatArrays from, ConstQuatArrays to, const double* t, std::size_t count,
-                QuatArrays out);
+// Adjacent source rotations with |q_i·q_{i+1}| below this are a discontinuity (resample.cc).
+inline constexpr double kDiscontinuityDot = 0.70710678118654752;
+
+// For i < count, with a = quats[i0[i]] and b = quats[i0[i] + 1] (as EulerToQuats() writes them),
+// b's sign aligned to a: out[i] = Slerp(a, b, t[i]), and discontinuous[i] = 1 where
+// a·b < kDiscontinuityDot (out[i] is then unspecified), otherwise 0.
+void SlerpQuats(const double* quats, const std::int64_t* i0, const double* t, std::size_t count,
+                QuatArrays out, unsigned char* discontinuous);
 
 // Near gimbal lock (the middle angle near +-90 degrees) the first and last angles are
 // ill-conditioned: a rotation off by a unit in the last place moves them by that over the cosine
@@ -61,14 +96,28 @@ void SlerpQuats(ConstQuatArrays from, ConstQuatArrays to, const double* t, std::
 // stay within 1e-12 degrees of them (tests/core/retime/retime_identity_test.cc).
 inline constexpr double kBatchedMinMiddleCos = 0.1;
 
-// For i < count: the angles QuatToEulerNearest(q[i], order, {reference[0][i], reference[1][i],
-// reference[2][i]}), each then moved by NearestTurn() to within 180 degrees of turn[c][i], into
-// out[c][i]; except where the cosine of the middle angle is below kBatchedMinMiddleCos, where
-// ill_conditioned[i] is set to 1 and out[.][i] is left unspecified (otherwise 0).
-// Precondition: valid order.
-void QuatsToEulerNearest(const EulerOrder& order, ConstQuatArrays q,
-                         const double* const reference[3], const double* const turn[3],
-                         std::size_t count, double* const out[3], unsigned char* ill_conditioned);
+// Where the angles of output samples go and what they are measured against: sample i lies at
+// i0[i] + t[i] (source frames), its Euler angles are the ones nearest the reference
+// reference[c][i0] + t (reference[c][i0 + 1] - reference[c][i0]) (the source's unwrapped angles
+// interpolated linearly), each then moved by whole turns to within 180 degrees of
+// turn[c][nearest[i]] (the source's value at the nearest sample), and stored at
+// out[c][output[i]].
+struct EulerTargets {
+  const std::int64_t* i0;
+  const double* t;
+  const std::int64_t* nearest;
+  const std::int64_t* output;
+  const double* reference[3];
+  const double* turn[3];
+  double* out[3];
+};
+
+// For i < count: the angles QuatToEulerNearest(q[i], order, reference) then moved by NearestTurn()
+// as `targets` says, stored as it says; except where the cosine of the middle angle is below
+// kBatchedMinMiddleCos, where ill_conditioned[i] is set to 1 and the stored angles are
+// unspecified (otherwise 0). Precondition: valid order.
+void QuatsToEulerNearest(const EulerOrder& order, ConstQuatArrays q, const EulerTargets& targets,
+                         std::size_t count, unsigned char* ill_conditioned);
 
 }  // namespace tempokey::core::retime_internal
 

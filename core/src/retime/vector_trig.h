@@ -1,8 +1,8 @@
 // Sine, cosine and arctangent on vectors of doubles (GCC vector extensions of any width: the
-// kernels use 8 lanes, two AVX registers, so that two independent chains of dependent operations
-// are in flight), for the batched rotation conversions of the rotation-aware resampling
-// (rotation_batch.h). Plain IEEE arithmetic only, so the AVX and portable clones of a kernel give
-// the same bits (simd.h).
+// kernels use 4 lanes, one AVX register, and pass several vectors at once so that independent
+// chains of dependent operations are in flight), for the batched rotation conversions of the
+// rotation-aware resampling (rotation_batch.h). Plain IEEE arithmetic only, so the AVX and
+// portable clones of a kernel give the same bits (simd.h).
 //
 // Accuracy (tests/core/retime/vector_trig_test.cc, against x87 long-double sinl, cosl, atan2l):
 // within 2.5 units in the last place, where libm's are within one: the conversions that
@@ -67,97 +67,135 @@ template <class V>
   return (MaskOf<V>)x < 0;
 }
 
+// Every function below takes N independent arguments (arrays of N vectors) and works on them
+// statement by statement, each lane with the arithmetic of a single call: the N dependency chains
+// of its polynomials and divisions sit side by side in the instruction stream, for the processor to
+// overlap (one chain alone leaves it waiting on each multiply and add). `k` runs over the N.
+#define TEMPOKEY_FOR_EACH(k, N) _Pragma("GCC unroll 8") for (int k = 0; k < (N); ++k)
+
 // sin(r) and cos(r) for |r| <= pi/4 (reduced arguments).
-template <class V>
-[[gnu::always_inline]] inline void SinCosReduced(V r, V& sine, V& cosine) {
-  const V z = r * r;
+template <int N, class V>
+[[gnu::always_inline]] inline void SinCosReduced(const V (&r)[N], V (&sine)[N], V (&cosine)[N]) {
+  V z[N], s[N], c[N];
+  TEMPOKEY_FOR_EACH(k, N) z[k] = r[k] * r[k];
   // (sin(r) - r) / r^3 as a polynomial in z = r^2 on [0, 0.617].
-  V s = Splat<V>(1.5918101877910613e-10);
-  s = s * z + -2.5051131474663988e-08;
-  s = s * z + 2.7557316100836803e-06;
-  s = s * z + -0.00019841269836755419;
-  s = s * z + 0.008333333333330946;
-  s = s * z + -0.16666666666666666;
-  sine = r + (r * z) * s;
+  TEMPOKEY_FOR_EACH(k, N) s[k] = Splat<V>(1.5918101877910613e-10);
+  TEMPOKEY_FOR_EACH(k, N) s[k] = s[k] * z[k] + -2.5051131474663988e-08;
+  TEMPOKEY_FOR_EACH(k, N) s[k] = s[k] * z[k] + 2.7557316100836803e-06;
+  TEMPOKEY_FOR_EACH(k, N) s[k] = s[k] * z[k] + -0.00019841269836755419;
+  TEMPOKEY_FOR_EACH(k, N) s[k] = s[k] * z[k] + 0.008333333333330946;
+  TEMPOKEY_FOR_EACH(k, N) s[k] = s[k] * z[k] + -0.16666666666666666;
+  TEMPOKEY_FOR_EACH(k, N) sine[k] = r[k] + (r[k] * z[k]) * s[k];
   // (cos(r) - 1 + z / 2) / z^2 on the same range.
-  V c = Splat<V>(-1.1382614811253895e-11);
-  c = c * z + 2.0876146029590015e-09;
-  c = c * z + -2.755731727061801e-07;
-  c = c * z + 2.480158729876363e-05;
-  c = c * z + -0.0013888888888887395;
-  c = c * z + 0.041666666666666664;
+  TEMPOKEY_FOR_EACH(k, N) c[k] = Splat<V>(-1.1382614811253895e-11);
+  TEMPOKEY_FOR_EACH(k, N) c[k] = c[k] * z[k] + 2.0876146029590015e-09;
+  TEMPOKEY_FOR_EACH(k, N) c[k] = c[k] * z[k] + -2.755731727061801e-07;
+  TEMPOKEY_FOR_EACH(k, N) c[k] = c[k] * z[k] + 2.480158729876363e-05;
+  TEMPOKEY_FOR_EACH(k, N) c[k] = c[k] * z[k] + -0.0013888888888887395;
+  TEMPOKEY_FOR_EACH(k, N) c[k] = c[k] * z[k] + 0.041666666666666664;
   // 1 - z/2 + z^2 c, with the rounding of 1 - z/2 carried into the small part.
-  const V half_z = 0.5 * z;
-  const V w = 1.0 - half_z;
-  cosine = w + (((1.0 - w) - half_z) + (z * z) * c);
+  TEMPOKEY_FOR_EACH(k, N) {
+    const V half_z = 0.5 * z[k];
+    const V w = 1.0 - half_z;
+    cosine[k] = w + (((1.0 - w) - half_z) + (z[k] * z[k]) * c[k]);
+  }
 }
 
 // sin(x) and cos(x) for |x| < kMaxReducedRadians (larger lanes are not reduced accurately: the
 // caller checks). x = k pi/2 + r, |r| <= pi/4, then the quadrant k mod 4 swaps and negates.
+template <int N, class V>
+[[gnu::always_inline]] inline void SinCos(const V (&x)[N], V (&sine)[N], V (&cosine)[N]) {
+  V quadrant[N], r[N], s[N], c[N];
+  TEMPOKEY_FOR_EACH(k, N) {
+    quadrant[k] = RoundSmall(x[k] * kTwoOverPi);
+    const V q = quadrant[k];
+    r[k] = ((x[k] - q * kHalfPi1) - q * kHalfPi2) - q * kHalfPi3;
+  }
+  SinCosReduced<N>(r, s, c);
+  TEMPOKEY_FOR_EACH(k, N) {
+    // q = k mod 4 in 0..3: floor(k / 4) is the nearest integer to k / 4 - 3/8 (no ties).
+    const V q = quadrant[k] - 4.0 * RoundSmall(quadrant[k] * 0.25 - 0.375);
+    const MaskOf<V> odd = q == 1.0 || q == 3.0;
+    const V sin_base = odd ? c[k] : s[k];
+    const V cos_base = odd ? s[k] : c[k];
+    sine[k] = q >= 2.0 ? -sin_base : sin_base;
+    cosine[k] = q == 1.0 || q == 2.0 ? -cos_base : cos_base;
+  }
+}
+
 template <class V>
 [[gnu::always_inline]] inline void SinCos(V x, V& sine, V& cosine) {
-  const V k = RoundSmall(x * kTwoOverPi);
-  const V r = ((x - k * kHalfPi1) - k * kHalfPi2) - k * kHalfPi3;
-  V s, c;
-  SinCosReduced(r, s, c);
-  // q = k mod 4 in 0..3: floor(k / 4) is the nearest integer to k / 4 - 3/8 (no ties).
-  const V q = k - 4.0 * RoundSmall(k * 0.25 - 0.375);
-  const MaskOf<V> odd = q == 1.0 || q == 3.0;
-  const V sin_base = odd ? c : s;
-  const V cos_base = odd ? s : c;
-  sine = q >= 2.0 ? -sin_base : sin_base;
-  cosine = q == 1.0 || q == 2.0 ? -cos_base : cos_base;
+  V s[1], c[1];
+  SinCos<1>({x}, s, c);
+  sine = s[0];
+  cosine = c[0];
 }
 
 // atan(u) for |u| <= tan(pi/8).
-template <class V>
-[[gnu::always_inline]] inline V AtanReduced(V u) {
-  const V z = u * u;
+template <int N, class V>
+[[gnu::always_inline]] inline void AtanReduced(const V (&u)[N], V (&out)[N]) {
+  V z[N], h[N];
+  TEMPOKEY_FOR_EACH(k, N) z[k] = u[k] * u[k];
   // (atan(u) / u - 1) / z as a polynomial in z = u^2 on [0, 0.1716].
-  V h = Splat<V>(0.016305609739836996);
-  h = h * z + -0.03458942456554059;
-  h = h * z + 0.04552367231875368;
-  h = h * z + -0.05230633784275726;
-  h = h * z + 0.05878954854801641;
-  h = h * z + -0.06666427278780239;
-  h = h * z + 0.07692296517303976;
-  h = h * z + -0.09090908758775827;
-  h = h * z + 0.11111111105269593;
-  h = h * z + -0.14285714285661094;
-  h = h * z + 0.1999999999999981;
-  h = h * z + -0.3333333333333333;
-  return u + (u * z) * h;
+  TEMPOKEY_FOR_EACH(k, N) h[k] = Splat<V>(0.016305609739836996);
+  TEMPOKEY_FOR_EACH(k, N) h[k] = h[k] * z[k] + -0.03458942456554059;
+  TEMPOKEY_FOR_EACH(k, N) h[k] = h[k] * z[k] + 0.04552367231875368;
+  TEMPOKEY_FOR_EACH(k, N) h[k] = h[k] * z[k] + -0.05230633784275726;
+  TEMPOKEY_FOR_EACH(k, N) h[k] = h[k] * z[k] + 0.05878954854801641;
+  TEMPOKEY_FOR_EACH(k, N) h[k] = h[k] * z[k] + -0.06666427278780239;
+  TEMPOKEY_FOR_EACH(k, N) h[k] = h[k] * z[k] + 0.07692296517303976;
+  TEMPOKEY_FOR_EACH(k, N) h[k] = h[k] * z[k] + -0.09090908758775827;
+  TEMPOKEY_FOR_EACH(k, N) h[k] = h[k] * z[k] + 0.11111111105269593;
+  TEMPOKEY_FOR_EACH(k, N) h[k] = h[k] * z[k] + -0.14285714285661094;
+  TEMPOKEY_FOR_EACH(k, N) h[k] = h[k] * z[k] + 0.1999999999999981;
+  TEMPOKEY_FOR_EACH(k, N) h[k] = h[k] * z[k] + -0.3333333333333333;
+  TEMPOKEY_FOR_EACH(k, N) out[k] = u[k] + (u[k] * z[k]) * h[k];
 }
 
 // atan2(y, x) in [-pi, pi], with std::atan2's signs and zeros: atan2(+-0, +0) = +-0,
 // atan2(+-0, -0) = +-pi. Finite arguments.
+template <int N, class V>
+[[gnu::always_inline]] inline void Atan2(const V (&y)[N], const V (&x)[N], V (&out)[N]) {
+  using Mask = MaskOf<V>;
+  const V zero = Splat<V>(0.0);
+  const V one = Splat<V>(1.0);
+  V u[N], p[N];
+  Mask swap[N], big[N];
+  TEMPOKEY_FOR_EACH(k, N) {
+    const V ax = Abs(x[k]);
+    const V ay = Abs(y[k]);
+    swap[k] = ay > ax;
+    const V num = swap[k] ? ax : ay;
+    const V den = swap[k] ? ay : ax;
+    const V t = den > 0.0 ? num / den : zero;  // in [0, 1]
+    // atan(t) = m pi/4 + sigma atan(u) with m = 0 or 1, then the octant: the angle stays
+    // m pi/4 + sigma atan(u) with m in 0..4 and sigma = +-1, summed once at the end.
+    big[k] = t > kTanEighthPi;
+    // (t - 1) / (t + 1) from the operands: num - den is exact for num >= den / 2 (Sterbenz).
+    u[k] = big[k] ? (num - den) / (num + den) : t;
+  }
+  AtanReduced<N>(u, p);
+  TEMPOKEY_FOR_EACH(k, N) {
+    V m = big[k] ? one : zero;  // atan(t)
+    V sigma = one;
+    m = swap[k] ? 2.0 - m : m;  // pi/2 - atan(t) when |y| > |x|
+    sigma = swap[k] ? -sigma : sigma;
+    const Mask negative_x = SignBit(x[k]);
+    m = negative_x ? 4.0 - m : m;  // pi - angle when x < 0 or x is -0
+    sigma = negative_x ? -sigma : sigma;
+    const V angle = m * kQuarterPiHi + (sigma * p[k] + m * kQuarterPiLo);  // in [0, pi]
+    out[k] = SignBit(y[k]) ? -angle : angle;
+  }
+}
+
 template <class V>
 [[gnu::always_inline]] inline V Atan2(V y, V x) {
-  using Mask = MaskOf<V>;
-  const V ax = Abs(x);
-  const V ay = Abs(y);
-  const Mask swap = ay > ax;
-  const V num = swap ? ax : ay;
-  const V den = swap ? ay : ax;
-  const V zero = Splat<V>(0.0);
-  const V t = den > 0.0 ? num / den : zero;  // in [0, 1]
-  // atan(t) = m pi/4 + sigma atan(u) with m = 0 or 1, then the octant: the angle stays
-  // m pi/4 + sigma atan(u) with m in 0..4 and sigma = +-1, summed once at the end.
-  const Mask big = t > kTanEighthPi;
-  // (t - 1) / (t + 1) from the operands: num - den is exact for num >= den / 2 (Sterbenz).
-  const V u = big ? (num - den) / (num + den) : t;
-  const V p = AtanReduced(u);
-  const V one = Splat<V>(1.0);
-  V m = big ? one : zero;  // atan(t)
-  V sigma = one;
-  m = swap ? 2.0 - m : m;  // pi/2 - atan(t) when |y| > |x|
-  sigma = swap ? -sigma : sigma;
-  const Mask negative_x = SignBit(x);
-  m = negative_x ? 4.0 - m : m;  // pi - angle when x < 0 or x is -0
-  sigma = negative_x ? -sigma : sigma;
-  const V angle = m * kQuarterPiHi + (sigma * p + m * kQuarterPiLo);  // in [0, pi]
-  return SignBit(y) ? -angle : angle;
+  V out[1];
+  Atan2<1>({y}, {x}, out);
+  return out[0];
 }
+
+#undef TEMPOKEY_FOR_EACH
 
 #pragma GCC diagnostic pop
 

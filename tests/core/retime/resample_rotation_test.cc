@@ -1,0 +1,94 @@
+// ResampleRotation() on joints whose rotation never changes: their angles come back exactly, and
+// near gimbal lock (where the general path's safeguards apply) within the identity tolerance of
+// the reference implementation (rotation_reference.h).
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "gtest/gtest.h"
+#include "tempokey/core/model/rotation.h"
+#include "tempokey/core/retime/resample.h"
+#include "tests/core/retime/rotation_reference.h"
+
+namespace tempokey::core {
+namespace {
+
+using ::tempokey::testing::ReferenceResampleRotation;
+
+constexpr std::int64_t kSourceCount = 200;
+
+// Output positions at `speed` source frames per output frame, with that decimation ratio.
+ResamplePlan PlanAtSpeed(double speed, ResampleFilter filter) {
+  std::vector<double> positions, ratios;
+  for (double x = 0.0; x <= static_cast<double>(kSourceCount - 1); x += speed) {
+    positions.push_back(x + 0.3 * speed);
+    ratios.push_back(speed);
+  }
+  absl::StatusOr<ResamplePlan> plan = MakeResamplePlan(positions, ratios, kSourceCount, filter);
+  EXPECT_TRUE(plan.ok()) << plan.status();
+  return *std::move(plan);
+}
+
+struct Resampled {
+  std::array<std::vector<double>, 3> fast, reference;
+};
+
+Resampled ResampleFixed(const ResamplePlan& plan, const EulerOrder& order,
+                        const std::array<double, 3>& angles) {
+  std::array<std::vector<double>, 3> source;
+  for (int c = 0; c < 3; ++c) source[c].assign(kSourceCount, angles[c]);
+  Resampled r;
+  std::array<std::span<const double>, 3> in;
+  std::array<std::span<double>, 3> fast, reference;
+  for (int c = 0; c < 3; ++c) {
+    r.fast[c].assign(plan.position.size(), 0.0);
+    r.reference[c].assign(plan.position.size(), 0.0);
+    in[c] = source[c];
+    fast[c] = r.fast[c];
+    reference[c] = r.reference[c];
+  }
+  ResampleRotation(plan, order, in, fast);
+  ReferenceResampleRotation(plan, order, in, reference);
+  return r;
+}
+
+TEST(ResampleRotationTest, AJointThatNeverTurnsKeepsItsAnglesExactlyUnderEveryKernel) {
+  const EulerOrder order = *ParseEulerOrder("ZXY");
+  const std::array<double, 3> angles = {-172.25, 33.125, 405.5};
+  for (const ResampleFilter filter : {ResampleFilter::kTent, ResampleFilter::kBox,
+                                      ResampleFilter::kLinear, ResampleFilter::kCubic,
+                                      ResampleFilter::kLanczos3}) {
+    for (const double speed : {0.4, 1.0, 2.5, 4.0}) {
+      const Resampled r = ResampleFixed(PlanAtSpeed(speed, filter), order, angles);
+      for (int c = 0; c < 3; ++c) {
+        for (std::size_t j = 0; j < r.fast[c].size(); ++j) {
+          ASSERT_EQ(r.fast[c][j], angles[c]) << "filter " << static_cast<int>(filter) << " speed "
+                                             << speed << " channel " << c << " sample " << j;
+          // The reference's conversions round, a few units in the last place.
+          ASSERT_NEAR(r.fast[c][j], r.reference[c][j], 1e-12);
+        }
+      }
+    }
+  }
+}
+
+TEST(ResampleRotationTest, AFixedJointNearGimbalLockStaysWithinTheReferencesTolerance) {
+  const EulerOrder order = *ParseEulerOrder("XYZ");
+  // Middle angles whose cosine is below the batched conversions' bound: the outer angles are
+  // ill-conditioned there, and the general path (its scalar fallback) answers.
+  for (const double middle : {89.99, -88.5, 90.0}) {
+    const std::array<double, 3> angles = {12.5, middle, -40.0};
+    const Resampled r = ResampleFixed(PlanAtSpeed(2.5, ResampleFilter::kTent), order, angles);
+    for (int c = 0; c < 3; ++c) {
+      for (std::size_t j = 0; j < r.fast[c].size(); ++j) {
+        ASSERT_NEAR(r.fast[c][j], r.reference[c][j], 1e-12)
+            << "middle " << middle << " channel " << c << " sample " << j;
+      }
+    }
+  }
+}
+
+}  // namespace
+}  // namespace tempokey::core

@@ -1,0 +1,392 @@
+// The batched kernels of the rotation-aware resampling (core/src/retime/rotation_batch.h) against
+// the scalar functions of rotation.h they stand for: bit for bit where they promise the scalar
+// arithmetic (weighted means, Markley's means, the several-argument trigonometry), within a few
+// units in the last place where they use the vector sine, cosine and arctangent.
+#include "core/src/retime/rotation_batch.h"
+
+#include <array>
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <numbers>
+#include <random>
+#include <vector>
+
+#include "core/src/retime/vector_trig.h"
+#include "gtest/gtest.h"
+#include "tempokey/core/model/rotation.h"
+
+#pragma GCC diagnostic ignored "-Wpsabi"
+
+namespace tempokey::core::retime_internal {
+namespace {
+
+bool SameBits(double a, double b) {
+  return std::bit_cast<std::uint64_t>(a) == std::bit_cast<std::uint64_t>(b);
+}
+
+// A random unit quaternion within `spread_degrees` of `center` (either sign).
+Quat Near(const Quat& center, double spread_degrees, std::mt19937_64& random) {
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  const double half = 0.5 * spread_degrees * std::numbers::pi / 180.0 * unit(random);
+  Quat axis{0.0, unit(random), unit(random), unit(random)};
+  const double n = std::sqrt(Dot(axis, axis));
+  const Quat turn{std::cos(half), std::sin(half) * axis.x / n, std::sin(half) * axis.y / n,
+                  std::sin(half) * axis.z / n};
+  const Quat q = Normalized(Multiply(center, turn));
+  return unit(random) < 0.0 ? Negated(q) : q;
+}
+
+Quat RandomRotation(std::mt19937_64& random) {
+  std::normal_distribution<double> normal;
+  return Normalized(Quat{normal(random), normal(random), normal(random), normal(random)});
+}
+
+// Source quaternions (w, x, y, z) one after the other, as EulerToQuats() writes them.
+std::vector<double> Interleaved(const std::vector<Quat>& quats) {
+  std::vector<double> out;
+  for (const Quat& q : quats) out.insert(out.end(), {q.w, q.x, q.y, q.z});
+  return out;
+}
+
+struct Columns {
+  std::vector<double> w, x, y, z;
+  explicit Columns(std::size_t n) : w(n), x(n), y(n), z(n) {}
+  QuatArrays Arrays() { return {w.data(), x.data(), y.data(), z.data()}; }
+  Quat At(std::size_t i) const { return {w[i], x[i], y[i], z[i]}; }
+};
+
+// Weighted samples over a source of quaternions: windows of 1 to 12 taps with tent-like weights
+// (some negative, some zero), spread from a few degrees to far past the Markley threshold.
+struct MeanCase {
+  std::vector<Quat> source;
+  std::vector<double> weights;
+  std::vector<WeightedMeanJob> jobs;
+};
+
+// Sample s's taps lie within spread(s) degrees of a random rotation.
+template <class SpreadFn>
+MeanCase MakeMeanCase(std::mt19937_64& random, std::size_t count, SpreadFn spread_of) {
+  MeanCase c;
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  for (std::size_t s = 0; s < count; ++s) {
+    const auto taps = static_cast<std::int64_t>(1 + random() % 12);
+    const double spread = spread_of(s);
+    const Quat center = RandomRotation(random);
+    WeightedMeanJob job{static_cast<std::int64_t>(c.source.size()), taps,
+                        static_cast<std::int64_t>(c.weights.size()), 0};
+    job.pivot = job.first + static_cast<std::int64_t>(random() % static_cast<std::uint64_t>(taps));
+    for (std::int64_t n = 0; n < taps; ++n) {
+      c.source.push_back(Near(center, spread, random));
+      const double u = unit(random);
+      c.weights.push_back(u < 0.1 ? 0.0 : u < 0.2 ? -0.1 * u : u);
+    }
+    c.jobs.push_back(job);
+  }
+  return c;
+}
+
+MeanCase MakeMeanCase(std::mt19937_64& random, std::size_t count) {
+  return MakeMeanCase(random, count, [](std::size_t s) {
+    return s % 3 == 0 ? 5.0 : s % 3 == 1 ? 40.0 : 170.0;
+  });
+}
+
+// The lane-major tables of WeightedMeans() for `jobs`, as the schedule lays them out.
+struct Tables {
+  std::vector<MeanGroup> groups;
+  std::vector<std::int64_t> source;
+  std::vector<double> weight;
+};
+
+Tables MakeTables(const MeanCase& c) {
+  Tables t;
+  for (std::size_t g = 0; g < c.jobs.size(); g += kMeanLanes) {
+    MeanGroup group{.tap_begin = t.source.size(), .taps = 0, .pivot = {}};
+    for (std::size_t lane = 0; lane < kMeanLanes; ++lane) {
+      const WeightedMeanJob& job = c.jobs[g + lane < c.jobs.size() ? g + lane : g];
+      group.pivot[lane] = job.pivot;
+      if (g + lane < c.jobs.size()) group.taps = std::max(group.taps, job.count);
+    }
+    for (std::int64_t n = 0; n < group.taps; ++n) {
+      for (std::size_t lane = 0; lane < kMeanLanes; ++lane) {
+        const bool in = g + lane < c.jobs.size();
+        const WeightedMeanJob& job = c.jobs[in ? g + lane : g];
+        const bool real = in && n < job.count;
+        t.source.push_back(real ? job.first + n : job.pivot);
+        t.weight.push_back(real ? c.weights[static_cast<std::size_t>(job.weight_offset + n)] : 0.0);
+      }
+    }
+    t.groups.push_back(group);
+  }
+  return t;
+}
+
+std::vector<Quat> TapsOf(const MeanCase& c, const WeightedMeanJob& job) {
+  return {c.source.begin() + job.first, c.source.begin() + job.first + job.count};
+}
+
+std::vector<double> WeightsOf(const MeanCase& c, const WeightedMeanJob& job) {
+  return {c.weights.begin() + job.weight_offset,
+          c.weights.begin() + job.weight_offset + job.count};
+}
+
+// WeightedMeans() on `c` against WeightedMeanRotation(): the same bits, and Markley's mean asked
+// for exactly where the scalar function takes it. Returns how many samples asked for it.
+int ExpectScalarWeightedMeans(const MeanCase& c) {
+  const Tables tables = MakeTables(c);
+  const std::vector<double> quats = Interleaved(c.source);
+  const double min_dot = std::cos(0.5 * 30.0 * std::numbers::pi / 180.0);
+  Columns out(c.jobs.size());
+  std::vector<unsigned char> needs_markley(c.jobs.size(), 7);
+  WeightedMeans(quats.data(), {tables.groups.data(), tables.source.data(), tables.weight.data()},
+                c.jobs.size(), min_dot, out.Arrays(), needs_markley.data());
+  int markley = 0;
+  for (std::size_t i = 0; i < c.jobs.size(); ++i) {
+    const WeightedMeanJob& job = c.jobs[i];
+    const std::vector<Quat> taps = TapsOf(c, job);
+    const std::vector<double> weights = WeightsOf(c, job);
+    const auto pivot = static_cast<std::size_t>(job.pivot - job.first);
+    const Quat expected = WeightedMeanRotation(taps, weights, pivot);
+    // The scalar function took Markley's mean exactly where its result is Markley's.
+    const Quat markley_mean = MarkleyMean(taps, weights, pivot);
+    const bool scalar_took_markley =
+        SameBits(expected.w, markley_mean.w) && SameBits(expected.x, markley_mean.x) &&
+        SameBits(expected.y, markley_mean.y) && SameBits(expected.z, markley_mean.z);
+    EXPECT_LE(needs_markley[i], 1) << "sample " << i;
+    if (needs_markley[i]) {
+      ++markley;
+      EXPECT_TRUE(scalar_took_markley) << "sample " << i;
+      continue;
+    }
+    const Quat got = out.At(i);
+    EXPECT_TRUE(SameBits(got.w, expected.w) && SameBits(got.x, expected.x) &&
+                SameBits(got.y, expected.y) && SameBits(got.z, expected.z))
+        << "sample " << i << " (" << job.count << " taps)";
+  }
+  return markley;
+}
+
+TEST(RotationBatchTest, WeightedMeansAreTheScalarMeansBitForBitAndAskForMarkleyWhereItDoes) {
+  std::mt19937_64 random(7);
+  // Not a multiple of the lanes; both outcomes.
+  const int markley = ExpectScalarWeightedMeans(MakeMeanCase(random, 303));
+  EXPECT_GT(markley, 20);
+  EXPECT_LT(markley, 280);
+}
+
+TEST(RotationBatchTest, WeightedMeansDecideTheSpreadAsTheScalarFunctionNearItsLimit) {
+  std::mt19937_64 random(23);
+  // Narrow windows throughout (the test mostly settled from the pivot alone; Markley's mean only
+  // for the few sums that do not normalize, such as a lone tap of weight 0), and windows around
+  // the 30 degree spread (settled tap by tap, on either side).
+  EXPECT_LT(ExpectScalarWeightedMeans(MakeMeanCase(random, 400, [](std::size_t) { return 8.0; })),
+            20);
+  std::uniform_real_distribution<double> spread(20.0, 45.0);
+  const int markley = ExpectScalarWeightedMeans(
+      MakeMeanCase(random, 400, [&](std::size_t) { return spread(random); }));
+  EXPECT_GT(markley, 20);
+  EXPECT_LT(markley, 380);
+}
+
+TEST(RotationBatchTest, MarkleyMeansAreTheScalarMarkleyMeanBitForBit) {
+  std::mt19937_64 random(11);
+  const MeanCase c = MakeMeanCase(random, 201);
+  const std::vector<double> quats = Interleaved(c.source);
+  Columns out(c.jobs.size());
+  MarkleyMeans(quats.data(), c.weights.data(), c.jobs.data(), c.jobs.size(), out.Arrays());
+  for (std::size_t i = 0; i < c.jobs.size(); ++i) {
+    const WeightedMeanJob& job = c.jobs[i];
+    const Quat expected = MarkleyMean(TapsOf(c, job), WeightsOf(c, job),
+                                      static_cast<std::size_t>(job.pivot - job.first));
+    const Quat got = out.At(i);
+    EXPECT_TRUE(SameBits(got.w, expected.w) && SameBits(got.x, expected.x) &&
+                SameBits(got.y, expected.y) && SameBits(got.z, expected.z))
+        << "sample " << i << " (" << job.count << " taps): got " << got.w << " " << got.x << " "
+        << got.y << " " << got.z << ", expected " << expected.w << " " << expected.x << " "
+        << expected.y << " " << expected.z;
+  }
+}
+
+TEST(RotationBatchTest, MarkleyMeansOfIdenticalAndOppositeQuaternionsStopAsTheScalarOneDoes) {
+  // A single tap, repeated taps and a quaternion with its negation: matrices already diagonal
+  // (the sweeps stop at once) or with exact zeros off the diagonal (rotations skipped).
+  const std::vector<Quat> source = {{1, 0, 0, 0}, {0, 1, 0, 0}, {0.6, 0.8, 0, 0},
+                                    {-0.6, -0.8, 0, 0}, {0.5, 0.5, 0.5, 0.5}};
+  const std::vector<double> weights = {1.0, 0.5, 0.25, 0.25, 1.0};
+  const std::vector<WeightedMeanJob> jobs = {{0, 1, 0, 0}, {1, 1, 1, 1}, {2, 2, 2, 2},
+                                             {0, 5, 0, 4}, {3, 2, 3, 3}};
+  const std::vector<double> quats = Interleaved(source);
+  Columns out(jobs.size());
+  MarkleyMeans(quats.data(), weights.data(), jobs.data(), jobs.size(), out.Arrays());
+  for (std::size_t i = 0; i < jobs.size(); ++i) {
+    const WeightedMeanJob& job = jobs[i];
+    const Quat expected =
+        MarkleyMean({source.begin() + job.first, source.begin() + job.first + job.count},
+                    {weights.begin() + job.weight_offset,
+                     weights.begin() + job.weight_offset + job.count},
+                    static_cast<std::size_t>(job.pivot - job.first));
+    const Quat got = out.At(i);
+    EXPECT_TRUE(SameBits(got.w, expected.w) && SameBits(got.x, expected.x) &&
+                SameBits(got.y, expected.y) && SameBits(got.z, expected.z))
+        << "job " << i;
+  }
+}
+
+TEST(RotationBatchTest, SlerpsMatchTheScalarSlerpAndFlagDiscontinuities) {
+  std::mt19937_64 random(13);
+  std::vector<Quat> source;
+  std::vector<std::int64_t> i0;
+  std::vector<double> t;
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  for (int s = 0; s < 203; ++s) {
+    const Quat a = RandomRotation(random);
+    // Small steps (the series branch), large ones (the sine branch), past 90 degrees.
+    const double spread = s % 3 == 0 ? 2.0 : s % 3 == 1 ? 60.0 : 200.0;
+    i0.push_back(static_cast<std::int64_t>(source.size()));
+    source.push_back(a);
+    source.push_back(Near(a, spread, random));
+    t.push_back(s % 17 == 0 ? 0.0 : s % 19 == 0 ? 1.0 : unit(random));
+  }
+  const std::vector<double> quats = Interleaved(source);
+  Columns out(i0.size());
+  std::vector<unsigned char> discontinuous(i0.size(), 7);
+  SlerpQuats(quats.data(), i0.data(), t.data(), i0.size(), out.Arrays(), discontinuous.data());
+  int flagged = 0;
+  for (std::size_t i = 0; i < i0.size(); ++i) {
+    const Quat& a = source[static_cast<std::size_t>(i0[i])];
+    Quat b = source[static_cast<std::size_t>(i0[i]) + 1];
+    if (Dot(b, a) < 0.0) b = Negated(b);
+    ASSERT_LE(discontinuous[i], 1);
+    EXPECT_EQ(discontinuous[i] == 1, Dot(a, b) < kDiscontinuityDot) << "sample " << i;
+    if (discontinuous[i]) {
+      ++flagged;
+      continue;
+    }
+    const Quat expected = Slerp(a, b, t[i]);
+    const Quat got = out.At(i);
+    EXPECT_NEAR(got.w, expected.w, 4e-16) << "sample " << i;
+    EXPECT_NEAR(got.x, expected.x, 4e-16) << "sample " << i;
+    EXPECT_NEAR(got.y, expected.y, 4e-16) << "sample " << i;
+    EXPECT_NEAR(got.z, expected.z, 4e-16) << "sample " << i;
+  }
+  EXPECT_GT(flagged, 10);
+}
+
+TEST(RotationBatchTest, ConversionsToQuaternionsAndBackMatchTheScalarFunctions) {
+  std::mt19937_64 random(17);
+  std::uniform_real_distribution<double> angle(-400.0, 400.0);
+  constexpr std::size_t kCount = 1001;
+  for (const char* name : {"XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX"}) {
+    const EulerOrder order = *ParseEulerOrder(name);
+    std::array<std::vector<double>, 3> source;
+    for (auto& channel : source) {
+      for (std::size_t i = 0; i < kCount; ++i) channel.push_back(angle(random));
+    }
+    std::vector<double> quats(4 * kCount);
+    EulerToQuats(order, source[0].data(), source[1].data(), source[2].data(), kCount, quats.data());
+    Columns q(kCount);
+    for (std::size_t i = 0; i < kCount; ++i) {
+      const Quat expected = EulerToQuat(order, {source[0][i], source[1][i], source[2][i]});
+      const Quat got{quats[4 * i], quats[4 * i + 1], quats[4 * i + 2], quats[4 * i + 3]};
+      EXPECT_NEAR(got.w, expected.w, 1e-15) << name << " sample " << i;
+      EXPECT_NEAR(got.x, expected.x, 1e-15) << name << " sample " << i;
+      EXPECT_NEAR(got.y, expected.y, 1e-15) << name << " sample " << i;
+      EXPECT_NEAR(got.z, expected.z, 1e-15) << name << " sample " << i;
+      q.w[i] = got.w;
+      q.x[i] = got.x;
+      q.y[i] = got.y;
+      q.z[i] = got.z;
+    }
+    // Back, against references near the source's angles (as the resampling's are) and turns
+    // away from them: sample i between reference samples i and i + 1 (the last between its two
+    // predecessors), written in reverse output order.
+    std::uniform_real_distribution<double> near(-20.0, 20.0), away(-150.0, 150.0);
+    std::array<std::vector<double>, 3> reference_values, turn_values;
+    for (int c = 0; c < 3; ++c) {
+      for (std::size_t i = 0; i < kCount; ++i) {
+        reference_values[c].push_back(source[c][i] + near(random));
+        turn_values[c].push_back(source[c][i] + away(random));
+      }
+    }
+    std::vector<std::int64_t> i0(kCount), nearest(kCount), output(kCount);
+    std::vector<double> t(kCount);
+    for (std::size_t i = 0; i < kCount; ++i) {
+      i0[i] = static_cast<std::int64_t>(i + 1 < kCount ? i : i - 1);
+      t[i] = i + 1 < kCount ? 0.0 : 1.0;
+      nearest[i] = static_cast<std::int64_t>(i);
+      output[i] = static_cast<std::int64_t>(kCount - 1 - i);
+    }
+    std::array<std::vector<double>, 3> out;
+    for (auto& channel : out) channel.assign(kCount, 0.0);
+    std::vector<unsigned char> ill_conditioned(kCount, 7);
+    const EulerTargets targets = {
+        .i0 = i0.data(),
+        .t = t.data(),
+        .nearest = nearest.data(),
+        .output = output.data(),
+        .reference = {reference_values[0].data(), reference_values[1].data(),
+                      reference_values[2].data()},
+        .turn = {turn_values[0].data(), turn_values[1].data(), turn_values[2].data()},
+        .out = {out[0].data(), out[1].data(), out[2].data()}};
+    QuatsToEulerNearest(order, {q.w.data(), q.x.data(), q.y.data(), q.z.data()}, targets, kCount,
+                        ill_conditioned.data());
+    int ill = 0;
+    for (std::size_t i = 0; i < kCount; ++i) {
+      const std::size_t a = static_cast<std::size_t>(i0[i]);
+      Vec3 reference;
+      for (int c = 0; c < 3; ++c) {
+        const std::vector<double>& v = reference_values[c];
+        reference[c] = v[a] + t[i] * (v[a + 1] - v[a]);
+      }
+      const Vec3 angles = QuatToEulerNearest(q.At(i), order, reference);
+      ASSERT_LE(ill_conditioned[i], 1);
+      // The middle angle's cosine: the flag's own threshold.
+      const double cos_b = std::cos(angles[1] * std::numbers::pi / 180.0);
+      if (std::abs(std::abs(cos_b) - kBatchedMinMiddleCos) > 1e-9) {
+        EXPECT_EQ(ill_conditioned[i] == 1, std::abs(cos_b) < kBatchedMinMiddleCos)
+            << name << " sample " << i;
+      }
+      if (ill_conditioned[i]) {
+        ++ill;
+        continue;
+      }
+      for (int c = 0; c < 3; ++c) {
+        const double expected = NearestTurn(angles[c], turn_values[c][i]);
+        EXPECT_NEAR(out[c][kCount - 1 - i], expected, 1e-12) << name << " sample " << i;
+      }
+    }
+    EXPECT_GT(ill, 0) << name;
+  }
+}
+
+TEST(RotationBatchTest, SeveralArgumentTrigonometryIsTheSingleArgumentOneBitForBit) {
+  using vector_trig::V4;
+  std::mt19937_64 random(19);
+  std::uniform_real_distribution<double> x(-8.0, 8.0);
+  for (int round = 0; round < 200; ++round) {
+    V4 args[3], ys[3];
+    for (int k = 0; k < 3; ++k) {
+      for (int lane = 0; lane < 4; ++lane) {
+        args[k][lane] = x(random);
+        ys[k][lane] = round % 7 == 0 ? 0.0 : x(random);
+      }
+    }
+    V4 sine[3], cosine[3], angle[3];
+    vector_trig::SinCos<3>(args, sine, cosine);
+    vector_trig::Atan2<3>(ys, args, angle);
+    for (int k = 0; k < 3; ++k) {
+      V4 s, c;
+      vector_trig::SinCos(args[k], s, c);
+      const V4 a = vector_trig::Atan2(ys[k], args[k]);
+      for (int lane = 0; lane < 4; ++lane) {
+        EXPECT_TRUE(SameBits(sine[k][lane], s[lane]));
+        EXPECT_TRUE(SameBits(cosine[k][lane], c[lane]));
+        EXPECT_TRUE(SameBits(angle[k][lane], a[lane]));
+      }
+    }
+  }
+}
+
+}  // namespace
+}  // namespace tempokey::core::retime_internal
