@@ -31,6 +31,8 @@ constexpr int kMaxInsertionRounds = 64;
 // Samples of work (frames x channels fitted or measured) between two looks at the stop token:
 // about a millisecond.
 constexpr std::int64_t kStopCheckSamples = std::int64_t{1} << 16;
+// Elements a ZeroFill() sets between two looks at the stop token.
+constexpr std::size_t kZeroFillPiece = 65536;
 // A removal whose window misses the bound by up to this factor is worth reweighting.
 constexpr double kLawsonReach = 1.5;
 // Window of a removal: up to kWindowSide keys on each side of the removed one (fewer at the
@@ -55,19 +57,47 @@ inline std::array<double, 4> Coefficients(double t, double length) {
 struct BasisColumns {
   std::array<std::vector<double>, 4> column;
 
-  void Fill(std::int64_t length) {
-    const auto l = static_cast<double>(length);
-    for (std::vector<double>& c : column) c.resize(static_cast<std::size_t>(length) + 1);
-    for (std::int64_t k = 0; k <= length; ++k) {
-      const std::array<double, 4> c = Coefficients(static_cast<double>(k) / l, l);
-      for (int r = 0; r < 4; ++r) column[r][k] = c[r];
-    }
-  }
+  void Fill(std::int64_t length);
 };
 
+// Coefficients() of four frames at once: every lane computes exactly what Coefficients() does
+// (the same operations in the same order, no contraction: simd.h), so the columns are the same
+// bits either way; long segments' columns are filled often enough for the speed to matter.
+TEMPOKEY_AVX_CLONES void FillColumns(std::int64_t length, double* c0, double* c1, double* c2,
+                                     double* c3) {
+  using simd::V4;
+  const auto l = static_cast<double>(length);
+  const V4 lv = simd::Broadcast(l);
+  std::int64_t k = 0;
+  for (; k + 4 <= length + 1; k += 4) {
+    const auto kd = static_cast<double>(k);
+    const V4 t = V4{kd, kd + 1.0, kd + 2.0, kd + 3.0} / lv;
+    const V4 t2 = t * t;
+    const V4 t3 = t2 * t;
+    simd::Store(c0 + k, 2.0 * t3 - 3.0 * t2 + 1.0);
+    simd::Store(c1 + k, (t3 - 2.0 * t2 + t) * lv);
+    simd::Store(c2 + k, -2.0 * t3 + 3.0 * t2);
+    simd::Store(c3 + k, (t3 - t2) * lv);
+  }
+  for (; k <= length; ++k) {
+    const std::array<double, 4> c = Coefficients(static_cast<double>(k) / l, l);
+    c0[k] = c[0];
+    c1[k] = c[1];
+    c2[k] = c[2];
+    c3[k] = c[3];
+  }
+}
+
+void BasisColumns::Fill(std::int64_t length) {
+  for (std::vector<double>& c : column) c.resize(static_cast<std::size_t>(length) + 1);
+  FillColumns(length, column[0].data(), column[1].data(), column[2].data(), column[3].data());
+}
+
 // Where a fit gets its basis columns: segments up to kTabledLength frames long from a table
-// computed once per thread (about 1 MB) and fetched once per fit; longer ones, rare, from a few
-// recently computed lengths. A returned reference stays valid until the next Get().
+// computed once per thread (about 1 MB) and fetched once per fit; longer ones from the recently
+// computed lengths (a removal window's trials keep coming back to a handful of lengths, and a
+// smooth channel's windows are often all long). A returned reference stays valid until the next
+// Get().
 constexpr std::int64_t kTabledLength = 256;
 
 class BasisSource {
@@ -358,10 +388,16 @@ class Fitter {
   template <class T>
   bool ZeroFill(std::vector<T>& v, std::int64_t n) {
     const auto size = static_cast<std::size_t>(n);
+    if (size <= kZeroFillPiece && size <= v.capacity()) {
+      // The common case, a window's solve: the buffer is already there.
+      v.resize(size);
+      std::fill(v.begin(), v.end(), T{});
+      return !Stopping(n);
+    }
     v.clear();
     v.reserve(size);  // allocation only: pages are touched below
     for (std::size_t done = 0; done < size;) {
-      const std::size_t next = std::min(size, done + 65536);
+      const std::size_t next = std::min(size, done + kZeroFillPiece);
       v.resize(next);
       if (Stopping(static_cast<std::int64_t>(next - done))) return false;
       done = next;
@@ -378,17 +414,49 @@ class Fitter {
   void Solve(std::span<const double> s, const KeyRun& run, int first, int last,
              const double* weights = nullptr, std::int64_t weights_origin = 0) {
     const int n = last - first + 1;
+    if (n <= kWindowKeys) {
+      // A removal window's solve (or a short channel's): its blocks on the stack. The caller
+      // counts the window's work for the stop token.
+      std::array<Mat2, kWindowKeys> diag{}, upper{}, eliminated;
+      std::array<Vec2, kWindowKeys> rhs{};
+      SolveIn<false>({diag.data(), upper.data(), rhs.data(), eliminated.data()}, s, run, first,
+                     last, weights, weights_origin);
+      return;
+    }
     if (!ZeroFill(diag_, n) || !ZeroFill(upper_, n) || !ZeroFill(rhs_, n)) return;
+    eliminated_.resize(static_cast<std::size_t>(n));
+    SolveIn<true>({diag_.data(), upper_.data(), rhs_.data(), eliminated_.data()}, s, run, first,
+                  last, weights, weights_origin);
+  }
+
+  // The blocks of one solve, per free key: its diagonal block, the block coupling it to the next
+  // free key, its right-hand side (all zero to start with), and the eliminated coupling.
+  struct SolveBlocks {
+    Mat2* diag;
+    Mat2* upper;
+    Vec2* rhs;
+    Mat2* eliminated;
+  };
+
+  // Solve() on `blocks`; kLong: a solve long enough to look at the stop token inside.
+  template <bool kLong>
+  void SolveIn(SolveBlocks blocks, std::span<const double> s, const KeyRun& run, int first,
+               int last, const double* weights, std::int64_t weights_origin) {
+    const int n = last - first + 1;
+    Mat2* diag = blocks.diag;
+    Mat2* upper = blocks.upper;
+    Vec2* rhs = blocks.rhs;
+    Mat2* eliminated = blocks.eliminated;
     auto weight = [&](std::int64_t f) { return weights ? weights[f - weights_origin] : 1.0; };
     for (int i = 0; i < n; ++i) {
       // A noisy channel keys almost every frame: millions of keys in one solve.
-      if (Stopping(1)) return;
+      if (kLong && Stopping(1)) return;
       const std::int64_t f = run.frames[first + i];
       const double w = weight(f) + kRidge;
-      diag_[i][0] += w;
-      rhs_[i][0] += w * s[f];
-      diag_[i][3] += kRidge;
-      rhs_[i][1] += kRidge * CentralDifference(s, f);
+      diag[i][0] += w;
+      rhs[i][0] += w * s[f];
+      diag[i][3] += kRidge;
+      rhs[i][1] += kRidge * CentralDifference(s, f);
     }
     const int seg_first = std::max(first - 1, 0);
     const int seg_last = std::min(last, run.count - 2);
@@ -397,7 +465,7 @@ class Fitter {
       const std::int64_t length = run.frames[j + 1] - fa;
       // A whole long channel is one solve: look at the stop token inside it too (the result is
       // then not used).
-      if (Stopping(length)) return;
+      if (kLong && Stopping(length)) return;
       if (length < 2) continue;
       const BasisColumns& basis = basis_.Get(length);
       const bool a_free = j >= first;
@@ -427,46 +495,45 @@ class Fitter {
       }
       if (a_free) {
         const int ia = j - first;
-        diag_[ia] = {diag_[ia][0] + gram[0], diag_[ia][1] + gram[1], diag_[ia][2] + gram[4],
-                     diag_[ia][3] + gram[5]};
-        rhs_[ia] = {rhs_[ia][0] + moment[0], rhs_[ia][1] + moment[1]};
+        diag[ia] = {diag[ia][0] + gram[0], diag[ia][1] + gram[1], diag[ia][2] + gram[4],
+                    diag[ia][3] + gram[5]};
+        rhs[ia] = {rhs[ia][0] + moment[0], rhs[ia][1] + moment[1]};
       }
       if (b_free) {
         const int ib = j + 1 - first;
-        diag_[ib] = {diag_[ib][0] + gram[10], diag_[ib][1] + gram[11], diag_[ib][2] + gram[14],
-                     diag_[ib][3] + gram[15]};
-        rhs_[ib] = {rhs_[ib][0] + moment[2], rhs_[ib][1] + moment[3]};
+        diag[ib] = {diag[ib][0] + gram[10], diag[ib][1] + gram[11], diag[ib][2] + gram[14],
+                    diag[ib][3] + gram[15]};
+        rhs[ib] = {rhs[ib][0] + moment[2], rhs[ib][1] + moment[3]};
       }
       if (a_free && b_free) {
         const int ia = j - first;
-        upper_[ia] = {upper_[ia][0] + gram[2], upper_[ia][1] + gram[3],
-                      upper_[ia][2] + gram[6], upper_[ia][3] + gram[7]};
+        upper[ia] = {upper[ia][0] + gram[2], upper[ia][1] + gram[3],
+                     upper[ia][2] + gram[6], upper[ia][3] + gram[7]};
       }
     }
-    // Forward elimination (eliminated_[i] = D'_i^-1 U_i, with D'_i = D_i - U_{i-1}^T
-    // eliminated_[i-1]), then back substitution.
-    eliminated_.resize(static_cast<std::size_t>(n));
+    // Forward elimination (eliminated[i] = D'_i^-1 U_i, with D'_i = D_i - U_{i-1}^T
+    // eliminated[i-1]), then back substitution.
     for (int i = 0; i < n; ++i) {
-      if (Stopping(1)) return;
+      if (kLong && Stopping(1)) return;
       if (i > 0) {
-        const Mat2& u = upper_[i - 1];
+        const Mat2& u = upper[i - 1];
         const Mat2 lower = {u[0], u[2], u[1], u[3]};  // U_{i-1} transposed
-        const Mat2 lc = Multiply(lower, eliminated_[i - 1]);
-        diag_[i] = {diag_[i][0] - lc[0], diag_[i][1] - lc[1], diag_[i][2] - lc[2],
-                    diag_[i][3] - lc[3]};
-        const Vec2 ld = Apply(lower, rhs_[i - 1]);
-        rhs_[i] = {rhs_[i][0] - ld[0], rhs_[i][1] - ld[1]};
+        const Mat2 lc = Multiply(lower, eliminated[i - 1]);
+        diag[i] = {diag[i][0] - lc[0], diag[i][1] - lc[1], diag[i][2] - lc[2],
+                   diag[i][3] - lc[3]};
+        const Vec2 ld = Apply(lower, rhs[i - 1]);
+        rhs[i] = {rhs[i][0] - ld[0], rhs[i][1] - ld[1]};
       }
-      const Mat2 inverse = Inverse(diag_[i]);
-      eliminated_[i] = Multiply(inverse, upper_[i]);
-      rhs_[i] = Apply(inverse, rhs_[i]);
+      const Mat2 inverse = Inverse(diag[i]);
+      eliminated[i] = Multiply(inverse, upper[i]);
+      rhs[i] = Apply(inverse, rhs[i]);
     }
-    Vec2 x = rhs_[n - 1];
+    Vec2 x = rhs[n - 1];
     run.values[last] = x[0];
     run.slopes[last] = x[1];
     for (int i = n - 2; i >= 0; --i) {
-      const Vec2 next = Apply(eliminated_[i], x);
-      x = {rhs_[i][0] - next[0], rhs_[i][1] - next[1]};
+      const Vec2 next = Apply(eliminated[i], x);
+      x = {rhs[i][0] - next[0], rhs[i][1] - next[1]};
       run.values[first + i] = x[0];
       run.slopes[first + i] = x[1];
     }
