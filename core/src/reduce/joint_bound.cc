@@ -167,7 +167,7 @@ std::vector<double> JointBoundPlan::InitialBudgets(double bound) const {
   return budgets;
 }
 
-absl::StatusOr<std::vector<Curve>> JointBoundPlan::Fit(
+absl::StatusOr<JointBoundCurves> JointBoundPlan::Fit(
     double bound, std::span<const double> caps, std::span<const double> fallback,
     const std::vector<std::vector<int>>& groups, const GroupFitter& fit, std::stop_token stop) {
   const Clip& clip = meter_.clip();
@@ -197,7 +197,7 @@ absl::StatusOr<std::vector<Curve>> JointBoundPlan::Fit(
       }
     }
     TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
-    const PointErrors errors = meter_.Measure(Spans(fitted));
+    PointErrors errors = meter_.Measure(Spans(fitted));
 
     // Per channel, the factor the worst point over the bound on its chain asks for.
     std::vector<double> factor(channel_count, 1.0);
@@ -214,7 +214,9 @@ absl::StatusOr<std::vector<Curve>> JointBoundPlan::Fit(
         factor[static_cast<std::size_t>(c)] = std::min(factor[static_cast<std::size_t>(c)], wanted);
       }
     }
-    if (!over) return curves;
+    if (!over) {
+      return JointBoundCurves{std::move(curves), std::move(fitted), std::move(errors)};
+    }
 
     std::vector<char> refit(groups.size(), 0);
     bool changed = false;
