@@ -35,6 +35,8 @@ constexpr std::int64_t kStopCheckSamples = std::int64_t{1} << 16;
 constexpr std::size_t kZeroFillPiece = 65536;
 // A removal whose window misses the bound by up to this factor is worth reweighting.
 constexpr double kLawsonReach = 1.5;
+// A ratio known to be over the bound.
+constexpr double kOver = std::numeric_limits<double>::infinity();
 // Window of a removal: up to kWindowSide keys on each side of the removed one (fewer at the
 // clip's ends), the removed key itself not among them.
 constexpr int kWindowSide = 2;
@@ -209,12 +211,14 @@ TEMPOKEY_AVX_CLONES void WeightedSums(const double* data, const double* w,
 }
 
 // The largest |curve - data| over the interior frames, the curve's coefficients `x` =
-// (v_a, m_a, v_b, m_b); returns as soon as a block of frames exceeds `limit`.
+// (v_a, m_a, v_b, m_b); returns as soon as a block of frames exceeds `limit` (some value above
+// it: callers only compare it with the limit then).
 TEMPOKEY_AVX_CLONES double MaxError(const double* data, const BasisColumns& basis,
                                     std::int64_t n, const double* x, double limit) {
   using simd::V4;
   const V4 x0 = simd::Broadcast(x[0]), x1 = simd::Broadcast(x[1]);
   const V4 x2 = simd::Broadcast(x[2]), x3 = simd::Broadcast(x[3]);
+  const V4 limit_v = simd::Broadcast(limit);
   V4 worst = simd::Broadcast(0.0);
   std::int64_t k = 1;
   for (; k + 4 <= n; k += 4) {
@@ -224,7 +228,7 @@ TEMPOKEY_AVX_CLONES double MaxError(const double* data, const BasisColumns& basi
                    simd::Load(basis.column[3].data() + k) * x3));
     const V4 e = simd::Abs(y - simd::Load(data + k));
     worst = e > worst ? e : worst;
-    if ((k & 15) == 13 && simd::Max(worst) > limit) return simd::Max(worst);
+    if (simd::Any(e > limit_v)) return simd::Max(worst);
   }
   double tail = simd::Max(worst);
   for (; k < n; ++k) {
@@ -619,6 +623,7 @@ class Fitter {
         // The channel most over its bound decides where the new key goes: at its worst frame,
         // or mid-segment when it is a key frame that is over (it is its segments' problem too).
         double ratio = 0.0;
+        double worst_interior = 0.0;  // the interior ratio of the channel most over
         std::size_t worst_channel = 0;
         for (std::size_t c = 0; c < channels_.size(); ++c) {
           const KeyRun run = RunOf(fit, c);
@@ -626,15 +631,15 @@ class Fitter {
           const double r = std::max({interior, KeyRatio(fit, c, j), KeyRatio(fit, c, j + 1)});
           if (r > ratio) {
             ratio = r;
+            worst_interior = interior;
             worst_channel = c;
           }
         }
         if (ratio > 1.0) {
           const std::span<const double> s = channels_[worst_channel];
           const KeyRun run = RunOf(fit, worst_channel);
-          const std::int64_t frame = SegmentMax(s, run, j) / bounds_[worst_channel] >= ratio
-                                         ? WorstFrame(s, run, j)
-                                         : fit.frames[j] + length / 2;
+          const std::int64_t frame = worst_interior >= ratio ? WorstFrame(s, run, j)
+                                                             : fit.frames[j] + length / 2;
           next.push_back(frame);
           inserted = true;
         }
@@ -700,14 +705,16 @@ class Fitter {
 
   // Lawson's iteration on the channels of `w` that are over their bound: each round multiplies
   // every frame's weight by its error and refits, so the fit leans towards the minimax one. True
-  // once every channel is within its bound.
+  // once every channel is within its bound. Precondition: `w` is over the bound (FitWindow()).
   bool LawsonWindow(Window& w) {
     const std::int64_t origin = w.frames[0];
     const std::int64_t span = w.frames[w.count - 1] - origin + 1;
     for (std::size_t c = 0; c < channels_.size(); ++c) {
       const std::span<const double> s = channels_[c];
       KeyRun run = w.Run(c);
-      double ratio = WindowRatio(c, run, 0, w.count - 1);
+      // Only whether each ratio is over 1 matters: the scans may stop there. A lone channel is
+      // over (its window missed the bound: the caller's trial).
+      double ratio = channels_.size() == 1 ? kOver : WindowRatio(c, run, 0, w.count - 1, 1.0);
       lawson_.assign(static_cast<std::size_t>(span), 1.0);
       for (int round = 0; round < options_.lawson_iterations && ratio > 1.0; ++round) {
         double total = 0.0;
@@ -721,7 +728,7 @@ class Fitter {
         const double scale = static_cast<double>(span) / total;
         for (double& weight : lawson_) weight *= scale;
         Solve(s, run, w.free_first, w.free_last, lawson_.data(), origin);
-        ratio = WindowRatio(c, run, 0, w.count - 1);
+        ratio = WindowRatio(c, run, 0, w.count - 1, 1.0);
       }
       if (ratio > 1.0) return false;
     }
@@ -864,7 +871,7 @@ class Fitter {
         const KeyRun run = RunOf(fit, c);
         for (int j = 0; j + 1 < count; ++j) {
           if (Stopping(fit.frames[j + 1] - fit.frames[j])) return;
-          const bool over = SegmentMax(channels_[c], run, j) > bounds_[c] ||
+          const bool over = SegmentMax(channels_[c], run, j, bounds_[c]) > bounds_[c] ||
                             KeyRatio(fit, c, j) > 1.0 || KeyRatio(fit, c, j + 1) > 1.0;
           if (over) bad.emplace_back(fit.frames[j], fit.frames[j + 1]);
         }
