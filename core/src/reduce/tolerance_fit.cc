@@ -240,6 +240,31 @@ TEMPOKEY_AVX_CLONES double MaxError(const double* data, const BasisColumns& basi
   return tail;
 }
 
+// weights[k] *= |curve - data[k]| + floor over the interior frames, the curve as in MaxError():
+// one Lawson round's reweighting of a segment.
+TEMPOKEY_AVX_CLONES void ScaleByResiduals(const double* data, const BasisColumns& basis,
+                                          std::int64_t n, const double* x, double floor,
+                                          double* weights) {
+  using simd::V4;
+  const V4 x0 = simd::Broadcast(x[0]), x1 = simd::Broadcast(x[1]);
+  const V4 x2 = simd::Broadcast(x[2]), x3 = simd::Broadcast(x[3]);
+  const V4 floor_v = simd::Broadcast(floor);
+  std::int64_t k = 1;
+  for (; k + 4 <= n; k += 4) {
+    const V4 y = ((simd::Load(basis.column[0].data() + k) * x0 +
+                   simd::Load(basis.column[1].data() + k) * x1) +
+                  (simd::Load(basis.column[2].data() + k) * x2 +
+                   simd::Load(basis.column[3].data() + k) * x3));
+    const V4 e = simd::Abs(y - simd::Load(data + k));
+    simd::Store(weights + k, simd::Load(weights + k) * (e + floor_v));
+  }
+  for (; k < n; ++k) {
+    const double y = (basis.column[0][k] * x[0] + basis.column[1][k] * x[1]) +
+                     (basis.column[2][k] * x[2] + basis.column[3][k] * x[3]);
+    weights[k] *= std::abs(y - data[k]) + floor;
+  }
+}
+
 // Sum of c c^T over the interior frames k = 1 .. L-1 of a segment of length L (c as
 // Coefficients() at t = k / L), in closed form: each product is a polynomial of degree 6 in t,
 // summed with the power sums of k (Faulhaber), so the cost does not grow with L.
@@ -717,14 +742,10 @@ class Fitter {
       double ratio = channels_.size() == 1 ? kOver : WindowRatio(c, run, 0, w.count - 1, 1.0);
       lawson_.assign(static_cast<std::size_t>(span), 1.0);
       for (int round = 0; round < options_.lawson_iterations && ratio > 1.0; ++round) {
+        Reweight(s, run, 1e-3 * bounds_[c], origin);
+        // Summed in frame order.
         double total = 0.0;
-        for (int j = 0; j + 1 < w.count; ++j) {
-          ForEachResidual(s, run, j, [&](std::int64_t f, double residual) {
-            double& weight = lawson_[f - origin];
-            weight *= std::abs(residual) + 1e-3 * bounds_[c];
-            total += weight;
-          });
-        }
+        for (const double weight : lawson_) total += weight;
         const double scale = static_cast<double>(span) / total;
         for (double& weight : lawson_) weight *= scale;
         Solve(s, run, w.free_first, w.free_last, lawson_.data(), origin);
@@ -733,6 +754,27 @@ class Fitter {
       if (ratio > 1.0) return false;
     }
     return true;
+  }
+
+  // Multiplies each frame's Lawson weight (lawson_, from `origin`) by its |curve - sample| +
+  // floor over the frames of `run`.
+  void Reweight(std::span<const double> s, const KeyRun& run, double floor, std::int64_t origin) {
+    auto at_key = [&](int i) {
+      const std::int64_t f = run.frames[i];
+      lawson_[f - origin] *= std::abs(run.values[i] - s[f]) + floor;
+    };
+    for (int j = 0; j + 1 < run.count; ++j) {
+      at_key(j);
+      const std::int64_t fa = run.frames[j];
+      const std::int64_t length = run.frames[j + 1] - fa;
+      if (length >= 2) {
+        const std::array<double, 4> x = {run.values[j], run.slopes[j], run.values[j + 1],
+                                         run.slopes[j + 1]};
+        ScaleByResiduals(s.data() + fa, basis_.Get(length), length, x.data(), floor,
+                         lawson_.data() + (fa - origin));
+      }
+    }
+    at_key(run.count - 1);
   }
 
   // Calls fn(frame, curve - sample) for the frames [a, b) of segment j of `run`, and b too when
