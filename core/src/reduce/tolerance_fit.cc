@@ -175,12 +175,20 @@ TEMPOKEY_AVX_CLONES void WeightedSums(const double* data, const double* w,
                                       const BasisColumns& basis, std::int64_t n, double* moments,
                                       double* gram) {
   using simd::V4;
+  // Only the upper triangle of the Gram sums is accumulated (and zeroed: zeroing the whole
+  // arrays costs a string instruction's start-up, more than a short segment's sums).
   std::array<V4, 4> m;
   std::array<V4, 16> g;
-  m.fill(simd::Broadcast(0.0));
-  g.fill(simd::Broadcast(0.0));
-  std::array<double, 4> mt{};
-  std::array<double, 16> gt{};
+  std::array<double, 4> mt;
+  std::array<double, 16> gt;
+  for (int r = 0; r < 4; ++r) {
+    m[r] = simd::Broadcast(0.0);
+    mt[r] = 0.0;
+    for (int q = r; q < 4; ++q) {
+      g[4 * r + q] = simd::Broadcast(0.0);
+      gt[4 * r + q] = 0.0;
+    }
+  }
   std::int64_t k = 1;
   for (; k + 4 <= n; k += 4) {
     const V4 wk = simd::Load(w + k);
@@ -446,8 +454,14 @@ class Fitter {
     if (n <= kWindowKeys) {
       // A removal window's solve (or a short channel's): its blocks on the stack. The caller
       // counts the window's work for the stop token.
-      std::array<Mat2, kWindowKeys> diag{}, upper{}, eliminated;
-      std::array<Vec2, kWindowKeys> rhs{};
+      // Only the n blocks in use are zeroed (a whole-array zeroing costs more than the solve).
+      std::array<Mat2, kWindowKeys> diag, upper, eliminated;
+      std::array<Vec2, kWindowKeys> rhs;
+      for (int i = 0; i < n; ++i) {
+        diag[i] = {0.0, 0.0, 0.0, 0.0};
+        upper[i] = {0.0, 0.0, 0.0, 0.0};
+        rhs[i] = {0.0, 0.0};
+      }
       SolveIn<false>({diag.data(), upper.data(), rhs.data(), eliminated.data()}, s, run, first,
                      last, weights, weights_origin);
       return;
