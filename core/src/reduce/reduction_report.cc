@@ -25,6 +25,9 @@ struct ChannelErrors {
 
 // Samples evaluated between two looks at the stop token.
 constexpr std::size_t kMeasurePiece = 65536;
+// A step between samples below this many degrees rounds to no turn in UnwrapDegrees() whatever
+// the rounding of step / 360 (half a turn, less a wide margin).
+constexpr double kSafeStepDegrees = 179.0;
 
 // The errors of channel c, `fitted` being its curve sampled at every frame.
 ChannelErrors CompareChannel(std::span<const double> samples, int c, const Curve& curve,
@@ -84,6 +87,28 @@ void FinishReport(double squared_sum, ReductionReport& report) {
                          : 0.0;
 }
 
+// Whether every step between consecutive samples is well under half a turn, so that
+// UnwrapDegrees() adds no turns anywhere.
+bool StepsUnderHalfTurn(std::span<const double> degrees) {
+  bool under = true;
+  for (std::size_t i = 1; i < degrees.size(); ++i) {
+    under &= std::abs(degrees[i] - degrees[i - 1]) < kSafeStepDegrees;
+  }
+  return under;
+}
+
+// UnwrapDegrees(degrees) as a copy. When no step reaches half a turn, its shift stays +0 and it
+// only adds that to every sample after the first (which turns a -0 into +0): done here without
+// its serial dependence from sample to sample, the same values.
+void UnwrapInto(std::span<const double> degrees, std::vector<double>& out) {
+  out.assign(degrees.begin(), degrees.end());
+  if (!StepsUnderHalfTurn(degrees)) {
+    UnwrapDegrees(out);
+    return;
+  }
+  for (std::size_t i = 1; i < out.size(); ++i) out[i] += 0.0;
+}
+
 }  // namespace
 
 FittedSamples::FittedSamples(const Clip& clip) {
@@ -94,8 +119,8 @@ FittedSamples::FittedSamples(const Clip& clip) {
   for (const Channel& channel : clip.channels) {
     if (IsRotation(channel.kind)) {
       // Reserved above: the buffers the earlier spans point into never move.
-      std::vector<double>& copy = unwrapped_.emplace_back(channel.samples);
-      UnwrapDegrees(copy);
+      std::vector<double>& copy = unwrapped_.emplace_back();
+      UnwrapInto(channel.samples, copy);
       channels_.emplace_back(copy);
     } else {
       channels_.emplace_back(channel.samples);
