@@ -568,7 +568,8 @@ class Fitter {
         rhs[i] = {rhs[i][0] - ld[0], rhs[i][1] - ld[1]};
       }
       const Mat2 inverse = Inverse(diag[i]);
-      eliminated[i] = Multiply(inverse, upper[i]);
+      // The last key couples to nothing after it: its eliminated block is never read.
+      if (i + 1 < n) eliminated[i] = Multiply(inverse, upper[i]);
       rhs[i] = Apply(inverse, rhs[i]);
     }
     Vec2 x = rhs[n - 1];
