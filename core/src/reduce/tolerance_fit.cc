@@ -106,10 +106,20 @@ class BasisSource {
  public:
   BasisSource() : tables_(ThreadTables()) {}
 
+  // The common case, a tabled length already filled, inline; the rest out of line.
   const BasisColumns& Get(std::int64_t length) {
     if (length <= kTabledLength) {
+      const BasisColumns& table = tables_[static_cast<std::size_t>(length)];
+      if (!table.column[0].empty()) return table;
+    }
+    return Compute(length);
+  }
+
+ private:
+  [[gnu::noinline]] const BasisColumns& Compute(std::int64_t length) {
+    if (length <= kTabledLength) {
       BasisColumns& table = tables_[static_cast<std::size_t>(length)];
-      if (table.column[0].empty()) table.Fill(length);
+      table.Fill(length);
       return table;
     }
     for (LongEntry& entry : long_) {
@@ -121,7 +131,6 @@ class BasisSource {
     return entry.basis;
   }
 
- private:
   using Tables = std::array<BasisColumns, kTabledLength + 1>;
   struct LongEntry {
     std::int64_t length = -1;
