@@ -881,7 +881,13 @@ class Fitter {
       for (int d = 0; !removed && d <= (can_slide ? options_.slide_frames : 0); ++d) {
         const std::int64_t moved = base.frames[before] + direction * d;
         if (d > 0 && (moved <= base.frames[before - 1] || moved >= fit.frames[i + 2])) break;
-        trial = base;
+        // A solve writes only the free keys, so after the first trial the fixed keys still hold
+        // the base's values and only the frames need resetting.
+        if (d == 0) {
+          trial = base;
+        } else {
+          trial.frames = base.frames;
+        }
         trial.frames[before] = moved;
         int worst_key = 0;
         const double ratio = FitWindow(trial, reach, &worst_key);
