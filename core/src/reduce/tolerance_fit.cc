@@ -227,6 +227,48 @@ TEMPOKEY_AVX_CLONES void WeightedSums(const double* data, const double* w,
   }
 }
 
+// Segments this short (at most kShortInterior interior frames) reach at most one of the kernels'
+// 4-frame blocks: their sums are computed inline below without a call, with the kernels'
+// operations in the kernels' order (each lane from 0, the lanes summed pairwise, then the scalar
+// tail from 0), so the same bits.
+constexpr std::int64_t kShortInterior = 7;
+
+// DataMoments() of a short segment (n - 1 <= kShortInterior).
+inline void ShortDataMoments(const double* data, const BasisColumns& basis, std::int64_t n,
+                             double* moments) {
+  std::int64_t k = 1;
+  std::array<double, 4> block = {0.0, 0.0, 0.0, 0.0};
+  if (k + 4 <= n) {
+    for (int r = 0; r < 4; ++r) {
+      const double* c = basis.column[r].data();
+      block[r] = ((0.0 + data[1] * c[1]) + (0.0 + data[2] * c[2])) +
+                 ((0.0 + data[3] * c[3]) + (0.0 + data[4] * c[4]));
+    }
+    k = 5;
+  } else {
+    for (double& b : block) b = (0.0 + 0.0) + (0.0 + 0.0);
+  }
+  std::array<double, 4> tail = {0.0, 0.0, 0.0, 0.0};
+  for (; k < n; ++k) {
+    for (int r = 0; r < 4; ++r) tail[r] += data[k] * basis.column[r][k];
+  }
+  for (int r = 0; r < 4; ++r) moments[r] = block[r] + tail[r];
+}
+
+// MaxError() of a short segment (n - 1 <= kShortInterior), exact (no early return: a value over
+// the limit is one the callers accept).
+inline double ShortMaxError(const double* data, const BasisColumns& basis, std::int64_t n,
+                            const double* x) {
+  double worst = 0.0;
+  for (std::int64_t k = 1; k < n; ++k) {
+    const double y = (basis.column[0][k] * x[0] + basis.column[1][k] * x[1]) +
+                     (basis.column[2][k] * x[2] + basis.column[3][k] * x[3]);
+    const double e = std::abs(y - data[k]);
+    if (e > worst) worst = e;
+  }
+  return worst;
+}
+
 // The largest |curve - data| over the interior frames, the curve's coefficients `x` =
 // (v_a, m_a, v_b, m_b); returns as soon as a block of frames exceeds `limit` (some value above
 // it: callers only compare it with the limit then).
@@ -527,7 +569,11 @@ class Fitter {
       const double* gram;
       if (weights == nullptr) {
         gram = grams_.Get(length).data();
-        DataMoments(data, basis, length, moment.data());
+        if (length - 1 <= kShortInterior) {
+          ShortDataMoments(data, basis, length, moment.data());
+        } else {
+          DataMoments(data, basis, length, moment.data());
+        }
       } else {
         WeightedSums(data, weights + (fa - weights_origin), basis, length, moment.data(),
                      weighted_gram_.data());
@@ -603,7 +649,9 @@ class Fitter {
     if (length < 2) return 0.0;
     const std::array<double, 4> x = {run.values[j], run.slopes[j], run.values[j + 1],
                                      run.slopes[j + 1]};
-    return MaxError(s.data() + fa, basis_.Get(length), length, x.data(), limit);
+    const BasisColumns& basis = basis_.Get(length);
+    if (length - 1 <= kShortInterior) return ShortMaxError(s.data() + fa, basis, length, x.data());
+    return MaxError(s.data() + fa, basis, length, x.data(), limit);
   }
 
   // The interior frame of segment j where the error is largest.
