@@ -255,6 +255,59 @@ inline void ShortDataMoments(const double* data, const BasisColumns& basis, std:
   for (int r = 0; r < 4; ++r) moments[r] = block[r] + tail[r];
 }
 
+// WeightedSums() of a short segment (n - 1 <= kShortInterior).
+inline void ShortWeightedSums(const double* data, const double* w, const BasisColumns& basis,
+                              std::int64_t n, double* moments, double* gram) {
+  std::array<double, 4> m = {0.0, 0.0, 0.0, 0.0};
+  std::array<double, 16> g{};
+  std::int64_t k = 1;
+  if (k + 4 <= n) {
+    // One block: lane j holds frame 1 + j, from 0; the lanes summed pairwise.
+    std::array<double, 4> wd;
+    for (int j = 0; j < 4; ++j) wd[j] = w[1 + j] * data[1 + j];
+    for (int r = 0; r < 4; ++r) {
+      const double* cr = basis.column[r].data() + 1;
+      std::array<double, 4> lane;
+      for (int j = 0; j < 4; ++j) lane[j] = 0.0 + wd[j] * cr[j];
+      m[r] = (lane[0] + lane[1]) + (lane[2] + lane[3]);
+      for (int q = r; q < 4; ++q) {
+        const double* cq = basis.column[q].data() + 1;
+        for (int j = 0; j < 4; ++j) lane[j] = 0.0 + (w[1 + j] * cr[j]) * cq[j];
+        g[4 * r + q] = (lane[0] + lane[1]) + (lane[2] + lane[3]);
+      }
+    }
+    k = 5;
+  }
+  std::array<double, 4> mt = {0.0, 0.0, 0.0, 0.0};
+  std::array<double, 16> gt{};
+  for (; k < n; ++k) {
+    const double wd = w[k] * data[k];
+    for (int r = 0; r < 4; ++r) {
+      const double cr = basis.column[r][k];
+      mt[r] += wd * cr;
+      for (int q = r; q < 4; ++q) gt[4 * r + q] += w[k] * cr * basis.column[q][k];
+    }
+  }
+  for (int r = 0; r < 4; ++r) {
+    moments[r] = m[r] + mt[r];
+    for (int q = r; q < 4; ++q) {
+      gram[4 * r + q] = g[4 * r + q] + gt[4 * r + q];
+      gram[4 * q + r] = gram[4 * r + q];
+    }
+  }
+}
+
+// ScaleByResiduals() of a short segment (n - 1 <= kShortInterior): frame by frame, the same
+// products.
+inline void ShortScaleByResiduals(const double* data, const BasisColumns& basis, std::int64_t n,
+                                  const double* x, double floor, double* weights) {
+  for (std::int64_t k = 1; k < n; ++k) {
+    const double y = (basis.column[0][k] * x[0] + basis.column[1][k] * x[1]) +
+                     (basis.column[2][k] * x[2] + basis.column[3][k] * x[3]);
+    weights[k] *= std::abs(y - data[k]) + floor;
+  }
+}
+
 // MaxError() of a short segment (n - 1 <= kShortInterior), exact (no early return: a value over
 // the limit is one the callers accept).
 inline double ShortMaxError(const double* data, const BasisColumns& basis, std::int64_t n,
@@ -575,8 +628,14 @@ class Fitter {
           DataMoments(data, basis, length, moment.data());
         }
       } else {
-        WeightedSums(data, weights + (fa - weights_origin), basis, length, moment.data(),
-                     weighted_gram_.data());
+        const double* segment_weights = weights + (fa - weights_origin);
+        if (length - 1 <= kShortInterior) {
+          ShortWeightedSums(data, segment_weights, basis, length, moment.data(),
+                            weighted_gram_.data());
+        } else {
+          WeightedSums(data, segment_weights, basis, length, moment.data(),
+                       weighted_gram_.data());
+        }
         gram = weighted_gram_.data();
       }
       // What a fixed end contributes comes off the right-hand side: the moments of
@@ -842,8 +901,13 @@ class Fitter {
       if (length >= 2) {
         const std::array<double, 4> x = {run.values[j], run.slopes[j], run.values[j + 1],
                                          run.slopes[j + 1]};
-        ScaleByResiduals(s.data() + fa, basis_.Get(length), length, x.data(), floor,
-                         lawson_.data() + (fa - origin));
+        const BasisColumns& basis = basis_.Get(length);
+        double* weights = lawson_.data() + (fa - origin);
+        if (length - 1 <= kShortInterior) {
+          ShortScaleByResiduals(s.data() + fa, basis, length, x.data(), floor, weights);
+        } else {
+          ScaleByResiduals(s.data() + fa, basis, length, x.data(), floor, weights);
+        }
       }
     }
     at_key(run.count - 1);
