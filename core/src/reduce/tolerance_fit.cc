@@ -96,10 +96,8 @@ void BasisColumns::Fill(std::int64_t length) {
 }
 
 // Where a fit gets its basis columns: segments up to kTabledLength frames long from a table
-// computed once per thread (about 1 MB) and fetched once per fit; longer ones from the recently
-// computed lengths (a removal window's trials keep coming back to a handful of lengths, and a
-// smooth channel's windows are often all long). A returned reference stays valid until the next
-// Get().
+// computed once per thread (about 1 MB) and fetched once per fit; longer ones, rare, from a few
+// recently computed lengths. A returned reference stays valid until the next Get().
 constexpr std::int64_t kTabledLength = 256;
 
 class BasisSource {
@@ -245,9 +243,8 @@ inline void ShortDataMoments(const double* data, const BasisColumns& basis, std:
                  ((0.0 + data[3] * c[3]) + (0.0 + data[4] * c[4]));
     }
     k = 5;
-  } else {
-    for (double& b : block) b = (0.0 + 0.0) + (0.0 + 0.0);
   }
+  // (Without a block, the kernel's empty lanes sum to +0, as `block` holds.)
   std::array<double, 4> tail = {0.0, 0.0, 0.0, 0.0};
   for (; k < n; ++k) {
     for (int r = 0; r < 4; ++r) tail[r] += data[k] * basis.column[r][k];
@@ -530,7 +527,7 @@ class Fitter {
   bool ZeroFill(std::vector<T>& v, std::int64_t n) {
     const auto size = static_cast<std::size_t>(n);
     if (size <= kZeroFillPiece && size <= v.capacity()) {
-      // The common case, a window's solve: the buffer is already there.
+      // A buffer already large enough (every solve of a fit after its first): one fill.
       v.resize(size);
       std::fill(v.begin(), v.end(), T{});
       return !Stopping(n);
@@ -556,9 +553,9 @@ class Fitter {
              const double* weights = nullptr, std::int64_t weights_origin = 0) {
     const int n = last - first + 1;
     if (n <= kWindowKeys) {
-      // A removal window's solve (or a short channel's): its blocks on the stack. The caller
-      // counts the window's work for the stop token.
-      // Only the n blocks in use are zeroed (a whole-array zeroing costs more than the solve).
+      // A removal window's solve (or a short channel's): its blocks on the stack, only the n in
+      // use zeroed (zeroing whole arrays costs a string instruction's start-up, more than the
+      // solve). The caller counts the window's work for the stop token.
       std::array<Mat2, kWindowKeys> diag, upper, eliminated;
       std::array<Vec2, kWindowKeys> rhs;
       for (int i = 0; i < n; ++i) {
