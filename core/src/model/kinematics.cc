@@ -91,8 +91,8 @@ inline Vec3 Rotated(const Mat3& m, const Vec3& v) {
 // m = m · AxisMatrix(axis, degrees), in place. Right-multiplying by a rotation about one axis
 // mixes only the other two columns: with (i, k) the axes after `axis` in cyclic order,
 // column i becomes c·i + s·k and column k becomes c·k - s·i (12 products instead of 27).
-// A zero angle (common: a captured skeleton's unused axes) takes cos 0 = 1 and sin ±0 = ±0 without
-// the library call, which returns exactly those.
+// A zero angle (common: a captured skeleton's unused axes) takes cos 0 = 1 and sin ±0 = ±0
+// without the library call, which returns exactly those.
 void RotateColumns(Mat3& m, int axis, double degrees) {
   static constexpr std::array<std::size_t, 3> kNext = {1, 2, 0};
   static constexpr std::array<std::size_t, 3> kAfterNext = {2, 0, 1};

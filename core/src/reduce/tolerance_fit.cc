@@ -706,7 +706,9 @@ class Fitter {
     const std::array<double, 4> x = {run.values[j], run.slopes[j], run.values[j + 1],
                                      run.slopes[j + 1]};
     const BasisColumns& basis = basis_.Get(length);
-    if (length - 1 <= kShortInterior) return ShortMaxError(s.data() + fa, basis, length, x.data());
+    if (length - 1 <= kShortInterior) {
+      return ShortMaxError(s.data() + fa, basis, length, x.data());
+    }
     return MaxError(s.data() + fa, basis, length, x.data(), limit);
   }
 
