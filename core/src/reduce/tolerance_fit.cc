@@ -602,15 +602,8 @@ class Fitter {
       diag[i][3] += kRidge;
       rhs[i][1] += kRidge * CentralDifference(s, f);
     }
-    const int seg_first = std::max(first - 1, 0);
-    const int seg_last = std::min(last, run.count - 2);
-    for (int j = seg_first; j <= seg_last; ++j) {
-      const std::int64_t fa = run.frames[j];
-      const std::int64_t length = run.frames[j + 1] - fa;
-      // A whole long channel is one solve: look at the stop token inside it too (the result is
-      // then not used).
-      if (kLong && Stopping(length)) return;
-      if (length < 2) continue;
+    // Segment j's frames added to the blocks of its free keys.
+    auto add_segment = [&](int j, std::int64_t fa, std::int64_t length) {
       const BasisColumns& basis = basis_.Get(length);
       const bool a_free = j >= first;
       const bool b_free = j + 1 <= last;
@@ -664,11 +657,12 @@ class Fitter {
         upper[ia] = {upper[ia][0] + gram[2], upper[ia][1] + gram[3],
                      upper[ia][2] + gram[6], upper[ia][3] + gram[7]};
       }
-    }
-    // Forward elimination (eliminated[i] = D'_i^-1 U_i, with D'_i = D_i - U_{i-1}^T
-    // eliminated[i-1]), then back substitution.
-    for (int i = 0; i < n; ++i) {
-      if (kLong && Stopping(1)) return;
+    };
+    // Forward elimination of free key i (eliminated[i] = D'_i^-1 U_i, with D'_i = D_i - U_{i-1}^T
+    // eliminated[i-1]) once every segment touching it has been added: done right after its last
+    // segment, so that the next segments' sums can proceed while its divisions complete (the same
+    // operations on the same values as eliminating after all segments).
+    auto eliminate = [&](int i) {
       if (i > 0) {
         const Mat2& u = upper[i - 1];
         const Mat2 lower = {u[0], u[2], u[1], u[3]};  // U_{i-1} transposed
@@ -682,7 +676,20 @@ class Fitter {
       // The last key couples to nothing after it: its eliminated block is never read.
       if (i + 1 < n) eliminated[i] = Multiply(inverse, upper[i]);
       rhs[i] = Apply(inverse, rhs[i]);
+    };
+    const int seg_first = std::max(first - 1, 0);
+    const int seg_last = std::min(last, run.count - 2);
+    for (int j = seg_first; j <= seg_last; ++j) {
+      const std::int64_t fa = run.frames[j];
+      const std::int64_t length = run.frames[j + 1] - fa;
+      // A whole long channel is one solve: look at the stop token inside it too (the result is
+      // then not used).
+      if (kLong && Stopping(length)) return;
+      if (length >= 2) add_segment(j, fa, length);
+      if (j >= first) eliminate(j - first);  // key j's last segment
     }
+    // The last key when it has no segment after it; then back substitution.
+    for (int i = std::max(seg_last - first + 1, 0); i < n; ++i) eliminate(i);
     Vec2 x = rhs[n - 1];
     run.values[last] = x[0];
     run.slopes[last] = x[1];
