@@ -56,8 +56,30 @@ inline std::array<double, 4> Coefficients(double t, double length) {
 
 // Coefficients() at every frame k = 0..L of a segment, column by column (the coefficient of v_a
 // at every frame, then of m_a, ...), so the per-frame loops run several frames per step.
+// One basis column: storage that grows without being zeroed or copied first (Fill() writes every
+// entry), so refilling a cache entry for another length costs only the fill.
+class BasisColumn {
+ public:
+  const double* data() const { return data_.get(); }
+  double* data() { return data_.get(); }
+  double operator[](std::int64_t k) const { return data_[static_cast<std::size_t>(k)]; }
+  bool empty() const { return size_ == 0; }
+  void Resize(std::size_t size) {
+    if (size > capacity_) {
+      data_ = std::make_unique_for_overwrite<double[]>(size);
+      capacity_ = size;
+    }
+    size_ = size;
+  }
+
+ private:
+  std::unique_ptr<double[]> data_;
+  std::size_t size_ = 0;
+  std::size_t capacity_ = 0;
+};
+
 struct BasisColumns {
-  std::array<std::vector<double>, 4> column;
+  std::array<BasisColumn, 4> column;
 
   void Fill(std::int64_t length);
 };
@@ -91,14 +113,18 @@ TEMPOKEY_AVX_CLONES void FillColumns(std::int64_t length, double* c0, double* c1
 }
 
 void BasisColumns::Fill(std::int64_t length) {
-  for (std::vector<double>& c : column) c.resize(static_cast<std::size_t>(length) + 1);
+  for (BasisColumn& c : column) c.Resize(static_cast<std::size_t>(length) + 1);
   FillColumns(length, column[0].data(), column[1].data(), column[2].data(), column[3].data());
 }
 
 // Where a fit gets its basis columns: segments up to kTabledLength frames long from a table
-// computed once per thread (about 1 MB) and fetched once per fit; longer ones, rare, from a few
-// recently computed lengths. A returned reference stays valid until the next Get().
+// computed once per thread (about 1 MB) and fetched once per fit; longer ones up to
+// kSharedLongLength from the thread's recently computed lengths (at most about 2 MB: a smooth
+// channel's removal windows and its refits under a joint bound keep coming back to them); the
+// rare longer ones from the fit's own few recent lengths. A returned reference stays valid until
+// the next Get().
 constexpr std::int64_t kTabledLength = 256;
+constexpr std::int64_t kSharedLongLength = 4096;
 
 class BasisSource {
  public:
@@ -120,19 +146,31 @@ class BasisSource {
       table.Fill(length);
       return table;
     }
-    for (LongEntry& entry : long_) {
-      if (entry.length == length) return entry.basis;
-    }
-    LongEntry& entry = long_[next_long_++ % long_.size()];
-    entry.length = length;
-    entry.basis.Fill(length);
-    return entry.basis;
+    if (length <= kSharedLongLength) return ThreadLongEntries().Get(length);
+    return long_.Get(length);
   }
 
   using Tables = std::array<BasisColumns, kTabledLength + 1>;
-  struct LongEntry {
-    std::int64_t length = -1;
-    BasisColumns basis;
+
+  // The last few lengths filled, replaced in turn.
+  template <std::size_t kCount>
+  struct RecentLengths {
+    struct Entry {
+      std::int64_t length = -1;
+      BasisColumns basis;
+    };
+    std::array<Entry, kCount> entries;
+    std::size_t next = 0;
+
+    const BasisColumns& Get(std::int64_t length) {
+      for (Entry& entry : entries) {
+        if (entry.length == length) return entry.basis;
+      }
+      Entry& entry = entries[next++ % kCount];
+      entry.length = length;
+      entry.basis.Fill(length);
+      return entry.basis;
+    }
   };
 
   static Tables& ThreadTables() {
@@ -140,9 +178,13 @@ class BasisSource {
     return tables;
   }
 
+  static RecentLengths<16>& ThreadLongEntries() {
+    thread_local RecentLengths<16> entries;
+    return entries;
+  }
+
   Tables& tables_;
-  std::array<LongEntry, 4> long_;
-  std::size_t next_long_ = 0;
+  RecentLengths<4> long_;
 };
 
 // ---- kernels over the interior frames k = 1 .. n-1 of a segment --------------------------------
