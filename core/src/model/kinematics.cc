@@ -1,6 +1,7 @@
 #include "tempokey/core/model/kinematics.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numbers>
 #include <utility>
@@ -90,12 +91,20 @@ inline Vec3 Rotated(const Mat3& m, const Vec3& v) {
 // m = m · AxisMatrix(axis, degrees), in place. Right-multiplying by a rotation about one axis
 // mixes only the other two columns: with (i, k) the axes after `axis` in cyclic order,
 // column i becomes c·i + s·k and column k becomes c·k - s·i (12 products instead of 27).
+// A zero angle (common: a captured skeleton's unused axes) takes cos 0 = 1 and sin ±0 = ±0
+// without the library call, which returns exactly those.
 void RotateColumns(Mat3& m, int axis, double degrees) {
+  static constexpr std::array<std::size_t, 3> kNext = {1, 2, 0};
+  static constexpr std::array<std::size_t, 3> kAfterNext = {2, 0, 1};
   const double r = degrees * kRadiansPerDegree;
-  const double c = std::cos(r);
-  const double s = std::sin(r);
-  const auto i = static_cast<std::size_t>((axis + 1) % 3);
-  const auto k = static_cast<std::size_t>((axis + 2) % 3);
+  double c = 1.0;
+  double s = r;
+  if (r != 0.0) {
+    c = std::cos(r);
+    s = std::sin(r);
+  }
+  const std::size_t i = kNext[static_cast<std::size_t>(axis)];
+  const std::size_t k = kAfterNext[static_cast<std::size_t>(axis)];
   for (std::size_t row = 0; row < 3; ++row) {
     const double a = m[row][i];
     const double b = m[row][k];

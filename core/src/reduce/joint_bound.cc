@@ -33,11 +33,11 @@ bool IsConstant(std::span<const double> samples) {
                      [&](double v) { return v == samples.front(); });
 }
 
-double Distance(const Vec3& a, const Vec3& b) {
+double SquaredDistance(const Vec3& a, const Vec3& b) {
   const double dx = a[0] - b[0];
   const double dy = a[1] - b[1];
   const double dz = a[2] - b[2];
-  return std::sqrt(dx * dx + dy * dy + dz * dz);
+  return dx * dx + dy * dy + dz * dz;
 }
 
 }  // namespace
@@ -84,11 +84,15 @@ JointBoundPlan::JointBoundPlan(WorldErrorMeter& meter,
     const SkeletonPoint& point = source.points[p];
     int joint = point.end_site >= 0 ? point.joint : clip.skeleton.joints[point.joint].parent;
     for (; joint >= 0; joint = clip.skeleton.joints[static_cast<std::size_t>(joint)].parent) {
-      double farthest = 0.0;
+      // The square root of the largest squared distance: the largest distance, since the
+      // correctly rounded square root is monotonic (one root instead of one per frame).
+      double farthest_squared = 0.0;
       for (std::int64_t f = 0; f < source.frame_count; ++f) {
-        farthest = std::max(farthest, Distance(source.at(f, p), source.at(f, static_cast<std::size_t>(joint))));
+        farthest_squared = std::max(
+            farthest_squared,
+            SquaredDistance(source.at(f, p), source.at(f, static_cast<std::size_t>(joint))));
       }
-      above[p].emplace_back(joint, farthest);
+      above[p].emplace_back(joint, std::sqrt(farthest_squared));
     }
   }
   std::vector<double> reach(joint_count, 0.0);  // per joint: its rotation's farthest point
@@ -167,7 +171,7 @@ std::vector<double> JointBoundPlan::InitialBudgets(double bound) const {
   return budgets;
 }
 
-absl::StatusOr<std::vector<Curve>> JointBoundPlan::Fit(
+absl::StatusOr<JointBoundCurves> JointBoundPlan::Fit(
     double bound, std::span<const double> caps, std::span<const double> fallback,
     const std::vector<std::vector<int>>& groups, const GroupFitter& fit, std::stop_token stop) {
   const Clip& clip = meter_.clip();
@@ -197,7 +201,7 @@ absl::StatusOr<std::vector<Curve>> JointBoundPlan::Fit(
       }
     }
     TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
-    const PointErrors errors = meter_.Measure(Spans(fitted));
+    PointErrors errors = meter_.Measure(Spans(fitted));
 
     // Per channel, the factor the worst point over the bound on its chain asks for.
     std::vector<double> factor(channel_count, 1.0);
@@ -214,7 +218,9 @@ absl::StatusOr<std::vector<Curve>> JointBoundPlan::Fit(
         factor[static_cast<std::size_t>(c)] = std::min(factor[static_cast<std::size_t>(c)], wanted);
       }
     }
-    if (!over) return curves;
+    if (!over) {
+      return JointBoundCurves{std::move(curves), std::move(fitted), std::move(errors)};
+    }
 
     std::vector<char> refit(groups.size(), 0);
     bool changed = false;

@@ -23,6 +23,13 @@ using GroupFitter = std::function<absl::Status(std::span<const std::size_t> grou
                                                std::span<const double> bounds,
                                                std::vector<Curve>& curves)>;
 
+// A joint-bound fit: the curves, and what their verification measured.
+struct JointBoundCurves {
+  std::vector<Curve> curves;
+  std::vector<std::vector<double>> samples;  // per channel, its curve at every frame
+  PointErrors errors;                        // of `samples`: every point within the bound
+};
+
 class JointBoundPlan {
  public:
   // `meter` measures against the clip being reduced and must outlive the plan; `inputs` are the
@@ -40,7 +47,7 @@ class JointBoundPlan {
   // fallback[c]. `groups` are the alignment groups, fitted through `fit`.
   // Errors: kCancelled from `stop`; what `fit` returns; kInternal if the guaranteed budgets ever
   // failed verification (a broken invariant).
-  absl::StatusOr<std::vector<Curve>> Fit(double bound, std::span<const double> caps,
+  absl::StatusOr<JointBoundCurves> Fit(double bound, std::span<const double> caps,
                                          std::span<const double> fallback,
                                          const std::vector<std::vector<int>>& groups,
                                          const GroupFitter& fit, std::stop_token stop);

@@ -196,10 +196,16 @@ struct ToleranceBounds {
   std::optional<double> joint;
 };
 
-// Each channel's bound from `t`, defaults resolved against the figure's height.
-absl::StatusOr<ToleranceBounds> ResolveBounds(const Clip& clip, const ToleranceParams& t) {
+// Each channel's bound from `t`, defaults resolved against the figure's height (the meter's, when
+// there is one: it measured the same pose).
+absl::StatusOr<ToleranceBounds> ResolveBounds(const Clip& clip, const ToleranceParams& t,
+                                              const reduce_internal::WorldErrorMeter* meter) {
   double height = 0.0;
-  if (!clip.skeleton.empty()) { TEMPOKEY_ASSIGN_OR_RETURN(height, FigureHeight(clip)); }
+  if (meter != nullptr) {
+    height = meter->figure_height();
+  } else if (!clip.skeleton.empty()) {
+    TEMPOKEY_ASSIGN_OR_RETURN(height, FigureHeight(clip));
+  }
   ToleranceBounds bounds;
   if (t.joint_tolerance) {  // on a skeleton: ValidateReduceOptionsForClip()
     TEMPOKEY_ASSIGN_OR_RETURN(bounds.joint, ResolveJointTolerance(*t.joint_tolerance, height));
@@ -344,6 +350,10 @@ std::vector<double> Scaled(std::span<const double> values, double scale) {
 struct ToleranceCurves {
   std::vector<Curve> curves;
   double joint_bound = 0.0;
+  // With a joint bound, what its verification measured of `curves` (the report reuses it): every
+  // channel's curve at every frame, and the points' errors.
+  std::vector<std::vector<double>> samples;
+  std::optional<reduce_internal::PointErrors> world_errors;
 };
 
 // One tolerance fit: the channels' bounds and the joint bound, each multiplied by a scale.
@@ -385,8 +395,12 @@ class ToleranceFitter {
         };
     out.joint_bound = *bounds_.joint * scale;
     TEMPOKEY_ASSIGN_OR_RETURN(
-        out.curves, joint_plan_->Fit(out.joint_bound, Scaled(bounds_.channel, scale),
-                                     Scaled(bounds_.fallback, scale), groups_, fit_groups, stop));
+        reduce_internal::JointBoundCurves fit,
+        joint_plan_->Fit(out.joint_bound, Scaled(bounds_.channel, scale),
+                         Scaled(bounds_.fallback, scale), groups_, fit_groups, stop));
+    out.curves = std::move(fit.curves);
+    out.samples = std::move(fit.samples);
+    out.world_errors = std::move(fit.errors);
     return out;
   }
 
@@ -419,7 +433,7 @@ absl::StatusOr<ToleranceCurves> ToleranceFit(const Clip& clip,
                                              const ToleranceParams& params,
                                              reduce_internal::WorldErrorMeter* meter,
                                              const ProgressFn& progress, std::stop_token stop) {
-  TEMPOKEY_ASSIGN_OR_RETURN(ToleranceBounds bounds, ResolveBounds(clip, params));
+  TEMPOKEY_ASSIGN_OR_RETURN(ToleranceBounds bounds, ResolveBounds(clip, params, meter));
   ToleranceFitter fitter(clip, inputs, params, std::move(bounds), meter);
   if (!params.key_budget) return fitter.Fit(1.0, progress, stop);
 
@@ -465,6 +479,8 @@ absl::StatusOr<ToleranceCurves> ToleranceFit(const Clip& clip,
       // bound (not seen in practice): take those. With a joint bound they keep it too, since
       // every channel is then within its guaranteed budget.
       best.curves = MidRangeCurves(clip, inputs);
+      best.samples.clear();
+      best.world_errors.reset();
       best.joint_bound = fitter.joint_bound() ? *fitter.joint_bound() * ceiling : 0.0;
       ReportProgress(progress, 1.0, absl::StrCat("reduce ", clip.channels.size(), "/",
                                                  clip.channels.size()));
@@ -554,10 +570,13 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
   // verification.
   std::optional<reduce_internal::WorldErrorMeter> meter;
   if (!clip.skeleton.empty()) {
-    TEMPOKEY_ASSIGN_OR_RETURN(meter, reduce_internal::WorldErrorMeter::ForClip(clip));
+    TEMPOKEY_ASSIGN_OR_RETURN(meter, reduce_internal::WorldErrorMeter::ForValidatedClip(clip));
   }
   int iterations = 0;
   double joint_bound = 0.0;
+  // The curves at every frame and their world errors, when the joint bound measured them.
+  std::vector<std::vector<double>> baked;
+  std::optional<reduce_internal::PointErrors> world_errors;
   reduce_internal::NoiseCurves noise;
   if (options.method == ReduceMethod::kNoise) {
     TEMPOKEY_ASSIGN_OR_RETURN(
@@ -569,6 +588,8 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
         ToleranceFit(clip, inputs, options.tolerance, meter ? &*meter : nullptr, progress, stop));
     result.keyed.curves = std::move(fit.curves);
     joint_bound = fit.joint_bound;
+    baked = std::move(fit.samples);
+    world_errors = std::move(fit.world_errors);
   } else {
     result.keyed.curves.reserve(clip.channels.size());
     result.squared_error_history.reserve(clip.channels.size());
@@ -597,8 +618,19 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
   // The clip was validated above and the curves are ours: measure without MeasureReduction()'s
   // checks and copies.
   const std::int64_t euler_filtered_frames = result.report.euler_filtered_frames;
-  result.report =
-      reduce_internal::MeasureFitted(inputs, result.keyed.curves, clip.frame_time_seconds, stop);
+  if (meter) {
+    // The world error needs every channel's curve at every frame too: sampled once for both.
+    if (baked.empty()) {
+      baked = reduce_internal::SampleCurves(result.keyed.curves, clip.frame_count,
+                                            clip.frame_time_seconds, stop);
+    }
+    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+    result.report = reduce_internal::MeasureBaked(inputs, result.keyed.curves,
+                                                  reduce_internal::Spans(baked));
+  } else {
+    result.report =
+        reduce_internal::MeasureFitted(inputs, result.keyed.curves, clip.frame_time_seconds, stop);
+  }
   TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
   result.report.iterations = iterations;
   result.report.euler_filtered_frames = euler_filtered_frames;
@@ -607,9 +639,8 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
     result.report.channels[c].noise_sigma_estimated = noise.estimated[c];
   }
   if (meter) {
-    const std::vector<std::vector<double>> baked = reduce_internal::SampleCurves(
-        result.keyed.curves, clip.frame_count, clip.frame_time_seconds);
-    result.report.world = meter->Report(meter->Measure(reduce_internal::Spans(baked)), joint_bound);
+    if (!world_errors) world_errors = meter->Measure(reduce_internal::Spans(baked));
+    result.report.world = meter->Report(*world_errors, joint_bound);
   }
   return result;
 }

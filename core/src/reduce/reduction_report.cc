@@ -8,6 +8,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "reduction_internal.h"
+#include "world_error_internal.h"
 #include "tempokey/core/reduce/reduce.h"
 #include "tempokey/core/reduce/world_error.h"
 #include "tempokey/core/model/rotation.h"
@@ -24,20 +25,17 @@ struct ChannelErrors {
 
 // Samples evaluated between two looks at the stop token.
 constexpr std::size_t kMeasurePiece = 65536;
+// A step between samples below this many degrees rounds to no turn in UnwrapDegrees() whatever
+// the rounding of step / 360 (half a turn, less a wide margin).
+constexpr double kSafeStepDegrees = 179.0;
 
-ChannelErrors MeasureChannel(std::span<const double> samples, int c, const Curve& curve,
-                             double frame_time_seconds, const std::stop_token& stop) {
+// The errors of channel c, `fitted` being its curve sampled at every frame.
+ChannelErrors CompareChannel(std::span<const double> samples, int c, const Curve& curve,
+                             std::span<const double> fitted) {
   ChannelErrors out;
   out.summary.channel_index = c;
   out.summary.key_count = static_cast<std::int64_t>(curve.keys.size());
   out.summary.sample_count = static_cast<std::int64_t>(samples.size());
-  std::vector<double> fitted(samples.size());
-  for (std::size_t first = 0; first < fitted.size(); first += kMeasurePiece) {
-    if (stop.stop_requested()) return out;
-    const std::size_t count = std::min(kMeasurePiece, fitted.size() - first);
-    SampleCurve(curve, frame_time_seconds, std::span<double>(fitted).subspan(first, count),
-                static_cast<std::int64_t>(first));
-  }
   for (std::size_t f = 0; f < samples.size(); ++f) {
     const double error = std::abs(fitted[f] - samples[f]);
     out.squared_sum += error * error;
@@ -51,6 +49,66 @@ ChannelErrors MeasureChannel(std::span<const double> samples, int c, const Curve
   return out;
 }
 
+ChannelErrors MeasureChannel(std::span<const double> samples, int c, const Curve& curve,
+                             double frame_time_seconds, const std::stop_token& stop) {
+  std::vector<double> fitted(samples.size());
+  for (std::size_t first = 0; first < fitted.size(); first += kMeasurePiece) {
+    if (stop.stop_requested()) {
+      ChannelErrors out;
+      out.summary.channel_index = c;
+      out.summary.key_count = static_cast<std::int64_t>(curve.keys.size());
+      out.summary.sample_count = static_cast<std::int64_t>(samples.size());
+      return out;
+    }
+    const std::size_t count = std::min(kMeasurePiece, fitted.size() - first);
+    SampleCurve(curve, frame_time_seconds, std::span<double>(fitted).subspan(first, count),
+                static_cast<std::int64_t>(first));
+  }
+  return CompareChannel(samples, c, curve, fitted);
+}
+
+// Adds one channel's errors to `report`; `squared_sum` gathers every channel's.
+void AddChannel(const ChannelErrors& errors, ReductionReport& report, double& squared_sum) {
+  const ChannelReduction& channel = errors.summary;
+  report.key_count += channel.key_count;
+  report.sample_count += channel.sample_count;
+  squared_sum += errors.squared_sum;
+  if (channel.max_error > report.max_error) {
+    report.max_error = channel.max_error;
+    report.worst_channel_index = channel.channel_index;
+    report.worst_frame = channel.max_error_frame;
+  }
+  report.channels.push_back(channel);
+}
+
+void FinishReport(double squared_sum, ReductionReport& report) {
+  report.rms_error = report.sample_count > 0
+                         ? std::sqrt(squared_sum / static_cast<double>(report.sample_count))
+                         : 0.0;
+}
+
+// Whether every step between consecutive samples is well under half a turn, so that
+// UnwrapDegrees() adds no turns anywhere.
+bool StepsUnderHalfTurn(std::span<const double> degrees) {
+  bool under = true;
+  for (std::size_t i = 1; i < degrees.size(); ++i) {
+    under &= std::abs(degrees[i] - degrees[i - 1]) < kSafeStepDegrees;
+  }
+  return under;
+}
+
+// UnwrapDegrees(degrees) as a copy. When no step reaches half a turn, its shift stays +0 and it
+// only adds that to every sample after the first (which turns a -0 into +0): done here without
+// its serial dependence from sample to sample, the same values.
+void UnwrapInto(std::span<const double> degrees, std::vector<double>& out) {
+  out.assign(degrees.begin(), degrees.end());
+  if (!StepsUnderHalfTurn(degrees)) {
+    UnwrapDegrees(out);
+    return;
+  }
+  for (std::size_t i = 1; i < out.size(); ++i) out[i] += 0.0;
+}
+
 }  // namespace
 
 FittedSamples::FittedSamples(const Clip& clip) {
@@ -61,8 +119,8 @@ FittedSamples::FittedSamples(const Clip& clip) {
   for (const Channel& channel : clip.channels) {
     if (IsRotation(channel.kind)) {
       // Reserved above: the buffers the earlier spans point into never move.
-      std::vector<double>& copy = unwrapped_.emplace_back(channel.samples);
-      UnwrapDegrees(copy);
+      std::vector<double>& copy = unwrapped_.emplace_back();
+      UnwrapInto(channel.samples, copy);
       channels_.emplace_back(copy);
     } else {
       channels_.emplace_back(channel.samples);
@@ -77,22 +135,24 @@ ReductionReport MeasureFitted(std::span<const std::span<const double>> samples,
   double squared_sum = 0.0;
   for (std::size_t c = 0; c < samples.size(); ++c) {
     if (stop.stop_requested()) return report;
-    const ChannelErrors errors =
-        MeasureChannel(samples[c], static_cast<int>(c), curves[c], frame_time_seconds, stop);
-    const ChannelReduction& channel = errors.summary;
-    report.key_count += channel.key_count;
-    report.sample_count += channel.sample_count;
-    squared_sum += errors.squared_sum;
-    if (channel.max_error > report.max_error) {
-      report.max_error = channel.max_error;
-      report.worst_channel_index = channel.channel_index;
-      report.worst_frame = channel.max_error_frame;
-    }
-    report.channels.push_back(channel);
+    AddChannel(
+        MeasureChannel(samples[c], static_cast<int>(c), curves[c], frame_time_seconds, stop),
+        report, squared_sum);
   }
-  report.rms_error = report.sample_count > 0
-                         ? std::sqrt(squared_sum / static_cast<double>(report.sample_count))
-                         : 0.0;
+  FinishReport(squared_sum, report);
+  return report;
+}
+
+ReductionReport MeasureBaked(std::span<const std::span<const double>> samples,
+                             std::span<const Curve> curves,
+                             std::span<const std::span<const double>> baked) {
+  ReductionReport report;
+  double squared_sum = 0.0;
+  for (std::size_t c = 0; c < samples.size(); ++c) {
+    AddChannel(CompareChannel(samples[c], static_cast<int>(c), curves[c], baked[c]), report,
+               squared_sum);
+  }
+  FinishReport(squared_sum, report);
   return report;
 }
 

@@ -48,6 +48,11 @@ using V4 = double __attribute__((vector_size(32)));
   return a > b ? a : b;
 }
 
+// A lane comparison's result (a < b gives -1 where true, 0 where false): whether any lane is true.
+[[gnu::always_inline]] inline bool Any(decltype(V4{} < V4{}) mask) {
+  return (mask[0] | mask[1] | mask[2] | mask[3]) != 0;
+}
+
 #pragma GCC diagnostic pop
 
 }  // namespace tempokey::core::simd

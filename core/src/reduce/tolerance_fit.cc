@@ -31,8 +31,12 @@ constexpr int kMaxInsertionRounds = 64;
 // Samples of work (frames x channels fitted or measured) between two looks at the stop token:
 // about a millisecond.
 constexpr std::int64_t kStopCheckSamples = std::int64_t{1} << 16;
+// Elements a ZeroFill() sets between two looks at the stop token.
+constexpr std::size_t kZeroFillPiece = 65536;
 // A removal whose window misses the bound by up to this factor is worth reweighting.
 constexpr double kLawsonReach = 1.5;
+// A ratio known to be over the bound.
+constexpr double kOver = std::numeric_limits<double>::infinity();
 // Window of a removal: up to kWindowSide keys on each side of the removed one (fewer at the
 // clip's ends), the removed key itself not among them.
 constexpr int kWindowSide = 2;
@@ -52,48 +56,121 @@ inline std::array<double, 4> Coefficients(double t, double length) {
 
 // Coefficients() at every frame k = 0..L of a segment, column by column (the coefficient of v_a
 // at every frame, then of m_a, ...), so the per-frame loops run several frames per step.
-struct BasisColumns {
-  std::array<std::vector<double>, 4> column;
-
-  void Fill(std::int64_t length) {
-    const auto l = static_cast<double>(length);
-    for (std::vector<double>& c : column) c.resize(static_cast<std::size_t>(length) + 1);
-    for (std::int64_t k = 0; k <= length; ++k) {
-      const std::array<double, 4> c = Coefficients(static_cast<double>(k) / l, l);
-      for (int r = 0; r < 4; ++r) column[r][k] = c[r];
+// One basis column: storage that grows without being zeroed or copied first (Fill() writes every
+// entry), so refilling a cache entry for another length costs only the fill.
+class BasisColumn {
+ public:
+  const double* data() const { return data_.get(); }
+  double* data() { return data_.get(); }
+  double operator[](std::int64_t k) const { return data_[static_cast<std::size_t>(k)]; }
+  bool empty() const { return size_ == 0; }
+  void Resize(std::size_t size) {
+    if (size > capacity_) {
+      data_ = std::make_unique_for_overwrite<double[]>(size);
+      capacity_ = size;
     }
+    size_ = size;
   }
+
+ private:
+  std::unique_ptr<double[]> data_;
+  std::size_t size_ = 0;
+  std::size_t capacity_ = 0;
 };
 
+struct BasisColumns {
+  std::array<BasisColumn, 4> column;
+
+  void Fill(std::int64_t length);
+};
+
+// Coefficients() of four frames at once: every lane computes exactly what Coefficients() does
+// (the same operations in the same order, no contraction: simd.h), so the columns are the same
+// bits either way; long segments' columns are filled often enough for the speed to matter.
+TEMPOKEY_AVX_CLONES void FillColumns(std::int64_t length, double* c0, double* c1, double* c2,
+                                     double* c3) {
+  using simd::V4;
+  const auto l = static_cast<double>(length);
+  const V4 lv = simd::Broadcast(l);
+  std::int64_t k = 0;
+  for (; k + 4 <= length + 1; k += 4) {
+    const auto kd = static_cast<double>(k);
+    const V4 t = V4{kd, kd + 1.0, kd + 2.0, kd + 3.0} / lv;
+    const V4 t2 = t * t;
+    const V4 t3 = t2 * t;
+    simd::Store(c0 + k, 2.0 * t3 - 3.0 * t2 + 1.0);
+    simd::Store(c1 + k, (t3 - 2.0 * t2 + t) * lv);
+    simd::Store(c2 + k, -2.0 * t3 + 3.0 * t2);
+    simd::Store(c3 + k, (t3 - t2) * lv);
+  }
+  for (; k <= length; ++k) {
+    const std::array<double, 4> c = Coefficients(static_cast<double>(k) / l, l);
+    c0[k] = c[0];
+    c1[k] = c[1];
+    c2[k] = c[2];
+    c3[k] = c[3];
+  }
+}
+
+void BasisColumns::Fill(std::int64_t length) {
+  for (BasisColumn& c : column) c.Resize(static_cast<std::size_t>(length) + 1);
+  FillColumns(length, column[0].data(), column[1].data(), column[2].data(), column[3].data());
+}
+
 // Where a fit gets its basis columns: segments up to kTabledLength frames long from a table
-// computed once per thread (about 1 MB) and fetched once per fit; longer ones, rare, from a few
-// recently computed lengths. A returned reference stays valid until the next Get().
+// computed once per thread (about 1 MB) and fetched once per fit; longer ones up to
+// kSharedLongLength from the thread's recently computed lengths (at most about 2 MB: a smooth
+// channel's removal windows and its refits under a joint bound keep coming back to them); the
+// rare longer ones from the fit's own few recent lengths. A returned reference stays valid until
+// the next Get().
 constexpr std::int64_t kTabledLength = 256;
+constexpr std::int64_t kSharedLongLength = 4096;
 
 class BasisSource {
  public:
   BasisSource() : tables_(ThreadTables()) {}
 
+  // The common case, a tabled length already filled, inline; the rest out of line.
   const BasisColumns& Get(std::int64_t length) {
     if (length <= kTabledLength) {
-      BasisColumns& table = tables_[static_cast<std::size_t>(length)];
-      if (table.column[0].empty()) table.Fill(length);
-      return table;
+      const BasisColumns& table = tables_[static_cast<std::size_t>(length)];
+      if (!table.column[0].empty()) return table;
     }
-    for (LongEntry& entry : long_) {
-      if (entry.length == length) return entry.basis;
-    }
-    LongEntry& entry = long_[next_long_++ % long_.size()];
-    entry.length = length;
-    entry.basis.Fill(length);
-    return entry.basis;
+    return Compute(length);
   }
 
  private:
+  [[gnu::noinline]] const BasisColumns& Compute(std::int64_t length) {
+    if (length <= kTabledLength) {
+      BasisColumns& table = tables_[static_cast<std::size_t>(length)];
+      table.Fill(length);
+      return table;
+    }
+    if (length <= kSharedLongLength) return ThreadLongEntries().Get(length);
+    return long_.Get(length);
+  }
+
   using Tables = std::array<BasisColumns, kTabledLength + 1>;
-  struct LongEntry {
-    std::int64_t length = -1;
-    BasisColumns basis;
+
+  // The last few lengths filled, replaced in turn.
+  template <std::size_t kCount>
+  struct RecentLengths {
+    struct Entry {
+      std::int64_t length = -1;
+      BasisColumns basis;
+    };
+    std::array<Entry, kCount> entries;
+    std::size_t next = 0;
+
+    const BasisColumns& Get(std::int64_t length) {
+      for (Entry& entry : entries) {
+        if (entry.length == length) return entry.basis;
+      }
+      Entry& entry = entries[next++ % kCount];
+      entry.length = length;
+      entry.basis.Fill(length);
+      return entry.basis;
+    }
   };
 
   static Tables& ThreadTables() {
@@ -101,9 +178,13 @@ class BasisSource {
     return tables;
   }
 
+  static RecentLengths<16>& ThreadLongEntries() {
+    thread_local RecentLengths<16> entries;
+    return entries;
+  }
+
   Tables& tables_;
-  std::array<LongEntry, 4> long_;
-  std::size_t next_long_ = 0;
+  RecentLengths<4> long_;
 };
 
 // ---- kernels over the interior frames k = 1 .. n-1 of a segment --------------------------------
@@ -143,12 +224,20 @@ TEMPOKEY_AVX_CLONES void WeightedSums(const double* data, const double* w,
                                       const BasisColumns& basis, std::int64_t n, double* moments,
                                       double* gram) {
   using simd::V4;
+  // Only the upper triangle of the Gram sums is accumulated (and zeroed: zeroing the whole
+  // arrays costs a string instruction's start-up, more than a short segment's sums).
   std::array<V4, 4> m;
   std::array<V4, 16> g;
-  m.fill(simd::Broadcast(0.0));
-  g.fill(simd::Broadcast(0.0));
-  std::array<double, 4> mt{};
-  std::array<double, 16> gt{};
+  std::array<double, 4> mt;
+  std::array<double, 16> gt;
+  for (int r = 0; r < 4; ++r) {
+    m[r] = simd::Broadcast(0.0);
+    mt[r] = 0.0;
+    for (int q = r; q < 4; ++q) {
+      g[4 * r + q] = simd::Broadcast(0.0);
+      gt[4 * r + q] = 0.0;
+    }
+  }
   std::int64_t k = 1;
   for (; k + 4 <= n; k += 4) {
     const V4 wk = simd::Load(w + k);
@@ -178,13 +267,109 @@ TEMPOKEY_AVX_CLONES void WeightedSums(const double* data, const double* w,
   }
 }
 
+// Segments this short (at most kShortInterior interior frames) reach at most one of the kernels'
+// 4-frame blocks: their sums are computed inline below without a call, with the kernels'
+// operations in the kernels' order (each lane from 0, the lanes summed pairwise, then the scalar
+// tail from 0), so the same bits.
+constexpr std::int64_t kShortInterior = 7;
+
+// DataMoments() of a short segment (n - 1 <= kShortInterior).
+inline void ShortDataMoments(const double* data, const BasisColumns& basis, std::int64_t n,
+                             double* moments) {
+  std::int64_t k = 1;
+  std::array<double, 4> block = {0.0, 0.0, 0.0, 0.0};
+  if (k + 4 <= n) {
+    for (int r = 0; r < 4; ++r) {
+      const double* c = basis.column[r].data();
+      block[r] = ((0.0 + data[1] * c[1]) + (0.0 + data[2] * c[2])) +
+                 ((0.0 + data[3] * c[3]) + (0.0 + data[4] * c[4]));
+    }
+    k = 5;
+  }
+  // (Without a block, the kernel's empty lanes sum to +0, as `block` holds.)
+  std::array<double, 4> tail = {0.0, 0.0, 0.0, 0.0};
+  for (; k < n; ++k) {
+    for (int r = 0; r < 4; ++r) tail[r] += data[k] * basis.column[r][k];
+  }
+  for (int r = 0; r < 4; ++r) moments[r] = block[r] + tail[r];
+}
+
+// WeightedSums() of a short segment (n - 1 <= kShortInterior).
+inline void ShortWeightedSums(const double* data, const double* w, const BasisColumns& basis,
+                              std::int64_t n, double* moments, double* gram) {
+  std::array<double, 4> m = {0.0, 0.0, 0.0, 0.0};
+  std::array<double, 16> g{};
+  std::int64_t k = 1;
+  if (k + 4 <= n) {
+    // One block: lane j holds frame 1 + j, from 0; the lanes summed pairwise.
+    std::array<double, 4> wd;
+    for (int j = 0; j < 4; ++j) wd[j] = w[1 + j] * data[1 + j];
+    for (int r = 0; r < 4; ++r) {
+      const double* cr = basis.column[r].data() + 1;
+      std::array<double, 4> lane;
+      for (int j = 0; j < 4; ++j) lane[j] = 0.0 + wd[j] * cr[j];
+      m[r] = (lane[0] + lane[1]) + (lane[2] + lane[3]);
+      for (int q = r; q < 4; ++q) {
+        const double* cq = basis.column[q].data() + 1;
+        for (int j = 0; j < 4; ++j) lane[j] = 0.0 + (w[1 + j] * cr[j]) * cq[j];
+        g[4 * r + q] = (lane[0] + lane[1]) + (lane[2] + lane[3]);
+      }
+    }
+    k = 5;
+  }
+  std::array<double, 4> mt = {0.0, 0.0, 0.0, 0.0};
+  std::array<double, 16> gt{};
+  for (; k < n; ++k) {
+    const double wd = w[k] * data[k];
+    for (int r = 0; r < 4; ++r) {
+      const double cr = basis.column[r][k];
+      mt[r] += wd * cr;
+      for (int q = r; q < 4; ++q) gt[4 * r + q] += w[k] * cr * basis.column[q][k];
+    }
+  }
+  for (int r = 0; r < 4; ++r) {
+    moments[r] = m[r] + mt[r];
+    for (int q = r; q < 4; ++q) {
+      gram[4 * r + q] = g[4 * r + q] + gt[4 * r + q];
+      gram[4 * q + r] = gram[4 * r + q];
+    }
+  }
+}
+
+// ScaleByResiduals() of a short segment (n - 1 <= kShortInterior): frame by frame, the same
+// products.
+inline void ShortScaleByResiduals(const double* data, const BasisColumns& basis, std::int64_t n,
+                                  const double* x, double floor, double* weights) {
+  for (std::int64_t k = 1; k < n; ++k) {
+    const double y = (basis.column[0][k] * x[0] + basis.column[1][k] * x[1]) +
+                     (basis.column[2][k] * x[2] + basis.column[3][k] * x[3]);
+    weights[k] *= std::abs(y - data[k]) + floor;
+  }
+}
+
+// MaxError() of a short segment (n - 1 <= kShortInterior), exact (no early return: a value over
+// the limit is one the callers accept).
+inline double ShortMaxError(const double* data, const BasisColumns& basis, std::int64_t n,
+                            const double* x) {
+  double worst = 0.0;
+  for (std::int64_t k = 1; k < n; ++k) {
+    const double y = (basis.column[0][k] * x[0] + basis.column[1][k] * x[1]) +
+                     (basis.column[2][k] * x[2] + basis.column[3][k] * x[3]);
+    const double e = std::abs(y - data[k]);
+    if (e > worst) worst = e;
+  }
+  return worst;
+}
+
 // The largest |curve - data| over the interior frames, the curve's coefficients `x` =
-// (v_a, m_a, v_b, m_b); returns as soon as a block of frames exceeds `limit`.
+// (v_a, m_a, v_b, m_b); returns as soon as a block of frames exceeds `limit` (some value above
+// it: callers only compare it with the limit then).
 TEMPOKEY_AVX_CLONES double MaxError(const double* data, const BasisColumns& basis,
                                     std::int64_t n, const double* x, double limit) {
   using simd::V4;
   const V4 x0 = simd::Broadcast(x[0]), x1 = simd::Broadcast(x[1]);
   const V4 x2 = simd::Broadcast(x[2]), x3 = simd::Broadcast(x[3]);
+  const V4 limit_v = simd::Broadcast(limit);
   V4 worst = simd::Broadcast(0.0);
   std::int64_t k = 1;
   for (; k + 4 <= n; k += 4) {
@@ -194,7 +379,7 @@ TEMPOKEY_AVX_CLONES double MaxError(const double* data, const BasisColumns& basi
                    simd::Load(basis.column[3].data() + k) * x3));
     const V4 e = simd::Abs(y - simd::Load(data + k));
     worst = e > worst ? e : worst;
-    if ((k & 15) == 13 && simd::Max(worst) > limit) return simd::Max(worst);
+    if (simd::Any(e > limit_v)) return simd::Max(worst);
   }
   double tail = simd::Max(worst);
   for (; k < n; ++k) {
@@ -204,6 +389,31 @@ TEMPOKEY_AVX_CLONES double MaxError(const double* data, const BasisColumns& basi
     if (e > tail) tail = e;
   }
   return tail;
+}
+
+// weights[k] *= |curve - data[k]| + floor over the interior frames, the curve as in MaxError():
+// one Lawson round's reweighting of a segment.
+TEMPOKEY_AVX_CLONES void ScaleByResiduals(const double* data, const BasisColumns& basis,
+                                          std::int64_t n, const double* x, double floor,
+                                          double* weights) {
+  using simd::V4;
+  const V4 x0 = simd::Broadcast(x[0]), x1 = simd::Broadcast(x[1]);
+  const V4 x2 = simd::Broadcast(x[2]), x3 = simd::Broadcast(x[3]);
+  const V4 floor_v = simd::Broadcast(floor);
+  std::int64_t k = 1;
+  for (; k + 4 <= n; k += 4) {
+    const V4 y = ((simd::Load(basis.column[0].data() + k) * x0 +
+                   simd::Load(basis.column[1].data() + k) * x1) +
+                  (simd::Load(basis.column[2].data() + k) * x2 +
+                   simd::Load(basis.column[3].data() + k) * x3));
+    const V4 e = simd::Abs(y - simd::Load(data + k));
+    simd::Store(weights + k, simd::Load(weights + k) * (e + floor_v));
+  }
+  for (; k < n; ++k) {
+    const double y = (basis.column[0][k] * x[0] + basis.column[1][k] * x[1]) +
+                     (basis.column[2][k] * x[2] + basis.column[3][k] * x[3]);
+    weights[k] *= std::abs(y - data[k]) + floor;
+  }
 }
 
 // Sum of c c^T over the interior frames k = 1 .. L-1 of a segment of length L (c as
@@ -358,10 +568,16 @@ class Fitter {
   template <class T>
   bool ZeroFill(std::vector<T>& v, std::int64_t n) {
     const auto size = static_cast<std::size_t>(n);
+    if (size <= kZeroFillPiece && size <= v.capacity()) {
+      // A buffer already large enough (every solve of a fit after its first): one fill.
+      v.resize(size);
+      std::fill(v.begin(), v.end(), T{});
+      return !Stopping(n);
+    }
     v.clear();
     v.reserve(size);  // allocation only: pages are touched below
     for (std::size_t done = 0; done < size;) {
-      const std::size_t next = std::min(size, done + 65536);
+      const std::size_t next = std::min(size, done + kZeroFillPiece);
       v.resize(next);
       if (Stopping(static_cast<std::int64_t>(next - done))) return false;
       done = next;
@@ -378,27 +594,58 @@ class Fitter {
   void Solve(std::span<const double> s, const KeyRun& run, int first, int last,
              const double* weights = nullptr, std::int64_t weights_origin = 0) {
     const int n = last - first + 1;
+    if (n <= kWindowKeys) {
+      // A removal window's solve (or a short channel's): its blocks on the stack, only the n in
+      // use zeroed (zeroing whole arrays costs a string instruction's start-up, more than the
+      // solve). The caller counts the window's work for the stop token.
+      std::array<Mat2, kWindowKeys> diag, upper, eliminated;
+      std::array<Vec2, kWindowKeys> rhs;
+      for (int i = 0; i < n; ++i) {
+        diag[i] = {0.0, 0.0, 0.0, 0.0};
+        upper[i] = {0.0, 0.0, 0.0, 0.0};
+        rhs[i] = {0.0, 0.0};
+      }
+      SolveIn<false>({diag.data(), upper.data(), rhs.data(), eliminated.data()}, s, run, first,
+                     last, weights, weights_origin);
+      return;
+    }
     if (!ZeroFill(diag_, n) || !ZeroFill(upper_, n) || !ZeroFill(rhs_, n)) return;
+    eliminated_.resize(static_cast<std::size_t>(n));
+    SolveIn<true>({diag_.data(), upper_.data(), rhs_.data(), eliminated_.data()}, s, run, first,
+                  last, weights, weights_origin);
+  }
+
+  // The blocks of one solve, per free key: its diagonal block, the block coupling it to the next
+  // free key, its right-hand side (all zero to start with), and the eliminated coupling.
+  struct SolveBlocks {
+    Mat2* diag;
+    Mat2* upper;
+    Vec2* rhs;
+    Mat2* eliminated;
+  };
+
+  // Solve() on `blocks`; kLong: a solve long enough to look at the stop token inside.
+  template <bool kLong>
+  void SolveIn(SolveBlocks blocks, std::span<const double> s, const KeyRun& run, int first,
+               int last, const double* weights, std::int64_t weights_origin) {
+    const int n = last - first + 1;
+    Mat2* diag = blocks.diag;
+    Mat2* upper = blocks.upper;
+    Vec2* rhs = blocks.rhs;
+    Mat2* eliminated = blocks.eliminated;
     auto weight = [&](std::int64_t f) { return weights ? weights[f - weights_origin] : 1.0; };
     for (int i = 0; i < n; ++i) {
       // A noisy channel keys almost every frame: millions of keys in one solve.
-      if (Stopping(1)) return;
+      if (kLong && Stopping(1)) return;
       const std::int64_t f = run.frames[first + i];
       const double w = weight(f) + kRidge;
-      diag_[i][0] += w;
-      rhs_[i][0] += w * s[f];
-      diag_[i][3] += kRidge;
-      rhs_[i][1] += kRidge * CentralDifference(s, f);
+      diag[i][0] += w;
+      rhs[i][0] += w * s[f];
+      diag[i][3] += kRidge;
+      rhs[i][1] += kRidge * CentralDifference(s, f);
     }
-    const int seg_first = std::max(first - 1, 0);
-    const int seg_last = std::min(last, run.count - 2);
-    for (int j = seg_first; j <= seg_last; ++j) {
-      const std::int64_t fa = run.frames[j];
-      const std::int64_t length = run.frames[j + 1] - fa;
-      // A whole long channel is one solve: look at the stop token inside it too (the result is
-      // then not used).
-      if (Stopping(length)) return;
-      if (length < 2) continue;
+    // Segment j's frames added to the blocks of its free keys.
+    auto add_segment = [&](int j, std::int64_t fa, std::int64_t length) {
       const BasisColumns& basis = basis_.Get(length);
       const bool a_free = j >= first;
       const bool b_free = j + 1 <= last;
@@ -407,10 +654,20 @@ class Fitter {
       const double* gram;
       if (weights == nullptr) {
         gram = grams_.Get(length).data();
-        DataMoments(data, basis, length, moment.data());
+        if (length - 1 <= kShortInterior) {
+          ShortDataMoments(data, basis, length, moment.data());
+        } else {
+          DataMoments(data, basis, length, moment.data());
+        }
       } else {
-        WeightedSums(data, weights + (fa - weights_origin), basis, length, moment.data(),
-                     weighted_gram_.data());
+        const double* segment_weights = weights + (fa - weights_origin);
+        if (length - 1 <= kShortInterior) {
+          ShortWeightedSums(data, segment_weights, basis, length, moment.data(),
+                            weighted_gram_.data());
+        } else {
+          WeightedSums(data, segment_weights, basis, length, moment.data(),
+                       weighted_gram_.data());
+        }
         gram = weighted_gram_.data();
       }
       // What a fixed end contributes comes off the right-hand side: the moments of
@@ -427,46 +684,60 @@ class Fitter {
       }
       if (a_free) {
         const int ia = j - first;
-        diag_[ia] = {diag_[ia][0] + gram[0], diag_[ia][1] + gram[1], diag_[ia][2] + gram[4],
-                     diag_[ia][3] + gram[5]};
-        rhs_[ia] = {rhs_[ia][0] + moment[0], rhs_[ia][1] + moment[1]};
+        diag[ia] = {diag[ia][0] + gram[0], diag[ia][1] + gram[1], diag[ia][2] + gram[4],
+                    diag[ia][3] + gram[5]};
+        rhs[ia] = {rhs[ia][0] + moment[0], rhs[ia][1] + moment[1]};
       }
       if (b_free) {
         const int ib = j + 1 - first;
-        diag_[ib] = {diag_[ib][0] + gram[10], diag_[ib][1] + gram[11], diag_[ib][2] + gram[14],
-                     diag_[ib][3] + gram[15]};
-        rhs_[ib] = {rhs_[ib][0] + moment[2], rhs_[ib][1] + moment[3]};
+        diag[ib] = {diag[ib][0] + gram[10], diag[ib][1] + gram[11], diag[ib][2] + gram[14],
+                    diag[ib][3] + gram[15]};
+        rhs[ib] = {rhs[ib][0] + moment[2], rhs[ib][1] + moment[3]};
       }
       if (a_free && b_free) {
         const int ia = j - first;
-        upper_[ia] = {upper_[ia][0] + gram[2], upper_[ia][1] + gram[3],
-                      upper_[ia][2] + gram[6], upper_[ia][3] + gram[7]};
+        upper[ia] = {upper[ia][0] + gram[2], upper[ia][1] + gram[3],
+                     upper[ia][2] + gram[6], upper[ia][3] + gram[7]};
       }
-    }
-    // Forward elimination (eliminated_[i] = D'_i^-1 U_i, with D'_i = D_i - U_{i-1}^T
-    // eliminated_[i-1]), then back substitution.
-    eliminated_.resize(static_cast<std::size_t>(n));
-    for (int i = 0; i < n; ++i) {
-      if (Stopping(1)) return;
+    };
+    // Forward elimination of free key i (eliminated[i] = D'_i^-1 U_i, with D'_i = D_i - U_{i-1}^T
+    // eliminated[i-1]) once every segment touching it has been added: done right after its last
+    // segment, so that the next segments' sums can proceed while its divisions complete (the same
+    // operations on the same values as eliminating after all segments).
+    auto eliminate = [&](int i) {
       if (i > 0) {
-        const Mat2& u = upper_[i - 1];
+        const Mat2& u = upper[i - 1];
         const Mat2 lower = {u[0], u[2], u[1], u[3]};  // U_{i-1} transposed
-        const Mat2 lc = Multiply(lower, eliminated_[i - 1]);
-        diag_[i] = {diag_[i][0] - lc[0], diag_[i][1] - lc[1], diag_[i][2] - lc[2],
-                    diag_[i][3] - lc[3]};
-        const Vec2 ld = Apply(lower, rhs_[i - 1]);
-        rhs_[i] = {rhs_[i][0] - ld[0], rhs_[i][1] - ld[1]};
+        const Mat2 lc = Multiply(lower, eliminated[i - 1]);
+        diag[i] = {diag[i][0] - lc[0], diag[i][1] - lc[1], diag[i][2] - lc[2],
+                   diag[i][3] - lc[3]};
+        const Vec2 ld = Apply(lower, rhs[i - 1]);
+        rhs[i] = {rhs[i][0] - ld[0], rhs[i][1] - ld[1]};
       }
-      const Mat2 inverse = Inverse(diag_[i]);
-      eliminated_[i] = Multiply(inverse, upper_[i]);
-      rhs_[i] = Apply(inverse, rhs_[i]);
+      const Mat2 inverse = Inverse(diag[i]);
+      // The last key couples to nothing after it: its eliminated block is never read.
+      if (i + 1 < n) eliminated[i] = Multiply(inverse, upper[i]);
+      rhs[i] = Apply(inverse, rhs[i]);
+    };
+    const int seg_first = std::max(first - 1, 0);
+    const int seg_last = std::min(last, run.count - 2);
+    for (int j = seg_first; j <= seg_last; ++j) {
+      const std::int64_t fa = run.frames[j];
+      const std::int64_t length = run.frames[j + 1] - fa;
+      // A whole long channel is one solve: look at the stop token inside it too (the result is
+      // then not used).
+      if (kLong && Stopping(length)) return;
+      if (length >= 2) add_segment(j, fa, length);
+      if (j >= first) eliminate(j - first);  // key j's last segment
     }
-    Vec2 x = rhs_[n - 1];
+    // The last key when it has no segment after it; then back substitution.
+    for (int i = std::max(seg_last - first + 1, 0); i < n; ++i) eliminate(i);
+    Vec2 x = rhs[n - 1];
     run.values[last] = x[0];
     run.slopes[last] = x[1];
     for (int i = n - 2; i >= 0; --i) {
-      const Vec2 next = Apply(eliminated_[i], x);
-      x = {rhs_[i][0] - next[0], rhs_[i][1] - next[1]};
+      const Vec2 next = Apply(eliminated[i], x);
+      x = {rhs[i][0] - next[0], rhs[i][1] - next[1]};
       run.values[first + i] = x[0];
       run.slopes[first + i] = x[1];
     }
@@ -483,7 +754,11 @@ class Fitter {
     if (length < 2) return 0.0;
     const std::array<double, 4> x = {run.values[j], run.slopes[j], run.values[j + 1],
                                      run.slopes[j + 1]};
-    return MaxError(s.data() + fa, basis_.Get(length), length, x.data(), limit);
+    const BasisColumns& basis = basis_.Get(length);
+    if (length - 1 <= kShortInterior) {
+      return ShortMaxError(s.data() + fa, basis, length, x.data());
+    }
+    return MaxError(s.data() + fa, basis, length, x.data(), limit);
   }
 
   // The interior frame of segment j where the error is largest.
@@ -552,6 +827,7 @@ class Fitter {
         // The channel most over its bound decides where the new key goes: at its worst frame,
         // or mid-segment when it is a key frame that is over (it is its segments' problem too).
         double ratio = 0.0;
+        double worst_interior = 0.0;  // the interior ratio of the channel most over
         std::size_t worst_channel = 0;
         for (std::size_t c = 0; c < channels_.size(); ++c) {
           const KeyRun run = RunOf(fit, c);
@@ -559,15 +835,15 @@ class Fitter {
           const double r = std::max({interior, KeyRatio(fit, c, j), KeyRatio(fit, c, j + 1)});
           if (r > ratio) {
             ratio = r;
+            worst_interior = interior;
             worst_channel = c;
           }
         }
         if (ratio > 1.0) {
           const std::span<const double> s = channels_[worst_channel];
           const KeyRun run = RunOf(fit, worst_channel);
-          const std::int64_t frame = SegmentMax(s, run, j) / bounds_[worst_channel] >= ratio
-                                         ? WorstFrame(s, run, j)
-                                         : fit.frames[j] + length / 2;
+          const std::int64_t frame = worst_interior >= ratio ? WorstFrame(s, run, j)
+                                                             : fit.frames[j] + length / 2;
           next.push_back(frame);
           inserted = true;
         }
@@ -633,32 +909,56 @@ class Fitter {
 
   // Lawson's iteration on the channels of `w` that are over their bound: each round multiplies
   // every frame's weight by its error and refits, so the fit leans towards the minimax one. True
-  // once every channel is within its bound.
+  // once every channel is within its bound. Precondition: `w` is over the bound (FitWindow()).
   bool LawsonWindow(Window& w) {
     const std::int64_t origin = w.frames[0];
     const std::int64_t span = w.frames[w.count - 1] - origin + 1;
     for (std::size_t c = 0; c < channels_.size(); ++c) {
       const std::span<const double> s = channels_[c];
       KeyRun run = w.Run(c);
-      double ratio = WindowRatio(c, run, 0, w.count - 1);
+      // Only whether each ratio is over 1 matters: the scans may stop there. A lone channel is
+      // over (its window missed the bound: the caller's trial).
+      double ratio = channels_.size() == 1 ? kOver : WindowRatio(c, run, 0, w.count - 1, 1.0);
       lawson_.assign(static_cast<std::size_t>(span), 1.0);
       for (int round = 0; round < options_.lawson_iterations && ratio > 1.0; ++round) {
+        Reweight(s, run, 1e-3 * bounds_[c], origin);
+        // Summed in frame order.
         double total = 0.0;
-        for (int j = 0; j + 1 < w.count; ++j) {
-          ForEachResidual(s, run, j, [&](std::int64_t f, double residual) {
-            double& weight = lawson_[f - origin];
-            weight *= std::abs(residual) + 1e-3 * bounds_[c];
-            total += weight;
-          });
-        }
+        for (const double weight : lawson_) total += weight;
         const double scale = static_cast<double>(span) / total;
         for (double& weight : lawson_) weight *= scale;
         Solve(s, run, w.free_first, w.free_last, lawson_.data(), origin);
-        ratio = WindowRatio(c, run, 0, w.count - 1);
+        ratio = WindowRatio(c, run, 0, w.count - 1, 1.0);
       }
       if (ratio > 1.0) return false;
     }
     return true;
+  }
+
+  // Multiplies each frame's Lawson weight (lawson_, from `origin`) by its |curve - sample| +
+  // floor over the frames of `run`.
+  void Reweight(std::span<const double> s, const KeyRun& run, double floor, std::int64_t origin) {
+    auto at_key = [&](int i) {
+      const std::int64_t f = run.frames[i];
+      lawson_[f - origin] *= std::abs(run.values[i] - s[f]) + floor;
+    };
+    for (int j = 0; j + 1 < run.count; ++j) {
+      at_key(j);
+      const std::int64_t fa = run.frames[j];
+      const std::int64_t length = run.frames[j + 1] - fa;
+      if (length >= 2) {
+        const std::array<double, 4> x = {run.values[j], run.slopes[j], run.values[j + 1],
+                                         run.slopes[j + 1]};
+        const BasisColumns& basis = basis_.Get(length);
+        double* weights = lawson_.data() + (fa - origin);
+        if (length - 1 <= kShortInterior) {
+          ShortScaleByResiduals(s.data() + fa, basis, length, x.data(), floor, weights);
+        } else {
+          ScaleByResiduals(s.data() + fa, basis, length, x.data(), floor, weights);
+        }
+      }
+    }
+    at_key(run.count - 1);
   }
 
   // Calls fn(frame, curve - sample) for the frames [a, b) of segment j of `run`, and b too when
@@ -741,7 +1041,13 @@ class Fitter {
       for (int d = 0; !removed && d <= (can_slide ? options_.slide_frames : 0); ++d) {
         const std::int64_t moved = base.frames[before] + direction * d;
         if (d > 0 && (moved <= base.frames[before - 1] || moved >= fit.frames[i + 2])) break;
-        trial = base;
+        // A solve writes only the free keys, so after the first trial the fixed keys still hold
+        // the base's values and only the frames need resetting.
+        if (d == 0) {
+          trial = base;
+        } else {
+          trial.frames = base.frames;
+        }
         trial.frames[before] = moved;
         int worst_key = 0;
         const double ratio = FitWindow(trial, reach, &worst_key);
@@ -797,7 +1103,7 @@ class Fitter {
         const KeyRun run = RunOf(fit, c);
         for (int j = 0; j + 1 < count; ++j) {
           if (Stopping(fit.frames[j + 1] - fit.frames[j])) return;
-          const bool over = SegmentMax(channels_[c], run, j) > bounds_[c] ||
+          const bool over = SegmentMax(channels_[c], run, j, bounds_[c]) > bounds_[c] ||
                             KeyRatio(fit, c, j) > 1.0 || KeyRatio(fit, c, j + 1) > 1.0;
           if (over) bad.emplace_back(fit.frames[j], fit.frames[j + 1]);
         }

@@ -1,6 +1,7 @@
 // Joint world-position error (SPEC 4.4), through the one forward kinematics.
 #include "tempokey/core/reduce/world_error.h"
 
+#include <algorithm>
 #include <cmath>
 #include <utility>
 
@@ -10,15 +11,39 @@
 
 namespace tempokey::core {
 namespace reduce_internal {
+namespace {
+
+// Samples evaluated between two looks at the stop token.
+constexpr std::size_t kSamplePiece = 65536;
+
+}  // namespace
 
 absl::StatusOr<WorldErrorMeter> WorldErrorMeter::ForClip(const Clip& clip) {
-  TEMPOKEY_ASSIGN_OR_RETURN(PointTrajectories source, WorldTrajectories(clip));
+  if (clip.skeleton.empty()) {
+    return absl::InvalidArgumentError("forward kinematics needs a skeleton, the clip has none");
+  }
+  TEMPOKEY_RETURN_IF_ERROR(ValidateClip(clip));
+  return ForValidatedClip(clip);
+}
+
+absl::StatusOr<WorldErrorMeter> WorldErrorMeter::ForValidatedClip(const Clip& clip) {
   TEMPOKEY_ASSIGN_OR_RETURN(ForwardKinematics fk, ForwardKinematics::ForLayout(clip));
   WorldErrorMeter meter(clip, std::move(fk));
-  meter.source_ = std::move(source);
-  meter.figure_height_ = VerticalExtent(
-      std::span<const Vec3>(meter.source_.positions).first(meter.source_.points.size()));
-  meter.scratch_.resize(meter.source_.points.size());
+  // WorldTrajectories(clip), with the meter's own forward kinematics.
+  std::vector<std::span<const double>> samples;
+  samples.reserve(clip.channels.size());
+  for (const Channel& channel : clip.channels) samples.emplace_back(channel.samples);
+  PointTrajectories& source = meter.source_;
+  source.points = meter.fk_.points();
+  source.frame_count = clip.frame_count;
+  const std::size_t n = source.points.size();
+  source.positions.resize(static_cast<std::size_t>(clip.frame_count) * n);
+  for (std::size_t f = 0; f < static_cast<std::size_t>(clip.frame_count); ++f) {
+    meter.fk_.Pose(samples, f, std::span<Vec3>(source.positions).subspan(f * n, n));
+  }
+  meter.figure_height_ =
+      VerticalExtent(std::span<const Vec3>(source.positions).first(source.points.size()));
+  meter.scratch_.resize(source.points.size());
   return meter;
 }
 
@@ -80,6 +105,23 @@ std::vector<std::vector<double>> SampleCurves(std::span<const Curve> curves,
   for (std::size_t c = 0; c < curves.size(); ++c) {
     samples[c].resize(static_cast<std::size_t>(frame_count));
     SampleCurve(curves[c], frame_time_seconds, samples[c]);
+  }
+  return samples;
+}
+
+std::vector<std::vector<double>> SampleCurves(std::span<const Curve> curves,
+                                              std::int64_t frame_count, double frame_time_seconds,
+                                              const std::stop_token& stop) {
+  std::vector<std::vector<double>> samples(curves.size());
+  for (std::size_t c = 0; c < curves.size(); ++c) {
+    samples[c].resize(static_cast<std::size_t>(frame_count));
+    for (std::size_t first = 0; first < samples[c].size(); first += kSamplePiece) {
+      if (stop.stop_requested()) return {};
+      const std::size_t count = std::min(kSamplePiece, samples[c].size() - first);
+      SampleCurve(curves[c], frame_time_seconds,
+                  std::span<double>(samples[c]).subspan(first, count),
+                  static_cast<std::int64_t>(first));
+    }
   }
   return samples;
 }

@@ -6,11 +6,13 @@
 
 #include <cstdint>
 #include <span>
+#include <stop_token>
 #include <vector>
 
 #include "absl/status/statusor.h"
 #include "tempokey/core/model/clip.h"
 #include "tempokey/core/model/kinematics.h"
+#include "tempokey/core/reduce/reduce.h"
 #include "tempokey/core/reduce/world_error.h"
 
 namespace tempokey::core::reduce_internal {
@@ -29,6 +31,10 @@ class WorldErrorMeter {
  public:
   // Errors: kInvalidArgument when the clip has no skeleton or fails ValidateClip().
   static absl::StatusOr<WorldErrorMeter> ForClip(const Clip& clip);
+
+  // ForClip() for a clip that has passed ValidateClip() already (ReduceKeys()), without checking
+  // its samples again. Errors: kInvalidArgument when the clip has no skeleton.
+  static absl::StatusOr<WorldErrorMeter> ForValidatedClip(const Clip& clip);
 
   // The errors of `fitted` (one span of frame_count samples per channel of the clip).
   PointErrors Measure(std::span<const std::span<const double>> fitted);
@@ -54,6 +60,17 @@ class WorldErrorMeter {
 // f * frame_time_seconds as SampleCurve() does).
 std::vector<std::vector<double>> SampleCurves(std::span<const Curve> curves,
                                               std::int64_t frame_count, double frame_time_seconds);
+
+// SampleCurves() a piece at a time, looking at `stop` between pieces; empty when it was seen.
+std::vector<std::vector<double>> SampleCurves(std::span<const Curve> curves,
+                                              std::int64_t frame_count, double frame_time_seconds,
+                                              const std::stop_token& stop);
+
+// MeasureFitted() (reduction_internal.h) of curves already sampled at every frame: `baked` holds
+// SampleCurves() of `curves`. The same report, bit for bit, without sampling the curves again.
+ReductionReport MeasureBaked(std::span<const std::span<const double>> samples,
+                             std::span<const Curve> curves,
+                             std::span<const std::span<const double>> baked);
 
 // Spans over `samples`.
 std::vector<std::span<const double>> Spans(const std::vector<std::vector<double>>& samples);
