@@ -80,6 +80,7 @@ test_suite() {
   build -DTEMPOKEY_BUILD_BENCH=ON  # benchmarks are built (so they keep compiling), not run
   log "test suite (CTest, Release)"
   ctest --test-dir "$build_dir" --output-on-failure -j "$jobs" --timeout 900
+  deploy/unoptimized-kernel-tests.sh
   if [[ "${TEMPOKEY_SANITIZER_TESTS:-1}" != "0" ]]; then
     deploy/sanitizer-tests.sh
   fi

@@ -422,7 +422,7 @@ SegmentForm BuildSegmentForm(std::span<const double> samples, const SegmentShape
 // nine predecessor y-states of one row, candidate = a[sy] + ((b + u) + v) with u, v in
 // {-z, 0, +z}, folded into the smallest, second smallest and arg-smallest per lane. Written
 // with vector extensions and cloned for AVX, where the machine has it; both clones compute the
-// same values (no contraction into FMA: -ffp-contract follows -std=c++20).
+// same values (no contraction into FMA: core/CMakeLists.txt sets -ffp-contract=off).
 // The states 0 .. 80 as 4-lane vectors of their number: the state lanes of UpdateLaneMinima().
 struct alignas(32) StateLanes {
   double lane[kStates][4];

@@ -143,8 +143,8 @@ class BandSolver {
 // nothing but the level and the number of frames, so its factor is computed once and shared by
 // every block window of that length and every channel of the clip; each solve is then the two
 // substitutions. Each lane performs exactly BandSolver::Solve()'s operations in the same order
-// (IEEE operations are exact per lane, and -std=c++20 contracts nothing into FMA), so every
-// level's solution is bit for bit the scalar one.
+// (IEEE operations are exact per lane, and nothing is contracted into FMA: -ffp-contract=off in
+// core/CMakeLists.txt), so every level's solution is bit for bit the scalar one.
 using Lanes = double __attribute__((vector_size(128)));
 constexpr int kLanes = 16;
 // Wrapped in 64-byte aligned structs for the vectors that hold them: a template argument drops
@@ -229,7 +229,7 @@ TEMPOKEY_AVX_CLONES void FactorConstantLevels(std::size_t n, const double* level
     double* __restrict row = reinterpret_cast<double*>(&band[i]);
     for (std::size_t q = 0; q < kCount; q += 4) {
       // Entry k of a row is at k * kCount + lane.
-      const auto at = [q](const double* values, std::size_t k) {
+      const auto at = [q](const double* values, std::size_t k) __attribute__((always_inline)) {
         return simd::Load(values + k * kCount + q);
       };
       const V4 e3 = at(a, 3) / at(r3, 0);

@@ -2,7 +2,7 @@
 //
 // Kernels written with 4-lane vectors compute every lane with the same operations in the same
 // order whether the compiler emits one AVX instruction or two SSE2 ones, and contraction into FMA
-// is off (-ffp-contract follows -std=c++20), so the AVX and portable clones agree bit for bit:
+// is off (-ffp-contract=off, core/CMakeLists.txt), so the AVX and portable clones agree bit for bit:
 // results do not depend on the machine.
 #ifndef TEMPOKEY_CORE_SRC_REDUCE_SIMD_H_
 #define TEMPOKEY_CORE_SRC_REDUCE_SIMD_H_

@@ -130,7 +130,7 @@ struct QuatLanes {
 [[gnu::always_inline]] inline bool AllReducible(const V (&v)[3], double limit) {
   // |v| by clearing the sign bit; one test of the three masks together.
   using Bits = std::int64_t __attribute__((vector_size(sizeof(V))));
-  auto abs = [](V x) { return (V)((Bits)x & std::numeric_limits<std::int64_t>::max()); };
+  auto abs = [](V x) __attribute__((always_inline)) { return (V)((Bits)x & std::numeric_limits<std::int64_t>::max()); };
   const Mask ok = (abs(v[0]) < limit) & (abs(v[1]) < limit) & (abs(v[2]) < limit);
   bool all = true;
   for (std::size_t lane = 0; lane < kLanes; ++lane) all = all && ok[lane] != 0;
@@ -219,7 +219,7 @@ template <int I, int J, int K>
       p[3] = q.z;
     }
   };
-  auto half_radians = [](V degrees) { return 0.5 * degrees * kDegToRad; };
+  auto half_radians = [](V degrees) __attribute__((always_inline)) { return 0.5 * degrees * kDegToRad; };
   std::size_t i = 0;
   // Two groups per step, their six sines and cosines side by side.
   for (; i + 2 * kLanes <= count; i += 2 * kLanes) {
@@ -352,7 +352,7 @@ TEMPOKEY_AVX2_CLONES void SlerpKernel(const double* quats, const std::int64_t* i
       // Exact ends: t <= 0 gives `from`, t >= 1 gives `to` (aligned).
       const Mask at_start = tt[g] <= 0.0;
       const Mask at_end = tt[g] >= 1.0;
-      auto pick = [&](V from, V to, V middle) {
+      auto pick = [&](V from, V to, V middle) __attribute__((always_inline)) {
         return at_start ? from : (at_end ? to : middle);
       };
       if (lanes[g] == 0) continue;
