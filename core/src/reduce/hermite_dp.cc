@@ -434,8 +434,9 @@ constexpr StateLanes kStateLaneTable = [] {
   }
   return table;
 }();
-const auto* const kStateLanes =
-    reinterpret_cast<const double __attribute__((vector_size(32)))*>(kStateLaneTable.lane);
+// Read as vectors through a type that may alias its doubles (the table is stored as doubles).
+using StateVector = double __attribute__((vector_size(32), may_alias));
+const StateVector* const kStateLanes = reinterpret_cast<const StateVector*>(kStateLaneTable.lane);
 
 // Returns the largest of the nine smallest candidates (lanes 0..8; none is NaN, so the order of
 // the comparisons does not matter).
@@ -446,7 +447,7 @@ TEMPOKEY_AVX_CLONES double UpdateLaneMinima(
   // The row's terms of key a, broadcast once for the three lane groups.
   V a_lanes[9];
   for (int sy = 0; sy < 9; ++sy) a_lanes[sy] = V{a[sy], a[sy], a[sy], a[sy]};
-  const V* states = kStateLanes + state_first;
+  const StateVector* states = kStateLanes + state_first;
   V largest = {};
   double tail = 0.0;
   for (int lane = 0; lane < 12; lane += 4) {
