@@ -277,7 +277,7 @@ TEST(NoiseReductionCorpusTest, CleanBandaiClipsReadAsNearlyNoiseless) {
   }
 }
 
-// ---- cancellation --------------------------------------------------------------------------------
+// ---- cancellation -------------------------------------------------------------------------------
 
 // The smoother looks at the stop token inside its searches and band solves: a stop requested
 // while a long channel is being smoothed ends the reduction with kCancelled, never a finished
