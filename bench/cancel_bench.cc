@@ -7,6 +7,7 @@
 //   cancel_bench [filter]
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <future>
 #include <random>
@@ -52,6 +53,19 @@ Clip NoiseClip(int channels, std::int64_t frames, bool rotations) {
   return clip;
 }
 
+// A slow sine (amplitude 10) under Gaussian noise of sigma 0.1, one scalar channel: the noise
+// method smooths it block by block with levels far from the extremes.
+Clip NoisySineClip(std::int64_t frames) {
+  Clip clip = NoiseClip(1, frames, false);
+  std::mt19937_64 random(1);
+  std::normal_distribution<double> noise(0.0, 0.1);
+  std::vector<double>& samples = clip.channels[0].samples;
+  for (std::size_t f = 0; f < samples.size(); ++f) {
+    samples[f] = 10.0 * std::sin(static_cast<double>(f) * 0.01) + noise(random);
+  }
+  return clip;
+}
+
 struct Workload {
   std::string name;
   Clip clip;
@@ -76,6 +90,9 @@ int Run(const std::string& filter) {
   paper_retime.warp.domain = WarpDomain::kSpeedOverSource;
   paper_retime.warp.speed = {SpeedKnot{{0.0, false}, 0.5}, SpeedKnot{{10000.0, false}, 0.9}};
   paper_retime.options.method = RetimeMethod::kPaper;
+  ReduceStep noise;
+  noise.options.method = ReduceMethod::kNoise;
+  noise.options.noise.position_sigma = 0.1;
   ReduceStep two_keys;
   two_keys.options.tolerance.max_scalar_error = 1e9;
 
@@ -86,6 +103,8 @@ int Run(const std::string& filter) {
                        {smooth_only}});
   workloads.push_back({"tolerance fit, 1 x 4M frames of noise", NoiseClip(1, 4'000'000, false),
                        {ReduceStep{}}});
+  workloads.push_back({"noise fit, 1 x 1M frames of a noisy sine, sigma 0.1",
+                       NoisySineClip(1'000'000), {noise}});
   workloads.push_back({"tolerance fit, pose-aligned clip, 64 x 60000 frames",
                        NoiseClip(64, 60'000, false), {clip_aligned}});
   workloads.push_back({"retime lanczos3 x3, rotation-aware joint, 3 x 3M frames",

@@ -8,6 +8,7 @@
 #include <limits>
 #include <memory>
 #include <numbers>
+#include <stop_token>
 #include <utility>
 #include <vector>
 
@@ -45,6 +46,9 @@ constexpr double kGuardFactor = 10.0;
 constexpr double kGuardFloorLogLambda = -12.0;
 // Midpoints of the integral that gives the degrees of freedom per frame.
 constexpr int kTraceNodes = 512;
+// Rows of a band solve (or of a level interpolation) between two looks at the stop token: a
+// millisecond or two of work, so a stop ends even a channel of millions of frames at once.
+constexpr std::size_t kStopCheckRows = std::size_t{1} << 16;
 
 // (2 sin(w / 2))^2 at the midpoints w of the integral below, computed once.
 const std::array<double, kTraceNodes>& TraceNodeSquares() {
@@ -83,54 +87,75 @@ double CachedDofPerFrame(double lambda) {
 
 // Solves (I + sum_r lambda[r] d_r d_r^T) y = x, d_r the third difference at r, for x of n >= 4
 // samples and n - 3 levels: a symmetric positive definite band of half-width 3, by Cholesky.
+// False, y incomplete, when a stop was requested on `stop` (looked at every kStopCheckRows rows).
 class BandSolver {
  public:
-  void Solve(std::span<const double> x, std::span<const double> lambda, std::span<double> y) {
+  bool Solve(std::span<const double> x, std::span<const double> lambda, std::span<double> y,
+             const std::stop_token& stop) {
     const std::size_t n = x.size();
     band_.assign(n, {1.0, 0.0, 0.0, 0.0});  // band_[i][k] = A(i, i - k)
-    // One sweep assembles, factors and forward-substitutes: row i of the matrix is complete once
-    // the penalty rows up to r = i are added (their terms still in increasing r), row i of L
-    // needs rows i - 3 .. i of it, and the forward step at i row i of L. The factor's chain of
-    // divisions and square roots and the substitution's then overlap instead of running one
-    // after the other.
-    for (std::size_t i = 0; i < n; ++i) {
-      if (i + kOrder < n) {
-        const double l = lambda[i];
-        for (int a = 0; a <= kOrder; ++a) {
-          for (int b = 0; b <= a; ++b) band_[i + a][a - b] += l * kDifference[a] * kDifference[b];
-        }
-      }
-      // In place: band_ row i becomes row i of L with A = L L^T.
-      for (int k = kOrder; k >= 1; --k) {
-        if (i < static_cast<std::size_t>(k)) continue;
-        const std::size_t j = i - static_cast<std::size_t>(k);
-        double s = band_[i][k];
-        for (int m = k + 1; m <= kOrder && i >= static_cast<std::size_t>(m); ++m) {
-          s -= band_[i][m] * band_[j][m - k];
-        }
-        band_[i][k] = s / band_[j][0];
-      }
-      double s = band_[i][0];
-      for (int k = 1; k <= kOrder && i >= static_cast<std::size_t>(k); ++k) {
-        s -= band_[i][k] * band_[i][k];
-      }
-      band_[i][0] = std::sqrt(s);
-      double f = x[i];
-      for (int k = 1; k <= kOrder && i >= static_cast<std::size_t>(k); ++k) {
-        f -= band_[i][k] * y[i - static_cast<std::size_t>(k)];
-      }
-      y[i] = f / band_[i][0];
+    // The rows in pieces of kStopCheckRows, the token looked at between pieces (not per row:
+    // the loops stay as tight as without it).
+    for (std::size_t begin = 0; begin < n; begin += kStopCheckRows) {
+      if (stop.stop_requested()) return false;
+      const std::size_t end = std::min(n, begin + kStopCheckRows);
+      for (std::size_t i = begin; i < end; ++i) ForwardRow(i, x, lambda, y);
     }
-    for (std::size_t i = n; i-- > 0;) {
-      double s = y[i];
-      for (int k = 1; k <= kOrder && i + static_cast<std::size_t>(k) < n; ++k) {
-        s -= band_[i + static_cast<std::size_t>(k)][k] * y[i + static_cast<std::size_t>(k)];
-      }
-      y[i] = s / band_[i][0];
+    for (std::size_t end = n; end > 0;) {
+      if (stop.stop_requested()) return false;
+      const std::size_t begin = end > kStopCheckRows ? end - kStopCheckRows : 0;
+      for (std::size_t i = end; i-- > begin;) BackRow(i, n, y);
+      end = begin;
     }
+    return true;
   }
 
  private:
+  // One sweep assembles, factors and forward-substitutes: row i of the matrix is complete once
+  // the penalty rows up to r = i are added (their terms still in increasing r), row i of L
+  // needs rows i - 3 .. i of it, and the forward step at i row i of L. The factor's chain of
+  // divisions and square roots and the substitution's then overlap instead of running one
+  // after the other. Row i of the sweep, rows 0 .. i - 1 done.
+  [[gnu::always_inline]] void ForwardRow(std::size_t i, std::span<const double> x,
+                                         std::span<const double> lambda, std::span<double> y) {
+    const std::size_t n = x.size();
+    if (i + kOrder < n) {
+      const double l = lambda[i];
+      for (int a = 0; a <= kOrder; ++a) {
+        for (int b = 0; b <= a; ++b) band_[i + a][a - b] += l * kDifference[a] * kDifference[b];
+      }
+    }
+    // In place: band_ row i becomes row i of L with A = L L^T.
+    for (int k = kOrder; k >= 1; --k) {
+      if (i < static_cast<std::size_t>(k)) continue;
+      const std::size_t j = i - static_cast<std::size_t>(k);
+      double s = band_[i][k];
+      for (int m = k + 1; m <= kOrder && i >= static_cast<std::size_t>(m); ++m) {
+        s -= band_[i][m] * band_[j][m - k];
+      }
+      band_[i][k] = s / band_[j][0];
+    }
+    double s = band_[i][0];
+    for (int k = 1; k <= kOrder && i >= static_cast<std::size_t>(k); ++k) {
+      s -= band_[i][k] * band_[i][k];
+    }
+    band_[i][0] = std::sqrt(s);
+    double f = x[i];
+    for (int k = 1; k <= kOrder && i >= static_cast<std::size_t>(k); ++k) {
+      f -= band_[i][k] * y[i - static_cast<std::size_t>(k)];
+    }
+    y[i] = f / band_[i][0];
+  }
+
+  // Row i of the back substitution of n rows, rows i + 1 .. n - 1 done.
+  [[gnu::always_inline]] void BackRow(std::size_t i, std::size_t n, std::span<double> y) const {
+    double s = y[i];
+    for (int k = 1; k <= kOrder && i + static_cast<std::size_t>(k) < n; ++k) {
+      s -= band_[i + static_cast<std::size_t>(k)][k] * y[i + static_cast<std::size_t>(k)];
+    }
+    y[i] = s / band_[i][0];
+  }
+
   std::vector<std::array<double, kOrder + 1>> band_;
 };
 
@@ -380,27 +405,33 @@ static_assert(kMaxBatches == 2);
 // second-level cache.
 constexpr std::size_t kMaxSolutionBytes = std::size_t{256} << 10;
 
+// The smoother of one channel. It looks at the stop token between batches of window solves, per
+// guard round and every kStopCheckRows rows of a band solve; once a stop is seen every phase
+// returns at once and Run()'s result is incomplete (the caller reports the cancellation).
 class NoiseSmoother {
  public:
   NoiseSmoother(std::span<const double> samples, double sigma, const NoiseFitOptions& options,
-                reduce_internal::SmootherFactors& factors)
+                reduce_internal::SmootherFactors& factors, std::stop_token stop)
       : x_(samples),
         n_(samples.size()),
         sigma2_(sigma * sigma),
         guard_(options.guard_sigmas * sigma),
         block_(static_cast<std::size_t>(options.block_frames)),
-        factors_(factors.store()) {}
+        factors_(factors.store()),
+        stop_(std::move(stop)) {}
 
+  // The smoothed samples; incomplete when stopped() is true afterwards.
   std::vector<double> Run() {
     std::vector<double> y(x_.begin(), x_.end());
     if (n_ <= kOrder + 1) return y;
     const double global = BestSingleLevel();
+    if (Stopping()) return y;
     // Per block: the level of least SURE on the block, solved with context on both sides.
     std::vector<double> block_log = BestBlockLevels(global);
+    if (Stopping()) return y;
     std::vector<double> lambda(n_ - kOrder);
     for (int round = 0;; ++round) {
-      Interpolate(block_log, lambda);
-      solver_.Solve(x_, lambda, y);
+      if (!Interpolate(block_log, lambda) || !SolveBand(x_, lambda, y)) return y;
       if (round == kMaxGuardRounds) break;
       bool lowered = false;
       for (std::size_t b = 0; b < block_log.size(); ++b) {
@@ -419,7 +450,25 @@ class NoiseSmoother {
     return y;
   }
 
+  // Whether a stop was seen: Run()'s result is then not to be used.
+  bool stopped() const { return stopped_; }
+
  private:
+  // Looks at the stop token; true (and from then on) once a stop was requested.
+  bool Stopping() {
+    if (!stopped_) stopped_ = stop_.stop_requested();
+    return stopped_;
+  }
+
+  // solver_.Solve() noting a stop: false when one was seen.
+  bool SolveBand(std::span<const double> x, std::span<const double> lambda, std::span<double> y) {
+    if (stopped_ || !solver_.Solve(x, lambda, y, stop_)) {
+      stopped_ = true;
+      return false;
+    }
+    return true;
+  }
+
   // A block and the frames it is solved on: SURE counts frames [b0, b1) of the solution of
   // x_[a0, a1).
   struct Window {
@@ -430,7 +479,8 @@ class NoiseSmoother {
   // 10^logs[i], up to the constant -n sigma^2: each one's residual there plus 2 sigma^2 times its
   // degrees of freedom. risks[w * logs.size() + i] is window w's at level i. Every window has n
   // frames, so they share the factors; sixteen levels per factor, and the solves of several
-  // windows and batches of levels step together (SubstituteConstantLevels()).
+  // windows and batches of levels step together (SubstituteConstantLevels()). Incomplete once a
+  // stop is seen (between window solves or steps of windows).
   std::vector<double> Risks(std::span<const double> logs, std::size_t n,
                             std::span<const Window> windows) {
     const std::size_t count = logs.size();
@@ -443,7 +493,7 @@ class NoiseSmoother {
         for (std::size_t i = 0; i < count; ++i) {
           const double level = std::pow(10.0, logs[i]);
           std::fill(lambda.begin(), lambda.end(), level);
-          solver_.Solve(x_.subspan(window.a0, n), lambda, y);
+          if (!SolveBand(x_.subspan(window.a0, n), lambda, y)) return risks;
           double rss = 0.0;
           for (std::size_t f = window.b0; f < window.b1; ++f) {
             const double r = y[f - window.a0] - x_[f];
@@ -461,6 +511,7 @@ class NoiseSmoother {
     const std::size_t batches_per_step =
         std::clamp<std::size_t>(reduce_internal::kMaxSmootherFactorBytes / factor_bytes, 1, batches);
     for (std::size_t first_batch = 0; first_batch < batches; first_batch += batches_per_step) {
+      if (Stopping()) return risks;
       const std::size_t step_batches = std::min(batches_per_step, batches - first_batch);
       std::array<double, kLanes> level[kMaxBatches];
       std::array<double, kLanes> dof[kMaxBatches];  // degrees of freedom per frame
@@ -478,6 +529,7 @@ class NoiseSmoother {
           std::clamp<std::size_t>(kMaxSolutionBytes / solution_bytes, 1, windows.size());
       for (std::size_t first_window = 0; first_window < windows.size();
            first_window += windows_per_step) {
+        if (Stopping()) return risks;
         const std::size_t step_windows = std::min(windows_per_step, windows.size() - first_window);
         const std::size_t jobs = step_windows * step_batches;
         std::vector<LaneValues>& solutions = factors_.solutions;
@@ -533,6 +585,7 @@ class NoiseSmoother {
     }
     const Window whole{0, n_, 0, n_};
     const std::vector<double> coarse_risks = Risks(coarse_logs, n_, {&whole, 1});
+    if (stopped_) return kMinLogLambda;
     const std::size_t coarse = Least(coarse_risks);
     double best = coarse == kNone ? kMinLogLambda : coarse_logs[coarse];
     double best_risk =
@@ -584,6 +637,7 @@ class NoiseSmoother {
         }
       }
       const std::vector<double> risks = Risks(logs, n, group);
+      if (stopped_) return block_log;
       for (std::size_t m = 0; m < members.size(); ++m) {
         const std::span<const double> own(risks.data() + m * logs.size(), logs.size());
         const std::size_t least = Least(own);
@@ -594,29 +648,36 @@ class NoiseSmoother {
   }
 
   // The level of each penalty row (its centre at r + 1.5) from the block levels, geometrically
-  // interpolated between block centres and held beyond the first and last.
-  void Interpolate(const std::vector<double>& block_log, std::vector<double>& lambda) const {
+  // interpolated between block centres and held beyond the first and last. False, `lambda`
+  // incomplete, once a stop is seen.
+  bool Interpolate(const std::vector<double>& block_log, std::vector<double>& lambda) {
     const auto block = static_cast<double>(block_);
     const auto last = static_cast<std::ptrdiff_t>(block_log.size()) - 1;
     // Between two blocks of the same level, and beyond the first and last, the exponent repeats:
     // its power is reused.
     double exponent = std::numeric_limits<double>::quiet_NaN();
     double power = 0.0;
-    for (std::size_t r = 0; r < lambda.size(); ++r) {
-      const double position = (static_cast<double>(r) + 1.5 - 0.5 * block) / block;
-      const double below = std::floor(position);
-      const double t = position - below;
-      const auto k = static_cast<std::ptrdiff_t>(below);
-      const double l0 = block_log[static_cast<std::size_t>(std::clamp<std::ptrdiff_t>(k, 0, last))];
-      const double l1 =
-          block_log[static_cast<std::size_t>(std::clamp<std::ptrdiff_t>(k + 1, 0, last))];
-      const double e = l0 + t * (l1 - l0);
-      if (!(e == exponent)) {
-        exponent = e;
-        power = std::pow(10.0, e);
+    for (std::size_t begin = 0; begin < lambda.size(); begin += kStopCheckRows) {
+      if (Stopping()) return false;
+      const std::size_t end = std::min(lambda.size(), begin + kStopCheckRows);
+      for (std::size_t r = begin; r < end; ++r) {
+        const double position = (static_cast<double>(r) + 1.5 - 0.5 * block) / block;
+        const double below = std::floor(position);
+        const double t = position - below;
+        const auto k = static_cast<std::ptrdiff_t>(below);
+        const double l0 =
+            block_log[static_cast<std::size_t>(std::clamp<std::ptrdiff_t>(k, 0, last))];
+        const double l1 =
+            block_log[static_cast<std::size_t>(std::clamp<std::ptrdiff_t>(k + 1, 0, last))];
+        const double e = l0 + t * (l1 - l0);
+        if (!(e == exponent)) {
+          exponent = e;
+          power = std::pow(10.0, e);
+        }
+        lambda[r] = power;
       }
-      lambda[r] = power;
     }
+    return true;
   }
 
   std::span<const double> x_;
@@ -627,6 +688,8 @@ class NoiseSmoother {
   BandSolver solver_;
   reduce_internal::SmootherFactors::Store& factors_;
   std::vector<SubstitutionJob> jobs_;
+  std::stop_token stop_;
+  bool stopped_ = false;
 };
 
 absl::Status ValidateOptions(const NoiseFitOptions& options) {
@@ -650,7 +713,8 @@ absl::Status ValidateOptions(const NoiseFitOptions& options) {
 std::vector<double> SmoothToNoise(std::span<const double> samples, double sigma,
                                   const NoiseFitOptions& options) {
   reduce_internal::SmootherFactors factors;
-  return reduce_internal::SmoothToNoise(samples, sigma, options, factors);
+  // Without a stop token the smoother runs to the end.
+  return *reduce_internal::SmoothToNoise(samples, sigma, options, factors, {});
 }
 
 absl::StatusOr<SplineFit> FitToNoise(std::span<const double> samples, double sigma,
@@ -659,10 +723,13 @@ absl::StatusOr<SplineFit> FitToNoise(std::span<const double> samples, double sig
   return reduce_internal::FitToNoise(samples, sigma, options, stop, factors);
 }
 
-std::vector<double> reduce_internal::SmoothToNoise(std::span<const double> samples, double sigma,
-                                                   const NoiseFitOptions& options,
-                                                   SmootherFactors& factors) {
-  return NoiseSmoother(samples, sigma, options, factors).Run();
+absl::StatusOr<std::vector<double>> reduce_internal::SmoothToNoise(
+    std::span<const double> samples, double sigma, const NoiseFitOptions& options,
+    SmootherFactors& factors, std::stop_token stop) {
+  NoiseSmoother smoother(samples, sigma, options, factors, std::move(stop));
+  std::vector<double> smooth = smoother.Run();
+  if (smoother.stopped()) return absl::CancelledError("cancelled");
+  return smooth;
 }
 
 absl::StatusOr<SplineFit> reduce_internal::FitToNoise(std::span<const double> samples,
@@ -683,9 +750,11 @@ absl::StatusOr<SplineFit> reduce_internal::FitToNoise(std::span<const double> sa
   }
   TEMPOKEY_RETURN_IF_ERROR(ValidateOptions(options));
   TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
-  const std::vector<double> smooth = SmoothToNoise(samples, sigma, options, factors);
+  absl::StatusOr<std::vector<double>> smooth =
+      SmoothToNoise(samples, sigma, options, factors, stop);
+  if (!smooth.ok()) return smooth.status();
   TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
-  const std::span<const double> channel(smooth);
+  const std::span<const double> channel(*smooth);
   const double bound = options.key_sigmas * sigma;
   return FitWithinTolerance({&channel, 1}, {&bound, 1}, {}, stop);
 }

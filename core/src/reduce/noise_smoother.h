@@ -34,9 +34,13 @@ class SmootherFactors {
 
 inline constexpr std::size_t kMaxSmootherFactorBytes = std::size_t{32} << 20;
 
-// SmoothToNoise() and FitToNoise() (noise_fit.h) reusing `factors`.
-std::vector<double> SmoothToNoise(std::span<const double> samples, double sigma,
-                                  const NoiseFitOptions& options, SmootherFactors& factors);
+// SmoothToNoise() and FitToNoise() (noise_fit.h) reusing `factors`. Both look at `stop` every
+// few milliseconds of work (between batches of window solves, per guard round, and every 65536
+// rows of a band solve) and return kCancelled "cancelled" soon after a stop is requested; the
+// results are otherwise the same, bit for bit, whatever the token.
+absl::StatusOr<std::vector<double>> SmoothToNoise(std::span<const double> samples, double sigma,
+                                                  const NoiseFitOptions& options,
+                                                  SmootherFactors& factors, std::stop_token stop);
 absl::StatusOr<SplineFit> FitToNoise(std::span<const double> samples, double sigma,
                                      const NoiseFitOptions& options, std::stop_token stop,
                                      SmootherFactors& factors);

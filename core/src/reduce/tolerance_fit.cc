@@ -909,7 +909,8 @@ class Fitter {
 
   // Lawson's iteration on the channels of `w` that are over their bound: each round multiplies
   // every frame's weight by its error and refits, so the fit leans towards the minimax one. True
-  // once every channel is within its bound. Precondition: `w` is over the bound (FitWindow()).
+  // once every channel is within its bound; false when one stays over, or once a stop was seen
+  // (each round counts the window's frames). Precondition: `w` is over the bound (FitWindow()).
   bool LawsonWindow(Window& w) {
     const std::int64_t origin = w.frames[0];
     const std::int64_t span = w.frames[w.count - 1] - origin + 1;
@@ -921,6 +922,9 @@ class Fitter {
       double ratio = channels_.size() == 1 ? kOver : WindowRatio(c, run, 0, w.count - 1, 1.0);
       lawson_.assign(static_cast<std::size_t>(span), 1.0);
       for (int round = 0; round < options_.lawson_iterations && ratio > 1.0; ++round) {
+        // A round reweights, refits and measures the window's frames: up to 100 rounds on a
+        // window of thousands of frames, so each one counts for the stop token.
+        if (Stopping(span)) return false;
         Reweight(s, run, 1e-3 * bounds_[c], origin);
         // Summed in frame order.
         double total = 0.0;
@@ -999,11 +1003,6 @@ class Fitter {
     Window base = trial;
     Window miss = trial;
     for (int i = 1; i + 1 < count; ++i) {
-      // The window's frames, every channel, a few trials each.
-      if (Stopping(4 * (fit.frames[i + 1] - out.frames.back()) *
-                   static_cast<std::int64_t>(c_count))) {
-        return;
-      }
       // Keys around the candidate: up to two accepted ones before, two remaining after.
       const int before = std::min<int>(kWindowSide, static_cast<int>(out.frames.size()));
       const int after = std::min(kWindowSide, count - 1 - i);
@@ -1028,6 +1027,10 @@ class Fitter {
       base.free_last = after == kWindowSide ? base.count - 2 : base.count - 1;
       // The key after the removed one may slide, unless it is the clip's last.
       const bool can_slide = i + 1 < count - 1;
+      // Samples of work of one trial (a fit and a measure of the window's frames, every channel):
+      // a candidate may take up to slide_frames + 1 trials, each counted for the stop token.
+      const std::int64_t trial_work = (base.frames[base.count - 1] - base.frames[0] + 1) *
+                                      static_cast<std::int64_t>(c_count);
 
       // Least squares on the window as it is and with the next key slid; the first that fits is
       // taken, else Lawson's iteration on the closest miss.
@@ -1049,6 +1052,7 @@ class Fitter {
           trial.frames = base.frames;
         }
         trial.frames[before] = moved;
+        if (Stopping(trial_work)) return;
         int worst_key = 0;
         const double ratio = FitWindow(trial, reach, &worst_key);
         if (ratio <= 1.0) {
@@ -1065,6 +1069,7 @@ class Fitter {
         trial = miss;
         removed = true;
       }
+      if (stopped_) return;  // LawsonWindow() gave up at a stop: the fit is not to be used
       if (!removed) {
         push(i);
         continue;

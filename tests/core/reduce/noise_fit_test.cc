@@ -5,11 +5,15 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <future>
+#include <latch>
 #include <numbers>
 #include <random>
+#include <stop_token>
 #include <string>
 #include <vector>
 
+#include "core/src/reduce/noise_smoother.h"
 #include "tempokey/core/io/bvh.h"
 #include "tempokey/core/model/keyed_clip.h"
 #include "tempokey/core/reduce/reduce.h"
@@ -271,6 +275,74 @@ TEST(NoiseReductionCorpusTest, CleanBandaiClipsReadAsNearlyNoiseless) {
     EXPECT_LT(levels[levels.size() / 2], 0.2);
     EXPECT_LT(result->report.rms_error, 0.12);
   }
+}
+
+// ---- cancellation -------------------------------------------------------------------------------
+
+// The smoother looks at the stop token inside its searches and band solves: a stop requested
+// while a long channel is being smoothed ends the reduction with kCancelled, never a finished
+// result. What these tests pin is the outcome, not a duration (bench/cancel_bench measures how
+// soon the stop is seen).
+
+// A slow sine under noise of kSigma: the searches pick levels well inside their range.
+std::vector<double> LongNoisySine(int frames) {
+  std::vector<double> v;
+  v.reserve(static_cast<std::size_t>(frames));
+  for (int f = 0; f < frames; ++f) v.push_back(10.0 * std::sin(0.01 * f));
+  return WithNoise(std::move(v), kSigma, kSeed);
+}
+
+TEST(NoiseCancellationTest, SmootherGivenAStoppedTokenReturnsCancelled) {
+  // Beyond the frames the lane searches take: the search solves the whole channel level by level.
+  const std::vector<double> samples = LongNoisySine(200'000);
+  reduce_internal::SmootherFactors factors;
+  std::stop_source stop;
+  stop.request_stop();
+
+  const absl::StatusOr<std::vector<double>> smooth =
+      reduce_internal::SmoothToNoise(samples, kSigma, {}, factors, stop.get_token());
+
+  EXPECT_EQ(smooth.status().code(), absl::StatusCode::kCancelled) << smooth.status();
+}
+
+TEST(NoiseCancellationTest, SmootherWithATokenNeverStoppedGivesTheSameCurveBitForBit) {
+  const std::vector<double> samples = LongNoisySine(5000);
+  reduce_internal::SmootherFactors factors;
+  const std::stop_source stop;
+
+  const absl::StatusOr<std::vector<double>> smooth =
+      reduce_internal::SmoothToNoise(samples, kSigma, {}, factors, stop.get_token());
+
+  ASSERT_TRUE(smooth.ok()) << smooth.status();
+  EXPECT_EQ(*smooth, SmoothToNoise(samples, kSigma));
+}
+
+TEST(NoiseCancellationTest, NoiseReductionOfALongChannelStoppedFromAnotherThreadIsCancelled) {
+  // One channel of a million frames: seconds of smoothing uncancelled, and the only look at the
+  // token between channels comes before it.
+  Clip clip;
+  clip.name = "long";
+  clip.frame_time_seconds = 1.0 / 120.0;
+  clip.frame_count = 1'000'000;
+  clip.channels.push_back({.joint = -1, .kind = ChannelKind::kScalar, .name = "s",
+                           .samples = LongNoisySine(1'000'000)});
+  ReduceOptions options;
+  options.method = ReduceMethod::kNoise;
+  options.noise.position_sigma = kSigma;
+  std::stop_source stop;
+  std::latch started(1);
+
+  // The stop is requested from this thread once the reduction's thread is about to begin, so it
+  // lands while the channel is being smoothed.
+  std::future<absl::StatusOr<ReduceResult>> run = std::async(std::launch::async, [&] {
+    started.count_down();
+    return ReduceKeys(clip, options, {}, stop.get_token());
+  });
+  started.wait();
+  stop.request_stop();
+  const absl::StatusOr<ReduceResult> result = run.get();
+
+  EXPECT_EQ(result.status().code(), absl::StatusCode::kCancelled) << result.status();
 }
 
 }  // namespace

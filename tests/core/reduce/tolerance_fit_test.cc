@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <future>
+#include <latch>
 #include <limits>
 #include <random>
 #include <span>
@@ -232,6 +234,33 @@ TEST(ToleranceFitTest, StopRequestCancels) {
   const absl::StatusOr<SplineFit> fit = FitWithinTolerance(channels, bounds, {}, stop.get_token());
 
   EXPECT_EQ(fit.status().code(), absl::StatusCode::kCancelled);
+}
+
+TEST(ToleranceFitTest, LongFitStoppedFromAnotherThreadIsCancelled) {
+  // A triangle wave of 3 million frames with keys a million frames apart to start, the widest
+  // slides and the most Lawson rounds: about a minute of work uncancelled (the removal's trials
+  // and Lawson rounds count for the stop token, not only its candidates).
+  Samples triangle(3'000'000);
+  for (std::size_t f = 0; f < triangle.size(); ++f) {
+    triangle[f] = 1e-3 * std::abs(static_cast<double>(f % 400'000) - 200'000.0);
+  }
+  const std::vector<std::span<const double>> channels = {triangle};
+  const std::vector<double> bounds = {0.01};
+  const ToleranceFitOptions options = {
+      .initial_spacing_frames = 1'000'000, .lawson_iterations = 100, .slide_frames = 1000};
+  std::stop_source stop;
+  std::latch started(1);
+
+  // The stop is requested from this thread once the fit's thread is about to begin.
+  std::future<absl::StatusOr<SplineFit>> run = std::async(std::launch::async, [&] {
+    started.count_down();
+    return FitWithinTolerance(channels, bounds, options, stop.get_token());
+  });
+  started.wait();
+  stop.request_stop();
+  const absl::StatusOr<SplineFit> fit = run.get();
+
+  EXPECT_EQ(fit.status().code(), absl::StatusCode::kCancelled) << fit.status();
 }
 
 }  // namespace
