@@ -121,10 +121,15 @@ void ResampleRotation(const ResamplePlan& plan, const EulerOrder& order,
 
 // The part of ResampleRotation() that depends on the plan alone (which source samples the joints'
 // rotations are read at; for each output sample that interpolates, between which samples and
-// where), made once per plan and shared by every joint. Retime() makes one per call.
+// where), made once per plan and shared by every joint. Retime() makes one per call. It holds a
+// few bytes per batch of output samples and a list of the source runs read: the per-sample tables
+// are laid out one batch at a time as each joint is resampled.
 class RotationSchedule {
  public:
-  explicit RotationSchedule(const ResamplePlan& plan);
+  // Cancellation as MakeResamplePlan(): when `stop` is requested the schedule may be left
+  // incomplete; the caller looks at `stop` right after and then never uses it (ResampleRotation()
+  // with an incomplete schedule writes nothing).
+  explicit RotationSchedule(const ResamplePlan& plan, std::stop_token stop = {});
   ~RotationSchedule();
   RotationSchedule(RotationSchedule&&) noexcept;
   RotationSchedule& operator=(RotationSchedule&&) noexcept;
