@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 #include <span>
+#include <stop_token>
 #include <vector>
 
 #include "gtest/gtest.h"
@@ -87,6 +88,36 @@ TEST(ResampleRotationTest, AFixedJointNearGimbalLockStaysWithinTheReferencesTole
             << "middle " << middle << " channel " << c << " sample " << j;
       }
     }
+  }
+}
+
+TEST(ResampleRotationTest, AScheduleMadeAfterAStopRequestIsNeverUsed) {
+  const ResamplePlan plan = PlanAtSpeed(1.3, ResampleFilter::kLanczos3);
+  std::array<std::vector<double>, 3> source;
+  for (int c = 0; c < 3; ++c) {
+    source[c].resize(kSourceCount);
+    for (std::int64_t i = 0; i < kSourceCount; ++i) {
+      source[c][static_cast<std::size_t>(i)] = 10.0 * (c + 1) * std::sin(0.05 * static_cast<double>(i));
+    }
+  }
+  std::stop_source stop;
+  stop.request_stop();
+  const RotationSchedule incomplete(plan, stop.get_token());
+
+  constexpr double kUntouched = 1234.5;
+  std::array<std::vector<double>, 3> out;
+  std::array<std::span<const double>, 3> in;
+  std::array<std::span<double>, 3> target;
+  for (int c = 0; c < 3; ++c) {
+    out[c].assign(plan.position.size(), kUntouched);
+    in[c] = source[c];
+    target[c] = out[c];
+  }
+  // No stop requested here: the schedule alone is incomplete.
+  ResampleRotation(plan, incomplete, *ParseEulerOrder("ZXY"), in, target);
+
+  for (int c = 0; c < 3; ++c) {
+    for (double v : out[c]) ASSERT_EQ(v, kUntouched);
   }
 }
 
