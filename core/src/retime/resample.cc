@@ -386,22 +386,6 @@ void ResampleAngle(const ResamplePlan& plan, std::span<const double> degrees,
   }
 }
 
-struct RotationSchedule::Data {
-  // Runs [begin, end) of the source samples some output reads.
-  std::vector<std::pair<std::size_t, std::size_t>> runs;
-  // The output samples in batches [begin, end) of consecutive samples, covering them all. A
-  // batch's copies are written directly; its samples that interpolate (at most kRotationBatch,
-  // reading at most about kRotationStopTaps source rotations) are laid out in slots (BatchSlots)
-  // one batch at a time, so that the scratch is sized to one batch rather than to the clip.
-  struct Batch {
-    std::size_t begin, end;
-  };
-  std::vector<Batch> batches;
-  std::size_t interpolating = 0;  // output samples that are not copies
-  // False when the constructor saw a stop request and returned early: never used then.
-  bool complete = false;
-};
-
 namespace {
 
 // True when every source sample of `channel` has the first one's value (bit for bit).
@@ -450,6 +434,10 @@ bool IsFixedRotation(const std::array<std::span<const double>, 3>& source,
 constexpr std::size_t kRotationBatch = 1024;
 // Most source rotations the samples of one batch read (see the schedule's batches).
 constexpr std::int64_t kRotationStopTaps = kResampleStopCheckTaps / 16;
+// The schedule lays out every batch's slots beforehand, once for all joints, when they take at
+// most this; on longer clips each joint lays out one batch at a time into scratch (a little
+// slower, in memory bounded by a batch's).
+constexpr std::size_t kPrebuiltSlotBytes = std::size_t{64} << 20;
 
 // The source quaternions the plan reads (RotationSchedule's runs), converted once each: a copy
 // reads none. No global sign continuity is imposed: each use aligns signs locally (slerp takes the
@@ -458,12 +446,12 @@ class SourceQuats {
  public:
   // Converts in chunks, the stop token looked at between them; when a stop is requested it
   // returns early, its quaternions incomplete: the caller looks at the token after.
-  SourceQuats(const RotationSchedule::Data& schedule, const EulerOrder& order,
+  SourceQuats(std::span<const std::pair<std::size_t, std::size_t>> runs, const EulerOrder& order,
               const std::array<std::span<const double>, 3>& source, const std::stop_token& stop)
       : quats_(std::make_unique_for_overwrite<double[]>(4 * source[0].size())) {
     // A chunk of conversions takes about a millisecond.
     constexpr auto kChunk = static_cast<std::size_t>(kResampleStopCheckTaps / 2);
-    for (const auto& [run_begin, run_end] : schedule.runs) {
+    for (const auto& [run_begin, run_end] : runs) {
       for (std::size_t begin = run_begin; begin < run_end; begin += kChunk) {
         if (stop.stop_requested()) return;
         const std::size_t end = std::min(run_end, begin + kChunk);
@@ -631,21 +619,18 @@ class BatchSlots {
  public:
   using Job = retime_internal::WeightedMeanJob;
 
-  BatchSlots()
-      : output_(Scratch<std::int64_t>(kRotationBatch)),
-        i0_(Scratch<std::int64_t>(kRotationBatch)),
-        nearest_(Scratch<std::int64_t>(kRotationBatch)),
-        t_(Scratch<double>(kRotationBatch)),
-        jobs_(Scratch<Job>(kRotationBatch)),
-        groups_(Scratch<retime_internal::MeanGroup>(kRotationBatch / retime_internal::kMeanLanes)) {}
-
   // The slots of the samples `interpolating` (output indices, ascending; at most kRotationBatch).
+  // The storage only grows: made again for another batch, it keeps the larger one's.
   void Make(const ResamplePlan& plan, std::span<const std::size_t> interpolating) {
     std::size_t begin[3] = {0, 0, 0};  // lerps, cubics, weighted
     for (const std::size_t j : interpolating) ++begin[KindIndex(plan.kind[j])];
     size_ = interpolating.size();
     cubic_begin_ = begin[0];
     weighted_begin_ = begin[0] + begin[1];
+    for (std::vector<std::int64_t>* v : {&output_, &i0_, &nearest_}) Grow(*v, size_);
+    Grow(t_, size_);
+    Grow(jobs_, begin[2]);
+    Grow(groups_, (begin[2] + retime_internal::kMeanLanes - 1) / retime_internal::kMeanLanes);
     std::size_t next[3] = {0, cubic_begin_, weighted_begin_};
     for (const std::size_t j : interpolating) {
       const int kind = KindIndex(plan.kind[j]);
@@ -668,16 +653,29 @@ class BatchSlots {
   std::size_t size() const { return size_; }
   std::size_t cubic_begin() const { return cubic_begin_; }
   std::size_t weighted_begin() const { return weighted_begin_; }
-  const std::int64_t* output() const { return output_.get(); }
-  const std::int64_t* i0() const { return i0_.get(); }
-  const double* t() const { return t_.get(); }
-  const std::int64_t* nearest() const { return nearest_.get(); }
+  const std::int64_t* output() const { return output_.data(); }
+  const std::int64_t* i0() const { return i0_.data(); }
+  const double* t() const { return t_.data(); }
+  const std::int64_t* nearest() const { return nearest_.data(); }
   const Job& job(std::size_t s) const { return jobs_[s]; }
   retime_internal::MeanTables mean_tables() const {
-    return {groups_.get(), tap_source_.data(), tap_weight_.data()};
+    return {groups_.data(), tap_source_.data(), tap_weight_.data()};
+  }
+
+  // Bytes a batch of `slots` slots, `means` of them weighted means with `taps` taps in all,
+  // takes at most (the tables pad a group to its longest lane: at most kMeanLanes times).
+  static std::size_t BytesAtMost(std::size_t slots, std::size_t means, std::size_t taps) {
+    return slots * (3 * sizeof(std::int64_t) + sizeof(double)) + means * sizeof(Job) +
+           means * sizeof(retime_internal::MeanGroup) +
+           retime_internal::kMeanLanes * taps * (sizeof(std::int64_t) + sizeof(double));
   }
 
  private:
+  template <class T>
+  static void Grow(std::vector<T>& v, std::size_t n) {
+    if (v.size() < n) v.resize(n);
+  }
+
   static int KindIndex(SampleKind kind) {
     return kind == SampleKind::kLerp ? 0 : kind == SampleKind::kCubic ? 1 : 2;
   }
@@ -695,11 +693,8 @@ class BatchSlots {
       groups_[g / kLanes].taps = taps;
       total += kLanes * static_cast<std::size_t>(taps);
     }
-    // Grown only: the vectors keep the largest batch's size.
-    if (tap_source_.size() < total) {
-      tap_source_.resize(total);
-      tap_weight_.resize(total);
-    }
+    Grow(tap_source_, total);
+    Grow(tap_weight_, total);
     std::size_t tap_begin = 0;
     for (std::size_t g = 0; g < end; g += kLanes) {
       retime_internal::MeanGroup& group = groups_[g / kLanes];
@@ -726,14 +721,37 @@ class BatchSlots {
     }
   }
 
-  std::unique_ptr<std::int64_t[]> output_, i0_, nearest_;
-  std::unique_ptr<double[]> t_;
-  std::unique_ptr<Job[]> jobs_;
-  std::unique_ptr<retime_internal::MeanGroup[]> groups_;
+  std::vector<std::int64_t> output_, i0_, nearest_;
+  std::vector<double> t_;
+  std::vector<Job> jobs_;
+  std::vector<retime_internal::MeanGroup> groups_;
   std::vector<std::int64_t> tap_source_;
   std::vector<double> tap_weight_;
   std::size_t size_ = 0, cubic_begin_ = 0, weighted_begin_ = 0;
 };
+
+}  // namespace
+
+struct RotationSchedule::Data {
+  // Runs [begin, end) of the source samples some output reads.
+  std::vector<std::pair<std::size_t, std::size_t>> runs;
+  // The output samples in batches [begin, end) of consecutive samples, covering them all. A
+  // batch's copies are written directly; its samples that interpolate (at most kRotationBatch,
+  // reading at most about kRotationStopTaps source rotations) are laid out in slots (BatchSlots)
+  // one batch at a time, so that the scratch is sized to one batch rather than to the clip.
+  struct Batch {
+    std::size_t begin, end;
+  };
+  std::vector<Batch> batches;
+  std::size_t interpolating = 0;  // output samples that are not copies
+  // On clips whose slots take at most kPrebuiltSlotBytes, each batch's slots made once here and
+  // shared by every joint (faster on the short clips most retimes see); empty otherwise.
+  std::vector<BatchSlots> prebuilt;
+  // False when the constructor saw a stop request and returned early: never used then.
+  bool complete = false;
+};
+
+namespace {
 
 // Marks the source samples output sample j (not a copy) reads.
 void MarkNeeded(const ResamplePlan& plan, std::size_t j, std::vector<unsigned char>& needed) {
@@ -762,6 +780,7 @@ RotationSchedule::RotationSchedule(const ResamplePlan& plan, std::stop_token sto
   // The token is looked at once per kResampleStopCheckTaps outputs and taps.
   StopCheck check(stop);
   std::int64_t work = 0;
+  std::size_t means = 0, mean_taps = 0;
   // A batch ends once kRotationBatch of its samples interpolate or they read kRotationStopTaps
   // source rotations, and the stop token is looked at between batches: a few milliseconds of
   // work at most, whatever the decimation ratio (batching changes no result: every step is per
@@ -778,6 +797,10 @@ RotationSchedule::RotationSchedule(const ResamplePlan& plan, std::stop_token sto
       const std::int64_t taps = plan.offset[j + 1] - plan.offset[j];
       taps_read += taps;
       work += taps;
+      if (plan.kind[j] == SampleKind::kWeighted) {
+        ++means;
+        mean_taps += static_cast<std::size_t>(taps);
+      }
       MarkNeeded(plan, j, needed);
     }
     d.interpolating += interpolating;
@@ -795,6 +818,18 @@ RotationSchedule::RotationSchedule(const ResamplePlan& plan, std::stop_token sto
     d.runs.emplace_back(i, end);
     work += static_cast<std::int64_t>(end - i);
     i = end;
+  }
+  if (BatchSlots::BytesAtMost(d.interpolating, means, mean_taps) <= kPrebuiltSlotBytes) {
+    d.prebuilt.resize(d.batches.size());
+    std::vector<std::size_t> interpolating;
+    for (std::size_t b = 0; b < d.batches.size(); ++b) {
+      if (stop.stop_requested()) return;
+      interpolating.clear();
+      for (std::size_t j = d.batches[b].begin; j < d.batches[b].end; ++j) {
+        if (plan.kind[j] != SampleKind::kCopy) interpolating.push_back(j);
+      }
+      d.prebuilt[b].Make(plan, interpolating);
+    }
   }
   d.complete = true;
 }
@@ -840,13 +875,13 @@ void WriteFixedRotation(const ResamplePlan& plan,
 bool WriteCopies(const ResamplePlan& plan, std::size_t begin, std::size_t end,
                  const std::array<std::span<const double>, 3>& source,
                  const std::array<std::span<double>, 3>& out, const std::stop_token& stop,
-                 std::vector<std::size_t>& interpolating) {
-  interpolating.clear();
+                 std::vector<std::size_t>* interpolating) {
+  if (interpolating != nullptr) interpolating->clear();
   constexpr auto kChunk = static_cast<std::size_t>(kResampleStopCheckTaps);
   for (std::size_t j = begin; j < end; ++j) {
     if ((j - begin) % kChunk == kChunk - 1 && stop.stop_requested()) return false;
     if (plan.kind[j] != SampleKind::kCopy) {
-      interpolating.push_back(j);
+      if (interpolating != nullptr) interpolating->push_back(j);
       continue;
     }
     const auto i = static_cast<std::size_t>(plan.first[j]);
@@ -868,7 +903,7 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
   if (d.interpolating == 0) {
     // Copies alone.
     for (const RotationSchedule::Data::Batch& batch : d.batches) {
-      if (!WriteCopies(plan, batch.begin, batch.end, source, out, stop, interpolating)) return;
+      if (!WriteCopies(plan, batch.begin, batch.end, source, out, stop, nullptr)) return;
     }
     return;
   }
@@ -877,7 +912,7 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
     return;
   }
 
-  const SourceQuats quats(d, order, source, stop);
+  const SourceQuats quats(d.runs, order, source, stop);
   if (stop.stop_requested()) return;
   // Each a pass or two over a channel: tens of milliseconds at most on the longest clips.
   std::array<Unwrapped, 3> unwrapped;
@@ -920,11 +955,17 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
       Scratch<retime_internal::WeightedMeanJob>(capacity);
   const std::unique_ptr<std::size_t[]> markley_slot = Scratch<std::size_t>(capacity);
   interpolating.reserve(capacity);
-  BatchSlots slots;
-  for (const RotationSchedule::Data::Batch& batch : d.batches) {
+  BatchSlots scratch;
+  for (std::size_t b = 0; b < d.batches.size(); ++b) {
     if (stop.stop_requested()) return;
-    if (!WriteCopies(plan, batch.begin, batch.end, source, out, stop, interpolating)) return;
-    slots.Make(plan, interpolating);
+    const RotationSchedule::Data::Batch& batch = d.batches[b];
+    const bool prebuilt = !d.prebuilt.empty();
+    if (!WriteCopies(plan, batch.begin, batch.end, source, out, stop,
+                     prebuilt ? nullptr : &interpolating)) {
+      return;
+    }
+    if (!prebuilt) scratch.Make(plan, interpolating);
+    const BatchSlots& slots = prebuilt ? d.prebuilt[b] : scratch;
     const std::size_t count = slots.size();
     const std::size_t slerps = slots.cubic_begin();
     retime_internal::SlerpQuats(quats.data(), slots.i0(), slots.t(), slerps,

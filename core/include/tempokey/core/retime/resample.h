@@ -121,9 +121,10 @@ void ResampleRotation(const ResamplePlan& plan, const EulerOrder& order,
 
 // The part of ResampleRotation() that depends on the plan alone (which source samples the joints'
 // rotations are read at; for each output sample that interpolates, between which samples and
-// where), made once per plan and shared by every joint. Retime() makes one per call. It holds a
-// few bytes per batch of output samples and a list of the source runs read: the per-sample tables
-// are laid out one batch at a time as each joint is resampled.
+// where), made once per plan and shared by every joint. Retime() makes one per call. Memory: the
+// per-sample tables of a clip that needs at most 64 MB of them are laid out here, once; a longer
+// clip's are laid out one batch of outputs at a time as each joint is resampled (the schedule
+// then holds a few bytes per batch and the runs of source samples read).
 class RotationSchedule {
  public:
   // Cancellation as MakeResamplePlan(): when `stop` is requested the schedule may be left
