@@ -613,8 +613,8 @@ SlotPlace PlaceOf(const ResamplePlan& plan, std::size_t j) {
 // The samples of one batch that interpolate, in slots: the slerps, then the squads, then the
 // weighted means. Per slot: the output index; the interval of the reference's linear
 // interpolation (and of a slerp or squad), i0 = min(floor(x), last - 1) and t = x - i0; the
-// nearest source sample. Made again for every batch of every joint into the same scratch, which
-// costs less than reading clip-long tables back from memory and bounds the memory by a batch's.
+// nearest source sample. Either made once per batch by the schedule (short clips) or again for
+// every batch of every joint into the same scratch (long clips: memory bounded by a batch's).
 class BatchSlots {
  public:
   using Job = retime_internal::WeightedMeanJob;
@@ -622,7 +622,7 @@ class BatchSlots {
   // The slots of the samples `interpolating` (output indices, ascending; at most kRotationBatch).
   // The storage only grows: made again for another batch, it keeps the larger one's.
   void Make(const ResamplePlan& plan, std::span<const std::size_t> interpolating) {
-    std::size_t begin[3] = {0, 0, 0};  // lerps, cubics, weighted
+    std::size_t begin[3] = {0, 0, 0};  // lerps, cubics, weighted means (KindIndex())
     for (const std::size_t j : interpolating) ++begin[KindIndex(plan.kind[j])];
     size_ = interpolating.size();
     cubic_begin_ = begin[0];
@@ -640,7 +640,7 @@ class BatchSlots {
       i0_[slot] = place.i0;
       t_[slot] = place.t;
       nearest_[slot] = place.nearest;
-      if (kind != 2) continue;
+      if (kind != kWeightedIndex) continue;
       const std::int64_t first = plan.first[j];
       const std::int64_t count = plan.offset[j + 1] - plan.offset[j];
       jobs_[slot - weighted_begin_] = {
@@ -676,8 +676,9 @@ class BatchSlots {
     if (v.size() < n) v.resize(n);
   }
 
+  static constexpr int kWeightedIndex = 2;
   static int KindIndex(SampleKind kind) {
-    return kind == SampleKind::kLerp ? 0 : kind == SampleKind::kCubic ? 1 : 2;
+    return kind == SampleKind::kLerp ? 0 : kind == SampleKind::kCubic ? 1 : kWeightedIndex;
   }
 
   // The lane-major tables of the weighted means (see MeanGroup).
