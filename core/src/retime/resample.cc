@@ -662,12 +662,12 @@ class BatchSlots {
     return {groups_.data(), tap_source_.data(), tap_weight_.data()};
   }
 
-  // Bytes a batch of `slots` slots, `means` of them weighted means with `taps` taps in all,
-  // takes at most (the tables pad a group to its longest lane: at most kMeanLanes times).
-  static std::size_t BytesAtMost(std::size_t slots, std::size_t means, std::size_t taps) {
+  // Bytes the slots of `slots` samples take, `means` of them weighted means in groups whose
+  // tables hold `padded_taps` taps (MeanGroup).
+  static std::size_t Bytes(std::size_t slots, std::size_t means, std::size_t padded_taps) {
     return slots * (3 * sizeof(std::int64_t) + sizeof(double)) + means * sizeof(Job) +
-           means * sizeof(retime_internal::MeanGroup) +
-           retime_internal::kMeanLanes * taps * (sizeof(std::int64_t) + sizeof(double));
+           (means / retime_internal::kMeanLanes + 1) * sizeof(retime_internal::MeanGroup) +
+           padded_taps * (sizeof(std::int64_t) + sizeof(double));
   }
 
  private:
@@ -784,14 +784,17 @@ RotationSchedule::RotationSchedule(const ResamplePlan& plan, std::stop_token sto
   // The token is looked at once per kResampleStopCheckTaps outputs and taps.
   StopCheck check(stop);
   std::int64_t work = 0;
-  std::size_t means = 0, mean_taps = 0;
+  // The size of the slots: the weighted means, and their tables' taps (a batch's weighted means
+  // in groups of kMeanLanes, in order, each padded to its longest).
+  std::size_t means = 0, padded_taps = 0;
   // A batch ends once kRotationBatch of its samples interpolate or they read kRotationStopTaps
   // source rotations, and the stop token is looked at between batches: a few milliseconds of
   // work at most, whatever the decimation ratio (batching changes no result: every step is per
   // sample).
   for (std::size_t j = 0; j < m;) {
     const std::size_t begin = j;
-    std::size_t interpolating = 0;
+    std::size_t interpolating = 0, group_means = 0;
+    std::int64_t group_taps = 0;
     for (std::int64_t taps_read = 0;
          j < m && interpolating < kRotationBatch && taps_read < kRotationStopTaps; ++j) {
       if (check.After(work)) return;
@@ -803,10 +806,16 @@ RotationSchedule::RotationSchedule(const ResamplePlan& plan, std::stop_token sto
       work += taps;
       if (plan.kind[j] == SampleKind::kWeighted) {
         ++means;
-        mean_taps += static_cast<std::size_t>(taps);
+        group_taps = std::max(group_taps, taps);
+        if (++group_means == retime_internal::kMeanLanes) {
+          padded_taps += retime_internal::kMeanLanes * static_cast<std::size_t>(group_taps);
+          group_means = 0;
+          group_taps = 0;
+        }
       }
       MarkNeeded(plan, j, needed);
     }
+    padded_taps += retime_internal::kMeanLanes * static_cast<std::size_t>(group_taps);
     d.interpolating += interpolating;
     d.batches.push_back({begin, j});
   }
@@ -824,7 +833,7 @@ RotationSchedule::RotationSchedule(const ResamplePlan& plan, std::stop_token sto
     i = end;
   }
   const std::size_t copies = m - d.interpolating;
-  if (BatchSlots::BytesAtMost(d.interpolating, means, mean_taps) + 2 * sizeof(std::size_t) * copies <=
+  if (BatchSlots::Bytes(d.interpolating, means, padded_taps) + 2 * sizeof(std::size_t) * copies <=
       kPrebuiltSlotBytes) {
     d.prebuilt.resize(d.batches.size());
     d.copy_output.reserve(copies);
