@@ -748,9 +748,6 @@ struct RotationSchedule::Data {
   // On clips whose slots take at most kPrebuiltSlotBytes, each batch's slots made once here and
   // shared by every joint (faster on the short clips most retimes see); empty otherwise.
   std::vector<BatchSlots> prebuilt;
-  // With them, the output samples that copy a source sample: output index, source index.
-  std::vector<std::size_t> copy_output, copy_source;
-  bool laid_out = false;  // prebuilt and the copies made
   // False when the constructor saw a stop request and returned early: never used then.
   bool complete = false;
 };
@@ -832,27 +829,17 @@ RotationSchedule::RotationSchedule(const ResamplePlan& plan, std::stop_token sto
     work += static_cast<std::int64_t>(end - i);
     i = end;
   }
-  const std::size_t copies = m - d.interpolating;
-  if (BatchSlots::Bytes(d.interpolating, means, padded_taps) + 2 * sizeof(std::size_t) * copies <=
-      kPrebuiltSlotBytes) {
+  if (BatchSlots::Bytes(d.interpolating, means, padded_taps) <= kPrebuiltSlotBytes) {
     d.prebuilt.resize(d.batches.size());
-    d.copy_output.reserve(copies);
-    d.copy_source.reserve(copies);
     std::vector<std::size_t> interpolating;
     for (std::size_t b = 0; b < d.batches.size(); ++b) {
+      if (stop.stop_requested()) return;
       interpolating.clear();
       for (std::size_t j = d.batches[b].begin; j < d.batches[b].end; ++j) {
-        if (check.After(work++)) return;
-        if (plan.kind[j] != SampleKind::kCopy) {
-          interpolating.push_back(j);
-          continue;
-        }
-        d.copy_output.push_back(j);
-        d.copy_source.push_back(static_cast<std::size_t>(plan.first[j]));
+        if (plan.kind[j] != SampleKind::kCopy) interpolating.push_back(j);
       }
       d.prebuilt[b].Make(plan, interpolating);
     }
-    d.laid_out = true;
   }
   d.complete = true;
 }
@@ -881,20 +868,9 @@ namespace {
 
 // The outputs of a joint whose rotation never changes (IsFixedRotation()): copies, and the
 // source's angles everywhere else.
-void WriteFixedRotation(const ResamplePlan& plan, const RotationSchedule::Data& d,
+void WriteFixedRotation(const ResamplePlan& plan,
                         const std::array<std::span<const double>, 3>& source,
                         const std::array<std::span<double>, 3>& out, const std::stop_token& stop) {
-  if (d.laid_out) {
-    // The copies are written: the slots' outputs are the rest.
-    for (const BatchSlots& slots : d.prebuilt) {
-      if (stop.stop_requested()) return;
-      for (std::size_t slot = 0; slot < slots.size(); ++slot) {
-        const auto j = static_cast<std::size_t>(slots.output()[slot]);
-        for (int c = 0; c < 3; ++c) out[c][j] = source[c][0];
-      }
-    }
-    return;
-  }
   StopCheck check(stop);
   for (std::size_t j = 0; j < plan.position.size(); ++j) {
     if (check.After(static_cast<std::int64_t>(j))) return;
@@ -934,16 +910,7 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
   if (!d.complete || stop.stop_requested()) return;
   const std::int64_t last = plan.source_count - 1;
   std::vector<std::size_t> interpolating;
-  if (d.laid_out) {
-    // The copies first, all at once; the batches then leave them be.
-    constexpr auto kChunk = static_cast<std::size_t>(kResampleStopCheckTaps);
-    for (std::size_t r = 0; r < d.copy_output.size(); ++r) {
-      if (r % kChunk == kChunk - 1 && stop.stop_requested()) return;
-      for (int c = 0; c < 3; ++c) out[c][d.copy_output[r]] = source[c][d.copy_source[r]];
-    }
-  }
   if (d.interpolating == 0) {
-    if (d.laid_out) return;
     // Copies alone.
     for (const RotationSchedule::Data::Batch& batch : d.batches) {
       if (!WriteCopies(plan, batch.begin, batch.end, source, out, stop, nullptr)) return;
@@ -951,7 +918,7 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
     return;
   }
   if (IsFixedRotation(source, stop)) {
-    WriteFixedRotation(plan, d, source, out, stop);
+    WriteFixedRotation(plan, source, out, stop);
     return;
   }
 
@@ -1002,11 +969,13 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
   for (std::size_t b = 0; b < d.batches.size(); ++b) {
     if (stop.stop_requested()) return;
     const RotationSchedule::Data::Batch& batch = d.batches[b];
-    if (!d.laid_out) {
-      if (!WriteCopies(plan, batch.begin, batch.end, source, out, stop, &interpolating)) return;
-      scratch.Make(plan, interpolating);
+    const bool prebuilt = !d.prebuilt.empty();
+    if (!WriteCopies(plan, batch.begin, batch.end, source, out, stop,
+                     prebuilt ? nullptr : &interpolating)) {
+      return;
     }
-    const BatchSlots& slots = d.laid_out ? d.prebuilt[b] : scratch;
+    if (!prebuilt) scratch.Make(plan, interpolating);
+    const BatchSlots& slots = prebuilt ? d.prebuilt[b] : scratch;
     const std::size_t count = slots.size();
     const std::size_t slerps = slots.cubic_begin();
     retime_internal::SlerpQuats(quats.data(), slots.i0(), slots.t(), slerps,
