@@ -386,32 +386,6 @@ void ResampleAngle(const ResamplePlan& plan, std::span<const double> degrees,
   }
 }
 
-struct RotationSchedule::Data {
-  // Runs [begin, end) of the source samples some output reads.
-  std::vector<std::pair<std::size_t, std::size_t>> runs;
-  // Output samples that copy a source sample: output index, source index.
-  std::vector<std::size_t> copy_output, copy_source;
-  // Output samples that interpolate, in slots: batch by batch (Batch), and within a batch the
-  // slerps, then the squads, then the weighted means. Per slot: the output index; the interval of
-  // the reference's linear interpolation (and of a slerp or squad), i0 = min(floor(x), last - 1)
-  // and t = x - i0; the nearest source sample.
-  std::vector<std::int64_t> output, i0, nearest;
-  std::vector<double> t;
-  struct Batch {
-    std::size_t begin, cubic_begin, weighted_begin, end;  // slots
-    std::size_t first_job;    // the batch's weighted means are jobs[first_job ...]
-    std::size_t first_group;  // and their mean groups groups[first_group ...]
-  };
-  std::vector<Batch> batches;
-  // The weighted means in slot order: their kernels (for Markley's mean and the scalar path),
-  // and the lane-major tables of the batched means.
-  using Job = retime_internal::WeightedMeanJob;
-  std::vector<Job> jobs;
-  std::vector<retime_internal::MeanGroup> groups;
-  std::vector<std::int64_t> tap_source;
-  std::vector<double> tap_weight;
-};
-
 namespace {
 
 // True when every source sample of `channel` has the first one's value (bit for bit).
@@ -439,9 +413,18 @@ bool IsConstant(std::span<const double> channel) {
 // it while the middle angle's cosine stays above kBatchedMinMiddleCos, which bounds how much a
 // rotation's rounding moves the outer angles; nearer gimbal lock the general path's own
 // safeguards apply).
-bool IsFixedRotation(const std::array<std::span<const double>, 3>& source) {
+// False as well when a stop is requested while it reads (the caller looks at the token after).
+bool IsFixedRotation(const std::array<std::span<const double>, 3>& source,
+                     const std::stop_token& stop) {
+  // In chunks, the token looked at between them: a long channel takes tens of milliseconds.
+  constexpr auto kChunk = static_cast<std::size_t>(kResampleStopCheckTaps);
   for (const std::span<const double>& channel : source) {
-    if (!IsConstant(channel)) return false;
+    for (std::size_t begin = 0; begin < channel.size(); begin += kChunk) {
+      if (stop.stop_requested()) return false;
+      const std::span<const double> chunk =
+          channel.subspan(begin, std::min(kChunk, channel.size() - begin));
+      if (chunk[0] != channel[0] || !IsConstant(chunk)) return false;
+    }
   }
   const double middle_cos = std::cos(source[1][0] * (std::numbers::pi / 180.0));
   return std::abs(middle_cos) >= retime_internal::kBatchedMinMiddleCos;
@@ -451,19 +434,31 @@ bool IsFixedRotation(const std::array<std::span<const double>, 3>& source) {
 constexpr std::size_t kRotationBatch = 1024;
 // Most source rotations the samples of one batch read (see the schedule's batches).
 constexpr std::int64_t kRotationStopTaps = kResampleStopCheckTaps / 16;
+// The schedule lays out every batch's slots beforehand, once for all joints, when they take at
+// most this; on longer clips each joint lays out one batch at a time into scratch (a little
+// slower, in memory bounded by a batch's).
+constexpr std::size_t kPrebuiltSlotBytes = std::size_t{64} << 20;
 
 // The source quaternions the plan reads (RotationSchedule's runs), converted once each: a copy
 // reads none. No global sign continuity is imposed: each use aligns signs locally (slerp takes the
 // short arc, the weighted mean aligns to its pivot, squad aligns its four inputs).
 class SourceQuats {
  public:
-  SourceQuats(const RotationSchedule::Data& schedule, const EulerOrder& order,
-              const std::array<std::span<const double>, 3>& source)
+  // Converts in chunks, the stop token looked at between them; when a stop is requested it
+  // returns early, its quaternions incomplete: the caller looks at the token after.
+  SourceQuats(std::span<const std::pair<std::size_t, std::size_t>> runs, const EulerOrder& order,
+              const std::array<std::span<const double>, 3>& source, const std::stop_token& stop)
       : quats_(std::make_unique_for_overwrite<double[]>(4 * source[0].size())) {
-    for (const auto& [begin, end] : schedule.runs) {
-      retime_internal::EulerToQuats(order, source[0].data() + begin, source[1].data() + begin,
-                                    source[2].data() + begin, end - begin,
-                                    quats_.get() + 4 * begin);
+    // A chunk of conversions takes about a millisecond.
+    constexpr auto kChunk = static_cast<std::size_t>(kResampleStopCheckTaps / 2);
+    for (const auto& [run_begin, run_end] : runs) {
+      for (std::size_t begin = run_begin; begin < run_end; begin += kChunk) {
+        if (stop.stop_requested()) return;
+        const std::size_t end = std::min(run_end, begin + kChunk);
+        retime_internal::EulerToQuats(order, source[0].data() + begin, source[1].data() + begin,
+                                      source[2].data() + begin, end - begin,
+                                      quats_.get() + 4 * begin);
+      }
     }
   }
 
@@ -615,116 +610,238 @@ SlotPlace PlaceOf(const ResamplePlan& plan, std::size_t j) {
   return {i0, x - static_cast<double>(i0), NearestIndex(x, last)};
 }
 
-// Lays out the lane-major tables of the weighted means jobs[first, end) (RotationSchedule::Data).
-void AddMeanGroups(const ResamplePlan& plan, std::size_t first, std::size_t end,
-                   RotationSchedule::Data& d) {
-  constexpr std::size_t kLanes = retime_internal::kMeanLanes;
-  for (std::size_t g = first; g < end; g += kLanes) {
-    retime_internal::MeanGroup group{.tap_begin = d.tap_source.size(), .taps = 0, .pivot = {}};
-    const RotationSchedule::Data::Job* lane_job[kLanes];
-    for (std::size_t lane = 0; lane < kLanes; ++lane) {
-      // Lanes past the last job repeat the first one, at weight 0 (see MeanGroup).
-      lane_job[lane] = &d.jobs[g + lane < end ? g + lane : g];
-      group.pivot[lane] = lane_job[lane]->pivot;
-      if (g + lane < end) group.taps = std::max(group.taps, lane_job[lane]->count);
+// The samples of one batch that interpolate, in slots: the slerps, then the squads, then the
+// weighted means. Per slot: the output index; the interval of the reference's linear
+// interpolation (and of a slerp or squad), i0 = min(floor(x), last - 1) and t = x - i0; the
+// nearest source sample. Either made once per batch by the schedule (short clips) or again for
+// every batch of every joint into the same scratch (long clips: memory bounded by a batch's).
+class BatchSlots {
+ public:
+  using Job = retime_internal::WeightedMeanJob;
+
+  // The slots of the samples `interpolating` (output indices, ascending; at most kRotationBatch).
+  // The storage only grows: made again for another batch, it keeps the larger one's.
+  void Make(const ResamplePlan& plan, std::span<const std::size_t> interpolating) {
+    std::size_t begin[3] = {0, 0, 0};  // lerps, cubics, weighted means (KindIndex())
+    for (const std::size_t j : interpolating) ++begin[KindIndex(plan.kind[j])];
+    size_ = interpolating.size();
+    cubic_begin_ = begin[0];
+    weighted_begin_ = begin[0] + begin[1];
+    for (std::vector<std::int64_t>* v : {&output_, &i0_, &nearest_}) Grow(*v, size_);
+    Grow(t_, size_);
+    Grow(jobs_, begin[2]);
+    Grow(groups_, (begin[2] + retime_internal::kMeanLanes - 1) / retime_internal::kMeanLanes);
+    std::size_t next[3] = {0, cubic_begin_, weighted_begin_};
+    for (const std::size_t j : interpolating) {
+      const int kind = KindIndex(plan.kind[j]);
+      const std::size_t slot = next[kind]++;
+      const SlotPlace place = PlaceOf(plan, j);
+      output_[slot] = static_cast<std::int64_t>(j);
+      i0_[slot] = place.i0;
+      t_[slot] = place.t;
+      nearest_[slot] = place.nearest;
+      if (kind != kWeightedIndex) continue;
+      const std::int64_t first = plan.first[j];
+      const std::int64_t count = plan.offset[j + 1] - plan.offset[j];
+      jobs_[slot - weighted_begin_] = {
+          first, count, plan.offset[j],
+          first + std::clamp(place.nearest - first, std::int64_t{0}, count - 1)};
     }
-    for (std::int64_t n = 0; n < group.taps; ++n) {
-      for (std::size_t lane = 0; lane < kLanes; ++lane) {
-        const RotationSchedule::Data::Job& job = *lane_job[lane];
-        const bool real = g + lane < end && n < job.count;
-        d.tap_source.push_back(real ? job.first + n : job.pivot);
-        d.tap_weight.push_back(real ? plan.weights[static_cast<std::size_t>(job.weight_offset + n)]
-                                    : 0.0);
-      }
-    }
-    d.groups.push_back(group);
+    MakeMeanTables(plan);
   }
+
+  std::size_t size() const { return size_; }
+  std::size_t cubic_begin() const { return cubic_begin_; }
+  std::size_t weighted_begin() const { return weighted_begin_; }
+  const std::int64_t* output() const { return output_.data(); }
+  const std::int64_t* i0() const { return i0_.data(); }
+  const double* t() const { return t_.data(); }
+  const std::int64_t* nearest() const { return nearest_.data(); }
+  const Job& job(std::size_t s) const { return jobs_[s]; }
+  retime_internal::MeanTables mean_tables() const {
+    return {groups_.data(), tap_source_.data(), tap_weight_.data()};
+  }
+
+  // Bytes the slots of `slots` samples take, `means` of them weighted means in groups whose
+  // tables hold `padded_taps` taps (MeanGroup).
+  static std::size_t Bytes(std::size_t slots, std::size_t means, std::size_t padded_taps) {
+    return slots * (3 * sizeof(std::int64_t) + sizeof(double)) + means * sizeof(Job) +
+           (means / retime_internal::kMeanLanes + 1) * sizeof(retime_internal::MeanGroup) +
+           padded_taps * (sizeof(std::int64_t) + sizeof(double));
+  }
+
+ private:
+  template <class T>
+  static void Grow(std::vector<T>& v, std::size_t n) {
+    if (v.size() < n) v.resize(n);
+  }
+
+  static constexpr int kWeightedIndex = 2;
+  static int KindIndex(SampleKind kind) {
+    return kind == SampleKind::kLerp ? 0 : kind == SampleKind::kCubic ? 1 : kWeightedIndex;
+  }
+
+  // The lane-major tables of the weighted means (see MeanGroup).
+  void MakeMeanTables(const ResamplePlan& plan) {
+    constexpr std::size_t kLanes = retime_internal::kMeanLanes;
+    const std::size_t end = size_ - weighted_begin_;
+    std::size_t total = 0;
+    for (std::size_t g = 0; g < end; g += kLanes) {
+      std::int64_t taps = 0;
+      for (std::size_t lane = 0; lane < kLanes && g + lane < end; ++lane) {
+        taps = std::max(taps, jobs_[g + lane].count);
+      }
+      groups_[g / kLanes].taps = taps;
+      total += kLanes * static_cast<std::size_t>(taps);
+    }
+    Grow(tap_source_, total);
+    Grow(tap_weight_, total);
+    std::size_t tap_begin = 0;
+    for (std::size_t g = 0; g < end; g += kLanes) {
+      retime_internal::MeanGroup& group = groups_[g / kLanes];
+      group.tap_begin = tap_begin;
+      for (std::size_t lane = 0; lane < kLanes; ++lane) {
+        // Lanes past the last job repeat the first one, at weight 0.
+        const bool real_lane = g + lane < end;
+        const Job& job = jobs_[real_lane ? g + lane : g];
+        group.pivot[lane] = job.pivot;
+        const std::int64_t count = real_lane ? job.count : 0;
+        std::int64_t* source = tap_source_.data() + tap_begin + lane;
+        double* weight = tap_weight_.data() + tap_begin + lane;
+        const double* w = plan.weights.data() + job.weight_offset;
+        for (std::int64_t n = 0; n < count; ++n) {
+          source[kLanes * static_cast<std::size_t>(n)] = job.first + n;
+          weight[kLanes * static_cast<std::size_t>(n)] = w[n];
+        }
+        for (std::int64_t n = count; n < group.taps; ++n) {
+          source[kLanes * static_cast<std::size_t>(n)] = job.pivot;
+          weight[kLanes * static_cast<std::size_t>(n)] = 0.0;
+        }
+      }
+      tap_begin += kLanes * static_cast<std::size_t>(group.taps);
+    }
+  }
+
+  std::vector<std::int64_t> output_, i0_, nearest_;
+  std::vector<double> t_;
+  std::vector<Job> jobs_;
+  std::vector<retime_internal::MeanGroup> groups_;
+  std::vector<std::int64_t> tap_source_;
+  std::vector<double> tap_weight_;
+  std::size_t size_ = 0, cubic_begin_ = 0, weighted_begin_ = 0;
+};
+
+}  // namespace
+
+struct RotationSchedule::Data {
+  // Runs [begin, end) of the source samples some output reads.
+  std::vector<std::pair<std::size_t, std::size_t>> runs;
+  // The output samples in batches [begin, end) of consecutive samples, covering them all. A
+  // batch's copies are written directly; its samples that interpolate (at most kRotationBatch,
+  // reading at most about kRotationStopTaps source rotations) are laid out in slots (BatchSlots)
+  // one batch at a time, so that the scratch is sized to one batch rather than to the clip.
+  struct Batch {
+    std::size_t begin, end;
+  };
+  std::vector<Batch> batches;
+  std::size_t interpolating = 0;  // output samples that are not copies
+  // On clips whose slots take at most kPrebuiltSlotBytes, each batch's slots made once here and
+  // shared by every joint (faster on the short clips most retimes see); empty otherwise.
+  std::vector<BatchSlots> prebuilt;
+  // False when the constructor saw a stop request and returned early: never used then.
+  bool complete = false;
+};
+
+namespace {
+
+// Marks the source samples output sample j (not a copy) reads.
+void MarkNeeded(const ResamplePlan& plan, std::size_t j, std::vector<unsigned char>& needed) {
+  const std::int64_t last = plan.source_count - 1;
+  auto need = [&](std::int64_t i) {
+    needed[static_cast<std::size_t>(std::clamp<std::int64_t>(i, 0, last))] = 1;
+  };
+  const std::int64_t first = plan.first[j];
+  if (plan.kind[j] == SampleKind::kWeighted) {
+    const std::int64_t end = first + plan.offset[j + 1] - plan.offset[j];
+    for (std::int64_t i = first; i < end; ++i) need(i);
+    return;
+  }
+  const std::int64_t i0 = PlaceOf(plan, j).i0;
+  for (std::int64_t i = i0 - 1; i <= i0 + 2; ++i) need(i);
 }
 
 }  // namespace
 
-RotationSchedule::RotationSchedule(const ResamplePlan& plan) : data_(std::make_unique<Data>()) {
+RotationSchedule::RotationSchedule(const ResamplePlan& plan, std::stop_token stop)
+    : data_(std::make_unique<Data>()) {
   Data& d = *data_;
   const auto n = static_cast<std::size_t>(plan.source_count);
-  const std::int64_t last = plan.source_count - 1;
+  const std::size_t m = plan.position.size();
   std::vector<unsigned char> needed(n, 0);
-  auto need = [&](std::int64_t i) {
-    needed[static_cast<std::size_t>(std::clamp<std::int64_t>(i, 0, last))] = 1;
-  };
-  std::vector<std::size_t> interpolating;
-  interpolating.reserve(plan.position.size() - static_cast<std::size_t>(plan.copy_count));
-  for (std::size_t j = 0; j < plan.position.size(); ++j) {
-    const std::int64_t first = plan.first[j];
-    if (plan.kind[j] == SampleKind::kCopy) {
-      d.copy_output.push_back(j);
-      d.copy_source.push_back(static_cast<std::size_t>(first));
-      continue;
-    }
-    interpolating.push_back(j);
-    if (plan.kind[j] == SampleKind::kWeighted) {
-      const std::int64_t end = first + plan.offset[j + 1] - plan.offset[j];
-      for (std::int64_t i = first; i < end; ++i) need(i);
-    } else {
-      const std::int64_t i0 = PlaceOf(plan, j).i0;
-      for (std::int64_t i = i0 - 1; i <= i0 + 2; ++i) need(i);
-    }
-  }
-  for (std::vector<std::int64_t>* slots : {&d.output, &d.i0, &d.nearest}) {
-    slots->reserve(interpolating.size());
-  }
-  d.t.reserve(interpolating.size());
-  // The tap tables hold each weighted sample's taps, padded to its group's longest.
-  d.tap_source.reserve(plan.weights.size() + plan.weights.size() / 4);
-  d.tap_weight.reserve(d.tap_source.capacity());
-  // A batch also ends once its samples read kRotationStopTaps source rotations, and the stop token
-  // is looked at between batches: a few milliseconds of work at most, whatever the decimation
-  // ratio (batching changes no result: every step is per sample).
-  for (std::size_t begin = 0; begin < interpolating.size();) {
-    std::size_t end = begin;
-    for (std::int64_t taps_read = 0; end < interpolating.size() &&
-                                     end - begin < kRotationBatch && taps_read < kRotationStopTaps;
-         ++end) {
-      const std::size_t j = interpolating[end];
-      taps_read += plan.offset[j + 1] - plan.offset[j];
-    }
-    Data::Batch batch{.begin = d.output.size(), .cubic_begin = 0, .weighted_begin = 0, .end = 0,
-                      .first_job = d.jobs.size(), .first_group = d.groups.size()};
-    auto add_slots = [&](SampleKind kind) {
-      for (std::size_t r = begin; r < end; ++r) {
-        const std::size_t j = interpolating[r];
-        if (plan.kind[j] != kind) continue;
-        const SlotPlace place = PlaceOf(plan, j);
-        d.output.push_back(static_cast<std::int64_t>(j));
-        d.i0.push_back(place.i0);
-        d.t.push_back(place.t);
-        d.nearest.push_back(place.nearest);
-        if (kind != SampleKind::kWeighted) continue;
-        const std::int64_t first = plan.first[j];
-        const std::int64_t count = plan.offset[j + 1] - plan.offset[j];
-        d.jobs.push_back({first, count, plan.offset[j],
-                          first + std::clamp(place.nearest - first, std::int64_t{0}, count - 1)});
+  // The token is looked at once per kResampleStopCheckTaps outputs and taps.
+  StopCheck check(stop);
+  std::int64_t work = 0;
+  // The size of the slots: the weighted means, and their tables' taps (a batch's weighted means
+  // in groups of kMeanLanes, in order, each padded to its longest).
+  std::size_t means = 0, padded_taps = 0;
+  // A batch ends once kRotationBatch of its samples interpolate or they read kRotationStopTaps
+  // source rotations, and the stop token is looked at between batches: a few milliseconds of
+  // work at most, whatever the decimation ratio (batching changes no result: every step is per
+  // sample).
+  for (std::size_t j = 0; j < m;) {
+    const std::size_t begin = j;
+    std::size_t interpolating = 0, group_means = 0;
+    std::int64_t group_taps = 0;
+    for (std::int64_t taps_read = 0;
+         j < m && interpolating < kRotationBatch && taps_read < kRotationStopTaps; ++j) {
+      if (check.After(work)) return;
+      ++work;
+      if (plan.kind[j] == SampleKind::kCopy) continue;
+      ++interpolating;
+      const std::int64_t taps = plan.offset[j + 1] - plan.offset[j];
+      taps_read += taps;
+      work += taps;
+      if (plan.kind[j] == SampleKind::kWeighted) {
+        ++means;
+        group_taps = std::max(group_taps, taps);
+        if (++group_means == retime_internal::kMeanLanes) {
+          padded_taps += retime_internal::kMeanLanes * static_cast<std::size_t>(group_taps);
+          group_means = 0;
+          group_taps = 0;
+        }
       }
-    };
-    add_slots(SampleKind::kLerp);
-    batch.cubic_begin = d.output.size();
-    add_slots(SampleKind::kCubic);
-    batch.weighted_begin = d.output.size();
-    add_slots(SampleKind::kWeighted);
-    batch.end = d.output.size();
-    AddMeanGroups(plan, batch.first_job, d.jobs.size(), d);
-    d.batches.push_back(batch);
-    begin = end;
+      MarkNeeded(plan, j, needed);
+    }
+    padded_taps += retime_internal::kMeanLanes * static_cast<std::size_t>(group_taps);
+    d.interpolating += interpolating;
+    d.batches.push_back({begin, j});
   }
   for (std::size_t i = 0; i < n;) {
+    if (check.After(work)) return;
     if (!needed[i]) {
       ++i;
+      ++work;
       continue;
     }
     std::size_t end = i;
     while (end < n && needed[end]) ++end;
     d.runs.emplace_back(i, end);
+    work += static_cast<std::int64_t>(end - i);
     i = end;
   }
+  if (BatchSlots::Bytes(d.interpolating, means, padded_taps) <= kPrebuiltSlotBytes) {
+    d.prebuilt.resize(d.batches.size());
+    std::vector<std::size_t> interpolating;
+    for (std::size_t b = 0; b < d.batches.size(); ++b) {
+      if (stop.stop_requested()) return;
+      interpolating.clear();
+      for (std::size_t j = d.batches[b].begin; j < d.batches[b].end; ++j) {
+        if (plan.kind[j] != SampleKind::kCopy) interpolating.push_back(j);
+      }
+      d.prebuilt[b].Make(plan, interpolating);
+    }
+  }
+  d.complete = true;
 }
 
 RotationSchedule::~RotationSchedule() = default;
@@ -741,29 +858,78 @@ void ResampleRotation(const ResamplePlan& plan, const EulerOrder& order,
     }
     return;
   }
-  ResampleRotation(plan, RotationSchedule(plan), order, source, out, stop);
+  const RotationSchedule schedule(plan, stop);
+  // An incomplete schedule (a stop was requested) is never used.
+  if (stop.stop_requested()) return;
+  ResampleRotation(plan, schedule, order, source, out, stop);
 }
+
+namespace {
+
+// The outputs of a joint whose rotation never changes (IsFixedRotation()): copies, and the
+// source's angles everywhere else.
+void WriteFixedRotation(const ResamplePlan& plan,
+                        const std::array<std::span<const double>, 3>& source,
+                        const std::array<std::span<double>, 3>& out, const std::stop_token& stop) {
+  StopCheck check(stop);
+  for (std::size_t j = 0; j < plan.position.size(); ++j) {
+    if (check.After(static_cast<std::int64_t>(j))) return;
+    const auto i = plan.kind[j] == SampleKind::kCopy ? static_cast<std::size_t>(plan.first[j]) : 0;
+    for (int c = 0; c < 3; ++c) out[c][j] = source[c][i];
+  }
+}
+
+// Writes the copies among outputs [begin, end) and lists the others in `interpolating`. A batch
+// can span a long run of copies: false when a stop was requested on the way (`interpolating`
+// then incomplete).
+bool WriteCopies(const ResamplePlan& plan, std::size_t begin, std::size_t end,
+                 const std::array<std::span<const double>, 3>& source,
+                 const std::array<std::span<double>, 3>& out, const std::stop_token& stop,
+                 std::vector<std::size_t>* interpolating) {
+  if (interpolating != nullptr) interpolating->clear();
+  constexpr auto kChunk = static_cast<std::size_t>(kResampleStopCheckTaps);
+  for (std::size_t j = begin; j < end; ++j) {
+    if ((j - begin) % kChunk == kChunk - 1 && stop.stop_requested()) return false;
+    if (plan.kind[j] != SampleKind::kCopy) {
+      if (interpolating != nullptr) interpolating->push_back(j);
+      continue;
+    }
+    const auto i = static_cast<std::size_t>(plan.first[j]);
+    for (int c = 0; c < 3; ++c) out[c][j] = source[c][i];
+  }
+  return true;
+}
+
+}  // namespace
 
 void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule,
                       const EulerOrder& order,
                       const std::array<std::span<const double>, 3>& source,
                       const std::array<std::span<double>, 3>& out, std::stop_token stop) {
   const RotationSchedule::Data& d = schedule.data();
+  if (!d.complete || stop.stop_requested()) return;
   const std::int64_t last = plan.source_count - 1;
-  for (std::size_t r = 0; r < d.copy_output.size(); ++r) {
-    for (int c = 0; c < 3; ++c) out[c][d.copy_output[r]] = source[c][d.copy_source[r]];
-  }
-  if (d.output.empty()) return;
-  if (IsFixedRotation(source)) {
-    for (const std::int64_t j : d.output) {
-      for (int c = 0; c < 3; ++c) out[c][static_cast<std::size_t>(j)] = source[c][0];
+  std::vector<std::size_t> interpolating;
+  if (d.interpolating == 0) {
+    // Copies alone.
+    for (const RotationSchedule::Data::Batch& batch : d.batches) {
+      if (!WriteCopies(plan, batch.begin, batch.end, source, out, stop, nullptr)) return;
     }
     return;
   }
+  if (IsFixedRotation(source, stop)) {
+    WriteFixedRotation(plan, source, out, stop);
+    return;
+  }
 
-  const SourceQuats quats(d, order, source);
+  const SourceQuats quats(d.runs, order, source, stop);
+  if (stop.stop_requested()) return;
+  // Each a pass or two over a channel: tens of milliseconds at most on the longest clips.
   std::array<Unwrapped, 3> unwrapped;
-  for (int c = 0; c < 3; ++c) Unwrap(source[c], unwrapped[c]);
+  for (int c = 0; c < 3; ++c) {
+    Unwrap(source[c], unwrapped[c]);
+    if (stop.stop_requested()) return;
+  }
   std::array<const double*, 3> reference_values;
   for (int c = 0; c < 3; ++c) {
     reference_values[c] = unwrapped[c].wraps ? unwrapped[c].values.data() : source[c].data();
@@ -787,10 +953,7 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
   // Per batch, each output in its slot: the interpolated rotations (slerps and weighted means
   // batched), then all of them back to Euler angles, written in place; then the few samples the
   // batched steps leave to the scalar ones.
-  std::size_t capacity = 0;
-  for (const RotationSchedule::Data::Batch& batch : d.batches) {
-    capacity = std::max(capacity, batch.end - batch.begin);
-  }
+  constexpr std::size_t capacity = kRotationBatch;
   QuatColumns rotations;
   rotations.Resize(capacity);
   const std::unique_ptr<unsigned char[]> copied = Scratch<unsigned char>(capacity);
@@ -801,15 +964,24 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
   const std::unique_ptr<retime_internal::WeightedMeanJob[]> markley_jobs =
       Scratch<retime_internal::WeightedMeanJob>(capacity);
   const std::unique_ptr<std::size_t[]> markley_slot = Scratch<std::size_t>(capacity);
-  for (const RotationSchedule::Data::Batch& batch : d.batches) {
+  interpolating.reserve(capacity);
+  BatchSlots scratch;
+  for (std::size_t b = 0; b < d.batches.size(); ++b) {
     if (stop.stop_requested()) return;
-    const std::size_t count = batch.end - batch.begin;
-    const std::size_t slerps = batch.cubic_begin - batch.begin;
-    retime_internal::SlerpQuats(quats.data(), d.i0.data() + batch.begin, d.t.data() + batch.begin,
-                                slerps, rotations.Arrays(), copied.get());
-    for (std::size_t slot = slerps; slot < batch.weighted_begin - batch.begin; ++slot) {
-      const std::size_t r = batch.begin + slot;
-      const auto i0 = d.i0[r];
+    const RotationSchedule::Data::Batch& batch = d.batches[b];
+    const bool prebuilt = !d.prebuilt.empty();
+    if (!WriteCopies(plan, batch.begin, batch.end, source, out, stop,
+                     prebuilt ? nullptr : &interpolating)) {
+      return;
+    }
+    if (!prebuilt) scratch.Make(plan, interpolating);
+    const BatchSlots& slots = prebuilt ? d.prebuilt[b] : scratch;
+    const std::size_t count = slots.size();
+    const std::size_t slerps = slots.cubic_begin();
+    retime_internal::SlerpQuats(quats.data(), slots.i0(), slots.t(), slerps,
+                                rotations.Arrays(), copied.get());
+    for (std::size_t slot = slerps; slot < slots.weighted_begin(); ++slot) {
+      const auto i0 = slots.i0()[slot];
       const Quat q1 = quats[static_cast<std::size_t>(i0)];
       const Quat q2 = aligned(quats[static_cast<std::size_t>(i0) + 1], q1);
       copied[slot] = QuatDot(q1, q2) < kDiscontinuityDot;
@@ -818,26 +990,24 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
       const bool smooth =
           QuatDot(q0, q1) >= kDiscontinuityDot && QuatDot(q2, q3) >= kDiscontinuityDot;
       rotations.Set(slot, copied[slot]          ? q1
-                          : smooth ? Squad(q0, q1, q2, q3, d.t[r])
-                                   : Slerp(q1, q2, d.t[r]));
+                          : smooth ? Squad(q0, q1, q2, q3, slots.t()[slot])
+                                   : Slerp(q1, q2, slots.t()[slot]));
     }
     // The weighted means; Markley's where their spread asks for it.
-    const std::size_t weighted_slot = batch.weighted_begin - batch.begin;
-    const std::size_t means = batch.end - batch.weighted_begin;
+    const std::size_t weighted_slot = slots.weighted_begin();
+    const std::size_t means = count - weighted_slot;
     const retime_internal::QuatArrays all = rotations.Arrays();
     const retime_internal::QuatArrays mean_slots = {all.w + weighted_slot, all.x + weighted_slot,
                                                     all.y + weighted_slot, all.z + weighted_slot};
     unsigned char* const needs_markley = copied.get() + weighted_slot;
-    retime_internal::WeightedMeans(quats.data(),
-                                   {d.groups.data() + batch.first_group, d.tap_source.data(),
-                                    d.tap_weight.data()},
-                                   means, min_dot, mean_slots, needs_markley);
+    retime_internal::WeightedMeans(quats.data(), slots.mean_tables(), means, min_dot, mean_slots,
+                                   needs_markley);
     std::size_t markleys = 0;
     for (std::size_t s = 0; s < means; ++s) {
       if (!needs_markley[s]) continue;
       // Not a copy: the slot's flag served as Markley's.
       needs_markley[s] = 0;
-      markley_jobs[markleys] = d.jobs[batch.first_job + s];
+      markley_jobs[markleys] = slots.job(s);
       markley_slot[markleys++] = weighted_slot + s;
     }
     retime_internal::MarkleyMeans(quats.data(), plan.weights.data(), markley_jobs.get(), markleys,
@@ -847,10 +1017,10 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
     // each then within 180 degrees of the source's value at the nearest sample (the source's own
     // convention).
     const retime_internal::EulerTargets targets = {
-        .i0 = d.i0.data() + batch.begin,
-        .t = d.t.data() + batch.begin,
-        .nearest = d.nearest.data() + batch.begin,
-        .output = d.output.data() + batch.begin,
+        .i0 = slots.i0(),
+        .t = slots.t(),
+        .nearest = slots.nearest(),
+        .output = slots.output(),
         .reference = {reference_values[0], reference_values[1], reference_values[2]},
         .turn = {source[0].data(), source[1].data(), source[2].data()},
         .out = {out[0].data(), out[1].data(), out[2].data()}};
@@ -858,19 +1028,18 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
                                          ill_conditioned.get());
     for (std::size_t slot = 0; slot < count; ++slot) {
       if (!copied[slot] && !ill_conditioned[slot]) continue;
-      const std::size_t r = batch.begin + slot;
-      const auto j = static_cast<std::size_t>(d.output[r]);
-      const auto nearest = static_cast<std::size_t>(d.nearest[r]);
+      const auto j = static_cast<std::size_t>(slots.output()[slot]);
+      const auto nearest = static_cast<std::size_t>(slots.nearest()[slot]);
       if (copied[slot]) {
         // Across a discontinuity: the nearer source pose.
         for (int c = 0; c < 3; ++c) out[c][j] = source[c][nearest];
         continue;
       }
-      const auto i = static_cast<std::size_t>(d.i0[r]);
+      const auto i = static_cast<std::size_t>(slots.i0()[slot]);
       Vec3 reference;
       for (int c = 0; c < 3; ++c) {
         const double* v = reference_values[c];
-        reference[c] = v[i] + d.t[r] * (v[i + 1] - v[i]);
+        reference[c] = v[i] + slots.t()[slot] * (v[i + 1] - v[i]);
       }
       const Vec3 exact = QuatToEulerNearest(scalar_path.Interpolated(j), order, reference);
       for (int c = 0; c < 3; ++c) out[c][j] = NearestTurn(exact[c], source[c][nearest]);

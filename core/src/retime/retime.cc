@@ -352,7 +352,11 @@ absl::StatusOr<RetimeResult> Retime(const Clip& clip, const TimeWarpSpec& warp,
         source[k] = clip.channels[index].samples;
         target[k] = out.channels[index].samples;
       }
-      if (!rotation_schedule) rotation_schedule.emplace(plan);
+      if (!rotation_schedule) {
+        rotation_schedule.emplace(plan, stop);
+        // Left incomplete when a stop was requested: never used then.
+        TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+      }
       ResampleRotation(plan, *rotation_schedule, rotation.order, source, target, stop);
       done += 3;
     } else if (IsRotation(channel.kind)) {

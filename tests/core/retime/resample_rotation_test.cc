@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 #include <span>
+#include <stop_token>
 #include <vector>
 
 #include "gtest/gtest.h"
@@ -87,6 +88,80 @@ TEST(ResampleRotationTest, AFixedJointNearGimbalLockStaysWithinTheReferencesTole
             << "middle " << middle << " channel " << c << " sample " << j;
       }
     }
+  }
+}
+
+// A clip long enough that the schedule does not lay out its slots beforehand (about 100 MB of
+// them, over its 64 MB): each joint lays them out one batch at a time, with the same results.
+TEST(ResampleRotationTest, ALongLanczosClipMatchesTheReferenceBatchByBatch) {
+  constexpr std::int64_t kFrames = 600'000;
+  constexpr double kSpeed = 1.3;
+  std::vector<double> positions, ratios;
+  for (double x = 0.37; x <= static_cast<double>(kFrames - 1); x += kSpeed) {
+    positions.push_back(x);
+    ratios.push_back(kSpeed);
+  }
+  const absl::StatusOr<ResamplePlan> plan =
+      MakeResamplePlan(positions, ratios, kFrames, ResampleFilter::kLanczos3);
+  ASSERT_TRUE(plan.ok()) << plan.status();
+  std::array<std::vector<double>, 3> source;
+  for (auto& channel : source) channel.resize(kFrames);
+  for (std::size_t i = 0; i < kFrames; ++i) {
+    const auto f = static_cast<double>(i);
+    source[0][i] = 30.0 * std::sin(f * 1e-3);
+    source[1][i] = 20.0 * std::cos(f * 7e-4);
+    // Swinging about 180 degrees, wrapped into [-180, 180]: seams to unwrap.
+    source[2][i] = std::remainder(180.0 + 40.0 * std::sin(f * 2e-3), 360.0);
+  }
+  std::array<std::vector<double>, 3> fast, reference;
+  std::array<std::span<const double>, 3> in;
+  std::array<std::span<double>, 3> fast_out, reference_out;
+  for (int c = 0; c < 3; ++c) {
+    fast[c].assign(plan->position.size(), 0.0);
+    reference[c].assign(plan->position.size(), 0.0);
+    in[c] = source[c];
+    fast_out[c] = fast[c];
+    reference_out[c] = reference[c];
+  }
+  const EulerOrder order = *ParseEulerOrder("ZXY");
+
+  ResampleRotation(*plan, order, in, fast_out);
+  ReferenceResampleRotation(*plan, order, in, reference_out);
+
+  for (int c = 0; c < 3; ++c) {
+    for (std::size_t j = 0; j < fast[c].size(); ++j) {
+      ASSERT_NEAR(fast[c][j], reference[c][j], 1e-12) << "channel " << c << " sample " << j;
+    }
+  }
+}
+
+TEST(ResampleRotationTest, AScheduleMadeAfterAStopRequestIsNeverUsed) {
+  const ResamplePlan plan = PlanAtSpeed(1.3, ResampleFilter::kLanczos3);
+  std::array<std::vector<double>, 3> source;
+  for (int c = 0; c < 3; ++c) {
+    source[c].resize(kSourceCount);
+    for (std::int64_t i = 0; i < kSourceCount; ++i) {
+      source[c][static_cast<std::size_t>(i)] = 10.0 * (c + 1) * std::sin(0.05 * static_cast<double>(i));
+    }
+  }
+  std::stop_source stop;
+  stop.request_stop();
+  const RotationSchedule incomplete(plan, stop.get_token());
+
+  constexpr double kUntouched = 1234.5;
+  std::array<std::vector<double>, 3> out;
+  std::array<std::span<const double>, 3> in;
+  std::array<std::span<double>, 3> target;
+  for (int c = 0; c < 3; ++c) {
+    out[c].assign(plan.position.size(), kUntouched);
+    in[c] = source[c];
+    target[c] = out[c];
+  }
+  // No stop requested here: the schedule alone is incomplete.
+  ResampleRotation(plan, incomplete, *ParseEulerOrder("ZXY"), in, target);
+
+  for (int c = 0; c < 3; ++c) {
+    for (double v : out[c]) ASSERT_EQ(v, kUntouched);
   }
 }
 

@@ -5,6 +5,7 @@
 #include <random>
 #include <stop_token>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -846,6 +847,55 @@ TEST(RetimeTest, ProgressReachesOneAndAStopRequestCancels) {
   EXPECT_EQ(fractions.back(), 1.0);
   EXPECT_TRUE(std::is_sorted(fractions.begin(), fractions.end()));
   EXPECT_EQ(cancelled.status().code(), absl::StatusCode::kCancelled);
+}
+
+// A joint's rotation (quaternion mode, Lanczos-3, compressed by 1.3) after a position channel,
+// over `frames` frames of a slow swing.
+Clip SwingingJointClip(std::int64_t frames) {
+  std::vector<double> x(static_cast<std::size_t>(frames)), z(x.size()), y(x.size()), p(x.size());
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    const auto t = static_cast<double>(i);
+    x[i] = 30.0 * std::sin(t * 1e-3);
+    z[i] = 20.0 * std::cos(t * 7e-4);
+    y[i] = 170.0 * std::sin(t * 3e-4);
+    p[i] = 0.01 * t;
+  }
+  return JointClip(1.0 / 120, {ChannelKind::kXPosition, ChannelKind::kZRotation,
+                               ChannelKind::kXRotation, ChannelKind::kYRotation},
+                   {p, z, x, y});
+}
+
+const RetimeOptions kLanczosQuaternion = {.filter = ResampleFilter::kLanczos3,
+                                          .rotation_mode = RotationMode::kQuaternion};
+
+TEST(RetimeTest, ARotationAwareLanczosRetimeWithTheStopAlreadyRequestedIsCancelled) {
+  const Clip clip = SwingingJointClip(20'000);
+  std::stop_source stop;
+  stop.request_stop();
+
+  const absl::StatusOr<RetimeResult> r =
+      Retime(clip, OverSource({Knot(0, 1.3)}), kLanczosQuaternion, {}, stop.get_token());
+
+  EXPECT_EQ(r.status().code(), absl::StatusCode::kCancelled);
+}
+
+TEST(RetimeTest, AStopRequestedFromAnotherThreadCancelsALargeRotationAwareLanczosRetime) {
+  const Clip clip = SwingingJointClip(400'000);
+  std::stop_source stop;
+  int reports = 0;
+  // The position channel is resampled first; its progress report asks another thread to stop
+  // and waits until it has, so the joint's rotation is yet to be resampled.
+  const ProgressFn progress = [&](double, std::string_view) {
+    if (reports++ > 0) return;
+    std::thread requester([&] { stop.request_stop(); });
+    requester.join();
+  };
+
+  const absl::StatusOr<RetimeResult> r =
+      Retime(clip, OverSource({Knot(0, 1.3)}), kLanczosQuaternion, progress, stop.get_token());
+
+  EXPECT_EQ(reports, 1);
+  EXPECT_EQ(r.status().code(), absl::StatusCode::kCancelled);
 }
 
 TEST(RetimeTest, PaperMethodAgreesWithTheExactMapAtConstantSpeed) {

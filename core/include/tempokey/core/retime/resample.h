@@ -121,10 +121,16 @@ void ResampleRotation(const ResamplePlan& plan, const EulerOrder& order,
 
 // The part of ResampleRotation() that depends on the plan alone (which source samples the joints'
 // rotations are read at; for each output sample that interpolates, between which samples and
-// where), made once per plan and shared by every joint. Retime() makes one per call.
+// where), made once per plan and shared by every joint. Retime() makes one per call. Memory: the
+// per-sample tables of a clip that needs at most 64 MB of them are laid out here, once; a longer
+// clip's are laid out one batch of outputs at a time as each joint is resampled (the schedule
+// then holds a few bytes per batch and the runs of source samples read).
 class RotationSchedule {
  public:
-  explicit RotationSchedule(const ResamplePlan& plan);
+  // Cancellation as MakeResamplePlan(): when `stop` is requested the schedule may be left
+  // incomplete; the caller looks at `stop` right after and then never uses it (ResampleRotation()
+  // with an incomplete schedule writes nothing).
+  explicit RotationSchedule(const ResamplePlan& plan, std::stop_token stop = {});
   ~RotationSchedule();
   RotationSchedule(RotationSchedule&&) noexcept;
   RotationSchedule& operator=(RotationSchedule&&) noexcept;
