@@ -172,13 +172,14 @@ class BandSolver {
 // core/CMakeLists.txt), so every level's solution is bit for bit the scalar one.
 using Lanes = double __attribute__((vector_size(128)));
 constexpr int kLanes = 16;
-// Wrapped in 64-byte aligned structs for the vectors that hold them: a template argument drops
-// the vector type's alignment attribute, and code built for the baseline target aligns the type
-// to 16 bytes only, where the AVX clone expects 32.
-struct alignas(64) BandRow {
+// Wrapped in aligned structs for the vectors that hold them: a template argument drops the
+// vector type's alignment attribute, and code built for the baseline target aligns the type to
+// 16 bytes only, where the AVX clone expects 32. 128, the vector's own size: clang refuses an
+// alignment below it, and GCC gave these structs 128 already.
+struct alignas(128) BandRow {
   Lanes entry[kOrder + 1];
 };
-struct alignas(64) LaneValues {
+struct alignas(128) LaneValues {
   Lanes value;
 };
 

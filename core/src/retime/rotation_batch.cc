@@ -137,20 +137,18 @@ struct QuatLanes {
   return all;
 }
 
-// Lane selectors for __builtin_shuffle on V.
-using Selector = std::int64_t __attribute__((vector_size(sizeof(V))));
-
 // The 4x4 transpose of rows a, b, c, d: quaternions stored (w, x, y, z) one after the other become
-// one vector per component, and back. Shuffles only: no arithmetic, every bit kept.
+// one vector per component, and back. Shuffles only: no arithmetic, every bit kept
+// (__builtin_shufflevector: GCC 12 and clang both have it).
 [[gnu::always_inline]] inline void Transpose(V& a, V& b, V& c, V& d) {
-  const V ab_even = __builtin_shuffle(a, b, Selector{0, 4, 2, 6});
-  const V ab_odd = __builtin_shuffle(a, b, Selector{1, 5, 3, 7});
-  const V cd_even = __builtin_shuffle(c, d, Selector{0, 4, 2, 6});
-  const V cd_odd = __builtin_shuffle(c, d, Selector{1, 5, 3, 7});
-  a = __builtin_shuffle(ab_even, cd_even, Selector{0, 1, 4, 5});
-  b = __builtin_shuffle(ab_odd, cd_odd, Selector{0, 1, 4, 5});
-  c = __builtin_shuffle(ab_even, cd_even, Selector{2, 3, 6, 7});
-  d = __builtin_shuffle(ab_odd, cd_odd, Selector{2, 3, 6, 7});
+  const V ab_even = __builtin_shufflevector(a, b, 0, 4, 2, 6);
+  const V ab_odd = __builtin_shufflevector(a, b, 1, 5, 3, 7);
+  const V cd_even = __builtin_shufflevector(c, d, 0, 4, 2, 6);
+  const V cd_odd = __builtin_shufflevector(c, d, 1, 5, 3, 7);
+  a = __builtin_shufflevector(ab_even, cd_even, 0, 1, 4, 5);
+  b = __builtin_shufflevector(ab_odd, cd_odd, 0, 1, 4, 5);
+  c = __builtin_shufflevector(ab_even, cd_even, 2, 3, 6, 7);
+  d = __builtin_shufflevector(ab_odd, cd_odd, 2, 3, 6, 7);
 }
 
 // The kLanes doubles at p, and back: unaligned vector loads and stores (a V held in an array
