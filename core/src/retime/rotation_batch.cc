@@ -152,15 +152,16 @@ struct QuatLanes {
 }
 
 // The kLanes doubles at p, and back: unaligned vector loads and stores (a V held in an array
-// and copied lane by lane goes through the stack, and its loads then wait on the stores).
-using UnalignedV =
-    double __attribute__((vector_size(sizeof(V)), aligned(alignof(double)), may_alias));
+// and copied lane by lane goes through the stack, and its loads then wait on the stores). A
+// memcpy of the whole vector is one unaligned load or store for GCC and clang alike, and is
+// defined for any address (clang ignores a lowered alignment on a vector typedef, and UBSan then
+// flags the access).
 [[gnu::always_inline]] inline V LoadV(const double* p) {
-  return *reinterpret_cast<const UnalignedV*>(p);
+  V v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
 }
-[[gnu::always_inline]] inline void StoreV(double* p, V v) {
-  *reinterpret_cast<UnalignedV*>(p) = v;
-}
+[[gnu::always_inline]] inline void StoreV(double* p, V v) { std::memcpy(p, &v, sizeof v); }
 
 // (w, x, y, z) of the lanes' quaternions as consecutive (w, x, y, z) groups.
 [[gnu::always_inline]] inline void StoreInterleaved(double* out, const QuatLanes& q,
