@@ -219,6 +219,22 @@ TEMPOKEY_AVX_CLONES void DataMoments(const double* data, const BasisColumns& bas
   moments[3] = simd::Sum(m3) + t3;
 }
 
+// The scalar tail of WeightedSums() and ShortWeightedSums(): frames [k, n) added, in frame order,
+// to the moments `mt` and the upper triangle of the Gram sums `gt`.
+[[gnu::always_inline]] inline void AddWeightedTail(const double* data, const double* w,
+                                                   const BasisColumns& basis, std::int64_t k,
+                                                   std::int64_t n, std::array<double, 4>& mt,
+                                                   std::array<double, 16>& gt) {
+  for (; k < n; ++k) {
+    const double wd = w[k] * data[k];
+    for (int r = 0; r < 4; ++r) {
+      const double cr = basis.column[r][k];
+      mt[r] += wd * cr;
+      for (int q = r; q < 4; ++q) gt[4 * r + q] += w[k] * cr * basis.column[q][k];
+    }
+  }
+}
+
 // moments[r] = sum of w[k] data[k] c_r(k); gram[4 r + q] = sum of w[k] c_r(k) c_q(k).
 TEMPOKEY_AVX_CLONES void WeightedSums(const double* data, const double* w,
                                       const BasisColumns& basis, std::int64_t n, double* moments,
@@ -250,14 +266,7 @@ TEMPOKEY_AVX_CLONES void WeightedSums(const double* data, const double* w,
       for (int q = r; q < 4; ++q) g[4 * r + q] += wc * c[q];
     }
   }
-  for (; k < n; ++k) {
-    const double wd = w[k] * data[k];
-    for (int r = 0; r < 4; ++r) {
-      const double cr = basis.column[r][k];
-      mt[r] += wd * cr;
-      for (int q = r; q < 4; ++q) gt[4 * r + q] += w[k] * cr * basis.column[q][k];
-    }
-  }
+  AddWeightedTail(data, w, basis, k, n, mt, gt);
   for (int r = 0; r < 4; ++r) {
     moments[r] = simd::Sum(m[r]) + mt[r];
     for (int q = r; q < 4; ++q) {
@@ -319,14 +328,7 @@ inline void ShortWeightedSums(const double* data, const double* w, const BasisCo
   }
   std::array<double, 4> mt = {0.0, 0.0, 0.0, 0.0};
   std::array<double, 16> gt{};
-  for (; k < n; ++k) {
-    const double wd = w[k] * data[k];
-    for (int r = 0; r < 4; ++r) {
-      const double cr = basis.column[r][k];
-      mt[r] += wd * cr;
-      for (int q = r; q < 4; ++q) gt[4 * r + q] += w[k] * cr * basis.column[q][k];
-    }
-  }
+  AddWeightedTail(data, w, basis, k, n, mt, gt);
   for (int r = 0; r < 4; ++r) {
     moments[r] = m[r] + mt[r];
     for (int q = r; q < 4; ++q) {
