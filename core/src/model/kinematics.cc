@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
+#include <cstdint>
 #include <cmath>
 #include <numbers>
 #include <utility>
@@ -73,77 +75,209 @@ absl::StatusOr<ForwardKinematics> ForwardKinematics::ForLayout(const Clip& layou
     plan.first_end_site_point = next_end_site;
     next_end_site += joint.end_sites.size();
   }
-  fk.world_rotation_.resize(fk.joints_.size());
+  for (const JointPlan& plan : fk.joints_) fk.rotation_count_ += plan.rotations.size();
+  fk.block_.resize(fk.joints_.size() * 12 * kBlockFrames);
+  fk.trig_.resize(fk.rotation_count_ * 2 * kBlockFrames);
+  fk.rotation_cos_.resize(fk.rotation_count_);
+  fk.rotation_sin_.resize(fk.rotation_count_);
   return fk;
 }
 
 namespace {
 
 constexpr double kRadiansPerDegree = std::numbers::pi / 180.0;
+constexpr std::size_t kB = ForwardKinematics::kBlockFrames;
 
-// MatVec() of rotation.h, here where every frame's pose calls it for every point.
-inline Vec3 Rotated(const Mat3& m, const Vec3& v) {
-  return {m[0][0] * v[0] + m[0][1] * v[1] + m[0][2] * v[2],
-          m[1][0] * v[0] + m[1][1] * v[1] + m[1][2] * v[2],
-          m[2][0] * v[0] + m[2][1] * v[1] + m[2][2] * v[2]};
+// The block kernels run on vectors of frames; -ffp-contract=off (core/CMakeLists.txt) keeps every
+// clone's arithmetic the same operations as the portable one, so all agree bit for bit. Sanitizer
+// builds keep the portable clone only (as simd.h).
+#if defined(TEMPOKEY_SANITIZED)
+#define TEMPOKEY_FK_CLONES
+#else
+#define TEMPOKEY_FK_CLONES __attribute__((target_clones("avx512f", "avx", "default")))
+#endif
+
+// A joint's block: its world rotation, row-major (entry (row, col) is the array at
+// (row * 3 + col) * kB), then its world position (axis a at (9 + a) * kB).
+constexpr std::size_t kBlockStride = 12 * kB;
+
+double* RotationEntry(double* block, std::size_t row, std::size_t col) {
+  return block + (row * 3 + col) * kB;
+}
+const double* RotationEntry(const double* block, std::size_t row, std::size_t col) {
+  return block + (row * 3 + col) * kB;
+}
+double* PositionAxis(double* block, std::size_t axis) { return block + (9 + axis) * kB; }
+const double* PositionAxis(const double* block, std::size_t axis) {
+  return block + (9 + axis) * kB;
 }
 
-// m = m · AxisMatrix(axis, degrees), in place. Right-multiplying by a rotation about one axis
-// mixes only the other two columns: with (i, k) the axes after `axis` in cyclic order,
-// column i becomes c·i + s·k and column k becomes c·k - s·i (12 products instead of 27).
-// A zero angle (common: a captured skeleton's unused axes) takes cos 0 = 1 and sin ±0 = ±0
-// without the library call, which returns exactly those.
-void RotateColumns(Mat3& m, int axis, double degrees) {
+// rotation = rotation · AxisMatrix(axis, angle) per frame, in place, the angle given by its cosine
+// c[f] and sine s[f]. Right-multiplying by a rotation about one axis mixes only the other two
+// columns: with (i, k) the axes after `axis` in cyclic order, column i becomes c·i + s·k and
+// column k becomes c·k - s·i (12 products instead of 27).
+TEMPOKEY_FK_CLONES void RotateColumnsBlock(double* block, int axis, const double* c,
+                                           const double* s, std::size_t n) {
   static constexpr std::array<std::size_t, 3> kNext = {1, 2, 0};
   static constexpr std::array<std::size_t, 3> kAfterNext = {2, 0, 1};
-  const double r = degrees * kRadiansPerDegree;
-  double c = 1.0;
-  double s = r;
-  if (r != 0.0) {
-    c = std::cos(r);
-    s = std::sin(r);
-  }
   const std::size_t i = kNext[static_cast<std::size_t>(axis)];
   const std::size_t k = kAfterNext[static_cast<std::size_t>(axis)];
   for (std::size_t row = 0; row < 3; ++row) {
-    const double a = m[row][i];
-    const double b = m[row][k];
-    m[row][i] = c * a + s * b;
-    m[row][k] = c * b - s * a;
+    double* __restrict column_i = RotationEntry(block, row, i);
+    double* __restrict column_k = RotationEntry(block, row, k);
+    for (std::size_t f = 0; f < n; ++f) {
+      const double a = column_i[f];
+      const double b = column_k[f];
+      column_i[f] = c[f] * a + s[f] * b;
+      column_k[f] = c[f] * b - s[f] * a;
+    }
+  }
+}
+
+// out[axis][f] = position[axis][f] + (rotation · v[f])[axis] (MatVec() of rotation.h, summed
+// left to right), v[f] given per axis by v[axis * kB + f].
+TEMPOKEY_FK_CLONES void MoveBlock(const double* block, const double* v, double* out,
+                                  std::size_t n) {
+  for (std::size_t row = 0; row < 3; ++row) {
+    const double* __restrict m0 = RotationEntry(block, row, 0);
+    const double* __restrict m1 = RotationEntry(block, row, 1);
+    const double* __restrict m2 = RotationEntry(block, row, 2);
+    const double* __restrict base = PositionAxis(block, row);
+    double* __restrict moved = out + row * kB;
+    for (std::size_t f = 0; f < n; ++f) {
+      moved[f] = base[f] + (m0[f] * v[f] + m1[f] * v[kB + f] + m2[f] * v[2 * kB + f]);
+    }
+  }
+}
+
+// The frames' points of one axis-major array (axis a of frame f at a * kB + f) written to point
+// `point` of each frame of `out` (frame-major, `stride` points a frame).
+void ScatterPoint(const double* axes, std::size_t n, std::size_t point, std::size_t stride,
+                  std::span<Vec3> out) {
+  for (std::size_t f = 0; f < n; ++f) {
+    out[f * stride + point] = {axes[f], axes[kB + f], axes[2 * kB + f]};
   }
 }
 
 }  // namespace
 
-void ForwardKinematics::Pose(std::span<const std::span<const double>> samples, std::size_t frame,
-                             std::span<Vec3> out) {
+void ForwardKinematics::RotationTrig(std::span<const double> degrees, std::span<double> cosines,
+                                     std::span<double> sines) {
+  for (std::size_t f = 0; f < degrees.size(); ++f) {
+    // An angle repeated from the frame before (constant channels, held poses) takes the same
+    // values without the library call.
+    if (f > 0 && std::bit_cast<std::uint64_t>(degrees[f]) ==
+                     std::bit_cast<std::uint64_t>(degrees[f - 1])) {
+      cosines[f] = cosines[f - 1];
+      sines[f] = sines[f - 1];
+      continue;
+    }
+    // A zero angle (common: a captured skeleton's unused axes) takes cos 0 = 1 and sin ±0 = ±0
+    // without the library call, which returns exactly those.
+    const double r = degrees[f] * kRadiansPerDegree;
+    double c = 1.0;
+    double s = r;
+    if (r != 0.0) {
+      c = std::cos(r);
+      s = std::sin(r);
+    }
+    cosines[f] = c;
+    sines[f] = s;
+  }
+}
+
+void ForwardKinematics::PlaceBlock(std::span<const std::span<const double>> samples,
+                                   std::size_t first, std::size_t count, std::span<Vec3> out) {
+  const std::size_t stride = points_.size();
+  std::array<double, 3 * kB> local{};  // the joint's translation, then an end site's offset
+  std::array<double, 3 * kB> site{};   // an end site's position
+  std::size_t rotation = 0;
   for (std::size_t j = 0; j < joints_.size(); ++j) {
     const JointPlan& plan = joints_[j];
-    Vec3 translation = plan.offset;
+    double* block = block_.data() + j * kBlockStride;
+    // The joint's local translation: its offset, each position channel replacing one axis.
     for (std::size_t axis = 0; axis < 3; ++axis) {
+      double* t = local.data() + axis * kB;
       const int c = plan.position_channel[axis];
-      if (c >= 0) translation[axis] = samples[static_cast<std::size_t>(c)][frame];
+      if (c >= 0) {
+        std::copy_n(samples[static_cast<std::size_t>(c)].data() + first, count, t);
+      } else {
+        std::fill_n(t, count, plan.offset[axis]);
+      }
     }
     // The joint's world rotation: its parent's, then each rotation channel in listed order.
-    Mat3& world = world_rotation_[j];
     if (plan.parent < 0) {
-      world = {{{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}};
-      out[j] = translation;
+      for (std::size_t row = 0; row < 3; ++row) {
+        for (std::size_t col = 0; col < 3; ++col) {
+          std::fill_n(RotationEntry(block, row, col), count, row == col ? 1.0 : 0.0);
+        }
+        std::copy_n(local.data() + row * kB, count, PositionAxis(block, row));
+      }
     } else {
-      const auto p = static_cast<std::size_t>(plan.parent);
-      world = world_rotation_[p];
-      const Vec3 moved = Rotated(world, translation);
-      out[j] = {out[p][0] + moved[0], out[p][1] + moved[1], out[p][2] + moved[2]};
+      const double* parent = block_.data() + static_cast<std::size_t>(plan.parent) * kBlockStride;
+      MoveBlock(parent, local.data(), PositionAxis(block, 0), count);
+      for (std::size_t e = 0; e < 9; ++e) std::copy_n(parent + e * kB, count, block + e * kB);
     }
+    ScatterPoint(PositionAxis(block, 0), count, j, stride, out);
     for (const auto& [axis, c] : plan.rotations) {
-      RotateColumns(world, axis, samples[static_cast<std::size_t>(c)][frame]);
+      RotateColumnsBlock(block, axis, rotation_cos_[rotation], rotation_sin_[rotation], count);
+      ++rotation;
     }
     for (std::size_t e = 0; e < plan.end_sites.size(); ++e) {
-      const Vec3 moved = Rotated(world_rotation_[j], plan.end_sites[e]);
-      out[plan.first_end_site_point + e] = {out[j][0] + moved[0], out[j][1] + moved[1],
-                                            out[j][2] + moved[2]};
+      for (std::size_t axis = 0; axis < 3; ++axis) {
+        std::fill_n(local.data() + axis * kB, count, plan.end_sites[e][axis]);
+      }
+      MoveBlock(block, local.data(), site.data(), count);
+      ScatterPoint(site.data(), count, plan.first_end_site_point + e, stride, out);
     }
   }
+}
+
+void ForwardKinematics::PoseFrames(std::span<const std::span<const double>> samples,
+                                   std::size_t first, std::size_t count, std::span<Vec3> out) {
+  const std::size_t stride = points_.size();
+  for (std::size_t done = 0; done < count; done += kB) {
+    const std::size_t n = std::min(kB, count - done);
+    std::size_t rotation = 0;
+    for (const JointPlan& plan : joints_) {
+      for (const auto& [axis, c] : plan.rotations) {
+        double* cosines = trig_.data() + 2 * rotation * kB;
+        double* sines = cosines + kB;
+        RotationTrig(samples[static_cast<std::size_t>(c)].subspan(first + done, n), {cosines, n},
+                     {sines, n});
+        rotation_cos_[rotation] = cosines;
+        rotation_sin_[rotation] = sines;
+        ++rotation;
+      }
+    }
+    PlaceBlock(samples, first + done, n, out.subspan(done * stride, n * stride));
+  }
+}
+
+void ForwardKinematics::PoseFramesFromTrig(std::span<const std::span<const double>> samples,
+                                           std::span<const std::span<const double>> cosines,
+                                           std::span<const std::span<const double>> sines,
+                                           std::size_t first, std::size_t count,
+                                           std::span<Vec3> out) {
+  const std::size_t stride = points_.size();
+  for (std::size_t done = 0; done < count; done += kB) {
+    const std::size_t n = std::min(kB, count - done);
+    std::size_t rotation = 0;
+    for (const JointPlan& plan : joints_) {
+      for (const auto& [axis, c] : plan.rotations) {
+        const auto ch = static_cast<std::size_t>(c);
+        rotation_cos_[rotation] = cosines[ch].data() + first + done;
+        rotation_sin_[rotation] = sines[ch].data() + first + done;
+        ++rotation;
+      }
+    }
+    PlaceBlock(samples, first + done, n, out.subspan(done * stride, n * stride));
+  }
+}
+
+void ForwardKinematics::Pose(std::span<const std::span<const double>> samples, std::size_t frame,
+                             std::span<Vec3> out) {
+  PoseFrames(samples, frame, 1, out);
 }
 
 namespace {
@@ -174,9 +308,7 @@ absl::StatusOr<PointTrajectories> WorldTrajectories(const Clip& clip) {
   out.frame_count = clip.frame_count;
   const std::size_t n = fk.point_count();
   out.positions.resize(static_cast<std::size_t>(clip.frame_count) * n);
-  for (std::size_t f = 0; f < static_cast<std::size_t>(clip.frame_count); ++f) {
-    fk.Pose(samples, f, std::span<Vec3>(out.positions).subspan(f * n, n));
-  }
+  fk.PoseFrames(samples, 0, static_cast<std::size_t>(clip.frame_count), out.positions);
   return out;
 }
 

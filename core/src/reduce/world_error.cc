@@ -15,6 +15,8 @@ namespace {
 
 // Samples evaluated between two looks at the stop token.
 constexpr std::size_t kSamplePiece = 65536;
+// Frames placed together before their errors are summed.
+constexpr std::size_t kMeasureFrames = 4 * ForwardKinematics::kBlockFrames;
 
 }  // namespace
 
@@ -38,12 +40,10 @@ absl::StatusOr<WorldErrorMeter> WorldErrorMeter::ForValidatedClip(const Clip& cl
   source.frame_count = clip.frame_count;
   const std::size_t n = source.points.size();
   source.positions.resize(static_cast<std::size_t>(clip.frame_count) * n);
-  for (std::size_t f = 0; f < static_cast<std::size_t>(clip.frame_count); ++f) {
-    meter.fk_.Pose(samples, f, std::span<Vec3>(source.positions).subspan(f * n, n));
-  }
+  meter.fk_.PoseFrames(samples, 0, static_cast<std::size_t>(clip.frame_count), source.positions);
   meter.figure_height_ =
       VerticalExtent(std::span<const Vec3>(source.positions).first(source.points.size()));
-  meter.scratch_.resize(source.points.size());
+  meter.scratch_.resize(kMeasureFrames * source.points.size());
   return meter;
 }
 
@@ -52,10 +52,21 @@ PointErrors WorldErrorMeter::Measure(std::span<const std::span<const double>> fi
   PointErrors errors;
   errors.max_error.assign(n, 0.0);
   errors.worst_frame.assign(n, 0);
-  for (std::int64_t f = 0; f < source_.frame_count; ++f) {
-    fk_.Pose(fitted, static_cast<std::size_t>(f), scratch_);
+  const auto frame_count = static_cast<std::size_t>(source_.frame_count);
+  for (std::size_t first = 0; first < frame_count; first += kMeasureFrames) {
+    const std::size_t count = std::min(kMeasureFrames, frame_count - first);
+    fk_.PoseFrames(fitted, first, count, std::span<Vec3>(scratch_).first(count * n));
+    AddErrors(first, count, errors);
+  }
+  return errors;
+}
+
+void WorldErrorMeter::AddErrors(std::size_t first, std::size_t count, PointErrors& errors) const {
+  const std::size_t n = source_.points.size();
+  for (std::size_t i = 0; i < count; ++i) {
+    const auto f = static_cast<std::int64_t>(first + i);
     for (std::size_t p = 0; p < n; ++p) {
-      const Vec3& a = scratch_[p];
+      const Vec3& a = scratch_[i * n + p];
       const Vec3& b = source_.at(f, p);
       const double dx = a[0] - b[0];
       const double dy = a[1] - b[1];
@@ -69,7 +80,6 @@ PointErrors WorldErrorMeter::Measure(std::span<const std::span<const double>> fi
       }
     }
   }
-  return errors;
 }
 
 WorldErrorReport WorldErrorMeter::Report(const PointErrors& errors, double joint_tolerance) const {

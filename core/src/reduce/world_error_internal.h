@@ -49,11 +49,15 @@ class WorldErrorMeter {
  private:
   WorldErrorMeter(const Clip& clip, ForwardKinematics fk) : clip_(&clip), fk_(std::move(fk)) {}
 
+  // Adds the errors of frames [first, first + count), placed in scratch_, to `errors`, frame by
+  // frame and point by point.
+  void AddErrors(std::size_t first, std::size_t count, PointErrors& errors) const;
+
   const Clip* clip_;
   ForwardKinematics fk_;
   PointTrajectories source_;
   double figure_height_ = 0.0;
-  std::vector<Vec3> scratch_;
+  std::vector<Vec3> scratch_;  // placed points, frame-major, of the frames being measured
 };
 
 // Every channel's samples at every source frame of `curves` (one curve per channel, sampled at

@@ -55,10 +55,14 @@ std::string SkeletonPointName(const Skeleton& skeleton, const SkeletonPoint& poi
 // world = parent world · local; an end site sits at its offset in its joint's frame. Rotations
 // are built from axis matrices directly, not from quaternions. Positions are in file units.
 //
-// Not thread-safe: Pose() uses scratch space held here; use one instance per thread (they are
-// cheap to copy).
+// Not thread-safe: Pose() and PoseFrames() use scratch space held here; use one instance per
+// thread (they are cheap to copy).
 class ForwardKinematics {
  public:
+  // Frames PoseFrames() places together: each joint's transform is held per frame in arrays of
+  // this many, so that the arithmetic runs on vectors of frames.
+  static constexpr std::size_t kBlockFrames = 32;
+
   // Errors: kInvalidArgument when `layout` has no skeleton ("forward kinematics needs a
   // skeleton, the clip has none") or fails ValidateClipLayout(). Samples are not read.
   static absl::StatusOr<ForwardKinematics> ForLayout(const Clip& layout);
@@ -74,6 +78,27 @@ class ForwardKinematics {
   void Pose(std::span<const std::span<const double>> samples, std::size_t frame,
             std::span<Vec3> out);
 
+  // Pose() of frames [first, first + count), frame-major: out[(f - first) * point_count() + p].
+  // Every value is Pose()'s at that frame, bit for bit (the same operations in the same order,
+  // on vectors of frames). Preconditions: one span per channel of the layout, each at least
+  // first + count long; out.size() == count * point_count().
+  void PoseFrames(std::span<const std::span<const double>> samples, std::size_t first,
+                  std::size_t count, std::span<Vec3> out);
+
+  // PoseFrames() with the cosine and sine of every rotation channel's angle at every frame given:
+  // cosines[c][f] and sines[c][f], as RotationTrig() computes them from samples[c] (position
+  // channels are read from `samples`; the spans of other channels are not read). For callers
+  // that place the same angles more than once.
+  void PoseFramesFromTrig(std::span<const std::span<const double>> samples,
+                          std::span<const std::span<const double>> cosines,
+                          std::span<const std::span<const double>> sines, std::size_t first,
+                          std::size_t count, std::span<Vec3> out);
+
+  // The cosine and sine of each angle (degrees) exactly as forward kinematics turns by it.
+  // Preconditions: the three spans have one size.
+  static void RotationTrig(std::span<const double> degrees, std::span<double> cosines,
+                           std::span<double> sines);
+
  private:
   struct JointPlan {
     int parent = -1;
@@ -86,9 +111,20 @@ class ForwardKinematics {
 
   ForwardKinematics() = default;
 
+  // Places frames [first, first + count) (count <= kBlockFrames): the angles of the r-th rotation
+  // channel (joint order, then listed order) by rotation_cos_[r][f], rotation_sin_[r][f].
+  void PlaceBlock(std::span<const std::span<const double>> samples, std::size_t first,
+                  std::size_t count, std::span<Vec3> out);
+
   std::vector<JointPlan> joints_;
   std::vector<SkeletonPoint> points_;
-  std::vector<Mat3> world_rotation_;  // scratch, one per joint
+  std::size_t rotation_count_ = 0;  // rotation channels over every joint
+  // Scratch: per joint, its world rotation (row-major, nine arrays) and position (three arrays),
+  // kBlockFrames values each.
+  std::vector<double> block_;
+  std::vector<double> trig_;  // per rotation channel, kBlockFrames cosines then sines
+  std::vector<const double*> rotation_cos_;
+  std::vector<const double*> rotation_sin_;
 };
 
 // The world positions of every point (SkeletonPoints() order) at every frame of a clip.
