@@ -193,15 +193,19 @@ absl::StatusOr<JointBoundCurves> JointBoundPlan::Fit(
   for (std::size_t g = 0; g < groups.size(); ++g) dirty[g] = g;
   for (int round = 0;; ++round) {
     TEMPOKEY_RETURN_IF_ERROR(fit(dirty, budgets, curves));
+    // Only the refitted channels change after the first round: the meter keeps what it
+    // computed of the others (a new fit starts from other samples: all change).
+    std::vector<char> refitted(channel_count, round == 0 ? 1 : 0);
     for (std::size_t g : dirty) {
       for (int c : groups[g]) {
         const auto ch = static_cast<std::size_t>(c);
         fitted[ch].resize(static_cast<std::size_t>(clip.frame_count));
         SampleCurve(curves[ch], clip.frame_time_seconds, fitted[ch]);
+        refitted[ch] = 1;
       }
     }
     TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
-    PointErrors errors = meter_.Measure(Spans(fitted));
+    PointErrors errors = meter_.MeasureChanged(Spans(fitted), refitted);
 
     // Per channel, the factor the worst point over the bound on its chain asks for.
     std::vector<double> factor(channel_count, 1.0);

@@ -61,6 +61,35 @@ PointErrors WorldErrorMeter::Measure(std::span<const std::span<const double>> fi
   return errors;
 }
 
+PointErrors WorldErrorMeter::MeasureChanged(std::span<const std::span<const double>> fitted,
+                                            std::span<const char> changed) {
+  const std::size_t n = source_.points.size();
+  const auto frame_count = static_cast<std::size_t>(source_.frame_count);
+  const bool first_call = cosines_.empty();
+  if (first_call) {
+    cosines_.resize(fitted.size());
+    sines_.resize(fitted.size());
+  }
+  for (std::size_t c = 0; c < fitted.size(); ++c) {
+    if (!IsRotation(clip_->channels[c].kind) || (!first_call && !changed[c])) continue;
+    cosines_[c].resize(frame_count);
+    sines_[c].resize(frame_count);
+    ForwardKinematics::RotationTrig(fitted[c].first(frame_count), cosines_[c], sines_[c]);
+  }
+  const std::vector<std::span<const double>> cosines = Spans(cosines_);
+  const std::vector<std::span<const double>> sines = Spans(sines_);
+  PointErrors errors;
+  errors.max_error.assign(n, 0.0);
+  errors.worst_frame.assign(n, 0);
+  for (std::size_t first = 0; first < frame_count; first += kMeasureFrames) {
+    const std::size_t count = std::min(kMeasureFrames, frame_count - first);
+    fk_.PoseFramesFromTrig(fitted, cosines, sines, first, count,
+                           std::span<Vec3>(scratch_).first(count * n));
+    AddErrors(first, count, errors);
+  }
+  return errors;
+}
+
 void WorldErrorMeter::AddErrors(std::size_t first, std::size_t count, PointErrors& errors) const {
   const std::size_t n = source_.points.size();
   for (std::size_t i = 0; i < count; ++i) {

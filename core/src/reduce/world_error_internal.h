@@ -39,6 +39,13 @@ class WorldErrorMeter {
   // The errors of `fitted` (one span of frame_count samples per channel of the clip).
   PointErrors Measure(std::span<const std::span<const double>> fitted);
 
+  // Measure() of `fitted` where only the channels with changed[c] != 0 may differ from the
+  // samples of the previous call (every channel is read on the first call): the cosines and
+  // sines of the other rotation channels' angles are kept from call to call (two doubles per
+  // rotation sample). The same errors as Measure(), bit for bit.
+  PointErrors MeasureChanged(std::span<const std::span<const double>> fitted,
+                             std::span<const char> changed);
+
   // The report of `errors` (which Measure() returned), with `joint_tolerance` as the bound kept.
   WorldErrorReport Report(const PointErrors& errors, double joint_tolerance) const;
 
@@ -58,6 +65,10 @@ class WorldErrorMeter {
   PointTrajectories source_;
   double figure_height_ = 0.0;
   std::vector<Vec3> scratch_;  // placed points, frame-major, of the frames being measured
+  // MeasureChanged()'s angles per channel at every frame (empty for other than rotations, and
+  // before the first call).
+  std::vector<std::vector<double>> cosines_;
+  std::vector<std::vector<double>> sines_;
 };
 
 // Every channel's samples at every source frame of `curves` (one curve per channel, sampled at
