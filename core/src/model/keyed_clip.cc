@@ -82,6 +82,39 @@ double EvaluateWeightedSegment(const Key& a, const Key& b, double time_seconds) 
 
 bool IsPlainSegment(const Key& a, const Key& b) { return !a.out_weight && !b.in_weight; }
 
+// The vector clones compute each frame with the same operations as the portable code
+// (-ffp-contract=off, core/CMakeLists.txt), so every clone gives the same bits. Sanitizer builds
+// keep the portable clone only (as reduce/simd.h).
+#if defined(TEMPOKEY_SANITIZED)
+#define TEMPOKEY_SAMPLE_CLONES
+#else
+#define TEMPOKEY_SAMPLE_CLONES __attribute__((target_clones("avx512f", "avx", "default")))
+#endif
+
+// out[i] = EvaluatePlainSegment(a, b, (first_frame + i) * frame_time_seconds) for every i, on
+// vectors of frames. The frame number is counted in doubles (first_frame + i is exact there, as
+// its conversion from the integer is), which vectorizes without 64-bit integer conversions.
+TEMPOKEY_SAMPLE_CLONES void EvaluatePlainRun(const Key& a, const Key& b,
+                                             double frame_time_seconds, double first_frame,
+                                             double* out, std::size_t n) {
+  const double a_time = a.time_seconds;
+  const double dt = b.time_seconds - a.time_seconds;
+  const double a_value = a.value;
+  const double rise = b.value - a.value;
+  const double out_tangent = a.out_tangent;
+  const double in_tangent = b.in_tangent;
+  for (std::size_t i = 0; i < n; ++i) {
+    const double t = (first_frame + static_cast<double>(i)) * frame_time_seconds;
+    const double s = (t - a_time) / dt;
+    const double s2 = s * s;
+    const double s3 = s2 * s;
+    const double h10 = s3 - 2 * s2 + s;
+    const double h01 = -2 * s3 + 3 * s2;
+    const double h11 = s3 - s2;
+    out[i] = a_value + h01 * rise + h10 * out_tangent * dt + h11 * in_tangent * dt;
+  }
+}
+
 double EvaluateSegment(const Key& a, const Key& b, double time_seconds) {
   return IsPlainSegment(a, b) ? EvaluatePlainSegment(a, b, time_seconds)
                               : EvaluateWeightedSegment(a, b, time_seconds);
@@ -181,22 +214,36 @@ void SampleCurve(const Curve& curve, double frame_time_seconds, std::span<double
     next = std::clamp<std::size_t>(static_cast<std::size_t>(after - keys.begin()), 1,
                                    keys.size() - 1);
   }
-  for (std::size_t i = 0; i < out.size(); ++i) {
-    const double t = static_cast<double>(first_frame + static_cast<std::int64_t>(i)) *
-                     frame_time_seconds;
+  auto time = [&](std::size_t i) {
+    return static_cast<double>(first_frame + static_cast<std::int64_t>(i)) * frame_time_seconds;
+  };
+  std::size_t i = 0;
+  while (i < out.size()) {
+    const double t = time(i);
     if (!(t > keys.front().time_seconds)) {
-      out[i] = keys.front().value;
+      out[i++] = keys.front().value;
       continue;
     }
     if (!(t < keys.back().time_seconds)) {
-      out[i] = keys.back().value;
+      out[i++] = keys.back().value;
       continue;
     }
     while (!(t < keys[next].time_seconds)) ++next;
     const Key& a = keys[next - 1];
     const Key& b = keys[next];
-    out[i] = IsPlainSegment(a, b) ? EvaluatePlainSegment(a, b, t)
-                                  : EvaluateWeightedSegment(a, b, t);
+    // The run of frames in this segment: times only grow (an exact integer times a positive
+    // frame time, rounded monotonically), so every frame of the run is after the first key and
+    // before keys[next], where the checks above and the walk leave it as they do for frame i.
+    std::size_t end = i + 1;
+    while (end < out.size() && time(end) < b.time_seconds) ++end;
+    if (IsPlainSegment(a, b)) {
+      EvaluatePlainRun(a, b, frame_time_seconds,
+                       static_cast<double>(first_frame + static_cast<std::int64_t>(i)),
+                       out.data() + i, end - i);
+    } else {
+      for (std::size_t j = i; j < end; ++j) out[j] = EvaluateWeightedSegment(a, b, time(j));
+    }
+    i = end;
   }
 }
 

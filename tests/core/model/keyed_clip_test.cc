@@ -1,7 +1,9 @@
 #include "tempokey/core/model/keyed_clip.h"
 
 #include <cmath>
+#include <cstdint>
 #include <random>
+#include <vector>
 
 #include "gtest/gtest.h"
 
@@ -94,6 +96,27 @@ TEST(SampleCurveTest, EqualsEvaluateCurveBitForBitOnRandomCurves) {
     for (std::size_t i = 0; i < sampled.size(); ++i) {
       const double expected = EvaluateCurve(curve, static_cast<double>(i) * frame_time);
       ASSERT_EQ(sampled[i], expected) << "trial " << trial << " sample " << i;
+    }
+  }
+}
+
+TEST(SampleCurveTest, PiecesFromALaterFirstFrameEqualTheWholeCurveBitForBit) {
+  std::mt19937 random(13);
+  std::uniform_real_distribution<double> value(-100.0, 100.0);
+  const double frame_time = 1.0 / 120.0;
+  Curve curve;
+  for (int k = 0; k < 40; ++k) {
+    curve.keys.push_back(Key{.time_seconds = 7.0 * k * frame_time, .value = value(random),
+                             .in_tangent = value(random), .out_tangent = value(random)});
+  }
+  std::vector<double> whole(300);
+  SampleCurve(curve, frame_time, whole);
+  for (std::int64_t first : {1, 6, 7, 33, 150, 271}) {
+    std::vector<double> piece(static_cast<std::size_t>(300 - first));
+    SampleCurve(curve, frame_time, piece, first);
+    for (std::size_t i = 0; i < piece.size(); ++i) {
+      ASSERT_EQ(piece[i], whole[static_cast<std::size_t>(first) + i])
+          << "first " << first << " sample " << i;
     }
   }
 }
