@@ -15,6 +15,9 @@ namespace {
 
 // Samples evaluated between two looks at the stop token.
 constexpr std::size_t kSamplePiece = 65536;
+// Angles whose cosines and sines MeasureChanged() keeps at most (64 MB); longer clips are measured
+// whole every time rather than double the memory their rotations take.
+constexpr std::size_t kMaxKeptAngles = std::size_t{1} << 22;
 // Frames placed together before their errors are summed.
 constexpr std::size_t kMeasureFrames = 4 * ForwardKinematics::kBlockFrames;
 
@@ -65,6 +68,9 @@ PointErrors WorldErrorMeter::MeasureChanged(std::span<const std::span<const doub
                                             std::span<const char> changed) {
   const std::size_t n = source_.points.size();
   const auto frame_count = static_cast<std::size_t>(source_.frame_count);
+  std::size_t rotation_channels = 0;
+  for (const Channel& channel : clip_->channels) rotation_channels += IsRotation(channel.kind);
+  if (rotation_channels * frame_count > kMaxKeptAngles) return Measure(fitted);
   const bool first_call = cosines_.empty();
   if (first_call) {
     cosines_.resize(fitted.size());

@@ -42,7 +42,8 @@ class WorldErrorMeter {
   // Measure() of `fitted` where only the channels with changed[c] != 0 may differ from the
   // samples of the previous call (every channel is read on the first call): the cosines and
   // sines of the other rotation channels' angles are kept from call to call (two doubles per
-  // rotation sample). The same errors as Measure(), bit for bit.
+  // rotation sample, up to 4M samples; a longer clip is measured whole). The same errors as
+  // Measure(), bit for bit.
   PointErrors MeasureChanged(std::span<const std::span<const double>> fitted,
                              std::span<const char> changed);
 
