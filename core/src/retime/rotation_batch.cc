@@ -705,8 +705,8 @@ template <int G>
       settled[g] = !done[g];
     }
     if (!any_active) break;
-    for (int p = 0; p < 4; ++p) {
-      for (int q = p + 1; q < 4; ++q) {
+    _Pragma("GCC unroll 4") for (int p = 0; p < 4; ++p) {
+      _Pragma("GCC unroll 4") for (int q = p + 1; q < 4; ++q) {
         V c[G], s[G];
         Mask rotate[G];
         for (int g = 0; g < G; ++g) {
@@ -765,9 +765,9 @@ constexpr int kMarkleyGroups = 2;
 // MarkleyMean() for several jobs at once, one per lane; a lane past its job's taps adds its pivot
 // with weight 0, which leaves every sum as it is (a group past the last job repeats it and stores
 // nothing).
-TEMPOKEY_AVX2_CLONES void MarkleyMeansKernel(const double* quats, const double* weights,
-                                            const WeightedMeanJob* jobs, std::size_t count,
-                                            QuatArrays out) {
+[[gnu::always_inline]] inline void MarkleyMeansBody(const double* quats, const double* weights,
+                                                    const WeightedMeanJob* jobs, std::size_t count,
+                                                    QuatArrays out) {
   constexpr int G = kMarkleyGroups;
   for (std::size_t start = 0; start < count; start += G * kLanes) {
     std::size_t first[G], lanes[G];
@@ -817,6 +817,22 @@ TEMPOKEY_AVX2_CLONES void MarkleyMeansKernel(const double* quats, const double* 
   }
 }
 
+TEMPOKEY_AVX2_CLONES void MarkleyMeansKernel(const double* quats, const double* weights,
+                                            const WeightedMeanJob* jobs, std::size_t count,
+                                            QuatArrays out) {
+  MarkleyMeansBody(quats, weights, jobs, count, out);
+}
+
+#if TEMPOKEY_AVX512_KERNELS
+// The same 4-lane code with AVX-512's 32 vector registers: the Jacobi sweeps' two groups of
+// matrices (64 vectors) spill less.
+TEMPOKEY_AVX512_TARGET void MarkleyMeansKernel512(const double* quats, const double* weights,
+                                                  const WeightedMeanJob* jobs, std::size_t count,
+                                                  QuatArrays out) {
+  MarkleyMeansBody(quats, weights, jobs, count, out);
+}
+#endif
+
 #if TEMPOKEY_AVX512_KERNELS
 // True where the 8-lane kernels can run (looked at once).
 bool UseAvx512Kernels() {
@@ -831,6 +847,9 @@ bool UseAvx512Kernels() {
 
 void MarkleyMeans(const double* quats, const double* weights, const WeightedMeanJob* jobs,
                   std::size_t count, QuatArrays out) {
+#if TEMPOKEY_AVX512_KERNELS
+  if (UseAvx512Kernels()) return MarkleyMeansKernel512(quats, weights, jobs, count, out);
+#endif
   MarkleyMeansKernel(quats, weights, jobs, count, out);
 }
 
