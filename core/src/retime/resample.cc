@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <limits>
 #include <memory>
@@ -388,17 +389,25 @@ void ResampleAngle(const ResamplePlan& plan, std::span<const double> degrees,
 
 namespace {
 
-// True when every source sample of `channel` has the first one's value (bit for bit).
+// True when every source sample of `channel` compares equal to the first one.
 bool IsConstant(std::span<const double> channel) {
-  // Blocks without an early exit inside, so that they vectorise: most channels are read to the
-  // end or differ early.
-  constexpr std::size_t kBlock = 16;
+  // Blocks without an early exit inside, two samples at a time on SSE2 vectors (GCC left a scalar
+  // block loop as a comparison per sample): most channels are read to the end or differ early.
+  using V = double __attribute__((vector_size(16)));
+  using Mask = vector_trig::MaskOf<V>;
+  constexpr std::size_t kLanes = sizeof(V) / sizeof(double);
+  constexpr std::size_t kBlock = 8 * kLanes;
   const double first = channel[0];
+  const double* d = channel.data();
   std::size_t i = 0;
   for (; i + kBlock <= channel.size(); i += kBlock) {
-    bool differs = false;
-    for (std::size_t k = 0; k < kBlock; ++k) differs |= channel[i + k] != first;
-    if (differs) return false;
+    Mask differs = {};
+    for (std::size_t k = 0; k < kBlock; k += kLanes) {
+      V v;
+      std::memcpy(&v, d + i + k, sizeof v);
+      differs |= v != first;
+    }
+    if (differs[0] || differs[1]) return false;
   }
   for (; i < channel.size(); ++i) {
     if (channel[i] != first) return false;
@@ -879,6 +888,24 @@ void WriteFixedRotation(const ResamplePlan& plan,
   }
 }
 
+// The first index in [from, end) where flags a[i] (or b[i], when b is given) are non-zero, or
+// end: eight flags at a time (nearly all are zero, and a branch per flag cost more than the
+// scalar fixes they mark).
+std::size_t NextFlagged(const unsigned char* a, const unsigned char* b, std::size_t from,
+                        std::size_t end) {
+  std::size_t i = from;
+  for (; i + 8 <= end; i += 8) {
+    std::uint64_t word_a = 0, word_b = 0;
+    std::memcpy(&word_a, a + i, sizeof word_a);
+    if (b != nullptr) std::memcpy(&word_b, b + i, sizeof word_b);
+    if ((word_a | word_b) != 0) break;
+  }
+  for (; i < end; ++i) {
+    if (a[i] != 0 || (b != nullptr && b[i] != 0)) return i;
+  }
+  return end;
+}
+
 // Writes the copies among outputs [begin, end) and lists the others in `interpolating`. A batch
 // can span a long run of copies: false when a stop was requested on the way (`interpolating`
 // then incomplete).
@@ -1003,8 +1030,8 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
     retime_internal::WeightedMeans(quats.data(), slots.mean_tables(), means, min_dot, mean_slots,
                                    needs_markley);
     std::size_t markleys = 0;
-    for (std::size_t s = 0; s < means; ++s) {
-      if (!needs_markley[s]) continue;
+    for (std::size_t s = NextFlagged(needs_markley, nullptr, 0, means); s < means;
+         s = NextFlagged(needs_markley, nullptr, s + 1, means)) {
       // Not a copy: the slot's flag served as Markley's.
       needs_markley[s] = 0;
       markley_jobs[markleys] = slots.job(s);
@@ -1026,8 +1053,8 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
         .out = {out[0].data(), out[1].data(), out[2].data()}};
     retime_internal::QuatsToEulerNearest(order, std::as_const(rotations).Arrays(), targets, count,
                                          ill_conditioned.get());
-    for (std::size_t slot = 0; slot < count; ++slot) {
-      if (!copied[slot] && !ill_conditioned[slot]) continue;
+    for (std::size_t slot = NextFlagged(copied.get(), ill_conditioned.get(), 0, count);
+         slot < count; slot = NextFlagged(copied.get(), ill_conditioned.get(), slot + 1, count)) {
       const auto j = static_cast<std::size_t>(slots.output()[slot]);
       const auto nearest = static_cast<std::size_t>(slots.nearest()[slot]);
       if (copied[slot]) {
