@@ -313,19 +313,26 @@ template <int I, int J, int K, class VT>
   };
   auto half_radians = [](VT degrees) __attribute__((always_inline)) { return 0.5 * degrees * kDegToRad; };
   std::size_t i = 0;
+  // Angles below this many degrees have half angles SinCosSmall() takes (mocap joints mostly
+  // stay within them: 95 % of CMU 131_01's blocks of 16 frames).
+  constexpr double kSmallDegrees = 89.0;
+  static_assert(0.5 * kSmallDegrees * kDegToRad < vector_trig::kMaxUnreducedRadians);
   // Two groups per step, their six sines and cosines side by side.
   for (; i + 2 * L <= count; i += 2 * L) {
     const VT angle[2][3] = {{LoadV<VT>(a + i), LoadV<VT>(b + i), LoadV<VT>(c + i)},
                             {LoadV<VT>(a + i + L), LoadV<VT>(b + i + L), LoadV<VT>(c + i + L)}};
-    if (!AllReducible(angle[0], kMaxDegrees) || !AllReducible(angle[1], kMaxDegrees)) {
+    VT sine[6], cosine[6];
+    const VT half[6] = {half_radians(angle[0][0]), half_radians(angle[0][1]),
+                        half_radians(angle[0][2]), half_radians(angle[1][0]),
+                        half_radians(angle[1][1]), half_radians(angle[1][2])};
+    if (AllReducible(angle[0], kSmallDegrees) && AllReducible(angle[1], kSmallDegrees)) {
+      vector_trig::SinCosSmall<6>(half, sine, cosine);
+    } else if (AllReducible(angle[0], kMaxDegrees) && AllReducible(angle[1], kMaxDegrees)) {
+      vector_trig::SinCos<6>(half, sine, cosine);
+    } else {
       scalar(i, 2 * L);
       continue;
     }
-    VT sine[6], cosine[6];
-    vector_trig::SinCos<6>({half_radians(angle[0][0]), half_radians(angle[0][1]),
-                            half_radians(angle[0][2]), half_radians(angle[1][0]),
-                            half_radians(angle[1][1]), half_radians(angle[1][2])},
-                           sine, cosine);
     for (std::size_t g = 0; g < 2; ++g) {
       const VT s[3] = {sine[3 * g], sine[3 * g + 1], sine[3 * g + 2]};
       const VT co[3] = {cosine[3 * g], cosine[3 * g + 1], cosine[3 * g + 2]};

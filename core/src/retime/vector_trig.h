@@ -132,6 +132,20 @@ template <int N, class V>
   }
 }
 
+// Arguments below this size have quadrant 0 in SinCos() (|x| 2/pi below a half, with room for
+// the product's rounding) and reduce to themselves.
+inline constexpr double kMaxUnreducedRadians = 0.78;
+
+// SinCos() for |x| < kMaxUnreducedRadians (the caller checks), bit for bit, without the reduction
+// and the quadrant's swaps: those leave such an argument as it is (but for -0, which the
+// reduction's subtraction of -0 turns into +0, as the added +0 here) and change nothing.
+template <int N, class V>
+[[gnu::always_inline]] inline void SinCosSmall(const V (&x)[N], V (&sine)[N], V (&cosine)[N]) {
+  V r[N];
+  TEMPOKEY_FOR_EACH(k, N) r[k] = x[k] + 0.0;
+  SinCosReduced<N>(r, sine, cosine);
+}
+
 template <class V>
 [[gnu::always_inline]] inline void SinCos(V x, V& sine, V& cosine) {
   V s[1], c[1];
