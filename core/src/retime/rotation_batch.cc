@@ -520,13 +520,14 @@ template <int I, int J, int K, class VT>
       // nearest sample.
       VT ref[3], turn[3];
       for (int axis = 0; axis < 3; ++axis) {
-        VT v0, v1;
+        VT v0, v1, nearest_value;
         for (std::size_t lane = 0; lane < L; ++lane) {
           v0[lane] = targets.reference[axis][at[lane]];
           v1[lane] = targets.reference[axis][at[lane] + 1];
-          turn[axis][lane] = targets.turn[axis][nearest[lane]];
+          nearest_value[lane] = targets.turn[axis][nearest[lane]];
         }
         ref[axis] = v0 + tt * (v1 - v0);
+        turn[axis] = nearest_value;
       }
       // The two Tait-Bryan solutions, each angle moved to the turn nearest the reference; the
       // nearer wins (NearestCandidate()).
@@ -542,12 +543,21 @@ template <int I, int J, int K, class VT>
         const VT d2 = second_angles[axis] - ref[axis];
         second_cost += d2 * d2;
       }
+      VT angle[3];
       for (int axis = 0; axis < 3; ++axis) {
         const VT nearer =
             second_cost < first_cost ? second_angles[axis] : first_angles[axis];
-        const VT angle = NearestTurn(nearer, turn[axis]);
-        for (std::size_t lane = 0; lane < lanes[g]; ++lane) {
-          targets.out[axis][output[lane]] = angle[lane];
+        angle[axis] = NearestTurn(nearer, turn[axis]);
+      }
+      // Outputs one after the other (a decimation's weighted means, a slowed section's slerps)
+      // take one vector store per axis.
+      if (lanes[g] == L && output[L - 1] - output[0] == static_cast<std::int64_t>(L - 1)) {
+        for (int axis = 0; axis < 3; ++axis) StoreV(targets.out[axis] + output[0], angle[axis]);
+      } else {
+        for (int axis = 0; axis < 3; ++axis) {
+          for (std::size_t lane = 0; lane < lanes[g]; ++lane) {
+            targets.out[axis][output[lane]] = angle[axis][lane];
+          }
         }
       }
       // Near gimbal lock: the caller's (gimbal lock itself, cos_b < 1e-12, among them).
