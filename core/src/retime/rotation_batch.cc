@@ -476,7 +476,8 @@ template <int I, int J, int K, class VT>
   constexpr int j = J;
   constexpr int k = K;
   constexpr double sign = ((j - i + 3) % 3 == 1) ? 1.0 : -1.0;
-  constexpr int G = kEulerGroups;
+  // On 8 lanes one group: the arctangents' chains of two spill more than they overlap.
+  constexpr int G = L == 8 ? 1 : kEulerGroups;
   for (std::size_t start = 0; start < count; start += G * L) {
     // Group g's samples start at first[g]; a group past the end repeats group 0 and stores
     // nothing.
