@@ -160,14 +160,21 @@ struct Unwrapped {
   bool wraps = false;
 };
 
-bool HasWrap(std::span<const double> degrees) {
-  // Blocks of steps, two at a time on SSE2 vectors, without an early exit inside: most channels
-  // have no seam and are read to the end.
-  using V = double __attribute__((vector_size(16)));
+// As rotation_batch.cc's clones: an AVX2 build of the channel scans beside the portable one (the
+// sanitizer builds keep the portable one only).
+#if defined(TEMPOKEY_SANITIZED)
+#define TEMPOKEY_SCAN_CLONES
+#else
+#define TEMPOKEY_SCAN_CLONES __attribute__((target_clones("avx2", "default")))
+#endif
+
+TEMPOKEY_SCAN_CLONES bool HasWrap(std::span<const double> degrees) {
+  // Blocks of steps, four at a time (one AVX register, two SSE2 ones in the portable clone),
+  // without an early exit inside: most channels have no seam and are read to the end.
+  using V = double __attribute__((vector_size(32)));
   using Mask = vector_trig::MaskOf<V>;
-  using Bits = std::int64_t __attribute__((vector_size(16)));
   constexpr std::size_t kLanes = sizeof(V) / sizeof(double);
-  constexpr std::size_t kBlock = 8 * kLanes;
+  constexpr std::size_t kBlock = 4 * kLanes;
   const double* d = degrees.data();
   const std::size_t n = degrees.size();
   std::size_t i = 1;
@@ -178,10 +185,10 @@ bool HasWrap(std::span<const double> degrees) {
       std::memcpy(&next, d + i + k, sizeof next);
       std::memcpy(&previous, d + i + k - 1, sizeof previous);
       // |step| by clearing the sign bit.
-      const V step = (V)((Bits)(next - previous) & std::numeric_limits<std::int64_t>::max());
+      const V step = (V)((Mask)(next - previous) & std::numeric_limits<std::int64_t>::max());
       wraps |= step > 180.0;
     }
-    if (wraps[0] || wraps[1]) return true;
+    if (wraps[0] || wraps[1] || wraps[2] || wraps[3]) return true;
   }
   for (; i < n; ++i) {
     if (std::abs(d[i] - d[i - 1]) > 180.0) return true;
@@ -390,13 +397,13 @@ void ResampleAngle(const ResamplePlan& plan, std::span<const double> degrees,
 namespace {
 
 // True when every source sample of `channel` compares equal to the first one.
-bool IsConstant(std::span<const double> channel) {
-  // Blocks without an early exit inside, two samples at a time on SSE2 vectors (GCC left a scalar
+TEMPOKEY_SCAN_CLONES bool IsConstant(std::span<const double> channel) {
+  // Blocks without an early exit inside, four samples at a time (as HasWrap(); GCC left a scalar
   // block loop as a comparison per sample): most channels are read to the end or differ early.
-  using V = double __attribute__((vector_size(16)));
+  using V = double __attribute__((vector_size(32)));
   using Mask = vector_trig::MaskOf<V>;
   constexpr std::size_t kLanes = sizeof(V) / sizeof(double);
-  constexpr std::size_t kBlock = 8 * kLanes;
+  constexpr std::size_t kBlock = 4 * kLanes;
   const double first = channel[0];
   const double* d = channel.data();
   std::size_t i = 0;
@@ -407,7 +414,7 @@ bool IsConstant(std::span<const double> channel) {
       std::memcpy(&v, d + i + k, sizeof v);
       differs |= v != first;
     }
-    if (differs[0] || differs[1]) return false;
+    if (differs[0] || differs[1] || differs[2] || differs[3]) return false;
   }
   for (; i < channel.size(); ++i) {
     if (channel[i] != first) return false;
