@@ -225,14 +225,24 @@ inline double QuatDot(const Quat& a, const Quat& b) {
 double TentHalfWidth(double ratio) { return ratio * std::clamp(ratio - 1.0, 0.0, 1.0); }
 double BoxHalfWidth(double ratio) { return 0.5 * ratio * std::clamp(ratio - 1.0, 0.0, 1.0); }
 
-double TentWeight(double d, double a) {
-  if (a <= 0.0) return Hat(d);
-  const double inv = 1.0 / (6.0 * a * a);
+namespace {
+
+// TentWeight() for a > 0, given inv = 1 / (6 a^2): a kernel's taps share one division.
+double TentWeightWithInverse(double d, double a, double inv) {
   auto e = [&](double z) {
     const double r = a - std::abs(z);
     return r > 0.0 ? r * r * r * inv : 0.0;
   };
   return Hat(d) + e(d + 1.0) - 2.0 * e(d) + e(d - 1.0);
+}
+
+double TentInverse(double a) { return 1.0 / (6.0 * a * a); }
+
+}  // namespace
+
+double TentWeight(double d, double a) {
+  if (a <= 0.0) return Hat(d);
+  return TentWeightWithInverse(d, a, TentInverse(a));
 }
 
 double BoxWeight(double d, double b) {
@@ -339,7 +349,10 @@ absl::StatusOr<ResamplePlan> MakeResamplePlan(std::span<const double> positions,
       case ResampleFilter::kTent:
       case ResampleFilter::kCubic:
         if (width > 0.0) {
-          writer.Kernel(x, 1.0 + width, last, [width](double d) { return TentWeight(d, width); });
+          const double inv = TentInverse(width);
+          writer.Kernel(x, 1.0 + width, last, [width, inv](double d) {
+            return TentWeightWithInverse(d, width, inv);
+          });
           continue;
         }
         if (filter == ResampleFilter::kCubic) {
