@@ -2,8 +2,12 @@
 
 #include <array>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
 #include <algorithm>
 #include <string>
+#include <vector>
 
 #include "absl/container/flat_hash_set.h"
 #include "absl/strings/str_cat.h"
@@ -234,6 +238,43 @@ absl::Status ValidateClipLayout(const Clip& clip, const ClipLimits& limits) {
   return absl::OkStatus();
 }
 
+namespace {
+
+// An AVX2 build beside the portable one (the sanitizer builds keep the portable one only).
+#if defined(TEMPOKEY_SANITIZED)
+#define TEMPOKEY_SCAN_CLONES
+#else
+#define TEMPOKEY_SCAN_CLONES __attribute__((target_clones("avx2", "default")))
+#endif
+
+// The index of the first sample beyond kMaxSampleMagnitude or not a number, or one in the block of
+// kBlock samples before it (at most the size): blocks are tested four samples at a time (one AVX
+// register, two SSE2 ones in the portable build), without an early exit inside (every sample of
+// every clip is read here, before any work on it; a scalar loop with its exit compiled to a
+// comparison and branch per sample).
+TEMPOKEY_SCAN_CLONES std::size_t FirstOutOfRange(const std::vector<double>& samples) {
+  using V = double __attribute__((vector_size(32)));
+  using Bits = std::int64_t __attribute__((vector_size(32)));
+  constexpr std::size_t kLanes = sizeof(V) / sizeof(double);
+  constexpr std::size_t kBlock = 4 * kLanes;
+  const double* d = samples.data();
+  std::size_t i = 0;
+  for (; i + kBlock <= samples.size(); i += kBlock) {
+    Bits out = {};
+    for (std::size_t k = 0; k < kBlock; k += kLanes) {
+      V v;
+      std::memcpy(&v, d + i + k, sizeof v);
+      // |v| by clearing the sign bit; a NaN compares false, so it is out too.
+      const V size = (V)((Bits)v & std::numeric_limits<std::int64_t>::max());
+      out |= !(size <= kMaxSampleMagnitude);
+    }
+    if (out[0] || out[1] || out[2] || out[3]) return i;
+  }
+  return i;
+}
+
+}  // namespace
+
 absl::Status ValidateClip(const Clip& clip, const ClipLimits& limits) {
   if (absl::Status layout = ValidateClipLayout(clip, limits); !layout.ok()) return layout;
   for (std::size_t c = 0; c < clip.channels.size(); ++c) {
@@ -244,8 +285,8 @@ absl::Status ValidateClip(const Clip& clip, const ClipLimits& limits) {
                                                      " samples, the clip has ", clip.frame_count,
                                                      " frames"));
     }
-    for (std::size_t i = 0; i < samples.size(); ++i) {
-      // One comparison in the loop; which rule failed is sorted out only on failure.
+    for (std::size_t i = FirstOutOfRange(samples); i < samples.size(); ++i) {
+      // Which rule failed is sorted out only on failure.
       if (!(std::abs(samples[i]) <= kMaxSampleMagnitude)) {
         if (!std::isfinite(samples[i])) {
           return absl::InvalidArgumentError(absl::StrCat(ChannelLabel(clip, static_cast<int>(c)),

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <limits>
 #include <memory>
@@ -159,14 +160,21 @@ struct Unwrapped {
   bool wraps = false;
 };
 
-bool HasWrap(std::span<const double> degrees) {
-  // Blocks of steps, two at a time on SSE2 vectors, without an early exit inside: most channels
-  // have no seam and are read to the end.
-  using V = double __attribute__((vector_size(16)));
+// As rotation_batch.cc's clones: an AVX2 build of the channel scans beside the portable one (the
+// sanitizer builds keep the portable one only).
+#if defined(TEMPOKEY_SANITIZED)
+#define TEMPOKEY_SCAN_CLONES
+#else
+#define TEMPOKEY_SCAN_CLONES __attribute__((target_clones("avx2", "default")))
+#endif
+
+TEMPOKEY_SCAN_CLONES bool HasWrap(std::span<const double> degrees) {
+  // Blocks of steps, four at a time (one AVX register, two SSE2 ones in the portable clone),
+  // without an early exit inside: most channels have no seam and are read to the end.
+  using V = double __attribute__((vector_size(32)));
   using Mask = vector_trig::MaskOf<V>;
-  using Bits = std::int64_t __attribute__((vector_size(16)));
   constexpr std::size_t kLanes = sizeof(V) / sizeof(double);
-  constexpr std::size_t kBlock = 8 * kLanes;
+  constexpr std::size_t kBlock = 4 * kLanes;
   const double* d = degrees.data();
   const std::size_t n = degrees.size();
   std::size_t i = 1;
@@ -177,10 +185,10 @@ bool HasWrap(std::span<const double> degrees) {
       std::memcpy(&next, d + i + k, sizeof next);
       std::memcpy(&previous, d + i + k - 1, sizeof previous);
       // |step| by clearing the sign bit.
-      const V step = (V)((Bits)(next - previous) & std::numeric_limits<std::int64_t>::max());
+      const V step = (V)((Mask)(next - previous) & std::numeric_limits<std::int64_t>::max());
       wraps |= step > 180.0;
     }
-    if (wraps[0] || wraps[1]) return true;
+    if (wraps[0] || wraps[1] || wraps[2] || wraps[3]) return true;
   }
   for (; i < n; ++i) {
     if (std::abs(d[i] - d[i - 1]) > 180.0) return true;
@@ -217,14 +225,24 @@ inline double QuatDot(const Quat& a, const Quat& b) {
 double TentHalfWidth(double ratio) { return ratio * std::clamp(ratio - 1.0, 0.0, 1.0); }
 double BoxHalfWidth(double ratio) { return 0.5 * ratio * std::clamp(ratio - 1.0, 0.0, 1.0); }
 
-double TentWeight(double d, double a) {
-  if (a <= 0.0) return Hat(d);
-  const double inv = 1.0 / (6.0 * a * a);
+namespace {
+
+// TentWeight() for a > 0, given inv = 1 / (6 a^2): a kernel's taps share one division.
+double TentWeightWithInverse(double d, double a, double inv) {
   auto e = [&](double z) {
     const double r = a - std::abs(z);
     return r > 0.0 ? r * r * r * inv : 0.0;
   };
   return Hat(d) + e(d + 1.0) - 2.0 * e(d) + e(d - 1.0);
+}
+
+double TentInverse(double a) { return 1.0 / (6.0 * a * a); }
+
+}  // namespace
+
+double TentWeight(double d, double a) {
+  if (a <= 0.0) return Hat(d);
+  return TentWeightWithInverse(d, a, TentInverse(a));
 }
 
 double BoxWeight(double d, double b) {
@@ -331,7 +349,10 @@ absl::StatusOr<ResamplePlan> MakeResamplePlan(std::span<const double> positions,
       case ResampleFilter::kTent:
       case ResampleFilter::kCubic:
         if (width > 0.0) {
-          writer.Kernel(x, 1.0 + width, last, [width](double d) { return TentWeight(d, width); });
+          const double inv = TentInverse(width);
+          writer.Kernel(x, 1.0 + width, last, [width, inv](double d) {
+            return TentWeightWithInverse(d, width, inv);
+          });
           continue;
         }
         if (filter == ResampleFilter::kCubic) {
@@ -388,17 +409,25 @@ void ResampleAngle(const ResamplePlan& plan, std::span<const double> degrees,
 
 namespace {
 
-// True when every source sample of `channel` has the first one's value (bit for bit).
-bool IsConstant(std::span<const double> channel) {
-  // Blocks without an early exit inside, so that they vectorise: most channels are read to the
-  // end or differ early.
-  constexpr std::size_t kBlock = 16;
+// True when every source sample of `channel` compares equal to the first one.
+TEMPOKEY_SCAN_CLONES bool IsConstant(std::span<const double> channel) {
+  // Blocks without an early exit inside, four samples at a time (as HasWrap(); GCC left a scalar
+  // block loop as a comparison per sample): most channels are read to the end or differ early.
+  using V = double __attribute__((vector_size(32)));
+  using Mask = vector_trig::MaskOf<V>;
+  constexpr std::size_t kLanes = sizeof(V) / sizeof(double);
+  constexpr std::size_t kBlock = 4 * kLanes;
   const double first = channel[0];
+  const double* d = channel.data();
   std::size_t i = 0;
   for (; i + kBlock <= channel.size(); i += kBlock) {
-    bool differs = false;
-    for (std::size_t k = 0; k < kBlock; ++k) differs |= channel[i + k] != first;
-    if (differs) return false;
+    Mask differs = {};
+    for (std::size_t k = 0; k < kBlock; k += kLanes) {
+      V v;
+      std::memcpy(&v, d + i + k, sizeof v);
+      differs |= v != first;
+    }
+    if (differs[0] || differs[1] || differs[2] || differs[3]) return false;
   }
   for (; i < channel.size(); ++i) {
     if (channel[i] != first) return false;
@@ -879,6 +908,24 @@ void WriteFixedRotation(const ResamplePlan& plan,
   }
 }
 
+// The first index in [from, end) where flags a[i] (or b[i], when b is given) are non-zero, or
+// end: eight flags at a time (nearly all are zero, and a branch per flag cost more than the
+// scalar fixes they mark).
+std::size_t NextFlagged(const unsigned char* a, const unsigned char* b, std::size_t from,
+                        std::size_t end) {
+  std::size_t i = from;
+  for (; i + 8 <= end; i += 8) {
+    std::uint64_t word_a = 0, word_b = 0;
+    std::memcpy(&word_a, a + i, sizeof word_a);
+    if (b != nullptr) std::memcpy(&word_b, b + i, sizeof word_b);
+    if ((word_a | word_b) != 0) break;
+  }
+  for (; i < end; ++i) {
+    if (a[i] != 0 || (b != nullptr && b[i] != 0)) return i;
+  }
+  return end;
+}
+
 // Writes the copies among outputs [begin, end) and lists the others in `interpolating`. A batch
 // can span a long run of copies: false when a stop was requested on the way (`interpolating`
 // then incomplete).
@@ -1003,8 +1050,8 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
     retime_internal::WeightedMeans(quats.data(), slots.mean_tables(), means, min_dot, mean_slots,
                                    needs_markley);
     std::size_t markleys = 0;
-    for (std::size_t s = 0; s < means; ++s) {
-      if (!needs_markley[s]) continue;
+    for (std::size_t s = NextFlagged(needs_markley, nullptr, 0, means); s < means;
+         s = NextFlagged(needs_markley, nullptr, s + 1, means)) {
       // Not a copy: the slot's flag served as Markley's.
       needs_markley[s] = 0;
       markley_jobs[markleys] = slots.job(s);
@@ -1026,8 +1073,8 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
         .out = {out[0].data(), out[1].data(), out[2].data()}};
     retime_internal::QuatsToEulerNearest(order, std::as_const(rotations).Arrays(), targets, count,
                                          ill_conditioned.get());
-    for (std::size_t slot = 0; slot < count; ++slot) {
-      if (!copied[slot] && !ill_conditioned[slot]) continue;
+    for (std::size_t slot = NextFlagged(copied.get(), ill_conditioned.get(), 0, count);
+         slot < count; slot = NextFlagged(copied.get(), ill_conditioned.get(), slot + 1, count)) {
       const auto j = static_cast<std::size_t>(slots.output()[slot]);
       const auto nearest = static_cast<std::size_t>(slots.nearest()[slot]);
       if (copied[slot]) {

@@ -1,6 +1,7 @@
 #include "rotation_batch.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -17,6 +18,17 @@
 #define TEMPOKEY_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
 #endif
 
+// The hottest kernels (conversions to quaternions and back, weighted means) also come as 8-lane
+// variants for AVX-512 processors, chosen at run time: the same arithmetic lane by lane (no
+// contraction into FMA: -ffp-contract=off), so the same bits, in about half the instructions.
+// Built by GCC alone, without sanitizers (the fuzz stage's clang build keeps the portable code).
+#if !defined(TEMPOKEY_SANITIZED) && defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define TEMPOKEY_AVX512_KERNELS 1
+#define TEMPOKEY_AVX512_TARGET __attribute__((target("avx512f,avx512dq,avx512vl,avx512bw")))
+#else
+#define TEMPOKEY_AVX512_KERNELS 0
+#endif
+
 namespace tempokey::core::retime_internal {
 namespace {
 
@@ -26,6 +38,10 @@ namespace {
 using V = vector_trig::V4;
 using Mask = vector_trig::MaskOf<V>;
 constexpr std::size_t kLanes = 4;
+// The 8-lane vectors of the AVX-512 variants. The helpers below take either width (LanesOf<V>).
+using V8 = vector_trig::V8;
+template <class T>
+inline constexpr std::size_t LanesOf = sizeof(T) / sizeof(double);
 
 // As rotation.cc.
 constexpr double kDegToRad = std::numbers::pi / 180.0;
@@ -33,39 +49,72 @@ constexpr double kRadToDeg = 180.0 / std::numbers::pi;
 constexpr double kSinRatioSeriesLimit = 0.5;
 
 // Quaternions, one per lane.
-struct QuatLanes {
-  V w, x, y, z;
+template <class VT>
+struct QuatLanesOf {
+  VT w, x, y, z;
 };
+using QuatLanes = QuatLanesOf<V>;
 
 [[gnu::always_inline]] inline V Broadcast(double v) { return vector_trig::Splat<V>(v); }
 
-// Lanes [0, count) of `p` (count <= kLanes), the missing lanes repeating lane 0: a partial group
+
+// Lane flags as doubles, 1 where set and 0 elsewhere, for the kernels that take either width: GCC
+// 12 turns an 8-lane comparison held as a mask value (read lane by lane, combined with integer
+// operations or passed on) into a comparison per lane, where a comparison used at once to select
+// between two vectors stays one instruction. So conditions are written `cond ? one : zero`.
+template <class VT>
+struct FlagValues {
+  const VT one = vector_trig::Splat<VT>(1.0);
+  const VT zero = vector_trig::Splat<VT>(0.0);
+};
+
+// True when no lane of `flags` (ones and zeros) is set: the lanes summed over halves.
+template <class VT>
+[[gnu::always_inline]] inline bool NoneSet(VT flags) {
+  using V2 = double __attribute__((vector_size(16)));
+  V four;
+  if constexpr (LanesOf<VT> == 8) {
+    four = __builtin_shufflevector(flags, flags, 0, 1, 2, 3) +
+           __builtin_shufflevector(flags, flags, 4, 5, 6, 7);
+  } else {
+    four = flags;
+  }
+  const V2 two = __builtin_shufflevector(four, four, 0, 1) + __builtin_shufflevector(four, four, 2, 3);
+  return two[0] + two[1] == 0.0;
+}
+
+// Lanes [0, count) of `p` (count <= lanes), the missing lanes repeating lane 0: a partial group
 // computes its padding on real values.
-[[gnu::always_inline]] inline V LoadPartial(const double* p, std::size_t count) {
-  V v;
-  if (count >= kLanes) {
+template <class VT = V>
+[[gnu::always_inline]] inline VT LoadPartial(const double* p, std::size_t count) {
+  VT v;
+  if (count >= LanesOf<VT>) {
     std::memcpy(&v, p, sizeof v);
     return v;
   }
-  v = Broadcast(p[0]);
+  v = vector_trig::Splat<VT>(p[0]);
   for (std::size_t lane = 1; lane < count; ++lane) v[lane] = p[lane];
   return v;
 }
 
-[[gnu::always_inline]] inline void StorePartial(double* p, V v, std::size_t count) {
-  if (count >= kLanes) {
+template <class VT>
+[[gnu::always_inline]] inline void StorePartial(double* p, VT v, std::size_t count) {
+  if (count >= LanesOf<VT>) {
     std::memcpy(p, &v, sizeof v);
     return;
   }
   for (std::size_t lane = 0; lane < count; ++lane) p[lane] = v[lane];
 }
 
-[[gnu::always_inline]] inline QuatLanes LoadQuats(ConstQuatArrays q, std::size_t i, std::size_t count) {
-  return {LoadPartial(q.w + i, count), LoadPartial(q.x + i, count), LoadPartial(q.y + i, count),
-          LoadPartial(q.z + i, count)};
+template <class VT = V>
+[[gnu::always_inline]] inline QuatLanesOf<VT> LoadQuats(ConstQuatArrays q, std::size_t i,
+                                                        std::size_t count) {
+  return {LoadPartial<VT>(q.w + i, count), LoadPartial<VT>(q.x + i, count),
+          LoadPartial<VT>(q.y + i, count), LoadPartial<VT>(q.z + i, count)};
 }
 
-[[gnu::always_inline]] inline void StoreQuats(QuatArrays q, std::size_t i, const QuatLanes& v,
+template <class VT>
+[[gnu::always_inline]] inline void StoreQuats(QuatArrays q, std::size_t i, const QuatLanesOf<VT>& v,
                                               std::size_t count) {
   StorePartial(q.w + i, v.w, count);
   StorePartial(q.x + i, v.x, count);
@@ -75,26 +124,27 @@ struct QuatLanes {
 
 // The scalar functions of rotation.cc, lane by lane, in their order of operations.
 
-[[gnu::always_inline]] inline V Dot(const QuatLanes& a, const QuatLanes& b) {
+template <class VT>
+[[gnu::always_inline]] inline VT Dot(const QuatLanesOf<VT>& a, const QuatLanesOf<VT>& b) {
   return a.w * b.w + a.x * b.x + a.y * b.y + a.z * b.z;
 }
 
-[[gnu::always_inline]] inline QuatLanes Scaled(const QuatLanes& q, V s) {
+template <class VT>
+[[gnu::always_inline]] inline QuatLanesOf<VT> Scaled(const QuatLanesOf<VT>& q, VT s) {
   return {q.w * s, q.x * s, q.y * s, q.z * s};
 }
 
 // std::sqrt lane by lane (one vsqrtpd where the target has it).
-[[gnu::always_inline]] inline V Sqrt(V v) {
-  V root;
-  for (std::size_t lane = 0; lane < kLanes; ++lane) root[lane] = std::sqrt(v[lane]);
+template <class VT>
+[[gnu::always_inline]] inline VT Sqrt(VT v) {
+  VT root;
+  for (std::size_t lane = 0; lane < LanesOf<VT>; ++lane) root[lane] = std::sqrt(v[lane]);
   return root;
 }
 
-[[gnu::always_inline]] inline QuatLanes Normalized(const QuatLanes& q) {
-  V norm;
-  const V squared = Dot(q, q);
-  for (std::size_t lane = 0; lane < kLanes; ++lane) norm[lane] = std::sqrt(squared[lane]);
-  return Scaled(q, 1.0 / norm);
+template <class VT>
+[[gnu::always_inline]] inline QuatLanesOf<VT> Normalized(const QuatLanesOf<VT>& q) {
+  return Scaled(q, 1.0 / Sqrt(Dot(q, q)));
 }
 
 // AxisRotation(axis, degrees) is (cos, sin along the axis) of the half angle
@@ -104,7 +154,9 @@ struct QuatLanes {
 // products per component less the ones by the rotation's zero components. Those are exact zeros,
 // and adding or subtracting an exact zero leaves a sum as it is, so every component has
 // Multiply()'s value (up to the sign of a zero result).
-[[gnu::always_inline]] inline QuatLanes MultiplyByAxis(const QuatLanes& q, int axis, V s, V c) {
+template <class VT>
+[[gnu::always_inline]] inline QuatLanesOf<VT> MultiplyByAxis(const QuatLanesOf<VT>& q, int axis,
+                                                             VT s, VT c) {
   switch (axis) {
     case 0:
       return {q.w * c - q.x * s, q.w * s + q.x * c, q.y * c + q.z * s, q.z * c - q.y * s};
@@ -121,20 +173,32 @@ struct QuatLanes {
          x2 * (-1.0 / 39916800 + x2 * (1.0 / 6227020800 + x2 * (-1.0 / 1307674368000.0)))))));
 }
 
-[[gnu::always_inline]] inline V NearestTurn(V angle, V reference) {
+template <class VT>
+[[gnu::always_inline]] inline VT NearestTurn(VT angle, VT reference) {
   return angle + 360.0 * vector_trig::RoundSmall((reference - angle) * (1.0 / 360.0));
 }
 
 // True when every lane of the three `v` is below `limit` in size (the vector sine's accurate
 // range).
-[[gnu::always_inline]] inline bool AllReducible(const V (&v)[3], double limit) {
-  // |v| by clearing the sign bit; one test of the three masks together.
-  using Bits = std::int64_t __attribute__((vector_size(sizeof(V))));
-  auto abs = [](V x) __attribute__((always_inline)) { return (V)((Bits)x & std::numeric_limits<std::int64_t>::max()); };
-  const Mask ok = (abs(v[0]) < limit) & (abs(v[1]) < limit) & (abs(v[2]) < limit);
-  bool all = true;
-  for (std::size_t lane = 0; lane < kLanes; ++lane) all = all && ok[lane] != 0;
-  return all;
+template <class VT>
+[[gnu::always_inline]] inline bool AllReducible(const VT (&v)[3], double limit) {
+  // As integers, the bits of doubles without their sign bit order as the sizes do, a NaN above
+  // every number: the largest over the lanes, compared once (integer operations only, which GCC
+  // keeps as vector operations on 8 lanes too).
+  using Bits = vector_trig::MaskOf<VT>;
+  auto magnitude = [](VT x) __attribute__((always_inline)) { return (Bits)x & std::numeric_limits<std::int64_t>::max(); };
+  auto larger = [](auto a, auto b) __attribute__((always_inline)) { return a > b ? a : b; };
+  const Bits largest = larger(larger(magnitude(v[0]), magnitude(v[1])), magnitude(v[2]));
+  vector_trig::MaskOf<V> four;
+  if constexpr (LanesOf<VT> == 8) {
+    four = larger(__builtin_shufflevector(largest, largest, 0, 1, 2, 3),
+                  __builtin_shufflevector(largest, largest, 4, 5, 6, 7));
+  } else {
+    four = largest;
+  }
+  std::int64_t most = 0;
+  for (std::size_t lane = 0; lane < kLanes; ++lane) most = larger(most, four[lane]);
+  return most < std::bit_cast<std::int64_t>(limit);
 }
 
 // The 4x4 transpose of rows a, b, c, d: quaternions stored (w, x, y, z) one after the other become
@@ -156,14 +220,23 @@ struct QuatLanes {
 // memcpy of the whole vector is one unaligned load or store for GCC and clang alike, and is
 // defined for any address (clang ignores a lowered alignment on a vector typedef, and UBSan then
 // flags the access).
-[[gnu::always_inline]] inline V LoadV(const double* p) {
-  V v;
+template <class VT = V>
+[[gnu::always_inline]] inline VT LoadV(const double* p) {
+  VT v;
   std::memcpy(&v, p, sizeof v);
   return v;
 }
-[[gnu::always_inline]] inline void StoreV(double* p, V v) { std::memcpy(p, &v, sizeof v); }
+template <class VT>
+[[gnu::always_inline]] inline void StoreV(double* p, VT v) { std::memcpy(p, &v, sizeof v); }
 
-// (w, x, y, z) of the lanes' quaternions as consecutive (w, x, y, z) groups.
+// The 4-lane halves of an 8-lane vector, and back (shuffles: every bit kept).
+[[maybe_unused, gnu::always_inline]] inline V LowHalf(V8 v) { return __builtin_shufflevector(v, v, 0, 1, 2, 3); }
+[[maybe_unused, gnu::always_inline]] inline V HighHalf(V8 v) { return __builtin_shufflevector(v, v, 4, 5, 6, 7); }
+[[maybe_unused, gnu::always_inline]] inline V8 Joined(V low, V high) {
+  return __builtin_shufflevector(low, high, 0, 1, 2, 3, 4, 5, 6, 7);
+}
+
+// (w, x, y, z) of the first `count` lanes' quaternions as consecutive (w, x, y, z) groups.
 [[gnu::always_inline]] inline void StoreInterleaved(double* out, const QuatLanes& q,
                                                     std::size_t count) {
   static_assert(kLanes == 4);
@@ -174,37 +247,57 @@ struct QuatLanes {
   if (count > 2) StoreV(out + 8, c);
   if (count > 3) StoreV(out + 12, d);
 }
-
-// Quaternions (w, x, y, z) from `quats` at the indices `at`, one per lane.
-[[gnu::always_inline]] inline QuatLanes Gather(const double* quats, const std::int64_t* at) {
-  static_assert(kLanes == 4);
-  V a = LoadV(quats + 4 * at[0]), b = LoadV(quats + 4 * at[1]), c = LoadV(quats + 4 * at[2]),
-    d = LoadV(quats + 4 * at[3]);
-  Transpose(a, b, c, d);
-  return {a, b, c, d};
+[[maybe_unused, gnu::always_inline]] inline void StoreInterleaved(double* out,
+                                                                  const QuatLanesOf<V8>& q,
+                                                    std::size_t count) {
+  StoreInterleaved(out, QuatLanes{LowHalf(q.w), LowHalf(q.x), LowHalf(q.y), LowHalf(q.z)}, count);
+  if (count <= kLanes) return;
+  StoreInterleaved(out + 4 * kLanes,
+                   QuatLanes{HighHalf(q.w), HighHalf(q.x), HighHalf(q.y), HighHalf(q.z)},
+                   count - kLanes);
 }
 
-// Lanes [0, count) of index array `p` into `at`, the missing lanes repeating lane 0.
+// Quaternions (w, x, y, z) from `quats` at the indices `at`, one per lane.
+template <class VT = V>
+[[gnu::always_inline]] inline QuatLanesOf<VT> Gather(const double* quats, const std::int64_t* at) {
+  if constexpr (LanesOf<VT> == 4) {
+    V a = LoadV(quats + 4 * at[0]), b = LoadV(quats + 4 * at[1]), c = LoadV(quats + 4 * at[2]),
+      d = LoadV(quats + 4 * at[3]);
+    Transpose(a, b, c, d);
+    return {a, b, c, d};
+  } else {
+    static_assert(LanesOf<VT> == 8);
+    const QuatLanes low = Gather<V>(quats, at);
+    const QuatLanes high = Gather<V>(quats, at + 4);
+    return {Joined(low.w, high.w), Joined(low.x, high.x), Joined(low.y, high.y),
+            Joined(low.z, high.z)};
+  }
+}
+
+// Lanes [0, count) of index array `p` into `at` (L entries), the missing lanes repeating lane 0.
+template <std::size_t L = kLanes>
 [[gnu::always_inline]] inline void LoadIndices(const std::int64_t* p, std::size_t count,
-                                               std::int64_t at[kLanes]) {
-  for (std::size_t lane = 0; lane < kLanes; ++lane) at[lane] = p[lane < count ? lane : 0];
+                                               std::int64_t (&at)[L]) {
+  for (std::size_t lane = 0; lane < L; ++lane) at[lane] = p[lane < count ? lane : 0];
 }
 
 // The kernels below are written for one Euler order (axes I, J, K) at a time: the axes then pick
 // matrix entries and products at compile time rather than through memory.
-template <int I, int J, int K>
-[[gnu::always_inline]] inline QuatLanes AxesProduct(const V (&sine)[3], const V (&cosine)[3]) {
+template <int I, int J, int K, class VT>
+[[gnu::always_inline]] inline QuatLanesOf<VT> AxesProduct(const VT (&sine)[3],
+                                                          const VT (&cosine)[3]) {
   // EulerToQuat(): Multiply(Multiply(R0, R1), R2) with R_n = AxisRotation(axis n, angle n).
-  const V zero = Broadcast(0.0);
-  const QuatLanes first = {cosine[0], I == 0 ? sine[0] : zero, I == 1 ? sine[0] : zero,
-                           I == 2 ? sine[0] : zero};
+  const VT zero = vector_trig::Splat<VT>(0.0);
+  const QuatLanesOf<VT> first = {cosine[0], I == 0 ? sine[0] : zero, I == 1 ? sine[0] : zero,
+                                 I == 2 ? sine[0] : zero};
   return MultiplyByAxis(MultiplyByAxis(first, J, sine[1], cosine[1]), K, sine[2], cosine[2]);
 }
 
-template <int I, int J, int K>
+template <int I, int J, int K, class VT>
 [[gnu::always_inline]] inline void EulerToQuatsBody(const double* a, const double* b,
                                                     const double* c, std::size_t count,
                                                     double* out) {
+  constexpr std::size_t L = LanesOf<VT>;
   constexpr EulerOrder order = {I, J, K};
   // Half angles (radians) beyond kMaxReducedRadians: far beyond any rotation channel's values.
   constexpr double kMaxDegrees = 2.0 * vector_trig::kMaxReducedRadians / kDegToRad;
@@ -218,36 +311,43 @@ template <int I, int J, int K>
       p[3] = q.z;
     }
   };
-  auto half_radians = [](V degrees) __attribute__((always_inline)) { return 0.5 * degrees * kDegToRad; };
+  auto half_radians = [](VT degrees) __attribute__((always_inline)) { return 0.5 * degrees * kDegToRad; };
   std::size_t i = 0;
+  // Angles below this many degrees have half angles SinCosSmall() takes (mocap joints mostly
+  // stay within them: 95 % of CMU 131_01's blocks of 16 frames).
+  constexpr double kSmallDegrees = 89.0;
+  static_assert(0.5 * kSmallDegrees * kDegToRad < vector_trig::kMaxUnreducedRadians);
   // Two groups per step, their six sines and cosines side by side.
-  for (; i + 2 * kLanes <= count; i += 2 * kLanes) {
-    const V angle[2][3] = {{LoadV(a + i), LoadV(b + i), LoadV(c + i)},
-                           {LoadV(a + i + kLanes), LoadV(b + i + kLanes), LoadV(c + i + kLanes)}};
-    if (!AllReducible(angle[0], kMaxDegrees) || !AllReducible(angle[1], kMaxDegrees)) {
-      scalar(i, 2 * kLanes);
+  for (; i + 2 * L <= count; i += 2 * L) {
+    const VT angle[2][3] = {{LoadV<VT>(a + i), LoadV<VT>(b + i), LoadV<VT>(c + i)},
+                            {LoadV<VT>(a + i + L), LoadV<VT>(b + i + L), LoadV<VT>(c + i + L)}};
+    VT sine[6], cosine[6];
+    const VT half[6] = {half_radians(angle[0][0]), half_radians(angle[0][1]),
+                        half_radians(angle[0][2]), half_radians(angle[1][0]),
+                        half_radians(angle[1][1]), half_radians(angle[1][2])};
+    if (AllReducible(angle[0], kSmallDegrees) && AllReducible(angle[1], kSmallDegrees)) {
+      vector_trig::SinCosSmall<6>(half, sine, cosine);
+    } else if (AllReducible(angle[0], kMaxDegrees) && AllReducible(angle[1], kMaxDegrees)) {
+      vector_trig::SinCos<6>(half, sine, cosine);
+    } else {
+      scalar(i, 2 * L);
       continue;
     }
-    V sine[6], cosine[6];
-    vector_trig::SinCos<6>({half_radians(angle[0][0]), half_radians(angle[0][1]),
-                            half_radians(angle[0][2]), half_radians(angle[1][0]),
-                            half_radians(angle[1][1]), half_radians(angle[1][2])},
-                           sine, cosine);
     for (std::size_t g = 0; g < 2; ++g) {
-      const V s[3] = {sine[3 * g], sine[3 * g + 1], sine[3 * g + 2]};
-      const V co[3] = {cosine[3 * g], cosine[3 * g + 1], cosine[3 * g + 2]};
-      StoreInterleaved(out + 4 * (i + g * kLanes), AxesProduct<I, J, K>(s, co), kLanes);
+      const VT s[3] = {sine[3 * g], sine[3 * g + 1], sine[3 * g + 2]};
+      const VT co[3] = {cosine[3 * g], cosine[3 * g + 1], cosine[3 * g + 2]};
+      StoreInterleaved(out + 4 * (i + g * L), AxesProduct<I, J, K>(s, co), L);
     }
   }
-  for (; i < count; i += kLanes) {
-    const std::size_t lanes = std::min(kLanes, count - i);
-    const V angle[3] = {LoadPartial(a + i, lanes), LoadPartial(b + i, lanes),
-                         LoadPartial(c + i, lanes)};
+  for (; i < count; i += L) {
+    const std::size_t lanes = std::min(L, count - i);
+    const VT angle[3] = {LoadPartial<VT>(a + i, lanes), LoadPartial<VT>(b + i, lanes),
+                         LoadPartial<VT>(c + i, lanes)};
     if (!AllReducible(angle, kMaxDegrees)) {
       scalar(i, lanes);
       continue;
     }
-    V sine[3], cosine[3];
+    VT sine[3], cosine[3];
     vector_trig::SinCos<3>({half_radians(angle[0]), half_radians(angle[1]), half_radians(angle[2])},
                            sine, cosine);
     StoreInterleaved(out + 4 * i, AxesProduct<I, J, K>(sine, cosine), lanes);
@@ -258,21 +358,21 @@ template <int I, int J, int K>
 constexpr int OrderCode(int i, int j, int k) { return 9 * i + 3 * j + k; }
 constexpr int OrderCode(const EulerOrder& order) { return OrderCode(order[0], order[1], order[2]); }
 
-// Calls body<I, J, K>(args...) for the order's axes. Precondition: valid order.
-#define TEMPOKEY_FOR_ORDER(order, body, ...)                              \
+// Calls body<I, J, K, VT>(args...) for the order's axes. Precondition: valid order.
+#define TEMPOKEY_FOR_ORDER(order, body, VT, ...)                          \
   switch (OrderCode(order)) {                                              \
-    case OrderCode(0, 1, 2): return body<0, 1, 2>(__VA_ARGS__);            \
-    case OrderCode(0, 2, 1): return body<0, 2, 1>(__VA_ARGS__);            \
-    case OrderCode(1, 0, 2): return body<1, 0, 2>(__VA_ARGS__);            \
-    case OrderCode(1, 2, 0): return body<1, 2, 0>(__VA_ARGS__);            \
-    case OrderCode(2, 0, 1): return body<2, 0, 1>(__VA_ARGS__);            \
-    default: return body<2, 1, 0>(__VA_ARGS__);                            \
+    case OrderCode(0, 1, 2): return body<0, 1, 2, VT>(__VA_ARGS__);        \
+    case OrderCode(0, 2, 1): return body<0, 2, 1, VT>(__VA_ARGS__);        \
+    case OrderCode(1, 0, 2): return body<1, 0, 2, VT>(__VA_ARGS__);        \
+    case OrderCode(1, 2, 0): return body<1, 2, 0, VT>(__VA_ARGS__);        \
+    case OrderCode(2, 0, 1): return body<2, 0, 1, VT>(__VA_ARGS__);        \
+    default: return body<2, 1, 0, VT>(__VA_ARGS__);                        \
   }
 
 TEMPOKEY_AVX2_CLONES void EulerToQuatsKernel(const EulerOrder& order, const double* a,
                                             const double* b, const double* c, std::size_t count,
                                             double* out) {
-  TEMPOKEY_FOR_ORDER(order, EulerToQuatsBody, a, b, c, count, out);
+  TEMPOKEY_FOR_ORDER(order, EulerToQuatsBody, V, a, b, c, count, out);
 }
 
 // Groups of kLanes samples one slerp step takes together.
@@ -346,7 +446,7 @@ TEMPOKEY_AVX2_CLONES void SlerpKernel(const double* quats, const std::int64_t* i
         wb = series ? series_wb : sine_wb;
       }
       const QuatLanes mixed =
-          Normalized({qa_g.w * wa + qb_g.w * wb, qa_g.x * wa + qb_g.x * wb,
+          Normalized(QuatLanes{qa_g.w * wa + qb_g.w * wb, qa_g.x * wa + qb_g.x * wb,
                       qa_g.y * wa + qb_g.y * wb, qa_g.z * wa + qb_g.z * wb});
       // Exact ends: t <= 0 gives `from`, t >= 1 gives `to` (aligned).
       const Mask at_start = tt[g] <= 0.0;
@@ -356,7 +456,7 @@ TEMPOKEY_AVX2_CLONES void SlerpKernel(const double* quats, const std::int64_t* i
       };
       if (lanes[g] == 0) continue;
       StoreQuats(out, first[g],
-                 {pick(qa_g.w, qb_g.w, mixed.w), pick(qa_g.x, qb_g.x, mixed.x),
+                 QuatLanes{pick(qa_g.w, qb_g.w, mixed.w), pick(qa_g.x, qb_g.x, mixed.x),
                   pick(qa_g.y, qb_g.y, mixed.y), pick(qa_g.z, qb_g.z, mixed.z)},
                  lanes[g]);
     }
@@ -367,35 +467,38 @@ TEMPOKEY_AVX2_CLONES void SlerpKernel(const double* quats, const std::int64_t* i
 // chain of divisions and polynomials alone leaves the processor waiting.
 constexpr int kEulerGroups = 2;
 
-template <int I, int J, int K>
+template <int I, int J, int K, class VT>
 [[gnu::always_inline]] inline void ToEulerBody(ConstQuatArrays quats, const EulerTargets& targets,
                                                std::size_t count, unsigned char* ill_conditioned) {
+  constexpr std::size_t L = LanesOf<VT>;
+  auto broadcast = [](double v) __attribute__((always_inline)) { return vector_trig::Splat<VT>(v); };
   constexpr int i = I;
   constexpr int j = J;
   constexpr int k = K;
   constexpr double sign = ((j - i + 3) % 3 == 1) ? 1.0 : -1.0;
-  constexpr int G = kEulerGroups;
-  for (std::size_t start = 0; start < count; start += G * kLanes) {
+  // On 8 lanes one group: the arctangents' chains of two spill more than they overlap.
+  constexpr int G = L == 8 ? 1 : kEulerGroups;
+  for (std::size_t start = 0; start < count; start += G * L) {
     // Group g's samples start at first[g]; a group past the end repeats group 0 and stores
     // nothing.
     std::size_t first[G], lanes[G];
-    V sin_b[G], cos_b[G], y[3 * G], x[3 * G];
+    VT sin_b[G], cos_b[G], y[3 * G], x[3 * G];
     for (int g = 0; g < G; ++g) {
-      const std::size_t begin = start + static_cast<std::size_t>(g) * kLanes;
+      const std::size_t begin = start + static_cast<std::size_t>(g) * L;
       first[g] = begin < count ? begin : start;
-      lanes[g] = begin < count ? std::min(kLanes, count - begin) : 0;
-      const QuatLanes q =
-          Normalized(LoadQuats(quats, first[g], std::max<std::size_t>(lanes[g], 1)));
+      lanes[g] = begin < count ? std::min(L, count - begin) : 0;
+      const QuatLanesOf<VT> q =
+          Normalized(LoadQuats<VT>(quats, first[g], std::max<std::size_t>(lanes[g], 1)));
       // QuatToMatrix().
-      const V xx = q.x * q.x, yy = q.y * q.y, zz = q.z * q.z;
-      const V xy = q.x * q.y, xz = q.x * q.z, yz = q.y * q.z;
-      const V wx = q.w * q.x, wy = q.w * q.y, wz = q.w * q.z;
-      const V r[3][3] = {{1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)},
+      const VT xx = q.x * q.x, yy = q.y * q.y, zz = q.z * q.z;
+      const VT xy = q.x * q.y, xz = q.x * q.z, yz = q.y * q.z;
+      const VT wx = q.w * q.x, wy = q.w * q.y, wz = q.w * q.z;
+      const VT r[3][3] = {{1.0 - 2.0 * (yy + zz), 2.0 * (xy - wz), 2.0 * (xz + wy)},
                           {2.0 * (xy + wz), 1.0 - 2.0 * (xx + zz), 2.0 * (yz - wx)},
                           {2.0 * (xz - wy), 2.0 * (yz + wx), 1.0 - 2.0 * (xx + yy)}};
-      V sb = sign * r[i][k];
-      sin_b[g] = sb < -1.0 ? Broadcast(-1.0) : (1.0 < sb ? Broadcast(1.0) : sb);
-      const V cos_squared = r[i][i] * r[i][i] + r[i][j] * r[i][j];
+      VT sb = sign * r[i][k];
+      sin_b[g] = sb < -1.0 ? broadcast(-1.0) : (1.0 < sb ? broadcast(1.0) : sb);
+      const VT cos_squared = r[i][i] * r[i][i] + r[i][j] * r[i][j];
       cos_b[g] = Sqrt(cos_squared);
       y[3 * g] = sin_b[g];
       x[3 * g] = cos_b[g];
@@ -404,53 +507,64 @@ template <int I, int J, int K>
       y[3 * g + 2] = -sign * r[i][j];
       x[3 * g + 2] = r[i][i];
     }
-    V bac[3 * G];
+    VT bac[3 * G];
     vector_trig::Atan2<3 * G>(y, x, bac);
     for (int g = 0; g < G; ++g) {
-      const V b = bac[3 * g], a = bac[3 * g + 1], c = bac[3 * g + 2];
+      const VT b = bac[3 * g], a = bac[3 * g + 1], c = bac[3 * g + 2];
       const std::size_t n = std::max<std::size_t>(lanes[g], 1);
-      std::int64_t at[kLanes], nearest[kLanes], output[kLanes];
+      std::int64_t at[L], nearest[L], output[L];
       LoadIndices(targets.i0 + first[g], n, at);
       LoadIndices(targets.nearest + first[g], n, nearest);
       LoadIndices(targets.output + first[g], n, output);
-      const V tt = LoadPartial(targets.t + first[g], n);
+      const VT tt = LoadPartial<VT>(targets.t + first[g], n);
       // The source's unwrapped angles interpolated linearly at the sample, and its values at the
       // nearest sample.
-      V ref[3], turn[3];
+      VT ref[3], turn[3];
       for (int axis = 0; axis < 3; ++axis) {
-        V v0, v1;
-        for (std::size_t lane = 0; lane < kLanes; ++lane) {
+        VT v0, v1, nearest_value;
+        for (std::size_t lane = 0; lane < L; ++lane) {
           v0[lane] = targets.reference[axis][at[lane]];
           v1[lane] = targets.reference[axis][at[lane] + 1];
-          turn[axis][lane] = targets.turn[axis][nearest[lane]];
+          nearest_value[lane] = targets.turn[axis][nearest[lane]];
         }
         ref[axis] = v0 + tt * (v1 - v0);
+        turn[axis] = nearest_value;
       }
       // The two Tait-Bryan solutions, each angle moved to the turn nearest the reference; the
       // nearer wins (NearestCandidate()).
-      V first_angles[3] = {NearestTurn(a * kRadToDeg, ref[0]), NearestTurn(b * kRadToDeg, ref[1]),
+      VT first_angles[3] = {NearestTurn(a * kRadToDeg, ref[0]), NearestTurn(b * kRadToDeg, ref[1]),
                             NearestTurn(c * kRadToDeg, ref[2])};
-      V second_angles[3] = {NearestTurn((a + std::numbers::pi) * kRadToDeg, ref[0]),
+      VT second_angles[3] = {NearestTurn((a + std::numbers::pi) * kRadToDeg, ref[0]),
                              NearestTurn((std::numbers::pi - b) * kRadToDeg, ref[1]),
                              NearestTurn((c + std::numbers::pi) * kRadToDeg, ref[2])};
-      V first_cost = Broadcast(0.0), second_cost = Broadcast(0.0);
+      VT first_cost = broadcast(0.0), second_cost = broadcast(0.0);
       for (int axis = 0; axis < 3; ++axis) {
-        const V d1 = first_angles[axis] - ref[axis];
+        const VT d1 = first_angles[axis] - ref[axis];
         first_cost += d1 * d1;
-        const V d2 = second_angles[axis] - ref[axis];
+        const VT d2 = second_angles[axis] - ref[axis];
         second_cost += d2 * d2;
       }
-      const Mask second = second_cost < first_cost;
+      VT angle[3];
       for (int axis = 0; axis < 3; ++axis) {
-        const V angle = NearestTurn(second ? second_angles[axis] : first_angles[axis], turn[axis]);
-        for (std::size_t lane = 0; lane < lanes[g]; ++lane) {
-          targets.out[axis][output[lane]] = angle[lane];
+        const VT nearer =
+            second_cost < first_cost ? second_angles[axis] : first_angles[axis];
+        angle[axis] = NearestTurn(nearer, turn[axis]);
+      }
+      // Outputs one after the other (a decimation's weighted means, a slowed section's slerps)
+      // take one vector store per axis.
+      if (lanes[g] == L && output[L - 1] - output[0] == static_cast<std::int64_t>(L - 1)) {
+        for (int axis = 0; axis < 3; ++axis) StoreV(targets.out[axis] + output[0], angle[axis]);
+      } else {
+        for (int axis = 0; axis < 3; ++axis) {
+          for (std::size_t lane = 0; lane < lanes[g]; ++lane) {
+            targets.out[axis][output[lane]] = angle[axis][lane];
+          }
         }
       }
       // Near gimbal lock: the caller's (gimbal lock itself, cos_b < 1e-12, among them).
-      const Mask near_lock = cos_b[g] < kBatchedMinMiddleCos;
+      const VT near_lock = cos_b[g] < kBatchedMinMiddleCos ? broadcast(1.0) : broadcast(0.0);
       for (std::size_t lane = 0; lane < lanes[g]; ++lane) {
-        ill_conditioned[first[g] + lane] = near_lock[lane] ? 1 : 0;
+        ill_conditioned[first[g] + lane] = near_lock[lane] != 0.0 ? 1 : 0;
       }
     }
   }
@@ -459,8 +573,22 @@ template <int I, int J, int K>
 TEMPOKEY_AVX2_CLONES void ToEulerKernel(const EulerOrder& order, ConstQuatArrays quats,
                                        const EulerTargets& targets, std::size_t count,
                                        unsigned char* ill_conditioned) {
-  TEMPOKEY_FOR_ORDER(order, ToEulerBody, quats, targets, count, ill_conditioned);
+  TEMPOKEY_FOR_ORDER(order, ToEulerBody, V, quats, targets, count, ill_conditioned);
 }
+
+#if TEMPOKEY_AVX512_KERNELS
+TEMPOKEY_AVX512_TARGET void EulerToQuatsKernel8(const EulerOrder& order, const double* a,
+                                                const double* b, const double* c,
+                                                std::size_t count, double* out) {
+  TEMPOKEY_FOR_ORDER(order, EulerToQuatsBody, V8, a, b, c, count, out);
+}
+
+TEMPOKEY_AVX512_TARGET void ToEulerKernel8(const EulerOrder& order, ConstQuatArrays quats,
+                                           const EulerTargets& targets, std::size_t count,
+                                           unsigned char* ill_conditioned) {
+  TEMPOKEY_FOR_ORDER(order, ToEulerBody, V8, quats, targets, count, ill_conditioned);
+}
+#endif
 
 #undef TEMPOKEY_FOR_ORDER
 
@@ -471,62 +599,89 @@ TEMPOKEY_AVX2_CLONES void ToEulerKernel(const EulerOrder& order, ConstQuatArrays
 // phi(tap, pivot) + phi(pivot, mean) of the mean, so when the largest tap's and the mean's
 // half-angles from the pivot add up to less than the spread's half-angle, by a margin far above
 // rounding, no tap is outside it (and the tap-by-tap test, run otherwise, would say so too).
-// `tap_cos` is min |tap·pivot|, `mean_cos` |mean·pivot|, `norm` the sum's norm (the test also
-// fails a sum that does not normalize).
-[[gnu::always_inline]] inline bool WithinSpread(V tap_cos, V mean_cos, V norm, double min_dot) {
+// `tap_cos` is min |tap·pivot|, `mean_cos` |mean·pivot|, `unnormalizable` 1 in the lanes whose sum
+// does not normalize (the test fails them too), 0 elsewhere.
+template <class VT>
+[[gnu::always_inline]] inline bool WithinSpread(VT tap_cos, VT mean_cos, VT unnormalizable,
+                                                double min_dot) {
   constexpr double kMargin = 1e-9;
-  const V zero = Broadcast(0.0);
-  const V tap_sin_squared = 1.0 - tap_cos * tap_cos;
-  const V mean_sin_squared = 1.0 - mean_cos * mean_cos;
-  const V sines_squared = (tap_sin_squared > 0.0 ? tap_sin_squared : zero) *
-                          (mean_sin_squared > 0.0 ? mean_sin_squared : zero);
+  const VT zero = vector_trig::Splat<VT>(0.0);
+  const VT tap_sin_squared = 1.0 - tap_cos * tap_cos;
+  const VT mean_sin_squared = 1.0 - mean_cos * mean_cos;
+  const VT sines_squared = (tap_sin_squared > 0.0 ? tap_sin_squared : zero) *
+                           (mean_sin_squared > 0.0 ? mean_sin_squared : zero);
   // cos(phi_tap + phi_mean).
-  const V sum_cos = tap_cos * mean_cos - Sqrt(sines_squared);
-  const Mask within = sum_cos >= min_dot + kMargin && norm > 1e-9;
-  bool all = true;
-  for (std::size_t lane = 0; lane < kLanes; ++lane) all = all && within[lane] != 0;
-  return all;
+  const VT sum_cos = tap_cos * mean_cos - Sqrt(sines_squared);
+  const FlagValues<VT> flag;
+  const VT outside = sum_cos >= min_dot + kMargin ? unnormalizable : flag.one;
+  return NoneSet(outside);
+}
+
+// The weighted means of the groups' samples, LanesOf<VT> lanes at a time: a group of kMeanLanes
+// samples is one 8-lane vector or two 4-lane ones.
+template <class VT>
+[[gnu::always_inline]] inline void WeightedMeansBody(const double* quats, MeanTables tables,
+                                                     std::size_t count, double min_dot,
+                                                     QuatArrays out,
+                                                     unsigned char* needs_markley) {
+  constexpr std::size_t L = LanesOf<VT>;
+  static_assert(kMeanLanes % L == 0);
+  using Q = QuatLanesOf<VT>;
+  const VT zero = vector_trig::Splat<VT>(0.0);
+  for (std::size_t first = 0; first < count; first += L) {
+    const std::size_t lanes = std::min(L, count - first);
+    const MeanGroup& group = tables.groups[first / kMeanLanes];
+    // This vector's lanes within the group's.
+    const std::size_t part = first % kMeanLanes;
+    const std::int64_t* source = tables.source + group.tap_begin + part;
+    const double* weight = tables.weight + group.tap_begin + part;
+    const Q ref = Gather<VT>(quats, group.pivot + part);
+    Q sum = {zero, zero, zero, zero};
+    VT nearest_pivot = vector_trig::Splat<VT>(1.0);  // min |q·pivot| over the taps
+    for (std::int64_t n = 0; n < group.taps; ++n) {
+      const Q q = Gather<VT>(quats, source + kMeanLanes * n);
+      const VT w = LoadV<VT>(weight + kMeanLanes * n);
+      const VT dot = Dot(q, ref);
+      const VT signed_w = dot < 0.0 ? -w : w;
+      sum = {sum.w + q.w * signed_w, sum.x + q.x * signed_w, sum.y + q.y * signed_w,
+             sum.z + q.z * signed_w};
+      const VT size = vector_trig::Abs(dot);
+      nearest_pivot = size < nearest_pivot ? size : nearest_pivot;
+    }
+    const VT norm = Sqrt(Dot(sum, sum));
+    const VT inverse = 1.0 / norm;
+    const Q mean = Scaled(sum, inverse);
+    const FlagValues<VT> flag;
+    // One comparison of the norm, its flags used twice (a comparison used in two places is
+    // shared as a mask value, which GCC 12 makes lane by lane on 8 lanes).
+    VT markley = norm > 1e-9 ? flag.zero : flag.one;
+    if (!WithinSpread(nearest_pivot, vector_trig::Abs(Dot(mean, ref)), markley, min_dot)) {
+      for (std::int64_t n = 0; n < group.taps; ++n) {
+        const Q q = Gather<VT>(quats, source + kMeanLanes * n);
+        const VT w = LoadV<VT>(weight + kMeanLanes * n);
+        markley = w != 0.0 && vector_trig::Abs(Dot(q, mean)) < min_dot ? flag.one : markley;
+      }
+    }
+    StoreQuats(out, first, mean, lanes);
+    for (std::size_t lane = 0; lane < lanes; ++lane) {
+      needs_markley[first + lane] = markley[lane] != 0.0 ? 1 : 0;
+    }
+  }
 }
 
 TEMPOKEY_AVX2_CLONES void WeightedMeansKernel(const double* quats, MeanTables tables,
                                              std::size_t count, double min_dot, QuatArrays out,
                                              unsigned char* needs_markley) {
-  static_assert(kLanes == kMeanLanes);
-  for (std::size_t first = 0, g = 0; first < count; first += kLanes, ++g) {
-    const std::size_t lanes = std::min(kLanes, count - first);
-    const MeanGroup& group = tables.groups[g];
-    const std::int64_t* source = tables.source + group.tap_begin;
-    const double* weight = tables.weight + group.tap_begin;
-    const QuatLanes ref = Gather(quats, group.pivot);
-    QuatLanes sum = {Broadcast(0.0), Broadcast(0.0), Broadcast(0.0), Broadcast(0.0)};
-    V nearest_pivot = Broadcast(1.0);  // min |q·pivot| over the taps
-    for (std::int64_t n = 0; n < group.taps; ++n) {
-      const QuatLanes q = Gather(quats, source + kLanes * n);
-      const V w = LoadV(weight + kLanes * n);
-      const V dot = Dot(q, ref);
-      const V signed_w = dot < 0.0 ? -w : w;
-      sum = {sum.w + q.w * signed_w, sum.x + q.x * signed_w, sum.y + q.y * signed_w,
-             sum.z + q.z * signed_w};
-      const V size = vector_trig::Abs(dot);
-      nearest_pivot = size < nearest_pivot ? size : nearest_pivot;
-    }
-    const V squared = Dot(sum, sum);
-    V norm;
-    for (std::size_t lane = 0; lane < kLanes; ++lane) norm[lane] = std::sqrt(squared[lane]);
-    const V inverse = 1.0 / norm;
-    const QuatLanes mean = Scaled(sum, inverse);
-    Mask markley = !(norm > 1e-9);
-    if (!WithinSpread(nearest_pivot, vector_trig::Abs(Dot(mean, ref)), norm, min_dot)) {
-      for (std::int64_t n = 0; n < group.taps; ++n) {
-        const QuatLanes q = Gather(quats, source + kLanes * n);
-        const V w = LoadV(weight + kLanes * n);
-        markley = markley || (w != 0.0 && vector_trig::Abs(Dot(q, mean)) < min_dot);
-      }
-    }
-    StoreQuats(out, first, mean, lanes);
-    for (std::size_t lane = 0; lane < lanes; ++lane) needs_markley[first + lane] = markley[lane] ? 1 : 0;
-  }
+  WeightedMeansBody<V>(quats, tables, count, min_dot, out, needs_markley);
 }
+
+#if TEMPOKEY_AVX512_KERNELS
+TEMPOKEY_AVX512_TARGET void WeightedMeansKernel8(const double* quats, MeanTables tables,
+                                                 std::size_t count, double min_dot, QuatArrays out,
+                                                 unsigned char* needs_markley) {
+  WeightedMeansBody<V8>(quats, tables, count, min_dot, out, needs_markley);
+}
+#endif
 
 // Lanes whose two vectors differ in any bit (-0 and +0 differ; no NaN arises here).
 using Bits = std::int64_t __attribute__((vector_size(sizeof(V))));
@@ -568,8 +723,8 @@ template <int G>
       settled[g] = !done[g];
     }
     if (!any_active) break;
-    for (int p = 0; p < 4; ++p) {
-      for (int q = p + 1; q < 4; ++q) {
+    _Pragma("GCC unroll 4") for (int p = 0; p < 4; ++p) {
+      _Pragma("GCC unroll 4") for (int q = p + 1; q < 4; ++q) {
         V c[G], s[G];
         Mask rotate[G];
         for (int g = 0; g < G; ++g) {
@@ -628,9 +783,9 @@ constexpr int kMarkleyGroups = 2;
 // MarkleyMean() for several jobs at once, one per lane; a lane past its job's taps adds its pivot
 // with weight 0, which leaves every sum as it is (a group past the last job repeats it and stores
 // nothing).
-TEMPOKEY_AVX2_CLONES void MarkleyMeansKernel(const double* quats, const double* weights,
-                                            const WeightedMeanJob* jobs, std::size_t count,
-                                            QuatArrays out) {
+[[gnu::always_inline]] inline void MarkleyMeansBody(const double* quats, const double* weights,
+                                                    const WeightedMeanJob* jobs, std::size_t count,
+                                                    QuatArrays out) {
   constexpr int G = kMarkleyGroups;
   for (std::size_t start = 0; start < count; start += G * kLanes) {
     std::size_t first[G], lanes[G];
@@ -671,7 +826,7 @@ TEMPOKEY_AVX2_CLONES void MarkleyMeansKernel(const double* quats, const double* 
     PrincipalEigenvectors<G>(m, e);
     for (int g = 0; g < G; ++g) {
       if (lanes[g] == 0) continue;
-      QuatLanes mean = Normalized({e[g][0], e[g][1], e[g][2], e[g][3]});
+      QuatLanes mean = Normalized(QuatLanes{e[g][0], e[g][1], e[g][2], e[g][3]});
       const Mask flip = Dot(mean, Gather(quats, pivot[g])) < 0.0;
       mean = {flip ? -mean.w : mean.w, flip ? -mean.x : mean.x, flip ? -mean.y : mean.y,
               flip ? -mean.z : mean.z};
@@ -680,20 +835,55 @@ TEMPOKEY_AVX2_CLONES void MarkleyMeansKernel(const double* quats, const double* 
   }
 }
 
+TEMPOKEY_AVX2_CLONES void MarkleyMeansKernel(const double* quats, const double* weights,
+                                            const WeightedMeanJob* jobs, std::size_t count,
+                                            QuatArrays out) {
+  MarkleyMeansBody(quats, weights, jobs, count, out);
+}
+
+#if TEMPOKEY_AVX512_KERNELS
+// The same 4-lane code with AVX-512's 32 vector registers: the Jacobi sweeps' two groups of
+// matrices (64 vectors) spill less.
+TEMPOKEY_AVX512_TARGET void MarkleyMeansKernel512(const double* quats, const double* weights,
+                                                  const WeightedMeanJob* jobs, std::size_t count,
+                                                  QuatArrays out) {
+  MarkleyMeansBody(quats, weights, jobs, count, out);
+}
+#endif
+
+#if TEMPOKEY_AVX512_KERNELS
+// True where the 8-lane kernels can run (looked at once).
+bool UseAvx512Kernels() {
+  static const bool supported =
+      __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512dq") &&
+      __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512bw");
+  return supported;
+}
+#endif
+
 }  // namespace
 
 void MarkleyMeans(const double* quats, const double* weights, const WeightedMeanJob* jobs,
                   std::size_t count, QuatArrays out) {
+#if TEMPOKEY_AVX512_KERNELS
+  if (UseAvx512Kernels()) return MarkleyMeansKernel512(quats, weights, jobs, count, out);
+#endif
   MarkleyMeansKernel(quats, weights, jobs, count, out);
 }
 
 void EulerToQuats(const EulerOrder& order, const double* a, const double* b, const double* c,
                   std::size_t count, double* out) {
+#if TEMPOKEY_AVX512_KERNELS
+  if (UseAvx512Kernels()) return EulerToQuatsKernel8(order, a, b, c, count, out);
+#endif
   EulerToQuatsKernel(order, a, b, c, count, out);
 }
 
 void WeightedMeans(const double* quats, const MeanTables& tables, std::size_t count, double min_dot,
                    QuatArrays out, unsigned char* needs_markley) {
+#if TEMPOKEY_AVX512_KERNELS
+  if (UseAvx512Kernels()) return WeightedMeansKernel8(quats, tables, count, min_dot, out, needs_markley);
+#endif
   WeightedMeansKernel(quats, tables, count, min_dot, out, needs_markley);
 }
 
@@ -704,6 +894,9 @@ void SlerpQuats(const double* quats, const std::int64_t* i0, const double* t, st
 
 void QuatsToEulerNearest(const EulerOrder& order, ConstQuatArrays q, const EulerTargets& targets,
                          std::size_t count, unsigned char* ill_conditioned) {
+#if TEMPOKEY_AVX512_KERNELS
+  if (UseAvx512Kernels()) return ToEulerKernel8(order, q, targets, count, ill_conditioned);
+#endif
   ToEulerKernel(order, q, targets, count, ill_conditioned);
 }
 

@@ -39,7 +39,7 @@ void EulerToQuats(const EulerOrder& order, const double* a, const double* b, con
 // out lane-major so that every tap of a group is one contiguous load of weights and four of
 // quaternions. The tables depend on the resampling plan alone: they are made once and shared by
 // every joint (resample.cc's RotationSchedule).
-inline constexpr std::size_t kMeanLanes = 4;
+inline constexpr std::size_t kMeanLanes = 8;
 
 // kMeanLanes output samples of at most `taps` taps each: tap n of lane l reads the source
 // quaternion source[tap_begin + kMeanLanes * n + l] with weight weight[tap_begin + kMeanLanes * n

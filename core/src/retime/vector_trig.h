@@ -112,15 +112,38 @@ template <int N, class V>
     r[k] = ((x[k] - q * kHalfPi1) - q * kHalfPi2) - q * kHalfPi3;
   }
   SinCosReduced<N>(r, s, c);
+  // The quadrant k mod 4 from the bits of k + 1.5 * 2^52 (RoundSmall()'s shifted sum, whose low
+  // bits are k's in two's complement): bit 0 swaps sine and cosine, bit 1 negates the sine, bit 1
+  // of k + 1 the cosine. Integer operations select and negate (exactly: a sign flip), where
+  // comparisons of the quadrant as a double made masks that GCC lowers lane by lane on 8-lane
+  // vectors.
+  using Bits = MaskOf<V>;
+  constexpr std::int64_t kSignBit = INT64_MIN;
   TEMPOKEY_FOR_EACH(k, N) {
-    // q = k mod 4 in 0..3: floor(k / 4) is the nearest integer to k / 4 - 3/8 (no ties).
-    const V q = quadrant[k] - 4.0 * RoundSmall(quadrant[k] * 0.25 - 0.375);
-    const MaskOf<V> odd = q == 1.0 || q == 3.0;
-    const V sin_base = odd ? c[k] : s[k];
-    const V cos_base = odd ? s[k] : c[k];
-    sine[k] = q >= 2.0 ? -sin_base : sin_base;
-    cosine[k] = q == 1.0 || q == 2.0 ? -cos_base : cos_base;
+    const Bits shifted = (Bits)(quadrant[k] + Splat<V>(6755399441055744.0));
+    const Bits odd = -(shifted & 1);
+    // Bit 1 as the sign bit: all ones where set (no shift into the sign).
+    const Bits sine_sign = -((shifted >> 1) & 1) & kSignBit;
+    const Bits cosine_sign = -(((shifted + 1) >> 1) & 1) & kSignBit;
+    const Bits s_bits = (Bits)s[k];
+    const Bits c_bits = (Bits)c[k];
+    sine[k] = (V)(((s_bits & ~odd) | (c_bits & odd)) ^ sine_sign);
+    cosine[k] = (V)(((c_bits & ~odd) | (s_bits & odd)) ^ cosine_sign);
   }
+}
+
+// Arguments below this size have quadrant 0 in SinCos() (|x| 2/pi below a half, with room for
+// the product's rounding) and reduce to themselves.
+inline constexpr double kMaxUnreducedRadians = 0.78;
+
+// SinCos() for |x| < kMaxUnreducedRadians (the caller checks), bit for bit, without the reduction
+// and the quadrant's swaps: those leave such an argument as it is (but for -0, which the
+// reduction's subtraction of -0 turns into +0, as the added +0 here) and change nothing.
+template <int N, class V>
+[[gnu::always_inline]] inline void SinCosSmall(const V (&x)[N], V (&sine)[N], V (&cosine)[N]) {
+  V r[N];
+  TEMPOKEY_FOR_EACH(k, N) r[k] = x[k] + 0.0;
+  SinCosReduced<N>(r, sine, cosine);
 }
 
 template <class V>

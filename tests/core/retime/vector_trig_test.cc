@@ -4,6 +4,7 @@
 // the ranges the conversions use and at the special values.
 #include "core/src/retime/vector_trig.h"
 
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -51,6 +52,26 @@ void SinCosOf(const std::vector<double>& xs, Worst& sine, Worst& cosine) {
       const long double exact_x = x[lane];
       sine.Add(UlpError(s[lane], sinl(exact_x)), x[lane]);
       cosine.Add(UlpError(c[lane], cosl(exact_x)), x[lane]);
+    }
+  }
+}
+
+TEST(VectorTrigTest, SmallArgumentsSkipTheReductionWithTheSameBits) {
+  std::mt19937_64 random(20261124);
+  std::uniform_real_distribution<double> small(-kMaxUnreducedRadians, kMaxUnreducedRadians);
+  std::vector<double> xs = {0.0, -0.0, 1e-300, -1e-300, 0.5, -0.5,
+                            std::nextafter(kMaxUnreducedRadians, 0.0),
+                            -std::nextafter(kMaxUnreducedRadians, 0.0)};
+  while (xs.size() < 4000) xs.push_back(small(random));
+  auto bits = [](double v) { return std::bit_cast<std::uint64_t>(v); };
+  for (std::size_t i = 0; i + 4 <= xs.size(); i += 4) {
+    const V4 x[1] = {{xs[i], xs[i + 1], xs[i + 2], xs[i + 3]}};
+    V4 s[1], c[1], small_s[1], small_c[1];
+    SinCos<1>(x, s, c);
+    SinCosSmall<1>(x, small_s, small_c);
+    for (int lane = 0; lane < 4; ++lane) {
+      EXPECT_EQ(bits(small_s[0][lane]), bits(s[0][lane])) << "sine at " << x[0][lane];
+      EXPECT_EQ(bits(small_c[0][lane]), bits(c[0][lane])) << "cosine at " << x[0][lane];
     }
   }
 }
