@@ -352,7 +352,7 @@ struct SegmentShape {
 };
 
 // b += (sample[k] - y_ref) * basis row k over k < n: the data terms of a segment's form. Cloned
-// for AVX like UpdateLaneMinima(); every component is summed in the same order by both clones,
+// for AVX like UpdateTargetMinima(); every component is summed in the same order by both clones,
 // so they agree bit for bit.
 TEMPOKEY_AVX_CLONES void SumDataTerms(const double* sample, const double* basis, int n,
                                       double y_ref, double* b) {
@@ -418,71 +418,90 @@ SegmentForm BuildSegmentForm(std::span<const double> samples, const SegmentShape
   return form;
 }
 
-// The inner loop of the DP pass (DpPass::UpdateMinima): for 12 target lanes (9 used) and the
-// nine predecessor y-states of one row, candidate = a[sy] + ((b + u) + v) with u, v in
-// {-z, 0, +z}, folded into the smallest, second smallest and arg-smallest per lane. Written
-// with vector extensions and cloned for AVX, where the machine has it; both clones compute the
-// same values (no contraction into FMA: core/CMakeLists.txt sets -ffp-contract=off).
-// The states 0 .. 80 as 4-lane vectors of their number: the state lanes of UpdateLaneMinima().
-struct alignas(32) StateLanes {
-  double lane[kStates][4];
-};
-constexpr StateLanes kStateLaneTable = [] {
-  StateLanes table{};
-  for (int s = 0; s < kStates; ++s) {
-    for (int l = 0; l < 4; ++l) table.lane[s][l] = static_cast<double>(s);
-  }
-  return table;
-}();
-// Read as vectors through a type that may alias its doubles (the table is stored as doubles).
-using StateVector = double __attribute__((vector_size(32), may_alias));
-const StateVector* const kStateLanes = reinterpret_cast<const StateVector*>(kStateLaneTable.lane);
+// The inner loop of the DP pass: one predecessor x-state's rows toward all nine target x-states
+// at once, in 11 vectors of 8 lanes. Vector tx < 9 holds target states (tx, 0..7), vector 9 the
+// states (0..7, 8) and vector 10 the state (8, 8) and seven unused lanes: every lane of a vector
+// then takes key a's terms from one row (a broadcast) or from consecutive rows (a load). For each
+// of the nine predecessor y-states sy, candidate = a[sy] + ((b + u) + v) with u, v in
+// {-z, 0, +z}, folded into the lane's smallest, second smallest and arg-smallest. Lanes of a
+// target x-state without a row this time carry b = +inf and z = 0, so their candidates are +inf
+// and change nothing. Written with 8-lane vector extensions and cloned for AVX-512 and AVX, where
+// the machine has them; every clone computes the same values (no contraction into FMA:
+// core/CMakeLists.txt sets -ffp-contract=off).
+constexpr int kLaneVector = 8;
+constexpr int kLaneVectors = 11;
+constexpr int kTargetLanes = kLaneVectors * kLaneVector;
 
-// Returns the largest of the nine smallest candidates (lanes 0..8; none is NaN, so the order of
-// the comparisons does not matter).
-TEMPOKEY_AVX_CLONES double UpdateLaneMinima(
-    const double* a, const double* b_lanes, const double* z0_lanes, const double* z1_lanes,
-    int state_first, double* least_lanes, double* second_lanes, double* state_lanes) {
-  using V = double __attribute__((vector_size(32)));
-  // The row's terms of key a, broadcast once for the three lane groups.
-  V a_lanes[9];
-  for (int sy = 0; sy < 9; ++sy) a_lanes[sy] = V{a[sy], a[sy], a[sy], a[sy]};
-  const StateVector* states = kStateLanes + state_first;
-  V largest = {};
-  double tail = 0.0;
-  for (int lane = 0; lane < 12; lane += 4) {
-    V least, second, state, b, z0, z1;
-    std::memcpy(&least, least_lanes + lane, sizeof(V));
-    std::memcpy(&second, second_lanes + lane, sizeof(V));
-    std::memcpy(&state, state_lanes + lane, sizeof(V));
-    std::memcpy(&b, b_lanes + lane, sizeof(V));
-    std::memcpy(&z0, z0_lanes + lane, sizeof(V));
-    std::memcpy(&z1, z1_lanes + lane, sizeof(V));
-    const V zero = {0.0, 0.0, 0.0, 0.0};
-    const V with_u[3] = {b + (zero - z0), b + zero, b + z0};
-    const V with_v[3] = {zero - z1, zero, z1};
-    for (int sy = 0; sy < 9; ++sy) {
-      const V c = a_lanes[sy] + (with_u[sy / 3] + with_v[sy % 3]);
-      const V larger = c > least ? c : least;
-      second = larger < second ? larger : second;
-      const auto smaller = c < least;
-      state = smaller ? states[sy] : state;
-      least = smaller ? c : least;
-    }
-    std::memcpy(least_lanes + lane, &least, sizeof(V));
-    std::memcpy(second_lanes + lane, &second, sizeof(V));
-    std::memcpy(state_lanes + lane, &state, sizeof(V));
-    if (lane == 0) {
-      largest = least;
-    } else if (lane == 4) {
-      largest = least > largest ? least : largest;
-    } else {
-      tail = least[0];
-    }
+// The lane of target state (tx, ty) (see above).
+constexpr int TargetLane(int tx, int ty) { return ty < 8 ? tx * 8 + ty : 72 + tx; }
+
+// The row terms of one predecessor x-state (see UpdateTargetMinima()).
+struct PredecessorLanes {
+  alignas(64) std::array<std::array<double, 16>, 9> a;  // [sy][tx], tx 9..15 unused (0)
+  alignas(64) std::array<double, kTargetLanes> b, z0, z1;
+};
+
+// Per target state (lane): smallest candidate, second smallest, and the state of the smallest.
+// A target whose second smallest lies outside the tie window of the smallest has one candidate in
+// the window, which the tie rule must choose; otherwise the window is rebuilt exactly from the
+// rows (rare: real ties).
+struct TargetMinima {
+  alignas(64) std::array<double, kTargetLanes> least, second, state;
+};
+
+using Lanes8 = double __attribute__((vector_size(64)));
+
+// Folds the nine candidates of the lanes at `lane` given key a's terms `a[sy]` for them.
+[[gnu::always_inline]] inline void FoldLanes(const Lanes8* a, const Lanes8* states,
+                                             const PredecessorLanes& row, int lane,
+                                             TargetMinima& minima) {
+  Lanes8 least, second, state, b, z0, z1;
+  std::memcpy(&least, minima.least.data() + lane, sizeof(Lanes8));
+  std::memcpy(&second, minima.second.data() + lane, sizeof(Lanes8));
+  std::memcpy(&state, minima.state.data() + lane, sizeof(Lanes8));
+  std::memcpy(&b, row.b.data() + lane, sizeof(Lanes8));
+  std::memcpy(&z0, row.z0.data() + lane, sizeof(Lanes8));
+  std::memcpy(&z1, row.z1.data() + lane, sizeof(Lanes8));
+  const Lanes8 zero = {};
+  const Lanes8 with_u[3] = {b + (zero - z0), b + zero, b + z0};
+  const Lanes8 with_v[3] = {zero - z1, zero, z1};
+  for (int sy = 0; sy < 9; ++sy) {
+    const Lanes8 c = a[sy] + (with_u[sy / 3] + with_v[sy % 3]);
+    const Lanes8 larger = c > least ? c : least;
+    second = larger < second ? larger : second;
+    const auto smaller = c < least;
+    state = smaller ? states[sy] : state;
+    least = smaller ? c : least;
   }
-  double out = tail;
-  for (int k = 0; k < 4; ++k) out = largest[k] > out ? largest[k] : out;
-  return out;
+  std::memcpy(minima.least.data() + lane, &least, sizeof(Lanes8));
+  std::memcpy(minima.second.data() + lane, &second, sizeof(Lanes8));
+  std::memcpy(minima.state.data() + lane, &state, sizeof(Lanes8));
+}
+
+// `vectors`: bit k set when vector k holds a lane of a row this time.
+TEMPOKEY_AVX512_CLONES void UpdateTargetMinima(const PredecessorLanes& row, int state_first,
+                                               std::uint32_t vectors, TargetMinima& minima) {
+  Lanes8 states[9];
+  for (int sy = 0; sy < 9; ++sy) {
+    const double s = static_cast<double>(state_first + sy);
+    states[sy] = Lanes8{s, s, s, s, s, s, s, s};
+  }
+  Lanes8 a[9] = {};
+  for (int tx = 0; tx < 9; ++tx) {
+    if ((vectors >> tx & 1u) == 0) continue;
+    for (int sy = 0; sy < 9; ++sy) {
+      const double v = row.a[sy][tx];
+      a[sy] = Lanes8{v, v, v, v, v, v, v, v};
+    }
+    FoldLanes(a, states, row, tx * kLaneVector, minima);
+  }
+  for (int k = 9; k < kLaneVectors; ++k) {
+    if ((vectors >> k & 1u) == 0) continue;
+    for (int sy = 0; sy < 9; ++sy) {
+      std::memcpy(&a[sy], row.a[sy].data() + (k - 9) * kLaneVector, sizeof(Lanes8));
+    }
+    FoldLanes(a, states, row, k * kLaneVector, minima);
+  }
 }
 
 // Viterbi tables of one pass.
@@ -541,23 +560,28 @@ class DpPass {
   //   candidate(sy, ty) = a[sy] + ((b[ty] + dy_a(sy) * z0[ty]) + dty_a(sy) * z1[ty])
   // with a = in + alpha (terms of key a alone), b = e0 + beta (key b alone) and z the cross
   // terms; the offsets are -1, 0, +1, so the products are exact and the fast pass and the tie
-  // fallback below compute every candidate bit for bit alike. Lanes 9..11 pad to 3 x 4.
+  // fallback below compute every candidate bit for bit alike.
   struct PredecessorRow {
     int sx = 0;
-    std::array<double, 9> a;
-    alignas(32) std::array<double, 12> b, z0, z1;
+    std::array<double, 9> a, b, z0, z1;
   };
 
-  // Per target y-state (lane): smallest candidate, second smallest, and the state of the
-  // smallest. A target whose second smallest lies outside the tie window of the smallest has one
-  // candidate in the window, which the tie rule must choose; otherwise the window is rebuilt
-  // exactly from the rows (rare: real ties).
-  struct LaneMinima {
-    alignas(32) std::array<double, 12> least, second, state;
+  // The rows of one segment: up to nine per target x-state, in the order they were folded.
+  struct Workspace {
+    PredecessorLanes lanes;
+    TargetMinima minima;
+    std::array<std::array<PredecessorRow, 9>, 9> rows;  // [tx][r]
+    std::array<int, 9> row_count;
+
     void Reset() {
-      least.fill(kInf);
-      second.fill(kInf);
-      state.fill(-1.0);
+      minima.least.fill(kInf);
+      minima.second.fill(kInf);
+      minima.state.fill(-1.0);
+      row_count.fill(0);
+      for (auto& a : lanes.a) a.fill(0.0);
+      lanes.b.fill(kInf);
+      lanes.z0.fill(0.0);
+      lanes.z1.fill(0.0);
     }
   };
 
@@ -670,33 +694,82 @@ class DpPass {
     }
     for (int c = 0; c < combo_count; ++c) shapes[combos[c]].entry = entries[key_of_combo[c]];
 
+    Workspace& work = *work_space_;
+    work.Reset();
+    // The target x-states still open: a target x-state closes at the first predecessor whose
+    // cheapest state is above every one of its targets' windows (later ones are dearer still).
+    std::uint32_t open = 0;
     for (int tx = 0; tx < 9; ++tx) {
-      minima_.Reset();
-      row_count_ = 0;
-      const bool allowed = !gb.x_fixed || XIndex(tx) == 1;
-      // The largest of minima_.least[0..8]: the widest tie window of the nine targets is that of
-      // the largest smallest candidate (TieTolerance() rounds monotonically).
-      double largest = kInf;
-      for (int sx : order) {
-        if (!allowed || cheapest[sx] == kInf) break;
-        if (cheapest[sx] > largest + TieTolerance(largest, scale_)) break;
-        // Rows reached here passed the same tests as in the sweep above (finite cheapest state,
-        // allowed target), so its verdict stands.
+      if (!gb.x_fixed || XIndex(tx) == 1) open |= 1u << tx;
+    }
+    // Target x-states whose lanes hold a row (the others hold b = +inf).
+    std::uint32_t filled = 0;
+    for (int sx : order) {
+      if (cheapest[sx] == kInf || open == 0) break;
+      std::uint32_t rows = 0;
+      for (int tx = 0; tx < 9; ++tx) {
+        if ((open >> tx & 1u) == 0) continue;
+        // The widest tie window of the nine targets is that of the largest smallest candidate
+        // (TieTolerance() rounds monotonically).
+        double largest = work.minima.least[TargetLane(tx, 8)];
+        for (int ty = 0; ty < 8; ++ty) largest = std::max(largest, work.minima.least[tx * 8 + ty]);
+        if (cheapest[sx] > largest + TieTolerance(largest, scale_)) {
+          open &= ~(1u << tx);
+          continue;
+        }
         if (!feasible[tx * 9 + sx]) continue;
         if (Stopping(shapes[tx * 9 + sx].n)) return false;
         const SegmentForm form =
             BuildSegmentForm(samples_, shapes[tx * 9 + sx], y_ref, centre_y, steps_);
-        PredecessorRow& row = rows_[row_count_++];
+        PredecessorRow& row = work.rows[tx][work.row_count[tx]++];
         FillRow(form, in.data() + sx * 9, sx, row);
-        largest = UpdateMinima(row, minima_);
+        StoreLanes(row, tx, work.lanes);
+        rows |= 1u << tx;
       }
+      if (rows == 0) continue;
+      for (int tx = 0; tx < 9; ++tx) {
+        if ((filled & ~rows) >> tx & 1u) ClearLanes(tx, work.lanes);
+      }
+      filled = rows;
+      UpdateTargetMinima(work.lanes, sx * 9, VectorsOf(rows), work.minima);
+    }
+    for (int tx = 0; tx < 9; ++tx) {
       for (int ty = 0; ty < 9; ++ty) {
-        const auto [value, state] = ChooseForTarget(ty);
+        const auto [value, state] = ChooseForTarget(work, tx, ty);
         cost_[i + 1][tx * 9 + ty] = value;
         predecessor_[i + 1][tx * 9 + ty] = static_cast<std::int8_t>(state);
       }
     }
     return true;
+  }
+
+  // The vectors of UpdateTargetMinima() that hold a lane of the target x-states `rows`.
+  static std::uint32_t VectorsOf(std::uint32_t rows) {
+    std::uint32_t vectors = rows;
+    if ((rows & 0xffu) != 0) vectors |= 1u << 9;
+    if ((rows >> 8 & 1u) != 0) vectors |= 1u << 10;
+    return vectors;
+  }
+
+  // Copies `row` into the lanes of target x-state `tx`.
+  static void StoreLanes(const PredecessorRow& row, int tx, PredecessorLanes& lanes) {
+    for (int sy = 0; sy < 9; ++sy) lanes.a[sy][tx] = row.a[sy];
+    for (int ty = 0; ty < 9; ++ty) {
+      const int lane = TargetLane(tx, ty);
+      lanes.b[lane] = row.b[ty];
+      lanes.z0[lane] = row.z0[ty];
+      lanes.z1[lane] = row.z1[ty];
+    }
+  }
+
+  // Makes the candidates of target x-state `tx` +inf (b = +inf, z = 0; a stays finite or +inf).
+  static void ClearLanes(int tx, PredecessorLanes& lanes) {
+    for (int ty = 0; ty < 9; ++ty) {
+      const int lane = TargetLane(tx, ty);
+      lanes.b[lane] = kInf;
+      lanes.z0[lane] = 0.0;
+      lanes.z1[lane] = 0.0;
+    }
   }
 
   static void FillRow(const SegmentForm& form, const double* in_row, int sx,
@@ -733,11 +806,6 @@ class DpPass {
       row.z0[ty] = z0[ty];
       row.z1[ty] = z1[ty];
     }
-    for (int ty = 9; ty < 12; ++ty) {
-      row.b[ty] = kInf;
-      row.z0[ty] = 0.0;
-      row.z1[ty] = 0.0;
-    }
   }
 
   // The candidate of `row` for (sy, ty), exactly as UpdateMinima() computes it.
@@ -749,24 +817,18 @@ class DpPass {
     return row.a[sy] + ((row.b[ty] + u) + v);
   }
 
-  // Returns the largest of the nine smallest candidates after the update.
-  static double UpdateMinima(const PredecessorRow& row, LaneMinima& minima) {
-    return UpdateLaneMinima(row.a.data(), row.b.data(), row.z0.data(), row.z1.data(),
-                     row.sx * 9, minima.least.data(), minima.second.data(),
-                     minima.state.data());
-  }
-
-  // The tie rule for target y-state `ty` over the rows of the current target x-state.
-  std::pair<double, int> ChooseForTarget(int ty) const {
-    const double m = minima_.least[ty];
+  // The tie rule for target state (tx, ty) over the rows of target x-state `tx`.
+  std::pair<double, int> ChooseForTarget(const Workspace& work, int tx, int ty) const {
+    const int lane = TargetLane(tx, ty);
+    const double m = work.minima.least[lane];
     if (m == kInf) return {kInf, -1};
     const double window = m + TieTolerance(m, scale_);
-    if (minima_.second[ty] > window) return {m, static_cast<int>(minima_.state[ty])};
+    if (work.minima.second[lane] > window) return {m, static_cast<int>(work.minima.state[lane])};
     // Several candidates in the window: state 40 if among them, else the lowest state.
     double best_value = kInf;
     int best_state = -1;
-    for (int r = 0; r < row_count_; ++r) {
-      const PredecessorRow& row = rows_[r];
+    for (int r = 0; r < work.row_count[tx]; ++r) {
+      const PredecessorRow& row = work.rows[tx][r];
       for (int sy = 0; sy < 9; ++sy) {
         const double c = Candidate(row, sy, ty);
         if (!(c <= window)) continue;
@@ -792,9 +854,7 @@ class DpPass {
   ShapeCache& cache_;
   std::stop_token stop_;
   std::int64_t work_ = 0;  // frames of work since the last look at stop_
-  LaneMinima minima_;
-  std::array<PredecessorRow, 9> rows_;
-  int row_count_ = 0;
+  std::unique_ptr<Workspace> work_space_ = std::make_unique<Workspace>();
 };
 
 absl::Status CheckStep(const char* name, double value) {
