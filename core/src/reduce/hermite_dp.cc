@@ -351,11 +351,11 @@ struct SegmentShape {
   double squares = 0.0;    // sum of (sample - y_ref)^2 over the frames
 };
 
-// b += (sample[k] - y_ref) * basis row k over k < n: the data terms of a segment's form. Cloned
-// for AVX like UpdateTargetMinima(); every component is summed in the same order by both clones,
-// so they agree bit for bit.
-TEMPOKEY_AVX_CLONES void SumDataTerms(const double* sample, const double* basis, int n,
-                                      double y_ref, double* b) {
+// b += (sample[k] - y_ref) * basis row k over k < n: the data terms of a segment's form. Inlined
+// into BuildRow()'s clones; every component is summed in the same order by all of them, so they
+// agree bit for bit.
+[[gnu::always_inline]] inline void SumDataTerms(const double* sample, const double* basis, int n,
+                                                double y_ref, double* b) {
   using V = double __attribute__((vector_size(32)));
   V sum = {0.0, 0.0, 0.0, 0.0};
   for (int k = 0; k < n; ++k) {
@@ -379,9 +379,10 @@ double SumSquares(const double* sample, int n, double y_ref) {
 // Builds the form of one x-combination from its shape: the Gram matrix of the basis over the
 // segment's frames comes from the cache, the data terms are summed here in coordinates relative
 // to `y_ref` (a sample near the segment) so the quadratic form does not cancel large sums.
-SegmentForm BuildSegmentForm(std::span<const double> samples, const SegmentShape& shape,
-                             double y_ref, const std::array<double, 4>& centre_y,
-                             const HermiteSteps& steps) {
+[[gnu::always_inline]] inline SegmentForm BuildSegmentForm(std::span<const double> samples,
+                                                           const SegmentShape& shape, double y_ref,
+                                                           const std::array<double, 4>& centre_y,
+                                                           const HermiteSteps& steps) {
   SegmentForm form;
   const int n = shape.n;
   if (n <= 0) return form;
@@ -451,10 +452,14 @@ struct TargetMinima {
 
 using Lanes8 = double __attribute__((vector_size(64)));
 
-// Folds the nine candidates of the lanes at `lane` given key a's terms `a[sy]` for them.
+using LaneMask8 = std::int64_t __attribute__((vector_size(64)));
+
+// Folds the nine candidates of the lanes at `lane` given key a's terms `a[sy]` for them; lanes
+// outside `active` (when given) keep their minima: they hold no row this time, only what an
+// earlier one left.
 [[gnu::always_inline]] inline void FoldLanes(const Lanes8* a, const Lanes8* states,
                                              const PredecessorLanes& row, int lane,
-                                             TargetMinima& minima) {
+                                             const LaneMask8* active, TargetMinima& minima) {
   Lanes8 least, second, state, b, z0, z1;
   std::memcpy(&least, minima.least.data() + lane, sizeof(Lanes8));
   std::memcpy(&second, minima.second.data() + lane, sizeof(Lanes8));
@@ -473,14 +478,23 @@ using Lanes8 = double __attribute__((vector_size(64)));
     state = smaller ? states[sy] : state;
     least = smaller ? c : least;
   }
+  if (active != nullptr) {
+    Lanes8 old;
+    std::memcpy(&old, minima.least.data() + lane, sizeof(Lanes8));
+    least = *active ? least : old;
+    std::memcpy(&old, minima.second.data() + lane, sizeof(Lanes8));
+    second = *active ? second : old;
+    std::memcpy(&old, minima.state.data() + lane, sizeof(Lanes8));
+    state = *active ? state : old;
+  }
   std::memcpy(minima.least.data() + lane, &least, sizeof(Lanes8));
   std::memcpy(minima.second.data() + lane, &second, sizeof(Lanes8));
   std::memcpy(minima.state.data() + lane, &state, sizeof(Lanes8));
 }
 
-// `vectors`: bit k set when vector k holds a lane of a row this time.
+// `rows`: bit tx set when target x-state tx has a row in `row` this time.
 TEMPOKEY_AVX512_CLONES void UpdateTargetMinima(const PredecessorLanes& row, int state_first,
-                                               std::uint32_t vectors, TargetMinima& minima) {
+                                               std::uint32_t rows, TargetMinima& minima) {
   Lanes8 states[9];
   for (int sy = 0; sy < 9; ++sy) {
     const double s = static_cast<double>(state_first + sy);
@@ -488,20 +502,76 @@ TEMPOKEY_AVX512_CLONES void UpdateTargetMinima(const PredecessorLanes& row, int 
   }
   Lanes8 a[9] = {};
   for (int tx = 0; tx < 9; ++tx) {
-    if ((vectors >> tx & 1u) == 0) continue;
+    if ((rows >> tx & 1u) == 0) continue;
     for (int sy = 0; sy < 9; ++sy) {
       const double v = row.a[sy][tx];
       a[sy] = Lanes8{v, v, v, v, v, v, v, v};
     }
-    FoldLanes(a, states, row, tx * kLaneVector, minima);
+    FoldLanes(a, states, row, tx * kLaneVector, nullptr, minima);
   }
+  // The target x-state of each lane of vectors 9 and 10 as a bit (0: an unused lane).
+  constexpr std::int64_t kLaneRows[2][kLaneVector] = {{1, 2, 4, 8, 16, 32, 64, 128},
+                                                      {256, 0, 0, 0, 0, 0, 0, 0}};
+  const std::int64_t r = rows;
+  const LaneMask8 present = {r, r, r, r, r, r, r, r};
   for (int k = 9; k < kLaneVectors; ++k) {
-    if ((vectors >> k & 1u) == 0) continue;
+    if ((rows & (k == 9 ? 0xffu : 0x100u)) == 0) continue;
+    LaneMask8 bits;
+    std::memcpy(&bits, kLaneRows[k - 9], sizeof(LaneMask8));
+    const LaneMask8 active = (bits & present) != 0;
     for (int sy = 0; sy < 9; ++sy) {
       std::memcpy(&a[sy], row.a[sy].data() + (k - 9) * kLaneVector, sizeof(Lanes8));
     }
-    FoldLanes(a, states, row, k * kLaneVector, minima);
+    FoldLanes(a, states, row, k * kLaneVector, &active, minima);
   }
+}
+
+// The row of one x-combination (sx, tx) into the lanes of target x-state `tx` (see
+// DpPass::Advance() for the candidates): the segment's form (BuildSegmentForm()) split into the
+// terms of key a alone, a[sy] = in[sy] + alpha[sy], of key b alone, b[ty] = e0 + beta[ty], and
+// the cross terms z0, z1. Cloned like UpdateTargetMinima(), each clone with the same operations.
+TEMPOKEY_AVX512_CLONES void BuildRow(std::span<const double> samples, const SegmentShape& shape,
+                                     double y_ref, const std::array<double, 4>& centre_y,
+                                     const HermiteSteps& steps, const double* in_row, int tx,
+                                     PredecessorLanes& lanes) {
+  const SegmentForm form = BuildSegmentForm(samples, shape, y_ref, centre_y, steps);
+  const auto& h = form.h;
+  // alpha(d0, d1) = g0 d0 + g1 d1 + H00 d0^2 + 2 H01 d0 d1 + H11 d1^2, d in {-1, 0, 1}.
+  const double a_minus = h[0][0] - form.g[0];
+  const double a_plus = h[0][0] + form.g[0];
+  const double b_minus = h[1][1] - form.g[1];
+  const double b_plus = h[1][1] + form.g[1];
+  const double ab = 2.0 * h[0][1];
+  const std::array<double, 9> alpha = {a_minus + b_minus + ab, a_minus, a_minus + b_plus - ab,
+                                       b_minus,                0.0,     b_plus,
+                                       a_plus + b_minus - ab,  a_plus,  a_plus + b_plus + ab};
+  const double c_minus = h[2][2] - form.g[2];
+  const double c_plus = h[2][2] + form.g[2];
+  const double d_minus = h[3][3] - form.g[3];
+  const double d_plus = h[3][3] + form.g[3];
+  const double cd = 2.0 * h[2][3];
+  const std::array<double, 9> beta = {c_minus + d_minus + cd, c_minus, c_minus + d_plus - cd,
+                                      d_minus,                0.0,     d_plus,
+                                      c_plus + d_minus - cd,  c_plus,  c_plus + d_plus + cd};
+  for (int sy = 0; sy < 9; ++sy) lanes.a[sy][tx] = in_row[sy] + alpha[sy];
+  // z0 = 2 (H02 d2 + H03 d3), z1 = 2 (H12 d2 + H13 d3) over the nine (d2, d3).
+  const double p0 = 2.0 * h[0][2];
+  const double q0 = 2.0 * h[0][3];
+  const double p1 = 2.0 * h[1][2];
+  const double q1 = 2.0 * h[1][3];
+  const std::array<double, 9> z0 = {-p0 - q0, -p0, -p0 + q0, -q0, 0.0, q0, p0 - q0, p0, p0 + q0};
+  const std::array<double, 9> z1 = {-p1 - q1, -p1, -p1 + q1, -q1, 0.0, q1, p1 - q1, p1, p1 + q1};
+  double* b = lanes.b.data() + tx * kLaneVector;
+  double* z0_lanes = lanes.z0.data() + tx * kLaneVector;
+  double* z1_lanes = lanes.z1.data() + tx * kLaneVector;
+  for (int ty = 0; ty < 8; ++ty) {
+    b[ty] = form.e0 + beta[ty];
+    z0_lanes[ty] = z0[ty];
+    z1_lanes[ty] = z1[ty];
+  }
+  lanes.b[TargetLane(tx, 8)] = form.e0 + beta[8];
+  lanes.z0[TargetLane(tx, 8)] = z0[8];
+  lanes.z1[TargetLane(tx, 8)] = z1[8];
 }
 
 // Viterbi tables of one pass.
@@ -560,28 +630,21 @@ class DpPass {
   //   candidate(sy, ty) = a[sy] + ((b[ty] + dy_a(sy) * z0[ty]) + dty_a(sy) * z1[ty])
   // with a = in + alpha (terms of key a alone), b = e0 + beta (key b alone) and z the cross
   // terms; the offsets are -1, 0, +1, so the products are exact and the fast pass and the tie
-  // fallback below compute every candidate bit for bit alike.
-  struct PredecessorRow {
-    int sx = 0;
-    std::array<double, 9> a, b, z0, z1;
-  };
-
-  // The rows of one segment: up to nine per target x-state, in the order they were folded.
+  // fallback below compute every candidate bit for bit alike. The rows of one predecessor
+  // x-state toward the nine target x-states share a PredecessorLanes, one per predecessor
+  // x-state folded (a slot), kept for the tie fallback.
   struct Workspace {
-    PredecessorLanes lanes;
+    std::array<PredecessorLanes, 9> slots;
+    std::array<int, 9> slot_sx;
+    std::array<std::uint32_t, 9> slot_rows;  // bit tx: target x-state tx has a row
+    int slot_count = 0;
     TargetMinima minima;
-    std::array<std::array<PredecessorRow, 9>, 9> rows;  // [tx][r]
-    std::array<int, 9> row_count;
 
     void Reset() {
       minima.least.fill(kInf);
       minima.second.fill(kInf);
       minima.state.fill(-1.0);
-      row_count.fill(0);
-      for (auto& a : lanes.a) a.fill(0.0);
-      lanes.b.fill(kInf);
-      lanes.z0.fill(0.0);
-      lanes.z1.fill(0.0);
+      slot_count = 0;
     }
   };
 
@@ -702,10 +765,9 @@ class DpPass {
     for (int tx = 0; tx < 9; ++tx) {
       if (!gb.x_fixed || XIndex(tx) == 1) open |= 1u << tx;
     }
-    // Target x-states whose lanes hold a row (the others hold b = +inf).
-    std::uint32_t filled = 0;
     for (int sx : order) {
       if (cheapest[sx] == kInf || open == 0) break;
+      PredecessorLanes& lanes = work.slots[work.slot_count];
       std::uint32_t rows = 0;
       for (int tx = 0; tx < 9; ++tx) {
         if ((open >> tx & 1u) == 0) continue;
@@ -719,19 +781,15 @@ class DpPass {
         }
         if (!feasible[tx * 9 + sx]) continue;
         if (Stopping(shapes[tx * 9 + sx].n)) return false;
-        const SegmentForm form =
-            BuildSegmentForm(samples_, shapes[tx * 9 + sx], y_ref, centre_y, steps_);
-        PredecessorRow& row = work.rows[tx][work.row_count[tx]++];
-        FillRow(form, in.data() + sx * 9, sx, row);
-        StoreLanes(row, tx, work.lanes);
+        BuildRow(samples_, shapes[tx * 9 + sx], y_ref, centre_y, steps_, in.data() + sx * 9, tx,
+                 lanes);
         rows |= 1u << tx;
       }
       if (rows == 0) continue;
-      for (int tx = 0; tx < 9; ++tx) {
-        if ((filled & ~rows) >> tx & 1u) ClearLanes(tx, work.lanes);
-      }
-      filled = rows;
-      UpdateTargetMinima(work.lanes, sx * 9, VectorsOf(rows), work.minima);
+      work.slot_sx[work.slot_count] = sx;
+      work.slot_rows[work.slot_count] = rows;
+      ++work.slot_count;
+      UpdateTargetMinima(lanes, sx * 9, rows, work.minima);
     }
     for (int tx = 0; tx < 9; ++tx) {
       for (int ty = 0; ty < 9; ++ty) {
@@ -743,78 +801,14 @@ class DpPass {
     return true;
   }
 
-  // The vectors of UpdateTargetMinima() that hold a lane of the target x-states `rows`.
-  static std::uint32_t VectorsOf(std::uint32_t rows) {
-    std::uint32_t vectors = rows;
-    if ((rows & 0xffu) != 0) vectors |= 1u << 9;
-    if ((rows >> 8 & 1u) != 0) vectors |= 1u << 10;
-    return vectors;
-  }
-
-  // Copies `row` into the lanes of target x-state `tx`.
-  static void StoreLanes(const PredecessorRow& row, int tx, PredecessorLanes& lanes) {
-    for (int sy = 0; sy < 9; ++sy) lanes.a[sy][tx] = row.a[sy];
-    for (int ty = 0; ty < 9; ++ty) {
-      const int lane = TargetLane(tx, ty);
-      lanes.b[lane] = row.b[ty];
-      lanes.z0[lane] = row.z0[ty];
-      lanes.z1[lane] = row.z1[ty];
-    }
-  }
-
-  // Makes the candidates of target x-state `tx` +inf (b = +inf, z = 0; a stays finite or +inf).
-  static void ClearLanes(int tx, PredecessorLanes& lanes) {
-    for (int ty = 0; ty < 9; ++ty) {
-      const int lane = TargetLane(tx, ty);
-      lanes.b[lane] = kInf;
-      lanes.z0[lane] = 0.0;
-      lanes.z1[lane] = 0.0;
-    }
-  }
-
-  static void FillRow(const SegmentForm& form, const double* in_row, int sx,
-                      PredecessorRow& row) {
-    const auto& h = form.h;
-    // alpha(d0, d1) = g0 d0 + g1 d1 + H00 d0^2 + 2 H01 d0 d1 + H11 d1^2, d in {-1, 0, 1}.
-    const double a_minus = h[0][0] - form.g[0];
-    const double a_plus = h[0][0] + form.g[0];
-    const double b_minus = h[1][1] - form.g[1];
-    const double b_plus = h[1][1] + form.g[1];
-    const double ab = 2.0 * h[0][1];
-    const std::array<double, 9> alpha = {a_minus + b_minus + ab, a_minus, a_minus + b_plus - ab,
-                                         b_minus,                0.0,     b_plus,
-                                         a_plus + b_minus - ab,  a_plus,  a_plus + b_plus + ab};
-    const double c_minus = h[2][2] - form.g[2];
-    const double c_plus = h[2][2] + form.g[2];
-    const double d_minus = h[3][3] - form.g[3];
-    const double d_plus = h[3][3] + form.g[3];
-    const double cd = 2.0 * h[2][3];
-    const std::array<double, 9> beta = {c_minus + d_minus + cd, c_minus, c_minus + d_plus - cd,
-                                        d_minus,                0.0,     d_plus,
-                                        c_plus + d_minus - cd,  c_plus,  c_plus + d_plus + cd};
-    row.sx = sx;
-    for (int sy = 0; sy < 9; ++sy) row.a[sy] = in_row[sy] + alpha[sy];
-    // z0 = 2 (H02 d2 + H03 d3), z1 = 2 (H12 d2 + H13 d3) over the nine (d2, d3).
-    const double p0 = 2.0 * h[0][2];
-    const double q0 = 2.0 * h[0][3];
-    const double p1 = 2.0 * h[1][2];
-    const double q1 = 2.0 * h[1][3];
-    const std::array<double, 9> z0 = {-p0 - q0, -p0, -p0 + q0, -q0, 0.0, q0, p0 - q0, p0, p0 + q0};
-    const std::array<double, 9> z1 = {-p1 - q1, -p1, -p1 + q1, -q1, 0.0, q1, p1 - q1, p1, p1 + q1};
-    for (int ty = 0; ty < 9; ++ty) {
-      row.b[ty] = form.e0 + beta[ty];
-      row.z0[ty] = z0[ty];
-      row.z1[ty] = z1[ty];
-    }
-  }
-
-  // The candidate of `row` for (sy, ty), exactly as UpdateMinima() computes it.
-  static double Candidate(const PredecessorRow& row, int sy, int ty) {
+  // The candidate of (sy, tx * 9 + ty) in `row`, exactly as UpdateTargetMinima() computes it.
+  static double Candidate(const PredecessorLanes& row, int sy, int tx, int ty) {
+    const int lane = TargetLane(tx, ty);
     const double d0 = kOffsetHigh[sy];
     const double d1 = kOffsetLow[sy];
-    const double u = d0 < 0.0 ? -row.z0[ty] : (d0 > 0.0 ? row.z0[ty] : 0.0);
-    const double v = d1 < 0.0 ? -row.z1[ty] : (d1 > 0.0 ? row.z1[ty] : 0.0);
-    return row.a[sy] + ((row.b[ty] + u) + v);
+    const double u = d0 < 0.0 ? -row.z0[lane] : (d0 > 0.0 ? row.z0[lane] : 0.0);
+    const double v = d1 < 0.0 ? -row.z1[lane] : (d1 > 0.0 ? row.z1[lane] : 0.0);
+    return row.a[sy][tx] + ((row.b[lane] + u) + v);
   }
 
   // The tie rule for target state (tx, ty) over the rows of target x-state `tx`.
@@ -827,12 +821,12 @@ class DpPass {
     // Several candidates in the window: state 40 if among them, else the lowest state.
     double best_value = kInf;
     int best_state = -1;
-    for (int r = 0; r < work.row_count[tx]; ++r) {
-      const PredecessorRow& row = work.rows[tx][r];
+    for (int r = 0; r < work.slot_count; ++r) {
+      if ((work.slot_rows[r] >> tx & 1u) == 0) continue;
       for (int sy = 0; sy < 9; ++sy) {
-        const double c = Candidate(row, sy, ty);
+        const double c = Candidate(work.slots[r], sy, tx, ty);
         if (!(c <= window)) continue;
-        const int state = row.sx * 9 + sy;
+        const int state = work.slot_sx[r] * 9 + sy;
         if (state == kCenterState) return {c, state};
         if (best_state < 0 || state < best_state) {
           best_state = state;
