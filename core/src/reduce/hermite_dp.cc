@@ -189,16 +189,6 @@ std::pair<double, int> ChooseCandidate(const double* candidates, double m, doubl
   return {m, -1};  // unreachable: m itself is <= threshold
 }
 
-// The error of one x-combination of a segment as a quadratic form in the y-offsets
-// delta = (dy_a, dty_a, dy_b, dty_b) in {-1, 0, 1}^4:
-//   E(delta) = e0 + g . delta + delta^T H delta,
-// built from residuals at the grid centre so that no large sums cancel.
-struct SegmentForm {
-  double e0 = 0.0;
-  std::array<double, 4> g{};
-  std::array<std::array<double, 4>, 4> h{};
-};
-
 // The Hermite basis at every frame of one x-shape, shared by every segment and x-combination
 // with that shape. A segment's x(s) depends only on its length L = bx - ax, the two tangent
 // x-components and where the first frame falls (t0 = first frame - ax): the frames sit at
@@ -376,71 +366,180 @@ double SumSquares(const double* sample, int n, double y_ref) {
   return squares;
 }
 
-// Builds the form of one x-combination from its shape: the Gram matrix of the basis over the
-// segment's frames comes from the cache, the data terms are summed here in coordinates relative
-// to `y_ref` (a sample near the segment) so the quadratic form does not cancel large sums.
-[[gnu::always_inline]] inline SegmentForm BuildSegmentForm(std::span<const double> samples,
-                                                           const SegmentShape& shape, double y_ref,
-                                                           const std::array<double, 4>& centre_y,
-                                                           const HermiteSteps& steps) {
-  SegmentForm form;
+// ---- the rows of one segment, 81 x-combinations at once -----------------------------------------
+//
+// The error of one x-combination (sx, tx) of a segment is a quadratic form in the y-offsets
+// delta = (dy_a, dty_a, dy_b, dty_b) in {-1, 0, 1}^4:
+//   E(delta) = e0 + g . delta + delta^T H delta,
+// built from residuals at the grid centre so that no large sums cancel: with y_ref a sample near
+// the segment, w the centre's y-components relative to it, G the Gram matrix of the basis over
+// the segment's frames (from the shape cache), b the data terms sum (sample - y_ref) h and c the
+// sum of (sample - y_ref)^2, E(w + D delta) = e0 + 2 (G w - b)^T D delta + delta^T D G D delta.
+// Its candidates split into the terms of key a alone, a[sy] = in[sy] + alpha[sy], of key b
+// alone, b[ty] = e0 + beta[ty], and the cross terms z0, z1:
+//   candidate(sy, ty) = a[sy] + ((b[ty] + dy_a(sy) * z0[ty]) + dty_a(sy) * z1[ty]);
+// the offsets are -1, 0, +1, so the products are exact and the fast pass and the tie fallback
+// compute every candidate bit for bit alike.
+//
+// The forms of all 81 combinations (index c = sx * 9 + tx) are computed together, lane c of
+// 8-lane vectors, each lane with the operations a single form takes in the same order: a lane
+// computes what the form of its combination alone would.
+constexpr int kLaneVector = 8;
+constexpr int kComboLanes = 88;  // 81 combinations, 11 vectors of 8
+
+using Lanes8 = double __attribute__((vector_size(64)));
+using LaneMask8 = std::int64_t __attribute__((vector_size(64)));
+
+[[gnu::always_inline]] inline Lanes8 LoadLanes(const double* p) {
+  Lanes8 v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+[[gnu::always_inline]] inline void StoreLanes(double* p, const Lanes8& v) {
+  std::memcpy(p, &v, sizeof v);
+}
+[[gnu::always_inline]] inline Lanes8 BroadcastLanes(double x) {
+  return Lanes8{x, x, x, x, x, x, x, x};
+}
+
+// What the forms are built from, per combination (lane c): data terms, Gram sums (the 10
+// distinct entries of G over the segment's frames) and the sum of squares. A combination without
+// frames has all zero (its form is zero); one whose frames do not match its shape (unreachable)
+// has c = +inf, so its e0 is +inf.
+struct FormInputs {
+  alignas(64) std::array<std::array<double, kComboLanes>, 4> data;
+  alignas(64) std::array<std::array<double, kComboLanes>, kGramSize> gram;
+  alignas(64) std::array<double, kComboLanes> squares;
+};
+
+// The split forms, per combination (lane c): alpha[sy], b[ty] = e0 + beta[ty], z0[ty], z1[ty].
+struct RowTerms {
+  alignas(64) std::array<std::array<double, kComboLanes>, 9> alpha, b, z0, z1;
+};
+
+// Writes combination `c`'s form inputs: its data terms summed over its frames (in the same order
+// for every combination), its Gram sums and sum of squares.
+[[gnu::always_inline]] inline void GatherComboInputs(std::span<const double> samples,
+                                                     const SegmentShape& shape, double y_ref,
+                                                     int c, FormInputs& inputs) {
   const int n = shape.n;
-  if (n <= 0) return form;
   const ShapeEntry& entry = shape.entry;
-  if (n < entry.count - 1 || n > entry.count) {  // unreachable: see ShapeEntry
-    form.e0 = kInf;
-    return form;
+  const bool none = n <= 0;
+  const bool mismatched = !none && (n < entry.count - 1 || n > entry.count);  // unreachable
+  if (none || mismatched) {
+    for (int j = 0; j < 4; ++j) inputs.data[j][c] = 0.0;
+    for (int j = 0; j < kGramSize; ++j) inputs.gram[j][c] = 0.0;
+    inputs.squares[c] = none ? 0.0 : kInf;
+    return;
   }
   alignas(32) std::array<double, 4> b;
   SumDataTerms(samples.data() + shape.first, entry.basis(), n, y_ref, b.data());
-  const double c = shape.squares;
+  for (int j = 0; j < 4; ++j) inputs.data[j][c] = b[j];
   const double* g = n == entry.count ? entry.gram_all() : entry.gram_but_last();
-  const std::array<double, 4> w = {centre_y[0] - y_ref, centre_y[1], centre_y[2] - y_ref,
-                                   centre_y[3]};
-  // E(w + D delta) = e0 + 2 (G w - b)^T D delta + delta^T D G D delta.
-  const std::array<double, 4> gw = {
-      g[0] * w[0] + g[1] * w[1] + g[2] * w[2] + g[3] * w[3],
-      g[1] * w[0] + g[4] * w[1] + g[5] * w[2] + g[6] * w[3],
-      g[2] * w[0] + g[5] * w[1] + g[7] * w[2] + g[8] * w[3],
-      g[3] * w[0] + g[6] * w[1] + g[8] * w[2] + g[9] * w[3]};
-  double wgw = 0.0;
-  double bw = 0.0;
-  for (int k = 0; k < 4; ++k) {
-    wgw += w[k] * gw[k];
-    bw += b[k] * w[k];
-  }
-  form.e0 = std::max(0.0, wgw - 2.0 * bw + c);
-  const std::array<double, 4> d = {steps.y, steps.tangent_y, steps.y, steps.tangent_y};
-  const int index[4][4] = {{0, 1, 2, 3}, {1, 4, 5, 6}, {2, 5, 7, 8}, {3, 6, 8, 9}};
-  for (int k = 0; k < 4; ++k) {
-    form.g[k] = 2.0 * d[k] * (gw[k] - b[k]);
-    for (int l = k; l < 4; ++l) form.h[k][l] = d[k] * d[l] * g[index[k][l]];
-  }
-  return form;
+  for (int j = 0; j < kGramSize; ++j) inputs.gram[j][c] = g[j];
+  inputs.squares[c] = shape.squares;
 }
 
-// The inner loop of the DP pass: one predecessor x-state's rows toward all nine target x-states
-// at once, in 11 vectors of 8 lanes. Vector tx < 9 holds target states (tx, 0..7), vector 9 the
-// states (0..7, 8) and vector 10 the state (8, 8) and seven unused lanes: every lane of a vector
-// then takes key a's terms from one row (a broadcast) or from consecutive rows (a load). For each
-// of the nine predecessor y-states sy, candidate = a[sy] + ((b + u) + v) with u, v in
-// {-z, 0, +z}, folded into the lane's smallest, second smallest and arg-smallest. Lanes of a
-// target x-state without a row this time carry b = +inf and z = 0, so their candidates are +inf
-// and change nothing. Written with 8-lane vector extensions and cloned for AVX-512 and AVX, where
-// the machine has them; every clone computes the same values (no contraction into FMA:
-// core/CMakeLists.txt sets -ffp-contract=off).
-constexpr int kLaneVector = 8;
+// The form inputs of combinations [begin, end): those marked in `combos` from their shapes, the
+// others zero. Cloned like UpdateTargetMinima(); every clone sums in the same order.
+TEMPOKEY_AVX512_CLONES void GatherFormInputs(std::span<const double> samples,
+                                             const SegmentShape* shapes, double y_ref,
+                                             const std::array<bool, 81>& combos, int begin,
+                                             int end, FormInputs& inputs) {
+  static const SegmentShape kNone;
+  for (int c = begin; c < end; ++c) {
+    const bool used = c < 81 && combos[c];
+    GatherComboInputs(samples, used ? shapes[c] : kNone, y_ref, c, inputs);
+  }
+}
+
+// The split forms of all combinations from their inputs; `centre` the centre's y-components
+// relative to y_ref (w above), `d` the y-steps (y, tangent y, y, tangent y).
+TEMPOKEY_AVX512_CLONES void BuildRowTerms(const FormInputs& inputs,
+                                          const std::array<double, 4>& centre,
+                                          const std::array<double, 4>& d, RowTerms& terms) {
+  const Lanes8 zero = {};
+  const Lanes8 two = BroadcastLanes(2.0);
+  Lanes8 w_lanes[4], d2[4], dd[4][4];
+  for (int k = 0; k < 4; ++k) {
+    w_lanes[k] = BroadcastLanes(centre[k]);
+    d2[k] = BroadcastLanes(2.0 * d[k]);
+    for (int l = 0; l < 4; ++l) dd[k][l] = BroadcastLanes(d[k] * d[l]);
+  }
+  for (int c = 0; c < kComboLanes; c += kLaneVector) {
+    Lanes8 g[kGramSize], b[4];
+    for (int j = 0; j < kGramSize; ++j) g[j] = LoadLanes(inputs.gram[j].data() + c);
+    for (int j = 0; j < 4; ++j) b[j] = LoadLanes(inputs.data[j].data() + c);
+    const Lanes8 squares = LoadLanes(inputs.squares.data() + c);
+    const Lanes8* w = w_lanes;
+    const Lanes8 gw[4] = {g[0] * w[0] + g[1] * w[1] + g[2] * w[2] + g[3] * w[3],
+                          g[1] * w[0] + g[4] * w[1] + g[5] * w[2] + g[6] * w[3],
+                          g[2] * w[0] + g[5] * w[1] + g[7] * w[2] + g[8] * w[3],
+                          g[3] * w[0] + g[6] * w[1] + g[8] * w[2] + g[9] * w[3]};
+    Lanes8 wgw = zero;
+    Lanes8 bw = zero;
+    for (int k = 0; k < 4; ++k) {
+      wgw += w[k] * gw[k];
+      bw += b[k] * w[k];
+    }
+    // std::max(0.0, x): x where 0 < x, else 0.
+    const Lanes8 e = wgw - two * bw + squares;
+    const Lanes8 e0 = zero < e ? e : zero;
+    Lanes8 lin[4];
+    for (int k = 0; k < 4; ++k) lin[k] = d2[k] * (gw[k] - b[k]);
+    const Lanes8 h00 = dd[0][0] * g[0], h01 = dd[0][1] * g[1], h02 = dd[0][2] * g[2],
+                 h03 = dd[0][3] * g[3], h11 = dd[1][1] * g[4], h12 = dd[1][2] * g[5],
+                 h13 = dd[1][3] * g[6], h22 = dd[2][2] * g[7], h23 = dd[2][3] * g[8],
+                 h33 = dd[3][3] * g[9];
+    // alpha(d0, d1) = g0 d0 + g1 d1 + H00 d0^2 + 2 H01 d0 d1 + H11 d1^2, d in {-1, 0, 1}.
+    const Lanes8 a_minus = h00 - lin[0];
+    const Lanes8 a_plus = h00 + lin[0];
+    const Lanes8 b_minus = h11 - lin[1];
+    const Lanes8 b_plus = h11 + lin[1];
+    const Lanes8 ab = two * h01;
+    const Lanes8 alpha[9] = {a_minus + b_minus + ab, a_minus, a_minus + b_plus - ab,
+                             b_minus,                zero,    b_plus,
+                             a_plus + b_minus - ab,  a_plus,  a_plus + b_plus + ab};
+    const Lanes8 c_minus = h22 - lin[2];
+    const Lanes8 c_plus = h22 + lin[2];
+    const Lanes8 d_minus = h33 - lin[3];
+    const Lanes8 d_plus = h33 + lin[3];
+    const Lanes8 cd = two * h23;
+    const Lanes8 beta[9] = {c_minus + d_minus + cd, c_minus, c_minus + d_plus - cd,
+                            d_minus,                zero,    d_plus,
+                            c_plus + d_minus - cd,  c_plus,  c_plus + d_plus + cd};
+    // z0 = 2 (H02 d2 + H03 d3), z1 = 2 (H12 d2 + H13 d3) over the nine (d2, d3).
+    const Lanes8 p0 = two * h02;
+    const Lanes8 q0 = two * h03;
+    const Lanes8 p1 = two * h12;
+    const Lanes8 q1 = two * h13;
+    const Lanes8 z0[9] = {-p0 - q0, -p0, -p0 + q0, -q0, zero, q0, p0 - q0, p0, p0 + q0};
+    const Lanes8 z1[9] = {-p1 - q1, -p1, -p1 + q1, -q1, zero, q1, p1 - q1, p1, p1 + q1};
+    for (int k = 0; k < 9; ++k) {
+      StoreLanes(terms.alpha[k].data() + c, alpha[k]);
+      StoreLanes(terms.b[k].data() + c, e0 + beta[k]);
+      StoreLanes(terms.z0[k].data() + c, z0[k]);
+      StoreLanes(terms.z1[k].data() + c, z1[k]);
+    }
+  }
+}
+
+// ---- the fold of the candidates -----------------------------------------------------------------
+//
+// One predecessor x-state sx's rows toward all nine target x-states at once, in 11 vectors of 8
+// lanes: vector ty < 9 holds the target states (0..7, ty), vector 9 the states (8, 0..7) and
+// vector 10 the state (8, 8) and seven unused lanes, so that the lanes of vectors 0..8 read
+// consecutive combinations sx * 9 + tx. For each of the nine predecessor y-states sy, candidate =
+// a[sy] + ((b + u) + v) with u, v in {-z, 0, +z}, folded into the lane's smallest, second
+// smallest and arg-smallest. Lanes of a target x-state without a row this time keep their
+// minima. Written with 8-lane vector extensions and cloned for AVX-512 and AVX, where the machine
+// has them; every clone computes the same values (no contraction into FMA: core/CMakeLists.txt
+// sets -ffp-contract=off).
 constexpr int kLaneVectors = 11;
 constexpr int kTargetLanes = kLaneVectors * kLaneVector;
 
 // The lane of target state (tx, ty) (see above).
-constexpr int TargetLane(int tx, int ty) { return ty < 8 ? tx * 8 + ty : 72 + tx; }
-
-// The row terms of one predecessor x-state (see UpdateTargetMinima()).
-struct PredecessorLanes {
-  alignas(64) std::array<std::array<double, 16>, 9> a;  // [sy][tx], tx 9..15 unused (0)
-  alignas(64) std::array<double, kTargetLanes> b, z0, z1;
-};
+constexpr int TargetLane(int tx, int ty) { return tx < 8 ? ty * 8 + tx : 72 + ty; }
 
 // Per target state (lane): smallest candidate, second smallest, and the state of the smallest.
 // A target whose second smallest lies outside the tie window of the smallest has one candidate in
@@ -450,23 +549,16 @@ struct TargetMinima {
   alignas(64) std::array<double, kTargetLanes> least, second, state;
 };
 
-using Lanes8 = double __attribute__((vector_size(64)));
-
-using LaneMask8 = std::int64_t __attribute__((vector_size(64)));
-
-// Folds the nine candidates of the lanes at `lane` given key a's terms `a[sy]` for them; lanes
-// outside `active` (when given) keep their minima: they hold no row this time, only what an
-// earlier one left.
+// Folds the nine candidates of the lanes at `lane`, given key a's terms a[sy], and b, z0, z1;
+// lanes outside `active` (when given) keep their minima.
 [[gnu::always_inline]] inline void FoldLanes(const Lanes8* a, const Lanes8* states,
-                                             const PredecessorLanes& row, int lane,
-                                             const LaneMask8* active, TargetMinima& minima) {
-  Lanes8 least, second, state, b, z0, z1;
-  std::memcpy(&least, minima.least.data() + lane, sizeof(Lanes8));
-  std::memcpy(&second, minima.second.data() + lane, sizeof(Lanes8));
-  std::memcpy(&state, minima.state.data() + lane, sizeof(Lanes8));
-  std::memcpy(&b, row.b.data() + lane, sizeof(Lanes8));
-  std::memcpy(&z0, row.z0.data() + lane, sizeof(Lanes8));
-  std::memcpy(&z1, row.z1.data() + lane, sizeof(Lanes8));
+                                             const Lanes8& b, const Lanes8& z0, const Lanes8& z1,
+                                             int lane, const LaneMask8* active,
+                                             TargetMinima& minima) {
+  const Lanes8 old_least = LoadLanes(minima.least.data() + lane);
+  const Lanes8 old_second = LoadLanes(minima.second.data() + lane);
+  const Lanes8 old_state = LoadLanes(minima.state.data() + lane);
+  Lanes8 least = old_least, second = old_second, state = old_state;
   const Lanes8 zero = {};
   const Lanes8 with_u[3] = {b + (zero - z0), b + zero, b + z0};
   const Lanes8 with_v[3] = {zero - z1, zero, z1};
@@ -479,99 +571,57 @@ using LaneMask8 = std::int64_t __attribute__((vector_size(64)));
     least = smaller ? c : least;
   }
   if (active != nullptr) {
-    Lanes8 old;
-    std::memcpy(&old, minima.least.data() + lane, sizeof(Lanes8));
-    least = *active ? least : old;
-    std::memcpy(&old, minima.second.data() + lane, sizeof(Lanes8));
-    second = *active ? second : old;
-    std::memcpy(&old, minima.state.data() + lane, sizeof(Lanes8));
-    state = *active ? state : old;
+    least = *active ? least : old_least;
+    second = *active ? second : old_second;
+    state = *active ? state : old_state;
   }
-  std::memcpy(minima.least.data() + lane, &least, sizeof(Lanes8));
-  std::memcpy(minima.second.data() + lane, &second, sizeof(Lanes8));
-  std::memcpy(minima.state.data() + lane, &state, sizeof(Lanes8));
+  StoreLanes(minima.least.data() + lane, least);
+  StoreLanes(minima.second.data() + lane, second);
+  StoreLanes(minima.state.data() + lane, state);
 }
 
-// `rows`: bit tx set when target x-state tx has a row in `row` this time.
-TEMPOKEY_AVX512_CLONES void UpdateTargetMinima(const PredecessorLanes& row, int state_first,
+// Folds predecessor x-state sx's rows, cost `in_row` of its nine states; `rows`: bit tx set when
+// the combination (sx, tx) takes part.
+TEMPOKEY_AVX512_CLONES void UpdateTargetMinima(const RowTerms& terms, const double* in_row, int sx,
                                                std::uint32_t rows, TargetMinima& minima) {
+  const int first = sx * 9;
   Lanes8 states[9];
-  for (int sy = 0; sy < 9; ++sy) {
-    const double s = static_cast<double>(state_first + sy);
-    states[sy] = Lanes8{s, s, s, s, s, s, s, s};
-  }
-  Lanes8 a[9] = {};
-  for (int tx = 0; tx < 9; ++tx) {
-    if ((rows >> tx & 1u) == 0) continue;
+  for (int sy = 0; sy < 9; ++sy) states[sy] = BroadcastLanes(static_cast<double>(first + sy));
+  Lanes8 a[9];
+  if ((rows & 0xffu) != 0) {
     for (int sy = 0; sy < 9; ++sy) {
-      const double v = row.a[sy][tx];
-      a[sy] = Lanes8{v, v, v, v, v, v, v, v};
+      a[sy] = BroadcastLanes(in_row[sy]) + LoadLanes(terms.alpha[sy].data() + first);
     }
-    FoldLanes(a, states, row, tx * kLaneVector, nullptr, minima);
-  }
-  // The target x-state of each lane of vectors 9 and 10 as a bit (0: an unused lane).
-  constexpr std::int64_t kLaneRows[2][kLaneVector] = {{1, 2, 4, 8, 16, 32, 64, 128},
-                                                      {256, 0, 0, 0, 0, 0, 0, 0}};
-  const std::int64_t r = rows;
-  const LaneMask8 present = {r, r, r, r, r, r, r, r};
-  for (int k = 9; k < kLaneVectors; ++k) {
-    if ((rows & (k == 9 ? 0xffu : 0x100u)) == 0) continue;
-    LaneMask8 bits;
-    std::memcpy(&bits, kLaneRows[k - 9], sizeof(LaneMask8));
+    const std::int64_t r = rows;
+    const LaneMask8 present = {r, r, r, r, r, r, r, r};
+    const LaneMask8 bits = {1, 2, 4, 8, 16, 32, 64, 128};
     const LaneMask8 active = (bits & present) != 0;
-    for (int sy = 0; sy < 9; ++sy) {
-      std::memcpy(&a[sy], row.a[sy].data() + (k - 9) * kLaneVector, sizeof(Lanes8));
+    const LaneMask8* mask = (rows & 0xffu) == 0xffu ? nullptr : &active;
+    for (int ty = 0; ty < 9; ++ty) {
+      FoldLanes(a, states, LoadLanes(terms.b[ty].data() + first),
+                LoadLanes(terms.z0[ty].data() + first), LoadLanes(terms.z1[ty].data() + first),
+                ty * kLaneVector, mask, minima);
     }
-    FoldLanes(a, states, row, k * kLaneVector, &active, minima);
   }
-}
-
-// The row of one x-combination (sx, tx) into the lanes of target x-state `tx` (see
-// DpPass::Advance() for the candidates): the segment's form (BuildSegmentForm()) split into the
-// terms of key a alone, a[sy] = in[sy] + alpha[sy], of key b alone, b[ty] = e0 + beta[ty], and
-// the cross terms z0, z1. Cloned like UpdateTargetMinima(), each clone with the same operations.
-TEMPOKEY_AVX512_CLONES void BuildRow(std::span<const double> samples, const SegmentShape& shape,
-                                     double y_ref, const std::array<double, 4>& centre_y,
-                                     const HermiteSteps& steps, const double* in_row, int tx,
-                                     PredecessorLanes& lanes) {
-  const SegmentForm form = BuildSegmentForm(samples, shape, y_ref, centre_y, steps);
-  const auto& h = form.h;
-  // alpha(d0, d1) = g0 d0 + g1 d1 + H00 d0^2 + 2 H01 d0 d1 + H11 d1^2, d in {-1, 0, 1}.
-  const double a_minus = h[0][0] - form.g[0];
-  const double a_plus = h[0][0] + form.g[0];
-  const double b_minus = h[1][1] - form.g[1];
-  const double b_plus = h[1][1] + form.g[1];
-  const double ab = 2.0 * h[0][1];
-  const std::array<double, 9> alpha = {a_minus + b_minus + ab, a_minus, a_minus + b_plus - ab,
-                                       b_minus,                0.0,     b_plus,
-                                       a_plus + b_minus - ab,  a_plus,  a_plus + b_plus + ab};
-  const double c_minus = h[2][2] - form.g[2];
-  const double c_plus = h[2][2] + form.g[2];
-  const double d_minus = h[3][3] - form.g[3];
-  const double d_plus = h[3][3] + form.g[3];
-  const double cd = 2.0 * h[2][3];
-  const std::array<double, 9> beta = {c_minus + d_minus + cd, c_minus, c_minus + d_plus - cd,
-                                      d_minus,                0.0,     d_plus,
-                                      c_plus + d_minus - cd,  c_plus,  c_plus + d_plus + cd};
-  for (int sy = 0; sy < 9; ++sy) lanes.a[sy][tx] = in_row[sy] + alpha[sy];
-  // z0 = 2 (H02 d2 + H03 d3), z1 = 2 (H12 d2 + H13 d3) over the nine (d2, d3).
-  const double p0 = 2.0 * h[0][2];
-  const double q0 = 2.0 * h[0][3];
-  const double p1 = 2.0 * h[1][2];
-  const double q1 = 2.0 * h[1][3];
-  const std::array<double, 9> z0 = {-p0 - q0, -p0, -p0 + q0, -q0, 0.0, q0, p0 - q0, p0, p0 + q0};
-  const std::array<double, 9> z1 = {-p1 - q1, -p1, -p1 + q1, -q1, 0.0, q1, p1 - q1, p1, p1 + q1};
-  double* b = lanes.b.data() + tx * kLaneVector;
-  double* z0_lanes = lanes.z0.data() + tx * kLaneVector;
-  double* z1_lanes = lanes.z1.data() + tx * kLaneVector;
-  for (int ty = 0; ty < 8; ++ty) {
-    b[ty] = form.e0 + beta[ty];
-    z0_lanes[ty] = z0[ty];
-    z1_lanes[ty] = z1[ty];
+  if ((rows >> 8 & 1u) != 0) {
+    const int c = first + 8;
+    for (int sy = 0; sy < 9; ++sy) a[sy] = BroadcastLanes(in_row[sy] + terms.alpha[sy][c]);
+    Lanes8 b, z0, z1;
+    for (int ty = 0; ty < 8; ++ty) {
+      b[ty] = terms.b[ty][c];
+      z0[ty] = terms.z0[ty][c];
+      z1[ty] = terms.z1[ty][c];
+    }
+    FoldLanes(a, states, b, z0, z1, 72, nullptr, minima);
+    // The unused lanes' candidates are +inf (b = +inf, z = 0): they change nothing.
+    b = BroadcastLanes(kInf);
+    z0 = Lanes8{};
+    z1 = Lanes8{};
+    b[0] = terms.b[8][c];
+    z0[0] = terms.z0[8][c];
+    z1[0] = terms.z1[8][c];
+    FoldLanes(a, states, b, z0, z1, 80, nullptr, minima);
   }
-  lanes.b[TargetLane(tx, 8)] = form.e0 + beta[8];
-  lanes.z0[TargetLane(tx, 8)] = z0[8];
-  lanes.z1[TargetLane(tx, 8)] = z1[8];
 }
 
 // Viterbi tables of one pass.
@@ -626,25 +676,21 @@ class DpPass {
     return {grid.x[XIndex(sx)], grid.y[sy / 3], grid.tx[TxIndex(sx)], grid.ty[sy % 3]};
   }
 
-  // One predecessor x-state's contribution to the nine targets of one target x-state:
-  //   candidate(sy, ty) = a[sy] + ((b[ty] + dy_a(sy) * z0[ty]) + dty_a(sy) * z1[ty])
-  // with a = in + alpha (terms of key a alone), b = e0 + beta (key b alone) and z the cross
-  // terms; the offsets are -1, 0, +1, so the products are exact and the fast pass and the tie
-  // fallback below compute every candidate bit for bit alike. The rows of one predecessor
-  // x-state toward the nine target x-states share a PredecessorLanes, one per predecessor
-  // x-state folded (a slot), kept for the tie fallback.
+  // The forms of one segment and the minima of its 81 target states. The predecessor x-states
+  // folded so far, in order (with the target x-states they had rows for), for the tie fallback.
   struct Workspace {
-    std::array<PredecessorLanes, 9> slots;
-    std::array<int, 9> slot_sx;
-    std::array<std::uint32_t, 9> slot_rows;  // bit tx: target x-state tx has a row
-    int slot_count = 0;
+    FormInputs inputs;
+    RowTerms terms;
     TargetMinima minima;
+    std::array<int, 9> folded_sx;
+    std::array<std::uint32_t, 9> folded_rows;  // bit tx: the combination (sx, tx) took part
+    int folded = 0;
 
     void Reset() {
       minima.least.fill(kInf);
       minima.second.fill(kInf);
       minima.state.fill(-1.0);
-      slot_count = 0;
+      folded = 0;
     }
   };
 
@@ -725,7 +771,7 @@ class DpPass {
             const double bx = gb.x[ix_b];
             const double btx = gb.tx[itx_b];
             if (!InsideAndFeasible(ax, atx, bx, btx)) continue;
-            const int combo = tx * 9 + sx;
+            const int combo = sx * 9 + tx;
             feasible[combo] = true;
             SegmentShape& shape = shapes[combo];
             const std::int64_t first = first_of[ix_a];
@@ -759,6 +805,23 @@ class DpPass {
 
     Workspace& work = *work_space_;
     work.Reset();
+    // The forms of every feasible combination, in pieces of about kDpStopCheckFrames frames of
+    // data sums between looks at the stop token.
+    std::int64_t frames = 0;
+    for (int begin = 0, c = 0; c < kComboLanes; ++c) {
+      if (c < kStates && feasible[c]) frames += shapes[c].n;
+      if (frames >= kDpStopCheckFrames || c + 1 == kComboLanes) {
+        GatherFormInputs(samples_, shapes.data(), y_ref, feasible, begin, c + 1, work.inputs);
+        if (Stopping(frames)) return false;
+        frames = 0;
+        begin = c + 1;
+      }
+    }
+    const std::array<double, 4> w = {centre_y[0] - y_ref, centre_y[1], centre_y[2] - y_ref,
+                                     centre_y[3]};
+    const std::array<double, 4> d = {steps_.y, steps_.tangent_y, steps_.y, steps_.tangent_y};
+    BuildRowTerms(work.inputs, w, d, work.terms);
+
     // The target x-states still open: a target x-state closes at the first predecessor whose
     // cheapest state is above every one of its targets' windows (later ones are dearer still).
     std::uint32_t open = 0;
@@ -767,33 +830,30 @@ class DpPass {
     }
     for (int sx : order) {
       if (cheapest[sx] == kInf || open == 0) break;
-      PredecessorLanes& lanes = work.slots[work.slot_count];
       std::uint32_t rows = 0;
       for (int tx = 0; tx < 9; ++tx) {
         if ((open >> tx & 1u) == 0) continue;
         // The widest tie window of the nine targets is that of the largest smallest candidate
         // (TieTolerance() rounds monotonically).
-        double largest = work.minima.least[TargetLane(tx, 8)];
-        for (int ty = 0; ty < 8; ++ty) largest = std::max(largest, work.minima.least[tx * 8 + ty]);
+        double largest = work.minima.least[TargetLane(tx, 0)];
+        for (int ty = 1; ty < 9; ++ty) {
+          largest = std::max(largest, work.minima.least[TargetLane(tx, ty)]);
+        }
         if (cheapest[sx] > largest + TieTolerance(largest, scale_)) {
           open &= ~(1u << tx);
           continue;
         }
-        if (!feasible[tx * 9 + sx]) continue;
-        if (Stopping(shapes[tx * 9 + sx].n)) return false;
-        BuildRow(samples_, shapes[tx * 9 + sx], y_ref, centre_y, steps_, in.data() + sx * 9, tx,
-                 lanes);
-        rows |= 1u << tx;
+        if (feasible[sx * 9 + tx]) rows |= 1u << tx;
       }
       if (rows == 0) continue;
-      work.slot_sx[work.slot_count] = sx;
-      work.slot_rows[work.slot_count] = rows;
-      ++work.slot_count;
-      UpdateTargetMinima(lanes, sx * 9, rows, work.minima);
+      work.folded_sx[work.folded] = sx;
+      work.folded_rows[work.folded] = rows;
+      ++work.folded;
+      UpdateTargetMinima(work.terms, in.data() + sx * 9, sx, rows, work.minima);
     }
     for (int tx = 0; tx < 9; ++tx) {
       for (int ty = 0; ty < 9; ++ty) {
-        const auto [value, state] = ChooseForTarget(work, tx, ty);
+        const auto [value, state] = ChooseForTarget(work, in, tx, ty);
         cost_[i + 1][tx * 9 + ty] = value;
         predecessor_[i + 1][tx * 9 + ty] = static_cast<std::int8_t>(state);
       }
@@ -801,18 +861,23 @@ class DpPass {
     return true;
   }
 
-  // The candidate of (sy, tx * 9 + ty) in `row`, exactly as UpdateTargetMinima() computes it.
-  static double Candidate(const PredecessorLanes& row, int sy, int tx, int ty) {
-    const int lane = TargetLane(tx, ty);
+  // The candidate of predecessor state sx * 9 + sy for target state tx * 9 + ty, exactly as
+  // UpdateTargetMinima() computes it.
+  static double Candidate(const Workspace& work, const std::array<double, kStates>& in, int sx,
+                          int sy, int tx, int ty) {
+    const int c = sx * 9 + tx;
     const double d0 = kOffsetHigh[sy];
     const double d1 = kOffsetLow[sy];
-    const double u = d0 < 0.0 ? -row.z0[lane] : (d0 > 0.0 ? row.z0[lane] : 0.0);
-    const double v = d1 < 0.0 ? -row.z1[lane] : (d1 > 0.0 ? row.z1[lane] : 0.0);
-    return row.a[sy][tx] + ((row.b[lane] + u) + v);
+    const RowTerms& t = work.terms;
+    const double u = d0 < 0.0 ? -t.z0[ty][c] : (d0 > 0.0 ? t.z0[ty][c] : 0.0);
+    const double v = d1 < 0.0 ? -t.z1[ty][c] : (d1 > 0.0 ? t.z1[ty][c] : 0.0);
+    return (in[sx * 9 + sy] + t.alpha[sy][c]) + ((t.b[ty][c] + u) + v);
   }
 
-  // The tie rule for target state (tx, ty) over the rows of target x-state `tx`.
-  std::pair<double, int> ChooseForTarget(const Workspace& work, int tx, int ty) const {
+  // The tie rule for target state (tx, ty) over the predecessors folded toward it.
+  std::pair<double, int> ChooseForTarget(const Workspace& work,
+                                         const std::array<double, kStates>& in, int tx,
+                                         int ty) const {
     const int lane = TargetLane(tx, ty);
     const double m = work.minima.least[lane];
     if (m == kInf) return {kInf, -1};
@@ -821,12 +886,13 @@ class DpPass {
     // Several candidates in the window: state 40 if among them, else the lowest state.
     double best_value = kInf;
     int best_state = -1;
-    for (int r = 0; r < work.slot_count; ++r) {
-      if ((work.slot_rows[r] >> tx & 1u) == 0) continue;
+    for (int r = 0; r < work.folded; ++r) {
+      if ((work.folded_rows[r] >> tx & 1u) == 0) continue;
+      const int sx = work.folded_sx[r];
       for (int sy = 0; sy < 9; ++sy) {
-        const double c = Candidate(work.slots[r], sy, tx, ty);
+        const double c = Candidate(work, in, sx, sy, tx, ty);
         if (!(c <= window)) continue;
-        const int state = work.slot_sx[r] * 9 + sy;
+        const int state = sx * 9 + sy;
         if (state == kCenterState) return {c, state};
         if (best_state < 0 || state < best_state) {
           best_state = state;
