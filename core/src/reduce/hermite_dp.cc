@@ -341,21 +341,6 @@ struct SegmentShape {
   double squares = 0.0;    // sum of (sample - y_ref)^2 over the frames
 };
 
-// b += (sample[k] - y_ref) * basis row k over k < n: the data terms of a segment's form. Inlined
-// into BuildRow()'s clones; every component is summed in the same order by all of them, so they
-// agree bit for bit.
-[[gnu::always_inline]] inline void SumDataTerms(const double* sample, const double* basis, int n,
-                                                double y_ref, double* b) {
-  using V = double __attribute__((vector_size(32)));
-  V sum = {0.0, 0.0, 0.0, 0.0};
-  for (int k = 0; k < n; ++k) {
-    V h;
-    std::memcpy(&h, basis + k * kBasisStride, sizeof(V));
-    sum += (sample[k] - y_ref) * h;
-  }
-  std::memcpy(b, &sum, sizeof(V));
-}
-
 // Sum of (sample[k] - y_ref)^2 over k < n.
 double SumSquares(const double* sample, int n, double y_ref) {
   double squares = 0.0;
@@ -417,40 +402,27 @@ struct RowTerms {
   alignas(64) std::array<std::array<double, kComboLanes>, 9> alpha, b, z0, z1;
 };
 
-// Writes combination `c`'s form inputs: its data terms summed over its frames (in the same order
-// for every combination), its Gram sums and sum of squares.
-[[gnu::always_inline]] inline void GatherComboInputs(std::span<const double> samples,
-                                                     const SegmentShape& shape, double y_ref,
-                                                     int c, FormInputs& inputs) {
-  const int n = shape.n;
-  const ShapeEntry& entry = shape.entry;
-  const bool none = n <= 0;
-  const bool mismatched = !none && (n < entry.count - 1 || n > entry.count);  // unreachable
-  if (none || mismatched) {
-    for (int j = 0; j < 4; ++j) inputs.data[j][c] = 0.0;
-    for (int j = 0; j < kGramSize; ++j) inputs.gram[j][c] = 0.0;
-    inputs.squares[c] = none ? 0.0 : kInf;
-    return;
+// The data terms of the nine combinations that share their frames (the same x offsets, any
+// tangents), frames k_begin .. k_end - 1 of them, added to `sums` (sums[j] += (sample[k] -
+// y_ref) * basis row k of combination j, one vector of 4 per combination, in frame order): a
+// combination's sums are those its frames alone give, and the nine independent chains overlap.
+// Cloned like UpdateTargetMinima(); every clone adds in the same order.
+TEMPOKEY_AVX512_CLONES void SumDataTerms(const double* sample, std::int64_t k_begin,
+                                         std::int64_t k_end, double y_ref,
+                                         const std::array<const double*, 9>& basis,
+                                         std::array<std::array<double, 4>, 9>& sums) {
+  using V = double __attribute__((vector_size(32)));
+  V acc[9];
+  for (int j = 0; j < 9; ++j) std::memcpy(&acc[j], sums[j].data(), sizeof(V));
+  for (std::int64_t k = k_begin; k < k_end; ++k) {
+    const double d = sample[k] - y_ref;
+    for (int j = 0; j < 9; ++j) {
+      V h;
+      std::memcpy(&h, basis[j] + k * kBasisStride, sizeof(V));
+      acc[j] += d * h;
+    }
   }
-  alignas(32) std::array<double, 4> b;
-  SumDataTerms(samples.data() + shape.first, entry.basis(), n, y_ref, b.data());
-  for (int j = 0; j < 4; ++j) inputs.data[j][c] = b[j];
-  const double* g = n == entry.count ? entry.gram_all() : entry.gram_but_last();
-  for (int j = 0; j < kGramSize; ++j) inputs.gram[j][c] = g[j];
-  inputs.squares[c] = shape.squares;
-}
-
-// The form inputs of combinations [begin, end): those marked in `combos` from their shapes, the
-// others zero. Cloned like UpdateTargetMinima(); every clone sums in the same order.
-TEMPOKEY_AVX512_CLONES void GatherFormInputs(std::span<const double> samples,
-                                             const SegmentShape* shapes, double y_ref,
-                                             const std::array<bool, 81>& combos, int begin,
-                                             int end, FormInputs& inputs) {
-  static const SegmentShape kNone;
-  for (int c = begin; c < end; ++c) {
-    const bool used = c < 81 && combos[c];
-    GatherComboInputs(samples, used ? shapes[c] : kNone, y_ref, c, inputs);
-  }
+  for (int j = 0; j < 9; ++j) std::memcpy(sums[j].data(), &acc[j], sizeof(V));
 }
 
 // The split forms of all combinations from their inputs; `centre` the centre's y-components
@@ -545,8 +517,10 @@ constexpr int TargetLane(int tx, int ty) { return tx < 8 ? ty * 8 + tx : 72 + ty
 // A target whose second smallest lies outside the tie window of the smallest has one candidate in
 // the window, which the tie rule must choose; otherwise the window is rebuilt exactly from the
 // rows (rare: real ties).
+// `largest[tx]` is the largest of the smallest candidates of target x-state tx's nine targets.
 struct TargetMinima {
   alignas(64) std::array<double, kTargetLanes> least, second, state;
+  alignas(64) std::array<double, 16> largest;  // [tx], 9..15 unused
 };
 
 // Folds the nine candidates of the lanes at `lane`, given key a's terms a[sy], and b, z0, z1;
@@ -622,6 +596,17 @@ TEMPOKEY_AVX512_CLONES void UpdateTargetMinima(const RowTerms& terms, const doub
     z1[0] = terms.z1[8][c];
     FoldLanes(a, states, b, z0, z1, 80, nullptr, minima);
   }
+  // The largest of the nine targets' smallest candidates per target x-state (max is exact, so
+  // the order does not matter).
+  Lanes8 largest = LoadLanes(minima.least.data());
+  for (int ty = 1; ty < 9; ++ty) {
+    const Lanes8 least = LoadLanes(minima.least.data() + ty * kLaneVector);
+    largest = least > largest ? least : largest;
+  }
+  StoreLanes(minima.largest.data(), largest);
+  double last = minima.least[80];
+  for (int lane = 72; lane < 80; ++lane) last = std::max(last, minima.least[lane]);
+  minima.largest[8] = last;
 }
 
 // Viterbi tables of one pass.
@@ -690,6 +675,7 @@ class DpPass {
       minima.least.fill(kInf);
       minima.second.fill(kInf);
       minima.state.fill(-1.0);
+      minima.largest.fill(kInf);
       folded = 0;
     }
   };
@@ -805,18 +791,7 @@ class DpPass {
 
     Workspace& work = *work_space_;
     work.Reset();
-    // The forms of every feasible combination, in pieces of about kDpStopCheckFrames frames of
-    // data sums between looks at the stop token.
-    std::int64_t frames = 0;
-    for (int begin = 0, c = 0; c < kComboLanes; ++c) {
-      if (c < kStates && feasible[c]) frames += shapes[c].n;
-      if (frames >= kDpStopCheckFrames || c + 1 == kComboLanes) {
-        GatherFormInputs(samples_, shapes.data(), y_ref, feasible, begin, c + 1, work.inputs);
-        if (Stopping(frames)) return false;
-        frames = 0;
-        begin = c + 1;
-      }
-    }
+    if (!GatherFormInputs(shapes, feasible, y_ref, work.inputs)) return false;
     const std::array<double, 4> w = {centre_y[0] - y_ref, centre_y[1], centre_y[2] - y_ref,
                                      centre_y[3]};
     const std::array<double, 4> d = {steps_.y, steps_.tangent_y, steps_.y, steps_.tangent_y};
@@ -835,10 +810,7 @@ class DpPass {
         if ((open >> tx & 1u) == 0) continue;
         // The widest tie window of the nine targets is that of the largest smallest candidate
         // (TieTolerance() rounds monotonically).
-        double largest = work.minima.least[TargetLane(tx, 0)];
-        for (int ty = 1; ty < 9; ++ty) {
-          largest = std::max(largest, work.minima.least[TargetLane(tx, ty)]);
-        }
+        const double largest = work.minima.largest[tx];
         if (cheapest[sx] > largest + TieTolerance(largest, scale_)) {
           open &= ~(1u << tx);
           continue;
@@ -856,6 +828,61 @@ class DpPass {
         const auto [value, state] = ChooseForTarget(work, in, tx, ty);
         cost_[i + 1][tx * 9 + ty] = value;
         predecessor_[i + 1][tx * 9 + ty] = static_cast<std::int8_t>(state);
+      }
+    }
+    return true;
+  }
+
+  // The form inputs of every combination (FormInputs), the data terms summed for the nine
+  // combinations of each pair of x offsets together (they share their frames), in pieces of
+  // kDpStopCheckFrames frames between looks at the stop token; false when a stop was requested.
+  bool GatherFormInputs(const std::array<SegmentShape, kStates>& shapes,
+                        const std::array<bool, kStates>& feasible, double y_ref,
+                        FormInputs& inputs) {
+    for (int ix_a = 0; ix_a < 3; ++ix_a) {
+      for (int ix_b = 0; ix_b < 3; ++ix_b) {
+        std::array<int, 9> combo;
+        std::array<const double*, 9> basis{};
+        std::array<bool, 9> used{};
+        const SegmentShape* some = nullptr;
+        for (int j = 0; j < 9; ++j) {
+          const int sx = ix_a * 3 + j / 3;
+          const int tx = ix_b * 3 + j % 3;
+          combo[j] = sx * 9 + tx;
+          const SegmentShape& shape = shapes[combo[j]];
+          const int n = shape.n;
+          // A frame count that does not match the shape is unreachable (see ShapeEntry).
+          used[j] = feasible[combo[j]] && n > 0 && n >= shape.entry.count - 1 &&
+                    n <= shape.entry.count;
+          if (used[j]) {
+            basis[j] = shape.entry.basis();
+            some = &shape;
+          }
+        }
+        std::array<std::array<double, 4>, 9> sums{};
+        if (some != nullptr) {
+          // Combinations not used sum along on a used one's rows (their sums are dropped).
+          for (auto& row : basis) {
+            if (row == nullptr) row = some->entry.basis();
+          }
+          const double* sample = samples_.data() + some->first;
+          for (std::int64_t k = 0; k < some->n; k += kDpStopCheckFrames) {
+            const std::int64_t end = std::min<std::int64_t>(some->n, k + kDpStopCheckFrames);
+            SumDataTerms(sample, k, end, y_ref, basis, sums);
+            if (Stopping(9 * (end - k))) return false;
+          }
+        }
+        for (int j = 0; j < 9; ++j) {
+          const int c = combo[j];
+          const SegmentShape& shape = shapes[c];
+          const bool mismatched = feasible[c] && shape.n > 0 && !used[j];
+          const double* g = used[j] ? (shape.n == shape.entry.count ? shape.entry.gram_all()
+                                                                     : shape.entry.gram_but_last())
+                                    : nullptr;
+          for (int l = 0; l < 4; ++l) inputs.data[l][c] = used[j] ? sums[j][l] : 0.0;
+          for (int l = 0; l < kGramSize; ++l) inputs.gram[l][c] = used[j] ? g[l] : 0.0;
+          inputs.squares[c] = used[j] ? shape.squares : (mismatched ? kInf : 0.0);
+        }
       }
     }
     return true;
