@@ -18,6 +18,7 @@
 #include "absl/strings/str_cat.h"
 #include "tempokey/core/model/progress.h"
 #include "tempokey/core/model/status.h"
+#include "lane_pack.h"
 #include "simd.h"
 
 namespace tempokey::core {
@@ -367,25 +368,10 @@ double SumSquares(const double* sample, int n, double y_ref) {
 // compute every candidate bit for bit alike.
 //
 // The forms of all 81 combinations (index c = sx * 9 + tx) are computed together, lane c of
-// 8-lane vectors, each lane with the operations a single form takes in the same order: a lane
-// computes what the form of its combination alone would.
+// 8-lane packs (lane_pack.h), each lane with the operations a single form takes in the same
+// order: a lane computes what the form of its combination alone would.
 constexpr int kLaneVector = 8;
 constexpr int kComboLanes = 88;  // 81 combinations, 11 vectors of 8
-
-using Lanes8 = double __attribute__((vector_size(64)));
-using LaneMask8 = std::int64_t __attribute__((vector_size(64)));
-
-[[gnu::always_inline]] inline Lanes8 LoadLanes(const double* p) {
-  Lanes8 v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
-[[gnu::always_inline]] inline void StoreLanes(double* p, const Lanes8& v) {
-  std::memcpy(p, &v, sizeof v);
-}
-[[gnu::always_inline]] inline Lanes8 BroadcastLanes(double x) {
-  return Lanes8{x, x, x, x, x, x, x, x};
-}
 
 // What the forms are built from, per combination (lane c): data terms, Gram sums (the 10
 // distinct entries of G over the segment's frames) and the sum of squares. A combination without
@@ -407,7 +393,7 @@ struct RowTerms {
 // y_ref) * basis row k of combination j, one vector of 4 per combination, in frame order): a
 // combination's sums are those its frames alone give, and the nine independent chains overlap.
 // Cloned like UpdateTargetMinima(); every clone adds in the same order.
-TEMPOKEY_AVX512_CLONES void SumDataTerms(const double* sample, std::int64_t k_begin,
+TEMPOKEY_AVX_CLONES void SumDataTerms(const double* sample, std::int64_t k_begin,
                                          std::int64_t k_end, double y_ref,
                                          const std::array<const double*, 9>& basis,
                                          std::array<std::array<double, 4>, 9>& sums) {
@@ -427,73 +413,104 @@ TEMPOKEY_AVX512_CLONES void SumDataTerms(const double* sample, std::int64_t k_be
 
 // The split forms of all combinations from their inputs; `centre` the centre's y-components
 // relative to y_ref (w above), `d` the y-steps (y, tangent y, y, tangent y).
-TEMPOKEY_AVX512_CLONES void BuildRowTerms(const FormInputs& inputs,
-                                          const std::array<double, 4>& centre,
-                                          const std::array<double, 4>& d, RowTerms& terms) {
-  const Lanes8 zero = {};
-  const Lanes8 two = BroadcastLanes(2.0);
-  Lanes8 w_lanes[4], d2[4], dd[4][4];
+template <typename P>
+[[gnu::always_inline]] inline void BuildRowTermsWith(const FormInputs& inputs,
+                                                     const std::array<double, 4>& centre,
+                                                     const std::array<double, 4>& d,
+                                                     RowTerms& terms) {
+  const P zero = P::Zero();
+  const P two = P::Splat(2.0);
+  P w_lanes[4], d2[4], dd[4][4];
   for (int k = 0; k < 4; ++k) {
-    w_lanes[k] = BroadcastLanes(centre[k]);
-    d2[k] = BroadcastLanes(2.0 * d[k]);
-    for (int l = 0; l < 4; ++l) dd[k][l] = BroadcastLanes(d[k] * d[l]);
+    w_lanes[k] = P::Splat(centre[k]);
+    d2[k] = P::Splat(2.0 * d[k]);
+    for (int l = 0; l < 4; ++l) dd[k][l] = P::Splat(d[k] * d[l]);
   }
   for (int c = 0; c < kComboLanes; c += kLaneVector) {
-    Lanes8 g[kGramSize], b[4];
-    for (int j = 0; j < kGramSize; ++j) g[j] = LoadLanes(inputs.gram[j].data() + c);
-    for (int j = 0; j < 4; ++j) b[j] = LoadLanes(inputs.data[j].data() + c);
-    const Lanes8 squares = LoadLanes(inputs.squares.data() + c);
-    const Lanes8* w = w_lanes;
-    const Lanes8 gw[4] = {g[0] * w[0] + g[1] * w[1] + g[2] * w[2] + g[3] * w[3],
-                          g[1] * w[0] + g[4] * w[1] + g[5] * w[2] + g[6] * w[3],
-                          g[2] * w[0] + g[5] * w[1] + g[7] * w[2] + g[8] * w[3],
-                          g[3] * w[0] + g[6] * w[1] + g[8] * w[2] + g[9] * w[3]};
-    Lanes8 wgw = zero;
-    Lanes8 bw = zero;
+    P g[kGramSize], b[4];
+    for (int j = 0; j < kGramSize; ++j) g[j] = P::Load(inputs.gram[j].data() + c);
+    for (int j = 0; j < 4; ++j) b[j] = P::Load(inputs.data[j].data() + c);
+    const P squares = P::Load(inputs.squares.data() + c);
+    const P* w = w_lanes;
+    const P gw[4] = {g[0] * w[0] + g[1] * w[1] + g[2] * w[2] + g[3] * w[3],
+                     g[1] * w[0] + g[4] * w[1] + g[5] * w[2] + g[6] * w[3],
+                     g[2] * w[0] + g[5] * w[1] + g[7] * w[2] + g[8] * w[3],
+                     g[3] * w[0] + g[6] * w[1] + g[8] * w[2] + g[9] * w[3]};
+    P wgw = zero;
+    P bw = zero;
     for (int k = 0; k < 4; ++k) {
-      wgw += w[k] * gw[k];
-      bw += b[k] * w[k];
+      wgw = wgw + w[k] * gw[k];
+      bw = bw + b[k] * w[k];
     }
     // std::max(0.0, x): x where 0 < x, else 0.
-    const Lanes8 e = wgw - two * bw + squares;
-    const Lanes8 e0 = zero < e ? e : zero;
-    Lanes8 lin[4];
+    const P e = wgw - two * bw + squares;
+    const P e0 = P::Select(zero < e, e, zero);
+    P lin[4];
     for (int k = 0; k < 4; ++k) lin[k] = d2[k] * (gw[k] - b[k]);
-    const Lanes8 h00 = dd[0][0] * g[0], h01 = dd[0][1] * g[1], h02 = dd[0][2] * g[2],
-                 h03 = dd[0][3] * g[3], h11 = dd[1][1] * g[4], h12 = dd[1][2] * g[5],
-                 h13 = dd[1][3] * g[6], h22 = dd[2][2] * g[7], h23 = dd[2][3] * g[8],
-                 h33 = dd[3][3] * g[9];
+    const P h00 = dd[0][0] * g[0], h01 = dd[0][1] * g[1], h02 = dd[0][2] * g[2],
+            h03 = dd[0][3] * g[3], h11 = dd[1][1] * g[4], h12 = dd[1][2] * g[5],
+            h13 = dd[1][3] * g[6], h22 = dd[2][2] * g[7], h23 = dd[2][3] * g[8],
+            h33 = dd[3][3] * g[9];
     // alpha(d0, d1) = g0 d0 + g1 d1 + H00 d0^2 + 2 H01 d0 d1 + H11 d1^2, d in {-1, 0, 1}.
-    const Lanes8 a_minus = h00 - lin[0];
-    const Lanes8 a_plus = h00 + lin[0];
-    const Lanes8 b_minus = h11 - lin[1];
-    const Lanes8 b_plus = h11 + lin[1];
-    const Lanes8 ab = two * h01;
-    const Lanes8 alpha[9] = {a_minus + b_minus + ab, a_minus, a_minus + b_plus - ab,
-                             b_minus,                zero,    b_plus,
-                             a_plus + b_minus - ab,  a_plus,  a_plus + b_plus + ab};
-    const Lanes8 c_minus = h22 - lin[2];
-    const Lanes8 c_plus = h22 + lin[2];
-    const Lanes8 d_minus = h33 - lin[3];
-    const Lanes8 d_plus = h33 + lin[3];
-    const Lanes8 cd = two * h23;
-    const Lanes8 beta[9] = {c_minus + d_minus + cd, c_minus, c_minus + d_plus - cd,
-                            d_minus,                zero,    d_plus,
-                            c_plus + d_minus - cd,  c_plus,  c_plus + d_plus + cd};
+    const P a_minus = h00 - lin[0];
+    const P a_plus = h00 + lin[0];
+    const P b_minus = h11 - lin[1];
+    const P b_plus = h11 + lin[1];
+    const P ab = two * h01;
+    const P alpha[9] = {a_minus + b_minus + ab, a_minus, a_minus + b_plus - ab,
+                        b_minus,                zero,    b_plus,
+                        a_plus + b_minus - ab,  a_plus,  a_plus + b_plus + ab};
+    const P c_minus = h22 - lin[2];
+    const P c_plus = h22 + lin[2];
+    const P d_minus = h33 - lin[3];
+    const P d_plus = h33 + lin[3];
+    const P cd = two * h23;
+    const P beta[9] = {c_minus + d_minus + cd, c_minus, c_minus + d_plus - cd,
+                       d_minus,                zero,    d_plus,
+                       c_plus + d_minus - cd,  c_plus,  c_plus + d_plus + cd};
     // z0 = 2 (H02 d2 + H03 d3), z1 = 2 (H12 d2 + H13 d3) over the nine (d2, d3).
-    const Lanes8 p0 = two * h02;
-    const Lanes8 q0 = two * h03;
-    const Lanes8 p1 = two * h12;
-    const Lanes8 q1 = two * h13;
-    const Lanes8 z0[9] = {-p0 - q0, -p0, -p0 + q0, -q0, zero, q0, p0 - q0, p0, p0 + q0};
-    const Lanes8 z1[9] = {-p1 - q1, -p1, -p1 + q1, -q1, zero, q1, p1 - q1, p1, p1 + q1};
+    const P p0 = two * h02;
+    const P q0 = two * h03;
+    const P p1 = two * h12;
+    const P q1 = two * h13;
+    const P z0[9] = {-p0 - q0, -p0, -p0 + q0, -q0, zero, q0, p0 - q0, p0, p0 + q0};
+    const P z1[9] = {-p1 - q1, -p1, -p1 + q1, -q1, zero, q1, p1 - q1, p1, p1 + q1};
     for (int k = 0; k < 9; ++k) {
-      StoreLanes(terms.alpha[k].data() + c, alpha[k]);
-      StoreLanes(terms.b[k].data() + c, e0 + beta[k]);
-      StoreLanes(terms.z0[k].data() + c, z0[k]);
-      StoreLanes(terms.z1[k].data() + c, z1[k]);
+      alpha[k].Store(terms.alpha[k].data() + c);
+      (e0 + beta[k]).Store(terms.b[k].data() + c);
+      z0[k].Store(terms.z0[k].data() + c);
+      z1[k].Store(terms.z1[k].data() + c);
     }
   }
+}
+
+TEMPOKEY_TARGET_AVX512 void BuildRowTermsAvx512(const FormInputs& inputs,
+                                                const std::array<double, 4>& centre,
+                                                const std::array<double, 4>& d, RowTerms& terms) {
+  BuildRowTermsWith<simd::Pack512>(inputs, centre, d, terms);
+}
+TEMPOKEY_TARGET_AVX2 void BuildRowTermsAvx2(const FormInputs& inputs,
+                                            const std::array<double, 4>& centre,
+                                            const std::array<double, 4>& d, RowTerms& terms) {
+  BuildRowTermsWith<simd::PackPair>(inputs, centre, d, terms);
+}
+void BuildRowTermsBaseline(const FormInputs& inputs, const std::array<double, 4>& centre,
+                           const std::array<double, 4>& d, RowTerms& terms) {
+  BuildRowTermsWith<simd::PackPair>(inputs, centre, d, terms);
+}
+
+// BuildRowTermsWith() for the running machine.
+void BuildRowTerms(const FormInputs& inputs, const std::array<double, 4>& centre,
+                   const std::array<double, 4>& d, RowTerms& terms) {
+  switch (simd::RunningPackIsa()) {
+    case simd::PackIsa::kAvx512:
+      return BuildRowTermsAvx512(inputs, centre, d, terms);
+    case simd::PackIsa::kAvx2:
+      return BuildRowTermsAvx2(inputs, centre, d, terms);
+    case simd::PackIsa::kBaseline:
+      break;
+  }
+  BuildRowTermsBaseline(inputs, centre, d, terms);
 }
 
 // ---- the fold of the candidates -----------------------------------------------------------------
@@ -525,88 +542,118 @@ struct TargetMinima {
 
 // Folds the nine candidates of the lanes at `lane`, given key a's terms a[sy], and b, z0, z1;
 // lanes outside `active` (when given) keep their minima.
-[[gnu::always_inline]] inline void FoldLanes(const Lanes8* a, const Lanes8* states,
-                                             const Lanes8& b, const Lanes8& z0, const Lanes8& z1,
-                                             int lane, const LaneMask8* active,
+template <typename P>
+[[gnu::always_inline]] inline void FoldLanes(const P* a, const P* states, const P& b, const P& z0,
+                                             const P& z1, int lane,
+                                             const typename P::Mask* active,
                                              TargetMinima& minima) {
-  const Lanes8 old_least = LoadLanes(minima.least.data() + lane);
-  const Lanes8 old_second = LoadLanes(minima.second.data() + lane);
-  const Lanes8 old_state = LoadLanes(minima.state.data() + lane);
-  Lanes8 least = old_least, second = old_second, state = old_state;
-  const Lanes8 zero = {};
-  const Lanes8 with_u[3] = {b + (zero - z0), b + zero, b + z0};
-  const Lanes8 with_v[3] = {zero - z1, zero, z1};
+  const P old_least = P::Load(minima.least.data() + lane);
+  const P old_second = P::Load(minima.second.data() + lane);
+  const P old_state = P::Load(minima.state.data() + lane);
+  P least = old_least, second = old_second, state = old_state;
+  const P zero = P::Zero();
+  const P with_u[3] = {b + (zero - z0), b + zero, b + z0};
+  const P with_v[3] = {zero - z1, zero, z1};
   for (int sy = 0; sy < 9; ++sy) {
-    const Lanes8 c = a[sy] + (with_u[sy / 3] + with_v[sy % 3]);
-    const Lanes8 larger = c > least ? c : least;
-    second = larger < second ? larger : second;
-    const auto smaller = c < least;
-    state = smaller ? states[sy] : state;
-    least = smaller ? c : least;
+    const P c = a[sy] + (with_u[sy / 3] + with_v[sy % 3]);
+    const P larger = P::Select(c > least, c, least);
+    second = P::Select(larger < second, larger, second);
+    const typename P::Mask smaller = c < least;
+    state = P::Select(smaller, states[sy], state);
+    least = P::Select(smaller, c, least);
   }
   if (active != nullptr) {
-    least = *active ? least : old_least;
-    second = *active ? second : old_second;
-    state = *active ? state : old_state;
+    least = P::Select(*active, least, old_least);
+    second = P::Select(*active, second, old_second);
+    state = P::Select(*active, state, old_state);
   }
-  StoreLanes(minima.least.data() + lane, least);
-  StoreLanes(minima.second.data() + lane, second);
-  StoreLanes(minima.state.data() + lane, state);
+  least.Store(minima.least.data() + lane);
+  second.Store(minima.second.data() + lane);
+  state.Store(minima.state.data() + lane);
 }
 
 // Folds predecessor x-state sx's rows, cost `in_row` of its nine states; `rows`: bit tx set when
 // the combination (sx, tx) takes part.
-TEMPOKEY_AVX512_CLONES void UpdateTargetMinima(const RowTerms& terms, const double* in_row, int sx,
-                                               std::uint32_t rows, TargetMinima& minima) {
+template <typename P>
+[[gnu::always_inline]] inline void UpdateTargetMinimaWith(const RowTerms& terms,
+                                                          const double* in_row, int sx,
+                                                          std::uint32_t rows,
+                                                          TargetMinima& minima) {
   const int first = sx * 9;
-  Lanes8 states[9];
-  for (int sy = 0; sy < 9; ++sy) states[sy] = BroadcastLanes(static_cast<double>(first + sy));
-  Lanes8 a[9];
+  P states[9];
+  for (int sy = 0; sy < 9; ++sy) states[sy] = P::Splat(static_cast<double>(first + sy));
+  P a[9];
   if ((rows & 0xffu) != 0) {
     for (int sy = 0; sy < 9; ++sy) {
-      a[sy] = BroadcastLanes(in_row[sy]) + LoadLanes(terms.alpha[sy].data() + first);
+      a[sy] = P::Splat(in_row[sy]) + P::Load(terms.alpha[sy].data() + first);
     }
-    const std::int64_t r = rows;
-    const LaneMask8 present = {r, r, r, r, r, r, r, r};
-    const LaneMask8 bits = {1, 2, 4, 8, 16, 32, 64, 128};
-    const LaneMask8 active = (bits & present) != 0;
-    const LaneMask8* mask = (rows & 0xffu) == 0xffu ? nullptr : &active;
+    const typename P::Mask active = P::LaneBits(rows);
+    const typename P::Mask* mask = (rows & 0xffu) == 0xffu ? nullptr : &active;
     for (int ty = 0; ty < 9; ++ty) {
-      FoldLanes(a, states, LoadLanes(terms.b[ty].data() + first),
-                LoadLanes(terms.z0[ty].data() + first), LoadLanes(terms.z1[ty].data() + first),
+      FoldLanes(a, states, P::Load(terms.b[ty].data() + first),
+                P::Load(terms.z0[ty].data() + first), P::Load(terms.z1[ty].data() + first),
                 ty * kLaneVector, mask, minima);
     }
   }
   if ((rows >> 8 & 1u) != 0) {
     const int c = first + 8;
-    for (int sy = 0; sy < 9; ++sy) a[sy] = BroadcastLanes(in_row[sy] + terms.alpha[sy][c]);
-    Lanes8 b, z0, z1;
-    for (int ty = 0; ty < 8; ++ty) {
-      b[ty] = terms.b[ty][c];
-      z0[ty] = terms.z0[ty][c];
-      z1[ty] = terms.z1[ty][c];
+    for (int sy = 0; sy < 9; ++sy) a[sy] = P::Splat(in_row[sy] + terms.alpha[sy][c]);
+    // Lanes 0..7 of vector 9 are the target states (8, 0..7); lane 0 of vector 10 is (8, 8),
+    // its unused lanes' candidates +inf (b = +inf, z = 0), which change nothing.
+    alignas(64) double b[2][kLaneVector], z0[2][kLaneVector], z1[2][kLaneVector];
+    for (int ty = 0; ty < kLaneVector; ++ty) {
+      b[0][ty] = terms.b[ty][c];
+      z0[0][ty] = terms.z0[ty][c];
+      z1[0][ty] = terms.z1[ty][c];
+      b[1][ty] = ty == 0 ? terms.b[8][c] : kInf;
+      z0[1][ty] = ty == 0 ? terms.z0[8][c] : 0.0;
+      z1[1][ty] = ty == 0 ? terms.z1[8][c] : 0.0;
     }
-    FoldLanes(a, states, b, z0, z1, 72, nullptr, minima);
-    // The unused lanes' candidates are +inf (b = +inf, z = 0): they change nothing.
-    b = BroadcastLanes(kInf);
-    z0 = Lanes8{};
-    z1 = Lanes8{};
-    b[0] = terms.b[8][c];
-    z0[0] = terms.z0[8][c];
-    z1[0] = terms.z1[8][c];
-    FoldLanes(a, states, b, z0, z1, 80, nullptr, minima);
+    for (int k = 0; k < 2; ++k) {
+      FoldLanes(a, states, P::Load(b[k]), P::Load(z0[k]), P::Load(z1[k]), 72 + k * kLaneVector,
+                static_cast<const typename P::Mask*>(nullptr), minima);
+    }
   }
   // The largest of the nine targets' smallest candidates per target x-state (max is exact, so
   // the order does not matter).
-  Lanes8 largest = LoadLanes(minima.least.data());
+  P largest = P::Load(minima.least.data());
   for (int ty = 1; ty < 9; ++ty) {
-    const Lanes8 least = LoadLanes(minima.least.data() + ty * kLaneVector);
-    largest = least > largest ? least : largest;
+    const P least = P::Load(minima.least.data() + ty * kLaneVector);
+    largest = P::Select(least > largest, least, largest);
   }
-  StoreLanes(minima.largest.data(), largest);
+  largest.Store(minima.largest.data());
   double last = minima.least[80];
   for (int lane = 72; lane < 80; ++lane) last = std::max(last, minima.least[lane]);
   minima.largest[8] = last;
+}
+
+TEMPOKEY_TARGET_AVX512 void UpdateTargetMinimaAvx512(const RowTerms& terms, const double* in_row,
+                                                     int sx, std::uint32_t rows,
+                                                     TargetMinima& minima) {
+  UpdateTargetMinimaWith<simd::Pack512>(terms, in_row, sx, rows, minima);
+}
+TEMPOKEY_TARGET_AVX2 void UpdateTargetMinimaAvx2(const RowTerms& terms, const double* in_row,
+                                                 int sx, std::uint32_t rows,
+                                                 TargetMinima& minima) {
+  UpdateTargetMinimaWith<simd::PackPair>(terms, in_row, sx, rows, minima);
+}
+void UpdateTargetMinimaBaseline(const RowTerms& terms, const double* in_row, int sx,
+                                std::uint32_t rows, TargetMinima& minima) {
+  UpdateTargetMinimaWith<simd::PackPair>(terms, in_row, sx, rows, minima);
+}
+
+// UpdateTargetMinimaWith() for the running machine.
+void UpdateTargetMinima(const RowTerms& terms, const double* in_row, int sx, std::uint32_t rows,
+                        TargetMinima& minima) {
+  switch (simd::RunningPackIsa()) {
+    case simd::PackIsa::kAvx512:
+      return UpdateTargetMinimaAvx512(terms, in_row, sx, rows, minima);
+    case simd::PackIsa::kAvx2:
+      return UpdateTargetMinimaAvx2(terms, in_row, sx, rows, minima);
+    case simd::PackIsa::kBaseline:
+      break;
+  }
+  UpdateTargetMinimaBaseline(terms, in_row, sx, rows, minima);
 }
 
 // Viterbi tables of one pass.

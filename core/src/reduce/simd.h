@@ -12,13 +12,10 @@
 // The innermost kernels are cloned for AVX and picked at load time by an ifunc resolver. Sanitizer
 // builds keep the portable clone only: an instrumented resolver runs before the sanitizer's
 // runtime is up (TSan crashes there).
-// Kernels on 8-lane vectors add an AVX-512 clone (one instruction per 8 lanes).
 #if defined(TEMPOKEY_SANITIZED)
 #define TEMPOKEY_AVX_CLONES
-#define TEMPOKEY_AVX512_CLONES
 #else
 #define TEMPOKEY_AVX_CLONES __attribute__((target_clones("avx", "default")))
-#define TEMPOKEY_AVX512_CLONES __attribute__((target_clones("avx512f", "avx", "default")))
 #endif
 
 namespace tempokey::core::simd {
