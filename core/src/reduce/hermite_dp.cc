@@ -540,11 +540,24 @@ struct TargetMinima {
   alignas(64) std::array<double, 16> largest;  // [tx], 9..15 unused
 };
 
+// The states 0 .. 80 as 8 lanes of their number, read as packs.
+struct StateLanes {
+  alignas(64) double lane[kStates][kLaneVector];
+};
+constexpr StateLanes kStateLanes = [] {
+  StateLanes table{};
+  for (int s = 0; s < kStates; ++s) {
+    for (int l = 0; l < kLaneVector; ++l) table.lane[s][l] = static_cast<double>(s);
+  }
+  return table;
+}();
+
 // Folds the nine candidates of the lanes at `lane`, given key a's terms a[sy], and b, z0, z1;
-// lanes outside `active` (when given) keep their minima.
+// `states` the lanes of the nine predecessor states; lanes outside `active` (when given) keep
+// their minima.
 template <typename P>
-[[gnu::always_inline]] inline void FoldLanes(const P* a, const P* states, const P& b, const P& z0,
-                                             const P& z1, int lane,
+[[gnu::always_inline]] inline void FoldLanes(const P* a, const double* states, const P& b,
+                                             const P& z0, const P& z1, int lane,
                                              const typename P::Mask* active,
                                              TargetMinima& minima) {
   const P old_least = P::Load(minima.least.data() + lane);
@@ -559,7 +572,7 @@ template <typename P>
     const P larger = P::Select(c > least, c, least);
     second = P::Select(larger < second, larger, second);
     const typename P::Mask smaller = c < least;
-    state = P::Select(smaller, states[sy], state);
+    state = P::Select(smaller, P::Load(states + sy * kLaneVector), state);
     least = P::Select(smaller, c, least);
   }
   if (active != nullptr) {
@@ -580,8 +593,7 @@ template <typename P>
                                                           std::uint32_t rows,
                                                           TargetMinima& minima) {
   const int first = sx * 9;
-  P states[9];
-  for (int sy = 0; sy < 9; ++sy) states[sy] = P::Splat(static_cast<double>(first + sy));
+  const double* states = kStateLanes.lane[first];
   P a[9];
   if ((rows & 0xffu) != 0) {
     for (int sy = 0; sy < 9; ++sy) {
@@ -922,13 +934,18 @@ class DpPass {
         for (int j = 0; j < 9; ++j) {
           const int c = combo[j];
           const SegmentShape& shape = shapes[c];
-          const bool mismatched = feasible[c] && shape.n > 0 && !used[j];
-          const double* g = used[j] ? (shape.n == shape.entry.count ? shape.entry.gram_all()
-                                                                     : shape.entry.gram_but_last())
-                                    : nullptr;
-          for (int l = 0; l < 4; ++l) inputs.data[l][c] = used[j] ? sums[j][l] : 0.0;
-          for (int l = 0; l < kGramSize; ++l) inputs.gram[l][c] = used[j] ? g[l] : 0.0;
-          inputs.squares[c] = used[j] ? shape.squares : (mismatched ? kInf : 0.0);
+          if (used[j]) {
+            const double* g = shape.n == shape.entry.count ? shape.entry.gram_all()
+                                                           : shape.entry.gram_but_last();
+            for (int l = 0; l < 4; ++l) inputs.data[l][c] = sums[j][l];
+            for (int l = 0; l < kGramSize; ++l) inputs.gram[l][c] = g[l];
+            inputs.squares[c] = shape.squares;
+          } else {
+            for (int l = 0; l < 4; ++l) inputs.data[l][c] = 0.0;
+            for (int l = 0; l < kGramSize; ++l) inputs.gram[l][c] = 0.0;
+            const bool mismatched = feasible[c] && shape.n > 0;
+            inputs.squares[c] = mismatched ? kInf : 0.0;
+          }
         }
       }
     }

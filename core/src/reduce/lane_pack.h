@@ -36,7 +36,13 @@ struct Pack512 {
     return r;
   }
   [[gnu::always_inline]] void Store(double* p) const { std::memcpy(p, &v, sizeof v); }
-  [[gnu::always_inline]] static Pack512 Splat(double x) { return {V{x, x, x, x, x, x, x, x}}; }
+  // Two 4-lane halves joined: GCC 12 builds V{x, x, ...} (or a shuffle of lane 0, which it folds
+  // into that) stored to an array one masked broadcast per lane.
+  [[gnu::always_inline]] static Pack512 Splat(double x) {
+    using V4 = double __attribute__((vector_size(32)));
+    const V4 half = {x, x, x, x};
+    return {__builtin_shufflevector(half, half, 0, 1, 2, 3, 4, 5, 6, 7)};
+  }
   [[gnu::always_inline]] static Pack512 Zero() { return {V{}}; }
   // Lane l is true where bit l of `bits` is set.
   [[gnu::always_inline]] static Mask LaneBits(std::uint32_t bits) {
@@ -84,7 +90,10 @@ struct PackPair {
     std::memcpy(p, &lo, sizeof lo);
     std::memcpy(p + 4, &hi, sizeof hi);
   }
-  [[gnu::always_inline]] static PackPair Splat(double x) { return {V{x, x, x, x}, V{x, x, x, x}}; }
+  [[gnu::always_inline]] static PackPair Splat(double x) {
+    const V all = {x, x, x, x};
+    return {all, all};
+  }
   [[gnu::always_inline]] static PackPair Zero() { return {V{}, V{}}; }
   [[gnu::always_inline]] static Mask LaneBits(std::uint32_t bits) {
     const std::int64_t b = bits;
@@ -132,7 +141,7 @@ inline PackIsa RunningPackIsa() {
 
 }  // namespace tempokey::core::simd
 
-// The attributes of a kernel's AVX-512 and AVX2 instantiations.
+// The attributes of a pack kernel's AVX-512 and AVX2 instantiations.
 #define TEMPOKEY_TARGET_AVX512 __attribute__((target("avx512f")))
 #define TEMPOKEY_TARGET_AVX2 __attribute__((target("avx2")))
 
