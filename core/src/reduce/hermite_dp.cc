@@ -568,7 +568,10 @@ template <typename P>
   const P with_u[3] = {b + (zero - z0), b + zero, b + z0};
   const P with_v[3] = {zero - z1, zero, z1};
   for (int sy = 0; sy < 9; ++sy) {
-    const P c = a[sy] + (with_u[sy / 3] + with_v[sy % 3]);
+    // with_u + 0 is with_u bit for bit: with_u is never -0 (b is not: e0 >= +0 and b = +inf in
+    // unused lanes), so the middle column skips that addition.
+    const P w = sy % 3 == 1 ? with_u[sy / 3] : with_u[sy / 3] + with_v[sy % 3];
+    const P c = a[sy] + w;
     const P larger = P::Select(c > least, c, least);
     second = P::Select(larger < second, larger, second);
     const typename P::Mask smaller = c < least;
@@ -777,8 +780,13 @@ class DpPass {
       cheapest[sx] = *std::min_element(in.begin() + sx * 9, in.begin() + sx * 9 + 9);
       order[sx] = sx;
     }
-    std::stable_sort(order.begin(), order.end(),
-                     [&](int l, int r) { return cheapest[l] < cheapest[r]; });
+    // A stable insertion sort (std::stable_sort allocates its buffer on every call).
+    for (int k = 1; k < 9; ++k) {
+      const int sx = order[k];
+      int j = k;
+      for (; j > 0 && cheapest[sx] < cheapest[order[j - 1]]; --j) order[j] = order[j - 1];
+      order[j] = sx;
+    }
 
     // Every shape the segment may need, looked up before any is used, in two sweeps (keys and
     // slot prefetches, then lookups and record prefetches), so the memory accesses overlap
