@@ -671,17 +671,63 @@ void UpdateTargetMinima(const RowTerms& terms, const double* in_row, int sx, std
   UpdateTargetMinimaBaseline(terms, in_row, sx, rows, minima);
 }
 
+// What the form inputs of a segment depend on (DpPass::Advance()).
+struct FormSignature {
+  std::array<double, 12> x;  // x and tx of both keys' grids
+  double y_ref = 0.0;
+  std::uint32_t reachable = 0;
+  bool last = false;
+  friend bool operator==(const FormSignature&, const FormSignature&) = default;
+};
+
+// The form inputs of each segment of a fit as its last pass built them, so that the next pass
+// can take those of segments whose signature did not change. Inputs are exact functions of the
+// signature and the samples (one fit, one channel), so taking them changes no value. One per
+// thread, reused by its fits; it keeps the first kMaxSegments segments of a fit (8 MB).
+class FormMemo {
+ public:
+  static constexpr std::size_t kMaxSegments = 768;
+  struct Entry {
+    bool valid = false;
+    FormSignature signature;
+    std::array<bool, kStates> feasible;
+    FormInputs inputs;
+  };
+
+  // Forgets every entry and makes room for the first segments of a fit of `segments`.
+  void Start(std::size_t segments) {
+    used_ = std::min(segments, kMaxSegments);
+    if (entries_.size() < used_) entries_.resize(used_);
+    for (std::size_t i = 0; i < used_; ++i) entries_[i].valid = false;
+  }
+  // The entry of segment `i`, or null past the first kMaxSegments.
+  Entry* Segment(std::size_t i) { return i < used_ ? &entries_[i] : nullptr; }
+
+ private:
+  std::vector<Entry> entries_;
+  std::size_t used_ = 0;
+};
+
+// The calling thread's form memo.
+FormMemo& ThreadFormMemo() {
+  thread_local FormMemo memo;
+  return memo;
+}
+
 // Viterbi tables of one pass.
 class DpPass {
  public:
+  // `memo` (optional) carries the segments' form inputs from the fit's previous pass.
   DpPass(std::span<const double> samples, std::span<const HermiteKey2D> keys,
-         const HermiteSteps& steps, ShapeCache& cache, std::stop_token stop = {})
+         const HermiteSteps& steps, ShapeCache& cache, std::stop_token stop = {},
+         FormMemo* memo = nullptr)
       : samples_(samples),
         keys_(keys),
         steps_(steps),
         scale_(DpTieScale(samples)),
         last_frame_(static_cast<double>(samples.size()) - 1.0),
         cache_(cache),
+        memo_(memo),
         stop_(std::move(stop)) {
     const std::size_t k = keys.size();
     grids_.reserve(k);
@@ -727,6 +773,7 @@ class DpPass {
   // folded so far, in order (with the target x-states they had rows for), for the tie fallback.
   struct Workspace {
     FormInputs inputs;
+    std::array<bool, kStates> feasible;
     RowTerms terms;
     TargetMinima minima;
     std::array<int, 9> folded_sx;
@@ -788,6 +835,82 @@ class DpPass {
       order[j] = sx;
     }
 
+    Workspace& work = *work_space_;
+    work.Reset();
+    // The forms' inputs depend on the x-grids, y_ref and which predecessor x-states are
+    // reachable: a segment whose three did not change since the last pass takes them as they
+    // were (the iteration moves only some keys in x, the others keep their segments' inputs).
+    const FormSignature signature = {{ga.x[0], ga.x[1], ga.x[2], ga.tx[0], ga.tx[1], ga.tx[2],
+                                      gb.x[0], gb.x[1], gb.x[2], gb.tx[0], gb.tx[1], gb.tx[2]},
+                                     y_ref,
+                                     ReachableMask(cheapest),
+                                     last};
+    FormMemo::Entry* memo = memo_ != nullptr ? memo_->Segment(i) : nullptr;
+    std::array<bool, kStates>& feasible = memo != nullptr ? memo->feasible : work.feasible;
+    FormInputs& inputs = memo != nullptr ? memo->inputs : work.inputs;
+    if (memo == nullptr || !memo->valid || !(memo->signature == signature)) {
+      if (memo != nullptr) memo->valid = false;
+      if (!PrepareForms(ga, gb, last, cheapest, y_ref, feasible, inputs)) return false;
+      if (memo != nullptr) {
+        memo->signature = signature;
+        memo->valid = true;
+      }
+    }
+    const std::array<double, 4> w = {centre_y[0] - y_ref, centre_y[1], centre_y[2] - y_ref,
+                                     centre_y[3]};
+    const std::array<double, 4> d = {steps_.y, steps_.tangent_y, steps_.y, steps_.tangent_y};
+    BuildRowTerms(inputs, w, d, work.terms);
+
+    // The target x-states still open: a target x-state closes at the first predecessor whose
+    // cheapest state is above every one of its targets' windows (later ones are dearer still).
+    std::uint32_t open = 0;
+    for (int tx = 0; tx < 9; ++tx) {
+      if (!gb.x_fixed || XIndex(tx) == 1) open |= 1u << tx;
+    }
+    for (int sx : order) {
+      if (cheapest[sx] == kInf || open == 0) break;
+      std::uint32_t rows = 0;
+      for (int tx = 0; tx < 9; ++tx) {
+        if ((open >> tx & 1u) == 0) continue;
+        // The widest tie window of the nine targets is that of the largest smallest candidate
+        // (TieTolerance() rounds monotonically).
+        const double largest = work.minima.largest[tx];
+        if (cheapest[sx] > largest + TieTolerance(largest, scale_)) {
+          open &= ~(1u << tx);
+          continue;
+        }
+        if (feasible[sx * 9 + tx]) rows |= 1u << tx;
+      }
+      if (rows == 0) continue;
+      work.folded_sx[work.folded] = sx;
+      work.folded_rows[work.folded] = rows;
+      ++work.folded;
+      UpdateTargetMinima(work.terms, in.data() + sx * 9, sx, rows, work.minima);
+    }
+    for (int tx = 0; tx < 9; ++tx) {
+      for (int ty = 0; ty < 9; ++ty) {
+        const auto [value, state] = ChooseForTarget(work, in, tx, ty);
+        cost_[i + 1][tx * 9 + ty] = value;
+        predecessor_[i + 1][tx * 9 + ty] = static_cast<std::int8_t>(state);
+      }
+    }
+    return true;
+  }
+
+  // Bit sx set when predecessor x-state sx has a finite cheapest state.
+  static std::uint32_t ReachableMask(const std::array<double, 9>& cheapest) {
+    std::uint32_t mask = 0;
+    for (int sx = 0; sx < 9; ++sx) {
+      if (cheapest[sx] != kInf) mask |= 1u << sx;
+    }
+    return mask;
+  }
+
+  // The feasible combinations of segment ga -> gb and their form inputs; false when a stop was
+  // requested part way.
+  bool PrepareForms(const KeyGrid& ga, const KeyGrid& gb, bool last,
+                    const std::array<double, 9>& cheapest, double y_ref,
+                    std::array<bool, kStates>& feasible, FormInputs& inputs) {
     // Every shape the segment may need, looked up before any is used, in two sweeps (keys and
     // slot prefetches, then lookups and record prefetches), so the memory accesses overlap
     // instead of stalling one by one. Visiting the combinations by the difference of their x
@@ -803,7 +926,7 @@ class DpPass {
     int combo_count = 0;
     int key_count = 0;
     // Whether each combination passes InsideAndFeasible(), for the rows below.
-    std::array<bool, kStates> feasible{};
+    feasible.fill(false);
     // SegmentFrames() of the three x values of each key: the first frame depends on key a's x
     // alone, the end on key b's.
     std::array<std::int64_t, 3> first_of, end_of;
@@ -856,48 +979,7 @@ class DpPass {
     }
     for (int c = 0; c < combo_count; ++c) shapes[combos[c]].entry = entries[key_of_combo[c]];
 
-    Workspace& work = *work_space_;
-    work.Reset();
-    if (!GatherFormInputs(shapes, feasible, y_ref, work.inputs)) return false;
-    const std::array<double, 4> w = {centre_y[0] - y_ref, centre_y[1], centre_y[2] - y_ref,
-                                     centre_y[3]};
-    const std::array<double, 4> d = {steps_.y, steps_.tangent_y, steps_.y, steps_.tangent_y};
-    BuildRowTerms(work.inputs, w, d, work.terms);
-
-    // The target x-states still open: a target x-state closes at the first predecessor whose
-    // cheapest state is above every one of its targets' windows (later ones are dearer still).
-    std::uint32_t open = 0;
-    for (int tx = 0; tx < 9; ++tx) {
-      if (!gb.x_fixed || XIndex(tx) == 1) open |= 1u << tx;
-    }
-    for (int sx : order) {
-      if (cheapest[sx] == kInf || open == 0) break;
-      std::uint32_t rows = 0;
-      for (int tx = 0; tx < 9; ++tx) {
-        if ((open >> tx & 1u) == 0) continue;
-        // The widest tie window of the nine targets is that of the largest smallest candidate
-        // (TieTolerance() rounds monotonically).
-        const double largest = work.minima.largest[tx];
-        if (cheapest[sx] > largest + TieTolerance(largest, scale_)) {
-          open &= ~(1u << tx);
-          continue;
-        }
-        if (feasible[sx * 9 + tx]) rows |= 1u << tx;
-      }
-      if (rows == 0) continue;
-      work.folded_sx[work.folded] = sx;
-      work.folded_rows[work.folded] = rows;
-      ++work.folded;
-      UpdateTargetMinima(work.terms, in.data() + sx * 9, sx, rows, work.minima);
-    }
-    for (int tx = 0; tx < 9; ++tx) {
-      for (int ty = 0; ty < 9; ++ty) {
-        const auto [value, state] = ChooseForTarget(work, in, tx, ty);
-        cost_[i + 1][tx * 9 + ty] = value;
-        predecessor_[i + 1][tx * 9 + ty] = static_cast<std::int8_t>(state);
-      }
-    }
-    return true;
+    return GatherFormInputs(shapes, feasible, y_ref, inputs);
   }
 
   // The form inputs of every combination (FormInputs), the data terms summed for the nine
@@ -1011,6 +1093,7 @@ class DpPass {
   std::vector<std::array<double, kStates>> cost_;
   std::vector<std::array<std::int8_t, kStates>> predecessor_;
   ShapeCache& cache_;
+  FormMemo* memo_;
   std::stop_token stop_;
   std::int64_t work_ = 0;  // frames of work since the last look at stop_
   std::unique_ptr<Workspace> work_space_ = std::make_unique<Workspace>();
@@ -1188,13 +1271,16 @@ absl::StatusOr<HermiteFitResult> FitHermiteDp(std::span<const double> samples,
   result.squared_error_history.push_back(result.squared_error);
   HermiteSteps steps = options.steps;
   ShapeCache& cache = ThreadShapeCache();
+  FormMemo& memo = ThreadFormMemo();
+  memo.Start(result.keys.size() - 1);
   for (int iteration = 0; iteration < options.max_iterations; ++iteration) {
     const double largest =
         std::max({steps.x, steps.y, steps.tangent_x, steps.tangent_y});
     if (largest < options.accuracy) break;
     TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
     cache.TrimIfLarge();
-    std::optional<HermiteDpPass> run = DpPass(samples, result.keys, steps, cache, stop).Run();
+    std::optional<HermiteDpPass> run =
+        DpPass(samples, result.keys, steps, cache, stop, &memo).Run();
     if (!run) return absl::CancelledError("cancelled");
     HermiteDpPass pass = *std::move(run);
     ++result.iterations;
