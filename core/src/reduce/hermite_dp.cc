@@ -681,17 +681,27 @@ struct FormSignature {
 };
 
 // The form inputs of each segment of a fit as its last pass built them, so that the next pass
-// can take those of segments whose signature did not change. Inputs are exact functions of the
-// signature and the samples (one fit, one channel), so taking them changes no value. One per
-// thread, reused by its fits; it keeps the first kMaxSegments segments of a fit (8 MB).
+// can take those of combinations whose x values did not change: a segment whose grids, y_ref and
+// reachable predecessors are the same takes them all as they were; one whose key moved by a grid
+// step, or whose reachable predecessors changed, takes those of the combinations it shares with
+// the last pass (same ax, a.tx, bx, b.tx) and builds the others. A combination's inputs and
+// feasibility are exact functions of its four x values, y_ref and the samples (one fit, one
+// channel), so taking them changes no value. One per thread, reused by its fits; it keeps the
+// first kMaxSegments segments of a fit (16 MB), two buffers each (the last pass's and the one
+// being built from it).
 class FormMemo {
  public:
   static constexpr std::size_t kMaxSegments = 768;
+  struct Buffer {
+    std::array<bool, kStates> feasible;
+    std::array<bool, kStates> known;  // the combination's inputs and feasibility are set
+    FormInputs inputs;
+  };
   struct Entry {
     bool valid = false;
-    FormSignature signature;
-    std::array<bool, kStates> feasible;
-    FormInputs inputs;
+    FormSignature signature;  // of buffers[current]
+    int current = 0;
+    std::array<Buffer, 2> buffers;
   };
 
   // Forgets every entry and makes room for the first segments of a fit of `segments`.
@@ -839,27 +849,49 @@ class DpPass {
     work.Reset();
     // The forms' inputs depend on the x-grids, y_ref and which predecessor x-states are
     // reachable: a segment whose three did not change since the last pass takes them as they
-    // were (the iteration moves only some keys in x, the others keep their segments' inputs).
+    // were, one that changed takes those of the combinations it shares with the last pass
+    // (FormMemo).
     const FormSignature signature = {{ga.x[0], ga.x[1], ga.x[2], ga.tx[0], ga.tx[1], ga.tx[2],
                                       gb.x[0], gb.x[1], gb.x[2], gb.tx[0], gb.tx[1], gb.tx[2]},
                                      y_ref,
                                      ReachableMask(cheapest),
                                      last};
     FormMemo::Entry* memo = memo_ != nullptr ? memo_->Segment(i) : nullptr;
-    std::array<bool, kStates>& feasible = memo != nullptr ? memo->feasible : work.feasible;
-    FormInputs& inputs = memo != nullptr ? memo->inputs : work.inputs;
-    if (memo == nullptr || !memo->valid || !(memo->signature == signature)) {
-      if (memo != nullptr) memo->valid = false;
-      if (!PrepareForms(ga, gb, last, cheapest, y_ref, feasible, inputs)) return false;
-      if (memo != nullptr) {
-        memo->signature = signature;
-        memo->valid = true;
+    const FormInputs* inputs = nullptr;
+    const std::array<bool, kStates>* feasible = nullptr;
+    if (memo != nullptr && memo->valid && memo->signature == signature) {
+      inputs = &memo->buffers[memo->current].inputs;
+      feasible = &memo->buffers[memo->current].feasible;
+    } else if (memo != nullptr) {
+      const FormMemo::Buffer& previous = memo->buffers[memo->current];
+      FormMemo::Buffer& next = memo->buffers[1 - memo->current];
+      next.feasible.fill(false);
+      std::array<bool, kStates> taken{};
+      if (memo->valid && memo->signature.y_ref == y_ref && memo->signature.last == last) {
+        TakeSharedInputs(memo->signature, ga, gb, cheapest, previous, next, taken);
       }
+      memo->valid = false;
+      if (!PrepareForms(ga, gb, last, cheapest, y_ref, &taken, next.feasible, next.inputs)) {
+        return false;
+      }
+      for (int c = 0; c < kStates; ++c) next.known[c] = Considered(gb, cheapest, c / 9, c % 9);
+      memo->current = 1 - memo->current;
+      memo->signature = signature;
+      memo->valid = true;
+      inputs = &next.inputs;
+      feasible = &next.feasible;
+    } else {
+      work.feasible.fill(false);
+      if (!PrepareForms(ga, gb, last, cheapest, y_ref, nullptr, work.feasible, work.inputs)) {
+        return false;
+      }
+      inputs = &work.inputs;
+      feasible = &work.feasible;
     }
     const std::array<double, 4> w = {centre_y[0] - y_ref, centre_y[1], centre_y[2] - y_ref,
                                      centre_y[3]};
     const std::array<double, 4> d = {steps_.y, steps_.tangent_y, steps_.y, steps_.tangent_y};
-    BuildRowTerms(inputs, w, d, work.terms);
+    BuildRowTerms(*inputs, w, d, work.terms);
 
     // The target x-states still open: a target x-state closes at the first predecessor whose
     // cheapest state is above every one of its targets' windows (later ones are dearer still).
@@ -879,7 +911,7 @@ class DpPass {
           open &= ~(1u << tx);
           continue;
         }
-        if (feasible[sx * 9 + tx]) rows |= 1u << tx;
+        if ((*feasible)[sx * 9 + tx]) rows |= 1u << tx;
       }
       if (rows == 0) continue;
       work.folded_sx[work.folded] = sx;
@@ -908,9 +940,55 @@ class DpPass {
 
   // The feasible combinations of segment ga -> gb and their form inputs; false when a stop was
   // requested part way.
+  // Whether combination (sx, tx) is looked at: its predecessor x-state reachable and, into the
+  // last key, its target x offset 0.
+  static bool Considered(const KeyGrid& gb, const std::array<double, 9>& cheapest, int sx,
+                         int tx) {
+    return cheapest[sx] != kInf && (!gb.x_fixed || XIndex(tx) == 1);
+  }
+
+  // Copies into `next` the inputs and feasibility of the combinations that `previous` (built for
+  // the grids in `signature`) knows under the same four x values, marking them in `taken`.
+  static void TakeSharedInputs(const FormSignature& signature, const KeyGrid& ga,
+                               const KeyGrid& gb, const std::array<double, 9>& cheapest,
+                               const FormMemo::Buffer& previous, FormMemo::Buffer& next,
+                               std::array<bool, kStates>& taken) {
+    // For each grid value of this pass, its index in the last pass's grid (-1: not there).
+    const std::array<const std::array<double, 3>*, 4> grids = {&ga.x, &ga.tx, &gb.x, &gb.tx};
+    std::array<std::array<int, 3>, 4> index;
+    for (int k = 0; k < 4; ++k) {
+      for (int o = 0; o < 3; ++o) {
+        index[k][o] = -1;
+        for (int m = 0; m < 3; ++m) {
+          if ((*grids[k])[o] == signature.x[k * 3 + m]) index[k][o] = m;
+        }
+      }
+    }
+    for (int sx = 0; sx < 9; ++sx) {
+      for (int tx = 0; tx < 9; ++tx) {
+        if (!Considered(gb, cheapest, sx, tx)) continue;
+        const int ix_a = index[0][XIndex(sx)], itx_a = index[1][TxIndex(sx)];
+        const int ix_b = index[2][XIndex(tx)], itx_b = index[3][TxIndex(tx)];
+        if (ix_a < 0 || itx_a < 0 || ix_b < 0 || itx_b < 0) continue;
+        const int from = (ix_a * 3 + itx_a) * 9 + ix_b * 3 + itx_b;
+        if (!previous.known[from]) continue;
+        const int c = sx * 9 + tx;
+        taken[c] = true;
+        next.feasible[c] = previous.feasible[from];
+        for (int l = 0; l < 4; ++l) next.inputs.data[l][c] = previous.inputs.data[l][from];
+        for (int l = 0; l < kGramSize; ++l) next.inputs.gram[l][c] = previous.inputs.gram[l][from];
+        next.inputs.squares[c] = previous.inputs.squares[from];
+      }
+    }
+  }
+
+  // The feasible combinations of segment ga -> gb and their form inputs, except those marked in
+  // `taken` (when given), whose feasibility and inputs are already set; `feasible` starts all
+  // false. False when a stop was requested part way.
   bool PrepareForms(const KeyGrid& ga, const KeyGrid& gb, bool last,
                     const std::array<double, 9>& cheapest, double y_ref,
-                    std::array<bool, kStates>& feasible, FormInputs& inputs) {
+                    const std::array<bool, kStates>* taken, std::array<bool, kStates>& feasible,
+                    FormInputs& inputs) {
     // Every shape the segment may need, looked up before any is used, in two sweeps (keys and
     // slot prefetches, then lookups and record prefetches), so the memory accesses overlap
     // instead of stalling one by one. Visiting the combinations by the difference of their x
@@ -926,7 +1004,6 @@ class DpPass {
     int combo_count = 0;
     int key_count = 0;
     // Whether each combination passes InsideAndFeasible(), for the rows below.
-    feasible.fill(false);
     // SegmentFrames() of the three x values of each key: the first frame depends on key a's x
     // alone, the end on key b's.
     std::array<std::int64_t, 3> first_of, end_of;
@@ -942,6 +1019,7 @@ class DpPass {
             const int sx = ix_a * 3 + itx_a;
             const int tx = ix_b * 3 + itx_b;
             if (cheapest[sx] == kInf || (gb.x_fixed && ix_b != 1)) continue;
+            if (taken != nullptr && (*taken)[sx * 9 + tx]) continue;
             const double ax = ga.x[ix_a];
             const double atx = ga.tx[itx_a];
             const double bx = gb.x[ix_b];
@@ -979,14 +1057,15 @@ class DpPass {
     }
     for (int c = 0; c < combo_count; ++c) shapes[combos[c]].entry = entries[key_of_combo[c]];
 
-    return GatherFormInputs(shapes, feasible, y_ref, inputs);
+    return GatherFormInputs(shapes, feasible, taken, y_ref, inputs);
   }
 
   // The form inputs of every combination (FormInputs), the data terms summed for the nine
   // combinations of each pair of x offsets together (they share their frames), in pieces of
   // kDpStopCheckFrames frames between looks at the stop token; false when a stop was requested.
   bool GatherFormInputs(const std::array<SegmentShape, kStates>& shapes,
-                        const std::array<bool, kStates>& feasible, double y_ref,
+                        const std::array<bool, kStates>& feasible,
+                        const std::array<bool, kStates>* taken, double y_ref,
                         FormInputs& inputs) {
     for (int ix_a = 0; ix_a < 3; ++ix_a) {
       for (int ix_b = 0; ix_b < 3; ++ix_b) {
@@ -998,6 +1077,7 @@ class DpPass {
           const int sx = ix_a * 3 + j / 3;
           const int tx = ix_b * 3 + j % 3;
           combo[j] = sx * 9 + tx;
+          if (taken != nullptr && (*taken)[combo[j]]) continue;
           const SegmentShape& shape = shapes[combo[j]];
           const int n = shape.n;
           // A frame count that does not match the shape is unreachable (see ShapeEntry).
@@ -1023,6 +1103,7 @@ class DpPass {
         }
         for (int j = 0; j < 9; ++j) {
           const int c = combo[j];
+          if (taken != nullptr && (*taken)[c]) continue;
           const SegmentShape& shape = shapes[c];
           if (used[j]) {
             const double* g = shape.n == shape.entry.count ? shape.entry.gram_all()
