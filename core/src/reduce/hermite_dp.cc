@@ -18,6 +18,7 @@
 #include "absl/strings/str_cat.h"
 #include "tempokey/core/model/progress.h"
 #include "tempokey/core/model/status.h"
+#include "lane_pack.h"
 #include "simd.h"
 
 namespace tempokey::core {
@@ -189,16 +190,6 @@ std::pair<double, int> ChooseCandidate(const double* candidates, double m, doubl
   return {m, -1};  // unreachable: m itself is <= threshold
 }
 
-// The error of one x-combination of a segment as a quadratic form in the y-offsets
-// delta = (dy_a, dty_a, dy_b, dty_b) in {-1, 0, 1}^4:
-//   E(delta) = e0 + g . delta + delta^T H delta,
-// built from residuals at the grid centre so that no large sums cancel.
-struct SegmentForm {
-  double e0 = 0.0;
-  std::array<double, 4> g{};
-  std::array<std::array<double, 4>, 4> h{};
-};
-
 // The Hermite basis at every frame of one x-shape, shared by every segment and x-combination
 // with that shape. A segment's x(s) depends only on its length L = bx - ax, the two tangent
 // x-components and where the first frame falls (t0 = first frame - ax): the frames sit at
@@ -351,21 +342,6 @@ struct SegmentShape {
   double squares = 0.0;    // sum of (sample - y_ref)^2 over the frames
 };
 
-// b += (sample[k] - y_ref) * basis row k over k < n: the data terms of a segment's form. Cloned
-// for AVX like UpdateLaneMinima(); every component is summed in the same order by both clones,
-// so they agree bit for bit.
-TEMPOKEY_AVX_CLONES void SumDataTerms(const double* sample, const double* basis, int n,
-                                      double y_ref, double* b) {
-  using V = double __attribute__((vector_size(32)));
-  V sum = {0.0, 0.0, 0.0, 0.0};
-  for (int k = 0; k < n; ++k) {
-    V h;
-    std::memcpy(&h, basis + k * kBasisStride, sizeof(V));
-    sum += (sample[k] - y_ref) * h;
-  }
-  std::memcpy(b, &sum, sizeof(V));
-}
-
 // Sum of (sample[k] - y_ref)^2 over k < n.
 double SumSquares(const double* sample, int n, double y_ref) {
   double squares = 0.0;
@@ -376,126 +352,392 @@ double SumSquares(const double* sample, int n, double y_ref) {
   return squares;
 }
 
-// Builds the form of one x-combination from its shape: the Gram matrix of the basis over the
-// segment's frames comes from the cache, the data terms are summed here in coordinates relative
-// to `y_ref` (a sample near the segment) so the quadratic form does not cancel large sums.
-SegmentForm BuildSegmentForm(std::span<const double> samples, const SegmentShape& shape,
-                             double y_ref, const std::array<double, 4>& centre_y,
-                             const HermiteSteps& steps) {
-  SegmentForm form;
-  const int n = shape.n;
-  if (n <= 0) return form;
-  const ShapeEntry& entry = shape.entry;
-  if (n < entry.count - 1 || n > entry.count) {  // unreachable: see ShapeEntry
-    form.e0 = kInf;
-    return form;
+// ---- the rows of one segment, 81 x-combinations at once -----------------------------------------
+//
+// The error of one x-combination (sx, tx) of a segment is a quadratic form in the y-offsets
+// delta = (dy_a, dty_a, dy_b, dty_b) in {-1, 0, 1}^4:
+//   E(delta) = e0 + g . delta + delta^T H delta,
+// built from residuals at the grid centre so that no large sums cancel: with y_ref a sample near
+// the segment, w the centre's y-components relative to it, G the Gram matrix of the basis over
+// the segment's frames (from the shape cache), b the data terms sum (sample - y_ref) h and c the
+// sum of (sample - y_ref)^2, E(w + D delta) = e0 + 2 (G w - b)^T D delta + delta^T D G D delta.
+// Its candidates split into the terms of key a alone, a[sy] = in[sy] + alpha[sy], of key b
+// alone, b[ty] = e0 + beta[ty], and the cross terms z0, z1:
+//   candidate(sy, ty) = a[sy] + ((b[ty] + dy_a(sy) * z0[ty]) + dty_a(sy) * z1[ty]);
+// the offsets are -1, 0, +1, so the products are exact and the fast pass and the tie fallback
+// compute every candidate bit for bit alike.
+//
+// The forms of all 81 combinations (index c = sx * 9 + tx) are computed together, lane c of
+// 8-lane packs (lane_pack.h), each lane with the operations a single form takes in the same
+// order: a lane computes what the form of its combination alone would.
+constexpr int kLaneVector = 8;
+constexpr int kComboLanes = 88;  // 81 combinations, 11 vectors of 8
+
+// What the forms are built from, per combination (lane c): data terms, Gram sums (the 10
+// distinct entries of G over the segment's frames) and the sum of squares. A combination without
+// frames has all zero (its form is zero); one whose frames do not match its shape (unreachable)
+// has c = +inf, so its e0 is +inf.
+struct FormInputs {
+  alignas(64) std::array<std::array<double, kComboLanes>, 4> data;
+  alignas(64) std::array<std::array<double, kComboLanes>, kGramSize> gram;
+  alignas(64) std::array<double, kComboLanes> squares;
+};
+
+// The split forms, per combination (lane c): alpha[sy], b[ty] = e0 + beta[ty], z0[ty], z1[ty].
+struct RowTerms {
+  alignas(64) std::array<std::array<double, kComboLanes>, 9> alpha, b, z0, z1;
+};
+
+// The data terms of the nine combinations that share their frames (the same x offsets, any
+// tangents), frames k_begin .. k_end - 1 of them, added to `sums` (sums[j] += (sample[k] -
+// y_ref) * basis row k of combination j, one vector of 4 per combination, in frame order): a
+// combination's sums are those its frames alone give, and the nine independent chains overlap.
+// Cloned like UpdateTargetMinima(); every clone adds in the same order.
+TEMPOKEY_AVX_CLONES void SumDataTerms(const double* sample, std::int64_t k_begin,
+                                         std::int64_t k_end, double y_ref,
+                                         const std::array<const double*, 9>& basis,
+                                         std::array<std::array<double, 4>, 9>& sums) {
+  using V = double __attribute__((vector_size(32)));
+  V acc[9];
+  for (int j = 0; j < 9; ++j) std::memcpy(&acc[j], sums[j].data(), sizeof(V));
+  for (std::int64_t k = k_begin; k < k_end; ++k) {
+    const double d = sample[k] - y_ref;
+    for (int j = 0; j < 9; ++j) {
+      V h;
+      std::memcpy(&h, basis[j] + k * kBasisStride, sizeof(V));
+      acc[j] += d * h;
+    }
   }
-  alignas(32) std::array<double, 4> b;
-  SumDataTerms(samples.data() + shape.first, entry.basis(), n, y_ref, b.data());
-  const double c = shape.squares;
-  const double* g = n == entry.count ? entry.gram_all() : entry.gram_but_last();
-  const std::array<double, 4> w = {centre_y[0] - y_ref, centre_y[1], centre_y[2] - y_ref,
-                                   centre_y[3]};
-  // E(w + D delta) = e0 + 2 (G w - b)^T D delta + delta^T D G D delta.
-  const std::array<double, 4> gw = {
-      g[0] * w[0] + g[1] * w[1] + g[2] * w[2] + g[3] * w[3],
-      g[1] * w[0] + g[4] * w[1] + g[5] * w[2] + g[6] * w[3],
-      g[2] * w[0] + g[5] * w[1] + g[7] * w[2] + g[8] * w[3],
-      g[3] * w[0] + g[6] * w[1] + g[8] * w[2] + g[9] * w[3]};
-  double wgw = 0.0;
-  double bw = 0.0;
-  for (int k = 0; k < 4; ++k) {
-    wgw += w[k] * gw[k];
-    bw += b[k] * w[k];
-  }
-  form.e0 = std::max(0.0, wgw - 2.0 * bw + c);
-  const std::array<double, 4> d = {steps.y, steps.tangent_y, steps.y, steps.tangent_y};
-  const int index[4][4] = {{0, 1, 2, 3}, {1, 4, 5, 6}, {2, 5, 7, 8}, {3, 6, 8, 9}};
-  for (int k = 0; k < 4; ++k) {
-    form.g[k] = 2.0 * d[k] * (gw[k] - b[k]);
-    for (int l = k; l < 4; ++l) form.h[k][l] = d[k] * d[l] * g[index[k][l]];
-  }
-  return form;
+  for (int j = 0; j < 9; ++j) std::memcpy(sums[j].data(), &acc[j], sizeof(V));
 }
 
-// The inner loop of the DP pass (DpPass::UpdateMinima): for 12 target lanes (9 used) and the
-// nine predecessor y-states of one row, candidate = a[sy] + ((b + u) + v) with u, v in
-// {-z, 0, +z}, folded into the smallest, second smallest and arg-smallest per lane. Written
-// with vector extensions and cloned for AVX, where the machine has it; both clones compute the
-// same values (no contraction into FMA: core/CMakeLists.txt sets -ffp-contract=off).
-// The states 0 .. 80 as 4-lane vectors of their number: the state lanes of UpdateLaneMinima().
-struct alignas(32) StateLanes {
-  double lane[kStates][4];
+// The split forms of all combinations from their inputs; `centre` the centre's y-components
+// relative to y_ref (w above), `d` the y-steps (y, tangent y, y, tangent y).
+template <typename P>
+[[gnu::always_inline]] inline void BuildRowTermsWith(const FormInputs& inputs,
+                                                     const std::array<double, 4>& centre,
+                                                     const std::array<double, 4>& d,
+                                                     RowTerms& terms) {
+  const P zero = P::Zero();
+  const P two = P::Splat(2.0);
+  P w_lanes[4], d2[4], dd[4][4];
+  for (int k = 0; k < 4; ++k) {
+    w_lanes[k] = P::Splat(centre[k]);
+    d2[k] = P::Splat(2.0 * d[k]);
+    for (int l = 0; l < 4; ++l) dd[k][l] = P::Splat(d[k] * d[l]);
+  }
+  for (int c = 0; c < kComboLanes; c += kLaneVector) {
+    P g[kGramSize], b[4];
+    for (int j = 0; j < kGramSize; ++j) g[j] = P::Load(inputs.gram[j].data() + c);
+    for (int j = 0; j < 4; ++j) b[j] = P::Load(inputs.data[j].data() + c);
+    const P squares = P::Load(inputs.squares.data() + c);
+    const P* w = w_lanes;
+    const P gw[4] = {g[0] * w[0] + g[1] * w[1] + g[2] * w[2] + g[3] * w[3],
+                     g[1] * w[0] + g[4] * w[1] + g[5] * w[2] + g[6] * w[3],
+                     g[2] * w[0] + g[5] * w[1] + g[7] * w[2] + g[8] * w[3],
+                     g[3] * w[0] + g[6] * w[1] + g[8] * w[2] + g[9] * w[3]};
+    P wgw = zero;
+    P bw = zero;
+    for (int k = 0; k < 4; ++k) {
+      wgw = wgw + w[k] * gw[k];
+      bw = bw + b[k] * w[k];
+    }
+    // std::max(0.0, x): x where 0 < x, else 0.
+    const P e = wgw - two * bw + squares;
+    const P e0 = P::Select(zero < e, e, zero);
+    P lin[4];
+    for (int k = 0; k < 4; ++k) lin[k] = d2[k] * (gw[k] - b[k]);
+    const P h00 = dd[0][0] * g[0], h01 = dd[0][1] * g[1], h02 = dd[0][2] * g[2],
+            h03 = dd[0][3] * g[3], h11 = dd[1][1] * g[4], h12 = dd[1][2] * g[5],
+            h13 = dd[1][3] * g[6], h22 = dd[2][2] * g[7], h23 = dd[2][3] * g[8],
+            h33 = dd[3][3] * g[9];
+    // alpha(d0, d1) = g0 d0 + g1 d1 + H00 d0^2 + 2 H01 d0 d1 + H11 d1^2, d in {-1, 0, 1}.
+    const P a_minus = h00 - lin[0];
+    const P a_plus = h00 + lin[0];
+    const P b_minus = h11 - lin[1];
+    const P b_plus = h11 + lin[1];
+    const P ab = two * h01;
+    const P alpha[9] = {a_minus + b_minus + ab, a_minus, a_minus + b_plus - ab,
+                        b_minus,                zero,    b_plus,
+                        a_plus + b_minus - ab,  a_plus,  a_plus + b_plus + ab};
+    const P c_minus = h22 - lin[2];
+    const P c_plus = h22 + lin[2];
+    const P d_minus = h33 - lin[3];
+    const P d_plus = h33 + lin[3];
+    const P cd = two * h23;
+    const P beta[9] = {c_minus + d_minus + cd, c_minus, c_minus + d_plus - cd,
+                       d_minus,                zero,    d_plus,
+                       c_plus + d_minus - cd,  c_plus,  c_plus + d_plus + cd};
+    // z0 = 2 (H02 d2 + H03 d3), z1 = 2 (H12 d2 + H13 d3) over the nine (d2, d3).
+    const P p0 = two * h02;
+    const P q0 = two * h03;
+    const P p1 = two * h12;
+    const P q1 = two * h13;
+    const P z0[9] = {-p0 - q0, -p0, -p0 + q0, -q0, zero, q0, p0 - q0, p0, p0 + q0};
+    const P z1[9] = {-p1 - q1, -p1, -p1 + q1, -q1, zero, q1, p1 - q1, p1, p1 + q1};
+    for (int k = 0; k < 9; ++k) {
+      alpha[k].Store(terms.alpha[k].data() + c);
+      (e0 + beta[k]).Store(terms.b[k].data() + c);
+      z0[k].Store(terms.z0[k].data() + c);
+      z1[k].Store(terms.z1[k].data() + c);
+    }
+  }
+}
+
+TEMPOKEY_TARGET_AVX512 void BuildRowTermsAvx512(const FormInputs& inputs,
+                                                const std::array<double, 4>& centre,
+                                                const std::array<double, 4>& d, RowTerms& terms) {
+  BuildRowTermsWith<simd::Pack512>(inputs, centre, d, terms);
+}
+TEMPOKEY_TARGET_AVX2 void BuildRowTermsAvx2(const FormInputs& inputs,
+                                            const std::array<double, 4>& centre,
+                                            const std::array<double, 4>& d, RowTerms& terms) {
+  BuildRowTermsWith<simd::PackPair>(inputs, centre, d, terms);
+}
+void BuildRowTermsBaseline(const FormInputs& inputs, const std::array<double, 4>& centre,
+                           const std::array<double, 4>& d, RowTerms& terms) {
+  BuildRowTermsWith<simd::PackPair>(inputs, centre, d, terms);
+}
+
+// BuildRowTermsWith() for the running machine.
+void BuildRowTerms(const FormInputs& inputs, const std::array<double, 4>& centre,
+                   const std::array<double, 4>& d, RowTerms& terms) {
+  switch (simd::RunningPackIsa()) {
+    case simd::PackIsa::kAvx512:
+      return BuildRowTermsAvx512(inputs, centre, d, terms);
+    case simd::PackIsa::kAvx2:
+      return BuildRowTermsAvx2(inputs, centre, d, terms);
+    case simd::PackIsa::kBaseline:
+      break;
+  }
+  BuildRowTermsBaseline(inputs, centre, d, terms);
+}
+
+// ---- the fold of the candidates -----------------------------------------------------------------
+//
+// One predecessor x-state sx's rows toward all nine target x-states at once, in 11 vectors of 8
+// lanes: vector ty < 9 holds the target states (0..7, ty), vector 9 the states (8, 0..7) and
+// vector 10 the state (8, 8) and seven unused lanes, so that the lanes of vectors 0..8 read
+// consecutive combinations sx * 9 + tx. For each of the nine predecessor y-states sy, candidate =
+// a[sy] + ((b + u) + v) with u, v in {-z, 0, +z}, folded into the lane's smallest, second
+// smallest and arg-smallest. Lanes of a target x-state without a row this time keep their
+// minima. Written with 8-lane vector extensions and cloned for AVX-512 and AVX, where the machine
+// has them; every clone computes the same values (no contraction into FMA: core/CMakeLists.txt
+// sets -ffp-contract=off).
+constexpr int kLaneVectors = 11;
+constexpr int kTargetLanes = kLaneVectors * kLaneVector;
+
+// The lane of target state (tx, ty) (see above).
+constexpr int TargetLane(int tx, int ty) { return tx < 8 ? ty * 8 + tx : 72 + ty; }
+
+// Per target state (lane): smallest candidate, second smallest, and the state of the smallest.
+// A target whose second smallest lies outside the tie window of the smallest has one candidate in
+// the window, which the tie rule must choose; otherwise the window is rebuilt exactly from the
+// rows (rare: real ties).
+// `largest[tx]` is the largest of the smallest candidates of target x-state tx's nine targets.
+struct TargetMinima {
+  alignas(64) std::array<double, kTargetLanes> least, second, state;
+  alignas(64) std::array<double, 16> largest;  // [tx], 9..15 unused
 };
-constexpr StateLanes kStateLaneTable = [] {
+
+// The states 0 .. 80 as 8 lanes of their number, read as packs.
+struct StateLanes {
+  alignas(64) double lane[kStates][kLaneVector];
+};
+constexpr StateLanes kStateLanes = [] {
   StateLanes table{};
   for (int s = 0; s < kStates; ++s) {
-    for (int l = 0; l < 4; ++l) table.lane[s][l] = static_cast<double>(s);
+    for (int l = 0; l < kLaneVector; ++l) table.lane[s][l] = static_cast<double>(s);
   }
   return table;
 }();
-// Read as vectors through a type that may alias its doubles (the table is stored as doubles).
-using StateVector = double __attribute__((vector_size(32), may_alias));
-const StateVector* const kStateLanes = reinterpret_cast<const StateVector*>(kStateLaneTable.lane);
 
-// Returns the largest of the nine smallest candidates (lanes 0..8; none is NaN, so the order of
-// the comparisons does not matter).
-TEMPOKEY_AVX_CLONES double UpdateLaneMinima(
-    const double* a, const double* b_lanes, const double* z0_lanes, const double* z1_lanes,
-    int state_first, double* least_lanes, double* second_lanes, double* state_lanes) {
-  using V = double __attribute__((vector_size(32)));
-  // The row's terms of key a, broadcast once for the three lane groups.
-  V a_lanes[9];
-  for (int sy = 0; sy < 9; ++sy) a_lanes[sy] = V{a[sy], a[sy], a[sy], a[sy]};
-  const StateVector* states = kStateLanes + state_first;
-  V largest = {};
-  double tail = 0.0;
-  for (int lane = 0; lane < 12; lane += 4) {
-    V least, second, state, b, z0, z1;
-    std::memcpy(&least, least_lanes + lane, sizeof(V));
-    std::memcpy(&second, second_lanes + lane, sizeof(V));
-    std::memcpy(&state, state_lanes + lane, sizeof(V));
-    std::memcpy(&b, b_lanes + lane, sizeof(V));
-    std::memcpy(&z0, z0_lanes + lane, sizeof(V));
-    std::memcpy(&z1, z1_lanes + lane, sizeof(V));
-    const V zero = {0.0, 0.0, 0.0, 0.0};
-    const V with_u[3] = {b + (zero - z0), b + zero, b + z0};
-    const V with_v[3] = {zero - z1, zero, z1};
+// Folds the nine candidates of the lanes at `lane`, given key a's terms a[sy], and b, z0, z1;
+// `states` the lanes of the nine predecessor states; lanes outside `active` (when given) keep
+// their minima.
+template <typename P>
+[[gnu::always_inline]] inline void FoldLanes(const P* a, const double* states, const P& b,
+                                             const P& z0, const P& z1, int lane,
+                                             const typename P::Mask* active,
+                                             TargetMinima& minima) {
+  const P old_least = P::Load(minima.least.data() + lane);
+  const P old_second = P::Load(minima.second.data() + lane);
+  const P old_state = P::Load(minima.state.data() + lane);
+  P least = old_least, second = old_second, state = old_state;
+  const P zero = P::Zero();
+  const P with_u[3] = {b + (zero - z0), b + zero, b + z0};
+  const P with_v[3] = {zero - z1, zero, z1};
+  for (int sy = 0; sy < 9; ++sy) {
+    // with_u + 0 is with_u bit for bit: with_u is never -0 (b is not: e0 >= +0 and b = +inf in
+    // unused lanes), so the middle column skips that addition.
+    const P w = sy % 3 == 1 ? with_u[sy / 3] : with_u[sy / 3] + with_v[sy % 3];
+    const P c = a[sy] + w;
+    const P larger = P::Select(c > least, c, least);
+    second = P::Select(larger < second, larger, second);
+    const typename P::Mask smaller = c < least;
+    state = P::Select(smaller, P::Load(states + sy * kLaneVector), state);
+    least = P::Select(smaller, c, least);
+  }
+  if (active != nullptr) {
+    least = P::Select(*active, least, old_least);
+    second = P::Select(*active, second, old_second);
+    state = P::Select(*active, state, old_state);
+  }
+  least.Store(minima.least.data() + lane);
+  second.Store(minima.second.data() + lane);
+  state.Store(minima.state.data() + lane);
+}
+
+// Folds predecessor x-state sx's rows, cost `in_row` of its nine states; `rows`: bit tx set when
+// the combination (sx, tx) takes part.
+template <typename P>
+[[gnu::always_inline]] inline void UpdateTargetMinimaWith(const RowTerms& terms,
+                                                          const double* in_row, int sx,
+                                                          std::uint32_t rows,
+                                                          TargetMinima& minima) {
+  const int first = sx * 9;
+  const double* states = kStateLanes.lane[first];
+  P a[9];
+  if ((rows & 0xffu) != 0) {
     for (int sy = 0; sy < 9; ++sy) {
-      const V c = a_lanes[sy] + (with_u[sy / 3] + with_v[sy % 3]);
-      const V larger = c > least ? c : least;
-      second = larger < second ? larger : second;
-      const auto smaller = c < least;
-      state = smaller ? states[sy] : state;
-      least = smaller ? c : least;
+      a[sy] = P::Splat(in_row[sy]) + P::Load(terms.alpha[sy].data() + first);
     }
-    std::memcpy(least_lanes + lane, &least, sizeof(V));
-    std::memcpy(second_lanes + lane, &second, sizeof(V));
-    std::memcpy(state_lanes + lane, &state, sizeof(V));
-    if (lane == 0) {
-      largest = least;
-    } else if (lane == 4) {
-      largest = least > largest ? least : largest;
-    } else {
-      tail = least[0];
+    const typename P::Mask active = P::LaneBits(rows);
+    const typename P::Mask* mask = (rows & 0xffu) == 0xffu ? nullptr : &active;
+    for (int ty = 0; ty < 9; ++ty) {
+      FoldLanes(a, states, P::Load(terms.b[ty].data() + first),
+                P::Load(terms.z0[ty].data() + first), P::Load(terms.z1[ty].data() + first),
+                ty * kLaneVector, mask, minima);
     }
   }
-  double out = tail;
-  for (int k = 0; k < 4; ++k) out = largest[k] > out ? largest[k] : out;
-  return out;
+  if ((rows >> 8 & 1u) != 0) {
+    const int c = first + 8;
+    for (int sy = 0; sy < 9; ++sy) a[sy] = P::Splat(in_row[sy] + terms.alpha[sy][c]);
+    // Lanes 0..7 of vector 9 are the target states (8, 0..7); lane 0 of vector 10 is (8, 8),
+    // its unused lanes' candidates +inf (b = +inf, z = 0), which change nothing.
+    alignas(64) double b[2][kLaneVector], z0[2][kLaneVector], z1[2][kLaneVector];
+    for (int ty = 0; ty < kLaneVector; ++ty) {
+      b[0][ty] = terms.b[ty][c];
+      z0[0][ty] = terms.z0[ty][c];
+      z1[0][ty] = terms.z1[ty][c];
+      b[1][ty] = ty == 0 ? terms.b[8][c] : kInf;
+      z0[1][ty] = ty == 0 ? terms.z0[8][c] : 0.0;
+      z1[1][ty] = ty == 0 ? terms.z1[8][c] : 0.0;
+    }
+    for (int k = 0; k < 2; ++k) {
+      FoldLanes(a, states, P::Load(b[k]), P::Load(z0[k]), P::Load(z1[k]), 72 + k * kLaneVector,
+                static_cast<const typename P::Mask*>(nullptr), minima);
+    }
+  }
+  // The largest of the nine targets' smallest candidates per target x-state (max is exact, so
+  // the order does not matter).
+  P largest = P::Load(minima.least.data());
+  for (int ty = 1; ty < 9; ++ty) {
+    const P least = P::Load(minima.least.data() + ty * kLaneVector);
+    largest = P::Select(least > largest, least, largest);
+  }
+  largest.Store(minima.largest.data());
+  double last = minima.least[80];
+  for (int lane = 72; lane < 80; ++lane) last = std::max(last, minima.least[lane]);
+  minima.largest[8] = last;
+}
+
+TEMPOKEY_TARGET_AVX512 void UpdateTargetMinimaAvx512(const RowTerms& terms, const double* in_row,
+                                                     int sx, std::uint32_t rows,
+                                                     TargetMinima& minima) {
+  UpdateTargetMinimaWith<simd::Pack512>(terms, in_row, sx, rows, minima);
+}
+TEMPOKEY_TARGET_AVX2 void UpdateTargetMinimaAvx2(const RowTerms& terms, const double* in_row,
+                                                 int sx, std::uint32_t rows,
+                                                 TargetMinima& minima) {
+  UpdateTargetMinimaWith<simd::PackPair>(terms, in_row, sx, rows, minima);
+}
+void UpdateTargetMinimaBaseline(const RowTerms& terms, const double* in_row, int sx,
+                                std::uint32_t rows, TargetMinima& minima) {
+  UpdateTargetMinimaWith<simd::PackPair>(terms, in_row, sx, rows, minima);
+}
+
+// UpdateTargetMinimaWith() for the running machine.
+void UpdateTargetMinima(const RowTerms& terms, const double* in_row, int sx, std::uint32_t rows,
+                        TargetMinima& minima) {
+  switch (simd::RunningPackIsa()) {
+    case simd::PackIsa::kAvx512:
+      return UpdateTargetMinimaAvx512(terms, in_row, sx, rows, minima);
+    case simd::PackIsa::kAvx2:
+      return UpdateTargetMinimaAvx2(terms, in_row, sx, rows, minima);
+    case simd::PackIsa::kBaseline:
+      break;
+  }
+  UpdateTargetMinimaBaseline(terms, in_row, sx, rows, minima);
+}
+
+// What the form inputs of a segment depend on (DpPass::Advance()).
+struct FormSignature {
+  std::array<double, 12> x;  // x and tx of both keys' grids
+  double y_ref = 0.0;
+  std::uint32_t reachable = 0;
+  bool last = false;
+  friend bool operator==(const FormSignature&, const FormSignature&) = default;
+};
+
+// The form inputs of each segment of a fit as its last pass built them, so that the next pass
+// can take those of combinations whose x values did not change: a segment whose grids, y_ref and
+// reachable predecessors are the same takes them all as they were; one whose key moved by a grid
+// step, or whose reachable predecessors changed, takes those of the combinations it shares with
+// the last pass (same ax, a.tx, bx, b.tx) and builds the others. A combination's inputs and
+// feasibility are exact functions of its four x values, y_ref and the samples (one fit, one
+// channel), so taking them changes no value. One per thread, reused by its fits; it keeps the
+// first kMaxSegments segments of a fit (16 MB), two buffers each (the last pass's and the one
+// being built from it).
+class FormMemo {
+ public:
+  static constexpr std::size_t kMaxSegments = 768;
+  struct Buffer {
+    std::array<bool, kStates> feasible;
+    std::array<bool, kStates> known;  // the combination's inputs and feasibility are set
+    FormInputs inputs;
+  };
+  struct Entry {
+    bool valid = false;
+    FormSignature signature;  // of buffers[current]
+    int current = 0;
+    std::array<Buffer, 2> buffers;
+  };
+
+  // Forgets every entry and makes room for the first segments of a fit of `segments`.
+  void Start(std::size_t segments) {
+    used_ = std::min(segments, kMaxSegments);
+    if (entries_.size() < used_) entries_.resize(used_);
+    for (std::size_t i = 0; i < used_; ++i) entries_[i].valid = false;
+  }
+  // The entry of segment `i`, or null past the first kMaxSegments.
+  Entry* Segment(std::size_t i) { return i < used_ ? &entries_[i] : nullptr; }
+
+ private:
+  std::vector<Entry> entries_;
+  std::size_t used_ = 0;
+};
+
+// The calling thread's form memo.
+FormMemo& ThreadFormMemo() {
+  thread_local FormMemo memo;
+  return memo;
 }
 
 // Viterbi tables of one pass.
 class DpPass {
  public:
+  // `memo` (optional) carries the segments' form inputs from the fit's previous pass.
   DpPass(std::span<const double> samples, std::span<const HermiteKey2D> keys,
-         const HermiteSteps& steps, ShapeCache& cache, std::stop_token stop = {})
+         const HermiteSteps& steps, ShapeCache& cache, std::stop_token stop = {},
+         FormMemo* memo = nullptr)
       : samples_(samples),
         keys_(keys),
         steps_(steps),
         scale_(DpTieScale(samples)),
         last_frame_(static_cast<double>(samples.size()) - 1.0),
         cache_(cache),
+        memo_(memo),
         stop_(std::move(stop)) {
     const std::size_t k = keys.size();
     grids_.reserve(k);
@@ -537,27 +779,23 @@ class DpPass {
     return {grid.x[XIndex(sx)], grid.y[sy / 3], grid.tx[TxIndex(sx)], grid.ty[sy % 3]};
   }
 
-  // One predecessor x-state's contribution to the nine targets of one target x-state:
-  //   candidate(sy, ty) = a[sy] + ((b[ty] + dy_a(sy) * z0[ty]) + dty_a(sy) * z1[ty])
-  // with a = in + alpha (terms of key a alone), b = e0 + beta (key b alone) and z the cross
-  // terms; the offsets are -1, 0, +1, so the products are exact and the fast pass and the tie
-  // fallback below compute every candidate bit for bit alike. Lanes 9..11 pad to 3 x 4.
-  struct PredecessorRow {
-    int sx = 0;
-    std::array<double, 9> a;
-    alignas(32) std::array<double, 12> b, z0, z1;
-  };
+  // The forms of one segment and the minima of its 81 target states. The predecessor x-states
+  // folded so far, in order (with the target x-states they had rows for), for the tie fallback.
+  struct Workspace {
+    FormInputs inputs;
+    std::array<bool, kStates> feasible;
+    RowTerms terms;
+    TargetMinima minima;
+    std::array<int, 9> folded_sx;
+    std::array<std::uint32_t, 9> folded_rows;  // bit tx: the combination (sx, tx) took part
+    int folded = 0;
 
-  // Per target y-state (lane): smallest candidate, second smallest, and the state of the
-  // smallest. A target whose second smallest lies outside the tie window of the smallest has one
-  // candidate in the window, which the tie rule must choose; otherwise the window is rebuilt
-  // exactly from the rows (rare: real ties).
-  struct LaneMinima {
-    alignas(32) std::array<double, 12> least, second, state;
     void Reset() {
-      least.fill(kInf);
-      second.fill(kInf);
-      state.fill(-1.0);
+      minima.least.fill(kInf);
+      minima.second.fill(kInf);
+      minima.state.fill(-1.0);
+      minima.largest.fill(kInf);
+      folded = 0;
     }
   };
 
@@ -599,9 +837,158 @@ class DpPass {
       cheapest[sx] = *std::min_element(in.begin() + sx * 9, in.begin() + sx * 9 + 9);
       order[sx] = sx;
     }
-    std::stable_sort(order.begin(), order.end(),
-                     [&](int l, int r) { return cheapest[l] < cheapest[r]; });
+    // A stable insertion sort (std::stable_sort allocates its buffer on every call).
+    for (int k = 1; k < 9; ++k) {
+      const int sx = order[k];
+      int j = k;
+      for (; j > 0 && cheapest[sx] < cheapest[order[j - 1]]; --j) order[j] = order[j - 1];
+      order[j] = sx;
+    }
 
+    Workspace& work = *work_space_;
+    work.Reset();
+    // The forms' inputs depend on the x-grids, y_ref and which predecessor x-states are
+    // reachable: a segment whose three did not change since the last pass takes them as they
+    // were, one that changed takes those of the combinations it shares with the last pass
+    // (FormMemo).
+    const FormSignature signature = {{ga.x[0], ga.x[1], ga.x[2], ga.tx[0], ga.tx[1], ga.tx[2],
+                                      gb.x[0], gb.x[1], gb.x[2], gb.tx[0], gb.tx[1], gb.tx[2]},
+                                     y_ref,
+                                     ReachableMask(cheapest),
+                                     last};
+    FormMemo::Entry* memo = memo_ != nullptr ? memo_->Segment(i) : nullptr;
+    const FormInputs* inputs = nullptr;
+    const std::array<bool, kStates>* feasible = nullptr;
+    if (memo != nullptr && memo->valid && memo->signature == signature) {
+      inputs = &memo->buffers[memo->current].inputs;
+      feasible = &memo->buffers[memo->current].feasible;
+    } else if (memo != nullptr) {
+      const FormMemo::Buffer& previous = memo->buffers[memo->current];
+      FormMemo::Buffer& next = memo->buffers[1 - memo->current];
+      next.feasible.fill(false);
+      std::array<bool, kStates> taken{};
+      if (memo->valid && memo->signature.y_ref == y_ref && memo->signature.last == last) {
+        TakeSharedInputs(memo->signature, ga, gb, cheapest, previous, next, taken);
+      }
+      memo->valid = false;
+      if (!PrepareForms(ga, gb, last, cheapest, y_ref, &taken, next.feasible, next.inputs)) {
+        return false;
+      }
+      for (int c = 0; c < kStates; ++c) next.known[c] = Considered(gb, cheapest, c / 9, c % 9);
+      memo->current = 1 - memo->current;
+      memo->signature = signature;
+      memo->valid = true;
+      inputs = &next.inputs;
+      feasible = &next.feasible;
+    } else {
+      work.feasible.fill(false);
+      if (!PrepareForms(ga, gb, last, cheapest, y_ref, nullptr, work.feasible, work.inputs)) {
+        return false;
+      }
+      inputs = &work.inputs;
+      feasible = &work.feasible;
+    }
+    const std::array<double, 4> w = {centre_y[0] - y_ref, centre_y[1], centre_y[2] - y_ref,
+                                     centre_y[3]};
+    const std::array<double, 4> d = {steps_.y, steps_.tangent_y, steps_.y, steps_.tangent_y};
+    BuildRowTerms(*inputs, w, d, work.terms);
+
+    // The target x-states still open: a target x-state closes at the first predecessor whose
+    // cheapest state is above every one of its targets' windows (later ones are dearer still).
+    std::uint32_t open = 0;
+    for (int tx = 0; tx < 9; ++tx) {
+      if (!gb.x_fixed || XIndex(tx) == 1) open |= 1u << tx;
+    }
+    for (int sx : order) {
+      if (cheapest[sx] == kInf || open == 0) break;
+      std::uint32_t rows = 0;
+      for (int tx = 0; tx < 9; ++tx) {
+        if ((open >> tx & 1u) == 0) continue;
+        // The widest tie window of the nine targets is that of the largest smallest candidate
+        // (TieTolerance() rounds monotonically).
+        const double largest = work.minima.largest[tx];
+        if (cheapest[sx] > largest + TieTolerance(largest, scale_)) {
+          open &= ~(1u << tx);
+          continue;
+        }
+        if ((*feasible)[sx * 9 + tx]) rows |= 1u << tx;
+      }
+      if (rows == 0) continue;
+      work.folded_sx[work.folded] = sx;
+      work.folded_rows[work.folded] = rows;
+      ++work.folded;
+      UpdateTargetMinima(work.terms, in.data() + sx * 9, sx, rows, work.minima);
+    }
+    for (int tx = 0; tx < 9; ++tx) {
+      for (int ty = 0; ty < 9; ++ty) {
+        const auto [value, state] = ChooseForTarget(work, in, tx, ty);
+        cost_[i + 1][tx * 9 + ty] = value;
+        predecessor_[i + 1][tx * 9 + ty] = static_cast<std::int8_t>(state);
+      }
+    }
+    return true;
+  }
+
+  // Bit sx set when predecessor x-state sx has a finite cheapest state.
+  static std::uint32_t ReachableMask(const std::array<double, 9>& cheapest) {
+    std::uint32_t mask = 0;
+    for (int sx = 0; sx < 9; ++sx) {
+      if (cheapest[sx] != kInf) mask |= 1u << sx;
+    }
+    return mask;
+  }
+
+  // The feasible combinations of segment ga -> gb and their form inputs; false when a stop was
+  // requested part way.
+  // Whether combination (sx, tx) is looked at: its predecessor x-state reachable and, into the
+  // last key, its target x offset 0.
+  static bool Considered(const KeyGrid& gb, const std::array<double, 9>& cheapest, int sx,
+                         int tx) {
+    return cheapest[sx] != kInf && (!gb.x_fixed || XIndex(tx) == 1);
+  }
+
+  // Copies into `next` the inputs and feasibility of the combinations that `previous` (built for
+  // the grids in `signature`) knows under the same four x values, marking them in `taken`.
+  static void TakeSharedInputs(const FormSignature& signature, const KeyGrid& ga,
+                               const KeyGrid& gb, const std::array<double, 9>& cheapest,
+                               const FormMemo::Buffer& previous, FormMemo::Buffer& next,
+                               std::array<bool, kStates>& taken) {
+    // For each grid value of this pass, its index in the last pass's grid (-1: not there).
+    const std::array<const std::array<double, 3>*, 4> grids = {&ga.x, &ga.tx, &gb.x, &gb.tx};
+    std::array<std::array<int, 3>, 4> index;
+    for (int k = 0; k < 4; ++k) {
+      for (int o = 0; o < 3; ++o) {
+        index[k][o] = -1;
+        for (int m = 0; m < 3; ++m) {
+          if ((*grids[k])[o] == signature.x[k * 3 + m]) index[k][o] = m;
+        }
+      }
+    }
+    for (int sx = 0; sx < 9; ++sx) {
+      for (int tx = 0; tx < 9; ++tx) {
+        if (!Considered(gb, cheapest, sx, tx)) continue;
+        const int ix_a = index[0][XIndex(sx)], itx_a = index[1][TxIndex(sx)];
+        const int ix_b = index[2][XIndex(tx)], itx_b = index[3][TxIndex(tx)];
+        if (ix_a < 0 || itx_a < 0 || ix_b < 0 || itx_b < 0) continue;
+        const int from = (ix_a * 3 + itx_a) * 9 + ix_b * 3 + itx_b;
+        if (!previous.known[from]) continue;
+        const int c = sx * 9 + tx;
+        taken[c] = true;
+        next.feasible[c] = previous.feasible[from];
+        for (int l = 0; l < 4; ++l) next.inputs.data[l][c] = previous.inputs.data[l][from];
+        for (int l = 0; l < kGramSize; ++l) next.inputs.gram[l][c] = previous.inputs.gram[l][from];
+        next.inputs.squares[c] = previous.inputs.squares[from];
+      }
+    }
+  }
+
+  // The feasible combinations of segment ga -> gb and their form inputs, except those marked in
+  // `taken` (when given), whose feasibility and inputs are already set; `feasible` starts all
+  // false. False when a stop was requested part way.
+  bool PrepareForms(const KeyGrid& ga, const KeyGrid& gb, bool last,
+                    const std::array<double, 9>& cheapest, double y_ref,
+                    const std::array<bool, kStates>* taken, std::array<bool, kStates>& feasible,
+                    FormInputs& inputs) {
     // Every shape the segment may need, looked up before any is used, in two sweeps (keys and
     // slot prefetches, then lookups and record prefetches), so the memory accesses overlap
     // instead of stalling one by one. Visiting the combinations by the difference of their x
@@ -617,7 +1004,6 @@ class DpPass {
     int combo_count = 0;
     int key_count = 0;
     // Whether each combination passes InsideAndFeasible(), for the rows below.
-    std::array<bool, kStates> feasible{};
     // SegmentFrames() of the three x values of each key: the first frame depends on key a's x
     // alone, the end on key b's.
     std::array<std::int64_t, 3> first_of, end_of;
@@ -633,12 +1019,13 @@ class DpPass {
             const int sx = ix_a * 3 + itx_a;
             const int tx = ix_b * 3 + itx_b;
             if (cheapest[sx] == kInf || (gb.x_fixed && ix_b != 1)) continue;
+            if (taken != nullptr && (*taken)[sx * 9 + tx]) continue;
             const double ax = ga.x[ix_a];
             const double atx = ga.tx[itx_a];
             const double bx = gb.x[ix_b];
             const double btx = gb.tx[itx_b];
             if (!InsideAndFeasible(ax, atx, bx, btx)) continue;
-            const int combo = tx * 9 + sx;
+            const int combo = sx * 9 + tx;
             feasible[combo] = true;
             SegmentShape& shape = shapes[combo];
             const std::int64_t first = first_of[ix_a];
@@ -670,107 +1057,104 @@ class DpPass {
     }
     for (int c = 0; c < combo_count; ++c) shapes[combos[c]].entry = entries[key_of_combo[c]];
 
-    for (int tx = 0; tx < 9; ++tx) {
-      minima_.Reset();
-      row_count_ = 0;
-      const bool allowed = !gb.x_fixed || XIndex(tx) == 1;
-      // The largest of minima_.least[0..8]: the widest tie window of the nine targets is that of
-      // the largest smallest candidate (TieTolerance() rounds monotonically).
-      double largest = kInf;
-      for (int sx : order) {
-        if (!allowed || cheapest[sx] == kInf) break;
-        if (cheapest[sx] > largest + TieTolerance(largest, scale_)) break;
-        // Rows reached here passed the same tests as in the sweep above (finite cheapest state,
-        // allowed target), so its verdict stands.
-        if (!feasible[tx * 9 + sx]) continue;
-        if (Stopping(shapes[tx * 9 + sx].n)) return false;
-        const SegmentForm form =
-            BuildSegmentForm(samples_, shapes[tx * 9 + sx], y_ref, centre_y, steps_);
-        PredecessorRow& row = rows_[row_count_++];
-        FillRow(form, in.data() + sx * 9, sx, row);
-        largest = UpdateMinima(row, minima_);
-      }
-      for (int ty = 0; ty < 9; ++ty) {
-        const auto [value, state] = ChooseForTarget(ty);
-        cost_[i + 1][tx * 9 + ty] = value;
-        predecessor_[i + 1][tx * 9 + ty] = static_cast<std::int8_t>(state);
+    return GatherFormInputs(shapes, feasible, taken, y_ref, inputs);
+  }
+
+  // The form inputs of every combination (FormInputs), the data terms summed for the nine
+  // combinations of each pair of x offsets together (they share their frames), in pieces of
+  // kDpStopCheckFrames frames between looks at the stop token; false when a stop was requested.
+  bool GatherFormInputs(const std::array<SegmentShape, kStates>& shapes,
+                        const std::array<bool, kStates>& feasible,
+                        const std::array<bool, kStates>* taken, double y_ref,
+                        FormInputs& inputs) {
+    for (int ix_a = 0; ix_a < 3; ++ix_a) {
+      for (int ix_b = 0; ix_b < 3; ++ix_b) {
+        std::array<int, 9> combo;
+        std::array<const double*, 9> basis{};
+        std::array<bool, 9> used{};
+        const SegmentShape* some = nullptr;
+        for (int j = 0; j < 9; ++j) {
+          const int sx = ix_a * 3 + j / 3;
+          const int tx = ix_b * 3 + j % 3;
+          combo[j] = sx * 9 + tx;
+          if (taken != nullptr && (*taken)[combo[j]]) continue;
+          const SegmentShape& shape = shapes[combo[j]];
+          const int n = shape.n;
+          // A frame count that does not match the shape is unreachable (see ShapeEntry).
+          used[j] = feasible[combo[j]] && n > 0 && n >= shape.entry.count - 1 &&
+                    n <= shape.entry.count;
+          if (used[j]) {
+            basis[j] = shape.entry.basis();
+            some = &shape;
+          }
+        }
+        std::array<std::array<double, 4>, 9> sums{};
+        if (some != nullptr) {
+          // Combinations not used sum along on a used one's rows (their sums are dropped).
+          for (auto& row : basis) {
+            if (row == nullptr) row = some->entry.basis();
+          }
+          const double* sample = samples_.data() + some->first;
+          for (std::int64_t k = 0; k < some->n; k += kDpStopCheckFrames) {
+            const std::int64_t end = std::min<std::int64_t>(some->n, k + kDpStopCheckFrames);
+            SumDataTerms(sample, k, end, y_ref, basis, sums);
+            if (Stopping(9 * (end - k))) return false;
+          }
+        }
+        for (int j = 0; j < 9; ++j) {
+          const int c = combo[j];
+          if (taken != nullptr && (*taken)[c]) continue;
+          const SegmentShape& shape = shapes[c];
+          if (used[j]) {
+            const double* g = shape.n == shape.entry.count ? shape.entry.gram_all()
+                                                           : shape.entry.gram_but_last();
+            for (int l = 0; l < 4; ++l) inputs.data[l][c] = sums[j][l];
+            for (int l = 0; l < kGramSize; ++l) inputs.gram[l][c] = g[l];
+            inputs.squares[c] = shape.squares;
+          } else {
+            for (int l = 0; l < 4; ++l) inputs.data[l][c] = 0.0;
+            for (int l = 0; l < kGramSize; ++l) inputs.gram[l][c] = 0.0;
+            const bool mismatched = feasible[c] && shape.n > 0;
+            inputs.squares[c] = mismatched ? kInf : 0.0;
+          }
+        }
       }
     }
     return true;
   }
 
-  static void FillRow(const SegmentForm& form, const double* in_row, int sx,
-                      PredecessorRow& row) {
-    const auto& h = form.h;
-    // alpha(d0, d1) = g0 d0 + g1 d1 + H00 d0^2 + 2 H01 d0 d1 + H11 d1^2, d in {-1, 0, 1}.
-    const double a_minus = h[0][0] - form.g[0];
-    const double a_plus = h[0][0] + form.g[0];
-    const double b_minus = h[1][1] - form.g[1];
-    const double b_plus = h[1][1] + form.g[1];
-    const double ab = 2.0 * h[0][1];
-    const std::array<double, 9> alpha = {a_minus + b_minus + ab, a_minus, a_minus + b_plus - ab,
-                                         b_minus,                0.0,     b_plus,
-                                         a_plus + b_minus - ab,  a_plus,  a_plus + b_plus + ab};
-    const double c_minus = h[2][2] - form.g[2];
-    const double c_plus = h[2][2] + form.g[2];
-    const double d_minus = h[3][3] - form.g[3];
-    const double d_plus = h[3][3] + form.g[3];
-    const double cd = 2.0 * h[2][3];
-    const std::array<double, 9> beta = {c_minus + d_minus + cd, c_minus, c_minus + d_plus - cd,
-                                        d_minus,                0.0,     d_plus,
-                                        c_plus + d_minus - cd,  c_plus,  c_plus + d_plus + cd};
-    row.sx = sx;
-    for (int sy = 0; sy < 9; ++sy) row.a[sy] = in_row[sy] + alpha[sy];
-    // z0 = 2 (H02 d2 + H03 d3), z1 = 2 (H12 d2 + H13 d3) over the nine (d2, d3).
-    const double p0 = 2.0 * h[0][2];
-    const double q0 = 2.0 * h[0][3];
-    const double p1 = 2.0 * h[1][2];
-    const double q1 = 2.0 * h[1][3];
-    const std::array<double, 9> z0 = {-p0 - q0, -p0, -p0 + q0, -q0, 0.0, q0, p0 - q0, p0, p0 + q0};
-    const std::array<double, 9> z1 = {-p1 - q1, -p1, -p1 + q1, -q1, 0.0, q1, p1 - q1, p1, p1 + q1};
-    for (int ty = 0; ty < 9; ++ty) {
-      row.b[ty] = form.e0 + beta[ty];
-      row.z0[ty] = z0[ty];
-      row.z1[ty] = z1[ty];
-    }
-    for (int ty = 9; ty < 12; ++ty) {
-      row.b[ty] = kInf;
-      row.z0[ty] = 0.0;
-      row.z1[ty] = 0.0;
-    }
-  }
-
-  // The candidate of `row` for (sy, ty), exactly as UpdateMinima() computes it.
-  static double Candidate(const PredecessorRow& row, int sy, int ty) {
+  // The candidate of predecessor state sx * 9 + sy for target state tx * 9 + ty, exactly as
+  // UpdateTargetMinima() computes it.
+  static double Candidate(const Workspace& work, const std::array<double, kStates>& in, int sx,
+                          int sy, int tx, int ty) {
+    const int c = sx * 9 + tx;
     const double d0 = kOffsetHigh[sy];
     const double d1 = kOffsetLow[sy];
-    const double u = d0 < 0.0 ? -row.z0[ty] : (d0 > 0.0 ? row.z0[ty] : 0.0);
-    const double v = d1 < 0.0 ? -row.z1[ty] : (d1 > 0.0 ? row.z1[ty] : 0.0);
-    return row.a[sy] + ((row.b[ty] + u) + v);
+    const RowTerms& t = work.terms;
+    const double u = d0 < 0.0 ? -t.z0[ty][c] : (d0 > 0.0 ? t.z0[ty][c] : 0.0);
+    const double v = d1 < 0.0 ? -t.z1[ty][c] : (d1 > 0.0 ? t.z1[ty][c] : 0.0);
+    return (in[sx * 9 + sy] + t.alpha[sy][c]) + ((t.b[ty][c] + u) + v);
   }
 
-  // Returns the largest of the nine smallest candidates after the update.
-  static double UpdateMinima(const PredecessorRow& row, LaneMinima& minima) {
-    return UpdateLaneMinima(row.a.data(), row.b.data(), row.z0.data(), row.z1.data(),
-                     row.sx * 9, minima.least.data(), minima.second.data(),
-                     minima.state.data());
-  }
-
-  // The tie rule for target y-state `ty` over the rows of the current target x-state.
-  std::pair<double, int> ChooseForTarget(int ty) const {
-    const double m = minima_.least[ty];
+  // The tie rule for target state (tx, ty) over the predecessors folded toward it.
+  std::pair<double, int> ChooseForTarget(const Workspace& work,
+                                         const std::array<double, kStates>& in, int tx,
+                                         int ty) const {
+    const int lane = TargetLane(tx, ty);
+    const double m = work.minima.least[lane];
     if (m == kInf) return {kInf, -1};
     const double window = m + TieTolerance(m, scale_);
-    if (minima_.second[ty] > window) return {m, static_cast<int>(minima_.state[ty])};
+    if (work.minima.second[lane] > window) return {m, static_cast<int>(work.minima.state[lane])};
     // Several candidates in the window: state 40 if among them, else the lowest state.
     double best_value = kInf;
     int best_state = -1;
-    for (int r = 0; r < row_count_; ++r) {
-      const PredecessorRow& row = rows_[r];
+    for (int r = 0; r < work.folded; ++r) {
+      if ((work.folded_rows[r] >> tx & 1u) == 0) continue;
+      const int sx = work.folded_sx[r];
       for (int sy = 0; sy < 9; ++sy) {
-        const double c = Candidate(row, sy, ty);
+        const double c = Candidate(work, in, sx, sy, tx, ty);
         if (!(c <= window)) continue;
-        const int state = row.sx * 9 + sy;
+        const int state = sx * 9 + sy;
         if (state == kCenterState) return {c, state};
         if (best_state < 0 || state < best_state) {
           best_state = state;
@@ -790,11 +1174,10 @@ class DpPass {
   std::vector<std::array<double, kStates>> cost_;
   std::vector<std::array<std::int8_t, kStates>> predecessor_;
   ShapeCache& cache_;
+  FormMemo* memo_;
   std::stop_token stop_;
   std::int64_t work_ = 0;  // frames of work since the last look at stop_
-  LaneMinima minima_;
-  std::array<PredecessorRow, 9> rows_;
-  int row_count_ = 0;
+  std::unique_ptr<Workspace> work_space_ = std::make_unique<Workspace>();
 };
 
 absl::Status CheckStep(const char* name, double value) {
@@ -969,13 +1352,16 @@ absl::StatusOr<HermiteFitResult> FitHermiteDp(std::span<const double> samples,
   result.squared_error_history.push_back(result.squared_error);
   HermiteSteps steps = options.steps;
   ShapeCache& cache = ThreadShapeCache();
+  FormMemo& memo = ThreadFormMemo();
+  memo.Start(result.keys.size() - 1);
   for (int iteration = 0; iteration < options.max_iterations; ++iteration) {
     const double largest =
         std::max({steps.x, steps.y, steps.tangent_x, steps.tangent_y});
     if (largest < options.accuracy) break;
     TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
     cache.TrimIfLarge();
-    std::optional<HermiteDpPass> run = DpPass(samples, result.keys, steps, cache, stop).Run();
+    std::optional<HermiteDpPass> run =
+        DpPass(samples, result.keys, steps, cache, stop, &memo).Run();
     if (!run) return absl::CancelledError("cancelled");
     HermiteDpPass pass = *std::move(run);
     ++result.iterations;
