@@ -189,6 +189,21 @@ class BasisSource {
 
 // ---- kernels over the interior frames k = 1 .. n-1 of a segment --------------------------------
 
+// Which of a segment's two keys a solve fits: both, or only one when the other is a fixed key at
+// the edge of a removal window. A segment's sums feed only the rows of its free keys (the Gram
+// sums pair each basis column of the segment's start key, columns 0 and 1, and of its end key,
+// columns 2 and 3), so a segment with a fixed end needs only the moments of its free key's
+// columns and the Gram sums that involve them; each sum kept is accumulated exactly as before.
+enum class FreeEnds { kBoth, kStartOnly, kEndOnly };
+
+// Whether moment r, or the Gram sum (r, q) with r <= q, feeds the rows of the free keys.
+constexpr bool NeedsMoment(FreeEnds ends, int r) {
+  return ends == FreeEnds::kBoth || (ends == FreeEnds::kStartOnly ? r < 2 : r >= 2);
+}
+constexpr bool NeedsGram(FreeEnds ends, int r, int q) {
+  return ends == FreeEnds::kBoth || (ends == FreeEnds::kStartOnly ? r < 2 : q >= 2);
+}
+
 // moments[r] = sum of data[k] * column r at k.
 TEMPOKEY_AVX_CLONES void DataMoments(const double* data, const BasisColumns& basis,
                                      std::int64_t n, double* moments) {
@@ -219,8 +234,31 @@ TEMPOKEY_AVX_CLONES void DataMoments(const double* data, const BasisColumns& bas
   moments[3] = simd::Sum(m3) + t3;
 }
 
+// DataMoments() of two columns only, ca and cb, into moments[0] and moments[1]: each the same
+// operations in the same order as DataMoments() gives that column.
+TEMPOKEY_AVX_CLONES void DataMomentPair(const double* data, const double* ca, const double* cb,
+                                        std::int64_t n, double* moments) {
+  using simd::V4;
+  V4 ma = simd::Broadcast(0.0), mb = ma;
+  std::int64_t k = 1;
+  for (; k + 4 <= n; k += 4) {
+    const V4 d = simd::Load(data + k);
+    ma += d * simd::Load(ca + k);
+    mb += d * simd::Load(cb + k);
+  }
+  double ta = 0.0, tb = 0.0;
+  for (; k < n; ++k) {
+    ta += data[k] * ca[k];
+    tb += data[k] * cb[k];
+  }
+  moments[0] = simd::Sum(ma) + ta;
+  moments[1] = simd::Sum(mb) + tb;
+}
+
 // The scalar tail of WeightedSums() and ShortWeightedSums(): frames [k, n) added, in frame order,
 // to the moments `mt` and the upper triangle of the Gram sums `gt`.
+// Only the sums `kEnds` needs are added.
+template <FreeEnds kEnds>
 [[gnu::always_inline]] inline void AddWeightedTail(const double* data, const double* w,
                                                    const BasisColumns& basis, std::int64_t k,
                                                    std::int64_t n, std::array<double, 4>& mt,
@@ -229,16 +267,20 @@ TEMPOKEY_AVX_CLONES void DataMoments(const double* data, const BasisColumns& bas
     const double wd = w[k] * data[k];
     for (int r = 0; r < 4; ++r) {
       const double cr = basis.column[r][k];
-      mt[r] += wd * cr;
-      for (int q = r; q < 4; ++q) gt[4 * r + q] += w[k] * cr * basis.column[q][k];
+      if (NeedsMoment(kEnds, r)) mt[r] += wd * cr;
+      for (int q = r; q < 4; ++q) {
+        if (NeedsGram(kEnds, r, q)) gt[4 * r + q] += w[k] * cr * basis.column[q][k];
+      }
     }
   }
 }
 
-// moments[r] = sum of w[k] data[k] c_r(k); gram[4 r + q] = sum of w[k] c_r(k) c_q(k).
-TEMPOKEY_AVX_CLONES void WeightedSums(const double* data, const double* w,
-                                      const BasisColumns& basis, std::int64_t n, double* moments,
-                                      double* gram) {
+// moments[r] = sum of w[k] data[k] c_r(k); gram[4 r + q] = sum of w[k] c_r(k) c_q(k): the sums
+// `kEnds` needs (the others are left as they were).
+template <FreeEnds kEnds>
+[[gnu::always_inline]] inline void WeightedSumsOf(const double* data, const double* w,
+                                                  const BasisColumns& basis, std::int64_t n,
+                                                  double* moments, double* gram) {
   using simd::V4;
   // Only the upper triangle of the Gram sums is accumulated (and zeroed: zeroing the whole
   // arrays costs a string instruction's start-up, more than a short segment's sums).
@@ -261,19 +303,38 @@ TEMPOKEY_AVX_CLONES void WeightedSums(const double* data, const double* w,
     std::array<V4, 4> c;
     for (int r = 0; r < 4; ++r) c[r] = simd::Load(basis.column[r].data() + k);
     for (int r = 0; r < 4; ++r) {
-      m[r] += wd * c[r];
+      if (NeedsMoment(kEnds, r)) m[r] += wd * c[r];
       const V4 wc = wk * c[r];
-      for (int q = r; q < 4; ++q) g[4 * r + q] += wc * c[q];
+      for (int q = r; q < 4; ++q) {
+        if (NeedsGram(kEnds, r, q)) g[4 * r + q] += wc * c[q];
+      }
     }
   }
-  AddWeightedTail(data, w, basis, k, n, mt, gt);
+  AddWeightedTail<kEnds>(data, w, basis, k, n, mt, gt);
   for (int r = 0; r < 4; ++r) {
-    moments[r] = simd::Sum(m[r]) + mt[r];
+    if (NeedsMoment(kEnds, r)) moments[r] = simd::Sum(m[r]) + mt[r];
     for (int q = r; q < 4; ++q) {
+      if (!NeedsGram(kEnds, r, q)) continue;
       gram[4 * r + q] = simd::Sum(g[4 * r + q]) + gt[4 * r + q];
       gram[4 * q + r] = gram[4 * r + q];
     }
   }
+}
+
+TEMPOKEY_AVX_CLONES void WeightedSums(const double* data, const double* w,
+                                      const BasisColumns& basis, std::int64_t n, double* moments,
+                                      double* gram) {
+  WeightedSumsOf<FreeEnds::kBoth>(data, w, basis, n, moments, gram);
+}
+TEMPOKEY_AVX_CLONES void WeightedSumsStart(const double* data, const double* w,
+                                           const BasisColumns& basis, std::int64_t n,
+                                           double* moments, double* gram) {
+  WeightedSumsOf<FreeEnds::kStartOnly>(data, w, basis, n, moments, gram);
+}
+TEMPOKEY_AVX_CLONES void WeightedSumsEnd(const double* data, const double* w,
+                                         const BasisColumns& basis, std::int64_t n,
+                                         double* moments, double* gram) {
+  WeightedSumsOf<FreeEnds::kEndOnly>(data, w, basis, n, moments, gram);
 }
 
 // Segments this short (at most kShortInterior interior frames) reach at most one of the kernels'
@@ -282,13 +343,15 @@ TEMPOKEY_AVX_CLONES void WeightedSums(const double* data, const double* w,
 // tail from 0), so the same bits.
 constexpr std::int64_t kShortInterior = 7;
 
-// DataMoments() of a short segment (n - 1 <= kShortInterior).
+// DataMoments() of a short segment (n - 1 <= kShortInterior): the moments `kEnds` needs.
+template <FreeEnds kEnds>
 inline void ShortDataMoments(const double* data, const BasisColumns& basis, std::int64_t n,
                              double* moments) {
   std::int64_t k = 1;
   std::array<double, 4> block = {0.0, 0.0, 0.0, 0.0};
   if (k + 4 <= n) {
     for (int r = 0; r < 4; ++r) {
+      if (!NeedsMoment(kEnds, r)) continue;
       const double* c = basis.column[r].data();
       block[r] = ((0.0 + data[1] * c[1]) + (0.0 + data[2] * c[2])) +
                  ((0.0 + data[3] * c[3]) + (0.0 + data[4] * c[4]));
@@ -298,12 +361,17 @@ inline void ShortDataMoments(const double* data, const BasisColumns& basis, std:
   // (Without a block, the kernel's empty lanes sum to +0, as `block` holds.)
   std::array<double, 4> tail = {0.0, 0.0, 0.0, 0.0};
   for (; k < n; ++k) {
-    for (int r = 0; r < 4; ++r) tail[r] += data[k] * basis.column[r][k];
+    for (int r = 0; r < 4; ++r) {
+      if (NeedsMoment(kEnds, r)) tail[r] += data[k] * basis.column[r][k];
+    }
   }
-  for (int r = 0; r < 4; ++r) moments[r] = block[r] + tail[r];
+  for (int r = 0; r < 4; ++r) {
+    if (NeedsMoment(kEnds, r)) moments[r] = block[r] + tail[r];
+  }
 }
 
-// WeightedSums() of a short segment (n - 1 <= kShortInterior).
+// WeightedSums() of a short segment (n - 1 <= kShortInterior): the sums `kEnds` needs.
+template <FreeEnds kEnds>
 inline void ShortWeightedSums(const double* data, const double* w, const BasisColumns& basis,
                               std::int64_t n, double* moments, double* gram) {
   std::array<double, 4> m = {0.0, 0.0, 0.0, 0.0};
@@ -316,9 +384,12 @@ inline void ShortWeightedSums(const double* data, const double* w, const BasisCo
     for (int r = 0; r < 4; ++r) {
       const double* cr = basis.column[r].data() + 1;
       std::array<double, 4> lane;
-      for (int j = 0; j < 4; ++j) lane[j] = 0.0 + wd[j] * cr[j];
-      m[r] = (lane[0] + lane[1]) + (lane[2] + lane[3]);
+      if (NeedsMoment(kEnds, r)) {
+        for (int j = 0; j < 4; ++j) lane[j] = 0.0 + wd[j] * cr[j];
+        m[r] = (lane[0] + lane[1]) + (lane[2] + lane[3]);
+      }
       for (int q = r; q < 4; ++q) {
+        if (!NeedsGram(kEnds, r, q)) continue;
         const double* cq = basis.column[q].data() + 1;
         for (int j = 0; j < 4; ++j) lane[j] = 0.0 + (w[1 + j] * cr[j]) * cq[j];
         g[4 * r + q] = (lane[0] + lane[1]) + (lane[2] + lane[3]);
@@ -328,10 +399,11 @@ inline void ShortWeightedSums(const double* data, const double* w, const BasisCo
   }
   std::array<double, 4> mt = {0.0, 0.0, 0.0, 0.0};
   std::array<double, 16> gt{};
-  AddWeightedTail(data, w, basis, k, n, mt, gt);
+  AddWeightedTail<kEnds>(data, w, basis, k, n, mt, gt);
   for (int r = 0; r < 4; ++r) {
-    moments[r] = m[r] + mt[r];
+    if (NeedsMoment(kEnds, r)) moments[r] = m[r] + mt[r];
     for (int q = r; q < 4; ++q) {
+      if (!NeedsGram(kEnds, r, q)) continue;
       gram[4 * r + q] = g[4 * r + q] + gt[4 * r + q];
       gram[4 * q + r] = gram[4 * r + q];
     }
@@ -652,37 +724,69 @@ class Fitter {
       const bool a_free = j >= first;
       const bool b_free = j + 1 <= last;
       const double* data = s.data() + fa;
+      // Only the free keys' rows are summed (FreeEnds): moment[0..1] when only a is free,
+      // moment[2..3] when only b is.
       std::array<double, 4> moment;
       const double* gram;
+      const bool short_segment = length - 1 <= kShortInterior;
       if (weights == nullptr) {
         gram = grams_.Get(length).data();
-        if (length - 1 <= kShortInterior) {
-          ShortDataMoments(data, basis, length, moment.data());
+        if (a_free && b_free) {
+          if (short_segment) {
+            ShortDataMoments<FreeEnds::kBoth>(data, basis, length, moment.data());
+          } else {
+            DataMoments(data, basis, length, moment.data());
+          }
+        } else if (a_free) {
+          if (short_segment) {
+            ShortDataMoments<FreeEnds::kStartOnly>(data, basis, length, moment.data());
+          } else {
+            DataMomentPair(data, basis.column[0].data(), basis.column[1].data(), length,
+                           moment.data());
+          }
+        } else if (short_segment) {
+          ShortDataMoments<FreeEnds::kEndOnly>(data, basis, length, moment.data());
         } else {
-          DataMoments(data, basis, length, moment.data());
+          DataMomentPair(data, basis.column[2].data(), basis.column[3].data(), length,
+                         moment.data() + 2);
         }
       } else {
         const double* segment_weights = weights + (fa - weights_origin);
-        if (length - 1 <= kShortInterior) {
-          ShortWeightedSums(data, segment_weights, basis, length, moment.data(),
-                            weighted_gram_.data());
+        double* sums = weighted_gram_.data();
+        if (a_free && b_free) {
+          if (short_segment) {
+            ShortWeightedSums<FreeEnds::kBoth>(data, segment_weights, basis, length,
+                                               moment.data(), sums);
+          } else {
+            WeightedSums(data, segment_weights, basis, length, moment.data(), sums);
+          }
+        } else if (a_free) {
+          if (short_segment) {
+            ShortWeightedSums<FreeEnds::kStartOnly>(data, segment_weights, basis, length,
+                                                    moment.data(), sums);
+          } else {
+            WeightedSumsStart(data, segment_weights, basis, length, moment.data(), sums);
+          }
+        } else if (short_segment) {
+          ShortWeightedSums<FreeEnds::kEndOnly>(data, segment_weights, basis, length,
+                                                moment.data(), sums);
         } else {
-          WeightedSums(data, segment_weights, basis, length, moment.data(),
-                       weighted_gram_.data());
+          WeightedSumsEnd(data, segment_weights, basis, length, moment.data(), sums);
         }
-        gram = weighted_gram_.data();
+        gram = sums;
       }
       // What a fixed end contributes comes off the right-hand side: the moments of
-      // (data - c . x_fixed) are the data's moments minus gram x_fixed.
+      // (data - c . x_fixed) are the data's moments minus gram x_fixed (in the free key's rows,
+      // the only ones used).
       if (!a_free) {
         const double v = run.values[j];
         const double m = run.slopes[j];
-        for (int r = 0; r < 4; ++r) moment[r] -= gram[4 * r] * v + gram[4 * r + 1] * m;
+        for (int r = 2; r < 4; ++r) moment[r] -= gram[4 * r] * v + gram[4 * r + 1] * m;
       }
       if (!b_free) {
         const double v = run.values[j + 1];
         const double m = run.slopes[j + 1];
-        for (int r = 0; r < 4; ++r) moment[r] -= gram[4 * r + 2] * v + gram[4 * r + 3] * m;
+        for (int r = 0; r < 2; ++r) moment[r] -= gram[4 * r + 2] * v + gram[4 * r + 3] * m;
       }
       if (a_free) {
         const int ia = j - first;
