@@ -668,6 +668,10 @@ class Fitter {
   void Solve(std::span<const double> s, const KeyRun& run, int first, int last,
              const double* weights = nullptr, std::int64_t weights_origin = 0) {
     const int n = last - first + 1;
+    if (first == 1 && last == 2 && run.count == 4) {
+      SolveInnerPair(s, run, weights, weights_origin);
+      return;
+    }
     if (n <= kWindowKeys) {
       // A removal window's solve (or a short channel's): its blocks on the stack, only the n in
       // use zeroed (zeroing whole arrays costs a string instruction's start-up, more than the
@@ -687,6 +691,109 @@ class Fitter {
     eliminated_.resize(static_cast<std::size_t>(n));
     SolveIn<true>({diag_.data(), upper_.data(), rhs_.data(), eliminated_.data()}, s, run, first,
                   last, weights, weights_origin);
+  }
+
+  // The sums of one segment of `length` >= 2 frames starting at `data` that the rows of its free
+  // keys need (FreeEnds): its moments into `moment` (moment[0..1] of the start key's columns,
+  // moment[2..3] of the end key's) and its Gram sums, returned (weighted by `segment_weights`,
+  // indexed like `data`, when given). The returned sums stay valid until the next call.
+  template <FreeEnds kEnds>
+  const double* SegmentSums(const double* data, std::int64_t length,
+                            const double* segment_weights, double* moment) {
+    const BasisColumns& basis = basis_.Get(length);
+    const bool short_segment = length - 1 <= kShortInterior;
+    if (segment_weights == nullptr) {
+      if (short_segment) {
+        ShortDataMoments<kEnds>(data, basis, length, moment);
+      } else if (kEnds == FreeEnds::kBoth) {
+        DataMoments(data, basis, length, moment);
+      } else if (kEnds == FreeEnds::kStartOnly) {
+        DataMomentPair(data, basis.column[0].data(), basis.column[1].data(), length, moment);
+      } else {
+        DataMomentPair(data, basis.column[2].data(), basis.column[3].data(), length, moment + 2);
+      }
+      return grams_.Get(length).data();
+    }
+    double* sums = weighted_gram_.data();
+    if (short_segment) {
+      ShortWeightedSums<kEnds>(data, segment_weights, basis, length, moment, sums);
+    } else if (kEnds == FreeEnds::kBoth) {
+      WeightedSums(data, segment_weights, basis, length, moment, sums);
+    } else if (kEnds == FreeEnds::kStartOnly) {
+      WeightedSumsStart(data, segment_weights, basis, length, moment, sums);
+    } else {
+      WeightedSumsEnd(data, segment_weights, basis, length, moment, sums);
+    }
+    return sums;
+  }
+
+  // Solve() of the usual removal window: four keys, the outer two fixed, the inner two free. The
+  // same operations on the same values, in the same order, as SolveIn() takes for it (its key
+  // terms, then segments 0, 1 and 2 each followed by the elimination of the key it completes,
+  // then back substitution), written out without its loops and index bookkeeping: most removal
+  // trials and Lawson rounds are this solve.
+  void SolveInnerPair(std::span<const double> s, const KeyRun& run, const double* weights,
+                      std::int64_t weights_origin) {
+    const std::int64_t* f = run.frames;
+    // A free key's own terms: its sample (weighted) and the ridge, added to zero blocks.
+    auto key_terms = [&](std::int64_t frame, Mat2& diag, Vec2& rhs) {
+      const double w = (weights ? weights[frame - weights_origin] : 1.0) + kRidge;
+      diag = {0.0 + w, 0.0, 0.0, 0.0 + kRidge};
+      rhs = {0.0 + w * s[frame], 0.0 + kRidge * CentralDifference(s, frame)};
+    };
+    auto segment_weights = [&](std::int64_t fa) {
+      return weights ? weights + (fa - weights_origin) : nullptr;
+    };
+    Mat2 d1, d2;
+    Vec2 r1, r2;
+    Mat2 u1 = {0.0, 0.0, 0.0, 0.0};
+    key_terms(f[1], d1, r1);
+    key_terms(f[2], d2, r2);
+    std::array<double, 4> moment;
+    // Segment 0: key 0 fixed, key 1 free.
+    if (f[1] - f[0] >= 2) {
+      const double* g = SegmentSums<FreeEnds::kEndOnly>(s.data() + f[0], f[1] - f[0],
+                                                         segment_weights(f[0]), moment.data());
+      const double v = run.values[0];
+      const double m = run.slopes[0];
+      for (int r = 2; r < 4; ++r) moment[r] -= g[4 * r] * v + g[4 * r + 1] * m;
+      d1 = {d1[0] + g[10], d1[1] + g[11], d1[2] + g[14], d1[3] + g[15]};
+      r1 = {r1[0] + moment[2], r1[1] + moment[3]};
+    }
+    // Segment 1: both keys free; then key 1 is complete.
+    if (f[2] - f[1] >= 2) {
+      const double* g = SegmentSums<FreeEnds::kBoth>(s.data() + f[1], f[2] - f[1],
+                                                      segment_weights(f[1]), moment.data());
+      d1 = {d1[0] + g[0], d1[1] + g[1], d1[2] + g[4], d1[3] + g[5]};
+      r1 = {r1[0] + moment[0], r1[1] + moment[1]};
+      d2 = {d2[0] + g[10], d2[1] + g[11], d2[2] + g[14], d2[3] + g[15]};
+      r2 = {r2[0] + moment[2], r2[1] + moment[3]};
+      u1 = {u1[0] + g[2], u1[1] + g[3], u1[2] + g[6], u1[3] + g[7]};
+    }
+    const Mat2 inverse1 = Inverse(d1);
+    const Mat2 e1 = Multiply(inverse1, u1);
+    r1 = Apply(inverse1, r1);
+    // Segment 2: key 2 free, key 3 fixed; then key 2 is complete.
+    if (f[3] - f[2] >= 2) {
+      const double* g = SegmentSums<FreeEnds::kStartOnly>(s.data() + f[2], f[3] - f[2],
+                                                           segment_weights(f[2]), moment.data());
+      const double v = run.values[3];
+      const double m = run.slopes[3];
+      for (int r = 0; r < 2; ++r) moment[r] -= g[4 * r + 2] * v + g[4 * r + 3] * m;
+      d2 = {d2[0] + g[0], d2[1] + g[1], d2[2] + g[4], d2[3] + g[5]};
+      r2 = {r2[0] + moment[0], r2[1] + moment[1]};
+    }
+    const Mat2 lower = {u1[0], u1[2], u1[1], u1[3]};  // U_1 transposed
+    const Mat2 lc = Multiply(lower, e1);
+    d2 = {d2[0] - lc[0], d2[1] - lc[1], d2[2] - lc[2], d2[3] - lc[3]};
+    const Vec2 ld = Apply(lower, r1);
+    r2 = {r2[0] - ld[0], r2[1] - ld[1]};
+    const Vec2 x2 = Apply(Inverse(d2), r2);
+    run.values[2] = x2[0];
+    run.slopes[2] = x2[1];
+    const Vec2 next = Apply(e1, x2);
+    run.values[1] = r1[0] - next[0];
+    run.slopes[1] = r1[1] - next[1];
   }
 
   // The blocks of one solve, per free key: its diagonal block, the block coupling it to the next
@@ -719,62 +826,15 @@ class Fitter {
       rhs[i][1] += kRidge * CentralDifference(s, f);
     }
     // Segment j's frames added to the blocks of its free keys.
-    auto add_segment = [&](int j, std::int64_t fa, std::int64_t length) {
-      const BasisColumns& basis = basis_.Get(length);
-      const bool a_free = j >= first;
-      const bool b_free = j + 1 <= last;
-      const double* data = s.data() + fa;
-      // Only the free keys' rows are summed (FreeEnds): moment[0..1] when only a is free,
-      // moment[2..3] when only b is.
+    // Segment j's sums added to the blocks of its free keys: kEnds says which are free (only
+    // the first and last segments of a solve can have a fixed end).
+    auto add_segment = [&]<FreeEnds kEnds>(int j, std::int64_t fa, std::int64_t length) {
+      constexpr bool a_free = kEnds != FreeEnds::kEndOnly;
+      constexpr bool b_free = kEnds != FreeEnds::kStartOnly;
       std::array<double, 4> moment;
-      const double* gram;
-      const bool short_segment = length - 1 <= kShortInterior;
-      if (weights == nullptr) {
-        gram = grams_.Get(length).data();
-        if (a_free && b_free) {
-          if (short_segment) {
-            ShortDataMoments<FreeEnds::kBoth>(data, basis, length, moment.data());
-          } else {
-            DataMoments(data, basis, length, moment.data());
-          }
-        } else if (a_free) {
-          if (short_segment) {
-            ShortDataMoments<FreeEnds::kStartOnly>(data, basis, length, moment.data());
-          } else {
-            DataMomentPair(data, basis.column[0].data(), basis.column[1].data(), length,
-                           moment.data());
-          }
-        } else if (short_segment) {
-          ShortDataMoments<FreeEnds::kEndOnly>(data, basis, length, moment.data());
-        } else {
-          DataMomentPair(data, basis.column[2].data(), basis.column[3].data(), length,
-                         moment.data() + 2);
-        }
-      } else {
-        const double* segment_weights = weights + (fa - weights_origin);
-        double* sums = weighted_gram_.data();
-        if (a_free && b_free) {
-          if (short_segment) {
-            ShortWeightedSums<FreeEnds::kBoth>(data, segment_weights, basis, length,
-                                               moment.data(), sums);
-          } else {
-            WeightedSums(data, segment_weights, basis, length, moment.data(), sums);
-          }
-        } else if (a_free) {
-          if (short_segment) {
-            ShortWeightedSums<FreeEnds::kStartOnly>(data, segment_weights, basis, length,
-                                                    moment.data(), sums);
-          } else {
-            WeightedSumsStart(data, segment_weights, basis, length, moment.data(), sums);
-          }
-        } else if (short_segment) {
-          ShortWeightedSums<FreeEnds::kEndOnly>(data, segment_weights, basis, length,
-                                                moment.data(), sums);
-        } else {
-          WeightedSumsEnd(data, segment_weights, basis, length, moment.data(), sums);
-        }
-        gram = sums;
-      }
+      const double* gram = SegmentSums<kEnds>(
+          s.data() + fa, length, weights ? weights + (fa - weights_origin) : nullptr,
+          moment.data());
       // What a fixed end contributes comes off the right-hand side: the moments of
       // (data - c . x_fixed) are the data's moments minus gram x_fixed (in the free key's rows,
       // the only ones used).
@@ -833,7 +893,15 @@ class Fitter {
       // A whole long channel is one solve: look at the stop token inside it too (the result is
       // then not used).
       if (kLong && Stopping(length)) return;
-      if (length >= 2) add_segment(j, fa, length);
+      if (length >= 2) {
+        if (j < first) {
+          add_segment.template operator()<FreeEnds::kEndOnly>(j, fa, length);
+        } else if (j + 1 > last) {
+          add_segment.template operator()<FreeEnds::kStartOnly>(j, fa, length);
+        } else {
+          add_segment.template operator()<FreeEnds::kBoth>(j, fa, length);
+        }
+      }
       if (j >= first) eliminate(j - first);  // key j's last segment
     }
     // The last key when it has no segment after it; then back substitution.
