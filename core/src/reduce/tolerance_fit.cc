@@ -665,9 +665,15 @@ class Fitter {
   // other keys fixed: the key frames themselves, the interior frames of every segment that touches
   // a free key, and the ridge. `weights` (optional) weighs each frame, indexed from
   // weights_origin. Block-tridiagonal elimination over the free keys.
+  //
+  // `kept` (a whole channel's unweighted solve, first == 0, last == run.count - 1, more than
+  // kWindowKeys keys, right after another such solve of the same channel, by FitAll()): the first
+  // `kept` keys' eliminated blocks (eliminated_, rhs_, upper_) are those the previous solve left,
+  // and are what this one would compute (KeptKeys()); the elimination resumes after them.
   void Solve(std::span<const double> s, const KeyRun& run, int first, int last,
-             const double* weights = nullptr, std::int64_t weights_origin = 0) {
+             const double* weights = nullptr, std::int64_t weights_origin = 0, int kept = 0) {
     const int n = last - first + 1;
+    long_solve_keys_ = 0;
     if (first == 1 && last == 2 && run.count == 4) {
       SolveInnerPair(s, run, weights, weights_origin);
       return;
@@ -687,10 +693,29 @@ class Fitter {
                      last, weights, weights_origin);
       return;
     }
-    if (!ZeroFill(diag_, n) || !ZeroFill(upper_, n) || !ZeroFill(rhs_, n)) return;
+    // Growing the blocks past a piece is ZeroFill()'s work (a piece at a time, looking at the
+    // stop token).
+    const auto size = static_cast<std::size_t>(n);
+    if (size > kZeroFillPiece &&
+        (size > diag_.capacity() || size > upper_.capacity() || size > rhs_.capacity())) {
+      kept = 0;
+    }
+    if (kept > 0) {
+      // The kept keys' blocks stay; the others start from zero.
+      for (auto* v : {&diag_, &upper_}) {
+        v->resize(size);
+        std::fill(v->begin() + kept, v->end(), Mat2{});
+      }
+      rhs_.resize(size);
+      std::fill(rhs_.begin() + kept, rhs_.end(), Vec2{});
+      if (Stopping(n - kept)) return;
+    } else if (!ZeroFill(diag_, n) || !ZeroFill(upper_, n) || !ZeroFill(rhs_, n)) {
+      return;
+    }
     eliminated_.resize(static_cast<std::size_t>(n));
     SolveIn<true>({diag_.data(), upper_.data(), rhs_.data(), eliminated_.data()}, s, run, first,
-                  last, weights, weights_origin);
+                  last, weights, weights_origin, kept);
+    if (!stopped_) long_solve_keys_ = n;
   }
 
   // The sums of one segment of `length` >= 2 frames starting at `data` that the rows of its free
@@ -808,14 +833,14 @@ class Fitter {
   // Solve() on `blocks`; kLong: a solve long enough to look at the stop token inside.
   template <bool kLong>
   void SolveIn(SolveBlocks blocks, std::span<const double> s, const KeyRun& run, int first,
-               int last, const double* weights, std::int64_t weights_origin) {
+               int last, const double* weights, std::int64_t weights_origin, int kept = 0) {
     const int n = last - first + 1;
     Mat2* diag = blocks.diag;
     Mat2* upper = blocks.upper;
     Vec2* rhs = blocks.rhs;
     Mat2* eliminated = blocks.eliminated;
     auto weight = [&](std::int64_t f) { return weights ? weights[f - weights_origin] : 1.0; };
-    for (int i = 0; i < n; ++i) {
+    for (int i = kept; i < n; ++i) {
       // A noisy channel keys almost every frame: millions of keys in one solve.
       if (kLong && Stopping(1)) return;
       const std::int64_t f = run.frames[first + i];
@@ -885,8 +910,26 @@ class Fitter {
       if (i + 1 < n) eliminated[i] = Multiply(inverse, upper[i]);
       rhs[i] = Apply(inverse, rhs[i]);
     };
-    const int seg_first = std::max(first - 1, 0);
+    int seg_first = std::max(first - 1, 0);
     const int seg_last = std::min(last, run.count - 2);
+    if (kept > 0) {
+      // Resuming after `kept` eliminated keys (first == 0): segment kept - 1 adds only to key
+      // kept, what the both-free sums give its end key (each sum the same however many are
+      // taken: FreeEnds).
+      const int j = kept - 1;
+      const std::int64_t fa = run.frames[j];
+      const std::int64_t length = run.frames[j + 1] - fa;
+      if (kLong && Stopping(length)) return;
+      if (length >= 2) {
+        std::array<double, 4> moment;
+        const double* gram =
+            SegmentSums<FreeEnds::kEndOnly>(s.data() + fa, length, nullptr, moment.data());
+        diag[kept] = {diag[kept][0] + gram[10], diag[kept][1] + gram[11],
+                      diag[kept][2] + gram[14], diag[kept][3] + gram[15]};
+        rhs[kept] = {rhs[kept][0] + moment[2], rhs[kept][1] + moment[3]};
+      }
+      seg_first = kept;
+    }
     for (int j = seg_first; j <= seg_last; ++j) {
       const std::int64_t fa = run.frames[j];
       const std::int64_t length = run.frames[j + 1] - fa;
@@ -987,9 +1030,10 @@ class Fitter {
     for (std::int64_t f = 0; f < last; f += spacing) fit.frames.push_back(f);
     fit.frames.push_back(last);
     std::vector<std::int64_t> next;
+    int kept = 0;
     for (int round = 0; round < kMaxInsertionRounds; ++round) {
       const int count = static_cast<int>(fit.frames.size());
-      FitAll(fit);
+      FitAll(fit, kept);
       if (stopped_) return;
       next.clear();
       bool inserted = false;
@@ -1023,23 +1067,40 @@ class Fitter {
         }
       }
       next.push_back(fit.frames.back());
+      kept = KeptKeys(fit.frames, next);
       fit.frames.swap(next);
       if (!inserted) return;
     }
-    FitAll(fit);
+    FitAll(fit, kept);
+  }
+
+  // The keys whose elimination the next FitAll() can keep from the last one, with key frames
+  // going from `old_frames` to `new_frames`: those before the key ahead of the first frame that
+  // differs (keys 0 .. p-2 when frames 0 .. p-1 agree: their segments and every block they touch
+  // are the same). Only a lone channel's solve leaves its blocks behind, and only a completed
+  // long solve (long_solve_keys_).
+  int KeptKeys(std::span<const std::int64_t> old_frames,
+               std::span<const std::int64_t> new_frames) const {
+    if (channels_.size() != 1 || long_solve_keys_ != static_cast<int>(old_frames.size())) return 0;
+    std::size_t p = 0;
+    while (p < old_frames.size() && p < new_frames.size() && old_frames[p] == new_frames[p]) ++p;
+    return p >= 2 ? static_cast<int>(p) - 1 : 0;
   }
 
   double KeyRatio(const SplineFit& fit, std::size_t c, int i) const {
     return std::abs(fit.values[c][i] - channels_[c][fit.frames[i]]) / bounds_[c];
   }
 
-  void FitAll(SplineFit& fit) {
+  // `kept`: for a lone channel, how many leading keys the previous FitAll()'s forward
+  // elimination, still in the solve's blocks, has eliminated exactly as this one would (their
+  // segments unchanged; see Solve()).
+  void FitAll(SplineFit& fit, int kept = 0) {
     const int count = static_cast<int>(fit.frames.size());
     for (std::size_t c = 0; c < channels_.size(); ++c) {
       if (Stopping(static_cast<std::int64_t>(frame_count_))) return;
       const auto keys = static_cast<std::int64_t>(fit.frames.size());
       if (!ZeroFill(fit.values[c], keys) || !ZeroFill(fit.slopes[c], keys)) return;
-      Solve(channels_[c], RunOf(fit, c), 0, count - 1);
+      Solve(channels_[c], RunOf(fit, c), 0, count - 1, nullptr, 0, kept);
     }
   }
 
@@ -1322,6 +1383,8 @@ class Fitter {
   ToleranceFitOptions options_;
   std::size_t frame_count_;
   std::vector<Mat2> diag_, upper_, eliminated_;
+  // Keys of the last solve if it was a completed long one (its blocks are in diag_ ...), else 0.
+  int long_solve_keys_ = 0;
   std::vector<Vec2> rhs_;
   std::vector<double> lawson_;
   GramCache& grams_ = GramCache::ForThread();
