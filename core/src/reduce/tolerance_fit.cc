@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -557,6 +558,11 @@ double CentralDifference(std::span<const double> s, std::int64_t f) {
   return 0.5 * (s[f + 1] - s[f - 1]);
 }
 
+// Whether a and b are the same double, bit for bit (so +0 and -0 differ).
+inline bool SameBits(double a, double b) {
+  return std::bit_cast<std::uint64_t>(a) == std::bit_cast<std::uint64_t>(b);
+}
+
 // A run of keys of one channel: frames shared, values and slopes its own.
 struct KeyRun {
   const std::int64_t* frames;
@@ -772,19 +778,33 @@ class Fitter {
     Mat2 d1, d2;
     Vec2 r1, r2;
     Mat2 u1 = {0.0, 0.0, 0.0, 0.0};
-    key_terms(f[1], d1, r1);
-    key_terms(f[2], d2, r2);
     std::array<double, 4> moment;
-    // Segment 0: key 0 fixed, key 1 free.
-    if (f[1] - f[0] >= 2) {
-      const double* g = SegmentSums<FreeEnds::kEndOnly>(s.data() + f[0], f[1] - f[0],
-                                                         segment_weights(f[0]), moment.data());
-      const double v = run.values[0];
-      const double m = run.slopes[0];
-      for (int r = 2; r < 4; ++r) moment[r] -= g[4 * r] * v + g[4 * r + 1] * m;
-      d1 = {d1[0] + g[10], d1[1] + g[11], d1[2] + g[14], d1[3] + g[15]};
-      r1 = {r1[0] + moment[2], r1[1] + moment[3]};
+    // Key 1's own terms and segment 0 (key 0 fixed, key 1 free): unweighted, they depend only
+    // on the channel, frames 0 and 1 and key 0, which a candidate's slide trials share; the
+    // blocks of the last such solve are kept and reused when those are the same (to the bit).
+    PairHead& head = pair_head_;
+    const bool reuse = weights == nullptr && head.samples == s.data() && head.f0 == f[0] &&
+                       head.f1 == f[1] && SameBits(head.v0, run.values[0]) &&
+                       SameBits(head.m0, run.slopes[0]);
+    if (reuse) {
+      d1 = head.d1;
+      r1 = head.r1;
+    } else {
+      key_terms(f[1], d1, r1);
+      if (f[1] - f[0] >= 2) {
+        const double* g = SegmentSums<FreeEnds::kEndOnly>(s.data() + f[0], f[1] - f[0],
+                                                           segment_weights(f[0]), moment.data());
+        const double v = run.values[0];
+        const double m = run.slopes[0];
+        for (int r = 2; r < 4; ++r) moment[r] -= g[4 * r] * v + g[4 * r + 1] * m;
+        d1 = {d1[0] + g[10], d1[1] + g[11], d1[2] + g[14], d1[3] + g[15]};
+        r1 = {r1[0] + moment[2], r1[1] + moment[3]};
+      }
+      if (weights == nullptr) {
+        head = {s.data(), f[0], f[1], run.values[0], run.slopes[0], d1, r1};
+      }
     }
+    key_terms(f[2], d2, r2);
     // Segment 1: both keys free; then key 1 is complete.
     if (f[2] - f[1] >= 2) {
       const double* g = SegmentSums<FreeEnds::kBoth>(s.data() + f[1], f[2] - f[1],
@@ -1382,6 +1402,18 @@ class Fitter {
   std::vector<double> bounds_;
   ToleranceFitOptions options_;
   std::size_t frame_count_;
+  // SolveInnerPair()'s blocks of key 1 after segment 0 in its last unweighted solve, and what
+  // they depend on.
+  struct PairHead {
+    const double* samples = nullptr;
+    std::int64_t f0 = -1;
+    std::int64_t f1 = -1;
+    double v0 = 0.0;
+    double m0 = 0.0;
+    Mat2 d1{};
+    Vec2 r1{};
+  };
+  PairHead pair_head_;
   std::vector<Mat2> diag_, upper_, eliminated_;
   // Keys of the last solve if it was a completed long one (its blocks are in diag_ ...), else 0.
   int long_solve_keys_ = 0;
