@@ -32,6 +32,8 @@ constexpr int kMaxInsertionRounds = 64;
 // Samples of work (frames x channels fitted or measured) between two looks at the stop token:
 // about a millisecond.
 constexpr std::int64_t kStopCheckSamples = std::int64_t{1} << 16;
+// Keys whose own terms a long solve adds between two counts of its work for the stop token.
+constexpr int kKeysPerStopCount = 1024;
 // Elements a ZeroFill() sets between two looks at the stop token.
 constexpr std::size_t kZeroFillPiece = 65536;
 // A removal whose window misses the bound by up to this factor is worth reweighting.
@@ -873,15 +875,19 @@ class Fitter {
     Vec2* rhs = blocks.rhs;
     Mat2* eliminated = blocks.eliminated;
     auto weight = [&](std::int64_t f) { return weights ? weights[f - weights_origin] : 1.0; };
-    for (int i = kept; i < n; ++i) {
-      // A noisy channel keys almost every frame: millions of keys in one solve.
-      if (kLong && Stopping(1)) return;
-      const std::int64_t f = run.frames[first + i];
-      const double w = weight(f) + kRidge;
-      diag[i][0] += w;
-      rhs[i][0] += w * s[f];
-      diag[i][3] += kRidge;
-      rhs[i][1] += kRidge * CentralDifference(s, f);
+    // A noisy channel keys almost every frame: millions of keys in one solve, counted for the
+    // stop token a piece of keys at a time.
+    for (int piece = kept; piece < n; piece += kKeysPerStopCount) {
+      const int piece_end = std::min(n, piece + kKeysPerStopCount);
+      if (kLong && Stopping(piece_end - piece)) return;
+      for (int i = piece; i < piece_end; ++i) {
+        const std::int64_t f = run.frames[first + i];
+        const double w = weight(f) + kRidge;
+        diag[i][0] += w;
+        rhs[i][0] += w * s[f];
+        diag[i][3] += kRidge;
+        rhs[i][1] += kRidge * CentralDifference(s, f);
+      }
     }
     // Segment j's frames added to the blocks of its free keys.
     // Segment j's sums added to the blocks of its free keys: kEnds says which are free (only
