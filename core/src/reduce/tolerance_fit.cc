@@ -32,6 +32,9 @@ constexpr int kMaxInsertionRounds = 64;
 // Samples of work (frames x channels fitted or measured) between two looks at the stop token:
 // about a millisecond.
 constexpr std::int64_t kStopCheckSamples = std::int64_t{1} << 16;
+// Frames of segments a long solve sums between two counts of its work for the stop token: a
+// small part of kStopCheckSamples, so that a stop is still seen about as soon.
+constexpr std::int64_t kStopCountPiece = 4096;
 // Keys whose own terms a long solve adds between two counts of its work for the stop token.
 constexpr int kKeysPerStopCount = 1024;
 // Elements a ZeroFill() sets between two looks at the stop token.
@@ -969,12 +972,19 @@ class Fitter {
       }
       seg_first = kept;
     }
+    // A whole long channel is one solve: look at the stop token inside it too (the result is
+    // then not used), its segments' frames counted here and handed over a piece at a time.
+    std::int64_t pending = 0;
     for (int j = seg_first; j <= seg_last; ++j) {
       const std::int64_t fa = run.frames[j];
       const std::int64_t length = run.frames[j + 1] - fa;
-      // A whole long channel is one solve: look at the stop token inside it too (the result is
-      // then not used).
-      if (kLong && Stopping(length)) return;
+      if (kLong) {
+        pending += length;
+        if (pending >= kStopCountPiece) {
+          if (Stopping(pending)) return;
+          pending = 0;
+        }
+      }
       if (length >= 2) {
         if (j < first) {
           add_segment.template operator()<FreeEnds::kEndOnly>(j, fa, length);
@@ -986,6 +996,7 @@ class Fitter {
       }
       if (j >= first) eliminate(j - first);  // key j's last segment
     }
+    if (kLong && Stopping(pending)) return;
     // The last key when it has no segment after it; then back substitution.
     for (int i = std::max(seg_last - first + 1, 0); i < n; ++i) eliminate(i);
     Vec2 x = rhs[n - 1];
@@ -1076,10 +1087,15 @@ class Fitter {
       if (stopped_) return;
       next.clear();
       bool inserted = false;
+      std::int64_t pending = 0;  // work not yet counted for the stop token
       for (int j = 0; j + 1 < count; ++j) {
         next.push_back(fit.frames[j]);
         const std::int64_t length = fit.frames[j + 1] - fit.frames[j];
-        if (Stopping(length * static_cast<std::int64_t>(channels_.size()))) return;
+        pending += length * static_cast<std::int64_t>(channels_.size());
+        if (pending >= kStopCountPiece) {
+          if (Stopping(pending)) return;
+          pending = 0;
+        }
         if (length < 2) continue;
         // The channel most over its bound decides where the new key goes: at its worst frame,
         // or mid-segment when it is a key frame that is over (it is its segments' problem too).
