@@ -1177,6 +1177,19 @@ class Fitter {
     KeyRun Run(std::size_t c) {
       return {frames.data(), values[c].data(), slopes[c].data(), count};
     }
+
+    // Assignment from a window of as many channels, element by element (a vector's assignment
+    // goes through a library copy per channel: a removal copies windows for most trials).
+    void CopyFrom(const Window& other) {
+      frames = other.frames;
+      for (std::size_t c = 0; c < values.size(); ++c) {
+        values[c] = other.values[c];
+        slopes[c] = other.slopes[c];
+      }
+      count = other.count;
+      free_first = other.free_first;
+      free_last = other.free_last;
+    }
   };
 
   // Least-squares fit of the free keys of every channel of `w`; returns the worst error relative
@@ -1337,7 +1350,7 @@ class Fitter {
         // A solve writes only the free keys, so after the first trial the fixed keys still hold
         // the base's values and only the frames need resetting.
         if (d == 0) {
-          trial = base;
+          trial.CopyFrom(base);
         } else {
           trial.frames = base.frames;
         }
@@ -1351,12 +1364,12 @@ class Fitter {
         }
         if (ratio < closest) {
           closest = ratio;
-          miss = trial;
+          miss.CopyFrom(trial);
         }
         if (d == 0) direction = worst_key < before ? -1 : 1;
       }
       if (!removed && closest <= reach && options_.lawson_iterations > 0 && LawsonWindow(miss)) {
-        trial = miss;
+        trial.CopyFrom(miss);
         removed = true;
       }
       if (stopped_) return;  // LawsonWindow() gave up at a stop: the fit is not to be used
