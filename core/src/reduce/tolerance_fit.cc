@@ -1292,6 +1292,13 @@ class Fitter {
     SplineFit out;
     out.values.resize(c_count);
     out.slopes.resize(c_count);
+    // At most every key is kept: room for all of them up front, no regrowing.
+    const auto capacity = static_cast<std::size_t>(count);
+    out.frames.reserve(capacity);
+    for (std::size_t c = 0; c < c_count; ++c) {
+      out.values[c].reserve(capacity);
+      out.slopes[c].reserve(capacity);
+    }
     auto push = [&](int i) {
       out.frames.push_back(fit.frames[i]);
       for (std::size_t c = 0; c < c_count; ++c) {
