@@ -937,7 +937,7 @@ class Fitter {
     // eliminated[i-1]) once every segment touching it has been added: done right after its last
     // segment, so that the next segments' sums can proceed while its divisions complete (the same
     // operations on the same values as eliminating after all segments).
-    auto eliminate = [&](int i) {
+    auto eliminate = [&](int i) __attribute__((always_inline)) {
       if (i > 0) {
         const Mat2& u = upper[i - 1];
         const Mat2 lower = {u[0], u[2], u[1], u[3]};  // U_{i-1} transposed
