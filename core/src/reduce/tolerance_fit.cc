@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <memory>
@@ -31,6 +32,11 @@ constexpr int kMaxInsertionRounds = 64;
 // Samples of work (frames x channels fitted or measured) between two looks at the stop token:
 // about a millisecond.
 constexpr std::int64_t kStopCheckSamples = std::int64_t{1} << 16;
+// Frames of segments a long solve sums between two counts of its work for the stop token: a
+// small part of kStopCheckSamples, so that a stop is still seen about as soon.
+constexpr std::int64_t kStopCountPiece = 4096;
+// Keys whose own terms a long solve adds between two counts of its work for the stop token.
+constexpr int kKeysPerStopCount = 1024;
 // Elements a ZeroFill() sets between two looks at the stop token.
 constexpr std::size_t kZeroFillPiece = 65536;
 // A removal whose window misses the bound by up to this factor is worth reweighting.
@@ -189,6 +195,21 @@ class BasisSource {
 
 // ---- kernels over the interior frames k = 1 .. n-1 of a segment --------------------------------
 
+// Which of a segment's two keys a solve fits: both, or only one when the other is a fixed key at
+// the edge of a removal window. A segment's sums feed only the rows of its free keys (the Gram
+// sums pair each basis column of the segment's start key, columns 0 and 1, and of its end key,
+// columns 2 and 3), so a segment with a fixed end needs only the moments of its free key's
+// columns and the Gram sums that involve them; each sum kept is accumulated exactly as before.
+enum class FreeEnds { kBoth, kStartOnly, kEndOnly };
+
+// Whether moment r, or the Gram sum (r, q) with r <= q, feeds the rows of the free keys.
+constexpr bool NeedsMoment(FreeEnds ends, int r) {
+  return ends == FreeEnds::kBoth || (ends == FreeEnds::kStartOnly ? r < 2 : r >= 2);
+}
+constexpr bool NeedsGram(FreeEnds ends, int r, int q) {
+  return ends == FreeEnds::kBoth || (ends == FreeEnds::kStartOnly ? r < 2 : q >= 2);
+}
+
 // moments[r] = sum of data[k] * column r at k.
 TEMPOKEY_AVX_CLONES void DataMoments(const double* data, const BasisColumns& basis,
                                      std::int64_t n, double* moments) {
@@ -219,8 +240,31 @@ TEMPOKEY_AVX_CLONES void DataMoments(const double* data, const BasisColumns& bas
   moments[3] = simd::Sum(m3) + t3;
 }
 
+// DataMoments() of two columns only, ca and cb, into moments[0] and moments[1]: each the same
+// operations in the same order as DataMoments() gives that column.
+TEMPOKEY_AVX_CLONES void DataMomentPair(const double* data, const double* ca, const double* cb,
+                                        std::int64_t n, double* moments) {
+  using simd::V4;
+  V4 ma = simd::Broadcast(0.0), mb = ma;
+  std::int64_t k = 1;
+  for (; k + 4 <= n; k += 4) {
+    const V4 d = simd::Load(data + k);
+    ma += d * simd::Load(ca + k);
+    mb += d * simd::Load(cb + k);
+  }
+  double ta = 0.0, tb = 0.0;
+  for (; k < n; ++k) {
+    ta += data[k] * ca[k];
+    tb += data[k] * cb[k];
+  }
+  moments[0] = simd::Sum(ma) + ta;
+  moments[1] = simd::Sum(mb) + tb;
+}
+
 // The scalar tail of WeightedSums() and ShortWeightedSums(): frames [k, n) added, in frame order,
 // to the moments `mt` and the upper triangle of the Gram sums `gt`.
+// Only the sums `kEnds` needs are added.
+template <FreeEnds kEnds>
 [[gnu::always_inline]] inline void AddWeightedTail(const double* data, const double* w,
                                                    const BasisColumns& basis, std::int64_t k,
                                                    std::int64_t n, std::array<double, 4>& mt,
@@ -229,16 +273,20 @@ TEMPOKEY_AVX_CLONES void DataMoments(const double* data, const BasisColumns& bas
     const double wd = w[k] * data[k];
     for (int r = 0; r < 4; ++r) {
       const double cr = basis.column[r][k];
-      mt[r] += wd * cr;
-      for (int q = r; q < 4; ++q) gt[4 * r + q] += w[k] * cr * basis.column[q][k];
+      if (NeedsMoment(kEnds, r)) mt[r] += wd * cr;
+      for (int q = r; q < 4; ++q) {
+        if (NeedsGram(kEnds, r, q)) gt[4 * r + q] += w[k] * cr * basis.column[q][k];
+      }
     }
   }
 }
 
-// moments[r] = sum of w[k] data[k] c_r(k); gram[4 r + q] = sum of w[k] c_r(k) c_q(k).
-TEMPOKEY_AVX_CLONES void WeightedSums(const double* data, const double* w,
-                                      const BasisColumns& basis, std::int64_t n, double* moments,
-                                      double* gram) {
+// moments[r] = sum of w[k] data[k] c_r(k); gram[4 r + q] = sum of w[k] c_r(k) c_q(k): the sums
+// `kEnds` needs (the others are left as they were).
+template <FreeEnds kEnds>
+[[gnu::always_inline]] inline void WeightedSumsOf(const double* data, const double* w,
+                                                  const BasisColumns& basis, std::int64_t n,
+                                                  double* moments, double* gram) {
   using simd::V4;
   // Only the upper triangle of the Gram sums is accumulated (and zeroed: zeroing the whole
   // arrays costs a string instruction's start-up, more than a short segment's sums).
@@ -261,19 +309,38 @@ TEMPOKEY_AVX_CLONES void WeightedSums(const double* data, const double* w,
     std::array<V4, 4> c;
     for (int r = 0; r < 4; ++r) c[r] = simd::Load(basis.column[r].data() + k);
     for (int r = 0; r < 4; ++r) {
-      m[r] += wd * c[r];
+      if (NeedsMoment(kEnds, r)) m[r] += wd * c[r];
       const V4 wc = wk * c[r];
-      for (int q = r; q < 4; ++q) g[4 * r + q] += wc * c[q];
+      for (int q = r; q < 4; ++q) {
+        if (NeedsGram(kEnds, r, q)) g[4 * r + q] += wc * c[q];
+      }
     }
   }
-  AddWeightedTail(data, w, basis, k, n, mt, gt);
+  AddWeightedTail<kEnds>(data, w, basis, k, n, mt, gt);
   for (int r = 0; r < 4; ++r) {
-    moments[r] = simd::Sum(m[r]) + mt[r];
+    if (NeedsMoment(kEnds, r)) moments[r] = simd::Sum(m[r]) + mt[r];
     for (int q = r; q < 4; ++q) {
+      if (!NeedsGram(kEnds, r, q)) continue;
       gram[4 * r + q] = simd::Sum(g[4 * r + q]) + gt[4 * r + q];
       gram[4 * q + r] = gram[4 * r + q];
     }
   }
+}
+
+TEMPOKEY_AVX_CLONES void WeightedSums(const double* data, const double* w,
+                                      const BasisColumns& basis, std::int64_t n, double* moments,
+                                      double* gram) {
+  WeightedSumsOf<FreeEnds::kBoth>(data, w, basis, n, moments, gram);
+}
+TEMPOKEY_AVX_CLONES void WeightedSumsStart(const double* data, const double* w,
+                                           const BasisColumns& basis, std::int64_t n,
+                                           double* moments, double* gram) {
+  WeightedSumsOf<FreeEnds::kStartOnly>(data, w, basis, n, moments, gram);
+}
+TEMPOKEY_AVX_CLONES void WeightedSumsEnd(const double* data, const double* w,
+                                         const BasisColumns& basis, std::int64_t n,
+                                         double* moments, double* gram) {
+  WeightedSumsOf<FreeEnds::kEndOnly>(data, w, basis, n, moments, gram);
 }
 
 // Segments this short (at most kShortInterior interior frames) reach at most one of the kernels'
@@ -282,13 +349,15 @@ TEMPOKEY_AVX_CLONES void WeightedSums(const double* data, const double* w,
 // tail from 0), so the same bits.
 constexpr std::int64_t kShortInterior = 7;
 
-// DataMoments() of a short segment (n - 1 <= kShortInterior).
+// DataMoments() of a short segment (n - 1 <= kShortInterior): the moments `kEnds` needs.
+template <FreeEnds kEnds>
 inline void ShortDataMoments(const double* data, const BasisColumns& basis, std::int64_t n,
                              double* moments) {
   std::int64_t k = 1;
   std::array<double, 4> block = {0.0, 0.0, 0.0, 0.0};
   if (k + 4 <= n) {
     for (int r = 0; r < 4; ++r) {
+      if (!NeedsMoment(kEnds, r)) continue;
       const double* c = basis.column[r].data();
       block[r] = ((0.0 + data[1] * c[1]) + (0.0 + data[2] * c[2])) +
                  ((0.0 + data[3] * c[3]) + (0.0 + data[4] * c[4]));
@@ -298,12 +367,17 @@ inline void ShortDataMoments(const double* data, const BasisColumns& basis, std:
   // (Without a block, the kernel's empty lanes sum to +0, as `block` holds.)
   std::array<double, 4> tail = {0.0, 0.0, 0.0, 0.0};
   for (; k < n; ++k) {
-    for (int r = 0; r < 4; ++r) tail[r] += data[k] * basis.column[r][k];
+    for (int r = 0; r < 4; ++r) {
+      if (NeedsMoment(kEnds, r)) tail[r] += data[k] * basis.column[r][k];
+    }
   }
-  for (int r = 0; r < 4; ++r) moments[r] = block[r] + tail[r];
+  for (int r = 0; r < 4; ++r) {
+    if (NeedsMoment(kEnds, r)) moments[r] = block[r] + tail[r];
+  }
 }
 
-// WeightedSums() of a short segment (n - 1 <= kShortInterior).
+// WeightedSums() of a short segment (n - 1 <= kShortInterior): the sums `kEnds` needs.
+template <FreeEnds kEnds>
 inline void ShortWeightedSums(const double* data, const double* w, const BasisColumns& basis,
                               std::int64_t n, double* moments, double* gram) {
   std::array<double, 4> m = {0.0, 0.0, 0.0, 0.0};
@@ -316,9 +390,12 @@ inline void ShortWeightedSums(const double* data, const double* w, const BasisCo
     for (int r = 0; r < 4; ++r) {
       const double* cr = basis.column[r].data() + 1;
       std::array<double, 4> lane;
-      for (int j = 0; j < 4; ++j) lane[j] = 0.0 + wd[j] * cr[j];
-      m[r] = (lane[0] + lane[1]) + (lane[2] + lane[3]);
+      if (NeedsMoment(kEnds, r)) {
+        for (int j = 0; j < 4; ++j) lane[j] = 0.0 + wd[j] * cr[j];
+        m[r] = (lane[0] + lane[1]) + (lane[2] + lane[3]);
+      }
       for (int q = r; q < 4; ++q) {
+        if (!NeedsGram(kEnds, r, q)) continue;
         const double* cq = basis.column[q].data() + 1;
         for (int j = 0; j < 4; ++j) lane[j] = 0.0 + (w[1 + j] * cr[j]) * cq[j];
         g[4 * r + q] = (lane[0] + lane[1]) + (lane[2] + lane[3]);
@@ -328,10 +405,11 @@ inline void ShortWeightedSums(const double* data, const double* w, const BasisCo
   }
   std::array<double, 4> mt = {0.0, 0.0, 0.0, 0.0};
   std::array<double, 16> gt{};
-  AddWeightedTail(data, w, basis, k, n, mt, gt);
+  AddWeightedTail<kEnds>(data, w, basis, k, n, mt, gt);
   for (int r = 0; r < 4; ++r) {
-    moments[r] = m[r] + mt[r];
+    if (NeedsMoment(kEnds, r)) moments[r] = m[r] + mt[r];
     for (int q = r; q < 4; ++q) {
+      if (!NeedsGram(kEnds, r, q)) continue;
       gram[4 * r + q] = g[4 * r + q] + gt[4 * r + q];
       gram[4 * q + r] = gram[4 * r + q];
     }
@@ -364,24 +442,37 @@ inline double ShortMaxError(const double* data, const BasisColumns& basis, std::
 }
 
 // The largest |curve - data| over the interior frames, the curve's coefficients `x` =
-// (v_a, m_a, v_b, m_b); returns as soon as a block of frames exceeds `limit` (some value above
-// it: callers only compare it with the limit then).
+// (v_a, m_a, v_b, m_b); returns soon after a frame exceeds `limit` (some value above it: callers
+// only compare it with the limit then).
 TEMPOKEY_AVX_CLONES double MaxError(const double* data, const BasisColumns& basis,
                                     std::int64_t n, const double* x, double limit) {
   using simd::V4;
   const V4 x0 = simd::Broadcast(x[0]), x1 = simd::Broadcast(x[1]);
   const V4 x2 = simd::Broadcast(x[2]), x3 = simd::Broadcast(x[3]);
   const V4 limit_v = simd::Broadcast(limit);
+  auto block_error = [&](std::int64_t at) __attribute__((always_inline)) {
+    const V4 y = ((simd::Load(basis.column[0].data() + at) * x0 +
+                   simd::Load(basis.column[1].data() + at) * x1) +
+                  (simd::Load(basis.column[2].data() + at) * x2 +
+                   simd::Load(basis.column[3].data() + at) * x3));
+    return simd::Abs(y - simd::Load(data + at));
+  };
   V4 worst = simd::Broadcast(0.0);
   std::int64_t k = 1;
-  for (; k + 4 <= n; k += 4) {
-    const V4 y = ((simd::Load(basis.column[0].data() + k) * x0 +
-                   simd::Load(basis.column[1].data() + k) * x1) +
-                  (simd::Load(basis.column[2].data() + k) * x2 +
-                   simd::Load(basis.column[3].data() + k) * x3));
-    const V4 e = simd::Abs(y - simd::Load(data + k));
+  // Two blocks per look at the limit: a maximum does not depend on how often it is looked at,
+  // and past the limit any value above it will do.
+  for (; k + 8 <= n; k += 8) {
+    const V4 e0 = block_error(k);
+    const V4 e1 = block_error(k + 4);
+    worst = e0 > worst ? e0 : worst;
+    worst = e1 > worst ? e1 : worst;
+    if (simd::Any(worst > limit_v)) return simd::Max(worst);
+  }
+  if (k + 4 <= n) {
+    const V4 e = block_error(k);
     worst = e > worst ? e : worst;
-    if (simd::Any(e > limit_v)) return simd::Max(worst);
+    if (simd::Any(worst > limit_v)) return simd::Max(worst);
+    k += 4;
   }
   double tail = simd::Max(worst);
   for (; k < n; ++k) {
@@ -483,6 +574,11 @@ double CentralDifference(std::span<const double> s, std::int64_t f) {
   if (f == 0) return s[1] - s[0];
   if (f == n - 1) return s[n - 1] - s[n - 2];
   return 0.5 * (s[f + 1] - s[f - 1]);
+}
+
+// Whether a and b are the same double, bit for bit (so +0 and -0 differ).
+inline bool SameBits(double a, double b) {
+  return std::bit_cast<std::uint64_t>(a) == std::bit_cast<std::uint64_t>(b);
 }
 
 // A run of keys of one channel: frames shared, values and slopes its own.
@@ -593,9 +689,19 @@ class Fitter {
   // other keys fixed: the key frames themselves, the interior frames of every segment that touches
   // a free key, and the ridge. `weights` (optional) weighs each frame, indexed from
   // weights_origin. Block-tridiagonal elimination over the free keys.
+  //
+  // `kept` (a whole channel's unweighted solve, first == 0, last == run.count - 1, more than
+  // kWindowKeys keys, right after another such solve of the same channel, by FitAll()): the first
+  // `kept` keys' eliminated blocks (eliminated_, rhs_, upper_) are those the previous solve left,
+  // and are what this one would compute (KeptKeys()); the elimination resumes after them.
   void Solve(std::span<const double> s, const KeyRun& run, int first, int last,
-             const double* weights = nullptr, std::int64_t weights_origin = 0) {
+             const double* weights = nullptr, std::int64_t weights_origin = 0, int kept = 0) {
     const int n = last - first + 1;
+    long_solve_keys_ = 0;
+    if (first == 1 && last == 2 && run.count == 4) {
+      SolveInnerPair(s, run, weights, weights_origin);
+      return;
+    }
     if (n <= kWindowKeys) {
       // A removal window's solve (or a short channel's): its blocks on the stack, only the n in
       // use zeroed (zeroing whole arrays costs a string instruction's start-up, more than the
@@ -611,10 +717,146 @@ class Fitter {
                      last, weights, weights_origin);
       return;
     }
-    if (!ZeroFill(diag_, n) || !ZeroFill(upper_, n) || !ZeroFill(rhs_, n)) return;
+    // Growing the blocks past a piece is ZeroFill()'s work (a piece at a time, looking at the
+    // stop token).
+    const auto size = static_cast<std::size_t>(n);
+    if (size > kZeroFillPiece &&
+        (size > diag_.capacity() || size > upper_.capacity() || size > rhs_.capacity())) {
+      kept = 0;
+    }
+    if (kept > 0) {
+      // The kept keys' blocks stay; the others start from zero.
+      for (auto* v : {&diag_, &upper_}) {
+        v->resize(size);
+        std::fill(v->begin() + kept, v->end(), Mat2{});
+      }
+      rhs_.resize(size);
+      std::fill(rhs_.begin() + kept, rhs_.end(), Vec2{});
+      if (Stopping(n - kept)) return;
+    } else if (!ZeroFill(diag_, n) || !ZeroFill(upper_, n) || !ZeroFill(rhs_, n)) {
+      return;
+    }
     eliminated_.resize(static_cast<std::size_t>(n));
     SolveIn<true>({diag_.data(), upper_.data(), rhs_.data(), eliminated_.data()}, s, run, first,
-                  last, weights, weights_origin);
+                  last, weights, weights_origin, kept);
+    if (!stopped_) long_solve_keys_ = n;
+  }
+
+  // The sums of one segment of `length` >= 2 frames starting at `data` that the rows of its free
+  // keys need (FreeEnds): its moments into `moment` (moment[0..1] of the start key's columns,
+  // moment[2..3] of the end key's) and its Gram sums, returned (weighted by `segment_weights`,
+  // indexed like `data`, when given). The returned sums stay valid until the next call.
+  template <FreeEnds kEnds>
+  const double* SegmentSums(const double* data, std::int64_t length,
+                            const double* segment_weights, double* moment) {
+    const BasisColumns& basis = basis_.Get(length);
+    const bool short_segment = length - 1 <= kShortInterior;
+    if (segment_weights == nullptr) {
+      if (short_segment) {
+        ShortDataMoments<kEnds>(data, basis, length, moment);
+      } else if (kEnds == FreeEnds::kBoth) {
+        DataMoments(data, basis, length, moment);
+      } else if (kEnds == FreeEnds::kStartOnly) {
+        DataMomentPair(data, basis.column[0].data(), basis.column[1].data(), length, moment);
+      } else {
+        DataMomentPair(data, basis.column[2].data(), basis.column[3].data(), length, moment + 2);
+      }
+      return grams_.Get(length).data();
+    }
+    double* sums = weighted_gram_.data();
+    if (short_segment) {
+      ShortWeightedSums<kEnds>(data, segment_weights, basis, length, moment, sums);
+    } else if (kEnds == FreeEnds::kBoth) {
+      WeightedSums(data, segment_weights, basis, length, moment, sums);
+    } else if (kEnds == FreeEnds::kStartOnly) {
+      WeightedSumsStart(data, segment_weights, basis, length, moment, sums);
+    } else {
+      WeightedSumsEnd(data, segment_weights, basis, length, moment, sums);
+    }
+    return sums;
+  }
+
+  // Solve() of the usual removal window: four keys, the outer two fixed, the inner two free. The
+  // same operations on the same values, in the same order, as SolveIn() takes for it (its key
+  // terms, then segments 0, 1 and 2 each followed by the elimination of the key it completes,
+  // then back substitution), written out without its loops and index bookkeeping: most removal
+  // trials and Lawson rounds are this solve.
+  void SolveInnerPair(std::span<const double> s, const KeyRun& run, const double* weights,
+                      std::int64_t weights_origin) {
+    const std::int64_t* f = run.frames;
+    // A free key's own terms: its sample (weighted) and the ridge, added to zero blocks.
+    auto key_terms = [&](std::int64_t frame, Mat2& diag, Vec2& rhs) {
+      const double w = (weights ? weights[frame - weights_origin] : 1.0) + kRidge;
+      diag = {0.0 + w, 0.0, 0.0, 0.0 + kRidge};
+      rhs = {0.0 + w * s[frame], 0.0 + kRidge * CentralDifference(s, frame)};
+    };
+    auto segment_weights = [&](std::int64_t fa) {
+      return weights ? weights + (fa - weights_origin) : nullptr;
+    };
+    Mat2 d1, d2;
+    Vec2 r1, r2;
+    Mat2 u1 = {0.0, 0.0, 0.0, 0.0};
+    std::array<double, 4> moment;
+    // Key 1's own terms and segment 0 (key 0 fixed, key 1 free): unweighted, they depend only
+    // on the channel, frames 0 and 1 and key 0, which a candidate's slide trials share; the
+    // blocks of the last such solve are kept and reused when those are the same (to the bit).
+    PairHead& head = pair_head_;
+    const bool reuse = weights == nullptr && head.samples == s.data() && head.f0 == f[0] &&
+                       head.f1 == f[1] && SameBits(head.v0, run.values[0]) &&
+                       SameBits(head.m0, run.slopes[0]);
+    if (reuse) {
+      d1 = head.d1;
+      r1 = head.r1;
+    } else {
+      key_terms(f[1], d1, r1);
+      if (f[1] - f[0] >= 2) {
+        const double* g = SegmentSums<FreeEnds::kEndOnly>(s.data() + f[0], f[1] - f[0],
+                                                           segment_weights(f[0]), moment.data());
+        const double v = run.values[0];
+        const double m = run.slopes[0];
+        for (int r = 2; r < 4; ++r) moment[r] -= g[4 * r] * v + g[4 * r + 1] * m;
+        d1 = {d1[0] + g[10], d1[1] + g[11], d1[2] + g[14], d1[3] + g[15]};
+        r1 = {r1[0] + moment[2], r1[1] + moment[3]};
+      }
+      if (weights == nullptr) {
+        head = {s.data(), f[0], f[1], run.values[0], run.slopes[0], d1, r1};
+      }
+    }
+    key_terms(f[2], d2, r2);
+    // Segment 1: both keys free; then key 1 is complete.
+    if (f[2] - f[1] >= 2) {
+      const double* g = SegmentSums<FreeEnds::kBoth>(s.data() + f[1], f[2] - f[1],
+                                                      segment_weights(f[1]), moment.data());
+      d1 = {d1[0] + g[0], d1[1] + g[1], d1[2] + g[4], d1[3] + g[5]};
+      r1 = {r1[0] + moment[0], r1[1] + moment[1]};
+      d2 = {d2[0] + g[10], d2[1] + g[11], d2[2] + g[14], d2[3] + g[15]};
+      r2 = {r2[0] + moment[2], r2[1] + moment[3]};
+      u1 = {u1[0] + g[2], u1[1] + g[3], u1[2] + g[6], u1[3] + g[7]};
+    }
+    const Mat2 inverse1 = Inverse(d1);
+    const Mat2 e1 = Multiply(inverse1, u1);
+    r1 = Apply(inverse1, r1);
+    // Segment 2: key 2 free, key 3 fixed; then key 2 is complete.
+    if (f[3] - f[2] >= 2) {
+      const double* g = SegmentSums<FreeEnds::kStartOnly>(s.data() + f[2], f[3] - f[2],
+                                                           segment_weights(f[2]), moment.data());
+      const double v = run.values[3];
+      const double m = run.slopes[3];
+      for (int r = 0; r < 2; ++r) moment[r] -= g[4 * r + 2] * v + g[4 * r + 3] * m;
+      d2 = {d2[0] + g[0], d2[1] + g[1], d2[2] + g[4], d2[3] + g[5]};
+      r2 = {r2[0] + moment[0], r2[1] + moment[1]};
+    }
+    const Mat2 lower = {u1[0], u1[2], u1[1], u1[3]};  // U_1 transposed
+    const Mat2 lc = Multiply(lower, e1);
+    d2 = {d2[0] - lc[0], d2[1] - lc[1], d2[2] - lc[2], d2[3] - lc[3]};
+    const Vec2 ld = Apply(lower, r1);
+    r2 = {r2[0] - ld[0], r2[1] - ld[1]};
+    const Vec2 x2 = Apply(Inverse(d2), r2);
+    run.values[2] = x2[0];
+    run.slopes[2] = x2[1];
+    const Vec2 next = Apply(e1, x2);
+    run.values[1] = r1[0] - next[0];
+    run.slopes[1] = r1[1] - next[1];
   }
 
   // The blocks of one solve, per free key: its diagonal block, the block coupling it to the next
@@ -629,60 +871,49 @@ class Fitter {
   // Solve() on `blocks`; kLong: a solve long enough to look at the stop token inside.
   template <bool kLong>
   void SolveIn(SolveBlocks blocks, std::span<const double> s, const KeyRun& run, int first,
-               int last, const double* weights, std::int64_t weights_origin) {
+               int last, const double* weights, std::int64_t weights_origin, int kept = 0) {
     const int n = last - first + 1;
     Mat2* diag = blocks.diag;
     Mat2* upper = blocks.upper;
     Vec2* rhs = blocks.rhs;
     Mat2* eliminated = blocks.eliminated;
     auto weight = [&](std::int64_t f) { return weights ? weights[f - weights_origin] : 1.0; };
-    for (int i = 0; i < n; ++i) {
-      // A noisy channel keys almost every frame: millions of keys in one solve.
-      if (kLong && Stopping(1)) return;
-      const std::int64_t f = run.frames[first + i];
-      const double w = weight(f) + kRidge;
-      diag[i][0] += w;
-      rhs[i][0] += w * s[f];
-      diag[i][3] += kRidge;
-      rhs[i][1] += kRidge * CentralDifference(s, f);
+    // A noisy channel keys almost every frame: millions of keys in one solve, counted for the
+    // stop token a piece of keys at a time.
+    for (int piece = kept; piece < n; piece += kKeysPerStopCount) {
+      const int piece_end = std::min(n, piece + kKeysPerStopCount);
+      if (kLong && Stopping(piece_end - piece)) return;
+      for (int i = piece; i < piece_end; ++i) {
+        const std::int64_t f = run.frames[first + i];
+        const double w = weight(f) + kRidge;
+        diag[i][0] += w;
+        rhs[i][0] += w * s[f];
+        diag[i][3] += kRidge;
+        rhs[i][1] += kRidge * CentralDifference(s, f);
+      }
     }
     // Segment j's frames added to the blocks of its free keys.
-    auto add_segment = [&](int j, std::int64_t fa, std::int64_t length) {
-      const BasisColumns& basis = basis_.Get(length);
-      const bool a_free = j >= first;
-      const bool b_free = j + 1 <= last;
-      const double* data = s.data() + fa;
+    // Segment j's sums added to the blocks of its free keys: kEnds says which are free (only
+    // the first and last segments of a solve can have a fixed end).
+    auto add_segment = [&]<FreeEnds kEnds>(int j, std::int64_t fa, std::int64_t length) {
+      constexpr bool a_free = kEnds != FreeEnds::kEndOnly;
+      constexpr bool b_free = kEnds != FreeEnds::kStartOnly;
       std::array<double, 4> moment;
-      const double* gram;
-      if (weights == nullptr) {
-        gram = grams_.Get(length).data();
-        if (length - 1 <= kShortInterior) {
-          ShortDataMoments(data, basis, length, moment.data());
-        } else {
-          DataMoments(data, basis, length, moment.data());
-        }
-      } else {
-        const double* segment_weights = weights + (fa - weights_origin);
-        if (length - 1 <= kShortInterior) {
-          ShortWeightedSums(data, segment_weights, basis, length, moment.data(),
-                            weighted_gram_.data());
-        } else {
-          WeightedSums(data, segment_weights, basis, length, moment.data(),
-                       weighted_gram_.data());
-        }
-        gram = weighted_gram_.data();
-      }
+      const double* gram = SegmentSums<kEnds>(
+          s.data() + fa, length, weights ? weights + (fa - weights_origin) : nullptr,
+          moment.data());
       // What a fixed end contributes comes off the right-hand side: the moments of
-      // (data - c . x_fixed) are the data's moments minus gram x_fixed.
+      // (data - c . x_fixed) are the data's moments minus gram x_fixed (in the free key's rows,
+      // the only ones used).
       if (!a_free) {
         const double v = run.values[j];
         const double m = run.slopes[j];
-        for (int r = 0; r < 4; ++r) moment[r] -= gram[4 * r] * v + gram[4 * r + 1] * m;
+        for (int r = 2; r < 4; ++r) moment[r] -= gram[4 * r] * v + gram[4 * r + 1] * m;
       }
       if (!b_free) {
         const double v = run.values[j + 1];
         const double m = run.slopes[j + 1];
-        for (int r = 0; r < 4; ++r) moment[r] -= gram[4 * r + 2] * v + gram[4 * r + 3] * m;
+        for (int r = 0; r < 2; ++r) moment[r] -= gram[4 * r + 2] * v + gram[4 * r + 3] * m;
       }
       if (a_free) {
         const int ia = j - first;
@@ -706,7 +937,7 @@ class Fitter {
     // eliminated[i-1]) once every segment touching it has been added: done right after its last
     // segment, so that the next segments' sums can proceed while its divisions complete (the same
     // operations on the same values as eliminating after all segments).
-    auto eliminate = [&](int i) {
+    auto eliminate = [&](int i) __attribute__((always_inline)) {
       if (i > 0) {
         const Mat2& u = upper[i - 1];
         const Mat2 lower = {u[0], u[2], u[1], u[3]};  // U_{i-1} transposed
@@ -721,17 +952,51 @@ class Fitter {
       if (i + 1 < n) eliminated[i] = Multiply(inverse, upper[i]);
       rhs[i] = Apply(inverse, rhs[i]);
     };
-    const int seg_first = std::max(first - 1, 0);
+    int seg_first = std::max(first - 1, 0);
     const int seg_last = std::min(last, run.count - 2);
+    if (kept > 0) {
+      // Resuming after `kept` eliminated keys (first == 0): segment kept - 1 adds only to key
+      // kept, what the both-free sums give its end key (each sum the same however many are
+      // taken: FreeEnds).
+      const int j = kept - 1;
+      const std::int64_t fa = run.frames[j];
+      const std::int64_t length = run.frames[j + 1] - fa;
+      if (kLong && Stopping(length)) return;
+      if (length >= 2) {
+        std::array<double, 4> moment;
+        const double* gram =
+            SegmentSums<FreeEnds::kEndOnly>(s.data() + fa, length, nullptr, moment.data());
+        diag[kept] = {diag[kept][0] + gram[10], diag[kept][1] + gram[11],
+                      diag[kept][2] + gram[14], diag[kept][3] + gram[15]};
+        rhs[kept] = {rhs[kept][0] + moment[2], rhs[kept][1] + moment[3]};
+      }
+      seg_first = kept;
+    }
+    // A whole long channel is one solve: look at the stop token inside it too (the result is
+    // then not used), its segments' frames counted here and handed over a piece at a time.
+    std::int64_t pending = 0;
     for (int j = seg_first; j <= seg_last; ++j) {
       const std::int64_t fa = run.frames[j];
       const std::int64_t length = run.frames[j + 1] - fa;
-      // A whole long channel is one solve: look at the stop token inside it too (the result is
-      // then not used).
-      if (kLong && Stopping(length)) return;
-      if (length >= 2) add_segment(j, fa, length);
+      if (kLong) {
+        pending += length;
+        if (pending >= kStopCountPiece) {
+          if (Stopping(pending)) return;
+          pending = 0;
+        }
+      }
+      if (length >= 2) {
+        if (j < first) {
+          add_segment.template operator()<FreeEnds::kEndOnly>(j, fa, length);
+        } else if (j + 1 > last) {
+          add_segment.template operator()<FreeEnds::kStartOnly>(j, fa, length);
+        } else {
+          add_segment.template operator()<FreeEnds::kBoth>(j, fa, length);
+        }
+      }
       if (j >= first) eliminate(j - first);  // key j's last segment
     }
+    if (kLong && Stopping(pending)) return;
     // The last key when it has no segment after it; then back substitution.
     for (int i = std::max(seg_last - first + 1, 0); i < n; ++i) eliminate(i);
     Vec2 x = rhs[n - 1];
@@ -815,16 +1080,22 @@ class Fitter {
     for (std::int64_t f = 0; f < last; f += spacing) fit.frames.push_back(f);
     fit.frames.push_back(last);
     std::vector<std::int64_t> next;
+    int kept = 0;
     for (int round = 0; round < kMaxInsertionRounds; ++round) {
       const int count = static_cast<int>(fit.frames.size());
-      FitAll(fit);
+      FitAll(fit, kept);
       if (stopped_) return;
       next.clear();
       bool inserted = false;
+      std::int64_t pending = 0;  // work not yet counted for the stop token
       for (int j = 0; j + 1 < count; ++j) {
         next.push_back(fit.frames[j]);
         const std::int64_t length = fit.frames[j + 1] - fit.frames[j];
-        if (Stopping(length * static_cast<std::int64_t>(channels_.size()))) return;
+        pending += length * static_cast<std::int64_t>(channels_.size());
+        if (pending >= kStopCountPiece) {
+          if (Stopping(pending)) return;
+          pending = 0;
+        }
         if (length < 2) continue;
         // The channel most over its bound decides where the new key goes: at its worst frame,
         // or mid-segment when it is a key frame that is over (it is its segments' problem too).
@@ -851,23 +1122,40 @@ class Fitter {
         }
       }
       next.push_back(fit.frames.back());
+      kept = KeptKeys(fit.frames, next);
       fit.frames.swap(next);
       if (!inserted) return;
     }
-    FitAll(fit);
+    FitAll(fit, kept);
+  }
+
+  // The keys whose elimination the next FitAll() can keep from the last one, with key frames
+  // going from `old_frames` to `new_frames`: those before the key ahead of the first frame that
+  // differs (keys 0 .. p-2 when frames 0 .. p-1 agree: their segments and every block they touch
+  // are the same). Only a lone channel's solve leaves its blocks behind, and only a completed
+  // long solve (long_solve_keys_).
+  int KeptKeys(std::span<const std::int64_t> old_frames,
+               std::span<const std::int64_t> new_frames) const {
+    if (channels_.size() != 1 || long_solve_keys_ != static_cast<int>(old_frames.size())) return 0;
+    std::size_t p = 0;
+    while (p < old_frames.size() && p < new_frames.size() && old_frames[p] == new_frames[p]) ++p;
+    return p >= 2 ? static_cast<int>(p) - 1 : 0;
   }
 
   double KeyRatio(const SplineFit& fit, std::size_t c, int i) const {
     return std::abs(fit.values[c][i] - channels_[c][fit.frames[i]]) / bounds_[c];
   }
 
-  void FitAll(SplineFit& fit) {
+  // `kept`: for a lone channel, how many leading keys the previous FitAll()'s forward
+  // elimination, still in the solve's blocks, has eliminated exactly as this one would (their
+  // segments unchanged; see Solve()).
+  void FitAll(SplineFit& fit, int kept = 0) {
     const int count = static_cast<int>(fit.frames.size());
     for (std::size_t c = 0; c < channels_.size(); ++c) {
       if (Stopping(static_cast<std::int64_t>(frame_count_))) return;
       const auto keys = static_cast<std::int64_t>(fit.frames.size());
       if (!ZeroFill(fit.values[c], keys) || !ZeroFill(fit.slopes[c], keys)) return;
-      Solve(channels_[c], RunOf(fit, c), 0, count - 1);
+      Solve(channels_[c], RunOf(fit, c), 0, count - 1, nullptr, 0, kept);
     }
   }
 
@@ -888,6 +1176,19 @@ class Fitter {
 
     KeyRun Run(std::size_t c) {
       return {frames.data(), values[c].data(), slopes[c].data(), count};
+    }
+
+    // Assignment from a window of as many channels, element by element (a vector's assignment
+    // goes through a library copy per channel: a removal copies windows for most trials).
+    void CopyFrom(const Window& other) {
+      frames = other.frames;
+      for (std::size_t c = 0; c < values.size(); ++c) {
+        values[c] = other.values[c];
+        slopes[c] = other.slopes[c];
+      }
+      count = other.count;
+      free_first = other.free_first;
+      free_last = other.free_last;
     }
   };
 
@@ -991,6 +1292,13 @@ class Fitter {
     SplineFit out;
     out.values.resize(c_count);
     out.slopes.resize(c_count);
+    // At most every key is kept: room for all of them up front, no regrowing.
+    const auto capacity = static_cast<std::size_t>(count);
+    out.frames.reserve(capacity);
+    for (std::size_t c = 0; c < c_count; ++c) {
+      out.values[c].reserve(capacity);
+      out.slopes[c].reserve(capacity);
+    }
     auto push = [&](int i) {
       out.frames.push_back(fit.frames[i]);
       for (std::size_t c = 0; c < c_count; ++c) {
@@ -1049,7 +1357,7 @@ class Fitter {
         // A solve writes only the free keys, so after the first trial the fixed keys still hold
         // the base's values and only the frames need resetting.
         if (d == 0) {
-          trial = base;
+          trial.CopyFrom(base);
         } else {
           trial.frames = base.frames;
         }
@@ -1063,12 +1371,12 @@ class Fitter {
         }
         if (ratio < closest) {
           closest = ratio;
-          miss = trial;
+          miss.CopyFrom(trial);
         }
         if (d == 0) direction = worst_key < before ? -1 : 1;
       }
       if (!removed && closest <= reach && options_.lawson_iterations > 0 && LawsonWindow(miss)) {
-        trial = miss;
+        trial.CopyFrom(miss);
         removed = true;
       }
       if (stopped_) return;  // LawsonWindow() gave up at a stop: the fit is not to be used
@@ -1149,7 +1457,21 @@ class Fitter {
   std::vector<double> bounds_;
   ToleranceFitOptions options_;
   std::size_t frame_count_;
+  // SolveInnerPair()'s blocks of key 1 after segment 0 in its last unweighted solve, and what
+  // they depend on.
+  struct PairHead {
+    const double* samples = nullptr;
+    std::int64_t f0 = -1;
+    std::int64_t f1 = -1;
+    double v0 = 0.0;
+    double m0 = 0.0;
+    Mat2 d1{};
+    Vec2 r1{};
+  };
+  PairHead pair_head_;
   std::vector<Mat2> diag_, upper_, eliminated_;
+  // Keys of the last solve if it was a completed long one (its blocks are in diag_ ...), else 0.
+  int long_solve_keys_ = 0;
   std::vector<Vec2> rhs_;
   std::vector<double> lawson_;
   GramCache& grams_ = GramCache::ForThread();
