@@ -281,6 +281,16 @@ template <std::size_t L = kLanes>
   for (std::size_t lane = 0; lane < L; ++lane) at[lane] = p[lane < count ? lane : 0];
 }
 
+// Whether the L output indices follow one another (output[l] == output[0] + l for every lane).
+template <std::size_t L>
+[[gnu::always_inline]] inline bool Consecutive(const std::int64_t (&output)[L]) {
+  bool consecutive = true;
+  for (std::size_t lane = 1; lane < L; ++lane) {
+    consecutive &= output[lane] == output[0] + static_cast<std::int64_t>(lane);
+  }
+  return consecutive;
+}
+
 // The kernels below are written for one Euler order (axes I, J, K) at a time: the axes then pick
 // matrix entries and products at compile time rather than through memory.
 template <int I, int J, int K, class VT>
@@ -551,8 +561,10 @@ template <int I, int J, int K, class VT>
         angle[axis] = NearestTurn(nearer, turn[axis]);
       }
       // Outputs one after the other (a decimation's weighted means, a slowed section's slerps)
-      // take one vector store per axis.
-      if (lanes[g] == L && output[L - 1] - output[0] == static_cast<std::int64_t>(L - 1)) {
+      // take one vector store per axis. Every lane is checked: a group may straddle two kinds of
+      // slot (BatchSlots orders a batch by kind), so its first and last outputs can be L - 1
+      // apart while the ones between are not consecutive.
+      if (lanes[g] == L && Consecutive(output)) {
         for (int axis = 0; axis < 3; ++axis) StoreV(targets.out[axis] + output[0], angle[axis]);
       } else {
         for (int axis = 0; axis < 3; ++axis) {

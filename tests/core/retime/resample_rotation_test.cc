@@ -4,7 +4,9 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <random>
 #include <span>
+#include <utility>
 #include <stop_token>
 #include <vector>
 
@@ -131,6 +133,65 @@ TEST(ResampleRotationTest, ALongLanczosClipMatchesTheReferenceBatchByBatch) {
   for (int c = 0; c < 3; ++c) {
     for (std::size_t j = 0; j < fast[c].size(); ++j) {
       ASSERT_NEAR(fast[c][j], reference[c][j], 1e-12) << "channel " << c << " sample " << j;
+    }
+  }
+}
+
+// Output samples of several kinds in one batch (slow sections interpolate, fast ones average):
+// the batch orders its slots by kind, so a vector group can hold outputs that are not one after
+// the other even where its first and last are a group's width apart (outputs 2..7 and 1, 9 of
+// the first plan). Every output must land in its own frame, as the reference puts it.
+TEST(ResampleRotationTest, MixedSpeedSectionsPutEveryOutputInItsOwnFrame) {
+  std::vector<std::pair<std::vector<double>, std::vector<double>>> profiles = {
+      {{0.0, 1.5, 2.5, 3.5, 4.5, 5.5, 6.5, 7.5, 9.0, 10.5, 12.0},
+       {1.0, 1.5, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.5, 1.0}}};
+  // Random sections of 0.5x, 1.5x and 2x, one to six outputs each.
+  std::mt19937 random(1);
+  const std::array<double, 3> speeds = {0.5, 1.5, 2.0};
+  for (int p = 0; p < 300; ++p) {
+    std::vector<double> positions, ratios;
+    double x = 0.0;
+    while (positions.size() < 40) {
+      const double speed = speeds[random() % 3];
+      const auto length = 1 + static_cast<std::uint32_t>(random() % 6);
+      for (std::uint32_t k = 0; k < length && positions.size() < 40; ++k) {
+        positions.push_back(x);
+        ratios.push_back(speed);
+        x += speed;
+      }
+    }
+    profiles.emplace_back(std::move(positions), std::move(ratios));
+  }
+  const EulerOrder order = *ParseEulerOrder("ZXY");
+  for (std::size_t p = 0; p < profiles.size(); ++p) {
+    const auto& [positions, ratios] = profiles[p];
+    const auto frames = static_cast<std::int64_t>(std::ceil(positions.back())) + 1;
+    const absl::StatusOr<ResamplePlan> plan =
+        MakeResamplePlan(positions, ratios, frames, ResampleFilter::kTent);
+    ASSERT_TRUE(plan.ok()) << plan.status();
+    std::array<std::vector<double>, 3> source, fast, reference;
+    std::array<std::span<const double>, 3> in;
+    std::array<std::span<double>, 3> fast_out, reference_out;
+    for (int c = 0; c < 3; ++c) {
+      for (std::int64_t i = 0; i < frames; ++i) {
+        const auto f = static_cast<double>(i);
+        source[c].push_back(10.0 * (c + 1) + 3.0 * f + 0.1 * f * f);
+      }
+      fast[c].assign(positions.size(), -999.0);
+      reference[c].assign(positions.size(), 0.0);
+      in[c] = source[c];
+      fast_out[c] = fast[c];
+      reference_out[c] = reference[c];
+    }
+
+    ResampleRotation(*plan, order, in, fast_out);
+    ReferenceResampleRotation(*plan, order, in, reference_out);
+
+    for (int c = 0; c < 3; ++c) {
+      for (std::size_t j = 0; j < positions.size(); ++j) {
+        ASSERT_NEAR(fast[c][j], reference[c][j], 1e-12)
+            << "profile " << p << " channel " << c << " output " << j;
+      }
     }
   }
 }
