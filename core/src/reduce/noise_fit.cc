@@ -283,10 +283,14 @@ struct SubstitutionJob {
   const BandRow* band;
   LaneValues* y;
   std::size_t quarters;  // lanes solved, in fours (1 to 4): a partly filled batch solves fewer
+  // The first frame whose solution is wanted: the back substitution stops there (the frames
+  // before it feed only each other's back steps, and the risk counts only its block's frames).
+  std::size_t first_wanted;
 };
 
 // Solves L L^T y = x for every job (each of n frames): forward, then back substitution, as
-// BandSolver does. y[i].value[l] is level l's solution at frame i. One solve is a chain of
+// BandSolver does, the back substitution down to each job's first wanted frame (y holds the
+// forward substitution's values before it). y[i].value[l] is level l's solution at frame i. One solve is a chain of
 // dependent divisions from frame to frame; the jobs are independent, so stepping all of them frame
 // by frame keeps several chains in flight and the divider busy. Each lane of each job performs
 // exactly the scalar operations in the scalar order. Written on 4-lane vectors (a quarter of a
@@ -314,8 +318,11 @@ TEMPOKEY_AVX_CLONES void SubstituteConstantLevels(std::size_t n, const Substitut
       }
     }
   }
-  for (std::size_t i = n; i-- > 0;) {
+  std::size_t lowest = n;
+  for (std::size_t j = 0; j < count; ++j) lowest = std::min(lowest, jobs[j].first_wanted);
+  for (std::size_t i = n; i-- > lowest;) {
     for (std::size_t j = 0; j < count; ++j) {
+      if (i < jobs[j].first_wanted) continue;
       const double* __restrict band = reinterpret_cast<const double*>(jobs[j].band);
       double* __restrict y = reinterpret_cast<double*>(jobs[j].y);
       for (std::size_t q = 0; q < jobs[j].quarters; ++q) {
@@ -540,7 +547,8 @@ class NoiseSmoother {
           for (std::size_t b = 0; b < step_batches; ++b) {
             const std::size_t used = std::min<std::size_t>(kLanes, count - (first_batch + b) * kLanes);
             jobs_.push_back({x_.data() + windows[first_window + w].a0, factor[b]->data(),
-                             solutions.data() + jobs_.size() * n, (used + 3) / 4});
+                             solutions.data() + jobs_.size() * n, (used + 3) / 4,
+                             windows[first_window + w].b0 - windows[first_window + w].a0});
           }
         }
         SubstituteConstantLevels(n, jobs_.data(), jobs);
