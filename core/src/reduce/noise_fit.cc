@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <memory>
 #include <numbers>
@@ -16,6 +17,7 @@
 #include "tempokey/core/model/progress.h"
 #include "tempokey/core/model/status.h"
 #include "noise_smoother.h"
+#include "lane_pack.h"
 #include "simd.h"
 
 
@@ -296,8 +298,8 @@ struct SubstitutionJob {
 // exactly the scalar operations in the scalar order. Written on 4-lane vectors (a quarter of a
 // batch at a time): the compiler keeps those in registers, where it moves 16-lane ones through
 // the stack.
-TEMPOKEY_AVX_CLONES void SubstituteConstantLevels(std::size_t n, const SubstitutionJob* jobs,
-                                                  std::size_t count) {
+TEMPOKEY_AVX_CLONES void SubstituteConstantLevels4(std::size_t n, const SubstitutionJob* jobs,
+                                                   std::size_t count) {
   using simd::V4;
   // Doubles from one frame (or one band entry) to the next.
   constexpr std::size_t kStride = kLanes;
@@ -335,6 +337,69 @@ TEMPOKEY_AVX_CLONES void SubstituteConstantLevels(std::size_t n, const Substitut
         simd::Store(y + at, s / simd::Load(band + i * kRowStride + 4 * q));
       }
     }
+  }
+}
+
+// SubstituteConstantLevels4() on 8-lane AVX-512 vectors, half a batch at a time: each lane
+// performs the same operations in the same order, so the solutions are the same bits. A batch
+// with an odd number of quarters solves its last quarter's idle lanes too (their factor entries
+// are those of the batch's last level, so they stay finite; nobody reads them).
+TEMPOKEY_TARGET_AVX512 void SubstituteConstantLevels8(std::size_t n, const SubstitutionJob* jobs,
+                                                      std::size_t count) {
+  using V8 = double __attribute__((vector_size(64)));
+  const auto load = [](const double* p) __attribute__((always_inline)) {
+    V8 v;
+    std::memcpy(&v, p, sizeof v);
+    return v;
+  };
+  const auto store = [](double* p, V8 v) __attribute__((always_inline)) {
+    std::memcpy(p, &v, sizeof v);
+  };
+  constexpr std::size_t kStride = kLanes;
+  constexpr std::size_t kRowStride = sizeof(BandRow) / sizeof(double);
+  for (std::size_t i = 0; i < n; ++i) {
+    for (std::size_t j = 0; j < count; ++j) {
+      const double* __restrict row = reinterpret_cast<const double*>(&jobs[j].band[i]);
+      double* __restrict y = reinterpret_cast<double*>(jobs[j].y);
+      const double x = jobs[j].x[i];
+      const V8 xi = {x, x, x, x, x, x, x, x};
+      const std::size_t halves = (jobs[j].quarters + 1) / 2;
+      for (std::size_t h = 0; h < halves; ++h) {
+        const std::size_t at = i * kStride + 8 * h;
+        V8 f = xi;
+        for (std::size_t k = 1; k <= kOrder && i >= k; ++k) {
+          f -= load(row + k * kStride + 8 * h) * load(y + at - k * kStride);
+        }
+        store(y + at, f / load(row + 8 * h));
+      }
+    }
+  }
+  std::size_t lowest = n;
+  for (std::size_t j = 0; j < count; ++j) lowest = std::min(lowest, jobs[j].first_wanted);
+  for (std::size_t i = n; i-- > lowest;) {
+    for (std::size_t j = 0; j < count; ++j) {
+      if (i < jobs[j].first_wanted) continue;
+      const double* __restrict band = reinterpret_cast<const double*>(jobs[j].band);
+      double* __restrict y = reinterpret_cast<double*>(jobs[j].y);
+      const std::size_t halves = (jobs[j].quarters + 1) / 2;
+      for (std::size_t h = 0; h < halves; ++h) {
+        const std::size_t at = i * kStride + 8 * h;
+        V8 s = load(y + at);
+        for (std::size_t k = 1; k <= kOrder && i + k < n; ++k) {
+          s -= load(band + (i + k) * kRowStride + k * kStride + 8 * h) * load(y + at + k * kStride);
+        }
+        store(y + at, s / load(band + i * kRowStride + 8 * h));
+      }
+    }
+  }
+}
+
+// The level searches' substitutions on the widest vectors the machine has.
+void SubstituteConstantLevels(std::size_t n, const SubstitutionJob* jobs, std::size_t count) {
+  if (simd::RunningPackIsa() == simd::PackIsa::kAvx512) {
+    SubstituteConstantLevels8(n, jobs, count);
+  } else {
+    SubstituteConstantLevels4(n, jobs, count);
   }
 }
 
