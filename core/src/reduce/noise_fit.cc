@@ -340,13 +340,13 @@ TEMPOKEY_AVX_CLONES void SubstituteConstantLevels4(std::size_t n, const Substitu
   }
 }
 
-// SubstituteConstantLevels4() on 8-lane AVX-512 vectors, half a batch at a time: each lane
-// performs the same operations in the same order, so the solutions are the same bits. A batch
-// with an odd number of quarters solves its last quarter's idle lanes too (their factor entries
-// are those of the batch's last level, so they stay finite; nobody reads them).
+// SubstituteConstantLevels4() on 8-lane AVX-512 vectors, half a batch at a time (a batch with an
+// odd number of quarters solves its last one on a 4-lane vector): each lane performs the same
+// operations in the same order, so the solutions are the same bits.
 TEMPOKEY_TARGET_AVX512 void SubstituteConstantLevels8(std::size_t n, const SubstitutionJob* jobs,
                                                       std::size_t count) {
   using V8 = double __attribute__((vector_size(64)));
+  using simd::V4;
   const auto load = [](const double* p) __attribute__((always_inline)) {
     V8 v;
     std::memcpy(&v, p, sizeof v);
@@ -363,7 +363,7 @@ TEMPOKEY_TARGET_AVX512 void SubstituteConstantLevels8(std::size_t n, const Subst
       double* __restrict y = reinterpret_cast<double*>(jobs[j].y);
       const double x = jobs[j].x[i];
       const V8 xi = {x, x, x, x, x, x, x, x};
-      const std::size_t halves = (jobs[j].quarters + 1) / 2;
+      const std::size_t halves = jobs[j].quarters / 2;
       for (std::size_t h = 0; h < halves; ++h) {
         const std::size_t at = i * kStride + 8 * h;
         V8 f = xi;
@@ -371,6 +371,14 @@ TEMPOKEY_TARGET_AVX512 void SubstituteConstantLevels8(std::size_t n, const Subst
           f -= load(row + k * kStride + 8 * h) * load(y + at - k * kStride);
         }
         store(y + at, f / load(row + 8 * h));
+      }
+      if (jobs[j].quarters % 2 != 0) {
+        const std::size_t at = i * kStride + 8 * halves;
+        V4 f = simd::Broadcast(x);
+        for (std::size_t k = 1; k <= kOrder && i >= k; ++k) {
+          f -= simd::Load(row + k * kStride + 8 * halves) * simd::Load(y + at - k * kStride);
+        }
+        simd::Store(y + at, f / simd::Load(row + 8 * halves));
       }
     }
   }
@@ -381,7 +389,7 @@ TEMPOKEY_TARGET_AVX512 void SubstituteConstantLevels8(std::size_t n, const Subst
       if (i < jobs[j].first_wanted) continue;
       const double* __restrict band = reinterpret_cast<const double*>(jobs[j].band);
       double* __restrict y = reinterpret_cast<double*>(jobs[j].y);
-      const std::size_t halves = (jobs[j].quarters + 1) / 2;
+      const std::size_t halves = jobs[j].quarters / 2;
       for (std::size_t h = 0; h < halves; ++h) {
         const std::size_t at = i * kStride + 8 * h;
         V8 s = load(y + at);
@@ -389,6 +397,15 @@ TEMPOKEY_TARGET_AVX512 void SubstituteConstantLevels8(std::size_t n, const Subst
           s -= load(band + (i + k) * kRowStride + k * kStride + 8 * h) * load(y + at + k * kStride);
         }
         store(y + at, s / load(band + i * kRowStride + 8 * h));
+      }
+      if (jobs[j].quarters % 2 != 0) {
+        const std::size_t at = i * kStride + 8 * halves;
+        V4 s = simd::Load(y + at);
+        for (std::size_t k = 1; k <= kOrder && i + k < n; ++k) {
+          s -= simd::Load(band + (i + k) * kRowStride + k * kStride + 8 * halves) *
+               simd::Load(y + at + k * kStride);
+        }
+        simd::Store(y + at, s / simd::Load(band + i * kRowStride + 8 * halves));
       }
     }
   }
