@@ -161,6 +161,106 @@ class BandSolver {
   std::vector<std::array<double, kOrder + 1>> band_;
 };
 
+// ---- the guard rounds' solves, several channels at once ----------------------------------------
+
+// Channels whose guard rounds solve together, one per lane of a 4-lane vector.
+constexpr std::size_t kGuardLanes = reduce_internal::kSmootherGroup;
+static_assert(kGuardLanes == 4, "the lane kernels hold one channel per lane of a 4-lane vector");
+// Doubles per row of LaneBandSolver's band: kOrder + 1 entries of kGuardLanes lanes.
+constexpr std::size_t kLaneRow = (kOrder + 1) * kGuardLanes;
+
+// Rows [begin, end) of BandSolver::ForwardRow() for kGuardLanes channels of n frames at once: lane
+// c of x[i * kGuardLanes + c], lambda[r * kGuardLanes + c], y[i * kGuardLanes + c] and
+// band[i * kLaneRow + k * kGuardLanes + c] (entry k of row i) is channel c's. Each lane performs
+// exactly the scalar operations in the scalar order.
+TEMPOKEY_AVX_CLONES void ForwardLaneRows(std::size_t n, std::size_t begin, std::size_t end,
+                                         const double* x, const double* lambda, double* band,
+                                         double* y) {
+  using simd::V4;
+  constexpr auto kBand = static_cast<std::size_t>(kOrder);
+  const auto entry = [band](std::size_t i, std::size_t k) __attribute__((always_inline)) {
+    return band + i * kLaneRow + k * kGuardLanes;
+  };
+  for (std::size_t i = begin; i < end; ++i) {
+    if (i + kBand < n) {
+      const V4 l = simd::Load(lambda + i * kGuardLanes);
+      for (std::size_t a = 0; a <= kBand; ++a) {
+        for (std::size_t b = 0; b <= a; ++b) {
+          double* e = entry(i + a, a - b);
+          simd::Store(e, simd::Load(e) + l * kDifference[a] * kDifference[b]);
+        }
+      }
+    }
+    for (std::size_t k = kBand; k >= 1; --k) {
+      if (i < k) continue;
+      const std::size_t j = i - k;
+      V4 s = simd::Load(entry(i, k));
+      for (std::size_t m = k + 1; m <= kBand && i >= m; ++m) {
+        s -= simd::Load(entry(i, m)) * simd::Load(entry(j, m - k));
+      }
+      simd::Store(entry(i, k), s / simd::Load(entry(j, 0)));
+    }
+    V4 s = simd::Load(entry(i, 0));
+    for (std::size_t k = 1; k <= kBand && i >= k; ++k) {
+      const V4 e = simd::Load(entry(i, k));
+      s -= e * e;
+    }
+    V4 root;
+    for (int lane = 0; lane < 4; ++lane) root[lane] = std::sqrt(s[lane]);
+    simd::Store(entry(i, 0), root);
+    V4 f = simd::Load(x + i * kGuardLanes);
+    for (std::size_t k = 1; k <= kBand && i >= k; ++k) {
+      f -= simd::Load(entry(i, k)) * simd::Load(y + (i - k) * kGuardLanes);
+    }
+    simd::Store(y + i * kGuardLanes, f / root);
+  }
+}
+
+// Rows [begin, end) of BandSolver::BackRow() for kGuardLanes channels at once, from row end - 1
+// down (ForwardLaneRows()'s layout).
+TEMPOKEY_AVX_CLONES void BackLaneRows(std::size_t n, std::size_t begin, std::size_t end,
+                                      const double* band, double* y) {
+  using simd::V4;
+  constexpr auto kBand = static_cast<std::size_t>(kOrder);
+  for (std::size_t i = end; i-- > begin;) {
+    V4 s = simd::Load(y + i * kGuardLanes);
+    for (std::size_t k = 1; k <= kBand && i + k < n; ++k) {
+      s -= simd::Load(band + (i + k) * kLaneRow + k * kGuardLanes) *
+           simd::Load(y + (i + k) * kGuardLanes);
+    }
+    simd::Store(y + i * kGuardLanes, s / simd::Load(band + i * kLaneRow));
+  }
+}
+
+// BandSolver::Solve() for kGuardLanes channels of n >= 4 frames at once, each with its own
+// levels (ForwardLaneRows()'s layout): every channel's solution is BandSolver's bit for bit. One
+// solve is a chain of divisions and square roots from row to row, so it runs at their latency;
+// four side by side take about the time of one. False, y incomplete, when a stop was requested.
+class LaneBandSolver {
+ public:
+  bool Solve(std::size_t n, const double* x, const double* lambda, double* y,
+             const std::stop_token& stop) {
+    band_.assign(n * kLaneRow, 0.0);
+    for (std::size_t i = 0; i < n; ++i) {
+      std::fill_n(band_.begin() + static_cast<std::ptrdiff_t>(i * kLaneRow), kGuardLanes, 1.0);
+    }
+    for (std::size_t begin = 0; begin < n; begin += kStopCheckRows) {
+      if (stop.stop_requested()) return false;
+      ForwardLaneRows(n, begin, std::min(n, begin + kStopCheckRows), x, lambda, band_.data(), y);
+    }
+    for (std::size_t end = n; end > 0;) {
+      if (stop.stop_requested()) return false;
+      const std::size_t begin = end > kStopCheckRows ? end - kStopCheckRows : 0;
+      BackLaneRows(n, begin, end, band_.data(), y);
+      end = begin;
+    }
+    return true;
+  }
+
+ private:
+  std::vector<double> band_;
+};
+
 // ---- many constant levels at once ---------------------------------------------------------------
 
 // The searches below solve one signal at many constant levels. A single solve is a chain of
@@ -497,7 +597,7 @@ constexpr std::size_t kMaxSolutionBytes = std::size_t{256} << 10;
 
 // The smoother of one channel. It looks at the stop token between batches of window solves, per
 // guard round and every kStopCheckRows rows of a band solve; once a stop is seen every phase
-// returns at once and Run()'s result is incomplete (the caller reports the cancellation).
+// returns at once and RunGroup()'s result is incomplete (the caller reports the cancellation).
 class NoiseSmoother {
  public:
   NoiseSmoother(std::span<const double> samples, double sigma, const NoiseFitOptions& options,
@@ -510,40 +610,95 @@ class NoiseSmoother {
         factors_(factors.store()),
         stop_(std::move(stop)) {}
 
-  // The smoothed samples; incomplete when stopped() is true afterwards.
-  std::vector<double> Run() {
-    std::vector<double> y(x_.begin(), x_.end());
-    if (n_ <= kOrder + 1) return y;
-    const double global = BestSingleLevel();
-    if (Stopping()) return y;
-    // Per block: the level of least SURE on the block, solved with context on both sides.
-    std::vector<double> block_log = BestBlockLevels(global);
-    if (Stopping()) return y;
-    std::vector<double> lambda(n_ - kOrder);
-    for (int round = 0;; ++round) {
-      if (!Interpolate(block_log, lambda) || !SolveBand(x_, lambda, y)) return y;
-      if (round == kMaxGuardRounds) break;
-      bool lowered = false;
-      for (std::size_t b = 0; b < block_log.size(); ++b) {
-        const std::size_t b0 = b * block_;
-        const std::size_t b1 = std::min(n_, b0 + block_);
-        double worst = 0.0;
-        for (std::size_t f = b0; f < b1; ++f) worst = std::max(worst, std::abs(y[f] - x_[f]));
-        if (worst <= guard_ || block_log[b] <= kGuardFloorLogLambda) continue;
-        block_log[b] = block_log[b] > kMinLogLambda
-                           ? std::max(kMinLogLambda, block_log[b] - std::log10(kGuardFactor))
-                           : kGuardFloorLogLambda;
-        lowered = true;
+  // The smoothed samples of each smoother of `group` (1 to kGuardLanes of them, over channels of
+  // the same length); incomplete when stopped() is true afterwards for any of them. Each
+  // channel's levels are searched alone; the guard rounds then solve the channels side by side
+  // (LaneBandSolver), each channel's rounds ending when its own guard holds: a channel's later
+  // solves repeat its levels, so they give its last solution again, bit for bit.
+  static std::vector<std::vector<double>> RunGroup(std::span<NoiseSmoother* const> group) {
+    std::vector<std::vector<double>> y;
+    for (const NoiseSmoother* smoother : group) y.emplace_back(smoother->x_.begin(), smoother->x_.end());
+    const std::size_t n = group.front()->n_;
+    if (n <= kOrder + 1) return y;
+    std::vector<std::vector<double>> block_log;
+    for (NoiseSmoother* smoother : group) {
+      const double global = smoother->BestSingleLevel();
+      // Per block: the level of least SURE on the block, solved with context on both sides.
+      if (!smoother->Stopping()) block_log.push_back(smoother->BestBlockLevels(global));
+      if (smoother->Stopping()) return StopAll(group, std::move(y));
+    }
+    // Lanes beyond the group repeat its last channel.
+    const auto channel_of = [&](std::size_t lane) { return std::min(lane, group.size() - 1); };
+    std::vector<double> x(n * kGuardLanes);
+    for (std::size_t i = 0; i < n; ++i) {
+      for (std::size_t lane = 0; lane < kGuardLanes; ++lane) {
+        x[i * kGuardLanes + lane] = group[channel_of(lane)]->x_[i];
       }
-      if (!lowered) break;
+    }
+    std::vector<double> levels(n - kOrder);
+    std::vector<double> lambda((n - kOrder) * kGuardLanes);
+    std::vector<double> solution(n * kGuardLanes);
+    std::vector<bool> lowered(group.size(), true);  // levels changed since the last solve
+    LaneBandSolver solver;
+    for (int round = 0;; ++round) {
+      for (std::size_t lane = 0; lane < kGuardLanes; ++lane) {
+        const std::size_t c = channel_of(lane);
+        if (!lowered[c]) continue;
+        if (lane == c && !group[c]->Interpolate(block_log[c], levels)) {
+          return StopAll(group, std::move(y));
+        }
+        for (std::size_t r = 0; r < levels.size(); ++r) lambda[r * kGuardLanes + lane] = levels[r];
+      }
+      if (!solver.Solve(n, x.data(), lambda.data(), solution.data(), group.front()->stop_)) {
+        return StopAll(group, std::move(y));
+      }
+      if (round == kMaxGuardRounds) break;
+      bool any = false;
+      for (std::size_t c = 0; c < group.size(); ++c) {
+        if (!lowered[c]) continue;  // its guard held: its solution is final
+        lowered[c] = group[c]->LowerGuardedBlocks(solution, c, block_log[c]);
+        any = any || lowered[c];
+      }
+      if (!any) break;
+    }
+    for (std::size_t c = 0; c < group.size(); ++c) {
+      for (std::size_t i = 0; i < n; ++i) y[c][i] = solution[i * kGuardLanes + c];
     }
     return y;
   }
 
-  // Whether a stop was seen: Run()'s result is then not to be used.
+  // Whether a stop was seen: RunGroup()'s result is then not to be used.
   bool stopped() const { return stopped_; }
 
  private:
+  // Marks every smoother of `group` stopped (they share the token) and returns `y`.
+  static std::vector<std::vector<double>> StopAll(std::span<NoiseSmoother* const> group,
+                                                  std::vector<std::vector<double>> y) {
+    for (NoiseSmoother* smoother : group) smoother->stopped_ = true;
+    return y;
+  }
+
+  // One guard round's check of this channel's solution (lane `lane` of `solution`, laid out as
+  // LaneBandSolver's): each block whose solution strays more than the guard from the samples has
+  // its level lowered by kGuardFactor (from the lowest searched, to the floor). Whether any was.
+  bool LowerGuardedBlocks(std::span<const double> solution, std::size_t lane,
+                          std::vector<double>& block_log) const {
+    bool lowered = false;
+    for (std::size_t b = 0; b < block_log.size(); ++b) {
+      const std::size_t b0 = b * block_;
+      const std::size_t b1 = std::min(n_, b0 + block_);
+      double worst = 0.0;
+      for (std::size_t f = b0; f < b1; ++f) {
+        worst = std::max(worst, std::abs(solution[f * kGuardLanes + lane] - x_[f]));
+      }
+      if (worst <= guard_ || block_log[b] <= kGuardFloorLogLambda) continue;
+      block_log[b] = block_log[b] > kMinLogLambda
+                         ? std::max(kMinLogLambda, block_log[b] - std::log10(kGuardFactor))
+                         : kGuardFloorLogLambda;
+      lowered = true;
+    }
+    return lowered;
+  }
   // Looks at the stop token; true (and from then on) once a stop was requested.
   bool Stopping() {
     if (!stopped_) stopped_ = stop_.stop_requested();
@@ -817,17 +972,37 @@ absl::StatusOr<SplineFit> FitToNoise(std::span<const double> samples, double sig
 absl::StatusOr<std::vector<double>> reduce_internal::SmoothToNoise(
     std::span<const double> samples, double sigma, const NoiseFitOptions& options,
     SmootherFactors& factors, std::stop_token stop) {
-  NoiseSmoother smoother(samples, sigma, options, factors, std::move(stop));
-  std::vector<double> smooth = smoother.Run();
-  if (smoother.stopped()) return absl::CancelledError("cancelled");
+  absl::StatusOr<std::vector<std::vector<double>>> smooth =
+      SmoothGroupToNoise({&samples, 1}, {&sigma, 1}, options, factors, std::move(stop));
+  if (!smooth.ok()) return smooth.status();
+  return std::move(smooth->front());
+}
+
+absl::StatusOr<std::vector<std::vector<double>>> reduce_internal::SmoothGroupToNoise(
+    std::span<const std::span<const double>> channels, std::span<const double> sigmas,
+    const NoiseFitOptions& options, SmootherFactors& factors, std::stop_token stop) {
+  std::vector<std::unique_ptr<NoiseSmoother>> smoothers;
+  std::vector<NoiseSmoother*> group;
+  std::vector<std::vector<double>> smooth;
+  for (std::size_t first = 0; first < channels.size(); first += group.size()) {
+    smoothers.clear();
+    group.clear();
+    // Consecutive channels of one length, at most kGuardLanes.
+    for (std::size_t c = first; c < channels.size() && group.size() < kGuardLanes &&
+                                channels[c].size() == channels[first].size();
+         ++c) {
+      smoothers.push_back(
+          std::make_unique<NoiseSmoother>(channels[c], sigmas[c], options, factors, stop));
+      group.push_back(smoothers.back().get());
+    }
+    for (std::vector<double>& y : NoiseSmoother::RunGroup(group)) smooth.push_back(std::move(y));
+    if (group.front()->stopped()) return absl::CancelledError("cancelled");
+  }
   return smooth;
 }
 
-absl::StatusOr<SplineFit> reduce_internal::FitToNoise(std::span<const double> samples,
-                                                      double sigma,
-                                                      const NoiseFitOptions& options,
-                                                      std::stop_token stop,
-                                                      SmootherFactors& factors) {
+absl::Status reduce_internal::CheckNoiseFit(std::span<const double> samples, double sigma,
+                                            const NoiseFitOptions& options) {
   if (samples.empty()) return absl::InvalidArgumentError("a fit needs at least one sample");
   for (std::size_t f = 0; f < samples.size(); ++f) {
     if (!std::isfinite(samples[f])) {
@@ -839,15 +1014,29 @@ absl::StatusOr<SplineFit> reduce_internal::FitToNoise(std::span<const double> sa
     return absl::InvalidArgumentError(
         absl::StrCat("the noise level must be finite and > 0, got ", sigma));
   }
-  TEMPOKEY_RETURN_IF_ERROR(ValidateOptions(options));
+  return ValidateOptions(options);
+}
+
+absl::StatusOr<SplineFit> reduce_internal::FitSmoothedToNoise(std::span<const double> smooth,
+                                                              double sigma,
+                                                              const NoiseFitOptions& options,
+                                                              std::stop_token stop) {
+  TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+  const double bound = options.key_sigmas * sigma;
+  return FitWithinTolerance({&smooth, 1}, {&bound, 1}, {}, stop);
+}
+
+absl::StatusOr<SplineFit> reduce_internal::FitToNoise(std::span<const double> samples,
+                                                      double sigma,
+                                                      const NoiseFitOptions& options,
+                                                      std::stop_token stop,
+                                                      SmootherFactors& factors) {
+  TEMPOKEY_RETURN_IF_ERROR(CheckNoiseFit(samples, sigma, options));
   TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
   absl::StatusOr<std::vector<double>> smooth =
       SmoothToNoise(samples, sigma, options, factors, stop);
   if (!smooth.ok()) return smooth.status();
-  TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
-  const std::span<const double> channel(*smooth);
-  const double bound = options.key_sigmas * sigma;
-  return FitWithinTolerance({&channel, 1}, {&bound, 1}, {}, stop);
+  return FitSmoothedToNoise(*smooth, sigma, options, stop);
 }
 
 }  // namespace tempokey::core
