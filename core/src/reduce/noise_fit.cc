@@ -586,14 +586,14 @@ namespace {
 // Frames above which a search solves level by level with BandSolver instead of sixteen levels at
 // once: sixteen factors of that many frames would take more than kMaxSmootherFactorBytes.
 constexpr std::size_t kMaxLaneFrames = reduce_internal::kMaxSmootherFactorBytes / sizeof(BandRow);
-// Batches of sixteen levels a search has at most: the coarse grid, 29 levels.
-constexpr std::size_t kMaxBatches =
-    static_cast<std::size_t>((kMaxLogLambda - kMinLogLambda) / kCoarseStep + 1 + kLanes - 1) /
-    kLanes;
-static_assert(kMaxBatches == 2);
 // Solutions computed at once (bytes): windows step together until theirs fill about half of a
 // second-level cache.
 constexpr std::size_t kMaxSolutionBytes = std::size_t{256} << 10;
+// But at least this many batch solves step together (a long channel's whole-window searches: a
+// solve's divisions wait on each other, several solves' overlap), and never more than
+// kMaxStepSolutionBytes of solutions.
+constexpr std::size_t kMinStepUnits = 16;
+constexpr std::size_t kMaxStepSolutionBytes = std::size_t{16} << 20;
 
 // The smoother of one channel. It looks at the stop token between batches of window solves, per
 // guard round and every kStopCheckRows rows of a band solve; once a stop is seen every phase
@@ -620,13 +620,11 @@ class NoiseSmoother {
     for (const NoiseSmoother* smoother : group) y.emplace_back(smoother->x_.begin(), smoother->x_.end());
     const std::size_t n = group.front()->n_;
     if (n <= kOrder + 1) return y;
-    std::vector<std::vector<double>> block_log;
-    for (NoiseSmoother* smoother : group) {
-      const double global = smoother->BestSingleLevel();
-      // Per block: the level of least SURE on the block, solved with context on both sides.
-      if (!smoother->Stopping()) block_log.push_back(smoother->BestBlockLevels(global));
-      if (smoother->Stopping()) return StopAll(group, std::move(y));
-    }
+    const std::vector<double> global = BestSingleLevels(group);
+    if (group.front()->Stopping()) return StopAll(group, std::move(y));
+    // Per block: the level of least SURE on the block, solved with context on both sides.
+    std::vector<std::vector<double>> block_log = BestBlockLevels(group, global);
+    if (group.front()->Stopping()) return StopAll(group, std::move(y));
     // Lanes beyond the group repeat its last channel.
     const auto channel_of = [&](std::size_t lane) { return std::min(lane, group.size() - 1); };
     std::vector<double> x(n * kGuardLanes);
@@ -720,93 +718,126 @@ class NoiseSmoother {
     std::size_t a0, a1, b0, b1;
   };
 
-  // SURE on each window's block of the solutions of its frames at the constant levels
-  // 10^logs[i], up to the constant -n sigma^2: each one's residual there plus 2 sigma^2 times its
-  // degrees of freedom. risks[w * logs.size() + i] is window w's at level i. Every window has n
-  // frames, so they share the factors; sixteen levels per factor, and the solves of several
-  // windows and batches of levels step together (SubstituteConstantLevels()). Incomplete once a
-  // stop is seen (between window solves or steps of windows).
-  std::vector<double> Risks(std::span<const double> logs, std::size_t n,
-                            std::span<const Window> windows) {
-    const std::size_t count = logs.size();
-    std::vector<double> risks(windows.size() * count);
+  // One window of one channel to be searched: `logs.size()` risks go to `risks`.
+  struct Search {
+    const NoiseSmoother* channel;
+    Window window;
+    std::span<const double> logs;
+    double* risks;
+  };
+
+  // SURE on each search's block of the solutions of its window at the constant levels
+  // 10^logs[i], up to the constant -n sigma^2: each one's residual there plus 2 sigma^2 (its
+  // channel's) times its degrees of freedom, to search.risks[i]. Every window has n frames, so
+  // they share the factors (this smoother's store); sixteen levels per factor, and the solves of
+  // several searches and batches of levels step together (SubstituteConstantLevels()): the more
+  // of them, the more chains of divisions in flight. False, risks incomplete, once a stop is seen
+  // (between window solves or steps).
+  bool Risks(std::size_t n, std::span<const Search> searches) {
     if (n > kMaxLaneFrames) {
       std::vector<double> y(n);
       std::vector<double> lambda(n - kOrder);
-      for (std::size_t w = 0; w < windows.size(); ++w) {
-        const Window& window = windows[w];
-        for (std::size_t i = 0; i < count; ++i) {
-          const double level = std::pow(10.0, logs[i]);
+      for (const Search& search : searches) {
+        const Window& window = search.window;
+        const std::span<const double> x = search.channel->x_;
+        for (std::size_t i = 0; i < search.logs.size(); ++i) {
+          const double level = std::pow(10.0, search.logs[i]);
           std::fill(lambda.begin(), lambda.end(), level);
-          if (!SolveBand(x_.subspan(window.a0, n), lambda, y)) return risks;
+          if (!SolveBand(x.subspan(window.a0, n), lambda, y)) return false;
           double rss = 0.0;
           for (std::size_t f = window.b0; f < window.b1; ++f) {
-            const double r = y[f - window.a0] - x_[f];
+            const double r = y[f - window.a0] - x[f];
             rss += r * r;
           }
-          risks[w * count + i] = rss + 2.0 * sigma2_ * static_cast<double>(window.b1 - window.b0) *
-                                           CachedDofPerFrame(level);
+          search.risks[i] = rss + 2.0 * search.channel->sigma2_ *
+                                      static_cast<double>(window.b1 - window.b0) *
+                                      CachedDofPerFrame(level);
         }
       }
-      return risks;
+      return true;
     }
-    const std::size_t batches = (count + kLanes - 1) / kLanes;
-    // Batches whose factors are held at once, and windows solved at once, within the byte bounds.
+    // One unit: a search at one batch of sixteen of its levels.
+    struct Unit {
+      std::size_t search, batch;
+    };
+    std::vector<Unit> units;
+    for (std::size_t i = 0; i < searches.size(); ++i) {
+      for (std::size_t b = 0; b * kLanes < searches[i].logs.size(); ++b) units.push_back({i, b});
+    }
+    // Units solved at once: enough for several chains in flight, few enough that their solutions
+    // stay near the cache (kMaxSolutionBytes) and within kMaxStepSolutionBytes, and their factors
+    // within kMaxSmootherFactorBytes.
+    const std::size_t solution_bytes = n * sizeof(LaneValues);
     const std::size_t factor_bytes = n * sizeof(BandRow);
-    const std::size_t batches_per_step =
-        std::clamp<std::size_t>(reduce_internal::kMaxSmootherFactorBytes / factor_bytes, 1, batches);
-    for (std::size_t first_batch = 0; first_batch < batches; first_batch += batches_per_step) {
-      if (Stopping()) return risks;
-      const std::size_t step_batches = std::min(batches_per_step, batches - first_batch);
-      std::array<double, kLanes> level[kMaxBatches];
-      std::array<double, kLanes> dof[kMaxBatches];  // degrees of freedom per frame
-      std::shared_ptr<const std::vector<BandRow>> factor[kMaxBatches];
-      for (std::size_t b = 0; b < step_batches; ++b) {
-        const std::size_t first = (first_batch + b) * kLanes;
-        for (std::size_t lane = 0; lane < kLanes; ++lane) {
-          level[b][lane] = std::pow(10.0, logs[std::min(first + lane, count - 1)]);
-          dof[b][lane] = CachedDofPerFrame(level[b][lane]);
+    const std::size_t per_step = std::max<std::size_t>(
+        1, std::min({std::max(kMinStepUnits, kMaxSolutionBytes / solution_bytes),
+                     kMaxStepSolutionBytes / solution_bytes,
+                     reduce_internal::kMaxSmootherFactorBytes / factor_bytes}));
+    struct Batch {
+      const double* logs;
+      std::size_t batch;
+      std::array<double, kLanes> level;
+      std::array<double, kLanes> dof;  // degrees of freedom per frame
+      std::shared_ptr<const std::vector<BandRow>> factor;
+    };
+    std::vector<Batch> batches;  // of the step, each distinct one once
+    std::vector<std::size_t> batch_of;  // per unit of the step
+    for (std::size_t first = 0; first < units.size(); first += per_step) {
+      if (Stopping()) return false;
+      const std::size_t step = std::min(per_step, units.size() - first);
+      batches.clear();
+      batch_of.clear();
+      for (std::size_t u = first; u < first + step; ++u) {
+        const Search& search = searches[units[u].search];
+        const std::size_t b = units[u].batch;
+        std::size_t k = 0;
+        while (k < batches.size() &&
+               !(batches[k].logs == search.logs.data() && batches[k].batch == b)) {
+          ++k;
         }
-        factor[b] = factors_.Get(n, level[b].data());
+        if (k == batches.size()) {
+          Batch& batch = batches.emplace_back();
+          batch.logs = search.logs.data();
+          batch.batch = b;
+          const std::size_t count = search.logs.size();
+          for (std::size_t lane = 0; lane < kLanes; ++lane) {
+            batch.level[lane] = std::pow(10.0, search.logs[std::min(b * kLanes + lane, count - 1)]);
+            batch.dof[lane] = CachedDofPerFrame(batch.level[lane]);
+          }
+          batch.factor = factors_.Get(n, batch.level.data());
+        }
+        batch_of.push_back(k);
       }
-      const std::size_t solution_bytes = n * sizeof(LaneValues) * step_batches;
-      const std::size_t windows_per_step =
-          std::clamp<std::size_t>(kMaxSolutionBytes / solution_bytes, 1, windows.size());
-      for (std::size_t first_window = 0; first_window < windows.size();
-           first_window += windows_per_step) {
-        if (Stopping()) return risks;
-        const std::size_t step_windows = std::min(windows_per_step, windows.size() - first_window);
-        const std::size_t jobs = step_windows * step_batches;
-        std::vector<LaneValues>& solutions = factors_.solutions;
-        if (solutions.size() < jobs * n) solutions.resize(jobs * n);
-        jobs_.clear();
-        for (std::size_t w = 0; w < step_windows; ++w) {
-          for (std::size_t b = 0; b < step_batches; ++b) {
-            const std::size_t used = std::min<std::size_t>(kLanes, count - (first_batch + b) * kLanes);
-            jobs_.push_back({x_.data() + windows[first_window + w].a0, factor[b]->data(),
-                             solutions.data() + jobs_.size() * n, (used + 3) / 4,
-                             windows[first_window + w].b0 - windows[first_window + w].a0});
-          }
-        }
-        SubstituteConstantLevels(n, jobs_.data(), jobs);
-        for (std::size_t w = 0; w < step_windows; ++w) {
-          const Window& window = windows[first_window + w];
-          for (std::size_t b = 0; b < step_batches; ++b) {
-            double rss[kLanes];
-            const SubstitutionJob& job = jobs_[w * step_batches + b];
-            LaneResiduals(job.y, x_.data() + window.a0, window.b0 - window.a0,
-                          window.b1 - window.a0, job.quarters, rss);
-            const std::size_t first = (first_batch + b) * kLanes;
-            for (std::size_t lane = 0; lane < kLanes && first + lane < count; ++lane) {
-              risks[(first_window + w) * count + first + lane] =
-                  rss[lane] + 2.0 * sigma2_ * static_cast<double>(window.b1 - window.b0) *
-                                  dof[b][lane];
-            }
-          }
+      std::vector<LaneValues>& solutions = factors_.solutions;
+      if (solutions.size() < step * n) solutions.resize(step * n);
+      jobs_.clear();
+      for (std::size_t u = 0; u < step; ++u) {
+        const Search& search = searches[units[first + u].search];
+        const std::size_t used =
+            std::min<std::size_t>(kLanes, search.logs.size() - units[first + u].batch * kLanes);
+        jobs_.push_back({search.channel->x_.data() + search.window.a0,
+                         batches[batch_of[u]].factor->data(), solutions.data() + u * n,
+                         (used + 3) / 4, search.window.b0 - search.window.a0});
+      }
+      SubstituteConstantLevels(n, jobs_.data(), jobs_.size());
+      for (std::size_t u = 0; u < step; ++u) {
+        const Search& search = searches[units[first + u].search];
+        const Window& window = search.window;
+        const SubstitutionJob& job = jobs_[u];
+        double rss[kLanes];
+        LaneResiduals(job.y, job.x, window.b0 - window.a0, window.b1 - window.a0, job.quarters,
+                      rss);
+        const std::size_t first_level = units[first + u].batch * kLanes;
+        const Batch& batch = batches[batch_of[u]];
+        for (std::size_t lane = 0; lane < kLanes && first_level + lane < search.logs.size();
+             ++lane) {
+          search.risks[first_level + lane] =
+              rss[lane] + 2.0 * search.channel->sigma2_ *
+                              static_cast<double>(window.b1 - window.b0) * batch.dof[lane];
         }
       }
     }
-    return risks;
+    return true;
   }
 
   // The index of the least of `risks`, the first of equals; `none` when none is below infinity.
@@ -823,71 +854,112 @@ class NoiseSmoother {
     return best;
   }
 
-  // log10 of the single level of least SURE over the whole channel.
-  double BestSingleLevel() {
+  // log10 of the single level of least SURE over the whole channel, for each channel of `group`
+  // (of one length), searched together. Empty once a stop is seen.
+  static std::vector<double> BestSingleLevels(std::span<NoiseSmoother* const> group) {
+    NoiseSmoother& owner = *group.front();
+    const std::size_t n = owner.n_;
     std::vector<double> coarse_logs;
     for (double l = kMinLogLambda; l <= kMaxLogLambda + 1e-9; l += kCoarseStep) {
       coarse_logs.push_back(l);
     }
-    const Window whole{0, n_, 0, n_};
-    const std::vector<double> coarse_risks = Risks(coarse_logs, n_, {&whole, 1});
-    if (stopped_) return kMinLogLambda;
-    const std::size_t coarse = Least(coarse_risks);
-    double best = coarse == kNone ? kMinLogLambda : coarse_logs[coarse];
-    double best_risk =
-        coarse == kNone ? std::numeric_limits<double>::infinity() : coarse_risks[coarse];
-    std::vector<double> fine_logs;
-    for (double l : {best - kFineStep, best + kFineStep}) {
-      if (l < kMinLogLambda || l > kMaxLogLambda) continue;
-      fine_logs.push_back(l);
+    const std::size_t count = coarse_logs.size();
+    const Window whole{0, n, 0, n};
+    std::vector<double> coarse_risks(group.size() * count);
+    std::vector<Search> searches;
+    for (std::size_t c = 0; c < group.size(); ++c) {
+      searches.push_back({group[c], whole, coarse_logs, coarse_risks.data() + c * count});
     }
-    const std::vector<double> fine_risks = Risks(fine_logs, n_, {&whole, 1});
-    for (std::size_t i = 0; i < fine_logs.size(); ++i) {
-      if (fine_risks[i] < best_risk) {
-        best_risk = fine_risks[i];
-        best = fine_logs[i];
+    if (!owner.Risks(n, searches)) return {};
+    std::vector<double> best(group.size());
+    std::vector<double> best_risk(group.size());
+    std::vector<std::vector<double>> fine_logs(group.size());
+    std::vector<std::array<double, 2>> fine_risks(group.size());
+    searches.clear();
+    for (std::size_t c = 0; c < group.size(); ++c) {
+      const std::span<const double> own(coarse_risks.data() + c * count, count);
+      const std::size_t coarse = Least(own);
+      best[c] = coarse == kNone ? kMinLogLambda : coarse_logs[coarse];
+      best_risk[c] = coarse == kNone ? std::numeric_limits<double>::infinity() : own[coarse];
+      for (double l : {best[c] - kFineStep, best[c] + kFineStep}) {
+        if (l < kMinLogLambda || l > kMaxLogLambda) continue;
+        fine_logs[c].push_back(l);
+      }
+      if (!fine_logs[c].empty()) {
+        searches.push_back({group[c], whole, fine_logs[c], fine_risks[c].data()});
+      }
+    }
+    if (!owner.Risks(n, searches)) return {};
+    for (std::size_t c = 0; c < group.size(); ++c) {
+      for (std::size_t i = 0; i < fine_logs[c].size(); ++i) {
+        if (fine_risks[c][i] < best_risk[c]) {
+          best_risk[c] = fine_risks[c][i];
+          best[c] = fine_logs[c][i];
+        }
       }
     }
     return best;
   }
 
-  // log10 of the level of least SURE on each block, within kBlockReach decades of `global`. The
-  // windows of equal length are searched together.
-  std::vector<double> BestBlockLevels(double global) {
-    const double low = std::max(kMinLogLambda, global - kBlockReach);
-    const double high = std::min(kMaxLogLambda, global + kBlockReach);
-    std::vector<double> logs;
-    for (double l = low; l <= high + 1e-9; l += kFineStep) logs.push_back(l);
-    std::vector<double> block_log;
+  // log10 of the level of least SURE on each block of each channel of `group` (of one length),
+  // within kBlockReach decades of the channel's `global` level. The windows of equal length are
+  // searched together, those of all the channels at once. Empty once a stop is seen.
+  static std::vector<std::vector<double>> BestBlockLevels(std::span<NoiseSmoother* const> group,
+                                                          std::span<const double> global) {
+    NoiseSmoother& owner = *group.front();
+    const std::size_t n_all = owner.n_;
+    const std::size_t block = owner.block_;
+    std::vector<std::vector<double>> logs(group.size());
+    for (std::size_t c = 0; c < group.size(); ++c) {
+      const double low = std::max(kMinLogLambda, global[c] - kBlockReach);
+      const double high = std::min(kMaxLogLambda, global[c] + kBlockReach);
+      for (double l = low; l <= high + 1e-9; l += kFineStep) logs[c].push_back(l);
+    }
     std::vector<Window> windows;
-    for (std::size_t b0 = 0; b0 < n_; b0 += block_) {
-      const std::size_t b1 = std::min(n_, b0 + block_);
-      const std::size_t a0 = b0 >= block_ ? b0 - block_ : 0;
-      const std::size_t a1 = std::min(n_, b1 + block_);
+    for (std::size_t b0 = 0; b0 < n_all; b0 += block) {
+      const std::size_t b1 = std::min(n_all, b0 + block);
+      const std::size_t a0 = b0 >= block ? b0 - block : 0;
+      const std::size_t a1 = std::min(n_all, b1 + block);
       windows.push_back({a0, a1, b0, b1});
-      block_log.push_back(global);  // kept where the window is too short to solve
+    }
+    std::vector<std::vector<double>> block_log;
+    for (std::size_t c = 0; c < group.size(); ++c) {
+      // Kept where the window is too short to solve.
+      block_log.emplace_back(windows.size(), global[c]);
     }
     std::vector<bool> done(windows.size(), false);
-    std::vector<Window> group;
     std::vector<std::size_t> members;
+    std::vector<Search> searches;
+    std::vector<double> risks;
     for (std::size_t w = 0; w < windows.size(); ++w) {
       const std::size_t n = windows[w].a1 - windows[w].a0;
       if (done[w] || n <= kOrder + 1) continue;
-      group.clear();
       members.clear();
       for (std::size_t v = w; v < windows.size(); ++v) {
         if (!done[v] && windows[v].a1 - windows[v].a0 == n) {
-          group.push_back(windows[v]);
           members.push_back(v);
           done[v] = true;
         }
       }
-      const std::vector<double> risks = Risks(logs, n, group);
-      if (stopped_) return block_log;
-      for (std::size_t m = 0; m < members.size(); ++m) {
-        const std::span<const double> own(risks.data() + m * logs.size(), logs.size());
-        const std::size_t least = Least(own);
-        if (least != kNone) block_log[members[m]] = logs[least];
+      std::size_t total = 0;
+      for (std::size_t c = 0; c < group.size(); ++c) total += logs[c].size() * members.size();
+      risks.resize(total);
+      searches.clear();
+      double* next = risks.data();
+      for (std::size_t c = 0; c < group.size(); ++c) {
+        for (const std::size_t v : members) {
+          searches.push_back({group[c], windows[v], logs[c], next});
+          next += logs[c].size();
+        }
+      }
+      if (!owner.Risks(n, searches)) return {};
+      std::size_t s = 0;
+      for (std::size_t c = 0; c < group.size(); ++c) {
+        for (const std::size_t v : members) {
+          const std::size_t least = Least({searches[s].risks, logs[c].size()});
+          if (least != kNone) block_log[c][v] = logs[c][least];
+          ++s;
+        }
       }
     }
     return block_log;
