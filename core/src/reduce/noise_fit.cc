@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 #include <memory>
 #include <numbers>
@@ -16,6 +17,7 @@
 #include "tempokey/core/model/progress.h"
 #include "tempokey/core/model/status.h"
 #include "noise_smoother.h"
+#include "lane_pack.h"
 #include "simd.h"
 
 
@@ -159,6 +161,106 @@ class BandSolver {
   std::vector<std::array<double, kOrder + 1>> band_;
 };
 
+// ---- the guard rounds' solves, several channels at once ----------------------------------------
+
+// Channels whose guard rounds solve together, one per lane of a 4-lane vector.
+constexpr std::size_t kGuardLanes = reduce_internal::kSmootherGroup;
+static_assert(kGuardLanes == 4, "the lane kernels hold one channel per lane of a 4-lane vector");
+// Doubles per row of LaneBandSolver's band: kOrder + 1 entries of kGuardLanes lanes.
+constexpr std::size_t kLaneRow = (kOrder + 1) * kGuardLanes;
+
+// Rows [begin, end) of BandSolver::ForwardRow() for kGuardLanes channels of n frames at once: lane
+// c of x[i * kGuardLanes + c], lambda[r * kGuardLanes + c], y[i * kGuardLanes + c] and
+// band[i * kLaneRow + k * kGuardLanes + c] (entry k of row i) is channel c's. Each lane performs
+// exactly the scalar operations in the scalar order.
+TEMPOKEY_AVX_CLONES void ForwardLaneRows(std::size_t n, std::size_t begin, std::size_t end,
+                                         const double* x, const double* lambda, double* band,
+                                         double* y) {
+  using simd::V4;
+  constexpr auto kBand = static_cast<std::size_t>(kOrder);
+  const auto entry = [band](std::size_t i, std::size_t k) __attribute__((always_inline)) {
+    return band + i * kLaneRow + k * kGuardLanes;
+  };
+  for (std::size_t i = begin; i < end; ++i) {
+    if (i + kBand < n) {
+      const V4 l = simd::Load(lambda + i * kGuardLanes);
+      for (std::size_t a = 0; a <= kBand; ++a) {
+        for (std::size_t b = 0; b <= a; ++b) {
+          double* e = entry(i + a, a - b);
+          simd::Store(e, simd::Load(e) + l * kDifference[a] * kDifference[b]);
+        }
+      }
+    }
+    for (std::size_t k = kBand; k >= 1; --k) {
+      if (i < k) continue;
+      const std::size_t j = i - k;
+      V4 s = simd::Load(entry(i, k));
+      for (std::size_t m = k + 1; m <= kBand && i >= m; ++m) {
+        s -= simd::Load(entry(i, m)) * simd::Load(entry(j, m - k));
+      }
+      simd::Store(entry(i, k), s / simd::Load(entry(j, 0)));
+    }
+    V4 s = simd::Load(entry(i, 0));
+    for (std::size_t k = 1; k <= kBand && i >= k; ++k) {
+      const V4 e = simd::Load(entry(i, k));
+      s -= e * e;
+    }
+    V4 root;
+    for (int lane = 0; lane < 4; ++lane) root[lane] = std::sqrt(s[lane]);
+    simd::Store(entry(i, 0), root);
+    V4 f = simd::Load(x + i * kGuardLanes);
+    for (std::size_t k = 1; k <= kBand && i >= k; ++k) {
+      f -= simd::Load(entry(i, k)) * simd::Load(y + (i - k) * kGuardLanes);
+    }
+    simd::Store(y + i * kGuardLanes, f / root);
+  }
+}
+
+// Rows [begin, end) of BandSolver::BackRow() for kGuardLanes channels at once, from row end - 1
+// down (ForwardLaneRows()'s layout).
+TEMPOKEY_AVX_CLONES void BackLaneRows(std::size_t n, std::size_t begin, std::size_t end,
+                                      const double* band, double* y) {
+  using simd::V4;
+  constexpr auto kBand = static_cast<std::size_t>(kOrder);
+  for (std::size_t i = end; i-- > begin;) {
+    V4 s = simd::Load(y + i * kGuardLanes);
+    for (std::size_t k = 1; k <= kBand && i + k < n; ++k) {
+      s -= simd::Load(band + (i + k) * kLaneRow + k * kGuardLanes) *
+           simd::Load(y + (i + k) * kGuardLanes);
+    }
+    simd::Store(y + i * kGuardLanes, s / simd::Load(band + i * kLaneRow));
+  }
+}
+
+// BandSolver::Solve() for kGuardLanes channels of n >= 4 frames at once, each with its own
+// levels (ForwardLaneRows()'s layout): every channel's solution is BandSolver's bit for bit. One
+// solve is a chain of divisions and square roots from row to row, so it runs at their latency;
+// four side by side take about the time of one. False, y incomplete, when a stop was requested.
+class LaneBandSolver {
+ public:
+  bool Solve(std::size_t n, const double* x, const double* lambda, double* y,
+             const std::stop_token& stop) {
+    band_.assign(n * kLaneRow, 0.0);
+    for (std::size_t i = 0; i < n; ++i) {
+      std::fill_n(band_.begin() + static_cast<std::ptrdiff_t>(i * kLaneRow), kGuardLanes, 1.0);
+    }
+    for (std::size_t begin = 0; begin < n; begin += kStopCheckRows) {
+      if (stop.stop_requested()) return false;
+      ForwardLaneRows(n, begin, std::min(n, begin + kStopCheckRows), x, lambda, band_.data(), y);
+    }
+    for (std::size_t end = n; end > 0;) {
+      if (stop.stop_requested()) return false;
+      const std::size_t begin = end > kStopCheckRows ? end - kStopCheckRows : 0;
+      BackLaneRows(n, begin, end, band_.data(), y);
+      end = begin;
+    }
+    return true;
+  }
+
+ private:
+  std::vector<double> band_;
+};
+
 // ---- many constant levels at once ---------------------------------------------------------------
 
 // The searches below solve one signal at many constant levels. A single solve is a chain of
@@ -283,17 +385,21 @@ struct SubstitutionJob {
   const BandRow* band;
   LaneValues* y;
   std::size_t quarters;  // lanes solved, in fours (1 to 4): a partly filled batch solves fewer
+  // The first frame whose solution is wanted: the back substitution stops there (the frames
+  // before it feed only each other's back steps, and the risk counts only its block's frames).
+  std::size_t first_wanted;
 };
 
 // Solves L L^T y = x for every job (each of n frames): forward, then back substitution, as
-// BandSolver does. y[i].value[l] is level l's solution at frame i. One solve is a chain of
+// BandSolver does, the back substitution down to each job's first wanted frame (y holds the
+// forward substitution's values before it). y[i].value[l] is level l's solution at frame i. One solve is a chain of
 // dependent divisions from frame to frame; the jobs are independent, so stepping all of them frame
 // by frame keeps several chains in flight and the divider busy. Each lane of each job performs
 // exactly the scalar operations in the scalar order. Written on 4-lane vectors (a quarter of a
 // batch at a time): the compiler keeps those in registers, where it moves 16-lane ones through
 // the stack.
-TEMPOKEY_AVX_CLONES void SubstituteConstantLevels(std::size_t n, const SubstitutionJob* jobs,
-                                                  std::size_t count) {
+TEMPOKEY_AVX_CLONES void SubstituteConstantLevels4(std::size_t n, const SubstitutionJob* jobs,
+                                                   std::size_t count) {
   using simd::V4;
   // Doubles from one frame (or one band entry) to the next.
   constexpr std::size_t kStride = kLanes;
@@ -314,8 +420,11 @@ TEMPOKEY_AVX_CLONES void SubstituteConstantLevels(std::size_t n, const Substitut
       }
     }
   }
-  for (std::size_t i = n; i-- > 0;) {
+  std::size_t lowest = n;
+  for (std::size_t j = 0; j < count; ++j) lowest = std::min(lowest, jobs[j].first_wanted);
+  for (std::size_t i = n; i-- > lowest;) {
     for (std::size_t j = 0; j < count; ++j) {
+      if (i < jobs[j].first_wanted) continue;
       const double* __restrict band = reinterpret_cast<const double*>(jobs[j].band);
       double* __restrict y = reinterpret_cast<double*>(jobs[j].y);
       for (std::size_t q = 0; q < jobs[j].quarters; ++q) {
@@ -328,6 +437,86 @@ TEMPOKEY_AVX_CLONES void SubstituteConstantLevels(std::size_t n, const Substitut
         simd::Store(y + at, s / simd::Load(band + i * kRowStride + 4 * q));
       }
     }
+  }
+}
+
+// SubstituteConstantLevels4() on 8-lane AVX-512 vectors, half a batch at a time (a batch with an
+// odd number of quarters solves its last one on a 4-lane vector): each lane performs the same
+// operations in the same order, so the solutions are the same bits.
+TEMPOKEY_TARGET_AVX512 void SubstituteConstantLevels8(std::size_t n, const SubstitutionJob* jobs,
+                                                      std::size_t count) {
+  using V8 = double __attribute__((vector_size(64)));
+  using simd::V4;
+  const auto load = [](const double* p) __attribute__((always_inline)) {
+    V8 v;
+    std::memcpy(&v, p, sizeof v);
+    return v;
+  };
+  const auto store = [](double* p, V8 v) __attribute__((always_inline)) {
+    std::memcpy(p, &v, sizeof v);
+  };
+  constexpr std::size_t kStride = kLanes;
+  constexpr std::size_t kRowStride = sizeof(BandRow) / sizeof(double);
+  for (std::size_t i = 0; i < n; ++i) {
+    for (std::size_t j = 0; j < count; ++j) {
+      const double* __restrict row = reinterpret_cast<const double*>(&jobs[j].band[i]);
+      double* __restrict y = reinterpret_cast<double*>(jobs[j].y);
+      const double x = jobs[j].x[i];
+      const V8 xi = {x, x, x, x, x, x, x, x};
+      const std::size_t halves = jobs[j].quarters / 2;
+      for (std::size_t h = 0; h < halves; ++h) {
+        const std::size_t at = i * kStride + 8 * h;
+        V8 f = xi;
+        for (std::size_t k = 1; k <= kOrder && i >= k; ++k) {
+          f -= load(row + k * kStride + 8 * h) * load(y + at - k * kStride);
+        }
+        store(y + at, f / load(row + 8 * h));
+      }
+      if (jobs[j].quarters % 2 != 0) {
+        const std::size_t at = i * kStride + 8 * halves;
+        V4 f = simd::Broadcast(x);
+        for (std::size_t k = 1; k <= kOrder && i >= k; ++k) {
+          f -= simd::Load(row + k * kStride + 8 * halves) * simd::Load(y + at - k * kStride);
+        }
+        simd::Store(y + at, f / simd::Load(row + 8 * halves));
+      }
+    }
+  }
+  std::size_t lowest = n;
+  for (std::size_t j = 0; j < count; ++j) lowest = std::min(lowest, jobs[j].first_wanted);
+  for (std::size_t i = n; i-- > lowest;) {
+    for (std::size_t j = 0; j < count; ++j) {
+      if (i < jobs[j].first_wanted) continue;
+      const double* __restrict band = reinterpret_cast<const double*>(jobs[j].band);
+      double* __restrict y = reinterpret_cast<double*>(jobs[j].y);
+      const std::size_t halves = jobs[j].quarters / 2;
+      for (std::size_t h = 0; h < halves; ++h) {
+        const std::size_t at = i * kStride + 8 * h;
+        V8 s = load(y + at);
+        for (std::size_t k = 1; k <= kOrder && i + k < n; ++k) {
+          s -= load(band + (i + k) * kRowStride + k * kStride + 8 * h) * load(y + at + k * kStride);
+        }
+        store(y + at, s / load(band + i * kRowStride + 8 * h));
+      }
+      if (jobs[j].quarters % 2 != 0) {
+        const std::size_t at = i * kStride + 8 * halves;
+        V4 s = simd::Load(y + at);
+        for (std::size_t k = 1; k <= kOrder && i + k < n; ++k) {
+          s -= simd::Load(band + (i + k) * kRowStride + k * kStride + 8 * halves) *
+               simd::Load(y + at + k * kStride);
+        }
+        simd::Store(y + at, s / simd::Load(band + i * kRowStride + 8 * halves));
+      }
+    }
+  }
+}
+
+// The level searches' substitutions on the widest vectors the machine has.
+void SubstituteConstantLevels(std::size_t n, const SubstitutionJob* jobs, std::size_t count) {
+  if (simd::RunningPackIsa() == simd::PackIsa::kAvx512) {
+    SubstituteConstantLevels8(n, jobs, count);
+  } else {
+    SubstituteConstantLevels4(n, jobs, count);
   }
 }
 
@@ -397,18 +586,18 @@ namespace {
 // Frames above which a search solves level by level with BandSolver instead of sixteen levels at
 // once: sixteen factors of that many frames would take more than kMaxSmootherFactorBytes.
 constexpr std::size_t kMaxLaneFrames = reduce_internal::kMaxSmootherFactorBytes / sizeof(BandRow);
-// Batches of sixteen levels a search has at most: the coarse grid, 29 levels.
-constexpr std::size_t kMaxBatches =
-    static_cast<std::size_t>((kMaxLogLambda - kMinLogLambda) / kCoarseStep + 1 + kLanes - 1) /
-    kLanes;
-static_assert(kMaxBatches == 2);
 // Solutions computed at once (bytes): windows step together until theirs fill about half of a
 // second-level cache.
 constexpr std::size_t kMaxSolutionBytes = std::size_t{256} << 10;
+// But at least this many batch solves step together (a long channel's whole-window searches: a
+// solve's divisions wait on each other, several solves' overlap), and never more than
+// kMaxStepSolutionBytes of solutions.
+constexpr std::size_t kMinStepUnits = 16;
+constexpr std::size_t kMaxStepSolutionBytes = std::size_t{16} << 20;
 
 // The smoother of one channel. It looks at the stop token between batches of window solves, per
 // guard round and every kStopCheckRows rows of a band solve; once a stop is seen every phase
-// returns at once and Run()'s result is incomplete (the caller reports the cancellation).
+// returns at once and RunGroup()'s result is incomplete (the caller reports the cancellation).
 class NoiseSmoother {
  public:
   NoiseSmoother(std::span<const double> samples, double sigma, const NoiseFitOptions& options,
@@ -421,40 +610,93 @@ class NoiseSmoother {
         factors_(factors.store()),
         stop_(std::move(stop)) {}
 
-  // The smoothed samples; incomplete when stopped() is true afterwards.
-  std::vector<double> Run() {
-    std::vector<double> y(x_.begin(), x_.end());
-    if (n_ <= kOrder + 1) return y;
-    const double global = BestSingleLevel();
-    if (Stopping()) return y;
+  // The smoothed samples of each smoother of `group` (1 to kGuardLanes of them, over channels of
+  // the same length); incomplete when stopped() is true afterwards for any of them. Each
+  // channel's levels are searched alone; the guard rounds then solve the channels side by side
+  // (LaneBandSolver), each channel's rounds ending when its own guard holds: a channel's later
+  // solves repeat its levels, so they give its last solution again, bit for bit.
+  static std::vector<std::vector<double>> RunGroup(std::span<NoiseSmoother* const> group) {
+    std::vector<std::vector<double>> y;
+    for (const NoiseSmoother* smoother : group) y.emplace_back(smoother->x_.begin(), smoother->x_.end());
+    const std::size_t n = group.front()->n_;
+    if (n <= kOrder + 1) return y;
+    const std::vector<double> global = BestSingleLevels(group);
+    if (group.front()->Stopping()) return StopAll(group, std::move(y));
     // Per block: the level of least SURE on the block, solved with context on both sides.
-    std::vector<double> block_log = BestBlockLevels(global);
-    if (Stopping()) return y;
-    std::vector<double> lambda(n_ - kOrder);
-    for (int round = 0;; ++round) {
-      if (!Interpolate(block_log, lambda) || !SolveBand(x_, lambda, y)) return y;
-      if (round == kMaxGuardRounds) break;
-      bool lowered = false;
-      for (std::size_t b = 0; b < block_log.size(); ++b) {
-        const std::size_t b0 = b * block_;
-        const std::size_t b1 = std::min(n_, b0 + block_);
-        double worst = 0.0;
-        for (std::size_t f = b0; f < b1; ++f) worst = std::max(worst, std::abs(y[f] - x_[f]));
-        if (worst <= guard_ || block_log[b] <= kGuardFloorLogLambda) continue;
-        block_log[b] = block_log[b] > kMinLogLambda
-                           ? std::max(kMinLogLambda, block_log[b] - std::log10(kGuardFactor))
-                           : kGuardFloorLogLambda;
-        lowered = true;
+    std::vector<std::vector<double>> block_log = BestBlockLevels(group, global);
+    if (group.front()->Stopping()) return StopAll(group, std::move(y));
+    // Lanes beyond the group repeat its last channel.
+    const auto channel_of = [&](std::size_t lane) { return std::min(lane, group.size() - 1); };
+    std::vector<double> x(n * kGuardLanes);
+    for (std::size_t i = 0; i < n; ++i) {
+      for (std::size_t lane = 0; lane < kGuardLanes; ++lane) {
+        x[i * kGuardLanes + lane] = group[channel_of(lane)]->x_[i];
       }
-      if (!lowered) break;
+    }
+    std::vector<double> levels(n - kOrder);
+    std::vector<double> lambda((n - kOrder) * kGuardLanes);
+    std::vector<double> solution(n * kGuardLanes);
+    std::vector<bool> lowered(group.size(), true);  // levels changed since the last solve
+    LaneBandSolver solver;
+    for (int round = 0;; ++round) {
+      for (std::size_t lane = 0; lane < kGuardLanes; ++lane) {
+        const std::size_t c = channel_of(lane);
+        if (!lowered[c]) continue;
+        if (lane == c && !group[c]->Interpolate(block_log[c], levels)) {
+          return StopAll(group, std::move(y));
+        }
+        for (std::size_t r = 0; r < levels.size(); ++r) lambda[r * kGuardLanes + lane] = levels[r];
+      }
+      if (!solver.Solve(n, x.data(), lambda.data(), solution.data(), group.front()->stop_)) {
+        return StopAll(group, std::move(y));
+      }
+      if (round == kMaxGuardRounds) break;
+      bool any = false;
+      for (std::size_t c = 0; c < group.size(); ++c) {
+        if (!lowered[c]) continue;  // its guard held: its solution is final
+        lowered[c] = group[c]->LowerGuardedBlocks(solution, c, block_log[c]);
+        any = any || lowered[c];
+      }
+      if (!any) break;
+    }
+    for (std::size_t c = 0; c < group.size(); ++c) {
+      for (std::size_t i = 0; i < n; ++i) y[c][i] = solution[i * kGuardLanes + c];
     }
     return y;
   }
 
-  // Whether a stop was seen: Run()'s result is then not to be used.
+  // Whether a stop was seen: RunGroup()'s result is then not to be used.
   bool stopped() const { return stopped_; }
 
  private:
+  // Marks every smoother of `group` stopped (they share the token) and returns `y`.
+  static std::vector<std::vector<double>> StopAll(std::span<NoiseSmoother* const> group,
+                                                  std::vector<std::vector<double>> y) {
+    for (NoiseSmoother* smoother : group) smoother->stopped_ = true;
+    return y;
+  }
+
+  // One guard round's check of this channel's solution (lane `lane` of `solution`, laid out as
+  // LaneBandSolver's): each block whose solution strays more than the guard from the samples has
+  // its level lowered by kGuardFactor (from the lowest searched, to the floor). Whether any was.
+  bool LowerGuardedBlocks(std::span<const double> solution, std::size_t lane,
+                          std::vector<double>& block_log) const {
+    bool lowered = false;
+    for (std::size_t b = 0; b < block_log.size(); ++b) {
+      const std::size_t b0 = b * block_;
+      const std::size_t b1 = std::min(n_, b0 + block_);
+      double worst = 0.0;
+      for (std::size_t f = b0; f < b1; ++f) {
+        worst = std::max(worst, std::abs(solution[f * kGuardLanes + lane] - x_[f]));
+      }
+      if (worst <= guard_ || block_log[b] <= kGuardFloorLogLambda) continue;
+      block_log[b] = block_log[b] > kMinLogLambda
+                         ? std::max(kMinLogLambda, block_log[b] - std::log10(kGuardFactor))
+                         : kGuardFloorLogLambda;
+      lowered = true;
+    }
+    return lowered;
+  }
   // Looks at the stop token; true (and from then on) once a stop was requested.
   bool Stopping() {
     if (!stopped_) stopped_ = stop_.stop_requested();
@@ -476,92 +718,126 @@ class NoiseSmoother {
     std::size_t a0, a1, b0, b1;
   };
 
-  // SURE on each window's block of the solutions of its frames at the constant levels
-  // 10^logs[i], up to the constant -n sigma^2: each one's residual there plus 2 sigma^2 times its
-  // degrees of freedom. risks[w * logs.size() + i] is window w's at level i. Every window has n
-  // frames, so they share the factors; sixteen levels per factor, and the solves of several
-  // windows and batches of levels step together (SubstituteConstantLevels()). Incomplete once a
-  // stop is seen (between window solves or steps of windows).
-  std::vector<double> Risks(std::span<const double> logs, std::size_t n,
-                            std::span<const Window> windows) {
-    const std::size_t count = logs.size();
-    std::vector<double> risks(windows.size() * count);
+  // One window of one channel to be searched: `logs.size()` risks go to `risks`.
+  struct Search {
+    const NoiseSmoother* channel;
+    Window window;
+    std::span<const double> logs;
+    double* risks;
+  };
+
+  // SURE on each search's block of the solutions of its window at the constant levels
+  // 10^logs[i], up to the constant -n sigma^2: each one's residual there plus 2 sigma^2 (its
+  // channel's) times its degrees of freedom, to search.risks[i]. Every window has n frames, so
+  // they share the factors (this smoother's store); sixteen levels per factor, and the solves of
+  // several searches and batches of levels step together (SubstituteConstantLevels()): the more
+  // of them, the more chains of divisions in flight. False, risks incomplete, once a stop is seen
+  // (between window solves or steps).
+  bool Risks(std::size_t n, std::span<const Search> searches) {
     if (n > kMaxLaneFrames) {
       std::vector<double> y(n);
       std::vector<double> lambda(n - kOrder);
-      for (std::size_t w = 0; w < windows.size(); ++w) {
-        const Window& window = windows[w];
-        for (std::size_t i = 0; i < count; ++i) {
-          const double level = std::pow(10.0, logs[i]);
+      for (const Search& search : searches) {
+        const Window& window = search.window;
+        const std::span<const double> x = search.channel->x_;
+        for (std::size_t i = 0; i < search.logs.size(); ++i) {
+          const double level = std::pow(10.0, search.logs[i]);
           std::fill(lambda.begin(), lambda.end(), level);
-          if (!SolveBand(x_.subspan(window.a0, n), lambda, y)) return risks;
+          if (!SolveBand(x.subspan(window.a0, n), lambda, y)) return false;
           double rss = 0.0;
           for (std::size_t f = window.b0; f < window.b1; ++f) {
-            const double r = y[f - window.a0] - x_[f];
+            const double r = y[f - window.a0] - x[f];
             rss += r * r;
           }
-          risks[w * count + i] = rss + 2.0 * sigma2_ * static_cast<double>(window.b1 - window.b0) *
-                                           CachedDofPerFrame(level);
+          search.risks[i] = rss + 2.0 * search.channel->sigma2_ *
+                                      static_cast<double>(window.b1 - window.b0) *
+                                      CachedDofPerFrame(level);
         }
       }
-      return risks;
+      return true;
     }
-    const std::size_t batches = (count + kLanes - 1) / kLanes;
-    // Batches whose factors are held at once, and windows solved at once, within the byte bounds.
+    // One unit: a search at one batch of sixteen of its levels.
+    struct Unit {
+      std::size_t search, batch;
+    };
+    std::vector<Unit> units;
+    for (std::size_t i = 0; i < searches.size(); ++i) {
+      for (std::size_t b = 0; b * kLanes < searches[i].logs.size(); ++b) units.push_back({i, b});
+    }
+    // Units solved at once: enough for several chains in flight, few enough that their solutions
+    // stay near the cache (kMaxSolutionBytes) and within kMaxStepSolutionBytes, and their factors
+    // within kMaxSmootherFactorBytes.
+    const std::size_t solution_bytes = n * sizeof(LaneValues);
     const std::size_t factor_bytes = n * sizeof(BandRow);
-    const std::size_t batches_per_step =
-        std::clamp<std::size_t>(reduce_internal::kMaxSmootherFactorBytes / factor_bytes, 1, batches);
-    for (std::size_t first_batch = 0; first_batch < batches; first_batch += batches_per_step) {
-      if (Stopping()) return risks;
-      const std::size_t step_batches = std::min(batches_per_step, batches - first_batch);
-      std::array<double, kLanes> level[kMaxBatches];
-      std::array<double, kLanes> dof[kMaxBatches];  // degrees of freedom per frame
-      std::shared_ptr<const std::vector<BandRow>> factor[kMaxBatches];
-      for (std::size_t b = 0; b < step_batches; ++b) {
-        const std::size_t first = (first_batch + b) * kLanes;
-        for (std::size_t lane = 0; lane < kLanes; ++lane) {
-          level[b][lane] = std::pow(10.0, logs[std::min(first + lane, count - 1)]);
-          dof[b][lane] = CachedDofPerFrame(level[b][lane]);
+    const std::size_t per_step = std::max<std::size_t>(
+        1, std::min({std::max(kMinStepUnits, kMaxSolutionBytes / solution_bytes),
+                     kMaxStepSolutionBytes / solution_bytes,
+                     reduce_internal::kMaxSmootherFactorBytes / factor_bytes}));
+    struct Batch {
+      const double* logs;
+      std::size_t batch;
+      std::array<double, kLanes> level;
+      std::array<double, kLanes> dof;  // degrees of freedom per frame
+      std::shared_ptr<const std::vector<BandRow>> factor;
+    };
+    std::vector<Batch> batches;  // of the step, each distinct one once
+    std::vector<std::size_t> batch_of;  // per unit of the step
+    for (std::size_t first = 0; first < units.size(); first += per_step) {
+      if (Stopping()) return false;
+      const std::size_t step = std::min(per_step, units.size() - first);
+      batches.clear();
+      batch_of.clear();
+      for (std::size_t u = first; u < first + step; ++u) {
+        const Search& search = searches[units[u].search];
+        const std::size_t b = units[u].batch;
+        std::size_t k = 0;
+        while (k < batches.size() &&
+               !(batches[k].logs == search.logs.data() && batches[k].batch == b)) {
+          ++k;
         }
-        factor[b] = factors_.Get(n, level[b].data());
+        if (k == batches.size()) {
+          Batch& batch = batches.emplace_back();
+          batch.logs = search.logs.data();
+          batch.batch = b;
+          const std::size_t count = search.logs.size();
+          for (std::size_t lane = 0; lane < kLanes; ++lane) {
+            batch.level[lane] = std::pow(10.0, search.logs[std::min(b * kLanes + lane, count - 1)]);
+            batch.dof[lane] = CachedDofPerFrame(batch.level[lane]);
+          }
+          batch.factor = factors_.Get(n, batch.level.data());
+        }
+        batch_of.push_back(k);
       }
-      const std::size_t solution_bytes = n * sizeof(LaneValues) * step_batches;
-      const std::size_t windows_per_step =
-          std::clamp<std::size_t>(kMaxSolutionBytes / solution_bytes, 1, windows.size());
-      for (std::size_t first_window = 0; first_window < windows.size();
-           first_window += windows_per_step) {
-        if (Stopping()) return risks;
-        const std::size_t step_windows = std::min(windows_per_step, windows.size() - first_window);
-        const std::size_t jobs = step_windows * step_batches;
-        std::vector<LaneValues>& solutions = factors_.solutions;
-        if (solutions.size() < jobs * n) solutions.resize(jobs * n);
-        jobs_.clear();
-        for (std::size_t w = 0; w < step_windows; ++w) {
-          for (std::size_t b = 0; b < step_batches; ++b) {
-            const std::size_t used = std::min<std::size_t>(kLanes, count - (first_batch + b) * kLanes);
-            jobs_.push_back({x_.data() + windows[first_window + w].a0, factor[b]->data(),
-                             solutions.data() + jobs_.size() * n, (used + 3) / 4});
-          }
-        }
-        SubstituteConstantLevels(n, jobs_.data(), jobs);
-        for (std::size_t w = 0; w < step_windows; ++w) {
-          const Window& window = windows[first_window + w];
-          for (std::size_t b = 0; b < step_batches; ++b) {
-            double rss[kLanes];
-            const SubstitutionJob& job = jobs_[w * step_batches + b];
-            LaneResiduals(job.y, x_.data() + window.a0, window.b0 - window.a0,
-                          window.b1 - window.a0, job.quarters, rss);
-            const std::size_t first = (first_batch + b) * kLanes;
-            for (std::size_t lane = 0; lane < kLanes && first + lane < count; ++lane) {
-              risks[(first_window + w) * count + first + lane] =
-                  rss[lane] + 2.0 * sigma2_ * static_cast<double>(window.b1 - window.b0) *
-                                  dof[b][lane];
-            }
-          }
+      std::vector<LaneValues>& solutions = factors_.solutions;
+      if (solutions.size() < step * n) solutions.resize(step * n);
+      jobs_.clear();
+      for (std::size_t u = 0; u < step; ++u) {
+        const Search& search = searches[units[first + u].search];
+        const std::size_t used =
+            std::min<std::size_t>(kLanes, search.logs.size() - units[first + u].batch * kLanes);
+        jobs_.push_back({search.channel->x_.data() + search.window.a0,
+                         batches[batch_of[u]].factor->data(), solutions.data() + u * n,
+                         (used + 3) / 4, search.window.b0 - search.window.a0});
+      }
+      SubstituteConstantLevels(n, jobs_.data(), jobs_.size());
+      for (std::size_t u = 0; u < step; ++u) {
+        const Search& search = searches[units[first + u].search];
+        const Window& window = search.window;
+        const SubstitutionJob& job = jobs_[u];
+        double rss[kLanes];
+        LaneResiduals(job.y, job.x, window.b0 - window.a0, window.b1 - window.a0, job.quarters,
+                      rss);
+        const std::size_t first_level = units[first + u].batch * kLanes;
+        const Batch& batch = batches[batch_of[u]];
+        for (std::size_t lane = 0; lane < kLanes && first_level + lane < search.logs.size();
+             ++lane) {
+          search.risks[first_level + lane] =
+              rss[lane] + 2.0 * search.channel->sigma2_ *
+                              static_cast<double>(window.b1 - window.b0) * batch.dof[lane];
         }
       }
     }
-    return risks;
+    return true;
   }
 
   // The index of the least of `risks`, the first of equals; `none` when none is below infinity.
@@ -578,71 +854,112 @@ class NoiseSmoother {
     return best;
   }
 
-  // log10 of the single level of least SURE over the whole channel.
-  double BestSingleLevel() {
+  // log10 of the single level of least SURE over the whole channel, for each channel of `group`
+  // (of one length), searched together. Empty once a stop is seen.
+  static std::vector<double> BestSingleLevels(std::span<NoiseSmoother* const> group) {
+    NoiseSmoother& owner = *group.front();
+    const std::size_t n = owner.n_;
     std::vector<double> coarse_logs;
     for (double l = kMinLogLambda; l <= kMaxLogLambda + 1e-9; l += kCoarseStep) {
       coarse_logs.push_back(l);
     }
-    const Window whole{0, n_, 0, n_};
-    const std::vector<double> coarse_risks = Risks(coarse_logs, n_, {&whole, 1});
-    if (stopped_) return kMinLogLambda;
-    const std::size_t coarse = Least(coarse_risks);
-    double best = coarse == kNone ? kMinLogLambda : coarse_logs[coarse];
-    double best_risk =
-        coarse == kNone ? std::numeric_limits<double>::infinity() : coarse_risks[coarse];
-    std::vector<double> fine_logs;
-    for (double l : {best - kFineStep, best + kFineStep}) {
-      if (l < kMinLogLambda || l > kMaxLogLambda) continue;
-      fine_logs.push_back(l);
+    const std::size_t count = coarse_logs.size();
+    const Window whole{0, n, 0, n};
+    std::vector<double> coarse_risks(group.size() * count);
+    std::vector<Search> searches;
+    for (std::size_t c = 0; c < group.size(); ++c) {
+      searches.push_back({group[c], whole, coarse_logs, coarse_risks.data() + c * count});
     }
-    const std::vector<double> fine_risks = Risks(fine_logs, n_, {&whole, 1});
-    for (std::size_t i = 0; i < fine_logs.size(); ++i) {
-      if (fine_risks[i] < best_risk) {
-        best_risk = fine_risks[i];
-        best = fine_logs[i];
+    if (!owner.Risks(n, searches)) return {};
+    std::vector<double> best(group.size());
+    std::vector<double> best_risk(group.size());
+    std::vector<std::vector<double>> fine_logs(group.size());
+    std::vector<std::array<double, 2>> fine_risks(group.size());
+    searches.clear();
+    for (std::size_t c = 0; c < group.size(); ++c) {
+      const std::span<const double> own(coarse_risks.data() + c * count, count);
+      const std::size_t coarse = Least(own);
+      best[c] = coarse == kNone ? kMinLogLambda : coarse_logs[coarse];
+      best_risk[c] = coarse == kNone ? std::numeric_limits<double>::infinity() : own[coarse];
+      for (double l : {best[c] - kFineStep, best[c] + kFineStep}) {
+        if (l < kMinLogLambda || l > kMaxLogLambda) continue;
+        fine_logs[c].push_back(l);
+      }
+      if (!fine_logs[c].empty()) {
+        searches.push_back({group[c], whole, fine_logs[c], fine_risks[c].data()});
+      }
+    }
+    if (!owner.Risks(n, searches)) return {};
+    for (std::size_t c = 0; c < group.size(); ++c) {
+      for (std::size_t i = 0; i < fine_logs[c].size(); ++i) {
+        if (fine_risks[c][i] < best_risk[c]) {
+          best_risk[c] = fine_risks[c][i];
+          best[c] = fine_logs[c][i];
+        }
       }
     }
     return best;
   }
 
-  // log10 of the level of least SURE on each block, within kBlockReach decades of `global`. The
-  // windows of equal length are searched together.
-  std::vector<double> BestBlockLevels(double global) {
-    const double low = std::max(kMinLogLambda, global - kBlockReach);
-    const double high = std::min(kMaxLogLambda, global + kBlockReach);
-    std::vector<double> logs;
-    for (double l = low; l <= high + 1e-9; l += kFineStep) logs.push_back(l);
-    std::vector<double> block_log;
+  // log10 of the level of least SURE on each block of each channel of `group` (of one length),
+  // within kBlockReach decades of the channel's `global` level. The windows of equal length are
+  // searched together, those of all the channels at once. Empty once a stop is seen.
+  static std::vector<std::vector<double>> BestBlockLevels(std::span<NoiseSmoother* const> group,
+                                                          std::span<const double> global) {
+    NoiseSmoother& owner = *group.front();
+    const std::size_t n_all = owner.n_;
+    const std::size_t block = owner.block_;
+    std::vector<std::vector<double>> logs(group.size());
+    for (std::size_t c = 0; c < group.size(); ++c) {
+      const double low = std::max(kMinLogLambda, global[c] - kBlockReach);
+      const double high = std::min(kMaxLogLambda, global[c] + kBlockReach);
+      for (double l = low; l <= high + 1e-9; l += kFineStep) logs[c].push_back(l);
+    }
     std::vector<Window> windows;
-    for (std::size_t b0 = 0; b0 < n_; b0 += block_) {
-      const std::size_t b1 = std::min(n_, b0 + block_);
-      const std::size_t a0 = b0 >= block_ ? b0 - block_ : 0;
-      const std::size_t a1 = std::min(n_, b1 + block_);
+    for (std::size_t b0 = 0; b0 < n_all; b0 += block) {
+      const std::size_t b1 = std::min(n_all, b0 + block);
+      const std::size_t a0 = b0 >= block ? b0 - block : 0;
+      const std::size_t a1 = std::min(n_all, b1 + block);
       windows.push_back({a0, a1, b0, b1});
-      block_log.push_back(global);  // kept where the window is too short to solve
+    }
+    std::vector<std::vector<double>> block_log;
+    for (std::size_t c = 0; c < group.size(); ++c) {
+      // Kept where the window is too short to solve.
+      block_log.emplace_back(windows.size(), global[c]);
     }
     std::vector<bool> done(windows.size(), false);
-    std::vector<Window> group;
     std::vector<std::size_t> members;
+    std::vector<Search> searches;
+    std::vector<double> risks;
     for (std::size_t w = 0; w < windows.size(); ++w) {
       const std::size_t n = windows[w].a1 - windows[w].a0;
       if (done[w] || n <= kOrder + 1) continue;
-      group.clear();
       members.clear();
       for (std::size_t v = w; v < windows.size(); ++v) {
         if (!done[v] && windows[v].a1 - windows[v].a0 == n) {
-          group.push_back(windows[v]);
           members.push_back(v);
           done[v] = true;
         }
       }
-      const std::vector<double> risks = Risks(logs, n, group);
-      if (stopped_) return block_log;
-      for (std::size_t m = 0; m < members.size(); ++m) {
-        const std::span<const double> own(risks.data() + m * logs.size(), logs.size());
-        const std::size_t least = Least(own);
-        if (least != kNone) block_log[members[m]] = logs[least];
+      std::size_t total = 0;
+      for (std::size_t c = 0; c < group.size(); ++c) total += logs[c].size() * members.size();
+      risks.resize(total);
+      searches.clear();
+      double* next = risks.data();
+      for (std::size_t c = 0; c < group.size(); ++c) {
+        for (const std::size_t v : members) {
+          searches.push_back({group[c], windows[v], logs[c], next});
+          next += logs[c].size();
+        }
+      }
+      if (!owner.Risks(n, searches)) return {};
+      std::size_t s = 0;
+      for (std::size_t c = 0; c < group.size(); ++c) {
+        for (const std::size_t v : members) {
+          const std::size_t least = Least({searches[s].risks, logs[c].size()});
+          if (least != kNone) block_log[c][v] = logs[c][least];
+          ++s;
+        }
       }
     }
     return block_log;
@@ -727,17 +1044,37 @@ absl::StatusOr<SplineFit> FitToNoise(std::span<const double> samples, double sig
 absl::StatusOr<std::vector<double>> reduce_internal::SmoothToNoise(
     std::span<const double> samples, double sigma, const NoiseFitOptions& options,
     SmootherFactors& factors, std::stop_token stop) {
-  NoiseSmoother smoother(samples, sigma, options, factors, std::move(stop));
-  std::vector<double> smooth = smoother.Run();
-  if (smoother.stopped()) return absl::CancelledError("cancelled");
+  absl::StatusOr<std::vector<std::vector<double>>> smooth =
+      SmoothGroupToNoise({&samples, 1}, {&sigma, 1}, options, factors, std::move(stop));
+  if (!smooth.ok()) return smooth.status();
+  return std::move(smooth->front());
+}
+
+absl::StatusOr<std::vector<std::vector<double>>> reduce_internal::SmoothGroupToNoise(
+    std::span<const std::span<const double>> channels, std::span<const double> sigmas,
+    const NoiseFitOptions& options, SmootherFactors& factors, std::stop_token stop) {
+  std::vector<std::unique_ptr<NoiseSmoother>> smoothers;
+  std::vector<NoiseSmoother*> group;
+  std::vector<std::vector<double>> smooth;
+  for (std::size_t first = 0; first < channels.size(); first += group.size()) {
+    smoothers.clear();
+    group.clear();
+    // Consecutive channels of one length, at most kGuardLanes.
+    for (std::size_t c = first; c < channels.size() && group.size() < kGuardLanes &&
+                                channels[c].size() == channels[first].size();
+         ++c) {
+      smoothers.push_back(
+          std::make_unique<NoiseSmoother>(channels[c], sigmas[c], options, factors, stop));
+      group.push_back(smoothers.back().get());
+    }
+    for (std::vector<double>& y : NoiseSmoother::RunGroup(group)) smooth.push_back(std::move(y));
+    if (group.front()->stopped()) return absl::CancelledError("cancelled");
+  }
   return smooth;
 }
 
-absl::StatusOr<SplineFit> reduce_internal::FitToNoise(std::span<const double> samples,
-                                                      double sigma,
-                                                      const NoiseFitOptions& options,
-                                                      std::stop_token stop,
-                                                      SmootherFactors& factors) {
+absl::Status reduce_internal::CheckNoiseFit(std::span<const double> samples, double sigma,
+                                            const NoiseFitOptions& options) {
   if (samples.empty()) return absl::InvalidArgumentError("a fit needs at least one sample");
   for (std::size_t f = 0; f < samples.size(); ++f) {
     if (!std::isfinite(samples[f])) {
@@ -749,15 +1086,29 @@ absl::StatusOr<SplineFit> reduce_internal::FitToNoise(std::span<const double> sa
     return absl::InvalidArgumentError(
         absl::StrCat("the noise level must be finite and > 0, got ", sigma));
   }
-  TEMPOKEY_RETURN_IF_ERROR(ValidateOptions(options));
+  return ValidateOptions(options);
+}
+
+absl::StatusOr<SplineFit> reduce_internal::FitSmoothedToNoise(std::span<const double> smooth,
+                                                              double sigma,
+                                                              const NoiseFitOptions& options,
+                                                              std::stop_token stop) {
+  TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+  const double bound = options.key_sigmas * sigma;
+  return FitWithinTolerance({&smooth, 1}, {&bound, 1}, {}, stop);
+}
+
+absl::StatusOr<SplineFit> reduce_internal::FitToNoise(std::span<const double> samples,
+                                                      double sigma,
+                                                      const NoiseFitOptions& options,
+                                                      std::stop_token stop,
+                                                      SmootherFactors& factors) {
+  TEMPOKEY_RETURN_IF_ERROR(CheckNoiseFit(samples, sigma, options));
   TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
   absl::StatusOr<std::vector<double>> smooth =
       SmoothToNoise(samples, sigma, options, factors, stop);
   if (!smooth.ok()) return smooth.status();
-  TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
-  const std::span<const double> channel(*smooth);
-  const double bound = options.key_sigmas * sigma;
-  return FitWithinTolerance({&channel, 1}, {&bound, 1}, {}, stop);
+  return FitSmoothedToNoise(*smooth, sigma, options, stop);
 }
 
 }  // namespace tempokey::core

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <string_view>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "tempokey/core/model/numbers.h"
@@ -77,20 +78,55 @@ absl::StatusOr<NoiseCurves> FitNoiseCurves(const Clip& clip,
   SmootherFactors factors;  // shared by the channels: they have the same length
   options.guard_sigmas = params.guard_sigmas;
   options.key_sigmas = params.key_sigmas;
+  std::vector<bool> flat;
   for (int c = 0; c < count; ++c) {
-    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
     const std::span<const double> samples = inputs[c];
     const std::optional<double> given = IsRotation(clip.channels[c].kind)
                                             ? params.rotation_sigma_degrees
                                             : params.position_sigma;
-    const double sigma = given ? *given : std::max(params.min_sigma, EstimateNoiseSigma(samples));
-    out.sigmas.push_back(sigma);
+    out.sigmas.push_back(given ? *given
+                               : std::max(params.min_sigma, EstimateNoiseSigma(samples)));
     out.estimated.push_back(!given.has_value());
-    if (std::all_of(samples.begin(), samples.end(),
-                    [&](double v) { return v == samples.front(); })) {
+    flat.push_back(std::all_of(samples.begin(), samples.end(),
+                               [&](double v) { return v == samples.front(); }));
+  }
+  // The channels to smooth are smoothed a few at a time (SmoothGroupToNoise()): `group` holds
+  // the next ones, `smooth` their curves.
+  std::vector<int> group;
+  std::vector<std::vector<double>> smooth;
+  std::size_t next_in_group = 0;
+  for (int c = 0; c < count; ++c) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+    const std::span<const double> samples = inputs[c];
+    const double sigma = out.sigmas[static_cast<std::size_t>(c)];
+    if (flat[static_cast<std::size_t>(c)]) {
       out.curves.push_back(FlatCurve(samples.size(), samples.front(), clip.frame_time_seconds));
     } else {
-      absl::StatusOr<SplineFit> fit = FitToNoise(samples, sigma, options, stop, factors);
+      if (next_in_group == group.size()) {
+        TEMPOKEY_RETURN_IF_ERROR(
+            Annotate(CheckNoiseFit(samples, sigma, options), ChannelLabel(clip, c)));
+        group.assign(1, c);
+        std::vector<std::span<const double>> spans = {samples};
+        std::vector<double> sigmas = {sigma};
+        // The following channels to smooth join while they pass the checks (one that fails
+        // reports its error in its turn, after the channels before it).
+        for (int d = c + 1; d < count && group.size() < kSmootherGroup; ++d) {
+          const auto ud = static_cast<std::size_t>(d);
+          if (flat[ud]) continue;
+          if (!CheckNoiseFit(inputs[d], out.sigmas[ud], options).ok()) break;
+          group.push_back(d);
+          spans.push_back(inputs[d]);
+          sigmas.push_back(out.sigmas[ud]);
+        }
+        absl::StatusOr<std::vector<std::vector<double>>> smoothed =
+            SmoothGroupToNoise(spans, sigmas, options, factors, stop);
+        if (!smoothed.ok()) return Annotate(smoothed.status(), ChannelLabel(clip, c));
+        smooth = *std::move(smoothed);
+        next_in_group = 0;
+      }
+      absl::StatusOr<SplineFit> fit =
+          FitSmoothedToNoise(smooth[next_in_group], sigma, options, stop);
+      ++next_in_group;
       if (!fit.ok()) return Annotate(fit.status(), ChannelLabel(clip, c));
       out.curves.push_back(CurveOf(*fit, clip.frame_time_seconds));
     }

@@ -45,6 +45,27 @@ absl::StatusOr<SplineFit> FitToNoise(std::span<const double> samples, double sig
                                      const NoiseFitOptions& options, std::stop_token stop,
                                      SmootherFactors& factors);
 
+// Channels whose smoothing SmoothGroupToNoise() does together.
+inline constexpr std::size_t kSmootherGroup = 4;
+
+// SmoothToNoise() of several channels, each with its own sigma (sigmas.size() ==
+// channels.size()): the same curves bit for bit, faster (the guard rounds' band solves of up to
+// kSmootherGroup consecutive channels of one length run side by side). Arguments as
+// CheckNoiseFit() accepts them; the same stop behaviour.
+absl::StatusOr<std::vector<std::vector<double>>> SmoothGroupToNoise(
+    std::span<const std::span<const double>> channels, std::span<const double> sigmas,
+    const NoiseFitOptions& options, SmootherFactors& factors, std::stop_token stop);
+
+// FitToNoise()'s checks of its arguments: InvalidArgument naming the first bad sample, sigma or
+// option.
+absl::Status CheckNoiseFit(std::span<const double> samples, double sigma,
+                           const NoiseFitOptions& options);
+
+// FitToNoise()'s keys of a channel SmoothToNoise() smoothed at `sigma`: kCancelled once a stop is
+// requested.
+absl::StatusOr<SplineFit> FitSmoothedToNoise(std::span<const double> smooth, double sigma,
+                                             const NoiseFitOptions& options, std::stop_token stop);
+
 }  // namespace tempokey::core::reduce_internal
 
 #endif  // TEMPOKEY_CORE_SRC_REDUCE_NOISE_SMOOTHER_H_

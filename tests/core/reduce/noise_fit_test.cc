@@ -7,6 +7,7 @@
 #include <cmath>
 #include <numbers>
 #include <random>
+#include <span>
 #include <stop_token>
 #include <string>
 #include <vector>
@@ -272,6 +273,30 @@ TEST(NoiseReductionCorpusTest, CleanBandaiClipsReadAsNearlyNoiseless) {
     std::sort(levels.begin(), levels.end());
     EXPECT_LT(levels[levels.size() / 2], 0.2);
     EXPECT_LT(result->report.rms_error, 0.12);
+  }
+}
+
+TEST(NoiseFitTest, ChannelsSmoothedTogetherComeOutAsEachAlone) {
+  // Six channels: four of one length (one with an impact, so its guard rounds outlast the
+  // others'; one at a much higher noise level), then two shorter ones. Smoothed together, each
+  // must be bit for bit what it is alone.
+  std::vector<double> impact = Truth(900);
+  for (int f = 400; f < 403; ++f) impact[static_cast<std::size_t>(f)] += 8.0 * kSigma;
+  const std::vector<std::vector<double>> channels = {
+      WithNoise(Truth(900), kSigma, 1),      WithNoise(impact, kSigma, 2),
+      WithNoise(Truth(900), 4.0 * kSigma, 3), WithNoise(Truth(900), kSigma, 4),
+      WithNoise(Truth(500), kSigma, 5),      WithNoise(Truth(500), kSigma, 6)};
+  const std::vector<double> sigmas = {kSigma, kSigma, 4.0 * kSigma, kSigma, kSigma, kSigma};
+  const std::vector<std::span<const double>> spans(channels.begin(), channels.end());
+  reduce_internal::SmootherFactors factors;
+
+  const absl::StatusOr<std::vector<std::vector<double>>> together =
+      reduce_internal::SmoothGroupToNoise(spans, sigmas, {}, factors, {});
+
+  ASSERT_TRUE(together.ok()) << together.status();
+  ASSERT_EQ(together->size(), channels.size());
+  for (std::size_t c = 0; c < channels.size(); ++c) {
+    EXPECT_EQ((*together)[c], SmoothToNoise(channels[c], sigmas[c])) << "channel " << c;
   }
 }
 
