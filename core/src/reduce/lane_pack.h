@@ -16,6 +16,8 @@
 #include <cstdint>
 #include <cstring>
 
+#include "core/src/simd/instruction_set.h"
+
 namespace tempokey::core::simd {
 
 #pragma GCC diagnostic push
@@ -124,19 +126,20 @@ struct PackPair {
 
 #pragma GCC diagnostic pop
 
-// Which instantiation of a pack kernel the running machine takes. Sanitizer builds take the
-// baseline one (like simd.h's clones).
+// Which instantiation of a pack kernel the running machine takes (instruction_set.h: the
+// processor's level, or lower when TEMPOKEY_MAX_ISA asks; baseline in sanitizer builds).
 enum class PackIsa { kAvx512, kAvx2, kBaseline };
 
 inline PackIsa RunningPackIsa() {
-#if defined(TEMPOKEY_SANITIZED)
+  switch (RunningInstructionSet()) {
+    case InstructionSet::kAvx512:
+      return PackIsa::kAvx512;
+    case InstructionSet::kAvx2:
+      return PackIsa::kAvx2;
+    case InstructionSet::kBaseline:
+      break;
+  }
   return PackIsa::kBaseline;
-#else
-  static const PackIsa isa = __builtin_cpu_supports("avx512f") ? PackIsa::kAvx512
-                             : __builtin_cpu_supports("avx2")  ? PackIsa::kAvx2
-                                                               : PackIsa::kBaseline;
-  return isa;
-#endif
 }
 
 }  // namespace tempokey::core::simd

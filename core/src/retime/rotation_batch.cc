@@ -8,6 +8,7 @@
 #include <limits>
 #include <numbers>
 
+#include "core/src/simd/instruction_set.h"
 #include "vector_trig.h"
 
 // As simd.h's TEMPOKEY_AVX2_CLONES, with AVX2: the kernels select lanes by masks, which are
@@ -864,12 +865,9 @@ TEMPOKEY_AVX512_TARGET void MarkleyMeansKernel512(const double* quats, const dou
 #endif
 
 #if TEMPOKEY_AVX512_KERNELS
-// True where the 8-lane kernels can run (looked at once).
+// True where the 8-lane kernels run (instruction_set.h).
 bool UseAvx512Kernels() {
-  static const bool supported =
-      __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512dq") &&
-      __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512bw");
-  return supported;
+  return simd::RunningInstructionSet() == simd::InstructionSet::kAvx512;
 }
 #endif
 

@@ -1,0 +1,48 @@
+// Which vector instruction set the kernels chosen at run time by the library (not by the
+// compiler's target_clones) may use: the AVX-512 and AVX2 instantiations of the pack kernels
+// (reduce/lane_pack.h) and the 8-lane retime kernels (retime/rotation_batch.cc). Every level
+// computes the same bits; the narrower ones are what most machines run, so tests run them on a
+// wider machine too by capping the level with TEMPOKEY_MAX_ISA.
+#ifndef TEMPOKEY_CORE_SRC_SIMD_INSTRUCTION_SET_H_
+#define TEMPOKEY_CORE_SRC_SIMD_INSTRUCTION_SET_H_
+
+#include <cstdlib>
+#include <string_view>
+
+namespace tempokey::core::simd {
+
+enum class InstructionSet { kBaseline, kAvx2, kAvx512 };
+
+// The processor's level: AVX-512 needs F, DQ, VL and BW (the 8-lane kernels use all four).
+inline InstructionSet ProcessorInstructionSet() {
+  if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512dq") &&
+      __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("avx512bw")) {
+    return InstructionSet::kAvx512;
+  }
+  return __builtin_cpu_supports("avx2") ? InstructionSet::kAvx2 : InstructionSet::kBaseline;
+}
+
+// The level the kernels use, read once per process: the processor's, lowered to
+// TEMPOKEY_MAX_ISA when that is "avx2" or "baseline" (any other value leaves it as it is).
+// Sanitizer builds always take the baseline kernels (like simd.h's clones).
+inline InstructionSet RunningInstructionSet() {
+#if defined(TEMPOKEY_SANITIZED)
+  return InstructionSet::kBaseline;
+#else
+  static const InstructionSet level = [] {
+    const InstructionSet processor = ProcessorInstructionSet();
+    const char* cap = std::getenv("TEMPOKEY_MAX_ISA");
+    if (cap == nullptr) return processor;
+    const std::string_view name(cap);
+    InstructionSet limit = InstructionSet::kAvx512;
+    if (name == "avx2") limit = InstructionSet::kAvx2;
+    if (name == "baseline") limit = InstructionSet::kBaseline;
+    return limit < processor ? limit : processor;
+  }();
+  return level;
+#endif
+}
+
+}  // namespace tempokey::core::simd
+
+#endif  // TEMPOKEY_CORE_SRC_SIMD_INSTRUCTION_SET_H_
