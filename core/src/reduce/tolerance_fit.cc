@@ -1121,6 +1121,7 @@ class Fitter {
           inserted = true;
         }
       }
+      if (Stopping(pending)) return;  // the round's last piece of work counts too
       next.push_back(fit.frames.back());
       kept = KeptKeys(fit.frames, next);
       fit.frames.swap(next);

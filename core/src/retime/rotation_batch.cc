@@ -58,7 +58,6 @@ using QuatLanes = QuatLanesOf<V>;
 
 [[gnu::always_inline]] inline V Broadcast(double v) { return vector_trig::Splat<V>(v); }
 
-
 // Lane flags as doubles, 1 where set and 0 elsewhere, for the kernels that take either width: GCC
 // 12 turns an 8-lane comparison held as a mask value (read lane by lane, combined with integer
 // operations or passed on) into a comparison per lane, where a comparison used at once to select
@@ -250,7 +249,7 @@ template <class VT>
 }
 [[maybe_unused, gnu::always_inline]] inline void StoreInterleaved(double* out,
                                                                   const QuatLanesOf<V8>& q,
-                                                    std::size_t count) {
+                                                                  std::size_t count) {
   StoreInterleaved(out, QuatLanes{LowHalf(q.w), LowHalf(q.x), LowHalf(q.y), LowHalf(q.z)}, count);
   if (count <= kLanes) return;
   StoreInterleaved(out + 4 * kLanes,

@@ -1,11 +1,12 @@
 // Batched rotation conversions for the rotation-aware resampling (resample.cc): the scalar
 // functions of rotation.h (EulerToQuat(), Slerp(), WeightedMeanRotation(), MarkleyMean(),
-// QuatToEulerNearest() then NearestTurn()) over many samples, four to a vector and several
-// vectors per step. Each performs the scalar function's arithmetic in the same order. The weighted
-// and Markley means use no trigonometry and give the scalar functions' bits; the others use the
-// sines, cosines and arctangents of vector_trig.h instead of libm's: results within a few units
-// in the last place of the scalar ones, the same branch choices except where a value lies within
-// such rounding of a threshold. tests/core/retime/rotation_batch_test.cc checks both.
+// QuatToEulerNearest() then NearestTurn()) over many samples, four or (AVX-512) eight to a
+// vector and several vectors per step. Each performs the scalar function's arithmetic in the
+// same order. The weighted and Markley means use no trigonometry and give the scalar functions'
+// bits; the others use the sines, cosines and arctangents of vector_trig.h instead of libm's:
+// results within a few units in the last place of the scalar ones, the same branch choices
+// except where a value lies within such rounding of a threshold.
+// tests/core/retime/rotation_batch_test.cc checks both.
 #ifndef TEMPOKEY_CORE_SRC_RETIME_ROTATION_BATCH_H_
 #define TEMPOKEY_CORE_SRC_RETIME_ROTATION_BATCH_H_
 

@@ -1,5 +1,5 @@
 // Sine, cosine and arctangent on vectors of doubles (GCC vector extensions of any width: the
-// kernels use 4 lanes, one AVX register, and pass several vectors at once so that independent
+// kernels use 4 lanes, one AVX register, or 8 with AVX-512, and pass several vectors at once so that independent
 // chains of dependent operations are in flight), for the batched rotation conversions of the
 // rotation-aware resampling (rotation_batch.h). Plain IEEE arithmetic only, so the AVX and
 // portable clones of a kernel give the same bits (simd.h).
