@@ -56,7 +56,7 @@ std::string SkeletonPointName(const Skeleton& skeleton, const SkeletonPoint& poi
 // are built from axis matrices directly, not from quaternions. Positions are in file units.
 //
 // Not thread-safe: Pose() and PoseFrames() use scratch space held here; use one instance per
-// thread (they are cheap to copy).
+// thread (a copy carries its own scratch, a few KB per joint).
 class ForwardKinematics {
  public:
   // Frames PoseFrames() places together: each joint's transform is held per frame in arrays of
