@@ -14,7 +14,6 @@
 #include <stop_token>
 #include <utility>
 
-#include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
 #include "tempokey/core/model/progress.h"
 #include "tempokey/core/model/status.h"
@@ -198,17 +197,20 @@ std::pair<double, int> ChooseCandidate(const double* candidates, double m, doubl
 struct ShapeKey {
   double length, atx, btx, t0;
   friend bool operator==(const ShapeKey&, const ShapeKey&) = default;
-  // One 64-bit word folded from the four values' bits (adding +0.0 first maps -0.0 to 0.0, which
-  // == does not tell apart), then the table's own mixing: one combine instead of four.
-  template <typename H>
-  friend H AbslHashValue(H h, const ShapeKey& k) {
-    const auto bits = [](double v) { return std::bit_cast<std::uint64_t>(v + 0.0); };
-    const std::uint64_t folded = bits(k.length) * 0x9e3779b97f4a7c15u ^
-                                 bits(k.atx) * 0xc2b2ae3d27d4eb4fu ^
-                                 bits(k.btx) * 0x165667b19e3779f9u ^ bits(k.t0) * 0xd6e8feb86659fd93u;
-    return H::combine(std::move(h), folded);
-  }
 };
+
+// The hash of a shape key: one 64-bit word folded from the four values' bits (adding +0.0 first
+// maps -0.0 to 0.0, which == does not tell apart), then mixed so that its low bits (the slot) and
+// high bits (the tag) both depend on every value.
+inline std::uint64_t HashShapeKey(const ShapeKey& k) {
+  const auto bits = [](double v) { return std::bit_cast<std::uint64_t>(v + 0.0); };
+  std::uint64_t h = bits(k.length) * 0x9e3779b97f4a7c15u ^ bits(k.atx) * 0xc2b2ae3d27d4eb4fu ^
+                    bits(k.btx) * 0x165667b19e3779f9u ^ bits(k.t0) * 0xd6e8feb86659fd93u;
+  h ^= h >> 32;
+  h *= 0xd6e8feb86659fd93u;
+  h ^= h >> 32;
+  return h;
+}
 
 // Per shape: `count` rows of the basis (h00, h10, h01, h11) at its frames, and the Gram sums
 // sum h h^T (10 distinct entries) over all rows and over all but the last. A segment's frames are
@@ -246,18 +248,27 @@ inline void AddToGram(const double* h, double* gram) {
 // is cleared, so a long fit does not fault fresh pages in over and over.
 class ShapeCache {
  public:
-  // The entry of `key`, computed on first use. Its pointers stay valid until the next trim.
-  ShapeEntry Get(const ShapeKey& key) {
-    auto [it, inserted] = entries_.try_emplace(key, ShapeEntry{});
-    if (inserted) it->second = Compute(key);
-    return it->second;
+  // The entry of `key`, whose HashShapeKey() is `hash`, computed on first use. Its pointers stay
+  // valid until the next trim.
+  ShapeEntry Get(const ShapeKey& key, std::uint64_t hash) {
+    const auto tag = static_cast<std::uint32_t>(hash >> 32);
+    for (std::size_t i = hash & mask_;; i = (i + 1) & mask_) {
+      const Slot slot = slots_[i];
+      if (slot.index == 0) break;
+      if (slot.tag != tag) continue;
+      const ShapeEntry& entry = entries_[slot.index - 1];
+      if (KeyOf(entry) == key) return entry;
+    }
+    return Insert(key, hash);
   }
-  // Starts loading the hash slot of `key` (a hint; no effect on results).
-  void Prefetch(const ShapeKey& key) const { entries_.prefetch(key); }
+  ShapeEntry Get(const ShapeKey& key) { return Get(key, HashShapeKey(key)); }
+  // Starts loading the slot of `hash` (a hint; no effect on results).
+  void Prefetch(std::uint64_t hash) const { __builtin_prefetch(&slots_[hash & mask_]); }
   // Bounds memory: past kMaxBlocks blocks (or a few oversized tables), forgets every entry and
   // reuses the blocks.
   void TrimIfLarge() {
     if (next_block_ > kMaxBlocks || oversized_.size() > kMaxOversized) {
+      std::fill(slots_.begin(), slots_.end(), Slot{});
       entries_.clear();
       oversized_.clear();
       next_block_ = 0;
@@ -269,6 +280,46 @@ class ShapeCache {
   static constexpr std::size_t kBlockDoubles = std::size_t{1} << 16;  // 512 KiB
   static constexpr std::size_t kMaxBlocks = 64;
   static constexpr std::size_t kMaxOversized = 4;
+  static constexpr std::size_t kInitialSlots = std::size_t{1} << 12;
+  // Each record starts with its key, kKeyDoubles values before the entry's Gram sums.
+  static constexpr std::size_t kKeyDoubles = 4;
+
+  // An open-addressing table (linear probing, at most half full) of 8-byte slots: a lookup
+  // touches one small slot, then the record it needs anyway, where the key is compared.
+  struct Slot {
+    std::uint32_t tag = 0;    // the hash's high half
+    std::uint32_t index = 0;  // 1 + the entry's index in entries_, 0 for an empty slot
+  };
+
+  static ShapeKey KeyOf(const ShapeEntry& entry) {
+    const double* key = entry.record - kKeyDoubles;
+    return {key[0], key[1], key[2], key[3]};
+  }
+
+  ShapeEntry Insert(const ShapeKey& key, std::uint64_t hash) {
+    entries_.push_back(Compute(key));
+    if (2 * entries_.size() > slots_.size()) {
+      Rehash(std::max(kInitialSlots, 2 * slots_.size()));
+    } else {
+      Place(hash, static_cast<std::uint32_t>(entries_.size()));
+    }
+    return entries_.back();
+  }
+
+  // Puts entry `index` (1-based) of hash `hash` into the first free slot of its probe sequence.
+  void Place(std::uint64_t hash, std::uint32_t index) {
+    std::size_t i = hash & mask_;
+    while (slots_[i].index != 0) i = (i + 1) & mask_;
+    slots_[i] = {static_cast<std::uint32_t>(hash >> 32), index};
+  }
+
+  void Rehash(std::size_t slots) {
+    slots_.assign(slots, Slot{});
+    mask_ = slots - 1;
+    for (std::size_t e = 0; e < entries_.size(); ++e) {
+      Place(HashShapeKey(KeyOf(entries_[e])), static_cast<std::uint32_t>(e + 1));
+    }
+  }
 
   // Room for `doubles` values that stays put until the next trim (entries point into it).
   double* Allocate(std::size_t doubles) {
@@ -296,7 +347,13 @@ class ShapeCache {
     const int count = last >= 0.0 ? static_cast<int>(last) + 1 : 0;
     // One contiguous record, Gram sums first: a lookup reads it front to back.
     static_assert(kGramSize == 10, "ShapeEntry's accessors assume 10 Gram sums");
-    double* record = Allocate(2 * kGramSize + static_cast<std::size_t>(count) * kBasisStride);
+    double* key_values =
+        Allocate(kKeyDoubles + 2 * kGramSize + static_cast<std::size_t>(count) * kBasisStride);
+    key_values[0] = key.length;
+    key_values[1] = key.atx;
+    key_values[2] = key.btx;
+    key_values[3] = key.t0;
+    double* record = key_values + kKeyDoubles;
     double* gram_but_last = record;
     double* gram_all = record + kGramSize;
     double* out = record + 2 * kGramSize;
@@ -320,7 +377,9 @@ class ShapeCache {
     return entry;
   }
 
-  absl::flat_hash_map<ShapeKey, ShapeEntry> entries_;
+  std::vector<Slot> slots_ = std::vector<Slot>(kInitialSlots);
+  std::size_t mask_ = kInitialSlots - 1;
+  std::vector<ShapeEntry> entries_;
   std::vector<std::unique_ptr<double[]>> blocks_;
   std::vector<std::unique_ptr<double[]>> oversized_;
   std::size_t next_block_ = 0;
@@ -999,6 +1058,7 @@ class DpPass {
     std::array<double, 9> squares;
     squares.fill(-1.0);
     std::array<ShapeKey, kStates> keys;
+    std::array<std::uint64_t, kStates> hashes;
     std::array<std::int8_t, kStates> key_of_combo;
     std::array<std::int8_t, kStates> combos;
     int combo_count = 0;
@@ -1040,8 +1100,9 @@ class DpPass {
             shape.squares = offsets_squares;
             const ShapeKey key{bx - ax, atx, btx, static_cast<double>(first) - ax};
             if (key_count == 0 || !(key == keys[key_count - 1])) {
+              hashes[key_count] = HashShapeKey(key);
+              cache_.Prefetch(hashes[key_count]);
               keys[key_count++] = key;
-              cache_.Prefetch(key);
             }
             key_of_combo[combo_count] = static_cast<std::int8_t>(key_count - 1);
             combos[combo_count++] = static_cast<std::int8_t>(combo);
@@ -1052,7 +1113,7 @@ class DpPass {
     std::array<ShapeEntry, kStates> entries;
     for (int k = 0; k < key_count; ++k) {
       if (Stopping(static_cast<std::int64_t>(keys[k].length))) return false;
-      entries[k] = cache_.Get(keys[k]);
+      entries[k] = cache_.Get(keys[k], hashes[k]);
       __builtin_prefetch(entries[k].record);
     }
     for (int c = 0; c < combo_count; ++c) shapes[combos[c]].entry = entries[key_of_combo[c]];
