@@ -218,8 +218,8 @@ inline std::uint64_t HashShapeKey(const ShapeKey& k) {
 // the last segment of a channel takes), so those two sums are the only ones ever read.
 struct ShapeEntry {
   // gram_but_last[10], gram_all[10], then `count` basis rows of kBasisStride.
-  const double* record = nullptr;
-  int count = 0;
+  const double* record;
+  int count;
 
   const double* gram_but_last() const { return record; }
   const double* gram_all() const { return record + 10; }
@@ -394,11 +394,12 @@ ShapeCache& ThreadShapeCache() {
 }
 
 // One x-combination's frames and their shape.
+// Left uninitialised where PrepareForms() declares them (only feasible combinations are read).
 struct SegmentShape {
   ShapeEntry entry;
-  std::int64_t first = 0;  // first frame
-  int n = 0;               // frames, 0 for none
-  double squares = 0.0;    // sum of (sample - y_ref)^2 over the frames
+  std::int64_t first;  // first frame
+  int n;               // frames, 0 for none
+  double squares;      // sum of (sample - y_ref)^2 over the frames
 };
 
 // Sum of (sample[k] - y_ref)^2 over k < n.
@@ -448,8 +449,9 @@ struct RowTerms {
 };
 
 // The data terms of the nine combinations that share their frames (the same x offsets, any
-// tangents), frames k_begin .. k_end - 1 of them, added to `sums` (sums[j] += (sample[k] -
-// y_ref) * basis row k of combination j, one vector of 4 per combination, in frame order): a
+// tangents), frames k_begin .. k_end - 1 of them, added to `sums` (started from zero when k_begin
+// is 0; sums[j] += (sample[k] - y_ref) * basis row k of combination j, one vector of 4 per
+// combination, in frame order): a
 // combination's sums are those its frames alone give, and the nine independent chains overlap.
 // Cloned like UpdateTargetMinima(); every clone adds in the same order.
 TEMPOKEY_AVX_CLONES void SumDataTerms(const double* sample, std::int64_t k_begin,
@@ -458,7 +460,13 @@ TEMPOKEY_AVX_CLONES void SumDataTerms(const double* sample, std::int64_t k_begin
                                          std::array<std::array<double, 4>, 9>& sums) {
   using V = double __attribute__((vector_size(32)));
   V acc[9];
-  for (int j = 0; j < 9; ++j) std::memcpy(&acc[j], sums[j].data(), sizeof(V));
+  for (int j = 0; j < 9; ++j) {
+    if (k_begin == 0) {
+      acc[j] = V{};
+    } else {
+      std::memcpy(&acc[j], sums[j].data(), sizeof(V));
+    }
+  }
   for (std::int64_t k = k_begin; k < k_end; ++k) {
     const double d = sample[k] - y_ref;
     for (int j = 0; j < 9; ++j) {
@@ -623,13 +631,14 @@ template <typename P>
   const P old_second = P::Load(minima.second.data() + lane);
   const P old_state = P::Load(minima.state.data() + lane);
   P least = old_least, second = old_second, state = old_state;
-  const P zero = P::Zero();
-  const P with_u[3] = {b + (zero - z0), b + zero, b + z0};
-  const P with_v[3] = {zero - z1, zero, z1};
+  // b + u + v with u, v in {-z, 0, +z}: b is never -0 (e0 >= +0 and b = +inf in unused lanes),
+  // nor is b -/+ z0, so x + 0 is x and x + (-z) is x - z bit for bit (IEEE defines x - z as
+  // x + (-z); for z = +-0 both give x): the middle offsets skip their addition and the low ones
+  // subtract.
+  const P with_u[3] = {b - z0, b, b + z0};
   for (int sy = 0; sy < 9; ++sy) {
-    // with_u + 0 is with_u bit for bit: with_u is never -0 (b is not: e0 >= +0 and b = +inf in
-    // unused lanes), so the middle column skips that addition.
-    const P w = sy % 3 == 1 ? with_u[sy / 3] : with_u[sy / 3] + with_v[sy % 3];
+    const P& u = with_u[sy / 3];
+    const P w = sy % 3 == 0 ? u - z1 : (sy % 3 == 1 ? u : u + z1);
     const P c = a[sy] + w;
     const P larger = P::Select(c > least, c, least);
     second = P::Select(larger < second, larger, second);
@@ -1149,7 +1158,7 @@ class DpPass {
             some = &shape;
           }
         }
-        std::array<std::array<double, 4>, 9> sums{};
+        std::array<std::array<double, 4>, 9> sums;  // set by SumDataTerms() from frame 0
         if (some != nullptr) {
           // Combinations not used sum along on a used one's rows (their sums are dropped).
           for (auto& row : basis) {
