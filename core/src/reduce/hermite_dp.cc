@@ -942,7 +942,7 @@ class DpPass {
       if (!PrepareForms(ga, gb, last, cheapest, y_ref, &taken, next.feasible, next.inputs)) {
         return false;
       }
-      for (int c = 0; c < kStates; ++c) next.known[c] = Considered(gb, cheapest, c / 9, c % 9);
+      MarkConsidered(gb, cheapest, next.known);
       memo->current = 1 - memo->current;
       memo->signature = signature;
       memo->valid = true;
@@ -974,8 +974,11 @@ class DpPass {
         if ((open >> tx & 1u) == 0) continue;
         // The widest tie window of the nine targets is that of the largest smallest candidate
         // (TieTolerance() rounds monotonically).
+        // Where the largest is >= 0 so is its tolerance (the scale is a sum of squares), so a
+        // cheapest state at or below it is inside the window without computing the tolerance.
         const double largest = work.minima.largest[tx];
-        if (cheapest[sx] > largest + TieTolerance(largest, scale_)) {
+        const bool inside = cheapest[sx] <= largest && largest >= 0.0;
+        if (!inside && cheapest[sx] > largest + TieTolerance(largest, scale_)) {
           open &= ~(1u << tx);
           continue;
         }
@@ -1013,6 +1016,18 @@ class DpPass {
   static bool Considered(const KeyGrid& gb, const std::array<double, 9>& cheapest, int sx,
                          int tx) {
     return cheapest[sx] != kInf && (!gb.x_fixed || XIndex(tx) == 1);
+  }
+
+  // known[sx * 9 + tx] = Considered(gb, cheapest, sx, tx), a row of nine at a time.
+  static void MarkConsidered(const KeyGrid& gb, const std::array<double, 9>& cheapest,
+                             std::array<bool, kStates>& known) {
+    std::array<bool, 9> row;
+    for (int tx = 0; tx < 9; ++tx) row[tx] = !gb.x_fixed || XIndex(tx) == 1;
+    constexpr std::array<bool, 9> kNone{};
+    for (int sx = 0; sx < 9; ++sx) {
+      const std::array<bool, 9>& from = cheapest[sx] != kInf ? row : kNone;
+      std::copy(from.begin(), from.end(), known.begin() + sx * 9);
+    }
   }
 
   // Copies into `next` the inputs and feasibility of the combinations that `previous` (built for
