@@ -14,7 +14,6 @@
 #include <stop_token>
 #include <utility>
 
-#include "absl/container/flat_hash_map.h"
 #include "absl/strings/str_cat.h"
 #include "tempokey/core/model/progress.h"
 #include "tempokey/core/model/status.h"
@@ -198,17 +197,20 @@ std::pair<double, int> ChooseCandidate(const double* candidates, double m, doubl
 struct ShapeKey {
   double length, atx, btx, t0;
   friend bool operator==(const ShapeKey&, const ShapeKey&) = default;
-  // One 64-bit word folded from the four values' bits (adding +0.0 first maps -0.0 to 0.0, which
-  // == does not tell apart), then the table's own mixing: one combine instead of four.
-  template <typename H>
-  friend H AbslHashValue(H h, const ShapeKey& k) {
-    const auto bits = [](double v) { return std::bit_cast<std::uint64_t>(v + 0.0); };
-    const std::uint64_t folded = bits(k.length) * 0x9e3779b97f4a7c15u ^
-                                 bits(k.atx) * 0xc2b2ae3d27d4eb4fu ^
-                                 bits(k.btx) * 0x165667b19e3779f9u ^ bits(k.t0) * 0xd6e8feb86659fd93u;
-    return H::combine(std::move(h), folded);
-  }
 };
+
+// The hash of a shape key: one 64-bit word folded from the four values' bits (adding +0.0 first
+// maps -0.0 to 0.0, which == does not tell apart), then mixed so that its low bits (the slot) and
+// high bits (the tag) both depend on every value.
+inline std::uint64_t HashShapeKey(const ShapeKey& k) {
+  const auto bits = [](double v) { return std::bit_cast<std::uint64_t>(v + 0.0); };
+  std::uint64_t h = bits(k.length) * 0x9e3779b97f4a7c15u ^ bits(k.atx) * 0xc2b2ae3d27d4eb4fu ^
+                    bits(k.btx) * 0x165667b19e3779f9u ^ bits(k.t0) * 0xd6e8feb86659fd93u;
+  h ^= h >> 32;
+  h *= 0xd6e8feb86659fd93u;
+  h ^= h >> 32;
+  return h;
+}
 
 // Per shape: `count` rows of the basis (h00, h10, h01, h11) at its frames, and the Gram sums
 // sum h h^T (10 distinct entries) over all rows and over all but the last. A segment's frames are
@@ -216,8 +218,8 @@ struct ShapeKey {
 // the last segment of a channel takes), so those two sums are the only ones ever read.
 struct ShapeEntry {
   // gram_but_last[10], gram_all[10], then `count` basis rows of kBasisStride.
-  const double* record = nullptr;
-  int count = 0;
+  const double* record;
+  int count;
 
   const double* gram_but_last() const { return record; }
   const double* gram_all() const { return record + 10; }
@@ -246,18 +248,27 @@ inline void AddToGram(const double* h, double* gram) {
 // is cleared, so a long fit does not fault fresh pages in over and over.
 class ShapeCache {
  public:
-  // The entry of `key`, computed on first use. Its pointers stay valid until the next trim.
-  ShapeEntry Get(const ShapeKey& key) {
-    auto [it, inserted] = entries_.try_emplace(key, ShapeEntry{});
-    if (inserted) it->second = Compute(key);
-    return it->second;
+  // The entry of `key`, whose HashShapeKey() is `hash`, computed on first use. Its pointers stay
+  // valid until the next trim.
+  ShapeEntry Get(const ShapeKey& key, std::uint64_t hash) {
+    const auto tag = static_cast<std::uint32_t>(hash >> 32);
+    for (std::size_t i = hash & mask_;; i = (i + 1) & mask_) {
+      const Slot slot = slots_[i];
+      if (slot.index == 0) break;
+      if (slot.tag != tag) continue;
+      const ShapeEntry& entry = entries_[slot.index - 1];
+      if (KeyOf(entry) == key) return entry;
+    }
+    return Insert(key, hash);
   }
-  // Starts loading the hash slot of `key` (a hint; no effect on results).
-  void Prefetch(const ShapeKey& key) const { entries_.prefetch(key); }
+  ShapeEntry Get(const ShapeKey& key) { return Get(key, HashShapeKey(key)); }
+  // Starts loading the slot of `hash` (a hint; no effect on results).
+  void Prefetch(std::uint64_t hash) const { __builtin_prefetch(&slots_[hash & mask_]); }
   // Bounds memory: past kMaxBlocks blocks (or a few oversized tables), forgets every entry and
   // reuses the blocks.
   void TrimIfLarge() {
     if (next_block_ > kMaxBlocks || oversized_.size() > kMaxOversized) {
+      std::fill(slots_.begin(), slots_.end(), Slot{});
       entries_.clear();
       oversized_.clear();
       next_block_ = 0;
@@ -269,6 +280,46 @@ class ShapeCache {
   static constexpr std::size_t kBlockDoubles = std::size_t{1} << 16;  // 512 KiB
   static constexpr std::size_t kMaxBlocks = 64;
   static constexpr std::size_t kMaxOversized = 4;
+  static constexpr std::size_t kInitialSlots = std::size_t{1} << 12;
+  // Each record starts with its key, kKeyDoubles values before the entry's Gram sums.
+  static constexpr std::size_t kKeyDoubles = 4;
+
+  // An open-addressing table (linear probing, at most half full) of 8-byte slots: a lookup
+  // touches one small slot, then the record it needs anyway, where the key is compared.
+  struct Slot {
+    std::uint32_t tag = 0;    // the hash's high half
+    std::uint32_t index = 0;  // 1 + the entry's index in entries_, 0 for an empty slot
+  };
+
+  static ShapeKey KeyOf(const ShapeEntry& entry) {
+    const double* key = entry.record - kKeyDoubles;
+    return {key[0], key[1], key[2], key[3]};
+  }
+
+  ShapeEntry Insert(const ShapeKey& key, std::uint64_t hash) {
+    entries_.push_back(Compute(key));
+    if (2 * entries_.size() > slots_.size()) {
+      Rehash(std::max(kInitialSlots, 2 * slots_.size()));
+    } else {
+      Place(hash, static_cast<std::uint32_t>(entries_.size()));
+    }
+    return entries_.back();
+  }
+
+  // Puts entry `index` (1-based) of hash `hash` into the first free slot of its probe sequence.
+  void Place(std::uint64_t hash, std::uint32_t index) {
+    std::size_t i = hash & mask_;
+    while (slots_[i].index != 0) i = (i + 1) & mask_;
+    slots_[i] = {static_cast<std::uint32_t>(hash >> 32), index};
+  }
+
+  void Rehash(std::size_t slots) {
+    slots_.assign(slots, Slot{});
+    mask_ = slots - 1;
+    for (std::size_t e = 0; e < entries_.size(); ++e) {
+      Place(HashShapeKey(KeyOf(entries_[e])), static_cast<std::uint32_t>(e + 1));
+    }
+  }
 
   // Room for `doubles` values that stays put until the next trim (entries point into it).
   double* Allocate(std::size_t doubles) {
@@ -296,7 +347,13 @@ class ShapeCache {
     const int count = last >= 0.0 ? static_cast<int>(last) + 1 : 0;
     // One contiguous record, Gram sums first: a lookup reads it front to back.
     static_assert(kGramSize == 10, "ShapeEntry's accessors assume 10 Gram sums");
-    double* record = Allocate(2 * kGramSize + static_cast<std::size_t>(count) * kBasisStride);
+    double* key_values =
+        Allocate(kKeyDoubles + 2 * kGramSize + static_cast<std::size_t>(count) * kBasisStride);
+    key_values[0] = key.length;
+    key_values[1] = key.atx;
+    key_values[2] = key.btx;
+    key_values[3] = key.t0;
+    double* record = key_values + kKeyDoubles;
     double* gram_but_last = record;
     double* gram_all = record + kGramSize;
     double* out = record + 2 * kGramSize;
@@ -320,7 +377,9 @@ class ShapeCache {
     return entry;
   }
 
-  absl::flat_hash_map<ShapeKey, ShapeEntry> entries_;
+  std::vector<Slot> slots_ = std::vector<Slot>(kInitialSlots);
+  std::size_t mask_ = kInitialSlots - 1;
+  std::vector<ShapeEntry> entries_;
   std::vector<std::unique_ptr<double[]>> blocks_;
   std::vector<std::unique_ptr<double[]>> oversized_;
   std::size_t next_block_ = 0;
@@ -335,11 +394,12 @@ ShapeCache& ThreadShapeCache() {
 }
 
 // One x-combination's frames and their shape.
+// Left uninitialised where PrepareForms() declares them (only feasible combinations are read).
 struct SegmentShape {
   ShapeEntry entry;
-  std::int64_t first = 0;  // first frame
-  int n = 0;               // frames, 0 for none
-  double squares = 0.0;    // sum of (sample - y_ref)^2 over the frames
+  std::int64_t first;  // first frame
+  int n;               // frames, 0 for none
+  double squares;      // sum of (sample - y_ref)^2 over the frames
 };
 
 // Sum of (sample[k] - y_ref)^2 over k < n.
@@ -389,8 +449,9 @@ struct RowTerms {
 };
 
 // The data terms of the nine combinations that share their frames (the same x offsets, any
-// tangents), frames k_begin .. k_end - 1 of them, added to `sums` (sums[j] += (sample[k] -
-// y_ref) * basis row k of combination j, one vector of 4 per combination, in frame order): a
+// tangents), frames k_begin .. k_end - 1 of them, added to `sums` (started from zero when k_begin
+// is 0; sums[j] += (sample[k] - y_ref) * basis row k of combination j, one vector of 4 per
+// combination, in frame order): a
 // combination's sums are those its frames alone give, and the nine independent chains overlap.
 // Cloned like UpdateTargetMinima(); every clone adds in the same order.
 TEMPOKEY_AVX_CLONES void SumDataTerms(const double* sample, std::int64_t k_begin,
@@ -399,7 +460,13 @@ TEMPOKEY_AVX_CLONES void SumDataTerms(const double* sample, std::int64_t k_begin
                                          std::array<std::array<double, 4>, 9>& sums) {
   using V = double __attribute__((vector_size(32)));
   V acc[9];
-  for (int j = 0; j < 9; ++j) std::memcpy(&acc[j], sums[j].data(), sizeof(V));
+  for (int j = 0; j < 9; ++j) {
+    if (k_begin == 0) {
+      acc[j] = V{};
+    } else {
+      std::memcpy(&acc[j], sums[j].data(), sizeof(V));
+    }
+  }
   for (std::int64_t k = k_begin; k < k_end; ++k) {
     const double d = sample[k] - y_ref;
     for (int j = 0; j < 9; ++j) {
@@ -564,13 +631,14 @@ template <typename P>
   const P old_second = P::Load(minima.second.data() + lane);
   const P old_state = P::Load(minima.state.data() + lane);
   P least = old_least, second = old_second, state = old_state;
-  const P zero = P::Zero();
-  const P with_u[3] = {b + (zero - z0), b + zero, b + z0};
-  const P with_v[3] = {zero - z1, zero, z1};
+  // b + u + v with u, v in {-z, 0, +z}: b is never -0 (e0 >= +0 and b = +inf in unused lanes),
+  // nor is b -/+ z0, so x + 0 is x and x + (-z) is x - z bit for bit (IEEE defines x - z as
+  // x + (-z); for z = +-0 both give x): the middle offsets skip their addition and the low ones
+  // subtract.
+  const P with_u[3] = {b - z0, b, b + z0};
   for (int sy = 0; sy < 9; ++sy) {
-    // with_u + 0 is with_u bit for bit: with_u is never -0 (b is not: e0 >= +0 and b = +inf in
-    // unused lanes), so the middle column skips that addition.
-    const P w = sy % 3 == 1 ? with_u[sy / 3] : with_u[sy / 3] + with_v[sy % 3];
+    const P& u = with_u[sy / 3];
+    const P w = sy % 3 == 0 ? u - z1 : (sy % 3 == 1 ? u : u + z1);
     const P c = a[sy] + w;
     const P larger = P::Select(c > least, c, least);
     second = P::Select(larger < second, larger, second);
@@ -874,7 +942,7 @@ class DpPass {
       if (!PrepareForms(ga, gb, last, cheapest, y_ref, &taken, next.feasible, next.inputs)) {
         return false;
       }
-      for (int c = 0; c < kStates; ++c) next.known[c] = Considered(gb, cheapest, c / 9, c % 9);
+      MarkConsidered(gb, cheapest, next.known);
       memo->current = 1 - memo->current;
       memo->signature = signature;
       memo->valid = true;
@@ -906,8 +974,11 @@ class DpPass {
         if ((open >> tx & 1u) == 0) continue;
         // The widest tie window of the nine targets is that of the largest smallest candidate
         // (TieTolerance() rounds monotonically).
+        // Where the largest is >= 0 so is its tolerance (the scale is a sum of squares), so a
+        // cheapest state at or below it is inside the window without computing the tolerance.
         const double largest = work.minima.largest[tx];
-        if (cheapest[sx] > largest + TieTolerance(largest, scale_)) {
+        const bool inside = cheapest[sx] <= largest && largest >= 0.0;
+        if (!inside && cheapest[sx] > largest + TieTolerance(largest, scale_)) {
           open &= ~(1u << tx);
           continue;
         }
@@ -945,6 +1016,18 @@ class DpPass {
   static bool Considered(const KeyGrid& gb, const std::array<double, 9>& cheapest, int sx,
                          int tx) {
     return cheapest[sx] != kInf && (!gb.x_fixed || XIndex(tx) == 1);
+  }
+
+  // known[sx * 9 + tx] = Considered(gb, cheapest, sx, tx), a row of nine at a time.
+  static void MarkConsidered(const KeyGrid& gb, const std::array<double, 9>& cheapest,
+                             std::array<bool, kStates>& known) {
+    std::array<bool, 9> row;
+    for (int tx = 0; tx < 9; ++tx) row[tx] = !gb.x_fixed || XIndex(tx) == 1;
+    constexpr std::array<bool, 9> kNone{};
+    for (int sx = 0; sx < 9; ++sx) {
+      const std::array<bool, 9>& from = cheapest[sx] != kInf ? row : kNone;
+      std::copy(from.begin(), from.end(), known.begin() + sx * 9);
+    }
   }
 
   // Copies into `next` the inputs and feasibility of the combinations that `previous` (built for
@@ -999,6 +1082,7 @@ class DpPass {
     std::array<double, 9> squares;
     squares.fill(-1.0);
     std::array<ShapeKey, kStates> keys;
+    std::array<std::uint64_t, kStates> hashes;
     std::array<std::int8_t, kStates> key_of_combo;
     std::array<std::int8_t, kStates> combos;
     int combo_count = 0;
@@ -1040,8 +1124,9 @@ class DpPass {
             shape.squares = offsets_squares;
             const ShapeKey key{bx - ax, atx, btx, static_cast<double>(first) - ax};
             if (key_count == 0 || !(key == keys[key_count - 1])) {
+              hashes[key_count] = HashShapeKey(key);
+              cache_.Prefetch(hashes[key_count]);
               keys[key_count++] = key;
-              cache_.Prefetch(key);
             }
             key_of_combo[combo_count] = static_cast<std::int8_t>(key_count - 1);
             combos[combo_count++] = static_cast<std::int8_t>(combo);
@@ -1052,7 +1137,7 @@ class DpPass {
     std::array<ShapeEntry, kStates> entries;
     for (int k = 0; k < key_count; ++k) {
       if (Stopping(static_cast<std::int64_t>(keys[k].length))) return false;
-      entries[k] = cache_.Get(keys[k]);
+      entries[k] = cache_.Get(keys[k], hashes[k]);
       __builtin_prefetch(entries[k].record);
     }
     for (int c = 0; c < combo_count; ++c) shapes[combos[c]].entry = entries[key_of_combo[c]];
@@ -1088,7 +1173,7 @@ class DpPass {
             some = &shape;
           }
         }
-        std::array<std::array<double, 4>, 9> sums{};
+        std::array<std::array<double, 4>, 9> sums;  // set by SumDataTerms() from frame 0
         if (some != nullptr) {
           // Combinations not used sum along on a used one's rows (their sums are dropped).
           for (auto& row : basis) {
