@@ -886,7 +886,9 @@ class DpPass {
   // Fills cost_[i + 1] and predecessor_[i + 1] from cost_[i] through segment i; false when a
   // stop was requested part way.
   bool Advance(std::size_t i) {
-    if (Stopping(1)) return false;
+    // A segment's fold is counted as kStates frames of work even when its form inputs come from
+    // the memo (no frames summed): about a hundred such segments between looks at the token.
+    if (Stopping(kStates)) return false;
     const bool last = i + 2 == keys_.size();
     const KeyGrid& ga = grids_[i];
     const KeyGrid& gb = grids_[i + 1];
@@ -1009,8 +1011,6 @@ class DpPass {
     return mask;
   }
 
-  // The feasible combinations of segment ga -> gb and their form inputs; false when a stop was
-  // requested part way.
   // Whether combination (sx, tx) is looked at: its predecessor x-state reachable and, into the
   // last key, its target x offset 0.
   static bool Considered(const KeyGrid& gb, const std::array<double, 9>& cheapest, int sx,
