@@ -16,6 +16,7 @@
 #include "absl/strings/str_cat.h"
 #include "tempokey/core/model/progress.h"
 #include "tempokey/core/model/status.h"
+#include "core/src/simd/instruction_set.h"
 #include "noise_smoother.h"
 #include "lane_pack.h"
 #include "simd.h"
@@ -440,6 +441,7 @@ TEMPOKEY_AVX_CLONES void SubstituteConstantLevels4(std::size_t n, const Substitu
   }
 }
 
+#if TEMPOKEY_WIDE_KERNELS
 // SubstituteConstantLevels4() on 8-lane AVX-512 vectors, half a batch at a time (a batch with an
 // odd number of quarters solves its last one on a 4-lane vector): each lane performs the same
 // operations in the same order, so the solutions are the same bits.
@@ -511,13 +513,17 @@ TEMPOKEY_TARGET_AVX512 void SubstituteConstantLevels8(std::size_t n, const Subst
   }
 }
 
+#endif  // TEMPOKEY_WIDE_KERNELS
+
 // The level searches' substitutions on the widest vectors the machine has.
 void SubstituteConstantLevels(std::size_t n, const SubstitutionJob* jobs, std::size_t count) {
+#if TEMPOKEY_WIDE_KERNELS
   if (simd::RunningPackIsa() == simd::PackIsa::kAvx512) {
     SubstituteConstantLevels8(n, jobs, count);
-  } else {
-    SubstituteConstantLevels4(n, jobs, count);
+    return;
   }
+#endif
+  SubstituteConstantLevels4(n, jobs, count);
 }
 
 // Residual sums of squares of the first 4 * `quarters` of the sixteen solutions `y` (of x[0 ...])

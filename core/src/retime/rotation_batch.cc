@@ -23,7 +23,7 @@
 // variants for AVX-512 processors, chosen at run time: the same arithmetic lane by lane (no
 // contraction into FMA: -ffp-contract=off), so the same bits, in about half the instructions.
 // Built by GCC alone, without sanitizers (the fuzz stage's clang build keeps the portable code).
-#if !defined(TEMPOKEY_SANITIZED) && defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#if TEMPOKEY_WIDE_KERNELS  // core/src/simd/instruction_set.h
 #define TEMPOKEY_AVX512_KERNELS 1
 #define TEMPOKEY_AVX512_TARGET __attribute__((target("avx512f,avx512dq,avx512vl,avx512bw")))
 #else

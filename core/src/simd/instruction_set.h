@@ -9,6 +9,16 @@
 #include <cstdlib>
 #include <string_view>
 
+// Whether the 8-lane kernels written with GCC's vector extensions inside target("avx512...")
+// functions are built: by GCC, without sanitizers. Clang rejects passing 8-lane vectors to the
+// helpers (lambdas) those kernels call, which do not carry the target attribute, and sanitizer
+// builds take the baseline kernels anyway (the fuzz stage is both).
+#if !defined(TEMPOKEY_SANITIZED) && defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define TEMPOKEY_WIDE_KERNELS 1
+#else
+#define TEMPOKEY_WIDE_KERNELS 0
+#endif
+
 namespace tempokey::core::simd {
 
 enum class InstructionSet { kBaseline, kAvx2, kAvx512 };
