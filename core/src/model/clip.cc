@@ -12,6 +12,7 @@
 #include "absl/container/flat_hash_set.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "core/src/simd/instruction_set.h"
 #include "tempokey/core/model/numbers.h"
 #include "tempokey/core/model/status.h"
 
@@ -240,19 +241,12 @@ absl::Status ValidateClipLayout(const Clip& clip, const ClipLimits& limits) {
 
 namespace {
 
-// An AVX2 build beside the portable one (the sanitizer builds keep the portable one only).
-#if defined(TEMPOKEY_SANITIZED)
-#define TEMPOKEY_SCAN_CLONES
-#else
-#define TEMPOKEY_SCAN_CLONES __attribute__((target_clones("avx2", "default")))
-#endif
-
 // The index of the first sample beyond kMaxSampleMagnitude or not a number, or one in the block of
 // kBlock samples before it (at most the size): blocks are tested four samples at a time (one AVX
 // register, two SSE2 ones in the portable build), without an early exit inside (every sample of
 // every clip is read here, before any work on it; a scalar loop with its exit compiled to a
 // comparison and branch per sample).
-TEMPOKEY_SCAN_CLONES std::size_t FirstOutOfRange(const std::vector<double>& samples) {
+TEMPOKEY_CLONES_AVX2 std::size_t FirstOutOfRange(const std::vector<double>& samples) {
   using V = double __attribute__((vector_size(32)));
   using Bits = std::int64_t __attribute__((vector_size(32)));
   constexpr std::size_t kLanes = sizeof(V) / sizeof(double);

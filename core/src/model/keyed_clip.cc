@@ -6,6 +6,7 @@
 #include <string>
 
 #include "absl/strings/str_cat.h"
+#include "core/src/simd/instruction_set.h"
 #include "tempokey/core/model/numbers.h"
 #include "tempokey/core/model/status.h"
 
@@ -82,21 +83,13 @@ double EvaluateWeightedSegment(const Key& a, const Key& b, double time_seconds) 
 
 bool IsPlainSegment(const Key& a, const Key& b) { return !a.out_weight && !b.in_weight; }
 
-// The vector clones compute each frame with the same operations as the portable code
-// (-ffp-contract=off, core/CMakeLists.txt), so every clone gives the same bits. Sanitizer builds
-// keep the portable clone only (as reduce/simd.h).
-#if defined(TEMPOKEY_SANITIZED)
-#define TEMPOKEY_SAMPLE_CLONES
-#else
-#define TEMPOKEY_SAMPLE_CLONES __attribute__((target_clones("avx512f", "avx", "default")))
-#endif
-
 // out[i] = EvaluatePlainSegment(a, b, (first_frame + i) * frame_time_seconds) for every i, on
-// vectors of frames. The frame number is counted in doubles (first_frame + i is exact there, as
-// its conversion from the integer is), which vectorizes without 64-bit integer conversions.
-TEMPOKEY_SAMPLE_CLONES void EvaluatePlainRun(const Key& a, const Key& b,
-                                             double frame_time_seconds, double first_frame,
-                                             double* out, std::size_t n) {
+// vectors of frames (every clone gives the same bits). The frame number is counted in doubles
+// (first_frame + i is exact there, as its conversion from the integer is), which vectorizes
+// without 64-bit integer conversions.
+TEMPOKEY_CLONES_AVX512_AVX void EvaluatePlainRun(const Key& a, const Key& b,
+                                                 double frame_time_seconds, double first_frame,
+                                                 double* out, std::size_t n) {
   const double a_time = a.time_seconds;
   const double dt = b.time_seconds - a.time_seconds;
   const double a_value = a.value;

@@ -9,6 +9,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "core/src/simd/instruction_set.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::core {
@@ -88,15 +89,8 @@ namespace {
 constexpr double kRadiansPerDegree = std::numbers::pi / 180.0;
 constexpr std::size_t kB = ForwardKinematics::kBlockFrames;
 
-// The block kernels run on vectors of frames; -ffp-contract=off (core/CMakeLists.txt) keeps every
-// clone's arithmetic the same operations as the portable one, so all agree bit for bit. Sanitizer
-// builds keep the portable clone only (as simd.h).
-#if defined(TEMPOKEY_SANITIZED)
-#define TEMPOKEY_FK_CLONES
-#else
-#define TEMPOKEY_FK_CLONES __attribute__((target_clones("avx512f", "avx", "default")))
-#endif
-
+// The block kernels run on vectors of frames, cloned with TEMPOKEY_CLONES_AVX512_AVX (every clone
+// agrees bit for bit).
 // A joint's block: its world rotation, row-major (entry (row, col) is the array at
 // (row * 3 + col) * kB), then its world position (axis a at (9 + a) * kB).
 constexpr std::size_t kBlockStride = 12 * kB;
@@ -116,8 +110,8 @@ const double* PositionAxis(const double* block, std::size_t axis) {
 // c[f] and sine s[f]. Right-multiplying by a rotation about one axis mixes only the other two
 // columns: with (i, k) the axes after `axis` in cyclic order, column i becomes c·i + s·k and
 // column k becomes c·k - s·i (12 products instead of 27).
-TEMPOKEY_FK_CLONES void RotateColumnsBlock(double* block, int axis, const double* c,
-                                           const double* s, std::size_t n) {
+TEMPOKEY_CLONES_AVX512_AVX void RotateColumnsBlock(double* block, int axis, const double* c,
+                                                   const double* s, std::size_t n) {
   static constexpr std::array<std::size_t, 3> kNext = {1, 2, 0};
   static constexpr std::array<std::size_t, 3> kAfterNext = {2, 0, 1};
   const std::size_t i = kNext[static_cast<std::size_t>(axis)];
@@ -136,8 +130,8 @@ TEMPOKEY_FK_CLONES void RotateColumnsBlock(double* block, int axis, const double
 
 // out[axis][f] = position[axis][f] + (rotation · v[f])[axis] (MatVec() of rotation.h, summed
 // left to right), v[f] given per axis by v[axis * kB + f].
-TEMPOKEY_FK_CLONES void MoveBlock(const double* block, const double* v, double* out,
-                                  std::size_t n) {
+TEMPOKEY_CLONES_AVX512_AVX void MoveBlock(const double* block, const double* v, double* out,
+                                          std::size_t n) {
   for (std::size_t row = 0; row < 3; ++row) {
     const double* __restrict m0 = RotationEntry(block, row, 0);
     const double* __restrict m1 = RotationEntry(block, row, 1);

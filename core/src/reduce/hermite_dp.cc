@@ -454,10 +454,10 @@ struct RowTerms {
 // combination, in frame order): a
 // combination's sums are those its frames alone give, and the nine independent chains overlap.
 // Cloned like UpdateTargetMinima(); every clone adds in the same order.
-TEMPOKEY_AVX_CLONES void SumDataTerms(const double* sample, std::int64_t k_begin,
-                                         std::int64_t k_end, double y_ref,
-                                         const std::array<const double*, 9>& basis,
-                                         std::array<std::array<double, 4>, 9>& sums) {
+TEMPOKEY_CLONES_AVX void SumDataTerms(const double* sample, std::int64_t k_begin,
+                                      std::int64_t k_end, double y_ref,
+                                      const std::array<const double*, 9>& basis,
+                                      std::array<std::array<double, 4>, 9>& sums) {
   using V = double __attribute__((vector_size(32)));
   V acc[9];
   for (int j = 0; j < 9; ++j) {

@@ -174,7 +174,7 @@ constexpr std::size_t kLaneRow = (kOrder + 1) * kGuardLanes;
 // c of x[i * kGuardLanes + c], lambda[r * kGuardLanes + c], y[i * kGuardLanes + c] and
 // band[i * kLaneRow + k * kGuardLanes + c] (entry k of row i) is channel c's. Each lane performs
 // exactly the scalar operations in the scalar order.
-TEMPOKEY_AVX_CLONES void ForwardLaneRows(std::size_t n, std::size_t begin, std::size_t end,
+TEMPOKEY_CLONES_AVX void ForwardLaneRows(std::size_t n, std::size_t begin, std::size_t end,
                                          const double* x, const double* lambda, double* band,
                                          double* y) {
   using simd::V4;
@@ -219,7 +219,7 @@ TEMPOKEY_AVX_CLONES void ForwardLaneRows(std::size_t n, std::size_t begin, std::
 
 // Rows [begin, end) of BandSolver::BackRow() for kGuardLanes channels at once, from row end - 1
 // down (ForwardLaneRows()'s layout).
-TEMPOKEY_AVX_CLONES void BackLaneRows(std::size_t n, std::size_t begin, std::size_t end,
+TEMPOKEY_CLONES_AVX void BackLaneRows(std::size_t n, std::size_t begin, std::size_t end,
                                       const double* band, double* y) {
   using simd::V4;
   constexpr auto kBand = static_cast<std::size_t>(kOrder);
@@ -301,7 +301,7 @@ struct alignas(128) LaneValues {
 // The Cholesky factor L of I + level[l] D^T D (n x n, D the third differences, n >= 4) for the
 // sixteen levels at once, as BandSolver computes it: band[i].entry[0] = L(i, i), entry[k] =
 // L(i, i - k).
-TEMPOKEY_AVX_CLONES void FactorConstantLevels(std::size_t n, const double* level,
+TEMPOKEY_CLONES_AVX void FactorConstantLevels(std::size_t n, const double* level,
                                               BandRow* band) {
   Lanes l;
   for (int lane = 0; lane < kLanes; ++lane) l[lane] = level[lane];
@@ -399,7 +399,7 @@ struct SubstitutionJob {
 // exactly the scalar operations in the scalar order. Written on 4-lane vectors (a quarter of a
 // batch at a time): the compiler keeps those in registers, where it moves 16-lane ones through
 // the stack.
-TEMPOKEY_AVX_CLONES void SubstituteConstantLevels4(std::size_t n, const SubstitutionJob* jobs,
+TEMPOKEY_CLONES_AVX void SubstituteConstantLevels4(std::size_t n, const SubstitutionJob* jobs,
                                                    std::size_t count) {
   using simd::V4;
   // Doubles from one frame (or one band entry) to the next.
@@ -529,7 +529,7 @@ void SubstituteConstantLevels(std::size_t n, const SubstitutionJob* jobs, std::s
 // Residual sums of squares of the first 4 * `quarters` of the sixteen solutions `y` (of x[0 ...])
 // over frames [b0, b1), each summed frame by frame in order as a scalar loop would; the other
 // lanes of `rss` are left at 0.
-TEMPOKEY_AVX_CLONES void LaneResiduals(const LaneValues* y, const double* x, std::size_t b0,
+TEMPOKEY_CLONES_AVX void LaneResiduals(const LaneValues* y, const double* x, std::size_t b0,
                                        std::size_t b1, std::size_t quarters, double* rss) {
   using simd::V4;
   const double* __restrict values = reinterpret_cast<const double*>(y);

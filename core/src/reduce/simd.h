@@ -1,4 +1,5 @@
-// Small vector kernels: 4-lane double vectors (GCC vector extensions) and the AVX clone macro.
+// Small vector kernels: 4-lane double vectors (GCC vector extensions), for the kernels cloned with
+// TEMPOKEY_CLONES_AVX (core/src/simd/instruction_set.h).
 //
 // Kernels written with 4-lane vectors compute every lane with the same operations in the same
 // order whether the compiler emits one AVX instruction or two SSE2 ones, and contraction into FMA
@@ -9,14 +10,7 @@
 
 #include <cstring>
 
-// The innermost kernels are cloned for AVX and picked at load time by an ifunc resolver. Sanitizer
-// builds keep the portable clone only: an instrumented resolver runs before the sanitizer's
-// runtime is up (TSan crashes there).
-#if defined(TEMPOKEY_SANITIZED)
-#define TEMPOKEY_AVX_CLONES
-#else
-#define TEMPOKEY_AVX_CLONES __attribute__((target_clones("avx", "default")))
-#endif
+#include "core/src/simd/instruction_set.h"
 
 namespace tempokey::core::simd {
 

@@ -93,7 +93,7 @@ struct BasisColumns {
 // Coefficients() of four frames at once: every lane computes exactly what Coefficients() does
 // (the same operations in the same order, no contraction: simd.h), so the columns are the same
 // bits either way; long segments' columns are filled often enough for the speed to matter.
-TEMPOKEY_AVX_CLONES void FillColumns(std::int64_t length, double* c0, double* c1, double* c2,
+TEMPOKEY_CLONES_AVX void FillColumns(std::int64_t length, double* c0, double* c1, double* c2,
                                      double* c3) {
   using simd::V4;
   const auto l = static_cast<double>(length);
@@ -211,7 +211,7 @@ constexpr bool NeedsGram(FreeEnds ends, int r, int q) {
 }
 
 // moments[r] = sum of data[k] * column r at k.
-TEMPOKEY_AVX_CLONES void DataMoments(const double* data, const BasisColumns& basis,
+TEMPOKEY_CLONES_AVX void DataMoments(const double* data, const BasisColumns& basis,
                                      std::int64_t n, double* moments) {
   using simd::V4;
   const double* c0 = basis.column[0].data();
@@ -242,7 +242,7 @@ TEMPOKEY_AVX_CLONES void DataMoments(const double* data, const BasisColumns& bas
 
 // DataMoments() of two columns only, ca and cb, into moments[0] and moments[1]: each the same
 // operations in the same order as DataMoments() gives that column.
-TEMPOKEY_AVX_CLONES void DataMomentPair(const double* data, const double* ca, const double* cb,
+TEMPOKEY_CLONES_AVX void DataMomentPair(const double* data, const double* ca, const double* cb,
                                         std::int64_t n, double* moments) {
   using simd::V4;
   V4 ma = simd::Broadcast(0.0), mb = ma;
@@ -327,17 +327,17 @@ template <FreeEnds kEnds>
   }
 }
 
-TEMPOKEY_AVX_CLONES void WeightedSums(const double* data, const double* w,
+TEMPOKEY_CLONES_AVX void WeightedSums(const double* data, const double* w,
                                       const BasisColumns& basis, std::int64_t n, double* moments,
                                       double* gram) {
   WeightedSumsOf<FreeEnds::kBoth>(data, w, basis, n, moments, gram);
 }
-TEMPOKEY_AVX_CLONES void WeightedSumsStart(const double* data, const double* w,
+TEMPOKEY_CLONES_AVX void WeightedSumsStart(const double* data, const double* w,
                                            const BasisColumns& basis, std::int64_t n,
                                            double* moments, double* gram) {
   WeightedSumsOf<FreeEnds::kStartOnly>(data, w, basis, n, moments, gram);
 }
-TEMPOKEY_AVX_CLONES void WeightedSumsEnd(const double* data, const double* w,
+TEMPOKEY_CLONES_AVX void WeightedSumsEnd(const double* data, const double* w,
                                          const BasisColumns& basis, std::int64_t n,
                                          double* moments, double* gram) {
   WeightedSumsOf<FreeEnds::kEndOnly>(data, w, basis, n, moments, gram);
@@ -444,7 +444,7 @@ inline double ShortMaxError(const double* data, const BasisColumns& basis, std::
 // The largest |curve - data| over the interior frames, the curve's coefficients `x` =
 // (v_a, m_a, v_b, m_b); returns soon after a frame exceeds `limit` (some value above it: callers
 // only compare it with the limit then).
-TEMPOKEY_AVX_CLONES double MaxError(const double* data, const BasisColumns& basis,
+TEMPOKEY_CLONES_AVX double MaxError(const double* data, const BasisColumns& basis,
                                     std::int64_t n, const double* x, double limit) {
   using simd::V4;
   const V4 x0 = simd::Broadcast(x[0]), x1 = simd::Broadcast(x[1]);
@@ -486,7 +486,7 @@ TEMPOKEY_AVX_CLONES double MaxError(const double* data, const BasisColumns& basi
 
 // weights[k] *= |curve - data[k]| + floor over the interior frames, the curve as in MaxError():
 // one Lawson round's reweighting of a segment.
-TEMPOKEY_AVX_CLONES void ScaleByResiduals(const double* data, const BasisColumns& basis,
+TEMPOKEY_CLONES_AVX void ScaleByResiduals(const double* data, const BasisColumns& basis,
                                           std::int64_t n, const double* x, double floor,
                                           double* weights) {
   using simd::V4;

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "core/src/simd/instruction_set.h"
 #include "rotation_batch.h"
 #include "vector_trig.h"
 
@@ -160,15 +161,8 @@ struct Unwrapped {
   bool wraps = false;
 };
 
-// As rotation_batch.cc's clones: an AVX2 build of the channel scans beside the portable one (the
-// sanitizer builds keep the portable one only).
-#if defined(TEMPOKEY_SANITIZED)
-#define TEMPOKEY_SCAN_CLONES
-#else
-#define TEMPOKEY_SCAN_CLONES __attribute__((target_clones("avx2", "default")))
-#endif
-
-TEMPOKEY_SCAN_CLONES bool HasWrap(std::span<const double> degrees) {
+// The channel scans are cloned with AVX2 (TEMPOKEY_CLONES_AVX2) beside the portable build.
+TEMPOKEY_CLONES_AVX2 bool HasWrap(std::span<const double> degrees) {
   // Blocks of steps, four at a time (one AVX register, two SSE2 ones in the portable clone),
   // without an early exit inside: most channels have no seam and are read to the end.
   using V = double __attribute__((vector_size(32)));
@@ -410,7 +404,7 @@ void ResampleAngle(const ResamplePlan& plan, std::span<const double> degrees,
 namespace {
 
 // True when every source sample of `channel` compares equal to the first one.
-TEMPOKEY_SCAN_CLONES bool IsConstant(std::span<const double> channel) {
+TEMPOKEY_CLONES_AVX2 bool IsConstant(std::span<const double> channel) {
   // Blocks without an early exit inside, four samples at a time (as HasWrap(); GCC left a scalar
   // block loop as a comparison per sample): most channels are read to the end or differ early.
   using V = double __attribute__((vector_size(32)));

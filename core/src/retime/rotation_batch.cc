@@ -11,14 +11,8 @@
 #include "core/src/simd/instruction_set.h"
 #include "vector_trig.h"
 
-// As simd.h's TEMPOKEY_AVX2_CLONES, with AVX2: the kernels select lanes by masks, which are
-// 256-bit integer vectors (AVX alone splits them into 128-bit halves).
-#if defined(TEMPOKEY_SANITIZED)
-#define TEMPOKEY_AVX2_CLONES
-#else
-#define TEMPOKEY_AVX2_CLONES __attribute__((target_clones("avx2", "default")))
-#endif
-
+// The kernels are cloned with AVX2 (TEMPOKEY_CLONES_AVX2), not AVX: they select lanes by masks,
+// which are 256-bit integer vectors (AVX alone splits them into 128-bit halves).
 // The hottest kernels (conversions to quaternions and back, weighted means) also come as 8-lane
 // variants for AVX-512 processors, chosen at run time: the same arithmetic lane by lane (no
 // contraction into FMA: -ffp-contract=off), so the same bits, in about half the instructions.
@@ -379,18 +373,18 @@ constexpr int OrderCode(const EulerOrder& order) { return OrderCode(order[0], or
     default: return body<2, 1, 0, VT>(__VA_ARGS__);                        \
   }
 
-TEMPOKEY_AVX2_CLONES void EulerToQuatsKernel(const EulerOrder& order, const double* a,
-                                            const double* b, const double* c, std::size_t count,
-                                            double* out) {
+TEMPOKEY_CLONES_AVX2 void EulerToQuatsKernel(const EulerOrder& order, const double* a,
+                                             const double* b, const double* c, std::size_t count,
+                                             double* out) {
   TEMPOKEY_FOR_ORDER(order, EulerToQuatsBody, V, a, b, c, count, out);
 }
 
 // Groups of kLanes samples one slerp step takes together.
 constexpr int kSlerpGroups = 2;
 
-TEMPOKEY_AVX2_CLONES void SlerpKernel(const double* quats, const std::int64_t* i0, const double* t,
-                                     std::size_t count, QuatArrays out,
-                                     unsigned char* discontinuous) {
+TEMPOKEY_CLONES_AVX2 void SlerpKernel(const double* quats, const std::int64_t* i0, const double* t,
+                                      std::size_t count, QuatArrays out,
+                                      unsigned char* discontinuous) {
   // As ToEulerBody(): groups of samples side by side through the arctangent.
   constexpr int G = kSlerpGroups;
   for (std::size_t start = 0; start < count; start += G * kLanes) {
@@ -582,9 +576,9 @@ template <int I, int J, int K, class VT>
   }
 }
 
-TEMPOKEY_AVX2_CLONES void ToEulerKernel(const EulerOrder& order, ConstQuatArrays quats,
-                                       const EulerTargets& targets, std::size_t count,
-                                       unsigned char* ill_conditioned) {
+TEMPOKEY_CLONES_AVX2 void ToEulerKernel(const EulerOrder& order, ConstQuatArrays quats,
+                                        const EulerTargets& targets, std::size_t count,
+                                        unsigned char* ill_conditioned) {
   TEMPOKEY_FOR_ORDER(order, ToEulerBody, V, quats, targets, count, ill_conditioned);
 }
 
@@ -681,9 +675,9 @@ template <class VT>
   }
 }
 
-TEMPOKEY_AVX2_CLONES void WeightedMeansKernel(const double* quats, MeanTables tables,
-                                             std::size_t count, double min_dot, QuatArrays out,
-                                             unsigned char* needs_markley) {
+TEMPOKEY_CLONES_AVX2 void WeightedMeansKernel(const double* quats, MeanTables tables,
+                                              std::size_t count, double min_dot, QuatArrays out,
+                                              unsigned char* needs_markley) {
   WeightedMeansBody<V>(quats, tables, count, min_dot, out, needs_markley);
 }
 
@@ -847,9 +841,9 @@ constexpr int kMarkleyGroups = 2;
   }
 }
 
-TEMPOKEY_AVX2_CLONES void MarkleyMeansKernel(const double* quats, const double* weights,
-                                            const WeightedMeanJob* jobs, std::size_t count,
-                                            QuatArrays out) {
+TEMPOKEY_CLONES_AVX2 void MarkleyMeansKernel(const double* quats, const double* weights,
+                                             const WeightedMeanJob* jobs, std::size_t count,
+                                             QuatArrays out) {
   MarkleyMeansBody(quats, weights, jobs, count, out);
 }
 

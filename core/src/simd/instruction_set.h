@@ -9,6 +9,21 @@
 #include <cstdlib>
 #include <string_view>
 
+// Kernels the compiler clones for several instruction sets, the loader picking one per machine
+// (target_clones): every clone performs the same operations (no FMA contraction:
+// -ffp-contract=off), so they give the same bits. Sanitizer builds keep the portable code only:
+// the loader runs the clone resolver (an ifunc) before the sanitizer's runtime is up, and an
+// instrumented resolver crashes there (TSan).
+#if defined(TEMPOKEY_SANITIZED)
+#define TEMPOKEY_CLONES_AVX
+#define TEMPOKEY_CLONES_AVX2
+#define TEMPOKEY_CLONES_AVX512_AVX
+#else
+#define TEMPOKEY_CLONES_AVX __attribute__((target_clones("avx", "default")))
+#define TEMPOKEY_CLONES_AVX2 __attribute__((target_clones("avx2", "default")))
+#define TEMPOKEY_CLONES_AVX512_AVX __attribute__((target_clones("avx512f", "avx", "default")))
+#endif
+
 // Whether the 8-lane kernels written with GCC's vector extensions inside target("avx512...")
 // functions are built: by GCC, without sanitizers. Clang rejects passing 8-lane vectors to the
 // helpers (lambdas) those kernels call, which do not carry the target attribute, and sanitizer
