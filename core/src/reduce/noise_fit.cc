@@ -391,52 +391,89 @@ struct SubstitutionJob {
   std::size_t first_wanted;
 };
 
+// The substitutions' layout, in doubles: from one frame of a LaneValues (or one entry of a BandRow)
+// to the next, and from one BandRow to the next.
+constexpr std::size_t kLaneStride = kLanes;
+constexpr std::size_t kBandRowStride = sizeof(BandRow) / sizeof(double);
+static_assert(sizeof(LaneValues) == kLaneStride * sizeof(double));
+
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"  // always inlined: the by-value ABI never applies
+
+// Loads and stores V, a GCC vector of doubles (4 or 8), at any alignment.
+template <class V>
+[[gnu::always_inline]] inline V LoadLanes(const double* p) {
+  V v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+template <class V>
+[[gnu::always_inline]] inline void StoreLanes(double* p, V v) {
+  std::memcpy(p, &v, sizeof v);
+}
+
+// BandSolver::ForwardRow() for frame i of the lanes [lane, lane + lanes of V) of one job: `row` is
+// the factor's row i, `y` the job's solutions, `f` the sample x[i] in every lane.
+template <class V>
+[[gnu::always_inline]] inline void ForwardLanes(const double* __restrict row,
+                                                double* __restrict y, std::size_t i,
+                                                std::size_t lane, V f) {
+  const std::size_t at = i * kLaneStride + lane;
+  for (std::size_t k = 1; k <= kOrder && i >= k; ++k) {
+    f -= LoadLanes<V>(row + k * kLaneStride + lane) * LoadLanes<V>(y + at - k * kLaneStride);
+  }
+  StoreLanes(y + at, f / LoadLanes<V>(row + lane));
+}
+
+// BandSolver::BackRow() for frame i of n of the lanes [lane, lane + lanes of V) of one job: `band`
+// is the whole factor, `y` the job's solutions.
+template <class V>
+[[gnu::always_inline]] inline void BackLanes(const double* __restrict band, double* __restrict y,
+                                             std::size_t n, std::size_t i, std::size_t lane) {
+  const std::size_t at = i * kLaneStride + lane;
+  V s = LoadLanes<V>(y + at);
+  for (std::size_t k = 1; k <= kOrder && i + k < n; ++k) {
+    s -= LoadLanes<V>(band + (i + k) * kBandRowStride + k * kLaneStride + lane) *
+         LoadLanes<V>(y + at + k * kLaneStride);
+  }
+  StoreLanes(y + at, s / LoadLanes<V>(band + i * kBandRowStride + lane));
+}
+
+#pragma GCC diagnostic pop
+
+// The lowest first wanted frame of the jobs (n if none is lower).
+std::size_t LowestWantedFrame(std::size_t n, const SubstitutionJob* jobs, std::size_t count) {
+  std::size_t lowest = n;
+  for (std::size_t j = 0; j < count; ++j) lowest = std::min(lowest, jobs[j].first_wanted);
+  return lowest;
+}
+
 // Solves L L^T y = x for every job (each of n frames): forward, then back substitution, as
 // BandSolver does, the back substitution down to each job's first wanted frame (y holds the
-// forward substitution's values before it). y[i].value[l] is level l's solution at frame i. One solve is a chain of
-// dependent divisions from frame to frame; the jobs are independent, so stepping all of them frame
-// by frame keeps several chains in flight and the divider busy. Each lane of each job performs
-// exactly the scalar operations in the scalar order. Written on 4-lane vectors (a quarter of a
-// batch at a time): the compiler keeps those in registers, where it moves 16-lane ones through
-// the stack.
+// forward substitution's values before it). y[i].value[l] is level l's solution at frame i. One
+// solve is a chain of dependent divisions from frame to frame; the jobs are independent, so
+// stepping all of them frame by frame keeps several chains in flight and the divider busy. Each
+// lane of each job performs exactly the scalar operations in the scalar order. Written on 4-lane
+// vectors (a quarter of a batch at a time): the compiler keeps those in registers, where it moves
+// 16-lane ones through the stack.
 TEMPOKEY_CLONES_AVX void SubstituteConstantLevels4(std::size_t n, const SubstitutionJob* jobs,
                                                    std::size_t count) {
   using simd::V4;
-  // Doubles from one frame (or one band entry) to the next.
-  constexpr std::size_t kStride = kLanes;
-  constexpr std::size_t kRowStride = sizeof(BandRow) / sizeof(double);
-  static_assert(sizeof(LaneValues) == kStride * sizeof(double));
   for (std::size_t i = 0; i < n; ++i) {
     for (std::size_t j = 0; j < count; ++j) {
-      const double* __restrict row = reinterpret_cast<const double*>(&jobs[j].band[i]);
-      double* __restrict y = reinterpret_cast<double*>(jobs[j].y);
+      const double* row = reinterpret_cast<const double*>(&jobs[j].band[i]);
+      double* y = reinterpret_cast<double*>(jobs[j].y);
       const V4 xi = simd::Broadcast(jobs[j].x[i]);
-      for (std::size_t q = 0; q < jobs[j].quarters; ++q) {
-        const std::size_t at = i * kStride + 4 * q;
-        V4 f = xi;
-        for (std::size_t k = 1; k <= kOrder && i >= k; ++k) {
-          f -= simd::Load(row + k * kStride + 4 * q) * simd::Load(y + at - k * kStride);
-        }
-        simd::Store(y + at, f / simd::Load(row + 4 * q));
-      }
+      for (std::size_t q = 0; q < jobs[j].quarters; ++q) ForwardLanes(row, y, i, 4 * q, xi);
     }
   }
-  std::size_t lowest = n;
-  for (std::size_t j = 0; j < count; ++j) lowest = std::min(lowest, jobs[j].first_wanted);
+  const std::size_t lowest = LowestWantedFrame(n, jobs, count);
   for (std::size_t i = n; i-- > lowest;) {
     for (std::size_t j = 0; j < count; ++j) {
       if (i < jobs[j].first_wanted) continue;
-      const double* __restrict band = reinterpret_cast<const double*>(jobs[j].band);
-      double* __restrict y = reinterpret_cast<double*>(jobs[j].y);
-      for (std::size_t q = 0; q < jobs[j].quarters; ++q) {
-        const std::size_t at = i * kStride + 4 * q;
-        V4 s = simd::Load(y + at);
-        for (std::size_t k = 1; k <= kOrder && i + k < n; ++k) {
-          s -= simd::Load(band + (i + k) * kRowStride + k * kStride + 4 * q) *
-               simd::Load(y + at + k * kStride);
-        }
-        simd::Store(y + at, s / simd::Load(band + i * kRowStride + 4 * q));
-      }
+      const double* band = reinterpret_cast<const double*>(jobs[j].band);
+      double* y = reinterpret_cast<double*>(jobs[j].y);
+      for (std::size_t q = 0; q < jobs[j].quarters; ++q) BackLanes<V4>(band, y, n, i, 4 * q);
     }
   }
 }
@@ -449,66 +486,27 @@ TEMPOKEY_TARGET_AVX512 void SubstituteConstantLevels8(std::size_t n, const Subst
                                                       std::size_t count) {
   using V8 = double __attribute__((vector_size(64)));
   using simd::V4;
-  const auto load = [](const double* p) __attribute__((always_inline)) {
-    V8 v;
-    std::memcpy(&v, p, sizeof v);
-    return v;
-  };
-  const auto store = [](double* p, V8 v) __attribute__((always_inline)) {
-    std::memcpy(p, &v, sizeof v);
-  };
-  constexpr std::size_t kStride = kLanes;
-  constexpr std::size_t kRowStride = sizeof(BandRow) / sizeof(double);
   for (std::size_t i = 0; i < n; ++i) {
     for (std::size_t j = 0; j < count; ++j) {
-      const double* __restrict row = reinterpret_cast<const double*>(&jobs[j].band[i]);
-      double* __restrict y = reinterpret_cast<double*>(jobs[j].y);
+      const double* row = reinterpret_cast<const double*>(&jobs[j].band[i]);
+      double* y = reinterpret_cast<double*>(jobs[j].y);
       const double x = jobs[j].x[i];
-      const V8 xi = {x, x, x, x, x, x, x, x};
       const std::size_t halves = jobs[j].quarters / 2;
       for (std::size_t h = 0; h < halves; ++h) {
-        const std::size_t at = i * kStride + 8 * h;
-        V8 f = xi;
-        for (std::size_t k = 1; k <= kOrder && i >= k; ++k) {
-          f -= load(row + k * kStride + 8 * h) * load(y + at - k * kStride);
-        }
-        store(y + at, f / load(row + 8 * h));
+        ForwardLanes(row, y, i, 8 * h, V8{x, x, x, x, x, x, x, x});
       }
-      if (jobs[j].quarters % 2 != 0) {
-        const std::size_t at = i * kStride + 8 * halves;
-        V4 f = simd::Broadcast(x);
-        for (std::size_t k = 1; k <= kOrder && i >= k; ++k) {
-          f -= simd::Load(row + k * kStride + 8 * halves) * simd::Load(y + at - k * kStride);
-        }
-        simd::Store(y + at, f / simd::Load(row + 8 * halves));
-      }
+      if (jobs[j].quarters % 2 != 0) ForwardLanes(row, y, i, 8 * halves, simd::Broadcast(x));
     }
   }
-  std::size_t lowest = n;
-  for (std::size_t j = 0; j < count; ++j) lowest = std::min(lowest, jobs[j].first_wanted);
+  const std::size_t lowest = LowestWantedFrame(n, jobs, count);
   for (std::size_t i = n; i-- > lowest;) {
     for (std::size_t j = 0; j < count; ++j) {
       if (i < jobs[j].first_wanted) continue;
-      const double* __restrict band = reinterpret_cast<const double*>(jobs[j].band);
-      double* __restrict y = reinterpret_cast<double*>(jobs[j].y);
+      const double* band = reinterpret_cast<const double*>(jobs[j].band);
+      double* y = reinterpret_cast<double*>(jobs[j].y);
       const std::size_t halves = jobs[j].quarters / 2;
-      for (std::size_t h = 0; h < halves; ++h) {
-        const std::size_t at = i * kStride + 8 * h;
-        V8 s = load(y + at);
-        for (std::size_t k = 1; k <= kOrder && i + k < n; ++k) {
-          s -= load(band + (i + k) * kRowStride + k * kStride + 8 * h) * load(y + at + k * kStride);
-        }
-        store(y + at, s / load(band + i * kRowStride + 8 * h));
-      }
-      if (jobs[j].quarters % 2 != 0) {
-        const std::size_t at = i * kStride + 8 * halves;
-        V4 s = simd::Load(y + at);
-        for (std::size_t k = 1; k <= kOrder && i + k < n; ++k) {
-          s -= simd::Load(band + (i + k) * kRowStride + k * kStride + 8 * halves) *
-               simd::Load(y + at + k * kStride);
-        }
-        simd::Store(y + at, s / simd::Load(band + i * kRowStride + 8 * halves));
-      }
+      for (std::size_t h = 0; h < halves; ++h) BackLanes<V8>(band, y, n, i, 8 * h);
+      if (jobs[j].quarters % 2 != 0) BackLanes<V4>(band, y, n, i, 8 * halves);
     }
   }
 }
