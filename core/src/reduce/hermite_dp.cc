@@ -478,6 +478,20 @@ TEMPOKEY_CLONES_AVX void SumDataTerms(const double* sample, std::int64_t k_begin
   for (int j = 0; j < 9; ++j) std::memcpy(sums[j].data(), &acc[j], sizeof(V));
 }
 
+// q(u, v) = h_uu u^2 + lin_u u + h_vv v^2 + lin_v v + cross u v at the nine steps (u, v) in
+// {-1, 0, 1}^2, u major: the quadratic part of one pair of a combination's form.
+template <typename P>
+[[gnu::always_inline]] inline std::array<P, 9> StepPairTerms(P h_uu, P lin_u, P h_vv, P lin_v,
+                                                             P cross, P zero) {
+  const P u_minus = h_uu - lin_u;
+  const P u_plus = h_uu + lin_u;
+  const P v_minus = h_vv - lin_v;
+  const P v_plus = h_vv + lin_v;
+  return {u_minus + v_minus + cross, u_minus, u_minus + v_plus - cross,
+          v_minus,                   zero,    v_plus,
+          u_plus + v_minus - cross,  u_plus,  u_plus + v_plus + cross};
+}
+
 // The split forms of all combinations from their inputs; `centre` the centre's y-components
 // relative to y_ref (w above), `d` the y-steps (y, tangent y, y, tangent y).
 template <typename P>
@@ -518,23 +532,10 @@ template <typename P>
             h03 = dd[0][3] * g[3], h11 = dd[1][1] * g[4], h12 = dd[1][2] * g[5],
             h13 = dd[1][3] * g[6], h22 = dd[2][2] * g[7], h23 = dd[2][3] * g[8],
             h33 = dd[3][3] * g[9];
-    // alpha(d0, d1) = g0 d0 + g1 d1 + H00 d0^2 + 2 H01 d0 d1 + H11 d1^2, d in {-1, 0, 1}.
-    const P a_minus = h00 - lin[0];
-    const P a_plus = h00 + lin[0];
-    const P b_minus = h11 - lin[1];
-    const P b_plus = h11 + lin[1];
-    const P ab = two * h01;
-    const P alpha[9] = {a_minus + b_minus + ab, a_minus, a_minus + b_plus - ab,
-                        b_minus,                zero,    b_plus,
-                        a_plus + b_minus - ab,  a_plus,  a_plus + b_plus + ab};
-    const P c_minus = h22 - lin[2];
-    const P c_plus = h22 + lin[2];
-    const P d_minus = h33 - lin[3];
-    const P d_plus = h33 + lin[3];
-    const P cd = two * h23;
-    const P beta[9] = {c_minus + d_minus + cd, c_minus, c_minus + d_plus - cd,
-                       d_minus,                zero,    d_plus,
-                       c_plus + d_minus - cd,  c_plus,  c_plus + d_plus + cd};
+    // alpha(d0, d1) = g0 d0 + g1 d1 + H00 d0^2 + 2 H01 d0 d1 + H11 d1^2, d in {-1, 0, 1}; beta
+    // the same in (d2, d3).
+    const std::array<P, 9> alpha = StepPairTerms(h00, lin[0], h11, lin[1], two * h01, zero);
+    const std::array<P, 9> beta = StepPairTerms(h22, lin[2], h33, lin[3], two * h23, zero);
     // z0 = 2 (H02 d2 + H03 d3), z1 = 2 (H12 d2 + H13 d3) over the nine (d2, d3).
     const P p0 = two * h02;
     const P q0 = two * h03;
