@@ -227,20 +227,17 @@ void ForwardKinematics::PlaceBlock(std::span<const std::span<const double>> samp
   }
 }
 
-void ForwardKinematics::PoseFrames(std::span<const std::span<const double>> samples,
-                                   std::size_t first, std::size_t count, std::span<Vec3> out) {
+template <class SetTrig>
+void ForwardKinematics::PlaceBlocks(std::span<const std::span<const double>> samples,
+                                    std::size_t first, std::size_t count, std::span<Vec3> out,
+                                    SetTrig set_trig) {
   const std::size_t stride = points_.size();
   for (std::size_t done = 0; done < count; done += kB) {
     const std::size_t n = std::min(kB, count - done);
     std::size_t rotation = 0;
     for (const JointPlan& plan : joints_) {
       for (const auto& [axis, c] : plan.rotations) {
-        double* cosines = trig_.data() + 2 * rotation * kB;
-        double* sines = cosines + kB;
-        RotationTrig(samples[static_cast<std::size_t>(c)].subspan(first + done, n), {cosines, n},
-                     {sines, n});
-        rotation_cos_[rotation] = cosines;
-        rotation_sin_[rotation] = sines;
+        set_trig(rotation, static_cast<std::size_t>(c), first + done, n);
         ++rotation;
       }
     }
@@ -248,25 +245,28 @@ void ForwardKinematics::PoseFrames(std::span<const std::span<const double>> samp
   }
 }
 
+void ForwardKinematics::PoseFrames(std::span<const std::span<const double>> samples,
+                                   std::size_t first, std::size_t count, std::span<Vec3> out) {
+  PlaceBlocks(samples, first, count, out,
+              [&](std::size_t rotation, std::size_t channel, std::size_t from, std::size_t n) {
+                double* cosines = trig_.data() + 2 * rotation * kB;
+                double* sines = cosines + kB;
+                RotationTrig(samples[channel].subspan(from, n), {cosines, n}, {sines, n});
+                rotation_cos_[rotation] = cosines;
+                rotation_sin_[rotation] = sines;
+              });
+}
+
 void ForwardKinematics::PoseFramesFromTrig(std::span<const std::span<const double>> samples,
                                            std::span<const std::span<const double>> cosines,
                                            std::span<const std::span<const double>> sines,
                                            std::size_t first, std::size_t count,
                                            std::span<Vec3> out) {
-  const std::size_t stride = points_.size();
-  for (std::size_t done = 0; done < count; done += kB) {
-    const std::size_t n = std::min(kB, count - done);
-    std::size_t rotation = 0;
-    for (const JointPlan& plan : joints_) {
-      for (const auto& [axis, c] : plan.rotations) {
-        const auto ch = static_cast<std::size_t>(c);
-        rotation_cos_[rotation] = cosines[ch].data() + first + done;
-        rotation_sin_[rotation] = sines[ch].data() + first + done;
-        ++rotation;
-      }
-    }
-    PlaceBlock(samples, first + done, n, out.subspan(done * stride, n * stride));
-  }
+  PlaceBlocks(samples, first, count, out,
+              [&](std::size_t rotation, std::size_t channel, std::size_t from, std::size_t) {
+                rotation_cos_[rotation] = cosines[channel].data() + from;
+                rotation_sin_[rotation] = sines[channel].data() + from;
+              });
 }
 
 void ForwardKinematics::Pose(std::span<const std::span<const double>> samples, std::size_t frame,

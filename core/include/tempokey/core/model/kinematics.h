@@ -116,6 +116,13 @@ class ForwardKinematics {
   void PlaceBlock(std::span<const std::span<const double>> samples, std::size_t first,
                   std::size_t count, std::span<Vec3> out);
 
+  // PlaceBlock() over frames [first, first + count), block by block: set_trig(r, channel,
+  // block_first, n) first points rotation_cos_[r] and rotation_sin_[r] at the block's cosines and
+  // sines of the r-th rotation channel (its channel index given).
+  template <class SetTrig>
+  void PlaceBlocks(std::span<const std::span<const double>> samples, std::size_t first,
+                   std::size_t count, std::span<Vec3> out, SetTrig set_trig);
+
   std::vector<JointPlan> joints_;
   std::vector<SkeletonPoint> points_;
   std::size_t rotation_count_ = 0;  // rotation channels over every joint
