@@ -441,11 +441,27 @@ template <class V>
 
 #pragma GCC diagnostic pop
 
-// The lowest first wanted frame of the jobs (n if none is lower).
-std::size_t LowestWantedFrame(std::size_t n, const SubstitutionJob* jobs, std::size_t count) {
+// The substitutions' frame and job loops: forward(row, y, i, job) steps frame i of one job forward
+// (`row` the factor's row i), then back(band, y, i, job) steps it back (`band` the whole factor),
+// frame i from n - 1 down to the job's first wanted frame.
+template <class Forward, class Back>
+[[gnu::always_inline]] inline void SubstituteJobs(std::size_t n, const SubstitutionJob* jobs,
+                                                  std::size_t count, Forward forward, Back back) {
+  for (std::size_t i = 0; i < n; ++i) {
+    for (std::size_t j = 0; j < count; ++j) {
+      forward(reinterpret_cast<const double*>(&jobs[j].band[i]),
+              reinterpret_cast<double*>(jobs[j].y), i, jobs[j]);
+    }
+  }
   std::size_t lowest = n;
   for (std::size_t j = 0; j < count; ++j) lowest = std::min(lowest, jobs[j].first_wanted);
-  return lowest;
+  for (std::size_t i = n; i-- > lowest;) {
+    for (std::size_t j = 0; j < count; ++j) {
+      if (i < jobs[j].first_wanted) continue;
+      back(reinterpret_cast<const double*>(jobs[j].band), reinterpret_cast<double*>(jobs[j].y), i,
+           jobs[j]);
+    }
+  }
 }
 
 // Solves L L^T y = x for every job (each of n frames): forward, then back substitution, as
@@ -459,23 +475,17 @@ std::size_t LowestWantedFrame(std::size_t n, const SubstitutionJob* jobs, std::s
 TEMPOKEY_CLONES_AVX void SubstituteConstantLevels4(std::size_t n, const SubstitutionJob* jobs,
                                                    std::size_t count) {
   using simd::V4;
-  for (std::size_t i = 0; i < n; ++i) {
-    for (std::size_t j = 0; j < count; ++j) {
-      const double* row = reinterpret_cast<const double*>(&jobs[j].band[i]);
-      double* y = reinterpret_cast<double*>(jobs[j].y);
-      const V4 xi = simd::Broadcast(jobs[j].x[i]);
-      for (std::size_t q = 0; q < jobs[j].quarters; ++q) ForwardLanes(row, y, i, 4 * q, xi);
-    }
-  }
-  const std::size_t lowest = LowestWantedFrame(n, jobs, count);
-  for (std::size_t i = n; i-- > lowest;) {
-    for (std::size_t j = 0; j < count; ++j) {
-      if (i < jobs[j].first_wanted) continue;
-      const double* band = reinterpret_cast<const double*>(jobs[j].band);
-      double* y = reinterpret_cast<double*>(jobs[j].y);
-      for (std::size_t q = 0; q < jobs[j].quarters; ++q) BackLanes<V4>(band, y, n, i, 4 * q);
-    }
-  }
+  SubstituteJobs(
+      n, jobs, count,
+      [](const double* row, double* y, std::size_t i, const SubstitutionJob& job)
+          __attribute__((always_inline)) {
+            const V4 xi = simd::Broadcast(job.x[i]);
+            for (std::size_t q = 0; q < job.quarters; ++q) ForwardLanes(row, y, i, 4 * q, xi);
+          },
+      [n](const double* band, double* y, std::size_t i, const SubstitutionJob& job)
+          __attribute__((always_inline)) {
+            for (std::size_t q = 0; q < job.quarters; ++q) BackLanes<V4>(band, y, n, i, 4 * q);
+          });
 }
 
 #if TEMPOKEY_WIDE_KERNELS
@@ -486,29 +496,23 @@ TEMPOKEY_TARGET_AVX512 void SubstituteConstantLevels8(std::size_t n, const Subst
                                                       std::size_t count) {
   using V8 = double __attribute__((vector_size(64)));
   using simd::V4;
-  for (std::size_t i = 0; i < n; ++i) {
-    for (std::size_t j = 0; j < count; ++j) {
-      const double* row = reinterpret_cast<const double*>(&jobs[j].band[i]);
-      double* y = reinterpret_cast<double*>(jobs[j].y);
-      const double x = jobs[j].x[i];
-      const std::size_t halves = jobs[j].quarters / 2;
-      for (std::size_t h = 0; h < halves; ++h) {
-        ForwardLanes(row, y, i, 8 * h, V8{x, x, x, x, x, x, x, x});
-      }
-      if (jobs[j].quarters % 2 != 0) ForwardLanes(row, y, i, 8 * halves, simd::Broadcast(x));
-    }
-  }
-  const std::size_t lowest = LowestWantedFrame(n, jobs, count);
-  for (std::size_t i = n; i-- > lowest;) {
-    for (std::size_t j = 0; j < count; ++j) {
-      if (i < jobs[j].first_wanted) continue;
-      const double* band = reinterpret_cast<const double*>(jobs[j].band);
-      double* y = reinterpret_cast<double*>(jobs[j].y);
-      const std::size_t halves = jobs[j].quarters / 2;
-      for (std::size_t h = 0; h < halves; ++h) BackLanes<V8>(band, y, n, i, 8 * h);
-      if (jobs[j].quarters % 2 != 0) BackLanes<V4>(band, y, n, i, 8 * halves);
-    }
-  }
+  SubstituteJobs(
+      n, jobs, count,
+      [](const double* row, double* y, std::size_t i, const SubstitutionJob& job)
+          __attribute__((always_inline)) {
+            const double x = job.x[i];
+            const std::size_t halves = job.quarters / 2;
+            for (std::size_t h = 0; h < halves; ++h) {
+              ForwardLanes(row, y, i, 8 * h, V8{x, x, x, x, x, x, x, x});
+            }
+            if (job.quarters % 2 != 0) ForwardLanes(row, y, i, 8 * halves, simd::Broadcast(x));
+          },
+      [n](const double* band, double* y, std::size_t i, const SubstitutionJob& job)
+          __attribute__((always_inline)) {
+            const std::size_t halves = job.quarters / 2;
+            for (std::size_t h = 0; h < halves; ++h) BackLanes<V8>(band, y, n, i, 8 * h);
+            if (job.quarters % 2 != 0) BackLanes<V4>(band, y, n, i, 8 * halves);
+          });
 }
 
 #endif  // TEMPOKEY_WIDE_KERNELS
