@@ -594,6 +594,11 @@ namespace {
 // Frames above which a search solves level by level with BandSolver instead of sixteen levels at
 // once: sixteen factors of that many frames would take more than kMaxSmootherFactorBytes.
 constexpr std::size_t kMaxLaneFrames = reduce_internal::kMaxSmootherFactorBytes / sizeof(BandRow);
+// Frames above which a channel's guard rounds solve alone (BandSolver) instead of beside others:
+// the lanes' samples, levels, solutions and factor (28 doubles a frame for four channels, where
+// one channel alone takes 7) would exceed kMaxSmootherFactorBytes.
+constexpr std::size_t kMaxGuardLaneFrames =
+    reduce_internal::kMaxSmootherFactorBytes / (kLaneRow + 3 * kGuardLanes) / sizeof(double);
 // Solutions computed at once (bytes): windows step together until theirs fill about half of a
 // second-level cache.
 constexpr std::size_t kMaxSolutionBytes = std::size_t{256} << 10;
@@ -622,7 +627,9 @@ class NoiseSmoother {
   // the same length); incomplete when stopped() is true afterwards for any of them. Each
   // channel's levels are searched alone; the guard rounds then solve the channels side by side
   // (LaneBandSolver), each channel's rounds ending when its own guard holds: a channel's later
-  // solves repeat its levels, so they give its last solution again, bit for bit.
+  // solves repeat its levels, so they give its last solution again, bit for bit. A group of one
+  // channel solves alone (BandSolver, the same bits): the lanes would take four times its memory
+  // for no gain.
   static std::vector<std::vector<double>> RunGroup(std::span<NoiseSmoother* const> group) {
     std::vector<std::vector<double>> y;
     for (const NoiseSmoother* smoother : group) y.emplace_back(smoother->x_.begin(), smoother->x_.end());
@@ -634,41 +641,47 @@ class NoiseSmoother {
     std::vector<std::vector<double>> block_log = BestBlockLevels(group, global);
     if (group.front()->Stopping()) return StopAll(group, std::move(y));
     // Lanes beyond the group repeat its last channel.
+    const std::size_t lanes = group.size() == 1 ? 1 : kGuardLanes;
     const auto channel_of = [&](std::size_t lane) { return std::min(lane, group.size() - 1); };
-    std::vector<double> x(n * kGuardLanes);
-    for (std::size_t i = 0; i < n; ++i) {
-      for (std::size_t lane = 0; lane < kGuardLanes; ++lane) {
-        x[i * kGuardLanes + lane] = group[channel_of(lane)]->x_[i];
+    std::vector<double> x;
+    if (lanes > 1) {
+      x.resize(n * lanes);
+      for (std::size_t i = 0; i < n; ++i) {
+        for (std::size_t lane = 0; lane < lanes; ++lane) {
+          x[i * lanes + lane] = group[channel_of(lane)]->x_[i];
+        }
       }
     }
     std::vector<double> levels(n - kOrder);
-    std::vector<double> lambda((n - kOrder) * kGuardLanes);
-    std::vector<double> solution(n * kGuardLanes);
+    std::vector<double> lambda((n - kOrder) * lanes);
+    std::vector<double> solution(n * lanes);
     std::vector<bool> lowered(group.size(), true);  // levels changed since the last solve
     LaneBandSolver solver;
     for (int round = 0;; ++round) {
-      for (std::size_t lane = 0; lane < kGuardLanes; ++lane) {
+      for (std::size_t lane = 0; lane < lanes; ++lane) {
         const std::size_t c = channel_of(lane);
         if (!lowered[c]) continue;
         if (lane == c && !group[c]->Interpolate(block_log[c], levels)) {
           return StopAll(group, std::move(y));
         }
-        for (std::size_t r = 0; r < levels.size(); ++r) lambda[r * kGuardLanes + lane] = levels[r];
+        for (std::size_t r = 0; r < levels.size(); ++r) lambda[r * lanes + lane] = levels[r];
       }
-      if (!solver.Solve(n, x.data(), lambda.data(), solution.data(), group.front()->stop_)) {
-        return StopAll(group, std::move(y));
-      }
+      const bool solved =
+          lanes == 1 ? group.front()->SolveBand(group.front()->x_, lambda, solution)
+                     : solver.Solve(n, x.data(), lambda.data(), solution.data(),
+                                    group.front()->stop_);
+      if (!solved) return StopAll(group, std::move(y));
       if (round == kMaxGuardRounds) break;
       bool any = false;
       for (std::size_t c = 0; c < group.size(); ++c) {
         if (!lowered[c]) continue;  // its guard held: its solution is final
-        lowered[c] = group[c]->LowerGuardedBlocks(solution, c, block_log[c]);
+        lowered[c] = group[c]->LowerGuardedBlocks(solution, lanes, c, block_log[c]);
         any = any || lowered[c];
       }
       if (!any) break;
     }
     for (std::size_t c = 0; c < group.size(); ++c) {
-      for (std::size_t i = 0; i < n; ++i) y[c][i] = solution[i * kGuardLanes + c];
+      for (std::size_t i = 0; i < n; ++i) y[c][i] = solution[i * lanes + c];
     }
     return y;
   }
@@ -684,10 +697,11 @@ class NoiseSmoother {
     return y;
   }
 
-  // One guard round's check of this channel's solution (lane `lane` of `solution`, laid out as
-  // LaneBandSolver's): each block whose solution strays more than the guard from the samples has
-  // its level lowered by kGuardFactor (from the lowest searched, to the floor). Whether any was.
-  bool LowerGuardedBlocks(std::span<const double> solution, std::size_t lane,
+  // One guard round's check of this channel's solution (lane `lane` of `lanes` in `solution`,
+  // frame f at solution[f * lanes + lane]): each block whose solution strays more than the guard
+  // from the samples has its level lowered by kGuardFactor (from the lowest searched, to the
+  // floor). Whether any was.
+  bool LowerGuardedBlocks(std::span<const double> solution, std::size_t lanes, std::size_t lane,
                           std::vector<double>& block_log) const {
     bool lowered = false;
     for (std::size_t b = 0; b < block_log.size(); ++b) {
@@ -695,7 +709,7 @@ class NoiseSmoother {
       const std::size_t b1 = std::min(n_, b0 + block_);
       double worst = 0.0;
       for (std::size_t f = b0; f < b1; ++f) {
-        worst = std::max(worst, std::abs(solution[f * kGuardLanes + lane] - x_[f]));
+        worst = std::max(worst, std::abs(solution[f * lanes + lane] - x_[f]));
       }
       if (worst <= guard_ || block_log[b] <= kGuardFloorLogLambda) continue;
       block_log[b] = block_log[b] > kMinLogLambda
@@ -1067,8 +1081,10 @@ absl::StatusOr<std::vector<std::vector<double>>> reduce_internal::SmoothGroupToN
   for (std::size_t first = 0; first < channels.size(); first += group.size()) {
     smoothers.clear();
     group.clear();
-    // Consecutive channels of one length, at most kGuardLanes.
-    for (std::size_t c = first; c < channels.size() && group.size() < kGuardLanes &&
+    // Consecutive channels of one length, at most kGuardLanes; a long channel alone.
+    const std::size_t most =
+        channels[first].size() <= kMaxGuardLaneFrames ? kGuardLanes : std::size_t{1};
+    for (std::size_t c = first; c < channels.size() && group.size() < most &&
                                 channels[c].size() == channels[first].size();
          ++c) {
       smoothers.push_back(

@@ -80,6 +80,7 @@ absl::StatusOr<NoiseCurves> FitNoiseCurves(const Clip& clip,
   options.key_sigmas = params.key_sigmas;
   std::vector<bool> flat;
   for (int c = 0; c < count; ++c) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
     const std::span<const double> samples = inputs[c];
     const std::optional<double> given = IsRotation(clip.channels[c].kind)
                                             ? params.rotation_sigma_degrees

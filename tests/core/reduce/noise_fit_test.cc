@@ -300,6 +300,27 @@ TEST(NoiseFitTest, ChannelsSmoothedTogetherComeOutAsEachAlone) {
   }
 }
 
+TEST(NoiseFitTest, LongChannelsSmoothedTogetherComeOutAsEachAlone) {
+  // Beyond the frames whose guard rounds solve side by side (their memory would be four
+  // channels' at once): each such channel is solved alone, with the same result.
+  constexpr int kFrames = 160'000;
+  const std::vector<std::vector<double>> channels = {WithNoise(Truth(kFrames), kSigma, 1),
+                                                     WithNoise(Truth(kFrames), kSigma, 2)};
+  const std::vector<double> sigmas = {kSigma, kSigma};
+  const std::vector<std::span<const double>> spans(channels.begin(), channels.end());
+  reduce_internal::SmootherFactors factors;
+
+  const absl::StatusOr<std::vector<std::vector<double>>> together =
+      reduce_internal::SmoothGroupToNoise(spans, sigmas, {}, factors, {});
+
+  ASSERT_TRUE(together.ok()) << together.status();
+  ASSERT_EQ(together->size(), channels.size());
+  for (std::size_t c = 0; c < channels.size(); ++c) {
+    EXPECT_EQ((*together)[c], SmoothToNoise(channels[c], sigmas[c])) << "channel " << c;
+    EXPECT_LT(Rms((*together)[c], Truth(kFrames)), 0.5 * kSigma) << "channel " << c;
+  }
+}
+
 // ---- cancellation -------------------------------------------------------------------------------
 
 // The smoother looks at the stop token inside its searches and band solves: a stop requested
@@ -342,8 +363,8 @@ TEST(NoiseCancellationTest, SmootherWithATokenNeverStoppedGivesTheSameCurveBitFo
 
 TEST(NoiseCancellationTest, NoiseReductionStoppedWhileItRunsIsCancelled) {
   // Two long channels; the stop is requested when the first one's fit is reported done, from
-  // inside the reduction, so it lands while the second is still to be smoothed whatever the
-  // machine's load (no race between threads).
+  // inside the reduction, so it lands before the second one's fit whatever the machine's load
+  // (no race between threads), and the look between channels sees it.
   constexpr int kFrames = 200'000;
   Clip clip;
   clip.name = "long";

@@ -884,7 +884,8 @@ TEST(RetimeTest, AStopRequestedFromAnotherThreadCancelsALargeRotationAwareLanczo
   std::stop_source stop;
   int reports = 0;
   // The position channel is resampled first; its progress report asks another thread to stop
-  // and waits until it has, so the joint's rotation is yet to be resampled.
+  // and waits until it has, so the stop is there before the joint's rotation is resampled (the
+  // look between channels sees it).
   const ProgressFn progress = [&](double, std::string_view) {
     if (reports++ > 0) return;
     std::thread requester([&] { stop.request_stop(); });
