@@ -305,10 +305,17 @@ template <int I, int J, int K, class VT>
   constexpr EulerOrder order = {I, J, K};
   // Half angles (radians) beyond kMaxReducedRadians: far beyond any rotation channel's values.
   constexpr double kMaxDegrees = 2.0 * vector_trig::kMaxReducedRadians / kDegToRad;
-  auto scalar = [&](std::size_t i, std::size_t lanes) {
-    for (std::size_t lane = 0; lane < lanes; ++lane) {
-      const Quat q = EulerToQuat(order, {a[i + lane], b[i + lane], c[i + lane]});
-      double* p = out + 4 * (i + lane);
+  // Samples [i, i + lanes) with an angle beyond kMaxDegrees (or not a number) converted again,
+  // one by one, by the scalar code: which samples take it depends on each sample alone, never on
+  // its neighbours in a vector, so the result does not depend on the vectors' width.
+  auto redo_unreducible = [&](std::size_t i, std::size_t lanes) {
+    for (std::size_t lane = i; lane < i + lanes; ++lane) {
+      if (std::abs(a[lane]) < kMaxDegrees && std::abs(b[lane]) < kMaxDegrees &&
+          std::abs(c[lane]) < kMaxDegrees) {
+        continue;
+      }
+      const Quat q = EulerToQuat(order, {a[lane], b[lane], c[lane]});
+      double* p = out + 4 * lane;
       p[0] = q.w;
       p[1] = q.x;
       p[2] = q.y;
@@ -329,32 +336,29 @@ template <int I, int J, int K, class VT>
     const VT half[6] = {half_radians(angle[0][0]), half_radians(angle[0][1]),
                         half_radians(angle[0][2]), half_radians(angle[1][0]),
                         half_radians(angle[1][1]), half_radians(angle[1][2])};
+    const bool reducible = AllReducible(angle[0], kMaxDegrees) &&
+                           AllReducible(angle[1], kMaxDegrees);
     if (AllReducible(angle[0], kSmallDegrees) && AllReducible(angle[1], kSmallDegrees)) {
       vector_trig::SinCosSmall<6>(half, sine, cosine);
-    } else if (AllReducible(angle[0], kMaxDegrees) && AllReducible(angle[1], kMaxDegrees)) {
-      vector_trig::SinCos<6>(half, sine, cosine);
     } else {
-      scalar(i, 2 * L);
-      continue;
+      vector_trig::SinCos<6>(half, sine, cosine);
     }
     for (std::size_t g = 0; g < 2; ++g) {
       const VT s[3] = {sine[3 * g], sine[3 * g + 1], sine[3 * g + 2]};
       const VT co[3] = {cosine[3 * g], cosine[3 * g + 1], cosine[3 * g + 2]};
       StoreInterleaved(out + 4 * (i + g * L), AxesProduct<I, J, K>(s, co), L);
     }
+    if (!reducible) redo_unreducible(i, 2 * L);
   }
   for (; i < count; i += L) {
     const std::size_t lanes = std::min(L, count - i);
     const VT angle[3] = {LoadPartial<VT>(a + i, lanes), LoadPartial<VT>(b + i, lanes),
                          LoadPartial<VT>(c + i, lanes)};
-    if (!AllReducible(angle, kMaxDegrees)) {
-      scalar(i, lanes);
-      continue;
-    }
     VT sine[3], cosine[3];
     vector_trig::SinCos<3>({half_radians(angle[0]), half_radians(angle[1]), half_radians(angle[2])},
                            sine, cosine);
     StoreInterleaved(out + 4 * i, AxesProduct<I, J, K>(sine, cosine), lanes);
+    if (!AllReducible(angle, kMaxDegrees)) redo_unreducible(i, lanes);
   }
 }
 

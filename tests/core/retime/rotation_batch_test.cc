@@ -8,6 +8,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <numbers>
 #include <random>
 #include <vector>
@@ -357,6 +358,41 @@ TEST(RotationBatchTest, ConversionsToQuaternionsAndBackMatchTheScalarFunctions) 
       }
     }
     EXPECT_GT(ill, 0) << name;
+  }
+}
+
+TEST(RotationBatchTest, AnAngleBeyondTheVectorSineLeavesItsNeighboursAsTheyAre) {
+  // One sample far beyond the vector sine's range (or not a number) is converted by the scalar
+  // code, bit for bit; the samples beside it in the same vector keep the vector path's bits, so
+  // the output does not depend on how many samples a vector holds (avx2.* runs this at 4 lanes).
+  std::mt19937_64 random(5);
+  std::uniform_real_distribution<double> angle(-170.0, 170.0);
+  constexpr std::size_t kCount = 41;
+  const EulerOrder order = *ParseEulerOrder("ZXY");
+  std::array<std::vector<double>, 3> source;
+  for (auto& channel : source) {
+    for (std::size_t i = 0; i < kCount; ++i) channel.push_back(angle(random));
+  }
+  std::vector<double> plain(4 * kCount);
+  EulerToQuats(order, source[0].data(), source[1].data(), source[2].data(), kCount, plain.data());
+  for (const double odd : {3e9, -2e10, std::numeric_limits<double>::quiet_NaN()}) {
+    for (const std::size_t at : {std::size_t{3}, std::size_t{21}, std::size_t{40}}) {
+      std::array<std::vector<double>, 3> changed = source;
+      changed[at % 3][at] = odd;
+      std::vector<double> quats(4 * kCount);
+      EulerToQuats(order, changed[0].data(), changed[1].data(), changed[2].data(), kCount,
+                   quats.data());
+      const Quat scalar = EulerToQuat(order, {changed[0][at], changed[1][at], changed[2][at]});
+      const std::array<double, 4> expected = {scalar.w, scalar.x, scalar.y, scalar.z};
+      for (std::size_t i = 0; i < kCount; ++i) {
+        for (std::size_t k = 0; k < 4; ++k) {
+          const double want = i == at ? expected[k] : plain[4 * i + k];
+          const double got = quats[4 * i + k];
+          EXPECT_TRUE(SameBits(got, want) || (std::isnan(want) && std::isnan(got)))
+              << "angle " << odd << " at sample " << at << ": sample " << i << " component " << k;
+        }
+      }
+    }
   }
 }
 
