@@ -453,7 +453,7 @@ struct RowTerms {
 // is 0; sums[j] += (sample[k] - y_ref) * basis row k of combination j, one vector of 4 per
 // combination, in frame order): a
 // combination's sums are those its frames alone give, and the nine independent chains overlap.
-// Cloned like UpdateTargetMinima(); every clone adds in the same order.
+// Cloned for AVX (TEMPOKEY_CLONES_AVX); every clone adds in the same order.
 TEMPOKEY_CLONES_AVX void SumDataTerms(const double* sample, std::int64_t k_begin,
                                       std::int64_t k_end, double y_ref,
                                       const std::array<const double*, 9>& basis,
@@ -589,9 +589,9 @@ void BuildRowTerms(const FormInputs& inputs, const std::array<double, 4>& centre
 // consecutive combinations sx * 9 + tx. For each of the nine predecessor y-states sy, candidate =
 // a[sy] + ((b + u) + v) with u, v in {-z, 0, +z}, folded into the lane's smallest, second
 // smallest and arg-smallest. Lanes of a target x-state without a row this time keep their
-// minima. Written with 8-lane vector extensions and cloned for AVX-512 and AVX, where the machine
-// has them; every clone computes the same values (no contraction into FMA: core/CMakeLists.txt
-// sets -ffp-contract=off).
+// minima. Written on 8-lane packs (lane_pack.h) and built for AVX-512, AVX2 and the baseline, the
+// running machine's chosen at run time (UpdateTargetMinima()); every build computes the same
+// values (no contraction into FMA: core/CMakeLists.txt sets -ffp-contract=off).
 constexpr int kLaneVectors = 11;
 constexpr int kTargetLanes = kLaneVectors * kLaneVector;
 
@@ -1165,10 +1165,10 @@ class DpPass {
           combo[j] = sx * 9 + tx;
           if (taken != nullptr && (*taken)[combo[j]]) continue;
           const SegmentShape& shape = shapes[combo[j]];
-          const int n = shape.n;
-          // A frame count that does not match the shape is unreachable (see ShapeEntry).
-          used[j] = feasible[combo[j]] && n > 0 && n >= shape.entry.count - 1 &&
-                    n <= shape.entry.count;
+          // A frame count that does not match the shape is unreachable (see ShapeEntry). An
+          // infeasible combination's shape is left uninitialised: read only when feasible.
+          used[j] = feasible[combo[j]] && shape.n > 0 && shape.n >= shape.entry.count - 1 &&
+                    shape.n <= shape.entry.count;
           if (used[j]) {
             basis[j] = shape.entry.basis();
             some = &shape;

@@ -47,7 +47,7 @@ class WorldErrorMeter {
   PointErrors MeasureChanged(std::span<const std::span<const double>> fitted,
                              std::span<const char> changed);
 
-  // The report of `errors` (which Measure() returned), with `joint_tolerance` as the bound kept.
+  // The report of `errors` (as Measure() or MeasureChanged() returned them), with `joint_tolerance` as the bound kept.
   WorldErrorReport Report(const PointErrors& errors, double joint_tolerance) const;
 
   const Clip& clip() const { return *clip_; }
