@@ -84,19 +84,19 @@ double EvaluateWeightedSegment(const Key& a, const Key& b, double time_seconds) 
 bool IsPlainSegment(const Key& a, const Key& b) { return !a.out_weight && !b.in_weight; }
 
 // out[i] = EvaluatePlainSegment(a, b, (first_frame + i) * frame_time_seconds) for every i, on
-// vectors of frames (every clone gives the same bits). The frame number is counted in doubles
-// (first_frame + i is exact there, as its conversion from the integer is), which vectorizes
-// without 64-bit integer conversions.
-TEMPOKEY_CLONES_AVX512_AVX void EvaluatePlainRun(const Key& a, const Key& b,
-                                                 double frame_time_seconds, double first_frame,
-                                                 double* out, std::size_t n) {
+// vectors of frames. The frame number is first_frame + i with i converted from a 32-bit integer
+// (exact, as the sum is): x86 converts those on vectors, where it converts 64-bit ones one by one.
+[[gnu::always_inline]] inline void EvaluatePlainRunOnVectors(const Key& a, const Key& b,
+                                                             double frame_time_seconds,
+                                                             double first_frame, double* out,
+                                                             std::size_t n) {
   const double a_time = a.time_seconds;
   const double dt = b.time_seconds - a.time_seconds;
   const double a_value = a.value;
   const double rise = b.value - a.value;
   const double out_tangent = a.out_tangent;
   const double in_tangent = b.in_tangent;
-  for (std::size_t i = 0; i < n; ++i) {
+  for (std::int32_t i = 0; i < static_cast<std::int32_t>(n); ++i) {
     const double t = (first_frame + static_cast<double>(i)) * frame_time_seconds;
     const double s = (t - a_time) / dt;
     const double s2 = s * s;
@@ -105,6 +105,21 @@ TEMPOKEY_CLONES_AVX512_AVX void EvaluatePlainRun(const Key& a, const Key& b,
     const double h01 = -2 * s3 + 3 * s2;
     const double h11 = s3 - s2;
     out[i] = a_value + h01 * rise + h10 * out_tangent * dt + h11 * in_tangent * dt;
+  }
+}
+
+// EvaluatePlainRunOnVectors() built for each instruction set, the running machine's chosen at run
+// time (every build gives the same bits).
+void EvaluatePlainRun(const Key& a, const Key& b, double frame_time_seconds, double first_frame,
+                      double* out, std::size_t n) {
+  // In runs of at most 2^31 - 1 frames (the 32-bit count above).
+  constexpr std::size_t kMostFrames = 0x7fffffff;
+  for (std::size_t done = 0; done < n; done += kMostFrames) {
+    const std::size_t count = std::min(kMostFrames, n - done);
+    simd::RunForInstructionSet([&]() __attribute__((always_inline)) {
+      EvaluatePlainRunOnVectors(a, b, frame_time_seconds, first_frame + static_cast<double>(done),
+                                out + done, count);
+    });
   }
 }
 

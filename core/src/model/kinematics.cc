@@ -89,8 +89,8 @@ namespace {
 constexpr double kRadiansPerDegree = std::numbers::pi / 180.0;
 constexpr std::size_t kB = ForwardKinematics::kBlockFrames;
 
-// The block kernels run on vectors of frames, cloned with TEMPOKEY_CLONES_AVX512_AVX (every clone
-// agrees bit for bit).
+// The block kernels run on vectors of frames, built for each instruction set and the running
+// machine's chosen at run time (simd::RunForInstructionSet(): every build agrees bit for bit).
 // A joint's block: its world rotation, row-major (entry (row, col) is the array at
 // (row * 3 + col) * kB), then its world position (axis a at (9 + a) * kB).
 constexpr std::size_t kBlockStride = 12 * kB;
@@ -110,8 +110,9 @@ const double* PositionAxis(const double* block, std::size_t axis) {
 // c[f] and sine s[f]. Right-multiplying by a rotation about one axis mixes only the other two
 // columns: with (i, k) the axes after `axis` in cyclic order, column i becomes c·i + s·k and
 // column k becomes c·k - s·i (12 products instead of 27).
-TEMPOKEY_CLONES_AVX512_AVX void RotateColumnsBlock(double* block, int axis, const double* c,
-                                                   const double* s, std::size_t n) {
+[[gnu::always_inline]] inline void RotateColumnsOnVectors(double* block, int axis,
+                                                          const double* c, const double* s,
+                                                          std::size_t n) {
   static constexpr std::array<std::size_t, 3> kNext = {1, 2, 0};
   static constexpr std::array<std::size_t, 3> kAfterNext = {2, 0, 1};
   const std::size_t i = kNext[static_cast<std::size_t>(axis)];
@@ -130,8 +131,8 @@ TEMPOKEY_CLONES_AVX512_AVX void RotateColumnsBlock(double* block, int axis, cons
 
 // out[axis][f] = position[axis][f] + (rotation · v[f])[axis] (MatVec() of rotation.h, summed
 // left to right), v[f] given per axis by v[axis * kB + f].
-TEMPOKEY_CLONES_AVX512_AVX void MoveBlock(const double* block, const double* v, double* out,
-                                          std::size_t n) {
+[[gnu::always_inline]] inline void MoveOnVectors(const double* block, const double* v, double* out,
+                                                 std::size_t n) {
   for (std::size_t row = 0; row < 3; ++row) {
     const double* __restrict m0 = RotationEntry(block, row, 0);
     const double* __restrict m1 = RotationEntry(block, row, 1);
@@ -142,6 +143,17 @@ TEMPOKEY_CLONES_AVX512_AVX void MoveBlock(const double* block, const double* v, 
       moved[f] = base[f] + (m0[f] * v[f] + m1[f] * v[kB + f] + m2[f] * v[2 * kB + f]);
     }
   }
+}
+
+void RotateColumnsBlock(double* block, int axis, const double* c, const double* s,
+                        std::size_t n) {
+  simd::RunForInstructionSet(
+      [&]() __attribute__((always_inline)) { RotateColumnsOnVectors(block, axis, c, s, n); });
+}
+
+void MoveBlock(const double* block, const double* v, double* out, std::size_t n) {
+  simd::RunForInstructionSet(
+      [&]() __attribute__((always_inline)) { MoveOnVectors(block, v, out, n); });
 }
 
 // The frames' points of one axis-major array (axis a of frame f at a * kB + f) written to point

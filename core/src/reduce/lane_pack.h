@@ -144,8 +144,4 @@ inline PackIsa RunningPackIsa() {
 
 }  // namespace tempokey::core::simd
 
-// The attributes of a pack kernel's AVX-512 and AVX2 instantiations.
-#define TEMPOKEY_TARGET_AVX512 __attribute__((target("avx512f")))
-#define TEMPOKEY_TARGET_AVX2 __attribute__((target("avx2")))
-
 #endif  // TEMPOKEY_CORE_SRC_REDUCE_LANE_PACK_H_

@@ -1,6 +1,7 @@
 // Which vector instruction set the kernels chosen at run time by the library (not by the
 // compiler's target_clones) may use: the AVX-512 and AVX2 instantiations of the pack kernels
-// (reduce/lane_pack.h) and the 8-lane retime kernels (retime/rotation_batch.cc). Every level
+// (reduce/lane_pack.h), the 8-lane retime kernels (retime/rotation_batch.cc) and the kernels run
+// through RunForInstructionSet() (forward kinematics' blocks, keyed curves' sampling). Every level
 // computes the same bits; the narrower ones are what most machines run, so tests run them on a
 // wider machine too by capping the level with TEMPOKEY_MAX_ISA.
 #ifndef TEMPOKEY_CORE_SRC_SIMD_INSTRUCTION_SET_H_
@@ -17,12 +18,14 @@
 #if defined(TEMPOKEY_SANITIZED)
 #define TEMPOKEY_CLONES_AVX
 #define TEMPOKEY_CLONES_AVX2
-#define TEMPOKEY_CLONES_AVX512_AVX
 #else
 #define TEMPOKEY_CLONES_AVX __attribute__((target_clones("avx", "default")))
 #define TEMPOKEY_CLONES_AVX2 __attribute__((target_clones("avx2", "default")))
-#define TEMPOKEY_CLONES_AVX512_AVX __attribute__((target_clones("avx512f", "avx", "default")))
 #endif
+
+// The attributes of a kernel's AVX-512 and AVX2 builds chosen at run time by the library.
+#define TEMPOKEY_TARGET_AVX512 __attribute__((target("avx512f")))
+#define TEMPOKEY_TARGET_AVX2 __attribute__((target("avx2")))
 
 // Whether the 8-lane kernels written with GCC's vector extensions inside target("avx512...")
 // functions are built: by GCC, without sanitizers. Clang rejects passing 8-lane vectors to the
@@ -49,7 +52,7 @@ inline InstructionSet ProcessorInstructionSet() {
 
 // The level the kernels use, read once per process: the processor's, lowered to
 // TEMPOKEY_MAX_ISA when that is "avx2" or "baseline" (any other value leaves it as it is).
-// Sanitizer builds always take the baseline kernels (like simd.h's clones).
+// Sanitizer builds always take the baseline kernels (as they keep no clones, above).
 inline InstructionSet RunningInstructionSet() {
 #if defined(TEMPOKEY_SANITIZED)
   return InstructionSet::kBaseline;
@@ -66,6 +69,34 @@ inline InstructionSet RunningInstructionSet() {
   }();
   return level;
 #endif
+}
+
+template <class Body>
+TEMPOKEY_TARGET_AVX512 void RunBuiltForAvx512(const Body& body) {
+  body();
+}
+template <class Body>
+TEMPOKEY_TARGET_AVX2 void RunBuiltForAvx2(const Body& body) {
+  body();
+}
+
+// Runs body(), an always_inline callable, compiled for RunningInstructionSet(): the loops the
+// compiler vectorises in it use AVX-512, AVX2 or the baseline's SSE2 (the same operations lane by
+// lane, so the same bits), and TEMPOKEY_MAX_ISA reaches each build, which target_clones' choice
+// by the loader does not.
+template <class Body>
+void RunForInstructionSet(const Body& body) {
+  switch (RunningInstructionSet()) {
+    case InstructionSet::kAvx512:
+      RunBuiltForAvx512(body);
+      return;
+    case InstructionSet::kAvx2:
+      RunBuiltForAvx2(body);
+      return;
+    case InstructionSet::kBaseline:
+      break;
+  }
+  body();
 }
 
 }  // namespace tempokey::core::simd
