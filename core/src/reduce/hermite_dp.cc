@@ -570,12 +570,12 @@ void BuildRowTermsBaseline(const FormInputs& inputs, const std::array<double, 4>
 // BuildRowTermsWith() for the running machine.
 void BuildRowTerms(const FormInputs& inputs, const std::array<double, 4>& centre,
                    const std::array<double, 4>& d, RowTerms& terms) {
-  switch (simd::RunningPackIsa()) {
-    case simd::PackIsa::kAvx512:
+  switch (simd::RunningInstructionSet()) {
+    case simd::InstructionSet::kAvx512:
       return BuildRowTermsAvx512(inputs, centre, d, terms);
-    case simd::PackIsa::kAvx2:
+    case simd::InstructionSet::kAvx2:
       return BuildRowTermsAvx2(inputs, centre, d, terms);
-    case simd::PackIsa::kBaseline:
+    case simd::InstructionSet::kBaseline:
       break;
   }
   BuildRowTermsBaseline(inputs, centre, d, terms);
@@ -729,12 +729,12 @@ void UpdateTargetMinimaBaseline(const RowTerms& terms, const double* in_row, int
 // UpdateTargetMinimaWith() for the running machine.
 void UpdateTargetMinima(const RowTerms& terms, const double* in_row, int sx, std::uint32_t rows,
                         TargetMinima& minima) {
-  switch (simd::RunningPackIsa()) {
-    case simd::PackIsa::kAvx512:
+  switch (simd::RunningInstructionSet()) {
+    case simd::InstructionSet::kAvx512:
       return UpdateTargetMinimaAvx512(terms, in_row, sx, rows, minima);
-    case simd::PackIsa::kAvx2:
+    case simd::InstructionSet::kAvx2:
       return UpdateTargetMinimaAvx2(terms, in_row, sx, rows, minima);
-    case simd::PackIsa::kBaseline:
+    case simd::InstructionSet::kBaseline:
       break;
   }
   UpdateTargetMinimaBaseline(terms, in_row, sx, rows, minima);

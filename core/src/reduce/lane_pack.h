@@ -126,22 +126,6 @@ struct PackPair {
 
 #pragma GCC diagnostic pop
 
-// Which instantiation of a pack kernel the running machine takes (instruction_set.h: the
-// processor's level, or lower when TEMPOKEY_MAX_ISA asks; baseline in sanitizer builds).
-enum class PackIsa { kAvx512, kAvx2, kBaseline };
-
-inline PackIsa RunningPackIsa() {
-  switch (RunningInstructionSet()) {
-    case InstructionSet::kAvx512:
-      return PackIsa::kAvx512;
-    case InstructionSet::kAvx2:
-      return PackIsa::kAvx2;
-    case InstructionSet::kBaseline:
-      break;
-  }
-  return PackIsa::kBaseline;
-}
-
 }  // namespace tempokey::core::simd
 
 #endif  // TEMPOKEY_CORE_SRC_REDUCE_LANE_PACK_H_

@@ -520,7 +520,7 @@ TEMPOKEY_TARGET_AVX512 void SubstituteConstantLevels8(std::size_t n, const Subst
 // The level searches' substitutions on the widest vectors the machine has.
 void SubstituteConstantLevels(std::size_t n, const SubstitutionJob* jobs, std::size_t count) {
 #if TEMPOKEY_WIDE_KERNELS
-  if (simd::RunningPackIsa() == simd::PackIsa::kAvx512) {
+  if (simd::RunningInstructionSet() == simd::InstructionSet::kAvx512) {
     SubstituteConstantLevels8(n, jobs, count);
     return;
   }
