@@ -276,6 +276,19 @@ TEST(NoiseReductionCorpusTest, CleanBandaiClipsReadAsNearlyNoiseless) {
   }
 }
 
+// SmoothGroupToNoise() of `channels`, each with its sigma; expects one curve per channel.
+std::vector<std::vector<double>> SmoothedTogether(
+    const std::vector<std::vector<double>>& channels, const std::vector<double>& sigmas) {
+  const std::vector<std::span<const double>> spans(channels.begin(), channels.end());
+  reduce_internal::SmootherFactors factors;
+  absl::StatusOr<std::vector<std::vector<double>>> together =
+      reduce_internal::SmoothGroupToNoise(spans, sigmas, {}, factors, {});
+  EXPECT_TRUE(together.ok()) << together.status();
+  if (!together.ok()) return {};
+  EXPECT_EQ(together->size(), channels.size());
+  return *std::move(together);
+}
+
 TEST(NoiseFitTest, ChannelsSmoothedTogetherComeOutAsEachAlone) {
   // Six channels: four of one length (one with an impact, so its guard rounds outlast the
   // others'; one at a much higher noise level), then two shorter ones. Smoothed together, each
@@ -287,16 +300,12 @@ TEST(NoiseFitTest, ChannelsSmoothedTogetherComeOutAsEachAlone) {
       WithNoise(Truth(900), 4.0 * kSigma, 3), WithNoise(Truth(900), kSigma, 4),
       WithNoise(Truth(500), kSigma, 5),      WithNoise(Truth(500), kSigma, 6)};
   const std::vector<double> sigmas = {kSigma, kSigma, 4.0 * kSigma, kSigma, kSigma, kSigma};
-  const std::vector<std::span<const double>> spans(channels.begin(), channels.end());
-  reduce_internal::SmootherFactors factors;
 
-  const absl::StatusOr<std::vector<std::vector<double>>> together =
-      reduce_internal::SmoothGroupToNoise(spans, sigmas, {}, factors, {});
+  const std::vector<std::vector<double>> together = SmoothedTogether(channels, sigmas);
 
-  ASSERT_TRUE(together.ok()) << together.status();
-  ASSERT_EQ(together->size(), channels.size());
+  ASSERT_EQ(together.size(), channels.size());
   for (std::size_t c = 0; c < channels.size(); ++c) {
-    EXPECT_EQ((*together)[c], SmoothToNoise(channels[c], sigmas[c])) << "channel " << c;
+    EXPECT_EQ(together[c], SmoothToNoise(channels[c], sigmas[c])) << "channel " << c;
   }
 }
 
@@ -307,17 +316,13 @@ TEST(NoiseFitTest, LongChannelsSmoothedTogetherComeOutAsEachAlone) {
   const std::vector<std::vector<double>> channels = {WithNoise(Truth(kFrames), kSigma, 1),
                                                      WithNoise(Truth(kFrames), kSigma, 2)};
   const std::vector<double> sigmas = {kSigma, kSigma};
-  const std::vector<std::span<const double>> spans(channels.begin(), channels.end());
-  reduce_internal::SmootherFactors factors;
 
-  const absl::StatusOr<std::vector<std::vector<double>>> together =
-      reduce_internal::SmoothGroupToNoise(spans, sigmas, {}, factors, {});
+  const std::vector<std::vector<double>> together = SmoothedTogether(channels, sigmas);
 
-  ASSERT_TRUE(together.ok()) << together.status();
-  ASSERT_EQ(together->size(), channels.size());
+  ASSERT_EQ(together.size(), channels.size());
   for (std::size_t c = 0; c < channels.size(); ++c) {
-    EXPECT_EQ((*together)[c], SmoothToNoise(channels[c], sigmas[c])) << "channel " << c;
-    EXPECT_LT(Rms((*together)[c], Truth(kFrames)), 0.5 * kSigma) << "channel " << c;
+    EXPECT_EQ(together[c], SmoothToNoise(channels[c], sigmas[c])) << "channel " << c;
+    EXPECT_LT(Rms(together[c], Truth(kFrames)), 0.5 * kSigma) << "channel " << c;
   }
 }
 
