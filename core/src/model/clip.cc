@@ -3,7 +3,6 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
-#include <cstring>
 #include <limits>
 #include <algorithm>
 #include <string>
@@ -12,6 +11,7 @@
 #include "absl/container/flat_hash_set.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "core/src/simd/block_scan.h"
 #include "core/src/simd/instruction_set.h"
 #include "tempokey/core/model/numbers.h"
 #include "tempokey/core/model/status.h"
@@ -241,30 +241,19 @@ absl::Status ValidateClipLayout(const Clip& clip, const ClipLimits& limits) {
 
 namespace {
 
-// The index of the first sample beyond kMaxSampleMagnitude or not a number, or one in the block of
-// kBlock samples before it (at most the size): blocks are tested four samples at a time (one AVX
-// register, two SSE2 ones in the portable build), without an early exit inside (every sample of
-// every clip is read here, before any work on it; a scalar loop with its exit compiled to a
-// comparison and branch per sample).
+// The index of the first sample beyond kMaxSampleMagnitude or not a number, or one in the block
+// before it (at most the size), scanned in blocks (simd/block_scan.h): every sample of every clip
+// is read here, before any work on it.
 TEMPOKEY_CLONES_AVX2 std::size_t FirstOutOfRange(const std::vector<double>& samples) {
-  using V = double __attribute__((vector_size(32)));
-  using Bits = std::int64_t __attribute__((vector_size(32)));
-  constexpr std::size_t kLanes = sizeof(V) / sizeof(double);
-  constexpr std::size_t kBlock = 4 * kLanes;
-  const double* d = samples.data();
-  std::size_t i = 0;
-  for (; i + kBlock <= samples.size(); i += kBlock) {
-    Bits out = {};
-    for (std::size_t k = 0; k < kBlock; k += kLanes) {
-      V v;
-      std::memcpy(&v, d + i + k, sizeof v);
-      // |v| by clearing the sign bit; a NaN compares false, so it is out too.
-      const V size = (V)((Bits)v & std::numeric_limits<std::int64_t>::max());
-      out |= !(size <= kMaxSampleMagnitude);
-    }
-    if (out[0] || out[1] || out[2] || out[3]) return i;
-  }
-  return i;
+  using simd::ScanMask;
+  using simd::ScanVector;
+  const auto out_of_range = [](const double* p) __attribute__((always_inline)) {
+    // |v| by clearing the sign bit; a NaN compares false, so it is out too.
+    const ScanVector size =
+        (ScanVector)((ScanMask)simd::LoadScanVector(p) & std::numeric_limits<std::int64_t>::max());
+    return !(size <= kMaxSampleMagnitude);
+  };
+  return simd::FirstFlaggedBlock(samples.data(), 0, samples.size(), out_of_range);
 }
 
 }  // namespace

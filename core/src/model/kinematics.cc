@@ -76,11 +76,12 @@ absl::StatusOr<ForwardKinematics> ForwardKinematics::ForLayout(const Clip& layou
     plan.first_end_site_point = next_end_site;
     next_end_site += joint.end_sites.size();
   }
-  for (const JointPlan& plan : fk.joints_) fk.rotation_count_ += plan.rotations.size();
+  std::size_t rotation_count = 0;  // rotation channels over every joint
+  for (const JointPlan& plan : fk.joints_) rotation_count += plan.rotations.size();
   fk.block_.resize(fk.joints_.size() * 12 * kBlockFrames);
-  fk.trig_.resize(fk.rotation_count_ * 2 * kBlockFrames);
-  fk.rotation_cos_.resize(fk.rotation_count_);
-  fk.rotation_sin_.resize(fk.rotation_count_);
+  fk.trig_.resize(rotation_count * 2 * kBlockFrames);
+  fk.rotation_cos_.resize(rotation_count);
+  fk.rotation_sin_.resize(rotation_count);
   return fk;
 }
 

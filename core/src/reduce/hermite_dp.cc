@@ -552,33 +552,12 @@ template <typename P>
   }
 }
 
-TEMPOKEY_TARGET_AVX512 void BuildRowTermsAvx512(const FormInputs& inputs,
-                                                const std::array<double, 4>& centre,
-                                                const std::array<double, 4>& d, RowTerms& terms) {
-  BuildRowTermsWith<simd::Pack512>(inputs, centre, d, terms);
-}
-TEMPOKEY_TARGET_AVX2 void BuildRowTermsAvx2(const FormInputs& inputs,
-                                            const std::array<double, 4>& centre,
-                                            const std::array<double, 4>& d, RowTerms& terms) {
-  BuildRowTermsWith<simd::PackPair>(inputs, centre, d, terms);
-}
-void BuildRowTermsBaseline(const FormInputs& inputs, const std::array<double, 4>& centre,
-                           const std::array<double, 4>& d, RowTerms& terms) {
-  BuildRowTermsWith<simd::PackPair>(inputs, centre, d, terms);
-}
-
 // BuildRowTermsWith() for the running machine.
 void BuildRowTerms(const FormInputs& inputs, const std::array<double, 4>& centre,
                    const std::array<double, 4>& d, RowTerms& terms) {
-  switch (simd::RunningInstructionSet()) {
-    case simd::InstructionSet::kAvx512:
-      return BuildRowTermsAvx512(inputs, centre, d, terms);
-    case simd::InstructionSet::kAvx2:
-      return BuildRowTermsAvx2(inputs, centre, d, terms);
-    case simd::InstructionSet::kBaseline:
-      break;
-  }
-  BuildRowTermsBaseline(inputs, centre, d, terms);
+  simd::RunOnPacks([&]<typename P>() __attribute__((always_inline)) {
+    BuildRowTermsWith<P>(inputs, centre, d, terms);
+  });
 }
 
 // ---- the fold of the candidates -----------------------------------------------------------------
@@ -711,33 +690,12 @@ template <typename P>
   minima.largest[8] = last;
 }
 
-TEMPOKEY_TARGET_AVX512 void UpdateTargetMinimaAvx512(const RowTerms& terms, const double* in_row,
-                                                     int sx, std::uint32_t rows,
-                                                     TargetMinima& minima) {
-  UpdateTargetMinimaWith<simd::Pack512>(terms, in_row, sx, rows, minima);
-}
-TEMPOKEY_TARGET_AVX2 void UpdateTargetMinimaAvx2(const RowTerms& terms, const double* in_row,
-                                                 int sx, std::uint32_t rows,
-                                                 TargetMinima& minima) {
-  UpdateTargetMinimaWith<simd::PackPair>(terms, in_row, sx, rows, minima);
-}
-void UpdateTargetMinimaBaseline(const RowTerms& terms, const double* in_row, int sx,
-                                std::uint32_t rows, TargetMinima& minima) {
-  UpdateTargetMinimaWith<simd::PackPair>(terms, in_row, sx, rows, minima);
-}
-
 // UpdateTargetMinimaWith() for the running machine.
 void UpdateTargetMinima(const RowTerms& terms, const double* in_row, int sx, std::uint32_t rows,
                         TargetMinima& minima) {
-  switch (simd::RunningInstructionSet()) {
-    case simd::InstructionSet::kAvx512:
-      return UpdateTargetMinimaAvx512(terms, in_row, sx, rows, minima);
-    case simd::InstructionSet::kAvx2:
-      return UpdateTargetMinimaAvx2(terms, in_row, sx, rows, minima);
-    case simd::InstructionSet::kBaseline:
-      break;
-  }
-  UpdateTargetMinimaBaseline(terms, in_row, sx, rows, minima);
+  simd::RunOnPacks([&]<typename P>() __attribute__((always_inline)) {
+    UpdateTargetMinimaWith<P>(terms, in_row, sx, rows, minima);
+  });
 }
 
 // What the form inputs of a segment depend on (DpPass::Advance()).

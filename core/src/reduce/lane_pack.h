@@ -1,6 +1,6 @@
 // Packs of 8 double lanes for kernels compiled once per instruction set: one AVX-512 vector
-// (Pack512) or two 4-lane vectors (PackPair, for AVX2 and the baseline), and the choice of the
-// running machine.
+// (Pack512) or two 4-lane vectors (PackPair, for AVX2 and the baseline), and RunOnPacks(), which
+// runs a kernel with the running machine's pack.
 //
 // GCC lowers an 8-lane vector type badly where the target has no 512-bit registers (element by
 // element through the stack), so a kernel written once on 8-lane vectors and cloned with
@@ -125,6 +125,20 @@ struct PackPair {
 };
 
 #pragma GCC diagnostic pop
+
+// Runs body.template operator()<P>(), an always_inline template callable, built for the running
+// machine (RunningInstructionSet()): with P = Pack512 for AVX-512, PackPair for AVX2 and the
+// baseline.
+template <class Body>
+void RunOnPacks(const Body& body) {
+  if (RunningInstructionSet() == InstructionSet::kAvx512) {
+    RunBuiltForAvx512(
+        [&]() __attribute__((always_inline)) { body.template operator()<Pack512>(); });
+    return;
+  }
+  RunForInstructionSet(
+      [&]() __attribute__((always_inline)) { body.template operator()<PackPair>(); });
+}
 
 }  // namespace tempokey::core::simd
 

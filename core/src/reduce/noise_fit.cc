@@ -400,18 +400,6 @@ static_assert(sizeof(LaneValues) == kLaneStride * sizeof(double));
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wpsabi"  // always inlined: the by-value ABI never applies
 
-// Loads and stores V, a GCC vector of doubles (4 or 8), at any alignment.
-template <class V>
-[[gnu::always_inline]] inline V LoadLanes(const double* p) {
-  V v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
-template <class V>
-[[gnu::always_inline]] inline void StoreLanes(double* p, V v) {
-  std::memcpy(p, &v, sizeof v);
-}
-
 // BandSolver::ForwardRow() for frame i of the lanes [lane, lane + lanes of V) of one job: `row` is
 // the factor's row i, `y` the job's solutions, `f` the sample x[i] in every lane.
 template <class V>
@@ -420,9 +408,9 @@ template <class V>
                                                 std::size_t lane, V f) {
   const std::size_t at = i * kLaneStride + lane;
   for (std::size_t k = 1; k <= kOrder && i >= k; ++k) {
-    f -= LoadLanes<V>(row + k * kLaneStride + lane) * LoadLanes<V>(y + at - k * kLaneStride);
+    f -= simd::Load<V>(row + k * kLaneStride + lane) * simd::Load<V>(y + at - k * kLaneStride);
   }
-  StoreLanes(y + at, f / LoadLanes<V>(row + lane));
+  simd::Store(y + at, f / simd::Load<V>(row + lane));
 }
 
 // BandSolver::BackRow() for frame i of n of the lanes [lane, lane + lanes of V) of one job: `band`
@@ -431,12 +419,12 @@ template <class V>
 [[gnu::always_inline]] inline void BackLanes(const double* __restrict band, double* __restrict y,
                                              std::size_t n, std::size_t i, std::size_t lane) {
   const std::size_t at = i * kLaneStride + lane;
-  V s = LoadLanes<V>(y + at);
+  V s = simd::Load<V>(y + at);
   for (std::size_t k = 1; k <= kOrder && i + k < n; ++k) {
-    s -= LoadLanes<V>(band + (i + k) * kBandRowStride + k * kLaneStride + lane) *
-         LoadLanes<V>(y + at + k * kLaneStride);
+    s -= simd::Load<V>(band + (i + k) * kBandRowStride + k * kLaneStride + lane) *
+         simd::Load<V>(y + at + k * kLaneStride);
   }
-  StoreLanes(y + at, s / LoadLanes<V>(band + i * kBandRowStride + lane));
+  simd::Store(y + at, s / simd::Load<V>(band + i * kBandRowStride + lane));
 }
 
 #pragma GCC diagnostic pop
@@ -632,7 +620,9 @@ class NoiseSmoother {
   // for no gain.
   static std::vector<std::vector<double>> RunGroup(std::span<NoiseSmoother* const> group) {
     std::vector<std::vector<double>> y;
-    for (const NoiseSmoother* smoother : group) y.emplace_back(smoother->x_.begin(), smoother->x_.end());
+    for (const NoiseSmoother* smoother : group) {
+      y.emplace_back(smoother->x_.begin(), smoother->x_.end());
+    }
     const std::size_t n = group.front()->n_;
     if (n <= kOrder + 1) return y;
     const std::vector<double> global = BestSingleLevels(group);

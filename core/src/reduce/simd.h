@@ -21,13 +21,16 @@ namespace tempokey::core::simd {
 
 using V4 = double __attribute__((vector_size(32)));
 
-[[gnu::always_inline]] inline V4 Load(const double* p) {
-  V4 v;
+// A vector V of doubles (4 lanes unless given) loaded or stored at any alignment.
+template <class V = V4>
+[[gnu::always_inline]] inline V Load(const double* p) {
+  V v;
   std::memcpy(&v, p, sizeof v);
   return v;
 }
 
-[[gnu::always_inline]] inline void Store(double* p, V4 v) { std::memcpy(p, &v, sizeof v); }
+template <class V>
+[[gnu::always_inline]] inline void Store(double* p, V v) { std::memcpy(p, &v, sizeof v); }
 
 [[gnu::always_inline]] inline V4 Broadcast(double x) { return V4{x, x, x, x}; }
 

@@ -50,7 +50,8 @@ absl::StatusOr<WorldErrorMeter> WorldErrorMeter::ForValidatedClip(const Clip& cl
   return meter;
 }
 
-PointErrors WorldErrorMeter::Measure(std::span<const std::span<const double>> fitted) {
+template <class Place>
+PointErrors WorldErrorMeter::MeasureFrames(Place place) {
   const std::size_t n = source_.points.size();
   PointErrors errors;
   errors.max_error.assign(n, 0.0);
@@ -58,15 +59,20 @@ PointErrors WorldErrorMeter::Measure(std::span<const std::span<const double>> fi
   const auto frame_count = static_cast<std::size_t>(source_.frame_count);
   for (std::size_t first = 0; first < frame_count; first += kMeasureFrames) {
     const std::size_t count = std::min(kMeasureFrames, frame_count - first);
-    fk_.PoseFrames(fitted, first, count, std::span<Vec3>(scratch_).first(count * n));
+    place(first, count, std::span<Vec3>(scratch_).first(count * n));
     AddErrors(first, count, errors);
   }
   return errors;
 }
 
+PointErrors WorldErrorMeter::Measure(std::span<const std::span<const double>> fitted) {
+  return MeasureFrames([&](std::size_t first, std::size_t count, std::span<Vec3> out) {
+    fk_.PoseFrames(fitted, first, count, out);
+  });
+}
+
 PointErrors WorldErrorMeter::MeasureChanged(std::span<const std::span<const double>> fitted,
                                             std::span<const char> changed) {
-  const std::size_t n = source_.points.size();
   const auto frame_count = static_cast<std::size_t>(source_.frame_count);
   std::size_t rotation_channels = 0;
   for (const Channel& channel : clip_->channels) rotation_channels += IsRotation(channel.kind);
@@ -84,16 +90,9 @@ PointErrors WorldErrorMeter::MeasureChanged(std::span<const std::span<const doub
   }
   const std::vector<std::span<const double>> cosines = Spans(cosines_);
   const std::vector<std::span<const double>> sines = Spans(sines_);
-  PointErrors errors;
-  errors.max_error.assign(n, 0.0);
-  errors.worst_frame.assign(n, 0);
-  for (std::size_t first = 0; first < frame_count; first += kMeasureFrames) {
-    const std::size_t count = std::min(kMeasureFrames, frame_count - first);
-    fk_.PoseFramesFromTrig(fitted, cosines, sines, first, count,
-                           std::span<Vec3>(scratch_).first(count * n));
-    AddErrors(first, count, errors);
-  }
-  return errors;
+  return MeasureFrames([&](std::size_t first, std::size_t count, std::span<Vec3> out) {
+    fk_.PoseFramesFromTrig(fitted, cosines, sines, first, count, out);
+  });
 }
 
 void WorldErrorMeter::AddErrors(std::size_t first, std::size_t count, PointErrors& errors) const {

@@ -47,7 +47,8 @@ class WorldErrorMeter {
   PointErrors MeasureChanged(std::span<const std::span<const double>> fitted,
                              std::span<const char> changed);
 
-  // The report of `errors` (as Measure() or MeasureChanged() returned them), with `joint_tolerance` as the bound kept.
+  // The report of `errors` (as Measure() or MeasureChanged() returned them), with
+  // `joint_tolerance` as the bound kept.
   WorldErrorReport Report(const PointErrors& errors, double joint_tolerance) const;
 
   const Clip& clip() const { return *clip_; }
@@ -60,6 +61,10 @@ class WorldErrorMeter {
   // Adds the errors of frames [first, first + count), placed in scratch_, to `errors`, frame by
   // frame and point by point.
   void AddErrors(std::size_t first, std::size_t count, PointErrors& errors) const;
+  // The errors of every frame, placed kMeasureFrames at a time by place(first, count, out) into
+  // scratch_ (out: count frames of points) and added by AddErrors().
+  template <class Place>
+  PointErrors MeasureFrames(Place place);
 
   const Clip* clip_;
   ForwardKinematics fk_;

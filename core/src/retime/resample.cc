@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "core/src/simd/block_scan.h"
 #include "core/src/simd/instruction_set.h"
 #include "rotation_batch.h"
 #include "vector_trig.h"
@@ -163,27 +164,19 @@ struct Unwrapped {
 
 // The channel scans are cloned with AVX2 (TEMPOKEY_CLONES_AVX2) beside the portable build.
 TEMPOKEY_CLONES_AVX2 bool HasWrap(std::span<const double> degrees) {
-  // Blocks of steps, four at a time (one AVX register, two SSE2 ones in the portable clone),
-  // without an early exit inside: most channels have no seam and are read to the end.
-  using V = double __attribute__((vector_size(32)));
-  using Mask = vector_trig::MaskOf<V>;
-  constexpr std::size_t kLanes = sizeof(V) / sizeof(double);
-  constexpr std::size_t kBlock = 4 * kLanes;
+  // Steps in blocks (simd/block_scan.h): most channels have no seam and are read to the end.
+  using simd::ScanMask;
+  using simd::ScanVector;
   const double* d = degrees.data();
   const std::size_t n = degrees.size();
-  std::size_t i = 1;
-  for (; i + kBlock <= n; i += kBlock) {
-    Mask wraps = {};
-    for (std::size_t k = 0; k < kBlock; k += kLanes) {
-      V next, previous;
-      std::memcpy(&next, d + i + k, sizeof next);
-      std::memcpy(&previous, d + i + k - 1, sizeof previous);
-      // |step| by clearing the sign bit.
-      const V step = (V)((Mask)(next - previous) & std::numeric_limits<std::int64_t>::max());
-      wraps |= step > 180.0;
-    }
-    if (wraps[0] || wraps[1] || wraps[2] || wraps[3]) return true;
-  }
+  const auto seam = [](const double* p) __attribute__((always_inline)) {
+    const ScanVector step = simd::LoadScanVector(p) - simd::LoadScanVector(p - 1);
+    // |step| by clearing the sign bit.
+    const ScanVector size =
+        (ScanVector)((ScanMask)step & std::numeric_limits<std::int64_t>::max());
+    return size > 180.0;
+  };
+  std::size_t i = simd::FirstFlaggedBlock(d, 1, n, seam);
   for (; i < n; ++i) {
     if (std::abs(d[i] - d[i - 1]) > 180.0) return true;
   }
@@ -405,24 +398,13 @@ namespace {
 
 // True when every source sample of `channel` compares equal to the first one.
 TEMPOKEY_CLONES_AVX2 bool IsConstant(std::span<const double> channel) {
-  // Blocks without an early exit inside, four samples at a time (as HasWrap(); GCC left a scalar
-  // block loop as a comparison per sample): most channels are read to the end or differ early.
-  using V = double __attribute__((vector_size(32)));
-  using Mask = vector_trig::MaskOf<V>;
-  constexpr std::size_t kLanes = sizeof(V) / sizeof(double);
-  constexpr std::size_t kBlock = 4 * kLanes;
+  // In blocks (simd/block_scan.h; GCC left a scalar block loop as a comparison per sample): most
+  // channels are read to the end or differ early.
   const double first = channel[0];
-  const double* d = channel.data();
-  std::size_t i = 0;
-  for (; i + kBlock <= channel.size(); i += kBlock) {
-    Mask differs = {};
-    for (std::size_t k = 0; k < kBlock; k += kLanes) {
-      V v;
-      std::memcpy(&v, d + i + k, sizeof v);
-      differs |= v != first;
-    }
-    if (differs[0] || differs[1] || differs[2] || differs[3]) return false;
-  }
+  const auto differs = [first](const double* p) __attribute__((always_inline)) {
+    return simd::LoadScanVector(p) != first;
+  };
+  std::size_t i = simd::FirstFlaggedBlock(channel.data(), 0, channel.size(), differs);
   for (; i < channel.size(); ++i) {
     if (channel[i] != first) return false;
   }

@@ -16,13 +16,8 @@
 // The hottest kernels (conversions to quaternions and back, weighted means) also come as 8-lane
 // variants for AVX-512 processors, chosen at run time: the same arithmetic lane by lane (no
 // contraction into FMA: -ffp-contract=off), so the same bits, in about half the instructions.
-// Built by GCC alone, without sanitizers (the fuzz stage's clang build keeps the portable code).
-#if TEMPOKEY_WIDE_KERNELS  // core/src/simd/instruction_set.h
-#define TEMPOKEY_AVX512_KERNELS 1
-#define TEMPOKEY_AVX512_TARGET __attribute__((target("avx512f,avx512dq,avx512vl,avx512bw")))
-#else
-#define TEMPOKEY_AVX512_KERNELS 0
-#endif
+// Built by GCC alone, without sanitizers (TEMPOKEY_WIDE_KERNELS: the fuzz stage's clang build
+// keeps the portable code).
 
 namespace tempokey::core::retime_internal {
 namespace {
@@ -586,14 +581,14 @@ TEMPOKEY_CLONES_AVX2 void ToEulerKernel(const EulerOrder& order, ConstQuatArrays
   TEMPOKEY_FOR_ORDER(order, ToEulerBody, V, quats, targets, count, ill_conditioned);
 }
 
-#if TEMPOKEY_AVX512_KERNELS
-TEMPOKEY_AVX512_TARGET void EulerToQuatsKernel8(const EulerOrder& order, const double* a,
+#if TEMPOKEY_WIDE_KERNELS
+TEMPOKEY_TARGET_AVX512 void EulerToQuatsKernel8(const EulerOrder& order, const double* a,
                                                 const double* b, const double* c,
                                                 std::size_t count, double* out) {
   TEMPOKEY_FOR_ORDER(order, EulerToQuatsBody, V8, a, b, c, count, out);
 }
 
-TEMPOKEY_AVX512_TARGET void ToEulerKernel8(const EulerOrder& order, ConstQuatArrays quats,
+TEMPOKEY_TARGET_AVX512 void ToEulerKernel8(const EulerOrder& order, ConstQuatArrays quats,
                                            const EulerTargets& targets, std::size_t count,
                                            unsigned char* ill_conditioned) {
   TEMPOKEY_FOR_ORDER(order, ToEulerBody, V8, quats, targets, count, ill_conditioned);
@@ -685,8 +680,8 @@ TEMPOKEY_CLONES_AVX2 void WeightedMeansKernel(const double* quats, MeanTables ta
   WeightedMeansBody<V>(quats, tables, count, min_dot, out, needs_markley);
 }
 
-#if TEMPOKEY_AVX512_KERNELS
-TEMPOKEY_AVX512_TARGET void WeightedMeansKernel8(const double* quats, MeanTables tables,
+#if TEMPOKEY_WIDE_KERNELS
+TEMPOKEY_TARGET_AVX512 void WeightedMeansKernel8(const double* quats, MeanTables tables,
                                                  std::size_t count, double min_dot, QuatArrays out,
                                                  unsigned char* needs_markley) {
   WeightedMeansBody<V8>(quats, tables, count, min_dot, out, needs_markley);
@@ -851,17 +846,17 @@ TEMPOKEY_CLONES_AVX2 void MarkleyMeansKernel(const double* quats, const double* 
   MarkleyMeansBody(quats, weights, jobs, count, out);
 }
 
-#if TEMPOKEY_AVX512_KERNELS
+#if TEMPOKEY_WIDE_KERNELS
 // The same 4-lane code with AVX-512's 32 vector registers: the Jacobi sweeps' two groups of
 // matrices (64 vectors) spill less.
-TEMPOKEY_AVX512_TARGET void MarkleyMeansKernel512(const double* quats, const double* weights,
+TEMPOKEY_TARGET_AVX512 void MarkleyMeansKernel512(const double* quats, const double* weights,
                                                   const WeightedMeanJob* jobs, std::size_t count,
                                                   QuatArrays out) {
   MarkleyMeansBody(quats, weights, jobs, count, out);
 }
 #endif
 
-#if TEMPOKEY_AVX512_KERNELS
+#if TEMPOKEY_WIDE_KERNELS
 // True where the 8-lane kernels run (instruction_set.h).
 bool UseAvx512Kernels() {
   return simd::RunningInstructionSet() == simd::InstructionSet::kAvx512;
@@ -872,7 +867,7 @@ bool UseAvx512Kernels() {
 
 void MarkleyMeans(const double* quats, const double* weights, const WeightedMeanJob* jobs,
                   std::size_t count, QuatArrays out) {
-#if TEMPOKEY_AVX512_KERNELS
+#if TEMPOKEY_WIDE_KERNELS
   if (UseAvx512Kernels()) return MarkleyMeansKernel512(quats, weights, jobs, count, out);
 #endif
   MarkleyMeansKernel(quats, weights, jobs, count, out);
@@ -880,7 +875,7 @@ void MarkleyMeans(const double* quats, const double* weights, const WeightedMean
 
 void EulerToQuats(const EulerOrder& order, const double* a, const double* b, const double* c,
                   std::size_t count, double* out) {
-#if TEMPOKEY_AVX512_KERNELS
+#if TEMPOKEY_WIDE_KERNELS
   if (UseAvx512Kernels()) return EulerToQuatsKernel8(order, a, b, c, count, out);
 #endif
   EulerToQuatsKernel(order, a, b, c, count, out);
@@ -888,7 +883,7 @@ void EulerToQuats(const EulerOrder& order, const double* a, const double* b, con
 
 void WeightedMeans(const double* quats, const MeanTables& tables, std::size_t count, double min_dot,
                    QuatArrays out, unsigned char* needs_markley) {
-#if TEMPOKEY_AVX512_KERNELS
+#if TEMPOKEY_WIDE_KERNELS
   if (UseAvx512Kernels()) return WeightedMeansKernel8(quats, tables, count, min_dot, out, needs_markley);
 #endif
   WeightedMeansKernel(quats, tables, count, min_dot, out, needs_markley);
@@ -901,7 +896,7 @@ void SlerpQuats(const double* quats, const std::int64_t* i0, const double* t, st
 
 void QuatsToEulerNearest(const EulerOrder& order, ConstQuatArrays q, const EulerTargets& targets,
                          std::size_t count, unsigned char* ill_conditioned) {
-#if TEMPOKEY_AVX512_KERNELS
+#if TEMPOKEY_WIDE_KERNELS
   if (UseAvx512Kernels()) return ToEulerKernel8(order, q, targets, count, ill_conditioned);
 #endif
   ToEulerKernel(order, q, targets, count, ill_conditioned);

@@ -38,8 +38,9 @@ void EulerToQuats(const EulerOrder& order, const double* a, const double* b, con
 
 // Weighted means are computed kMeanLanes at a time, one output sample per lane, from tables laid
 // out lane-major so that every tap of a group is contiguous: one load of weights and four of
-// quaternions on 8-lane vectors (the 4-lane kernels take half a group at a time). The tables depend on the resampling plan alone: they are made once and shared by
-// every joint (resample.cc's RotationSchedule).
+// quaternions on 8-lane vectors (the 4-lane kernels take half a group at a time). The tables
+// depend on the resampling plan alone: they are made once and shared by every joint
+// (resample.cc's RotationSchedule).
 inline constexpr std::size_t kMeanLanes = 8;
 
 // kMeanLanes output samples of at most `taps` taps each: tap n of lane l reads the source

@@ -1,8 +1,8 @@
 // Sine, cosine and arctangent on vectors of doubles (GCC vector extensions of any width: the
-// kernels use 4 lanes, one AVX register, or 8 with AVX-512, and pass several vectors at once so that independent
-// chains of dependent operations are in flight), for the batched rotation conversions of the
-// rotation-aware resampling (rotation_batch.h). Plain IEEE arithmetic only, so the AVX and
-// portable clones of a kernel give the same bits (simd.h).
+// kernels use 4 lanes, one AVX register, or 8 with AVX-512, and pass several vectors at once so
+// that independent chains of dependent operations are in flight), for the batched rotation
+// conversions of the rotation-aware resampling (rotation_batch.h). Plain IEEE arithmetic only, so
+// every build of a kernel gives the same bits (core/src/simd/instruction_set.h).
 //
 // Accuracy (tests/core/retime/vector_trig_test.cc, against x87 long-double sinl, cosl, atan2l):
 // within 2.5 units in the last place, where libm's are within one: the conversions that

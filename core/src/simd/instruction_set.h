@@ -23,8 +23,9 @@
 #define TEMPOKEY_CLONES_AVX2 __attribute__((target_clones("avx2", "default")))
 #endif
 
-// The attributes of a kernel's AVX-512 and AVX2 builds chosen at run time by the library.
-#define TEMPOKEY_TARGET_AVX512 __attribute__((target("avx512f")))
+// The attributes of a kernel's AVX-512 and AVX2 builds chosen at run time by the library: the
+// AVX-512 level has F, DQ, VL and BW (ProcessorInstructionSet()).
+#define TEMPOKEY_TARGET_AVX512 __attribute__((target("avx512f,avx512dq,avx512vl,avx512bw")))
 #define TEMPOKEY_TARGET_AVX2 __attribute__((target("avx2")))
 
 // Whether the 8-lane kernels written with GCC's vector extensions inside target("avx512...")

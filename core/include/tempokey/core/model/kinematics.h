@@ -55,8 +55,8 @@ std::string SkeletonPointName(const Skeleton& skeleton, const SkeletonPoint& poi
 // world = parent world · local; an end site sits at its offset in its joint's frame. Rotations
 // are built from axis matrices directly, not from quaternions. Positions are in file units.
 //
-// Not thread-safe: Pose() and PoseFrames() use scratch space held here; use one instance per
-// thread (a copy carries its own scratch, a few KB per joint).
+// Not thread-safe: Pose(), PoseFrames() and PoseFramesFromTrig() use scratch space held here; use
+// one instance per thread (a copy carries its own scratch, a few KB per joint).
 class ForwardKinematics {
  public:
   // Frames PoseFrames() places together: each joint's transform is held per frame in arrays of
@@ -125,7 +125,6 @@ class ForwardKinematics {
 
   std::vector<JointPlan> joints_;
   std::vector<SkeletonPoint> points_;
-  std::size_t rotation_count_ = 0;  // rotation channels over every joint
   // Scratch: per joint, its world rotation (row-major, nine arrays) and position (three arrays),
   // kBlockFrames values each.
   std::vector<double> block_;

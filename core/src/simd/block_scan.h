@@ -1,0 +1,49 @@
+// Scans of long arrays of doubles for the first of a few flagged samples (a value out of range,
+// a change, a seam): blocks of kScanBlock samples, four at a time (one AVX2 register, two SSE2
+// ones in the portable build), without an early exit inside a block, where a scalar loop with its
+// exit compiles to a comparison and branch per sample. Most arrays are read to the end.
+#ifndef TEMPOKEY_CORE_SRC_SIMD_BLOCK_SCAN_H_
+#define TEMPOKEY_CORE_SRC_SIMD_BLOCK_SCAN_H_
+
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+
+namespace tempokey::core::simd {
+
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"  // always inlined: the by-value ABI never applies
+
+using ScanVector = double __attribute__((vector_size(32)));
+using ScanMask = std::int64_t __attribute__((vector_size(32)));  // all ones in a flagged lane
+inline constexpr std::size_t kScanLanes = sizeof(ScanVector) / sizeof(double);
+inline constexpr std::size_t kScanBlock = 4 * kScanLanes;
+
+// The four samples at p, at any alignment.
+[[gnu::always_inline]] inline ScanVector LoadScanVector(const double* p) {
+  ScanVector v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+
+// The start of the first whole block of [from, n) in which flagged(p) has a lane set for one of
+// its vectors (p the vector's first sample in `data`), or the start of the samples after the last
+// whole block: the caller finishes sample by sample from there. Always inlined, so it is built
+// for the caller's clones (TEMPOKEY_CLONES_AVX2).
+template <class Flagged>
+[[gnu::always_inline]] inline std::size_t FirstFlaggedBlock(const double* data, std::size_t from,
+                                                            std::size_t n, Flagged flagged) {
+  std::size_t i = from;
+  for (; i + kScanBlock <= n; i += kScanBlock) {
+    ScanMask any = {};
+    for (std::size_t k = 0; k < kScanBlock; k += kScanLanes) any |= flagged(data + i + k);
+    if (any[0] || any[1] || any[2] || any[3]) return i;
+  }
+  return i;
+}
+
+#pragma GCC diagnostic pop
+
+}  // namespace tempokey::core::simd
+
+#endif  // TEMPOKEY_CORE_SRC_SIMD_BLOCK_SCAN_H_
