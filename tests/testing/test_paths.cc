@@ -3,8 +3,10 @@
 #include <algorithm>
 #include <cstdlib>
 #include <filesystem>
+#include <mutex>
 #include <stdexcept>
 #include <system_error>
+#include <utility>
 
 namespace tempokey::testing {
 
@@ -39,9 +41,44 @@ std::vector<std::string> AllSharedBvhFiles() {
 std::string BinaryDir() { return TEMPOKEY_BINARY_DIR; }
 std::string SourceDir() { return TEMPOKEY_SOURCE_DIR; }
 
+namespace {
+
+// The temporary directories this test process made, removed when it exits normally. A suite run
+// makes thousands of them; left to the OS cleaner they filled CI's disk. TEMPOKEY_KEEP_TEST_DIRS=1
+// keeps them, to look at what a failing test wrote.
+class OwnedTempDirs {
+ public:
+  ~OwnedTempDirs() {
+    if (const char* keep = std::getenv("TEMPOKEY_KEEP_TEST_DIRS"); keep != nullptr && *keep == '1') {
+      return;
+    }
+    for (const std::string& dir : dirs_) {
+      std::error_code ignored;  // a directory a test already removed is not an error
+      std::filesystem::remove_all(dir, ignored);
+    }
+  }
+
+  void Add(std::string dir) {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    dirs_.push_back(std::move(dir));
+  }
+
+ private:
+  std::mutex mutex_;
+  std::vector<std::string> dirs_;
+};
+
+OwnedTempDirs& TempDirsOfThisProcess() {
+  static OwnedTempDirs dirs;
+  return dirs;
+}
+
+}  // namespace
+
 std::string MakeTempDir() {
   std::string pattern = (std::filesystem::temp_directory_path() / "tempokey-test-XXXXXX").string();
   if (mkdtemp(pattern.data()) == nullptr) throw std::runtime_error("mkdtemp failed");
+  TempDirsOfThisProcess().Add(pattern);
   return pattern;
 }
 

@@ -17,7 +17,8 @@ std::vector<std::string> AllSharedBvhFiles();
 std::string BinaryDir();
 // The source tree.
 std::string SourceDir();
-// A fresh empty directory for this test, removed by the OS temp cleaner, not by us.
+// A fresh empty directory for this test, removed with its contents when the test process exits
+// (TEMPOKEY_KEEP_TEST_DIRS=1 keeps it).
 std::string MakeTempDir();
 
 }  // namespace tempokey::testing
