@@ -14,7 +14,7 @@
 #include "core/src/simd/block_scan.h"
 #include "core/src/simd/instruction_set.h"
 #include "rotation_batch.h"
-#include "vector_trig.h"
+#include "core/src/simd/vector_trig.h"
 
 namespace tempokey::core {
 namespace {

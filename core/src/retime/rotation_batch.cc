@@ -9,7 +9,7 @@
 #include <numbers>
 
 #include "core/src/simd/instruction_set.h"
-#include "vector_trig.h"
+#include "core/src/simd/vector_trig.h"
 
 // The kernels are cloned with AVX2 (TEMPOKEY_CLONES_AVX2), not AVX: they select lanes by masks,
 // which are 256-bit integer vectors (AVX alone splits them into 128-bit halves).

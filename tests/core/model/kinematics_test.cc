@@ -1,5 +1,10 @@
 #include "tempokey/core/model/kinematics.h"
 
+#include <bit>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <numbers>
 #include <vector>
 
 #include "gtest/gtest.h"
@@ -87,6 +92,72 @@ TEST(KinematicsTest, JointRotationsListRotationChannelsAndTheirOrder) {
   EXPECT_EQ(rotations[0].channels, (std::vector<int>{3, 4, 5}));
   EXPECT_EQ(rotations[0].order, (EulerOrder{2, 0, 1}));
   EXPECT_EQ(rotations[1].channels, (std::vector<int>{6}));
+}
+
+// Angles a capture holds and some it should not: small and large, exact quarter turns, zeros of
+// either sign, and ones past the vector kernels' reduction (libm's then).
+std::vector<double> TrigAngles() {
+  std::vector<double> degrees = {0.0,    -0.0,  1e-300, -1e-12, 0.5,   45.0,   89.999, 90.0,
+                                 -90.0,  180.0, -180.0, 270.0,  359.9, 720.0,  -1234.5, 1e6,
+                                 5.7e8,  -5.8e8, 1e12,  -3e15,  1e300};
+  for (int k = 0; k < 1000; ++k) degrees.push_back(-400.0 + 0.8137 * k);
+  return degrees;
+}
+
+TEST(RotationTrigTest, AgreesWithLibmToAFewUnitsInTheLastPlace) {
+  const std::vector<double> degrees = TrigAngles();
+  std::vector<double> cosines(degrees.size()), sines(degrees.size());
+
+  ForwardKinematics::RotationTrig(degrees, cosines, sines);
+
+  for (std::size_t i = 0; i < degrees.size(); ++i) {
+    const double r = degrees[i] * (std::numbers::pi / 180.0);
+    // Within 4 units in the last place of 1: sines and cosines are at most 1 in size, and near
+    // their zeros the argument's own rounding is of that size.
+    constexpr double kUlps = 4 * std::numeric_limits<double>::epsilon();
+    EXPECT_NEAR(cosines[i], std::cos(r), kUlps) << degrees[i];
+    EXPECT_NEAR(sines[i], std::sin(r), kUlps) << degrees[i];
+  }
+}
+
+TEST(RotationTrigTest, KeepsExactValuesAtZeroAndLibmsPastTheReduction) {
+  const std::vector<double> degrees = {-0.0, 0.0, 1e12, -3e15, 1e300};
+  std::vector<double> cosines(degrees.size()), sines(degrees.size());
+
+  ForwardKinematics::RotationTrig(degrees, cosines, sines);
+
+  EXPECT_EQ(cosines[0], 1.0);
+  EXPECT_TRUE(sines[0] == 0.0 && std::signbit(sines[0]));
+  EXPECT_EQ(cosines[1], 1.0);
+  EXPECT_TRUE(sines[1] == 0.0 && !std::signbit(sines[1]));
+  for (std::size_t i = 2; i < degrees.size(); ++i) {
+    const double r = degrees[i] * (std::numbers::pi / 180.0);
+    EXPECT_EQ(cosines[i], std::cos(r)) << degrees[i];
+    EXPECT_EQ(sines[i], std::sin(r)) << degrees[i];
+  }
+}
+
+TEST(RotationTrigTest, NanGivesNan) {
+  const std::vector<double> degrees = {1.0, std::numeric_limits<double>::quiet_NaN(), 2.0};
+  std::vector<double> cosines(3), sines(3);
+
+  ForwardKinematics::RotationTrig(degrees, cosines, sines);
+
+  EXPECT_TRUE(std::isnan(cosines[1]) && std::isnan(sines[1]));
+  EXPECT_FALSE(std::isnan(cosines[0]) || std::isnan(sines[2]));
+}
+
+TEST(RotationTrigTest, AnAngleHasTheSameBitsWhereverItSitsInTheSpan) {
+  const std::vector<double> degrees = TrigAngles();
+  std::vector<double> cosines(degrees.size()), sines(degrees.size());
+  ForwardKinematics::RotationTrig(degrees, cosines, sines);
+
+  for (std::size_t i = 0; i < degrees.size(); ++i) {
+    double c = 0.0, s = 0.0;
+    ForwardKinematics::RotationTrig({&degrees[i], 1}, {&c, 1}, {&s, 1});
+    EXPECT_EQ(std::bit_cast<std::uint64_t>(c), std::bit_cast<std::uint64_t>(cosines[i]));
+    EXPECT_EQ(std::bit_cast<std::uint64_t>(s), std::bit_cast<std::uint64_t>(sines[i]));
+  }
 }
 
 }  // namespace

@@ -13,7 +13,7 @@
 #include <random>
 #include <vector>
 
-#include "core/src/retime/vector_trig.h"
+#include "core/src/simd/vector_trig.h"
 #include "gtest/gtest.h"
 #include "tempokey/core/model/rotation.h"
 

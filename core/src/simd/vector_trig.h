@@ -1,10 +1,11 @@
 // Sine, cosine and arctangent on vectors of doubles (GCC vector extensions of any width: the
 // kernels use 4 lanes, one AVX register, or 8 with AVX-512, and pass several vectors at once so
 // that independent chains of dependent operations are in flight), for the batched rotation
-// conversions of the rotation-aware resampling (rotation_batch.h). Plain IEEE arithmetic only, so
-// every build of a kernel gives the same bits (core/src/simd/instruction_set.h).
+// conversions of the rotation-aware resampling (retime/rotation_batch.h) and the rotations of
+// forward kinematics (model/kinematics.cc). Plain IEEE arithmetic only, so every build of a
+// kernel gives the same bits (core/src/simd/instruction_set.h).
 //
-// Accuracy (tests/core/retime/vector_trig_test.cc, against x87 long-double sinl, cosl, atan2l):
+// Accuracy (tests/core/simd/vector_trig_test.cc, against x87 long-double sinl, cosl, atan2l):
 // within 2.5 units in the last place, where libm's are within one: the conversions that
 // use them differ from the scalar ones (std::sin, std::cos, std::atan2) by a few units in the last
 // place of their results.
@@ -12,8 +13,8 @@
 // The polynomials are Chebyshev economizations, in exact rational arithmetic, of the Taylor series
 // on the reduced ranges below (truncated where the dropped Chebyshev coefficients sum below
 // 2e-17, a tenth of a unit in the last place), rounded to double.
-#ifndef TEMPOKEY_CORE_SRC_RETIME_VECTOR_TRIG_H_
-#define TEMPOKEY_CORE_SRC_RETIME_VECTOR_TRIG_H_
+#ifndef TEMPOKEY_CORE_SRC_SIMD_VECTOR_TRIG_H_
+#define TEMPOKEY_CORE_SRC_SIMD_VECTOR_TRIG_H_
 
 #include <cstdint>
 
@@ -224,4 +225,4 @@ template <class V>
 
 }  // namespace tempokey::core::vector_trig
 
-#endif  // TEMPOKEY_CORE_SRC_RETIME_VECTOR_TRIG_H_
+#endif  // TEMPOKEY_CORE_SRC_SIMD_VECTOR_TRIG_H_

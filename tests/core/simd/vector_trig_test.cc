@@ -2,7 +2,7 @@
 // long-double libm (sinl, cosl, atan2l: 64-bit significands, far more exact than a double) as
 // the oracle: within kMaxUlps units in the last place of the double nearest the true value, over
 // the ranges the conversions use and at the special values.
-#include "core/src/retime/vector_trig.h"
+#include "core/src/simd/vector_trig.h"
 
 #include <bit>
 #include <cmath>
