@@ -167,29 +167,32 @@ void ScatterPoint(const double* axes, std::size_t n, std::size_t point, std::siz
   }
 }
 
-}  // namespace
-
-namespace {
-
-// RotationTrig() on the angles [0, n): the vector kernels' sine and cosine (within 2.5 units in
-// the last place of libm's, at about a fifth of its cost: forward kinematics of every frame is
-// most of a world-space measurement), eight angles at a time, the last group padded. Every lane
-// is computed alone, so an angle's values do not depend on where it sits in the span (PoseFrames()
-// and Pose() agree). Kept from the scalar definition: sin(-0) = -0, and libm for angles the
-// kernels do not reduce accurately (|radians| >= kMaxReducedRadians, and NaN).
-// Eight angles' RotationTrig(), from radians.
+// Eight angles' RotationTrig(), from radians: the vector kernels' sine and cosine, within 2.5
+// units in the last place of the exact values (libm's are within one), at about a quarter of the
+// cost of libm's sincos (forward kinematics of every frame is most of a world-space measurement).
+// Every lane is computed alone, so an angle's values do not depend on the other lanes. Kept from
+// the scalar definition: sin(-0) = -0, and libm's values where the kernels do not reduce
+// accurately (|radians| >= kMaxReducedRadians, infinities and NaN), whose lanes the kernels see
+// as 0 (no NaN or infinity enters their integer quadrant arithmetic).
 [[gnu::always_inline]] inline void SinCosOfEight(const double* radians, double* cosines,
                                                  double* sines) {
   using V = vector_trig::V4;
   constexpr int kChains = 2;
   V x[kChains], s[kChains], c[kChains];
   std::memcpy(x, radians, sizeof x);
-  vector_trig::SinCos<kChains>(x, s, c);
   bool all_reduced = true;
   for (int k = 0; k < kChains; ++k) {
-    s[k] = x[k] == 0.0 ? x[k] : s[k];  // the kernel's sine of -0 is +0
     const auto reduced = vector_trig::Abs(x[k]) < vector_trig::kMaxReducedRadians;
     for (int lane = 0; lane < 4; ++lane) all_reduced = all_reduced && reduced[lane] != 0;
+  }
+  if (!all_reduced) {
+    for (int k = 0; k < kChains; ++k) {
+      x[k] = vector_trig::Abs(x[k]) < vector_trig::kMaxReducedRadians ? x[k] : V{};
+    }
+  }
+  vector_trig::SinCos<kChains>(x, s, c);
+  for (int k = 0; k < kChains; ++k) {
+    s[k] = x[k] == 0.0 ? x[k] : s[k];  // the kernel's sine of -0 is +0
   }
   std::memcpy(cosines, c, sizeof c);
   std::memcpy(sines, s, sizeof s);
@@ -202,6 +205,7 @@ namespace {
   }
 }
 
+// RotationTrig() on the angles [0, n), eight at a time, the last group padded with zeros.
 TEMPOKEY_CLONES_AVX2 void SinCosOfDegrees(const double* degrees, double* cosines, double* sines,
                                           std::size_t n) {
   constexpr std::size_t kLanes = 8;

@@ -13,8 +13,8 @@
 #include "absl/strings/str_cat.h"
 #include "core/src/simd/block_scan.h"
 #include "core/src/simd/instruction_set.h"
-#include "rotation_batch.h"
 #include "core/src/simd/vector_trig.h"
+#include "rotation_batch.h"
 
 namespace tempokey::core {
 namespace {

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <limits>
 #include <numbers>
+#include <span>
 #include <vector>
 
 #include "gtest/gtest.h"
@@ -94,17 +95,21 @@ TEST(KinematicsTest, JointRotationsListRotationChannelsAndTheirOrder) {
   EXPECT_EQ(rotations[1].channels, (std::vector<int>{6}));
 }
 
+// RotationTrig() against libm: 4 units in the last place of 1, absolute (sines and cosines are at
+// most 1 in size, and near their zeros the argument's own rounding is of that size).
+constexpr double kTrigTolerance = 4 * std::numeric_limits<double>::epsilon();
+
 // Angles a capture holds and some it should not: small and large, exact quarter turns, zeros of
 // either sign, and ones past the vector kernels' reduction (libm's then).
 std::vector<double> TrigAngles() {
   std::vector<double> degrees = {0.0,    -0.0,  1e-300, -1e-12, 0.5,   45.0,   89.999, 90.0,
                                  -90.0,  180.0, -180.0, 270.0,  359.9, 720.0,  -1234.5, 1e6,
-                                 5.7e8,  -5.8e8, 1e12,  -3e15,  1e300};
+                                 3e8,    -4e8,  5.7e8,  -5.8e8, 1e12,  -3e15,  1e300};
   for (int k = 0; k < 1000; ++k) degrees.push_back(-400.0 + 0.8137 * k);
   return degrees;
 }
 
-TEST(RotationTrigTest, AgreesWithLibmToAFewUnitsInTheLastPlace) {
+TEST(RotationTrigTest, AgreesWithLibmToAFewUnitsInTheLastPlaceOfOne) {
   const std::vector<double> degrees = TrigAngles();
   std::vector<double> cosines(degrees.size()), sines(degrees.size());
 
@@ -112,39 +117,63 @@ TEST(RotationTrigTest, AgreesWithLibmToAFewUnitsInTheLastPlace) {
 
   for (std::size_t i = 0; i < degrees.size(); ++i) {
     const double r = degrees[i] * (std::numbers::pi / 180.0);
-    // Within 4 units in the last place of 1: sines and cosines are at most 1 in size, and near
-    // their zeros the argument's own rounding is of that size.
-    constexpr double kUlps = 4 * std::numeric_limits<double>::epsilon();
-    EXPECT_NEAR(cosines[i], std::cos(r), kUlps) << degrees[i];
-    EXPECT_NEAR(sines[i], std::sin(r), kUlps) << degrees[i];
+    EXPECT_NEAR(cosines[i], std::cos(r), kTrigTolerance) << degrees[i];
+    EXPECT_NEAR(sines[i], std::sin(r), kTrigTolerance) << degrees[i];
   }
 }
 
 TEST(RotationTrigTest, KeepsExactValuesAtZeroAndLibmsPastTheReduction) {
-  const std::vector<double> degrees = {-0.0, 0.0, 1e12, -3e15, 1e300};
+  // Nine angles: a full group of eight (the kernels and libm side by side) and a last one alone.
+  const double inf = std::numeric_limits<double>::infinity();
+  const std::vector<double> degrees = {-0.0, 0.0, 1e12, 30.0, -3e15, 1e300, inf, -inf, -0.0};
   std::vector<double> cosines(degrees.size()), sines(degrees.size());
 
   ForwardKinematics::RotationTrig(degrees, cosines, sines);
 
-  EXPECT_EQ(cosines[0], 1.0);
-  EXPECT_TRUE(sines[0] == 0.0 && std::signbit(sines[0]));
-  EXPECT_EQ(cosines[1], 1.0);
-  EXPECT_TRUE(sines[1] == 0.0 && !std::signbit(sines[1]));
-  for (std::size_t i = 2; i < degrees.size(); ++i) {
+  for (std::size_t i : {0u, 1u, 8u}) {
+    EXPECT_EQ(cosines[i], 1.0) << i;
+    EXPECT_EQ(sines[i], 0.0) << i;
+    EXPECT_EQ(std::signbit(sines[i]), std::signbit(degrees[i])) << i;
+  }
+  for (std::size_t i : {2u, 4u, 5u}) {
     const double r = degrees[i] * (std::numbers::pi / 180.0);
     EXPECT_EQ(cosines[i], std::cos(r)) << degrees[i];
     EXPECT_EQ(sines[i], std::sin(r)) << degrees[i];
   }
+  for (std::size_t i : {6u, 7u}) {
+    EXPECT_TRUE(std::isnan(cosines[i]) && std::isnan(sines[i])) << degrees[i];
+  }
+  EXPECT_NEAR(sines[3], 0.5, kTrigTolerance);
 }
 
-TEST(RotationTrigTest, NanGivesNan) {
-  const std::vector<double> degrees = {1.0, std::numeric_limits<double>::quiet_NaN(), 2.0};
-  std::vector<double> cosines(3), sines(3);
+TEST(RotationTrigTest, NanGivesNanAndLeavesItsNeighboursAlone) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  // NaN inside a full group of eight and in the last, shorter one.
+  const std::vector<double> degrees = {1.0, nan, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, nan};
+  std::vector<double> cosines(degrees.size()), sines(degrees.size());
 
   ForwardKinematics::RotationTrig(degrees, cosines, sines);
 
-  EXPECT_TRUE(std::isnan(cosines[1]) && std::isnan(sines[1]));
-  EXPECT_FALSE(std::isnan(cosines[0]) || std::isnan(sines[2]));
+  for (std::size_t i = 0; i < degrees.size(); ++i) {
+    if (std::isnan(degrees[i])) {
+      EXPECT_TRUE(std::isnan(cosines[i]) && std::isnan(sines[i])) << i;
+    } else {
+      const double r = degrees[i] * (std::numbers::pi / 180.0);
+      EXPECT_NEAR(cosines[i], std::cos(r), kTrigTolerance) << i;
+      EXPECT_NEAR(sines[i], std::sin(r), kTrigTolerance) << i;
+    }
+  }
+}
+
+TEST(RotationTrigTest, NoAnglesWritesNothing) {
+  const std::vector<double> degrees = {30.0};
+  std::vector<double> cosines = {-7.0}, sines = {-7.0};
+
+  ForwardKinematics::RotationTrig(std::span(degrees).first(0), std::span(cosines).first(0),
+                                  std::span(sines).first(0));
+
+  EXPECT_EQ(cosines[0], -7.0);
+  EXPECT_EQ(sines[0], -7.0);
 }
 
 TEST(RotationTrigTest, AnAngleHasTheSameBitsWhereverItSitsInTheSpan) {
