@@ -6,6 +6,7 @@
 // caller's own clips and jobs, count what they store in the memory budget, and end a stream whose
 // client takes no message for the idle timeout.
 #include <algorithm>
+#include <functional>
 #include <memory>
 #include <optional>
 #include <string>
@@ -85,81 +86,26 @@ std::string OutputName(const std::variant<core::Clip, core::KeyedClip>& output) 
   return std::get<core::KeyedClip>(output).layout.name;
 }
 
-// GetClip: a stored clip sliced as a sampled result (ResultSlicer), one message in flight.
-class ClipReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
- public:
-  ClipReactor(ServiceContext* service, grpc::CallbackServerContext* call,
-              const grpc::ByteBuffer& request)
-      : service_(service) {
-    if (absl::Status status = Open(*call, request); !status.ok()) {
-      slot_.Release();
-      Finish(ToGrpcStatus(status, call));
-      return;
-    }
-    if (service_->idle != nullptr) {
-      idle_ = service_->idle->NewTimer([call] { call->TryCancel(); });
-    }
-    WriteNext();
-  }
-
-  void OnWriteDone(bool ok) override {
-    if (idle_ != nullptr) idle_->Disarm();
-    if (!ok) {
-      slot_.Release();
-      Finish(ToGrpcStatus(absl::CancelledError("the clip stream broke")));
-      return;
-    }
-    WriteNext();
-  }
-
-  void OnDone() override {
-    if (idle_ != nullptr) idle_->Close();
-    delete this;
-  }
-
- private:
-  absl::Status Open(const grpc::CallbackServerContext& call, const grpc::ByteBuffer& raw) {
-    TEMPOKEY_ASSIGN_OR_RETURN(const std::string owner, service_->Authenticate(call));
-    v1::GetClipRequest request;
-    TEMPOKEY_RETURN_IF_ERROR(ParseMessage(raw, "GetClip request", &request));
-    TEMPOKEY_RETURN_IF_ERROR(CheckId("clip_id", request.clip_id()));
-    if (request.slice_bytes() < 0) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("slice_bytes must be >= 0 (0: 1 MiB), got ", request.slice_bytes()));
-    }
-    TEMPOKEY_ASSIGN_OR_RETURN(std::shared_ptr<const core::Clip> clip,
-                              service_->clips->Get(owner, request.clip_id()));
-    TEMPOKEY_RETURN_IF_ERROR(slot_.Claim(*service_, /*allow_while_draining=*/true));
-    // The stream needs the clip as a result: a copy, counted while it streams.
-    TEMPOKEY_ASSIGN_OR_RETURN(MemoryBudget::Reservation memory,
-                              ReserveMemory(*service_, MemoryUse::kResult, "a clip read back"));
-    TEMPOKEY_RETURN_IF_ERROR(memory.Grow(ClipBytes(*clip)));
-    core::PipelineResult result;
-    result.output = *clip;
-    slicer_.emplace(ShareWithReservation(std::move(result), std::move(memory)),
-                    request.slice_bytes(), request.batch_parts());
-    return absl::OkStatus();
-  }
-
-  void WriteNext() {
-    if (!slicer_->Next(&part_)) {
-      slot_.Release();
-      Finish(grpc::Status::OK);
-      return;
-    }
-    SerializeMessage(part_, &buffer_);
-    service_->BytesOut(static_cast<std::int64_t>(buffer_.Length()));
-    if (idle_ != nullptr) idle_->Arm();
-    StartWrite(&buffer_);
-  }
-
-  ServiceContext* const service_;
-  StreamSlot slot_;
-  std::shared_ptr<IdleReaper::Timer> idle_;
-  std::optional<wire::ResultSlicer> slicer_;
-  v1::ResultPart part_;
-  grpc::ByteBuffer buffer_;
-};
+// GetClip: a stored clip, the caller's own, sliced as a sampled result: a copy, counted in the
+// memory budget while it streams.
+absl::StatusOr<ResultStream> OpenStoredClip(ServiceContext& service, const std::string& owner,
+                                            const grpc::ByteBuffer& raw_request,
+                                            const std::function<absl::Status()>& claim_slot) {
+  v1::GetClipRequest request;
+  TEMPOKEY_RETURN_IF_ERROR(ParseMessage(raw_request, "GetClip request", &request));
+  TEMPOKEY_RETURN_IF_ERROR(CheckId("clip_id", request.clip_id()));
+  TEMPOKEY_RETURN_IF_ERROR(CheckSliceBytes("slice_bytes", request.slice_bytes()));
+  TEMPOKEY_ASSIGN_OR_RETURN(std::shared_ptr<const core::Clip> clip,
+                            service.clips->Get(owner, request.clip_id()));
+  TEMPOKEY_RETURN_IF_ERROR(claim_slot());
+  TEMPOKEY_ASSIGN_OR_RETURN(MemoryBudget::Reservation memory,
+                            ReserveMemory(service, MemoryUse::kResult, "a clip read back"));
+  TEMPOKEY_RETURN_IF_ERROR(memory.Grow(ClipBytes(*clip)));
+  core::PipelineResult result;
+  result.output = *clip;
+  return ResultStream{ShareWithReservation(std::move(result), std::move(memory)),
+                      request.slice_bytes(), request.batch_parts()};
+}
 
 // ExportFile: formats the job result or clip on the pool, then streams the bytes in chunks.
 class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
@@ -370,7 +316,13 @@ grpc::ServerUnaryReactor* MotionService::ParseClipFile(grpc::CallbackServerConte
 
 grpc::ServerWriteReactor<grpc::ByteBuffer>* MotionService::GetClip(
     grpc::CallbackServerContext* call, const grpc::ByteBuffer* request) {
-  return new ClipReactor(context_, call, *request);
+  ServiceContext* service = context_;
+  return NewSlicedResultReactor(
+      service, call, *request, "clip",
+      [service](const std::string& owner, const grpc::ByteBuffer& raw,
+                const std::function<absl::Status()>& claim_slot) {
+        return OpenStoredClip(*service, owner, raw, claim_slot);
+      });
 }
 
 grpc::ServerUnaryReactor* MotionService::PlanRetime(grpc::CallbackServerContext* call,

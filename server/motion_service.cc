@@ -130,6 +130,14 @@ absl::Status CheckId(std::string_view field, const std::string& id) {
   return absl::OkStatus();
 }
 
+absl::Status CheckSliceBytes(std::string_view field, std::int64_t slice_bytes) {
+  if (slice_bytes < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        core::AsAbsl(field), " must be >= 0 (0: 1 MiB), got ", slice_bytes));
+  }
+  return absl::OkStatus();
+}
+
 absl::StatusOr<std::vector<core::PipelineStep>> PrepareSteps(
     const google::protobuf::RepeatedPtrField<v1::Operation>& operations, const core::Clip& clip,
     const core::ClipLimits& limits, double max_cost_seconds) {

@@ -326,10 +326,7 @@ class ProcessReactor final : public ProcessReactorBase {
   }
 
   absl::Status Start(const v1::ProcessStart& start) {
-    if (start.slice_bytes() < 0) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("start.slice_bytes must be >= 0 (0: 1 MiB), got ", start.slice_bytes()));
-    }
+    TEMPOKEY_RETURN_IF_ERROR(CheckSliceBytes("start.slice_bytes", start.slice_bytes()));
     if (!assembler_->has_header()) {
       return absl::InvalidArgumentError("ProcessStart arrived before the clip header");
     }

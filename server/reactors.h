@@ -4,6 +4,10 @@
 #define TEMPOKEY_SERVER_REACTORS_H_
 
 #include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
 #include <string_view>
 #include <vector>
 
@@ -27,6 +31,24 @@ grpc::ServerReadReactor<grpc::ByteBuffer>* NewUploadReactor(ServiceContext* serv
 grpc::ServerWriteReactor<grpc::ByteBuffer>* NewWatchReactor(ServiceContext* service,
                                                             grpc::CallbackServerContext* call,
                                                             const grpc::ByteBuffer* request);
+// What a sliced result stream (GetJobResult, GetClip) sends: the result, shared with the stream,
+// and the client's slicing (wire::ResultSlicer).
+struct ResultStream {
+  std::shared_ptr<const core::PipelineResult> result;
+  std::int64_t slice_bytes = 0;
+  bool batch_parts = false;
+};
+// Opens a sliced result stream for `owner` from its raw request: parses, checks, looks up, and
+// calls `claim_slot` (the stream's slot in ServiceContext's limit) once the request is known to
+// be good and before any costly copy.
+using OpenResultStream = std::function<absl::StatusOr<ResultStream>(
+    const std::string& owner, const grpc::ByteBuffer& raw_request,
+    const std::function<absl::Status()>& claim_slot)>;
+// A reactor streaming what `open` opens, one ResultPart in flight at a time; `stream` names it in
+// errors ("the clip stream broke").
+grpc::ServerWriteReactor<grpc::ByteBuffer>* NewSlicedResultReactor(
+    ServiceContext* service, grpc::CallbackServerContext* call, const grpc::ByteBuffer& request,
+    std::string_view stream, const OpenResultStream& open);
 grpc::ServerWriteReactor<grpc::ByteBuffer>* NewResultReactor(ServiceContext* service,
                                                              grpc::CallbackServerContext* call,
                                                              const grpc::ByteBuffer* request);
@@ -74,6 +96,10 @@ grpc::ServerUnaryReactor* AnswerUnary(ServiceContext& service, grpc::ServerUnary
 absl::StatusOr<std::vector<core::PipelineStep>> PrepareSteps(
     const google::protobuf::RepeatedPtrField<v1::Operation>& operations, const core::Clip& clip,
     const core::ClipLimits& limits, double max_cost_seconds);
+
+// Checks a request's slice size `field` (0: 1 MiB).
+// Errors: kInvalidArgument "slice_bytes must be >= 0 (0: 1 MiB), got -1".
+absl::Status CheckSliceBytes(std::string_view field, std::int64_t slice_bytes);
 
 // Checks an id field of a request (job_id, clip_id): not empty, at most kMaxIdBytes.
 // Errors: kInvalidArgument "job_id is empty"; kResourceExhausted "job_id is 300 bytes, over the

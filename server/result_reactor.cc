@@ -1,8 +1,11 @@
-// GetJobResult: the result of a succeeded job in slices (ResultHeader with the reports first),
-// one message in flight at a time, built lazily from the shared result: results far larger than
-// a client's 4 MiB receive limit stream with constant server memory per call. A client that
-// takes no message for the idle timeout is cancelled.
+// Sliced result streams (GetJobResult, GetClip): a result in slices (ResultHeader with the
+// reports first), one message in flight at a time, built lazily from the shared result: results
+// far larger than a client's 4 MiB receive limit stream with constant server memory per call. A
+// client that takes no message for the idle timeout is cancelled.
+#include <functional>
 #include <memory>
+#include <optional>
+#include <string>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -16,13 +19,13 @@
 namespace tempokey::server {
 namespace {
 
-class ResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
+class SlicedResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
  public:
-  ResultReactor(ServiceContext* service, grpc::CallbackServerContext* call,
-                const grpc::ByteBuffer* request)
-      : service_(service) {
-    absl::Status status = Open(*call, *request);
-    if (!status.ok()) {
+  SlicedResultReactor(ServiceContext* service, grpc::CallbackServerContext* call,
+                      const grpc::ByteBuffer& request, std::string_view stream,
+                      const OpenResultStream& open)
+      : service_(service), stream_(stream) {
+    if (absl::Status status = Open(*call, request, open); !status.ok()) {
       slot_.Release();
       Finish(ToGrpcStatus(status, call));
       return;
@@ -38,7 +41,7 @@ class ResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
     if (idle_ != nullptr) idle_->Disarm();
     if (!ok) {
       slot_.Release();
-      Finish(ToGrpcStatus(absl::CancelledError("the result stream broke")));
+      Finish(ToGrpcStatus(absl::CancelledError(absl::StrCat("the ", stream_, " stream broke"))));
       return;
     }
     WriteNext();
@@ -50,20 +53,15 @@ class ResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
   }
 
  private:
-  absl::Status Open(const grpc::CallbackServerContext& call, const grpc::ByteBuffer& raw_request) {
+  absl::Status Open(const grpc::CallbackServerContext& call, const grpc::ByteBuffer& raw_request,
+                    const OpenResultStream& open) {
     TEMPOKEY_ASSIGN_OR_RETURN(const std::string owner, service_->Authenticate(call));
-    v1::GetJobResultRequest request;
-    TEMPOKEY_RETURN_IF_ERROR(ParseMessage(raw_request, "GetJobResult request", &request));
-    TEMPOKEY_RETURN_IF_ERROR(CheckId("job_id", request.job_id()));
-    if (request.slice_bytes() < 0) {
-      return absl::InvalidArgumentError(
-          absl::StrCat("slice_bytes must be >= 0 (0: 1 MiB), got ", request.slice_bytes()));
+    auto claim_slot = [this] { return slot_.Claim(*service_, /*allow_while_draining=*/true); };
+    TEMPOKEY_ASSIGN_OR_RETURN(ResultStream stream, open(owner, raw_request, claim_slot));
+    if (!slot_.held()) {
+      return absl::InternalError(absl::StrCat("the ", stream_, " stream took no stream slot"));
     }
-    absl::StatusOr<std::shared_ptr<const core::PipelineResult>> result =
-        service_->jobs->Result(request.job_id(), owner);
-    if (!result.ok()) return result.status();
-    TEMPOKEY_RETURN_IF_ERROR(slot_.Claim(*service_, /*allow_while_draining=*/true));
-    slicer_.emplace(*std::move(result), request.slice_bytes(), request.batch_parts());
+    slicer_.emplace(std::move(stream.result), stream.slice_bytes, stream.batch_parts);
     return absl::OkStatus();
   }
 
@@ -80,6 +78,7 @@ class ResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
   }
 
   ServiceContext* const service_;
+  const std::string stream_;
   StreamSlot slot_;
   std::optional<wire::ResultSlicer> slicer_;
   std::shared_ptr<IdleReaper::Timer> idle_;
@@ -87,12 +86,38 @@ class ResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
   grpc::ByteBuffer buffer_;
 };
 
+// GetJobResult: a succeeded job's result, the caller's own.
+absl::StatusOr<ResultStream> OpenJobResult(ServiceContext& service, const std::string& owner,
+                                           const grpc::ByteBuffer& raw_request,
+                                           const std::function<absl::Status()>& claim_slot) {
+  v1::GetJobResultRequest request;
+  TEMPOKEY_RETURN_IF_ERROR(ParseMessage(raw_request, "GetJobResult request", &request));
+  TEMPOKEY_RETURN_IF_ERROR(CheckId("job_id", request.job_id()));
+  TEMPOKEY_RETURN_IF_ERROR(CheckSliceBytes("slice_bytes", request.slice_bytes()));
+  absl::StatusOr<std::shared_ptr<const core::PipelineResult>> result =
+      service.jobs->Result(request.job_id(), owner);
+  if (!result.ok()) return result.status();
+  TEMPOKEY_RETURN_IF_ERROR(claim_slot());
+  return ResultStream{*std::move(result), request.slice_bytes(), request.batch_parts()};
+}
+
 }  // namespace
+
+grpc::ServerWriteReactor<grpc::ByteBuffer>* NewSlicedResultReactor(
+    ServiceContext* service, grpc::CallbackServerContext* call, const grpc::ByteBuffer& request,
+    std::string_view stream, const OpenResultStream& open) {
+  return new SlicedResultReactor(service, call, request, stream, open);
+}
 
 grpc::ServerWriteReactor<grpc::ByteBuffer>* NewResultReactor(ServiceContext* service,
                                                              grpc::CallbackServerContext* call,
                                                              const grpc::ByteBuffer* request) {
-  return new ResultReactor(service, call, request);
+  return NewSlicedResultReactor(
+      service, call, *request, "result",
+      [service](const std::string& owner, const grpc::ByteBuffer& raw,
+                const std::function<absl::Status()>& claim_slot) {
+        return OpenJobResult(*service, owner, raw, claim_slot);
+      });
 }
 
 }  // namespace tempokey::server

@@ -83,6 +83,8 @@ class StreamSlot {
   // Errors: as ServiceContext::AdmitStream().
   absl::Status Claim(ServiceContext& service, bool allow_while_draining = false);
   void Release();
+  // Whether the slot is claimed and not yet released.
+  bool held() const { return service_.load() != nullptr; }
 
  private:
   std::atomic<ServiceContext*> service_{nullptr};

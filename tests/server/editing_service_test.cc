@@ -165,6 +165,36 @@ TEST_F(EditingServiceTest, GetClipReturnsTheStoredClipSampleForSample) {
   EXPECT_EQ(clip->frame_time_seconds, expected.frame_time_seconds);
 }
 
+TEST_F(EditingServiceTest, GetClipRefusedOrEndedGivesItsStreamSlotBack) {
+  const std::string clip_id = ParseCmu();
+  auto get = [&](const std::string& id, std::int32_t slice_bytes) {
+    grpc::ClientContext context;
+    SetDeadline(context);
+    v1::GetClipRequest request;
+    request.set_clip_id(id);
+    request.set_slice_bytes(slice_bytes);
+    auto reader = stub_->GetClip(&context, request);
+    v1::ResultPart part;
+    int parts = 0;
+    while (reader->Read(&part)) ++parts;
+    return std::pair(reader->Finish(), parts);
+  };
+
+  const auto [negative, negative_parts] = get(clip_id, -1);
+  const auto [unknown, unknown_parts] = get("no-such-clip", 0);
+  const auto [whole, whole_parts] = get(clip_id, 0);
+
+  EXPECT_THAT(negative, GrpcStatusIs(grpc::INVALID_ARGUMENT,
+                                     "slice_bytes must be >= 0 (0: 1 MiB), got -1"));
+  EXPECT_EQ(negative_parts, 0);
+  EXPECT_THAT(unknown, GrpcStatusIs(grpc::NOT_FOUND, HasSubstr("no-such-clip")));
+  EXPECT_EQ(unknown_parts, 0);
+  EXPECT_TRUE(whole.ok()) << whole.error_message();
+  EXPECT_GT(whole_parts, 1);
+  // Each stream gives its slot back before its status goes out.
+  EXPECT_EQ(server_->open_streams(), 0);
+}
+
 TEST_F(EditingServiceTest, PlanReportIsTheReportOfTheRetimeJob) {
   const std::string clip_id = ParseCmu();
   const std::string job_id = RunJob(clip_id, {RampStep()});
