@@ -380,8 +380,17 @@ inline void ShortDataMoments(const double* data, const BasisColumns& basis, std:
 template <FreeEnds kEnds>
 inline void ShortWeightedSums(const double* data, const double* w, const BasisColumns& basis,
                               std::int64_t n, double* moments, double* gram) {
+  // Only the sums `kEnds` needs are zeroed, read and written: zeroing the whole arrays costs a
+  // string instruction's start-up, about as much as a short segment's sums.
   std::array<double, 4> m = {0.0, 0.0, 0.0, 0.0};
-  std::array<double, 16> g{};
+  std::array<double, 4> mt = {0.0, 0.0, 0.0, 0.0};
+  std::array<double, 16> g;
+  std::array<double, 16> gt;
+  for (int r = 0; r < 4; ++r) {
+    for (int q = r; q < 4; ++q) {
+      if (NeedsGram(kEnds, r, q)) g[4 * r + q] = gt[4 * r + q] = 0.0;
+    }
+  }
   std::int64_t k = 1;
   if (k + 4 <= n) {
     // One block: lane j holds frame 1 + j, from 0; the lanes summed pairwise.
@@ -403,8 +412,6 @@ inline void ShortWeightedSums(const double* data, const double* w, const BasisCo
     }
     k = 5;
   }
-  std::array<double, 4> mt = {0.0, 0.0, 0.0, 0.0};
-  std::array<double, 16> gt{};
   AddWeightedTail<kEnds>(data, w, basis, k, n, mt, gt);
   for (int r = 0; r < 4; ++r) {
     if (NeedsMoment(kEnds, r)) moments[r] = m[r] + mt[r];
