@@ -181,16 +181,28 @@ void ScatterPoint(const double* axes, std::size_t n, std::size_t point, std::siz
   V x[kChains], s[kChains], c[kChains];
   std::memcpy(x, radians, sizeof x);
   bool all_reduced = true;
+  bool all_small = true;
   for (int k = 0; k < kChains; ++k) {
-    const auto reduced = vector_trig::Abs(x[k]) < vector_trig::kMaxReducedRadians;
-    for (int lane = 0; lane < 4; ++lane) all_reduced = all_reduced && reduced[lane] != 0;
+    const V magnitude = vector_trig::Abs(x[k]);
+    const auto reduced = magnitude < vector_trig::kMaxReducedRadians;
+    const auto small = magnitude < vector_trig::kMaxUnreducedRadians;
+    for (int lane = 0; lane < 4; ++lane) {
+      all_reduced = all_reduced && reduced[lane] != 0;
+      all_small = all_small && small[lane] != 0;
+    }
   }
   if (!all_reduced) {
     for (int k = 0; k < kChains; ++k) {
       x[k] = vector_trig::Abs(x[k]) < vector_trig::kMaxReducedRadians ? x[k] : V{};
     }
   }
-  vector_trig::SinCos<kChains>(x, s, c);
+  // Most joints turn less than 44 degrees: their groups skip the reduction, which leaves such
+  // angles as they are (SinCosSmall(): the same bits).
+  if (all_small) {
+    vector_trig::SinCosSmall<kChains>(x, s, c);
+  } else {
+    vector_trig::SinCos<kChains>(x, s, c);
+  }
   for (int k = 0; k < kChains; ++k) {
     s[k] = x[k] == 0.0 ? x[k] : s[k];  // the kernel's sine of -0 is +0
   }
