@@ -56,7 +56,13 @@ class SlicedResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuff
   absl::Status Open(const grpc::CallbackServerContext& call, const grpc::ByteBuffer& raw_request,
                     const OpenResultStream& open) {
     TEMPOKEY_ASSIGN_OR_RETURN(const std::string owner, service_->Authenticate(call));
-    auto claim_slot = [this] { return slot_.Claim(*service_, /*allow_while_draining=*/true); };
+    auto claim_slot = [this] {
+      // A second claim would count two slots and give back one.
+      if (slot_.held()) {
+        return absl::InternalError(absl::StrCat("the ", stream_, " stream claimed its slot twice"));
+      }
+      return slot_.Claim(*service_, /*allow_while_draining=*/true);
+    };
     TEMPOKEY_ASSIGN_OR_RETURN(ResultStream stream, open(owner, raw_request, claim_slot));
     if (!slot_.held()) {
       return absl::InternalError(absl::StrCat("the ", stream_, " stream took no stream slot"));

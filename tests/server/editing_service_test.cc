@@ -180,9 +180,14 @@ TEST_F(EditingServiceTest, GetClipRefusedOrEndedGivesItsStreamSlotBack) {
     return std::pair(reader->Finish(), parts);
   };
 
+  // Each stream gives its slot back before its status goes out: none is open once the client
+  // has it.
   const auto [negative, negative_parts] = get(clip_id, -1);
+  EXPECT_EQ(server_->open_streams(), 0);
   const auto [unknown, unknown_parts] = get("no-such-clip", 0);
+  EXPECT_EQ(server_->open_streams(), 0);
   const auto [whole, whole_parts] = get(clip_id, 0);
+  EXPECT_EQ(server_->open_streams(), 0);
 
   EXPECT_THAT(negative, GrpcStatusIs(grpc::INVALID_ARGUMENT,
                                      "slice_bytes must be >= 0 (0: 1 MiB), got -1"));
@@ -191,8 +196,6 @@ TEST_F(EditingServiceTest, GetClipRefusedOrEndedGivesItsStreamSlotBack) {
   EXPECT_EQ(unknown_parts, 0);
   EXPECT_TRUE(whole.ok()) << whole.error_message();
   EXPECT_GT(whole_parts, 1);
-  // Each stream gives its slot back before its status goes out.
-  EXPECT_EQ(server_->open_streams(), 0);
 }
 
 TEST_F(EditingServiceTest, PlanReportIsTheReportOfTheRetimeJob) {

@@ -155,9 +155,14 @@ TEST_F(JobsTest, ResultStreamsRefusedOrEndedGiveTheirStreamSlotsBack) {
   const std::string job_id = Submit(*stub_, SubmitRequest(Upload(MakeClip(1, 100)))).job.job_id();
   WaitForJob(*stub_, job_id);
 
+  // Each stream gives its slot back before its status goes out: none is open once the client
+  // has it.
   const ResultOutcome negative = GetResult(*stub_, job_id, /*slice_bytes=*/-1);
+  EXPECT_EQ(server_->open_streams(), 0);
   const ResultOutcome unknown = GetResult(*stub_, "no-such-job");
+  EXPECT_EQ(server_->open_streams(), 0);
   const ResultOutcome whole = GetResult(*stub_, job_id);
+  EXPECT_EQ(server_->open_streams(), 0);
 
   EXPECT_THAT(negative.status, GrpcStatusIs(grpc::INVALID_ARGUMENT,
                                             "slice_bytes must be >= 0 (0: 1 MiB), got -1"));
@@ -165,8 +170,6 @@ TEST_F(JobsTest, ResultStreamsRefusedOrEndedGiveTheirStreamSlotsBack) {
   EXPECT_THAT(unknown.status, GrpcStatusIs(grpc::NOT_FOUND, HasSubstr("no-such-job")));
   EXPECT_TRUE(whole.status.ok()) << whole.status.error_message();
   EXPECT_TRUE(AssembleClipResult(whole.parts).ok());
-  // Each stream gives its slot back before its status goes out.
-  EXPECT_EQ(server_->open_streams(), 0);
 }
 
 TEST(JobsGatedTest, WatchSeesStrictlyIncreasingVersionsAndEndsOnTheTerminalState) {
