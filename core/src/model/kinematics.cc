@@ -4,13 +4,13 @@
 #include <array>
 #include <cstdint>
 #include <cmath>
-#include <cstring>
 #include <numbers>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "core/src/simd/instruction_set.h"
 #include "core/src/simd/vector_trig.h"
+#include "core/src/simd/vectors.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::core {
@@ -179,22 +179,18 @@ void ScatterPoint(const double* axes, std::size_t n, std::size_t point, std::siz
   using V = vector_trig::V4;
   constexpr int kChains = 2;
   V x[kChains], s[kChains], c[kChains];
-  std::memcpy(x, radians, sizeof x);
+  vector_trig::MaskOf<V> reduced[kChains];
   bool all_reduced = true;
   bool all_small = true;
   for (int k = 0; k < kChains; ++k) {
+    x[k] = simd::Load(radians + 4 * k);
     const V magnitude = vector_trig::Abs(x[k]);
-    const auto reduced = magnitude < vector_trig::kMaxReducedRadians;
-    const auto small = magnitude < vector_trig::kMaxUnreducedRadians;
-    for (int lane = 0; lane < 4; ++lane) {
-      all_reduced = all_reduced && reduced[lane] != 0;
-      all_small = all_small && small[lane] != 0;
-    }
+    reduced[k] = magnitude < vector_trig::kMaxReducedRadians;
+    all_reduced = all_reduced && simd::All(reduced[k]);
+    all_small = all_small && simd::All(magnitude < vector_trig::kMaxUnreducedRadians);
   }
   if (!all_reduced) {
-    for (int k = 0; k < kChains; ++k) {
-      x[k] = vector_trig::Abs(x[k]) < vector_trig::kMaxReducedRadians ? x[k] : V{};
-    }
+    for (int k = 0; k < kChains; ++k) x[k] = reduced[k] ? x[k] : V{};
   }
   // Most joints turn less than 44 degrees: their groups skip the reduction, which leaves such
   // angles as they are (SinCosSmall(): the same bits).
@@ -206,8 +202,10 @@ void ScatterPoint(const double* axes, std::size_t n, std::size_t point, std::siz
   for (int k = 0; k < kChains; ++k) {
     s[k] = x[k] == 0.0 ? x[k] : s[k];  // the kernel's sine of -0 is +0
   }
-  std::memcpy(cosines, c, sizeof c);
-  std::memcpy(sines, s, sizeof s);
+  for (int k = 0; k < kChains; ++k) {
+    simd::Store(cosines + 4 * k, c[k]);
+    simd::Store(sines + 4 * k, s[k]);
+  }
   if (all_reduced) return;
   for (int i = 0; i < 4 * kChains; ++i) {
     if (!(std::abs(radians[i]) < vector_trig::kMaxReducedRadians)) {

@@ -15,10 +15,10 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "core/src/simd/vectors.h"
 #include "tempokey/core/model/progress.h"
 #include "tempokey/core/model/status.h"
 #include "lane_pack.h"
-#include "simd.h"
 
 namespace tempokey::core {
 namespace {
@@ -458,7 +458,7 @@ TEMPOKEY_CLONES_AVX void SumDataTerms(const double* sample, std::int64_t k_begin
                                       std::int64_t k_end, double y_ref,
                                       const std::array<const double*, 9>& basis,
                                       std::array<std::array<double, 4>, 9>& sums) {
-  using V = double __attribute__((vector_size(32)));
+  using V = simd::V4;
   V acc[9];
   for (int j = 0; j < 9; ++j) {
     if (k_begin == 0) {

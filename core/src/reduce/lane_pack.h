@@ -17,6 +17,7 @@
 #include <cstring>
 
 #include "core/src/simd/instruction_set.h"
+#include "core/src/simd/vectors.h"
 
 namespace tempokey::core::simd {
 
@@ -41,7 +42,6 @@ struct Pack512 {
   // Two 4-lane halves joined: GCC 12 builds V{x, x, ...} (or a shuffle of lane 0, which it folds
   // into that) stored to an array one masked broadcast per lane.
   [[gnu::always_inline]] static Pack512 Splat(double x) {
-    using V4 = double __attribute__((vector_size(32)));
     const V4 half = {x, x, x, x};
     return {__builtin_shufflevector(half, half, 0, 1, 2, 3, 4, 5, 6, 7)};
   }
@@ -75,7 +75,7 @@ struct Pack512 {
 
 // 8 lanes in two 256-bit vectors, lanes 0..3 and 4..7.
 struct PackPair {
-  using V = double __attribute__((vector_size(32)));
+  using V = V4;
   using M = std::int64_t __attribute__((vector_size(32)));
   struct Mask {
     M lo, hi;

@@ -17,9 +17,9 @@
 #include "tempokey/core/model/progress.h"
 #include "tempokey/core/model/status.h"
 #include "core/src/simd/instruction_set.h"
+#include "core/src/simd/vectors.h"
 #include "noise_smoother.h"
 #include "lane_pack.h"
-#include "simd.h"
 
 
 namespace tempokey::core {

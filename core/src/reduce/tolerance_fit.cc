@@ -10,9 +10,9 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "core/src/simd/vectors.h"
 #include "tempokey/core/model/progress.h"
 #include "tempokey/core/model/status.h"
-#include "simd.h"
 
 // The kernels below use simd::V4 values; helpers that return them are always inlined (simd.h).
 #pragma GCC diagnostic ignored "-Wpsabi"

@@ -10,6 +10,7 @@
 
 #include "core/src/simd/instruction_set.h"
 #include "core/src/simd/vector_trig.h"
+#include "core/src/simd/vectors.h"
 
 // The kernels are cloned with AVX2 (TEMPOKEY_CLONES_AVX2), not AVX: they select lanes by masks,
 // which are 256-bit integer vectors (AVX alone splits them into 128-bit halves).
@@ -204,20 +205,6 @@ template <class VT>
   d = __builtin_shufflevector(ab_odd, cd_odd, 2, 3, 6, 7);
 }
 
-// The kLanes doubles at p, and back: unaligned vector loads and stores (a V held in an array
-// and copied lane by lane goes through the stack, and its loads then wait on the stores). A
-// memcpy of the whole vector is one unaligned load or store for GCC and clang alike, and is
-// defined for any address (clang ignores a lowered alignment on a vector typedef, and UBSan then
-// flags the access).
-template <class VT = V>
-[[gnu::always_inline]] inline VT LoadV(const double* p) {
-  VT v;
-  std::memcpy(&v, p, sizeof v);
-  return v;
-}
-template <class VT>
-[[gnu::always_inline]] inline void StoreV(double* p, VT v) { std::memcpy(p, &v, sizeof v); }
-
 // The 4-lane halves of an 8-lane vector, and back (shuffles: every bit kept).
 [[maybe_unused, gnu::always_inline]] inline V LowHalf(V8 v) { return __builtin_shufflevector(v, v, 0, 1, 2, 3); }
 [[maybe_unused, gnu::always_inline]] inline V HighHalf(V8 v) { return __builtin_shufflevector(v, v, 4, 5, 6, 7); }
@@ -231,10 +218,10 @@ template <class VT>
   static_assert(kLanes == 4);
   V a = q.w, b = q.x, c = q.y, d = q.z;
   Transpose(a, b, c, d);
-  StoreV(out, a);
-  if (count > 1) StoreV(out + 4, b);
-  if (count > 2) StoreV(out + 8, c);
-  if (count > 3) StoreV(out + 12, d);
+  simd::Store(out, a);
+  if (count > 1) simd::Store(out + 4, b);
+  if (count > 2) simd::Store(out + 8, c);
+  if (count > 3) simd::Store(out + 12, d);
 }
 [[maybe_unused, gnu::always_inline]] inline void StoreInterleaved(double* out,
                                                                   const QuatLanesOf<V8>& q,
@@ -250,8 +237,8 @@ template <class VT>
 template <class VT = V>
 [[gnu::always_inline]] inline QuatLanesOf<VT> Gather(const double* quats, const std::int64_t* at) {
   if constexpr (LanesOf<VT> == 4) {
-    V a = LoadV(quats + 4 * at[0]), b = LoadV(quats + 4 * at[1]), c = LoadV(quats + 4 * at[2]),
-      d = LoadV(quats + 4 * at[3]);
+    V a = simd::Load(quats + 4 * at[0]), b = simd::Load(quats + 4 * at[1]),
+      c = simd::Load(quats + 4 * at[2]), d = simd::Load(quats + 4 * at[3]);
     Transpose(a, b, c, d);
     return {a, b, c, d};
   } else {
@@ -325,8 +312,9 @@ template <int I, int J, int K, class VT>
   static_assert(0.5 * kSmallDegrees * kDegToRad < vector_trig::kMaxUnreducedRadians);
   // Two groups per step, their six sines and cosines side by side.
   for (; i + 2 * L <= count; i += 2 * L) {
-    const VT angle[2][3] = {{LoadV<VT>(a + i), LoadV<VT>(b + i), LoadV<VT>(c + i)},
-                            {LoadV<VT>(a + i + L), LoadV<VT>(b + i + L), LoadV<VT>(c + i + L)}};
+    const VT angle[2][3] = {
+        {simd::Load<VT>(a + i), simd::Load<VT>(b + i), simd::Load<VT>(c + i)},
+        {simd::Load<VT>(a + i + L), simd::Load<VT>(b + i + L), simd::Load<VT>(c + i + L)}};
     VT sine[6], cosine[6];
     const VT half[6] = {half_radians(angle[0][0]), half_radians(angle[0][1]),
                         half_radians(angle[0][2]), half_radians(angle[1][0]),
@@ -558,7 +546,9 @@ template <int I, int J, int K, class VT>
       // slot (BatchSlots orders a batch by kind), so its first and last outputs can be L - 1
       // apart while the ones between are not consecutive.
       if (lanes[g] == L && Consecutive(output)) {
-        for (int axis = 0; axis < 3; ++axis) StoreV(targets.out[axis] + output[0], angle[axis]);
+        for (int axis = 0; axis < 3; ++axis) {
+          simd::Store(targets.out[axis] + output[0], angle[axis]);
+        }
       } else {
         for (int axis = 0; axis < 3; ++axis) {
           for (std::size_t lane = 0; lane < lanes[g]; ++lane) {
@@ -645,7 +635,7 @@ template <class VT>
     VT nearest_pivot = vector_trig::Splat<VT>(1.0);  // min |q·pivot| over the taps
     for (std::int64_t n = 0; n < group.taps; ++n) {
       const Q q = Gather<VT>(quats, source + kMeanLanes * n);
-      const VT w = LoadV<VT>(weight + kMeanLanes * n);
+      const VT w = simd::Load<VT>(weight + kMeanLanes * n);
       const VT dot = Dot(q, ref);
       const VT signed_w = dot < 0.0 ? -w : w;
       sum = {sum.w + q.w * signed_w, sum.x + q.x * signed_w, sum.y + q.y * signed_w,
@@ -663,7 +653,7 @@ template <class VT>
     if (!WithinSpread(nearest_pivot, vector_trig::Abs(Dot(mean, ref)), markley, min_dot)) {
       for (std::int64_t n = 0; n < group.taps; ++n) {
         const Q q = Gather<VT>(quats, source + kMeanLanes * n);
-        const VT w = LoadV<VT>(weight + kMeanLanes * n);
+        const VT w = simd::Load<VT>(weight + kMeanLanes * n);
         markley = w != 0.0 && vector_trig::Abs(Dot(q, mean)) < min_dot ? flag.one : markley;
       }
     }

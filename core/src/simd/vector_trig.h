@@ -18,13 +18,15 @@
 
 #include <cstdint>
 
+#include "core/src/simd/vectors.h"
+
 namespace tempokey::core::vector_trig {
 
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wpsabi"
 
 // 4 and 8 lanes of doubles, and the masks their comparisons give (all bits set where true).
-using V4 = double __attribute__((vector_size(32)));
+using V4 = simd::V4;
 using V8 = double __attribute__((vector_size(64)));
 template <class V>
 using MaskOf = decltype(V{} < V{});

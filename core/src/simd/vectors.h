@@ -1,12 +1,13 @@
-// Small vector kernels: 4-lane double vectors (GCC vector extensions), for the kernels cloned with
-// TEMPOKEY_CLONES_AVX (core/src/simd/instruction_set.h).
+// 4-lane double vectors (GCC vector extensions) and their small helpers, for the kernels cloned
+// with TEMPOKEY_CLONES_AVX (core/src/simd/instruction_set.h): the reductions' kernels, and the
+// vector sines and cosines (vector_trig.h) with their callers.
 //
 // Kernels written with 4-lane vectors compute every lane with the same operations in the same
 // order whether the compiler emits one AVX instruction or two SSE2 ones, and contraction into FMA
 // is off (-ffp-contract=off, core/CMakeLists.txt), so the AVX and portable clones agree bit for bit:
 // results do not depend on the machine.
-#ifndef TEMPOKEY_CORE_SRC_REDUCE_SIMD_H_
-#define TEMPOKEY_CORE_SRC_REDUCE_SIMD_H_
+#ifndef TEMPOKEY_CORE_SRC_SIMD_VECTORS_H_
+#define TEMPOKEY_CORE_SRC_SIMD_VECTORS_H_
 
 #include <cstring>
 
@@ -21,7 +22,10 @@ namespace tempokey::core::simd {
 
 using V4 = double __attribute__((vector_size(32)));
 
-// A vector V of doubles (4 lanes unless given) loaded or stored at any alignment.
+// A vector V of doubles (4 lanes unless given) loaded or stored at any alignment. A memcpy of the
+// whole vector is one unaligned load or store for GCC and clang alike, and is defined for any
+// address (clang ignores a lowered alignment on a vector typedef, and UBSan then flags the
+// access); a vector copied lane by lane through an array goes through the stack instead.
 template <class V = V4>
 [[gnu::always_inline]] inline V Load(const double* p) {
   V v;
@@ -50,8 +54,13 @@ template <class V>
   return (mask[0] | mask[1] | mask[2] | mask[3]) != 0;
 }
 
+// Whether every lane is true.
+[[gnu::always_inline]] inline bool All(decltype(V4{} < V4{}) mask) {
+  return (mask[0] & mask[1] & mask[2] & mask[3]) != 0;
+}
+
 #pragma GCC diagnostic pop
 
 }  // namespace tempokey::core::simd
 
-#endif  // TEMPOKEY_CORE_SRC_REDUCE_SIMD_H_
+#endif  // TEMPOKEY_CORE_SRC_SIMD_VECTORS_H_
