@@ -168,7 +168,9 @@ absl::StatusOr<JobSnapshot> JobManager::Submit(JobSpec spec, std::shared_ptr<con
   record->create_time = Now();
   record->queued_at = std::chrono::steady_clock::now();
   TEMPOKEY_RETURN_IF_ERROR(pool_->TrySubmit(
-      [this, record](std::stop_token pool_stop) { Run(record, std::move(pool_stop)); }));
+      [this, job = std::weak_ptr<JobRecord>(record)](std::stop_token pool_stop) {
+        Run(job, std::move(pool_stop));
+      }));
   ++next_seq_;
   by_seq_.emplace(record->seq, record);
   by_id_.emplace(record->id, record);
@@ -178,13 +180,18 @@ absl::StatusOr<JobSnapshot> JobManager::Submit(JobSpec spec, std::shared_ptr<con
   return SnapshotLocked(*record);
 }
 
-void JobManager::Run(const std::shared_ptr<JobRecord>& record, std::stop_token pool_stop) {
+void JobManager::Run(const std::weak_ptr<JobRecord>& job, std::stop_token pool_stop) {
   JobSnapshot snapshot;
   std::vector<std::shared_ptr<JobWatcher>> watchers;
   std::shared_ptr<const core::Clip> clip;
+  std::shared_ptr<JobRecord> record;
   {
     std::lock_guard lock(mu_);
-    if (record->state != JobState::kQueued) return;  // cancelled while queued: never runs
+    record = job.lock();  // under mu_: gone if it was cancelled while queued and then deleted
+    if (record == nullptr || record->state != JobState::kQueued) {  // cancelled: never runs
+      record.reset();  // the manager still holds it here; a DeleteJob after the unlock frees it
+      return;
+    }
     record->state = JobState::kRunning;
     record->start_time = Now();
     record->started_at = std::chrono::steady_clock::now();
@@ -198,7 +205,7 @@ void JobManager::Run(const std::shared_ptr<JobRecord>& record, std::stop_token p
 
   if (options_.on_job_start) options_.on_job_start(record->id);
   // The drain deadline (pool_stop) cancels the job like a CancelJob would.
-  std::stop_callback forward(pool_stop, [&record] { record->stop.request_stop(); });
+  std::stop_callback forward(pool_stop, [stop = record->stop]() mutable { stop.request_stop(); });
   absl::StatusOr<core::PipelineResult> result = core::RunPipeline(
       *clip, record->spec->steps,
       [this, &record](double fraction, std::string_view stage) {
@@ -259,6 +266,9 @@ void JobManager::Run(const std::shared_ptr<JobRecord>& record, std::stop_token p
     ++finished_count_;
     finished_bytes_ += record->result_bytes + record->spec_bytes;
     ReportEndLocked(snapshot, *record);
+    // Let go before the unlock: a DeleteJob right after it gives the job's memory back at once,
+    // not whenever this worker returns (finished_ holds the record until then).
+    record.reset();
     EvictLocked();
   }
   Notify(watchers, snapshot);
@@ -521,7 +531,7 @@ void JobManager::RemoveLocked(const std::shared_ptr<JobRecord>& record) {
   finished_bytes_ -= record->result_bytes + record->spec_bytes;
   record->result.reset();
   // The record (its spec and reservation) goes once finished_ drops it too: EvictLocked() or
-  // DropRemovedLocked(), and once no worker or snapshot holds it.
+  // DropRemovedLocked(). No worker holds it by then: Run() lets go before the job is seen to end.
 }
 
 void JobManager::DropRemovedLocked() {

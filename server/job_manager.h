@@ -187,7 +187,10 @@ class JobManager {
  private:
   struct JobRecord;
 
-  void Run(const std::shared_ptr<JobRecord>& record, std::stop_token pool_stop);
+  // Runs the job on a pool worker. The queued task does not own the record, and the worker lets go
+  // of it under the lock that ends the job: once anyone can see a job ended (and delete it), only
+  // the manager holds it, so a DeleteJob gives its memory back at once.
+  void Run(const std::weak_ptr<JobRecord>& job, std::stop_token pool_stop);
   void PublishProgress(const std::shared_ptr<JobRecord>& record, double fraction,
                        std::string_view stage);
   JobSnapshot SnapshotLocked(const JobRecord& record) const ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);

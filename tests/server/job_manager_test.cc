@@ -526,6 +526,37 @@ TEST_F(JobManagerTest, StoredJobsCountTheirOperationsInTheMemoryBudget) {
   EXPECT_EQ(budget.used(), 0);
 }
 
+TEST_F(JobManagerTest, DeletingAJobCancelledInTheQueueGivesItsMemoryBackAtOnce) {
+  MemoryBudget& budget = Budget(std::int64_t{64} << 20);
+  JobManagerOptions options = GatedOptions();
+  options.budget = &budget;
+  Start(std::move(options));
+  JobSnapshot blocker = SubmitWrap();
+  ASSERT_TRUE(gate_->WaitArrivals(1));  // the only worker is held; the next job waits behind it
+  const std::int64_t blocker_bytes = budget.used(MemoryUse::kJob);
+  core::RetimeStep retime;  // 100 000 speed knots: 2.4 MB of operations
+  retime.warp.domain = core::WarpDomain::kSpeedOverSource;
+  for (int k = 0; k < 100'000; ++k) {
+    retime.warp.speed.push_back(core::SpeedKnot{.time = {.value = k * 1e-4}, .speed = 1.0});
+  }
+  absl::StatusOr<JobSnapshot> queued =
+      manager_->Submit(JobSpec{.clip_id = "sha256:test", .steps = {retime}},
+                       std::make_shared<const core::Clip>(MakeClip(1, 10)));
+  ASSERT_TRUE(queued.ok()) << queued.status();
+  const std::int64_t both_bytes = budget.used(MemoryUse::kJob);
+
+  // Its task is still in the pool's queue behind the held worker, and must not keep it alive.
+  ASSERT_TRUE(manager_->Cancel(queued->job_id).ok());
+  ASSERT_TRUE(manager_->Delete(queued->job_id).ok());
+  const std::int64_t after_delete = budget.used(MemoryUse::kJob);
+  gate_->Open();
+  WaitTerminal(blocker.job_id);
+
+  EXPECT_GE(both_bytes - blocker_bytes,
+            100'000 * static_cast<std::int64_t>(sizeof(core::SpeedKnot)));
+  EXPECT_EQ(after_delete, blocker_bytes);
+}
+
 TEST_F(JobManagerTest, ResultThatDoesNotFitTheBudgetFailsTheJobWithResourceExhausted) {
   MemoryBudget& budget = Budget(std::int64_t{1} << 20);
   JobManagerOptions options;
