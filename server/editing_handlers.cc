@@ -248,7 +248,12 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
     StartWrite(&buffer_);
   }
 
+  // Gives back the stream slot and the file's memory before the client sees the status: no write
+  // is in flight by now (each chunk is a copy), and no task formats any more.
   void End(const grpc::Status& status) {
+    std::string().swap(bytes_);
+    memory_.Release();
+    gltf_clip_.reset();
     slot_.Release();
     Finish(status);
   }

@@ -50,6 +50,13 @@ class ProcessLink final {
     queued_at_ = std::chrono::steady_clock::now();
   }
 
+  // Drops the clip and gives its memory back: after the run, or (with no task queued) when the
+  // call is refused.
+  void DropInput() {
+    clip_ = core::Clip();
+    clip_memory_.Release();
+  }
+
   // On a worker.
   void Run(std::stop_token pool_stop) {
     {
@@ -63,8 +70,7 @@ class ProcessLink final {
         clip_, steps_,
         [this](double fraction, std::string_view stage) { OnProgress(fraction, stage); },
         stop_.get_token(), service_->clip_limits);
-    clip_ = core::Clip();  // the input is no longer needed while the result streams out
-    clip_memory_.Release();
+    DropInput();  // the input is no longer needed while the result streams out
     const auto ended = std::chrono::steady_clock::now();
     const std::string outcome = result.ok()                                             ? "succeeded"
                                 : result.status().code() == absl::StatusCode::kCancelled ? "cancelled"
@@ -259,6 +265,7 @@ class ProcessReactor final : public ProcessReactorBase {
     if (!ok) {
       // After the start a half-close is the normal end of the client's side.
       if (!started_) {
+        ReleaseInput();
         link_->FinishNow(absl::InvalidArgumentError(
             "the Process stream ended before ProcessStart (send header, samples, then start)"));
       }
@@ -277,6 +284,7 @@ class ProcessReactor final : public ProcessReactorBase {
         ParseMessage(buffer_, absl::StrCat("Process message ", messages_), &request_);
     if (status.ok()) status = Accept();
     if (!status.ok()) {
+      ReleaseInput();
       link_->FinishNow(status);
       return;
     }
@@ -300,6 +308,15 @@ class ProcessReactor final : public ProcessReactorBase {
     TEMPOKEY_RETURN_IF_ERROR(slot_.Claim(*service_));
     link_->SetSlot(&slot_);
     return absl::OkStatus();
+  }
+
+  // What a refused call holds goes back to the budget before the client sees the refusal, not
+  // when gRPC destroys the call. Only from OnReadDone() before a task was queued: no read is
+  // pending and nothing else touches the input.
+  void ReleaseInput() {
+    assembler_.reset();
+    clip_memory_.Release();
+    link_->DropInput();
   }
 
   void Read() {

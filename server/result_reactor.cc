@@ -26,8 +26,7 @@ class SlicedResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuff
                       const OpenResultStream& open)
       : service_(service), stream_(stream) {
     if (absl::Status status = Open(*call, request, open); !status.ok()) {
-      slot_.Release();
-      Finish(ToGrpcStatus(status, call));
+      End(ToGrpcStatus(status, call));
       return;
     }
     if (service_->idle != nullptr) {
@@ -40,8 +39,7 @@ class SlicedResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuff
   void OnWriteDone(bool ok) override {
     if (idle_ != nullptr) idle_->Disarm();
     if (!ok) {
-      slot_.Release();
-      Finish(ToGrpcStatus(absl::CancelledError(absl::StrCat("the ", stream_, " stream broke"))));
+      End(ToGrpcStatus(absl::CancelledError(absl::StrCat("the ", stream_, " stream broke"))));
       return;
     }
     WriteNext();
@@ -73,14 +71,21 @@ class SlicedResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuff
 
   void WriteNext() {
     if (!slicer_->Next(&part_)) {
-      slot_.Release();
-      Finish(grpc::Status::OK);
+      End(grpc::Status::OK);
       return;
     }
     SerializeMessage(part_, &buffer_);
     service_->BytesOut(static_cast<std::int64_t>(buffer_.Length()));
     if (idle_ != nullptr) idle_->Arm();
     StartWrite(&buffer_);
+  }
+
+  // Gives back the stream slot and the result (and the memory it counts, such as GetClip's copy)
+  // before the client sees the status: no write is in flight by now.
+  void End(const grpc::Status& status) {
+    slicer_.reset();
+    slot_.Release();
+    Finish(status);
   }
 
   ServiceContext* const service_;

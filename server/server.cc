@@ -334,9 +334,11 @@ void Server::Quiesce() {
     spdlog::info("draining: not ready, refusing new work, closing watches; {} queued and {} "
                  "running get {} s to finish",
                  pool_->queue_depth(), pool_->running(), grace.count());
-    grpc_server_->GetHealthCheckService()->SetServingStatus(kMotionServiceName, false);
+    // Refuse first, then say so: a client that sees NOT_SERVING and calls at once must get
+    // UNAVAILABLE, never a job accepted in between.
     context_->draining.store(true);
     jobs_->BeginDrain();
+    grpc_server_->GetHealthCheckService()->SetServingStatus(kMotionServiceName, false);
     if (!pool_->WaitIdle(std::chrono::steady_clock::now() + grace)) {
       spdlog::warn("drain grace period over: cancelling {} queued and {} running",
                    pool_->queue_depth(), pool_->running());

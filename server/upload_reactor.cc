@@ -48,7 +48,9 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
     }
     if (!ok) {
       // End of the client's stream (or the call broke): the clip is complete or never will be.
-      FinishOnce(Complete());
+      const absl::Status completed = Complete();
+      if (!completed.ok()) ReleaseHeld();
+      FinishOnce(completed);
       return;
     }
     ++messages_;
@@ -57,12 +59,7 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
     if (status.ok()) status = Accept();
     if (!status.ok()) {
       spdlog::debug("upload refused at message {}: {}", messages_, status.ToString());
-      // What the refused upload holds goes back to the budget now, before the client sees the
-      // refusal, not when gRPC destroys the call: the client's other uploads may need it at once.
-      // No read is pending, so nothing else touches these.
-      digest_.reset();
-      assembler_.reset();
-      reservation_.Release();
+      ReleaseHeld();
       FinishOnce(status);
       return;
     }
@@ -86,6 +83,15 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
   void Read() {
     if (idle_ != nullptr) idle_->Arm();
     StartRead(&buffer_);
+  }
+
+  // What a refused or incomplete upload holds goes back to the budget now, before the client sees
+  // the status, not when gRPC destroys the call: the client's next upload may need it at once.
+  // Called only from OnReadDone() with no read pending, so nothing else touches these.
+  void ReleaseHeld() {
+    digest_.reset();
+    assembler_.reset();
+    reservation_.Release();
   }
 
   // Finishes the call once, from a gRPC callback or the idle timer (another thread).

@@ -241,6 +241,89 @@ TEST_F(MemoryBudgetInProcessTest, UploadsInProgressShareTheBudget) {
   TEMPOKEY_ASSERT_GRPC_OK(first_status);
 }
 
+TEST_F(MemoryBudgetInProcessTest, AnIncompleteUploadGivesItsMemoryBackBeforeItsStatus) {
+  Start(10 * kMiB);
+  grpc::ClientContext context;
+  SetDeadline(context);
+  v1::UploadClipResponse response;
+  auto upload = stub_->UploadClip(&context, &response);
+  std::vector<v1::UploadClipRequest> requests = UploadRequests(ClipOfMiB(6), 256 * 1024);
+  // The header and half the samples: the clip can never be complete.
+  for (std::size_t i = 0; i < requests.size() / 2; ++i) ASSERT_TRUE(upload->Write(requests[i]));
+  upload->WritesDone();
+  const grpc::Status status = upload->Finish();
+  // Read as soon as the status is in: the memory must be back already, not once gRPC gets
+  // round to destroying the call (a client's next upload may need it at once).
+  const std::int64_t held_after_status = server_->budget().used(server::MemoryUse::kUpload);
+
+  EXPECT_THAT(status, GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, HasSubstr("never arrived")));
+  EXPECT_EQ(held_after_status, 0);
+}
+
+TEST_F(MemoryBudgetInProcessTest, AReadClipsCopyIsGivenBackBeforeItsStatus) {
+  Start(32 * kMiB);
+  const UploadOutcome stored = UploadClip(*stub_, ClipOfMiB(4));
+  ASSERT_TRUE(stored.status.ok());
+  grpc::ClientContext context;
+  SetDeadline(context);
+  v1::GetClipRequest request;
+  request.set_clip_id(stored.response.clip_id());
+  auto reader = stub_->GetClip(&context, request);
+  v1::ResultPart part;
+  std::int64_t parts = 0;
+  while (reader->Read(&part)) ++parts;
+  const grpc::Status status = reader->Finish();
+  // GetClip streams a copy counted as a result; it goes back before the status, not once gRPC
+  // gets round to destroying the call.
+  const std::int64_t copy_after_status = server_->budget().used(server::MemoryUse::kResult);
+
+  TEMPOKEY_ASSERT_GRPC_OK(status);
+  EXPECT_GT(parts, 1);
+  EXPECT_EQ(copy_after_status, 0);
+}
+
+TEST_F(MemoryBudgetInProcessTest, AProcessCallRefusedBeforeItsStartGivesItsClipBackFirst) {
+  Start(32 * kMiB);
+  grpc::ClientContext context;
+  SetDeadline(context);
+  auto process = stub_->Process(&context);
+  // The whole clip, then the client's side closes without a ProcessStart.
+  for (const v1::ProcessRequest& request : ProcessClipRequests(ClipOfMiB(4))) {
+    ASSERT_TRUE(process->Write(request));
+  }
+  process->WritesDone();
+  v1::ProcessResponse response;
+  while (process->Read(&response)) {
+  }
+  const grpc::Status status = process->Finish();
+  const std::int64_t clip_after_status = server_->budget().used(server::MemoryUse::kProcess);
+
+  EXPECT_THAT(status, GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT,
+                                   HasSubstr("ended before ProcessStart")));
+  EXPECT_EQ(clip_after_status, 0);
+}
+
+TEST_F(MemoryBudgetInProcessTest, AnExportedFilesMemoryIsGivenBackBeforeItsStatus) {
+  Start(32 * kMiB);
+  const UploadOutcome stored = UploadClip(*stub_, ClipOfMiB(2));
+  ASSERT_TRUE(stored.status.ok());
+  grpc::ClientContext context;
+  SetDeadline(context);
+  v1::ExportFileRequest request;
+  request.set_clip_id(stored.response.clip_id());
+  request.set_format("bvh");
+  auto reader = stub_->ExportFile(&context, request);
+  v1::FileChunk chunk;
+  std::int64_t bytes = 0;
+  while (reader->Read(&chunk)) bytes += static_cast<std::int64_t>(chunk.data().size());
+  const grpc::Status status = reader->Finish();
+  const std::int64_t file_after_status = server_->budget().used(server::MemoryUse::kResult);
+
+  TEMPOKEY_ASSERT_GRPC_OK(status);
+  EXPECT_GT(bytes, kMiB);
+  EXPECT_EQ(file_after_status, 0);
+}
+
 TEST_F(MemoryBudgetInProcessTest, InlineClipsProcessCallsAndResultsCountToo) {
   Start(4 * kMiB);
   v1::SubmitJobRequest inline_request;
