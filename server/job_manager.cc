@@ -189,7 +189,7 @@ void JobManager::Run(const std::weak_ptr<JobRecord>& job, std::stop_token pool_s
     std::lock_guard lock(mu_);
     record = job.lock();  // under mu_: gone if it was cancelled while queued and then deleted
     if (record == nullptr || record->state != JobState::kQueued) {  // cancelled: never runs
-      record.reset();  // the manager still holds it here; a DeleteJob after the unlock frees it
+      record.reset();  // under mu_ too: a DeleteJob after the unlock frees it
       return;
     }
     record->state = JobState::kRunning;
@@ -246,7 +246,7 @@ void JobManager::Run(const std::weak_ptr<JobRecord>& job, std::stop_token pool_s
       record->state = JobState::kSucceeded;
       record->progress = 1.0;
       record->stage = "done";
-      record->result = shared_result;
+      record->result = std::move(shared_result);  // the record's alone: a DeleteJob frees it
       record->result_bytes = result_bytes;
     } else if (result.status().code() == absl::StatusCode::kCancelled &&
                record->stop.stop_requested()) {
@@ -267,8 +267,10 @@ void JobManager::Run(const std::weak_ptr<JobRecord>& job, std::stop_token pool_s
     finished_bytes_ += record->result_bytes + record->spec_bytes;
     ReportEndLocked(snapshot, *record);
     // Let go before the unlock: a DeleteJob right after it gives the job's memory back at once,
-    // not whenever this worker returns (finished_ holds the record until then).
+    // not whenever this worker returns (finished_ holds the record until then). Only watchers
+    // need the snapshot's result, which they are sent.
     record.reset();
+    if (watchers.empty()) snapshot.result.reset();
     EvictLocked();
   }
   Notify(watchers, snapshot);
@@ -381,7 +383,7 @@ std::vector<std::shared_ptr<JobWatcher>> JobManager::CancelLocked(JobRecord& rec
 absl::StatusOr<JobSnapshot> JobManager::Cancel(std::string_view job_id, std::string_view owner) {
   JobSnapshot snapshot;
   std::vector<std::shared_ptr<JobWatcher>> watchers;
-  std::shared_ptr<JobRecord> ended;
+  bool ended = false;  // not the record: a DeleteJob after the unlock must free it at once
   {
     std::lock_guard lock(mu_);
     TEMPOKEY_ASSIGN_OR_RETURN(std::shared_ptr<JobRecord> record, FindLocked(job_id, owner));
@@ -390,7 +392,7 @@ absl::StatusOr<JobSnapshot> JobManager::Cancel(std::string_view job_id, std::str
       finished_.push_back(record);
       ++finished_count_;
       finished_bytes_ += record->spec_bytes;
-      ended = record;
+      ended = true;
     } else if (record->state == JobState::kRunning && !record->stop.stop_requested()) {
       record->stop.request_stop();
       record->stage = "cancelling";
@@ -398,8 +400,8 @@ absl::StatusOr<JobSnapshot> JobManager::Cancel(std::string_view job_id, std::str
       watchers = record->watchers;
     }
     snapshot = SnapshotLocked(*record);
-    if (ended != nullptr) {
-      ReportEndLocked(snapshot, *ended);
+    if (ended) {
+      ReportEndLocked(snapshot, *record);
       EvictLocked();
     }
   }

@@ -188,8 +188,8 @@ class JobManager {
   struct JobRecord;
 
   // Runs the job on a pool worker. The queued task does not own the record, and the worker lets go
-  // of it under the lock that ends the job: once anyone can see a job ended (and delete it), only
-  // the manager holds it, so a DeleteJob gives its memory back at once.
+  // of it (and of the result, unless watchers are sent it) under the lock that ends the job: once
+  // anyone can see a job ended and delete it, a DeleteJob gives its memory back at once.
   void Run(const std::weak_ptr<JobRecord>& job, std::stop_token pool_stop);
   void PublishProgress(const std::shared_ptr<JobRecord>& record, double fraction,
                        std::string_view stage);

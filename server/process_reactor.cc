@@ -61,7 +61,10 @@ class ProcessLink final {
   void Run(std::stop_token pool_stop) {
     {
       std::lock_guard lock(mu_);
-      if (finished_) return;  // the client left while the call was queued
+      if (finished_) {  // the client left while the call was queued
+        DropInput();
+        return;
+      }
     }
     const auto started = std::chrono::steady_clock::now();
     if (service_->options.test_hooks.on_job_start) service_->options.test_hooks.on_job_start("");

@@ -551,10 +551,33 @@ TEST_F(JobManagerTest, DeletingAJobCancelledInTheQueueGivesItsMemoryBackAtOnce) 
   const std::int64_t after_delete = budget.used(MemoryUse::kJob);
   gate_->Open();
   WaitTerminal(blocker.job_id);
+  // The orphaned task still runs, finds its job gone and starts nothing.
+  ASSERT_TRUE(pool_->WaitIdle(std::chrono::steady_clock::now() + kHangGuard));
 
   EXPECT_GE(both_bytes - blocker_bytes,
             100'000 * static_cast<std::int64_t>(sizeof(core::SpeedKnot)));
   EXPECT_EQ(after_delete, blocker_bytes);
+  EXPECT_EQ(gate_->arrived(), 1);
+}
+
+TEST_F(JobManagerTest, DeletingASucceededJobGivesItsResultsMemoryBackAtOnce) {
+  MemoryBudget& budget = Budget(std::int64_t{64} << 20);
+  JobManagerOptions options;
+  options.budget = &budget;
+  Start(std::move(options));
+  absl::StatusOr<JobSnapshot> job = manager_->Submit(
+      JobSpec{.clip_id = "sha256:test", .steps = {core::ConvertStep{}}},
+      std::make_shared<const core::Clip>(MakeClip(40, 2000)));  // a 2 MB result
+  ASSERT_TRUE(job.ok()) << job.status();
+  const JobState state = WaitTerminal(job->job_id).state;  // the snapshot (and its result) dropped
+  const std::int64_t result_bytes = budget.used(MemoryUse::kResult);
+
+  ASSERT_TRUE(manager_->Delete(job->job_id).ok());
+  const std::int64_t after_delete = budget.used();
+
+  EXPECT_EQ(state, JobState::kSucceeded);
+  EXPECT_GT(result_bytes, std::int64_t{1} << 20);
+  EXPECT_EQ(after_delete, 0);
 }
 
 TEST_F(JobManagerTest, ResultThatDoesNotFitTheBudgetFailsTheJobWithResourceExhausted) {
