@@ -29,6 +29,19 @@ using ::testing::HasSubstr;
 
 constexpr auto kHangGuard = std::chrono::seconds(60);
 
+// A retime of this many speed knots: 2.4 MB of operations in one step.
+constexpr int kManyKnots = 100'000;
+constexpr std::int64_t kManyKnotsBytes =
+    std::int64_t{kManyKnots} * static_cast<std::int64_t>(sizeof(core::SpeedKnot));
+core::RetimeStep RetimeOfManyKnots() {
+  core::RetimeStep retime;
+  retime.warp.domain = core::WarpDomain::kSpeedOverSource;
+  for (int k = 0; k < kManyKnots; ++k) {
+    retime.warp.speed.push_back(core::SpeedKnot{.time = {.value = k * 1e-4}, .speed = 1.0});
+  }
+  return retime;
+}
+
 // Records every update in arrival order; closes are recorded too.
 class RecordingWatcher : public JobWatcher {
  public:
@@ -121,6 +134,12 @@ class JobManagerTest : public ::testing::Test {
   // outlives every reservation they hold.
   MemoryBudget& Budget(std::int64_t bytes) {
     budget_ = std::make_unique<MemoryBudget>(bytes);
+    return *budget_;
+  }
+  // Starts the manager (with `options`) on a budget of `bytes`.
+  MemoryBudget& StartWithBudget(std::int64_t bytes, JobManagerOptions options = {}) {
+    options.budget = &Budget(bytes);
+    Start(std::move(options));
     return *budget_;
   }
 
@@ -493,16 +512,8 @@ TEST_F(JobManagerTest, EndIsReportedBeforeAnyoneSeesTheTerminalState) {
 }
 
 TEST_F(JobManagerTest, StoredJobsCountTheirOperationsInTheMemoryBudget) {
-  MemoryBudget& budget = Budget(std::int64_t{8} << 20);
-  JobManagerOptions options = GatedOptions();
-  options.budget = &budget;
-  Start(std::move(options));
-  // 100 000 speed knots: 2.4 MB of operations in one job.
-  core::RetimeStep retime;
-  retime.warp.domain = core::WarpDomain::kSpeedOverSource;
-  for (int k = 0; k < 100'000; ++k) {
-    retime.warp.speed.push_back(core::SpeedKnot{.time = {.value = k * 1e-4}, .speed = 1.0});
-  }
+  MemoryBudget& budget = StartWithBudget(std::int64_t{8} << 20, GatedOptions());
+  const core::RetimeStep retime = RetimeOfManyKnots();
   auto submit = [&](int knots_copies) {
     std::vector<core::PipelineStep> steps(static_cast<std::size_t>(knots_copies), retime);
     return manager_->Submit(JobSpec{.clip_id = "sha256:test", .steps = std::move(steps)},
@@ -519,7 +530,7 @@ TEST_F(JobManagerTest, StoredJobsCountTheirOperationsInTheMemoryBudget) {
   ASSERT_TRUE(manager_->Delete(one->job_id).ok());
 
   ASSERT_TRUE(one.ok()) << one.status();
-  EXPECT_GE(held, 100'000 * static_cast<std::int64_t>(sizeof(core::SpeedKnot)));
+  EXPECT_GE(held, kManyKnotsBytes);
   EXPECT_EQ(too_big.status().code(), absl::StatusCode::kResourceExhausted);
   EXPECT_THAT(std::string(too_big.status().message()),
               HasSubstr("memory budget (--memory_budget_bytes=8388608) cannot take a job of"));
@@ -527,20 +538,12 @@ TEST_F(JobManagerTest, StoredJobsCountTheirOperationsInTheMemoryBudget) {
 }
 
 TEST_F(JobManagerTest, DeletingAJobCancelledInTheQueueGivesItsMemoryBackAtOnce) {
-  MemoryBudget& budget = Budget(std::int64_t{64} << 20);
-  JobManagerOptions options = GatedOptions();
-  options.budget = &budget;
-  Start(std::move(options));
+  MemoryBudget& budget = StartWithBudget(std::int64_t{64} << 20, GatedOptions());
   JobSnapshot blocker = SubmitWrap();
   ASSERT_TRUE(gate_->WaitArrivals(1));  // the only worker is held; the next job waits behind it
   const std::int64_t blocker_bytes = budget.used(MemoryUse::kJob);
-  core::RetimeStep retime;  // 100 000 speed knots: 2.4 MB of operations
-  retime.warp.domain = core::WarpDomain::kSpeedOverSource;
-  for (int k = 0; k < 100'000; ++k) {
-    retime.warp.speed.push_back(core::SpeedKnot{.time = {.value = k * 1e-4}, .speed = 1.0});
-  }
   absl::StatusOr<JobSnapshot> queued =
-      manager_->Submit(JobSpec{.clip_id = "sha256:test", .steps = {retime}},
+      manager_->Submit(JobSpec{.clip_id = "sha256:test", .steps = {RetimeOfManyKnots()}},
                        std::make_shared<const core::Clip>(MakeClip(1, 10)));
   ASSERT_TRUE(queued.ok()) << queued.status();
   const std::int64_t both_bytes = budget.used(MemoryUse::kJob);
@@ -554,17 +557,13 @@ TEST_F(JobManagerTest, DeletingAJobCancelledInTheQueueGivesItsMemoryBackAtOnce) 
   // The orphaned task still runs, finds its job gone and starts nothing.
   ASSERT_TRUE(pool_->WaitIdle(std::chrono::steady_clock::now() + kHangGuard));
 
-  EXPECT_GE(both_bytes - blocker_bytes,
-            100'000 * static_cast<std::int64_t>(sizeof(core::SpeedKnot)));
+  EXPECT_GE(both_bytes - blocker_bytes, kManyKnotsBytes);
   EXPECT_EQ(after_delete, blocker_bytes);
   EXPECT_EQ(gate_->arrived(), 1);
 }
 
 TEST_F(JobManagerTest, DeletingASucceededJobGivesItsResultsMemoryBackAtOnce) {
-  MemoryBudget& budget = Budget(std::int64_t{64} << 20);
-  JobManagerOptions options;
-  options.budget = &budget;
-  Start(std::move(options));
+  MemoryBudget& budget = StartWithBudget(std::int64_t{64} << 20);
   absl::StatusOr<JobSnapshot> job = manager_->Submit(
       JobSpec{.clip_id = "sha256:test", .steps = {core::ConvertStep{}}},
       std::make_shared<const core::Clip>(MakeClip(40, 2000)));  // a 2 MB result
@@ -581,10 +580,7 @@ TEST_F(JobManagerTest, DeletingASucceededJobGivesItsResultsMemoryBackAtOnce) {
 }
 
 TEST_F(JobManagerTest, ResultThatDoesNotFitTheBudgetFailsTheJobWithResourceExhausted) {
-  MemoryBudget& budget = Budget(std::int64_t{1} << 20);
-  JobManagerOptions options;
-  options.budget = &budget;
-  Start(std::move(options));
+  MemoryBudget& budget = StartWithBudget(std::int64_t{1} << 20);
 
   // 40 joints x 3 + 3 channels x 2000 frames: a 2 MB result.
   absl::StatusOr<JobSnapshot> job = manager_->Submit(
