@@ -130,15 +130,11 @@ class JobManagerTest : public ::testing::Test {
     }
   }
 
-  // A memory budget for the manager's jobs; declared before the pool and the manager, so it
-  // outlives every reservation they hold.
-  MemoryBudget& Budget(std::int64_t bytes) {
-    budget_ = std::make_unique<MemoryBudget>(bytes);
-    return *budget_;
-  }
-  // Starts the manager (with `options`) on a budget of `bytes`.
+  // Starts the manager (with `options`) on a memory budget of `bytes` for its jobs. The budget is
+  // declared before the pool and the manager, so it outlives every reservation they hold.
   MemoryBudget& StartWithBudget(std::int64_t bytes, JobManagerOptions options = {}) {
-    options.budget = &Budget(bytes);
+    budget_ = std::make_unique<MemoryBudget>(bytes);
+    options.budget = budget_.get();
     Start(std::move(options));
     return *budget_;
   }
