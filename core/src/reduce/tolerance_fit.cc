@@ -424,13 +424,14 @@ inline void ShortWeightedSums(const double* data, const double* w, const BasisCo
 }
 
 // ScaleByResiduals() of a short segment (n - 1 <= kShortInterior): frame by frame, the same
-// products.
+// products, added to `total` the same way.
 inline void ShortScaleByResiduals(const double* data, const BasisColumns& basis, std::int64_t n,
-                                  const double* x, double floor, double* weights) {
+                                  const double* x, double floor, double* weights, double& total) {
   for (std::int64_t k = 1; k < n; ++k) {
     const double y = (basis.column[0][k] * x[0] + basis.column[1][k] * x[1]) +
                      (basis.column[2][k] * x[2] + basis.column[3][k] * x[3]);
     weights[k] *= std::abs(y - data[k]) + floor;
+    total += weights[k];
   }
 }
 
@@ -491,15 +492,18 @@ TEMPOKEY_CLONES_AVX double MaxError(const double* data, const BasisColumns& basi
   return tail;
 }
 
-// weights[k] *= |curve - data[k]| + floor over the interior frames, the curve as in MaxError():
-// one Lawson round's reweighting of a segment.
+// weights[k] *= |curve - data[k]| + floor over the interior frames, the curve as in MaxError(),
+// each new weight then added to `total` in frame order: one Lawson round's reweighting of a
+// segment and its part of the round's sum. The sum is a chain of dependent additions, the
+// longest path of a round; the reweighting runs on vectors beside it, at no cost of its own.
 TEMPOKEY_CLONES_AVX void ScaleByResiduals(const double* data, const BasisColumns& basis,
                                           std::int64_t n, const double* x, double floor,
-                                          double* weights) {
+                                          double* weights, double& total) {
   using simd::V4;
   const V4 x0 = simd::Broadcast(x[0]), x1 = simd::Broadcast(x[1]);
   const V4 x2 = simd::Broadcast(x[2]), x3 = simd::Broadcast(x[3]);
   const V4 floor_v = simd::Broadcast(floor);
+  double sum = total;
   std::int64_t k = 1;
   for (; k + 4 <= n; k += 4) {
     const V4 y = ((simd::Load(basis.column[0].data() + k) * x0 +
@@ -507,13 +511,17 @@ TEMPOKEY_CLONES_AVX void ScaleByResiduals(const double* data, const BasisColumns
                   (simd::Load(basis.column[2].data() + k) * x2 +
                    simd::Load(basis.column[3].data() + k) * x3));
     const V4 e = simd::Abs(y - simd::Load(data + k));
-    simd::Store(weights + k, simd::Load(weights + k) * (e + floor_v));
+    const V4 w = simd::Load(weights + k) * (e + floor_v);
+    simd::Store(weights + k, w);
+    sum = (((sum + w[0]) + w[1]) + w[2]) + w[3];
   }
   for (; k < n; ++k) {
     const double y = (basis.column[0][k] * x[0] + basis.column[1][k] * x[1]) +
                      (basis.column[2][k] * x[2] + basis.column[3][k] * x[3]);
     weights[k] *= std::abs(y - data[k]) + floor;
+    sum += weights[k];
   }
+  total = sum;
 }
 
 // Sum of c c^T over the interior frames k = 1 .. L-1 of a segment of length L (c as
@@ -1236,10 +1244,8 @@ class Fitter {
         // A round reweights, refits and measures the window's frames: up to 100 rounds on a
         // window of thousands of frames, so each one counts for the stop token.
         if (Stopping(span)) return false;
-        Reweight(s, run, 1e-3 * bounds_[c], origin);
         // Summed in frame order.
-        double total = 0.0;
-        for (const double weight : lawson_) total += weight;
+        const double total = Reweight(s, run, 1e-3 * bounds_[c], origin);
         const double scale = static_cast<double>(span) / total;
         for (double& weight : lawson_) weight *= scale;
         Solve(s, run, w.free_first, w.free_last, lawson_.data(), origin);
@@ -1251,11 +1257,15 @@ class Fitter {
   }
 
   // Multiplies each frame's Lawson weight (lawson_, from `origin`) by its |curve - sample| +
-  // floor over the frames of `run`.
-  void Reweight(std::span<const double> s, const KeyRun& run, double floor, std::int64_t origin) {
+  // floor over the frames of `run`, which cover lawson_; returns the new weights' sum, added in
+  // frame order.
+  double Reweight(std::span<const double> s, const KeyRun& run, double floor,
+                  std::int64_t origin) {
+    double total = 0.0;
     auto at_key = [&](int i) {
       const std::int64_t f = run.frames[i];
       lawson_[f - origin] *= std::abs(run.values[i] - s[f]) + floor;
+      total += lawson_[f - origin];
     };
     for (int j = 0; j + 1 < run.count; ++j) {
       at_key(j);
@@ -1267,13 +1277,14 @@ class Fitter {
         const BasisColumns& basis = basis_.Get(length);
         double* weights = lawson_.data() + (fa - origin);
         if (length - 1 <= kShortInterior) {
-          ShortScaleByResiduals(s.data() + fa, basis, length, x.data(), floor, weights);
+          ShortScaleByResiduals(s.data() + fa, basis, length, x.data(), floor, weights, total);
         } else {
-          ScaleByResiduals(s.data() + fa, basis, length, x.data(), floor, weights);
+          ScaleByResiduals(s.data() + fa, basis, length, x.data(), floor, weights, total);
         }
       }
     }
     at_key(run.count - 1);
+    return total;
   }
 
   // Calls fn(frame, curve - sample) for the frames [a, b) of segment j of `run`, and b too when

@@ -97,6 +97,12 @@ PointErrors WorldErrorMeter::MeasureChanged(std::span<const std::span<const doub
 
 void WorldErrorMeter::AddErrors(std::size_t first, std::size_t count, PointErrors& errors) const {
   const std::size_t n = source_.points.size();
+  // The sum is held here and stored once: added through `errors`, every addition would wait on
+  // the store of the one before (the stores to max_error may alias it). The same additions in
+  // the same order, so the same bits.
+  double squared_sum = errors.squared_sum;
+  double* const max_error = errors.max_error.data();
+  std::int64_t* const worst_frame = errors.worst_frame.data();
   for (std::size_t i = 0; i < count; ++i) {
     const auto f = static_cast<std::int64_t>(first + i);
     for (std::size_t p = 0; p < n; ++p) {
@@ -106,14 +112,15 @@ void WorldErrorMeter::AddErrors(std::size_t first, std::size_t count, PointError
       const double dy = a[1] - b[1];
       const double dz = a[2] - b[2];
       const double squared = dx * dx + dy * dy + dz * dz;
-      errors.squared_sum += squared;
+      squared_sum += squared;
       const double distance = std::sqrt(squared);
-      if (distance > errors.max_error[p]) {
-        errors.max_error[p] = distance;
-        errors.worst_frame[p] = f;
+      if (distance > max_error[p]) {
+        max_error[p] = distance;
+        worst_frame[p] = f;
       }
     }
   }
+  errors.squared_sum = squared_sum;
 }
 
 WorldErrorReport WorldErrorMeter::Report(const PointErrors& errors, double joint_tolerance) const {
