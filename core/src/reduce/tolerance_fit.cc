@@ -425,14 +425,16 @@ inline void ShortWeightedSums(const double* data, const double* w, const BasisCo
 
 // ScaleByResiduals() of a short segment (n - 1 <= kShortInterior): frame by frame, the same
 // products, added to `total` the same way.
-inline void ShortScaleByResiduals(const double* data, const BasisColumns& basis, std::int64_t n,
-                                  const double* x, double floor, double* weights, double& total) {
+inline double ShortScaleByResiduals(const double* data, const BasisColumns& basis, std::int64_t n,
+                                    const double* x, double floor, double* weights,
+                                    double total) {
   for (std::int64_t k = 1; k < n; ++k) {
     const double y = (basis.column[0][k] * x[0] + basis.column[1][k] * x[1]) +
                      (basis.column[2][k] * x[2] + basis.column[3][k] * x[3]);
     weights[k] *= std::abs(y - data[k]) + floor;
     total += weights[k];
   }
+  return total;
 }
 
 // MaxError() of a short segment (n - 1 <= kShortInterior), exact (no early return: a value over
@@ -493,17 +495,17 @@ TEMPOKEY_CLONES_AVX double MaxError(const double* data, const BasisColumns& basi
 }
 
 // weights[k] *= |curve - data[k]| + floor over the interior frames, the curve as in MaxError(),
-// each new weight then added to `total` in frame order: one Lawson round's reweighting of a
-// segment and its part of the round's sum. The sum is a chain of dependent additions, the
-// longest path of a round; the reweighting runs on vectors beside it, at no cost of its own.
-TEMPOKEY_CLONES_AVX void ScaleByResiduals(const double* data, const BasisColumns& basis,
-                                          std::int64_t n, const double* x, double floor,
-                                          double* weights, double& total) {
+// each new weight then added to `total` in frame order; returns the sum: one Lawson round's
+// reweighting of a segment and its part of the round's sum. The sum is a chain of dependent
+// additions, the longest path of a round; the reweighting runs on vectors beside it, at no cost
+// of its own.
+TEMPOKEY_CLONES_AVX double ScaleByResiduals(const double* data, const BasisColumns& basis,
+                                            std::int64_t n, const double* x, double floor,
+                                            double* weights, double total) {
   using simd::V4;
   const V4 x0 = simd::Broadcast(x[0]), x1 = simd::Broadcast(x[1]);
   const V4 x2 = simd::Broadcast(x[2]), x3 = simd::Broadcast(x[3]);
   const V4 floor_v = simd::Broadcast(floor);
-  double sum = total;
   std::int64_t k = 1;
   for (; k + 4 <= n; k += 4) {
     const V4 y = ((simd::Load(basis.column[0].data() + k) * x0 +
@@ -513,15 +515,15 @@ TEMPOKEY_CLONES_AVX void ScaleByResiduals(const double* data, const BasisColumns
     const V4 e = simd::Abs(y - simd::Load(data + k));
     const V4 w = simd::Load(weights + k) * (e + floor_v);
     simd::Store(weights + k, w);
-    sum = (((sum + w[0]) + w[1]) + w[2]) + w[3];
+    total = (((total + w[0]) + w[1]) + w[2]) + w[3];
   }
   for (; k < n; ++k) {
     const double y = (basis.column[0][k] * x[0] + basis.column[1][k] * x[1]) +
                      (basis.column[2][k] * x[2] + basis.column[3][k] * x[3]);
     weights[k] *= std::abs(y - data[k]) + floor;
-    sum += weights[k];
+    total += weights[k];
   }
-  total = sum;
+  return total;
 }
 
 // Sum of c c^T over the interior frames k = 1 .. L-1 of a segment of length L (c as
@@ -1244,7 +1246,6 @@ class Fitter {
         // A round reweights, refits and measures the window's frames: up to 100 rounds on a
         // window of thousands of frames, so each one counts for the stop token.
         if (Stopping(span)) return false;
-        // Summed in frame order.
         const double total = Reweight(s, run, 1e-3 * bounds_[c], origin);
         const double scale = static_cast<double>(span) / total;
         for (double& weight : lawson_) weight *= scale;
@@ -1277,9 +1278,10 @@ class Fitter {
         const BasisColumns& basis = basis_.Get(length);
         double* weights = lawson_.data() + (fa - origin);
         if (length - 1 <= kShortInterior) {
-          ShortScaleByResiduals(s.data() + fa, basis, length, x.data(), floor, weights, total);
+          total = ShortScaleByResiduals(s.data() + fa, basis, length, x.data(), floor, weights,
+                                        total);
         } else {
-          ScaleByResiduals(s.data() + fa, basis, length, x.data(), floor, weights, total);
+          total = ScaleByResiduals(s.data() + fa, basis, length, x.data(), floor, weights, total);
         }
       }
     }
