@@ -7,6 +7,7 @@
 #include <cstring>
 #include <limits>
 #include <numbers>
+#include <vector>
 
 #include "core/src/simd/instruction_set.h"
 #include "core/src/simd/vector_trig.h"
@@ -775,18 +776,88 @@ template <int G>
 // Groups of kLanes jobs one Markley step takes together.
 constexpr int kMarkleyGroups = 2;
 
+// The principal eigenvector by repeated squaring, where the matrix says it converges: per lane,
+// S = M + sigma I (sigma the sum of the negative weights' sizes, so S is positive semidefinite:
+// every tap adds w q q^T, whose eigenvalues are w and 0), B = S / trace(S), whose eigenvalues
+// mu_1 >= ... >= mu_4 >= 0 sum to 1. The Rayleigh quotient rho of the start vector v (the
+// pivot) bounds mu_1 >= rho, so mu_2 <= 1 - rho: where rho >= kPowerMinRayleigh = 3/4, mu_2 /
+// mu_1 <= 1/3 and v's tangent against the eigenvector is at most sqrt(1/2). kPowerSquarings
+// squarings (each renormalized by its trace) make B^64, whose image of v is within
+// (1/3)^64 sqrt(1/2) < 1e-30 of the eigenvector before rounding; rounding adds a few units in
+// the last place, as the Jacobi sweeps' own does. `accepted` is 1 in such lanes, 0 in the others
+// (a broad or degenerate spread, a non-finite sum), which the caller gives to the sweeps.
+// Markley's means are taken where taps lie over 30 degrees from the mean, so most have rho near
+// 1: the squarings cost a seventh of the sweeps, whose rotations each wait on two divisions and
+// two square roots.
+constexpr double kPowerMinRayleigh = 0.75;
+constexpr int kPowerSquarings = 6;
+
+template <int G>
+[[gnu::always_inline]] inline void PowerEigenvectors(const V (&m)[G][4][4], const V (&sigma)[G],
+                                                     const QuatLanes (&start)[G], V (&e)[G][4],
+                                                     V (&accepted)[G]) {
+  const FlagValues<V> flag;
+  for (int g = 0; g < G; ++g) {
+    // The upper triangle of S (M's sums are symmetric but for rounding).
+    V b[4][4];
+    for (int r = 0; r < 4; ++r) {
+      for (int c = r; c < 4; ++c) b[r][c] = r == c ? m[g][r][c] + sigma[g] : m[g][r][c];
+    }
+    const V trace = (b[0][0] + b[1][1]) + (b[2][2] + b[3][3]);
+    const V inverse = 1.0 / trace;
+    for (int r = 0; r < 4; ++r) {
+      for (int c = r; c < 4; ++c) b[r][c] = b[r][c] * inverse;
+    }
+    for (int r = 0; r < 4; ++r) {
+      for (int c = 0; c < r; ++c) b[r][c] = b[c][r];
+    }
+    const V v[4] = {start[g].w, start[g].x, start[g].y, start[g].z};
+    V bv[4];
+    for (int r = 0; r < 4; ++r) {
+      bv[r] = (b[r][0] * v[0] + b[r][1] * v[1]) + (b[r][2] * v[2] + b[r][3] * v[3]);
+    }
+    const V rayleigh = ((v[0] * bv[0] + v[1] * bv[1]) + (v[2] * bv[2] + v[3] * bv[3])) /
+                       ((v[0] * v[0] + v[1] * v[1]) + (v[2] * v[2] + v[3] * v[3]));
+    // Also false where anything is not a number.
+    accepted[g] = trace > 1e-100 && rayleigh >= kPowerMinRayleigh ? flag.one : flag.zero;
+    for (int k = 0; k < kPowerSquarings; ++k) {
+      V square[4][4];
+      for (int r = 0; r < 4; ++r) {
+        for (int c = r; c < 4; ++c) {
+          square[r][c] = (b[r][0] * b[0][c] + b[r][1] * b[1][c]) +
+                         (b[r][2] * b[2][c] + b[r][3] * b[3][c]);
+        }
+      }
+      const V scale = 1.0 / ((square[0][0] + square[1][1]) + (square[2][2] + square[3][3]));
+      for (int r = 0; r < 4; ++r) {
+        for (int c = r; c < 4; ++c) b[r][c] = b[c][r] = square[r][c] * scale;
+      }
+    }
+    for (int r = 0; r < 4; ++r) {
+      e[g][r] = (b[r][0] * v[0] + b[r][1] * v[1]) + (b[r][2] * v[2] + b[r][3] * v[3]);
+    }
+  }
+}
+
 // MarkleyMean() for several jobs at once, one per lane; a lane past its job's taps adds its pivot
 // with weight 0, which leaves every sum as it is (a group past the last job repeats it and stores
 // nothing).
+// With kPowers, each lane's eigenvector by squarings where PowerEigenvectors() accepts it; the
+// index of every job it does not accept goes to `retry`, its output unspecified. Without, the
+// Jacobi sweeps for every job (MarkleyMean()'s bits).
+template <bool kPowers>
 [[gnu::always_inline]] inline void MarkleyMeansBody(const double* quats, const double* weights,
                                                     const WeightedMeanJob* jobs, std::size_t count,
-                                                    QuatArrays out) {
+                                                    QuatArrays out,
+                                                    std::vector<std::size_t>* retry) {
   constexpr int G = kMarkleyGroups;
   for (std::size_t start = 0; start < count; start += G * kLanes) {
     std::size_t first[G], lanes[G];
     std::int64_t pivot[G][kLanes];
     V m[G][4][4];
+    V sigma[G];
     for (int g = 0; g < G; ++g) {
+      sigma[g] = Broadcast(0.0);
       const std::size_t begin = start + static_cast<std::size_t>(g) * kLanes;
       first[g] = begin < count ? begin : start;
       lanes[g] = begin < count ? std::min(kLanes, count - begin) : 0;
@@ -810,6 +881,7 @@ constexpr int kMarkleyGroups = 2;
           w[lane] = real ? weights[job[lane]->weight_offset + n] : 0.0;
         }
         const QuatLanes q = Gather(quats, at);
+        if constexpr (kPowers) sigma[g] += w < 0.0 ? -w : Broadcast(0.0);
         const V component[4] = {q.w, q.x, q.y, q.z};
         for (int r = 0; r < 4; ++r) {
           const V weighted = w * component[r];
@@ -818,11 +890,23 @@ constexpr int kMarkleyGroups = 2;
       }
     }
     V e[G][4];
-    PrincipalEigenvectors<G>(m, e);
+    QuatLanes pivots[G];
+    for (int g = 0; g < G; ++g) pivots[g] = Gather(quats, pivot[g]);
+    if constexpr (kPowers) {
+      V accepted[G];
+      PowerEigenvectors<G>(m, sigma, pivots, e, accepted);
+      for (int g = 0; g < G; ++g) {
+        for (std::size_t lane = 0; lane < lanes[g]; ++lane) {
+          if (accepted[g][lane] == 0.0) retry->push_back(first[g] + lane);
+        }
+      }
+    } else {
+      PrincipalEigenvectors<G>(m, e);
+    }
     for (int g = 0; g < G; ++g) {
       if (lanes[g] == 0) continue;
       QuatLanes mean = Normalized(QuatLanes{e[g][0], e[g][1], e[g][2], e[g][3]});
-      const Mask flip = Dot(mean, Gather(quats, pivot[g])) < 0.0;
+      const Mask flip = Dot(mean, pivots[g]) < 0.0;
       mean = {flip ? -mean.w : mean.w, flip ? -mean.x : mean.x, flip ? -mean.y : mean.y,
               flip ? -mean.z : mean.z};
       StoreQuats(out, first[g], mean, lanes[g]);
@@ -832,8 +916,12 @@ constexpr int kMarkleyGroups = 2;
 
 TEMPOKEY_CLONES_AVX2 void MarkleyMeansKernel(const double* quats, const double* weights,
                                              const WeightedMeanJob* jobs, std::size_t count,
-                                             QuatArrays out) {
-  MarkleyMeansBody(quats, weights, jobs, count, out);
+                                             QuatArrays out, std::vector<std::size_t>* retry) {
+  if (retry != nullptr) {
+    MarkleyMeansBody<true>(quats, weights, jobs, count, out, retry);
+  } else {
+    MarkleyMeansBody<false>(quats, weights, jobs, count, out, nullptr);
+  }
 }
 
 #if TEMPOKEY_WIDE_KERNELS
@@ -841,8 +929,13 @@ TEMPOKEY_CLONES_AVX2 void MarkleyMeansKernel(const double* quats, const double* 
 // matrices (64 vectors) spill less.
 TEMPOKEY_TARGET_AVX512 void MarkleyMeansKernel512(const double* quats, const double* weights,
                                                   const WeightedMeanJob* jobs, std::size_t count,
-                                                  QuatArrays out) {
-  MarkleyMeansBody(quats, weights, jobs, count, out);
+                                                  QuatArrays out,
+                                                  std::vector<std::size_t>* retry) {
+  if (retry != nullptr) {
+    MarkleyMeansBody<true>(quats, weights, jobs, count, out, retry);
+  } else {
+    MarkleyMeansBody<false>(quats, weights, jobs, count, out, nullptr);
+  }
 }
 #endif
 
@@ -857,10 +950,30 @@ bool UseAvx512Kernels() {
 
 void MarkleyMeans(const double* quats, const double* weights, const WeightedMeanJob* jobs,
                   std::size_t count, QuatArrays out) {
+  const auto kernel = [&](const WeightedMeanJob* some, std::size_t n, QuatArrays to,
+                          std::vector<std::size_t>* retry) {
 #if TEMPOKEY_WIDE_KERNELS
-  if (UseAvx512Kernels()) return MarkleyMeansKernel512(quats, weights, jobs, count, out);
+    if (UseAvx512Kernels()) return MarkleyMeansKernel512(quats, weights, some, n, to, retry);
 #endif
-  MarkleyMeansKernel(quats, weights, jobs, count, out);
+    MarkleyMeansKernel(quats, weights, some, n, to, retry);
+  };
+  std::vector<std::size_t> retry;
+  kernel(jobs, count, out, &retry);
+  if (retry.empty()) return;
+  // The jobs the squarings left: the sweeps, into their own slots.
+  std::vector<WeightedMeanJob> again(retry.size());
+  for (std::size_t i = 0; i < retry.size(); ++i) again[i] = jobs[retry[i]];
+  std::vector<double> components(4 * retry.size());
+  const QuatArrays swept = {components.data(), components.data() + retry.size(),
+                            components.data() + 2 * retry.size(),
+                            components.data() + 3 * retry.size()};
+  kernel(again.data(), again.size(), swept, nullptr);
+  for (std::size_t i = 0; i < retry.size(); ++i) {
+    out.w[retry[i]] = swept.w[i];
+    out.x[retry[i]] = swept.x[i];
+    out.y[retry[i]] = swept.y[i];
+    out.z[retry[i]] = swept.z[i];
+  }
 }
 
 void EulerToQuats(const EulerOrder& order, const double* a, const double* b, const double* c,

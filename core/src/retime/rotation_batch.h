@@ -2,10 +2,12 @@
 // functions of rotation.h (EulerToQuat(), Slerp(), WeightedMeanRotation(), MarkleyMean(),
 // QuatToEulerNearest() then NearestTurn()) over many samples, four or (AVX-512) eight to a
 // vector and several vectors per step. Each performs the scalar function's arithmetic in the
-// same order. The weighted and Markley means use no trigonometry and give the scalar functions'
-// bits; the others use the sines, cosines and arctangents of vector_trig.h instead of libm's:
-// results within a few units in the last place of the scalar ones, the same branch choices
-// except where a value lies within such rounding of a threshold.
+// same order. The weighted means use no trigonometry and give the scalar function's bits;
+// Markley's means find the eigenvector by repeated squaring where that converges, within a few
+// units in the last place of the scalar Jacobi sweeps (which they run, bit for bit, elsewhere);
+// the others use the sines, cosines and arctangents of vector_trig.h instead of libm's: results
+// within a few units in the last place of the scalar ones, the same branch choices except where
+// a value lies within such rounding of a threshold.
 // tests/core/retime/rotation_batch_test.cc checks both.
 #ifndef TEMPOKEY_CORE_SRC_RETIME_ROTATION_BATCH_H_
 #define TEMPOKEY_CORE_SRC_RETIME_ROTATION_BATCH_H_
@@ -77,8 +79,11 @@ struct WeightedMeanJob {
 };
 
 // For i < count: MarkleyMean() (rotation.h) of job i's quaternions of `quats` (as EulerToQuats()
-// writes them) into out[i], bit for bit: the same Jacobi sweeps, lane by lane, for several jobs at
-// once.
+// writes them) into out[i]. Where the largest eigenvalue of the job's matrix is at least 3/4 of
+// its trace (after a shift that makes negative weights harmless), as it is for almost every
+// spread that asks for Markley's mean, the eigenvector of repeated squaring: within a few units
+// in the last place of MarkleyMean()'s. Elsewhere MarkleyMean() bit for bit: the same Jacobi
+// sweeps, lane by lane, for several jobs at once.
 void MarkleyMeans(const double* quats, const double* weights, const WeightedMeanJob* jobs,
                   std::size_t count, QuatArrays out);
 
