@@ -777,15 +777,17 @@ template <int G>
 constexpr int kMarkleyGroups = 2;
 
 // The principal eigenvector by repeated squaring, where the matrix says it converges: per lane,
-// S = M + sigma I (sigma the sum of the negative weights' sizes, so S is positive semidefinite:
-// every tap adds w q q^T, whose eigenvalues are w and 0), B = S / trace(S), whose eigenvalues
-// mu_1 >= ... >= mu_4 >= 0 sum to 1. The Rayleigh quotient rho of the start vector v (the
-// pivot) bounds mu_1 >= rho, so mu_2 <= 1 - rho: where rho >= kPowerMinRayleigh = 3/4, mu_2 /
-// mu_1 <= 1/3 and v's tangent against the eigenvector is at most sqrt(1/2). kPowerSquarings
-// squarings (each renormalized by its trace) make B^64, whose image of v is within
-// (1/3)^64 sqrt(1/2) < 1e-30 of the eigenvector before rounding; rounding adds a few units in
-// the last place, as the Jacobi sweeps' own does. `accepted` is 1 in such lanes, 0 in the others
-// (a broad or degenerate spread, a non-finite sum), which the caller gives to the sweeps.
+// S = M + sigma I (sigma the sum of the negative weights' sizes, so S is positive semidefinite up
+// to rounding: every tap adds w q q^T, whose eigenvalues are w |q|^2 and 0, |q| = 1 within
+// rounding), B = S / trace(S), whose eigenvalues mu_1 >= ... >= mu_4 >= 0 sum to 1. The Rayleigh
+// quotient rho of the start vector v (the pivot) bounds mu_1 >= rho, so mu_2 <= 1 - rho: where
+// rho >= kPowerMinRayleigh = 3/4, mu_2 / mu_1 <= 1/3 and v lies within 30 degrees of the
+// eigenvector (tangent at most 1/sqrt(3)). kPowerSquarings squarings (each renormalized by its
+// trace) make B^64, whose image of v is within (1/3)^64 / sqrt(3) < 1e-30 of the eigenvector
+// before rounding (B^32 would leave about 1e-16: the sixth squaring is the margin); rounding adds
+// a few units in the last place, as the Jacobi sweeps' own does (the relative gap is at least
+// 1/2). `accepted` is 1 in such lanes, 0 in the others (a broad or degenerate spread, a negative
+// weight outweighing the rest, anything not a number), which the caller gives to the sweeps.
 // Markley's means are taken where taps lie over 30 degrees from the mean, so most have rho near
 // 1: the squarings cost a seventh of the sweeps, whose rotations each wait on two divisions and
 // two square roots.

@@ -79,11 +79,12 @@ struct WeightedMeanJob {
 };
 
 // For i < count: MarkleyMean() (rotation.h) of job i's quaternions of `quats` (as EulerToQuats()
-// writes them) into out[i]. Where the largest eigenvalue of the job's matrix is at least 3/4 of
-// its trace (after a shift that makes negative weights harmless), as it is for almost every
-// spread that asks for Markley's mean, the eigenvector of repeated squaring: within a few units
-// in the last place of MarkleyMean()'s. Elsewhere MarkleyMean() bit for bit: the same Jacobi
-// sweeps, lane by lane, for several jobs at once.
+// writes them) into out[i]. Where the pivot's Rayleigh quotient on the job's matrix is at least
+// 3/4 of its trace (after a shift that makes negative weights harmless; the largest eigenvalue is
+// then at least three times the next), as it is for most spreads that ask for Markley's mean, the
+// eigenvector of repeated squaring: within a few units in the last place of MarkleyMean()'s.
+// Elsewhere MarkleyMean() bit for bit: the same Jacobi sweeps, lane by lane, for several jobs at
+// once.
 void MarkleyMeans(const double* quats, const double* weights, const WeightedMeanJob* jobs,
                   std::size_t count, QuatArrays out);
 
