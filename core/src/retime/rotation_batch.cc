@@ -784,13 +784,14 @@ constexpr int kMarkleyGroups = 2;
 // rho >= kPowerMinRayleigh = 3/4, mu_2 / mu_1 <= 1/3 and v lies within 30 degrees of the
 // eigenvector (tangent at most 1/sqrt(3)). kPowerSquarings squarings (each renormalized by its
 // trace) make B^64, whose image of v is within (1/3)^64 / sqrt(3) < 1e-30 of the eigenvector
-// before rounding (B^32 would leave about 1e-16: the sixth squaring is the margin); rounding adds
+// before rounding (B^32 would leave up to 3e-16, more than half a unit in the last place: the
+// sixth squaring is needed); rounding adds
 // a few units in the last place, as the Jacobi sweeps' own does (the relative gap is at least
 // 1/2). `accepted` is 1 in such lanes, 0 in the others (a broad or degenerate spread, a negative
 // weight outweighing the rest, anything not a number), which the caller gives to the sweeps.
 // Markley's means are taken where taps lie over 30 degrees from the mean, so most have rho near
 // 1. The squarings are multiplications and additions, where each of the sweeps' rotations waits
-// on two divisions and two square roots: Markley's share of Bandai's dance at 2.5x fell from
+// on three divisions and two square roots: Markley's share of Bandai's dance at 2.5x fell from
 // 23 % of the retime to 6 %, the other jobs' sweeps included (README, "Measured").
 constexpr double kPowerMinRayleigh = 0.75;
 constexpr int kPowerSquarings = 6;
@@ -951,8 +952,8 @@ bool UseAvx512Kernels() {
 
 }  // namespace
 
-void MarkleyMeans(const double* quats, const double* weights, const WeightedMeanJob* jobs,
-                  std::size_t count, QuatArrays out) {
+std::size_t MarkleyMeans(const double* quats, const double* weights,
+                         const WeightedMeanJob* jobs, std::size_t count, QuatArrays out) {
   const auto kernel = [&](const WeightedMeanJob* some, std::size_t n, QuatArrays to,
                           std::vector<std::size_t>* retry) {
 #if TEMPOKEY_WIDE_KERNELS
@@ -962,7 +963,7 @@ void MarkleyMeans(const double* quats, const double* weights, const WeightedMean
   };
   std::vector<std::size_t> retry;
   kernel(jobs, count, out, &retry);
-  if (retry.empty()) return;
+  if (retry.empty()) return 0;
   // The jobs the squarings left: the sweeps, into their own slots.
   std::vector<WeightedMeanJob> again(retry.size());
   for (std::size_t i = 0; i < retry.size(); ++i) again[i] = jobs[retry[i]];
@@ -977,6 +978,7 @@ void MarkleyMeans(const double* quats, const double* weights, const WeightedMean
     out.y[retry[i]] = swept.y[i];
     out.z[retry[i]] = swept.z[i];
   }
+  return retry.size();
 }
 
 void EulerToQuats(const EulerOrder& order, const double* a, const double* b, const double* c,

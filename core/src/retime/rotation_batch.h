@@ -84,9 +84,9 @@ struct WeightedMeanJob {
 // then at least three times the next), as it is for most spreads that ask for Markley's mean, the
 // eigenvector of repeated squaring: within a few units in the last place of MarkleyMean()'s.
 // Elsewhere MarkleyMean() bit for bit: the same Jacobi sweeps, lane by lane, for several jobs at
-// once.
-void MarkleyMeans(const double* quats, const double* weights, const WeightedMeanJob* jobs,
-                  std::size_t count, QuatArrays out);
+// once. Returns how many jobs took the sweeps.
+std::size_t MarkleyMeans(const double* quats, const double* weights,
+                         const WeightedMeanJob* jobs, std::size_t count, QuatArrays out);
 
 // Adjacent source rotations with |q_i·q_{i+1}| below this are a discontinuity (resample.cc).
 inline constexpr double kDiscontinuityDot = 0.70710678118654752;
