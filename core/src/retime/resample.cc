@@ -183,6 +183,34 @@ TEMPOKEY_CLONES_AVX2 bool HasWrap(std::span<const double> degrees) {
   return false;
 }
 
+// True when every source sample of `channel` compares equal to the first one.
+TEMPOKEY_CLONES_AVX2 bool IsConstant(std::span<const double> channel) {
+  // In blocks (simd/block_scan.h; GCC left a scalar block loop as a comparison per sample): most
+  // channels are read to the end or differ early.
+  const double first = channel[0];
+  const auto differs = [first](const double* p) __attribute__((always_inline)) {
+    return simd::LoadScanVector(p) != first;
+  };
+  std::size_t i = simd::FirstFlaggedBlock(channel.data(), 0, channel.size(), differs);
+  for (; i < channel.size(); ++i) {
+    if (channel[i] != first) return false;
+  }
+  return true;
+}
+
+// IsConstant() in chunks, the stop token looked at between them (a long channel takes tens of
+// milliseconds); false as well when a stop is requested (the caller looks at the token after).
+bool IsConstantChannel(std::span<const double> channel, const std::stop_token& stop) {
+  constexpr auto kChunk = static_cast<std::size_t>(kResampleStopCheckTaps);
+  for (std::size_t begin = 0; begin < channel.size(); begin += kChunk) {
+    if (stop.stop_requested()) return false;
+    const std::span<const double> chunk =
+        channel.subspan(begin, std::min(kChunk, channel.size() - begin));
+    if (chunk[0] != channel[0] || !IsConstant(chunk)) return false;
+  }
+  return true;
+}
+
 void Unwrap(std::span<const double> degrees, Unwrapped& out) {
   out.wraps = HasWrap(degrees);
   if (!out.wraps) return;
@@ -358,6 +386,16 @@ absl::StatusOr<ResamplePlan> MakeResamplePlan(std::span<const double> positions,
 
 void ResampleScalar(const ResamplePlan& plan, std::span<const double> source,
                     std::span<double> out, std::stop_token stop) {
+  // A channel that never changes (most position channels of a BVH file are its bones' offsets:
+  // 60 of each Bandai clip's 66) resamples to its own value at every output, for every filter:
+  // each output's weights sum to one, and the odd reflection past the ends keeps a constant. The
+  // value itself is the exact answer, where the weighted sums give it to within a unit or so in
+  // the last place.
+  if (IsConstantChannel(source, stop)) {
+    std::fill(out.begin(), out.end(), source[0]);
+    return;
+  }
+  if (stop.stop_requested()) return;
   const double* src = source.data();
   const double* weights = plan.weights.data();
   const std::int64_t* first = plan.first.data();
@@ -396,21 +434,6 @@ void ResampleAngle(const ResamplePlan& plan, std::span<const double> degrees,
 
 namespace {
 
-// True when every source sample of `channel` compares equal to the first one.
-TEMPOKEY_CLONES_AVX2 bool IsConstant(std::span<const double> channel) {
-  // In blocks (simd/block_scan.h; GCC left a scalar block loop as a comparison per sample): most
-  // channels are read to the end or differ early.
-  const double first = channel[0];
-  const auto differs = [first](const double* p) __attribute__((always_inline)) {
-    return simd::LoadScanVector(p) != first;
-  };
-  std::size_t i = simd::FirstFlaggedBlock(channel.data(), 0, channel.size(), differs);
-  for (; i < channel.size(); ++i) {
-    if (channel[i] != first) return false;
-  }
-  return true;
-}
-
 // A joint whose three angles never change (end effectors and unused joints of a skeleton: a
 // quarter of CMU's) interpolates to its own rotation at every output. Its samples are then the
 // source's angles themselves: the exact answer, where the conversions to a quaternion and back
@@ -421,15 +444,8 @@ TEMPOKEY_CLONES_AVX2 bool IsConstant(std::span<const double> channel) {
 // False as well when a stop is requested while it reads (the caller looks at the token after).
 bool IsFixedRotation(const std::array<std::span<const double>, 3>& source,
                      const std::stop_token& stop) {
-  // In chunks, the token looked at between them: a long channel takes tens of milliseconds.
-  constexpr auto kChunk = static_cast<std::size_t>(kResampleStopCheckTaps);
   for (const std::span<const double>& channel : source) {
-    for (std::size_t begin = 0; begin < channel.size(); begin += kChunk) {
-      if (stop.stop_requested()) return false;
-      const std::span<const double> chunk =
-          channel.subspan(begin, std::min(kChunk, channel.size() - begin));
-      if (chunk[0] != channel[0] || !IsConstant(chunk)) return false;
-    }
+    if (!IsConstantChannel(channel, stop)) return false;
   }
   const double middle_cos = std::cos(source[1][0] * (std::numbers::pi / 180.0));
   return std::abs(middle_cos) >= retime_internal::kBatchedMinMiddleCos;
@@ -449,11 +465,13 @@ constexpr std::size_t kPrebuiltSlotBytes = std::size_t{64} << 20;
 // short arc, the weighted mean aligns to its pivot, squad aligns its four inputs).
 class SourceQuats {
  public:
-  // Converts in chunks, the stop token looked at between them; when a stop is requested it
-  // returns early, its quaternions incomplete: the caller looks at the token after.
+  // Converts in chunks into `storage` (grown to the clip's length, kept from joint to joint), the
+  // stop token looked at between them; when a stop is requested it returns early, its quaternions
+  // incomplete: the caller looks at the token after.
   SourceQuats(std::span<const std::pair<std::size_t, std::size_t>> runs, const EulerOrder& order,
-              const std::array<std::span<const double>, 3>& source, const std::stop_token& stop)
-      : quats_(std::make_unique_for_overwrite<double[]>(4 * source[0].size())) {
+              const std::array<std::span<const double>, 3>& source, const std::stop_token& stop,
+              std::vector<double>& storage)
+      : quats_(Grown(storage, 4 * source[0].size())) {
     // A chunk of conversions takes about a millisecond.
     constexpr auto kChunk = static_cast<std::size_t>(kResampleStopCheckTaps / 2);
     for (const auto& [run_begin, run_end] : runs) {
@@ -462,21 +480,26 @@ class SourceQuats {
         const std::size_t end = std::min(run_end, begin + kChunk);
         retime_internal::EulerToQuats(order, source[0].data() + begin, source[1].data() + begin,
                                       source[2].data() + begin, end - begin,
-                                      quats_.get() + 4 * begin);
+                                      quats_ + 4 * begin);
       }
     }
   }
 
   Quat operator[](std::size_t i) const {
-    const double* q = quats_.get() + 4 * i;
+    const double* q = quats_ + 4 * i;
     return {q[0], q[1], q[2], q[3]};
   }
   // (w, x, y, z) of every quaternion, one after the other (EulerToQuats()); only the runs' are
   // set.
-  const double* data() const { return quats_.get(); }
+  const double* data() const { return quats_; }
 
  private:
-  std::unique_ptr<double[]> quats_;
+  static double* Grown(std::vector<double>& storage, std::size_t size) {
+    if (storage.size() < size) storage.resize(size);
+    return storage.data();
+  }
+
+  double* quats_;
 };
 
 // An array of n values left uninitialized: every batch writes its slots before reading them, and
@@ -531,9 +554,17 @@ Quat WeightedMean(std::span<const Quat> quats, std::span<const double> weights, 
 // units in the last place would be magnified (rotation_batch.h).
 class ScalarRotationPath {
  public:
+  // What the path converts and gathers, kept from joint to joint (RotationScratch).
+  struct Memory {
+    std::vector<Quat> quats;
+    std::vector<unsigned char> converted;
+    std::vector<Quat> taps;
+  };
+
   ScalarRotationPath(const ResamplePlan& plan, const EulerOrder& order,
-                     const std::array<std::span<const double>, 3>& source, double min_dot)
-      : plan_(plan), order_(order), source_(source), min_dot_(min_dot) {}
+                     const std::array<std::span<const double>, 3>& source, double min_dot,
+                     Memory& memory)
+      : plan_(plan), order_(order), source_(source), min_dot_(min_dot), memory_(memory) {}
 
   // The interpolated rotation of output sample j (not a copy, not across a discontinuity).
   Quat Interpolated(std::size_t j) {
@@ -553,13 +584,14 @@ class ScalarRotationPath {
       return smooth ? Squad(q0, q1, q2, q3, t) : Slerp(q1, q2, t);
     }
     const std::int64_t count = plan_.offset[j + 1] - plan_.offset[j];
-    taps_.resize(static_cast<std::size_t>(count));
-    for (std::int64_t tap = 0; tap < count; ++tap) taps_[static_cast<std::size_t>(tap)] = At(first + tap);
+    std::vector<Quat>& taps = memory_.taps;
+    taps.resize(static_cast<std::size_t>(count));
+    for (std::int64_t tap = 0; tap < count; ++tap) taps[static_cast<std::size_t>(tap)] = At(first + tap);
     const std::span<const double> w(plan_.weights.data() + plan_.offset[j],
                                     static_cast<std::size_t>(count));
     const auto k = NearestIndex(x, last);
     const std::int64_t pivot = std::clamp(k - first, std::int64_t{0}, count - 1);
-    return WeightedMean(taps_, w, static_cast<std::size_t>(pivot), min_dot_);
+    return WeightedMean(taps, w, static_cast<std::size_t>(pivot), min_dot_);
   }
 
  private:
@@ -574,25 +606,26 @@ class ScalarRotationPath {
   }
 
   const Quat& Converted(std::int64_t i) {
-    if (quats_.empty()) {
-      quats_.resize(static_cast<std::size_t>(plan_.source_count));
-      converted_.assign(quats_.size(), 0);
+    // Set up on this joint's first use: most joints never take the scalar path.
+    if (!started_) {
+      memory_.quats.resize(static_cast<std::size_t>(plan_.source_count));
+      memory_.converted.assign(memory_.quats.size(), 0);
+      started_ = true;
     }
     const auto u = static_cast<std::size_t>(i);
-    if (!converted_[u]) {
-      quats_[u] = EulerToQuat(order_, {source_[0][u], source_[1][u], source_[2][u]});
-      converted_[u] = 1;
+    if (!memory_.converted[u]) {
+      memory_.quats[u] = EulerToQuat(order_, {source_[0][u], source_[1][u], source_[2][u]});
+      memory_.converted[u] = 1;
     }
-    return quats_[u];
+    return memory_.quats[u];
   }
 
   const ResamplePlan& plan_;
   const EulerOrder& order_;
   const std::array<std::span<const double>, 3>& source_;
   double min_dot_;
-  std::vector<Quat> quats_;
-  std::vector<unsigned char> converted_;
-  std::vector<Quat> taps_;
+  Memory& memory_;
+  bool started_ = false;
 };
 
 }  // namespace
@@ -750,12 +783,51 @@ struct RotationSchedule::Data {
   };
   std::vector<Batch> batches;
   std::size_t interpolating = 0;  // output samples that are not copies
+  // The most samples that interpolate in one batch (at most kRotationBatch): the size of a
+  // joint's per-batch scratch, which a short clip's few outputs would otherwise leave mostly
+  // unused (allocating it whole cost a short retime about a tenth of its time).
+  std::size_t largest_batch = 0;
   // On clips whose slots take at most kPrebuiltSlotBytes, each batch's slots made once here and
   // shared by every joint (faster on the short clips most retimes see); empty otherwise.
   std::vector<BatchSlots> prebuilt;
   // False when the constructor saw a stop request and returned early: never used then.
   bool complete = false;
 };
+
+// What one joint's resampling allocates, kept for the next (RotationScratch): the batch arrays
+// hold `capacity` slots, grown to the largest batch of the plans they serve.
+struct RotationScratch::Buffers {
+  std::vector<double> source_quats;  // SourceQuats
+  std::array<Unwrapped, 3> unwrapped;
+  ScalarRotationPath::Memory scalar_path;
+  std::vector<std::size_t> interpolating;
+  BatchSlots slots;  // the batch's slots, on clips whose schedule has none prebuilt
+  std::size_t capacity = 0;
+  QuatColumns rotations;
+  std::unique_ptr<unsigned char[]> copied;
+  std::unique_ptr<unsigned char[]> ill_conditioned;
+  // The weighted means whose spread asks for Markley's mean, and their slots.
+  QuatColumns markley_means;
+  std::unique_ptr<retime_internal::WeightedMeanJob[]> markley_jobs;
+  std::unique_ptr<std::size_t[]> markley_slot;
+
+  void Reserve(std::size_t batch) {
+    if (batch <= capacity) return;
+    capacity = batch;
+    rotations.Resize(capacity);
+    copied = Scratch<unsigned char>(capacity);
+    ill_conditioned = Scratch<unsigned char>(capacity);
+    markley_means.Resize(capacity);
+    markley_jobs = Scratch<retime_internal::WeightedMeanJob>(capacity);
+    markley_slot = Scratch<std::size_t>(capacity);
+    interpolating.reserve(capacity);
+  }
+};
+
+RotationScratch::RotationScratch() : buffers_(std::make_unique<Buffers>()) {}
+RotationScratch::~RotationScratch() = default;
+RotationScratch::RotationScratch(RotationScratch&&) noexcept = default;
+RotationScratch& RotationScratch::operator=(RotationScratch&&) noexcept = default;
 
 namespace {
 
@@ -819,6 +891,7 @@ RotationSchedule::RotationSchedule(const ResamplePlan& plan, std::stop_token sto
     }
     padded_taps += retime_internal::kMeanLanes * static_cast<std::size_t>(group_taps);
     d.interpolating += interpolating;
+    d.largest_batch = std::max(d.largest_batch, interpolating);
     d.batches.push_back({begin, j});
   }
   for (std::size_t i = 0; i < n;) {
@@ -866,7 +939,8 @@ void ResampleRotation(const ResamplePlan& plan, const EulerOrder& order,
   const RotationSchedule schedule(plan, stop);
   // An incomplete schedule (a stop was requested) is never used.
   if (stop.stop_requested()) return;
-  ResampleRotation(plan, schedule, order, source, out, stop);
+  RotationScratch scratch;
+  ResampleRotation(plan, schedule, scratch, order, source, out, stop);
 }
 
 namespace {
@@ -926,13 +1000,12 @@ bool WriteCopies(const ResamplePlan& plan, std::size_t begin, std::size_t end,
 }  // namespace
 
 void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule,
-                      const EulerOrder& order,
+                      RotationScratch& scratch, const EulerOrder& order,
                       const std::array<std::span<const double>, 3>& source,
                       const std::array<std::span<double>, 3>& out, std::stop_token stop) {
   const RotationSchedule::Data& d = schedule.data();
   if (!d.complete || stop.stop_requested()) return;
   const std::int64_t last = plan.source_count - 1;
-  std::vector<std::size_t> interpolating;
   if (d.interpolating == 0) {
     // Copies alone.
     for (const RotationSchedule::Data::Batch& batch : d.batches) {
@@ -945,10 +1018,11 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
     return;
   }
 
-  const SourceQuats quats(d.runs, order, source, stop);
+  RotationScratch::Buffers& memory = scratch.buffers();
+  const SourceQuats quats(d.runs, order, source, stop, memory.source_quats);
   if (stop.stop_requested()) return;
   // Each a pass or two over a channel: tens of milliseconds at most on the longest clips.
-  std::array<Unwrapped, 3> unwrapped;
+  std::array<Unwrapped, 3>& unwrapped = memory.unwrapped;
   for (int c = 0; c < 3; ++c) {
     Unwrap(source[c], unwrapped[c]);
     if (stop.stop_requested()) return;
@@ -971,24 +1045,19 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
   // WeightedMeanRotation()'s default: a rotation of angle theta from the mean has
   // |dot| = cos(theta / 2).
   const double min_dot = std::cos(0.5 * 30.0 * (std::numbers::pi / 180.0));
-  ScalarRotationPath scalar_path(plan, order, source, min_dot);
+  ScalarRotationPath scalar_path(plan, order, source, min_dot, memory.scalar_path);
 
   // Per batch, each output in its slot: the interpolated rotations (slerps and weighted means
   // batched), then all of them back to Euler angles, written in place; then the few samples the
   // batched steps leave to the scalar ones.
-  constexpr std::size_t capacity = kRotationBatch;
-  QuatColumns rotations;
-  rotations.Resize(capacity);
-  const std::unique_ptr<unsigned char[]> copied = Scratch<unsigned char>(capacity);
-  const std::unique_ptr<unsigned char[]> ill_conditioned = Scratch<unsigned char>(capacity);
-  // The weighted means whose spread asks for Markley's mean, and their slots.
-  QuatColumns markley_means;
-  markley_means.Resize(capacity);
-  const std::unique_ptr<retime_internal::WeightedMeanJob[]> markley_jobs =
-      Scratch<retime_internal::WeightedMeanJob>(capacity);
-  const std::unique_ptr<std::size_t[]> markley_slot = Scratch<std::size_t>(capacity);
-  interpolating.reserve(capacity);
-  BatchSlots scratch;
+  memory.Reserve(d.largest_batch);
+  QuatColumns& rotations = memory.rotations;
+  unsigned char* const copied = memory.copied.get();
+  unsigned char* const ill_conditioned = memory.ill_conditioned.get();
+  QuatColumns& markley_means = memory.markley_means;
+  retime_internal::WeightedMeanJob* const markley_jobs = memory.markley_jobs.get();
+  std::size_t* const markley_slot = memory.markley_slot.get();
+  std::vector<std::size_t>& interpolating = memory.interpolating;
   for (std::size_t b = 0; b < d.batches.size(); ++b) {
     if (stop.stop_requested()) return;
     const RotationSchedule::Data::Batch& batch = d.batches[b];
@@ -997,12 +1066,12 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
                      prebuilt ? nullptr : &interpolating)) {
       return;
     }
-    if (!prebuilt) scratch.Make(plan, interpolating);
-    const BatchSlots& slots = prebuilt ? d.prebuilt[b] : scratch;
+    if (!prebuilt) memory.slots.Make(plan, interpolating);
+    const BatchSlots& slots = prebuilt ? d.prebuilt[b] : memory.slots;
     const std::size_t count = slots.size();
     const std::size_t slerps = slots.cubic_begin();
     retime_internal::SlerpQuats(quats.data(), slots.i0(), slots.t(), slerps,
-                                rotations.Arrays(), copied.get());
+                                rotations.Arrays(), copied);
     for (std::size_t slot = slerps; slot < slots.weighted_begin(); ++slot) {
       const auto i0 = slots.i0()[slot];
       const Quat q1 = quats[static_cast<std::size_t>(i0)];
@@ -1022,7 +1091,7 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
     const retime_internal::QuatArrays all = rotations.Arrays();
     const retime_internal::QuatArrays mean_slots = {all.w + weighted_slot, all.x + weighted_slot,
                                                     all.y + weighted_slot, all.z + weighted_slot};
-    unsigned char* const needs_markley = copied.get() + weighted_slot;
+    unsigned char* const needs_markley = copied + weighted_slot;
     retime_internal::WeightedMeans(quats.data(), slots.mean_tables(), means, min_dot, mean_slots,
                                    needs_markley);
     std::size_t markleys = 0;
@@ -1033,7 +1102,7 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
       markley_jobs[markleys] = slots.job(s);
       markley_slot[markleys++] = weighted_slot + s;
     }
-    retime_internal::MarkleyMeans(quats.data(), plan.weights.data(), markley_jobs.get(), markleys,
+    retime_internal::MarkleyMeans(quats.data(), plan.weights.data(), markley_jobs, markleys,
                                   markley_means.Arrays());
     for (std::size_t s = 0; s < markleys; ++s) rotations.Set(markley_slot[s], markley_means.Get(s));
     // Back to Euler angles nearest the source's unwrapped angles at x (linearly interpolated),
@@ -1048,9 +1117,9 @@ void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule
         .turn = {source[0].data(), source[1].data(), source[2].data()},
         .out = {out[0].data(), out[1].data(), out[2].data()}};
     retime_internal::QuatsToEulerNearest(order, std::as_const(rotations).Arrays(), targets, count,
-                                         ill_conditioned.get());
-    for (std::size_t slot = NextFlagged(copied.get(), ill_conditioned.get(), 0, count);
-         slot < count; slot = NextFlagged(copied.get(), ill_conditioned.get(), slot + 1, count)) {
+                                         ill_conditioned);
+    for (std::size_t slot = NextFlagged(copied, ill_conditioned, 0, count);
+         slot < count; slot = NextFlagged(copied, ill_conditioned, slot + 1, count)) {
       const auto j = static_cast<std::size_t>(slots.output()[slot]);
       const auto nearest = static_cast<std::size_t>(slots.nearest()[slot]);
       if (copied[slot]) {

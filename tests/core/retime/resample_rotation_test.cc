@@ -2,6 +2,7 @@
 // near gimbal lock (where the general path's safeguards apply) within the identity tolerance of
 // the reference implementation (rotation_reference.h).
 #include <array>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <random>
@@ -219,10 +220,80 @@ TEST(ResampleRotationTest, AScheduleMadeAfterAStopRequestIsNeverUsed) {
     target[c] = out[c];
   }
   // No stop requested here: the schedule alone is incomplete.
-  ResampleRotation(plan, incomplete, *ParseEulerOrder("ZXY"), in, target);
+  RotationScratch scratch;
+  ResampleRotation(plan, incomplete, scratch, *ParseEulerOrder("ZXY"), in, target);
 
   for (int c = 0; c < 3; ++c) {
     for (double v : out[c]) ASSERT_EQ(v, kUntouched);
+  }
+}
+
+// A plan over `source_count` frames at `speed` source frames per output frame (tent filter).
+ResamplePlan PlanOver(std::int64_t source_count, double speed) {
+  std::vector<double> positions, ratios;
+  for (double x = 0.0; x <= static_cast<double>(source_count - 1); x += speed) {
+    positions.push_back(x);
+    ratios.push_back(speed);
+  }
+  absl::StatusOr<ResamplePlan> plan =
+      MakeResamplePlan(positions, ratios, source_count, ResampleFilter::kTent);
+  EXPECT_TRUE(plan.ok()) << plan.status();
+  return *std::move(plan);
+}
+
+TEST(ResampleRotationTest, OneScratchServesJointAfterJointAsAFreshOneWould) {
+  // Joints of two clips of different lengths, in turn, through one scratch, against each joint
+  // resampled alone: a joint that crosses the +-180 seam (unwrapped angles), two in a row near
+  // gimbal lock (the scalar path, whose converted rotations must not leak into the next joint), a
+  // joint that never turns and ordinary ones, at a speed that takes weighted means and one that
+  // takes slerps.
+  const EulerOrder order = *ParseEulerOrder("ZXY");
+  struct Joint {
+    std::int64_t frames;
+    double speed;
+    std::array<double, 3> base, swing;
+  };
+  const std::vector<Joint> joints = {
+      {300, 2.5, {20, 89.5, -30}, {25, 1.5, 40}},   // near gimbal lock
+      {300, 2.5, {-70, 90.4, 60}, {35, 1.2, 15}},   // near gimbal lock, other angles
+      {90, 0.7, {175, 10, -40}, {20, 15, 30}},      // crosses the seam
+      {300, 2.5, {10, 20, 30}, {40, 30, 25}},
+      {90, 2.5, {-120, 89.8, 5}, {30, 0.5, 30}},    // near gimbal lock, the short clip
+      {90, 2.5, {12, 34, 56}, {0, 0, 0}},           // never turns
+      {300, 0.7, {-10, -40, 170}, {30, 25, 40}},    // crosses the seam, slerps
+  };
+  RotationScratch scratch;
+  for (std::size_t n = 0; n < joints.size(); ++n) {
+    const Joint& joint = joints[n];
+    const ResamplePlan plan = PlanOver(joint.frames, joint.speed);
+    const RotationSchedule schedule(plan);
+    std::array<std::vector<double>, 3> source, shared, alone;
+    std::array<std::span<const double>, 3> in;
+    std::array<std::span<double>, 3> shared_out, alone_out;
+    for (int c = 0; c < 3; ++c) {
+      for (std::int64_t i = 0; i < joint.frames; ++i) {
+        double angle = joint.base[static_cast<std::size_t>(c)] +
+                       joint.swing[static_cast<std::size_t>(c)] *
+                           std::sin(0.09 * static_cast<double>(i) + c);
+        if (angle > 180.0) angle -= 360.0;  // wrapped, as files write them
+        source[c].push_back(angle);
+      }
+      shared[c].assign(plan.position.size(), 0.0);
+      alone[c].assign(plan.position.size(), 0.0);
+      in[c] = source[c];
+      shared_out[c] = shared[c];
+      alone_out[c] = alone[c];
+    }
+    ResampleRotation(plan, schedule, scratch, order, in, shared_out);
+    ResampleRotation(plan, order, in, alone_out);
+    for (int c = 0; c < 3; ++c) {
+      for (std::size_t j = 0; j < shared[c].size(); ++j) {
+        ASSERT_EQ(std::bit_cast<std::uint64_t>(shared[c][j]),
+                  std::bit_cast<std::uint64_t>(alone[c][j]))
+            << "joint " << n << " channel " << c << " output " << j << ": " << shared[c][j]
+            << " against " << alone[c][j];
+      }
+    }
   }
 }
 

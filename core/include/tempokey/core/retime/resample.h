@@ -142,9 +142,28 @@ class RotationSchedule {
   std::unique_ptr<Data> data_;
 };
 
-// ResampleRotation() with the schedule of `plan` made beforehand. Same results and cancellation.
+// The memory ResampleRotation() works in, handed from one joint to the next: the joint's source
+// rotations, unwrapped angles and one batch's scratch, each grown to the largest joint and batch
+// it has served. A retime of a short clip used to allocate these a dozen times per joint, about a
+// tenth of its time. One joint at a time: not for several threads at once.
+class RotationScratch {
+ public:
+  RotationScratch();
+  ~RotationScratch();
+  RotationScratch(RotationScratch&&) noexcept;
+  RotationScratch& operator=(RotationScratch&&) noexcept;
+
+  struct Buffers;  // resample.cc
+  Buffers& buffers() { return *buffers_; }
+
+ private:
+  std::unique_ptr<Buffers> buffers_;
+};
+
+// ResampleRotation() with the schedule of `plan` made beforehand, in `scratch` (Retime() makes
+// one of each per call). Same results and cancellation.
 void ResampleRotation(const ResamplePlan& plan, const RotationSchedule& schedule,
-                      const EulerOrder& order,
+                      RotationScratch& scratch, const EulerOrder& order,
                       const std::array<std::span<const double>, 3>& source,
                       const std::array<std::span<double>, 3>& out, std::stop_token stop = {});
 
