@@ -131,8 +131,7 @@ absl::StatusOr<NoiseCurves> FitNoiseCurves(const Clip& clip,
       if (!fit.ok()) return Annotate(fit.status(), ChannelLabel(clip, c));
       out.curves.push_back(CurveOf(*fit, clip.frame_time_seconds));
     }
-    ReportProgress(progress, static_cast<double>(c + 1) / count,
-                   absl::StrCat("reduce ", c + 1, "/", count));
+    ReportProgressOf(progress, static_cast<double>(c + 1) / count, "reduce ", c + 1, "/", count);
   }
   return out;
 }

@@ -328,8 +328,8 @@ absl::Status FitGroups(const Clip& clip, std::span<const std::span<const double>
     for (std::size_t k = 0; k < group.size(); ++k) {
       curves[group[k]] = SplineCurve(*fit, k, clip.frame_time_seconds);
     }
-    ReportProgress(progress, static_cast<double>(i + 1) / static_cast<double>(which.size()),
-                   absl::StrCat("reduce ", group.back() + 1, "/", clip.channels.size()));
+    ReportProgressOf(progress, static_cast<double>(i + 1) / static_cast<double>(which.size()),
+                     "reduce ", group.back() + 1, "/", clip.channels.size());
   }
   return absl::OkStatus();
 }
@@ -482,8 +482,7 @@ absl::StatusOr<ToleranceCurves> ToleranceFit(const Clip& clip,
       best.samples.clear();
       best.world_errors.reset();
       best.joint_bound = fitter.joint_bound() ? *fitter.joint_bound() * ceiling : 0.0;
-      ReportProgress(progress, 1.0, absl::StrCat("reduce ", clip.channels.size(), "/",
-                                                 clip.channels.size()));
+      ReportProgressOf(progress, 1.0, "reduce ", clip.channels.size(), "/", clip.channels.size());
       return best;
     }
   }
@@ -497,8 +496,7 @@ absl::StatusOr<ToleranceCurves> ToleranceFit(const Clip& clip,
       over = scale;
     }
   }
-  ReportProgress(progress, 1.0, absl::StrCat("reduce ", clip.channels.size(), "/",
-                                             clip.channels.size()));
+  ReportProgressOf(progress, 1.0, "reduce ", clip.channels.size(), "/", clip.channels.size());
   return best;
 }
 
@@ -601,8 +599,8 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
       iterations = std::max(iterations, fit->iterations);
       result.keyed.curves.push_back(std::move(fit->curve));
       result.squared_error_history.push_back(std::move(fit->history));
-      ReportProgress(progress, static_cast<double>(c + 1) / channel_count,
-                     absl::StrCat("reduce ", c + 1, "/", channel_count));
+      ReportProgressOf(progress, static_cast<double>(c + 1) / channel_count, "reduce ", c + 1,
+                       "/", channel_count);
     }
   }
   // Every number a fit produces lies in the keyed clip's ranges (clip.h) for every input

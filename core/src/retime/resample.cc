@@ -211,6 +211,18 @@ bool IsConstantChannel(std::span<const double> channel, const std::stop_token& s
   return true;
 }
 
+// The outputs of a channel whose samples all compare equal (IsConstantChannel()): copies keep
+// their own sample's bits (-0 and +0 compare equal), every other output is the first sample.
+void WriteConstant(const ResamplePlan& plan, std::span<const double> source,
+                   std::span<double> out, const std::stop_token& stop) {
+  StopCheck check(stop);
+  for (std::size_t j = 0; j < out.size(); ++j) {
+    if (check.After(static_cast<std::int64_t>(j))) return;
+    const auto i = plan.kind[j] == SampleKind::kCopy ? static_cast<std::size_t>(plan.first[j]) : 0;
+    out[j] = source[i];
+  }
+}
+
 void Unwrap(std::span<const double> degrees, Unwrapped& out) {
   out.wraps = HasWrap(degrees);
   if (!out.wraps) return;
@@ -391,8 +403,8 @@ void ResampleScalar(const ResamplePlan& plan, std::span<const double> source,
   // each output's weights sum to one, and the odd reflection past the ends keeps a constant. The
   // value itself is the exact answer, where the weighted sums give it to within a unit or so in
   // the last place.
-  if (IsConstantChannel(source, stop)) {
-    std::fill(out.begin(), out.end(), source[0]);
+  if (!source.empty() && IsConstantChannel(source, stop)) {
+    WriteConstant(plan, source, out, stop);
     return;
   }
   if (stop.stop_requested()) return;
@@ -783,9 +795,9 @@ struct RotationSchedule::Data {
   };
   std::vector<Batch> batches;
   std::size_t interpolating = 0;  // output samples that are not copies
-  // The most samples that interpolate in one batch (at most kRotationBatch): the size of a
-  // joint's per-batch scratch, which a short clip's few outputs would otherwise leave mostly
-  // unused (allocating it whole cost a short retime about a tenth of its time).
+  // The most samples that interpolate in one batch (at most kRotationBatch): the size of the
+  // per-batch scratch (RotationScratch), so that a short clip's few outputs take only what they
+  // use.
   std::size_t largest_batch = 0;
   // On clips whose slots take at most kPrebuiltSlotBytes, each batch's slots made once here and
   // shared by every joint (faster on the short clips most retimes see); empty otherwise.
@@ -950,12 +962,7 @@ namespace {
 void WriteFixedRotation(const ResamplePlan& plan,
                         const std::array<std::span<const double>, 3>& source,
                         const std::array<std::span<double>, 3>& out, const std::stop_token& stop) {
-  StopCheck check(stop);
-  for (std::size_t j = 0; j < plan.position.size(); ++j) {
-    if (check.After(static_cast<std::int64_t>(j))) return;
-    const auto i = plan.kind[j] == SampleKind::kCopy ? static_cast<std::size_t>(plan.first[j]) : 0;
-    for (int c = 0; c < 3; ++c) out[c][j] = source[c][i];
-  }
+  for (int c = 0; c < 3; ++c) WriteConstant(plan, source[c], out[c], stop);
 }
 
 // The first index in [from, end) where flags a[i] (or b[i], when b is given) are non-zero, or

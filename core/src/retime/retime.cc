@@ -370,11 +370,8 @@ absl::StatusOr<RetimeResult> Retime(const Clip& clip, const TimeWarpSpec& warp,
     }
     // The resamplers return early, their output incomplete, when a stop was requested.
     TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
-    // Formatted only for a listener (a string per channel was 2 % of a short clip's retime).
-    if (progress) {
-      progress(static_cast<double>(done) / total,
-               absl::StrCat("retime ", done, "/", clip.channels.size()));
-    }
+    ReportProgressOf(progress, static_cast<double>(done) / total, "retime ", done, "/",
+                     clip.channels.size());
   }
 
   RetimeReport& report = result.report;

@@ -154,6 +154,18 @@ TEST_P(RetimeFilterTest, AConstantChannelComesOutAsExactlyItsValueAtEveryOutput)
       }
     }
   }
+  // Zeros of both signs compare equal, so a channel of them is constant: the outputs that copy a
+  // sample keep its sign (the identity copies every one), the others are zero.
+  std::vector<double> zeros(301, 0.0);
+  for (std::size_t i = 0; i < zeros.size(); i += 3) zeros[i] = -0.0;
+  const Clip signed_zeros = PlainClip(dt, {zeros});
+  const RetimeResult same = RetimeOrDie(signed_zeros, {}, {.filter = GetParam()});
+  for (std::size_t i = 0; i < zeros.size(); ++i) {
+    ASSERT_TRUE(BitEqual(same.clip.channels[0].samples[i], zeros[i])) << i;
+  }
+  const RetimeResult faster =
+      RetimeOrDie(signed_zeros, OverSource({Knot(0, 2.5)}), {.filter = GetParam()});
+  for (double v : faster.clip.channels[0].samples) ASSERT_EQ(v, 0.0);
 }
 
 INSTANTIATE_TEST_SUITE_P(AllFilters, RetimeFilterTest,

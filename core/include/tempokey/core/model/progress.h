@@ -7,6 +7,7 @@
 #include <string_view>
 
 #include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
 
 namespace tempokey::core {
 
@@ -17,6 +18,14 @@ using ProgressFn = std::function<void(double fraction, std::string_view stage)>;
 // Calls `fn` when it is set.
 inline void ReportProgress(const ProgressFn& fn, double fraction, std::string_view stage) {
   if (fn) fn(fraction, stage);
+}
+
+// Calls `fn` when it is set, with the label absl::StrCat(parts...) made only then: the core
+// reports once per channel, and the labels made for no listener were 2 % of a short clip's
+// retime.
+template <class... Parts>
+void ReportProgressOf(const ProgressFn& fn, double fraction, const Parts&... parts) {
+  if (fn) fn(fraction, absl::StrCat(parts...));
 }
 
 // kCancelled "cancelled" if a stop was requested, OK otherwise. Core functions call it between
