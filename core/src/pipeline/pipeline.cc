@@ -128,9 +128,13 @@ absl::StatusOr<PipelineResult> RunPipeline(const Clip& clip, std::span<const Pip
     TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
     const PipelineStep& step = steps[i];
     const double base = static_cast<double>(i) * step_share;
-    ProgressFn step_progress = [&](double fraction, std::string_view stage) {
-      ReportProgress(progress, base + fraction * step_share, stage);
-    };
+    // Empty without a listener, so that the steps make no labels for nobody.
+    ProgressFn step_progress;
+    if (progress) {
+      step_progress = [&](double fraction, std::string_view stage) {
+        progress(base + fraction * step_share, stage);
+      };
+    }
     ReportProgress(progress, base, StepName(step));
 
     absl::Status status = std::visit(

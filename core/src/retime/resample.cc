@@ -598,7 +598,9 @@ class ScalarRotationPath {
     const std::int64_t count = plan_.offset[j + 1] - plan_.offset[j];
     std::vector<Quat>& taps = memory_.taps;
     taps.resize(static_cast<std::size_t>(count));
-    for (std::int64_t tap = 0; tap < count; ++tap) taps[static_cast<std::size_t>(tap)] = At(first + tap);
+    for (std::int64_t tap = 0; tap < count; ++tap) {
+      taps[static_cast<std::size_t>(tap)] = At(first + tap);
+    }
     const std::span<const double> w(plan_.weights.data() + plan_.offset[j],
                                     static_cast<std::size_t>(count));
     const auto k = NearestIndex(x, last);
@@ -807,7 +809,12 @@ struct RotationSchedule::Data {
 };
 
 // What one joint's resampling allocates, kept for the next (RotationScratch): the batch arrays
-// hold `capacity` slots, grown to the largest batch of the plans they serve.
+// hold `capacity` slots, grown to the largest batch of the plans they serve. Allocated for each
+// joint, a dozen allocations a joint, they took about a tenth of a short clip's retime (malloc and
+// free in `perf record` of Bandai's walk at 2.5x, 146 frames); kept, that retime ran 14 % faster.
+// Every buffer is written for the current joint before it is read: Unwrap() sets `wraps` each
+// time, the scalar path clears its conversions on its first use for a joint, SourceQuats reads
+// only the runs it has just converted, and each batch fills its slots and flags.
 struct RotationScratch::Buffers {
   std::vector<double> source_quats;  // SourceQuats
   std::array<Unwrapped, 3> unwrapped;

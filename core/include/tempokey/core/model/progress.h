@@ -20,9 +20,8 @@ inline void ReportProgress(const ProgressFn& fn, double fraction, std::string_vi
   if (fn) fn(fraction, stage);
 }
 
-// Calls `fn` when it is set, with the label absl::StrCat(parts...) made only then: the core
-// reports once per channel, and the labels made for no listener were 2 % of a short clip's
-// retime.
+// Calls `fn` when it is set, with the label absl::StrCat(parts...) made only then (the core
+// reports once per channel; a label made for no listener costs a short clip's retime about 2 %).
 template <class... Parts>
 void ReportProgressOf(const ProgressFn& fn, double fraction, const Parts&... parts) {
   if (fn) fn(fraction, absl::StrCat(parts...));

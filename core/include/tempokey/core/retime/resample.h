@@ -100,9 +100,11 @@ absl::StatusOr<ResamplePlan> MakeResamplePlan(std::span<const double> positions,
                                               std::int64_t source_count, ResampleFilter filter,
                                               std::stop_token stop = {});
 
-// out[j] = Σ weights · source over sample j's span. Preconditions: source has
-// plan.source_count values, out has plan.output_count(). When `stop` is requested it returns
-// early with `out` incomplete: the caller checks `stop` afterwards.
+// out[j] = Σ weights · source over sample j's span; for a channel whose samples all compare
+// equal, that value itself at every output (the sum's exact value), a copy keeping its own
+// sample's bits (-0 and +0 compare equal). Preconditions: source has plan.source_count values,
+// out has plan.output_count(). When `stop` is requested it returns early with `out` incomplete:
+// the caller checks `stop` afterwards.
 void ResampleScalar(const ResamplePlan& plan, std::span<const double> source, std::span<double> out,
                     std::stop_token stop = {});
 
@@ -144,9 +146,8 @@ class RotationSchedule {
 
 // The memory ResampleRotation() works in, handed from one joint to the next: the joint's source
 // rotations, unwrapped angles and one batch's scratch, each grown to the largest joint and batch
-// it has served. Allocated for each joint, a dozen allocations a joint, they took about a tenth of
-// a short clip's retime (malloc and free in `perf record` of Bandai's walk at 2.5x). One joint at
-// a time: not for several threads at once.
+// it has served. The results do not depend on what it served before. One joint at a time: not
+// for several threads at once. A moved-from scratch holds nothing and must not be used again.
 class RotationScratch {
  public:
   RotationScratch();
@@ -154,7 +155,8 @@ class RotationScratch {
   RotationScratch(RotationScratch&&) noexcept;
   RotationScratch& operator=(RotationScratch&&) noexcept;
 
-  struct Buffers;  // resample.cc
+  // The buffers themselves, for ResampleRotation() (defined in resample.cc).
+  struct Buffers;
   Buffers& buffers() { return *buffers_; }
 
  private:
