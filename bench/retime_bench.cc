@@ -40,8 +40,8 @@ const Clip& LoadClip(const std::string& relative) {
 
 constexpr const char* kCmu = "cmu/131_01.bvh";
 constexpr const char* kBandai = "bandai/dataset-1_dance-short_normal_001.bvh";
-// A short clip (146 frames at 30 fps): where the per-call work weighs most; the SPEC 8 table's slowest
-// clip and warp on some machines (at 2.5x).
+// A short clip (146 frames at 30 fps): where the per-call work weighs most; the SPEC 8 table's
+// slowest clip and warp on some machines (at 2.5x).
 constexpr const char* kBandaiWalk = "bandai/dataset-1_walk_active_001.bvh";
 
 struct Warp {

@@ -1,5 +1,6 @@
 // A 64-bit digest of the exact bits of doubles (FNV-1a over their bytes), to pin a computation's
-// output in a test: equal digests mean every value is bit for bit the same.
+// output in a test: equal digests mean every value is bit for bit the same; and the same test for
+// two values.
 #ifndef TEMPOKEY_TESTS_TESTING_BIT_DIGEST_H_
 #define TEMPOKEY_TESTS_TESTING_BIT_DIGEST_H_
 
@@ -8,6 +9,9 @@
 #include <span>
 
 namespace tempokey::testing {
+
+// Whether a and b are the same double bit for bit (+0 and -0 differ; a NaN equals its own bits).
+inline bool SameBits(double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; }
 
 class BitDigest {
  public:

@@ -10,6 +10,7 @@
 #include "gtest/gtest.h"
 #include "tempokey/core/io/bvh.h"
 #include "tempokey/core/io/file_io.h"
+#include "tests/testing/bit_digest.h"
 #include "tests/testing/test_paths.h"
 
 namespace tempokey::core {
@@ -79,7 +80,7 @@ ScannedBvh Scan(const std::string& text) {
   return scanned;
 }
 
-bool SameBits(double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; }
+using ::tempokey::testing::SameBits;
 
 // Joints, parents, offsets, end sites, channel kinds and every sample bit for bit.
 void ExpectBitIdentical(const Clip& expected, const Clip& actual) {

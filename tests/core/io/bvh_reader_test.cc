@@ -10,12 +10,13 @@
 #include "gtest/gtest.h"
 #include "tempokey/core/io/bvh.h"
 #include "tempokey/core/io/file_io.h"
+#include "tests/testing/bit_digest.h"
 #include "tests/testing/test_paths.h"
 
 namespace tempokey::core {
 namespace {
 
-bool SameBits(double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; }
+using ::tempokey::testing::SameBits;
 
 // Parses or fails the test.
 Clip Parse(const std::string& text, const std::string& name = "walk.bvh") {

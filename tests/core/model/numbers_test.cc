@@ -8,11 +8,12 @@
 
 #include "gtest/gtest.h"
 #include "tempokey/core/model/numbers.h"
+#include "tests/testing/bit_digest.h"
 
 namespace tempokey::core {
 namespace {
 
-bool SameBits(double a, double b) { return std::memcmp(&a, &b, sizeof(double)) == 0; }
+using ::tempokey::testing::SameBits;
 
 TEST(FormatDoubleTest, WritesShortestRoundTripText) {
   EXPECT_EQ(FormatDouble(0.1), "0.1");

@@ -2,7 +2,6 @@
 // near gimbal lock (where the general path's safeguards apply) within the identity tolerance of
 // the reference implementation (rotation_reference.h).
 #include <array>
-#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <random>
@@ -15,11 +14,13 @@
 #include "tempokey/core/model/rotation.h"
 #include "tempokey/core/retime/resample.h"
 #include "tests/core/retime/rotation_reference.h"
+#include "tests/testing/bit_digest.h"
 
 namespace tempokey::core {
 namespace {
 
 using ::tempokey::testing::ReferenceResampleRotation;
+using ::tempokey::testing::SameBits;
 
 constexpr std::int64_t kSourceCount = 200;
 
@@ -288,8 +289,7 @@ TEST(ResampleRotationTest, OneScratchServesJointAfterJointAsAFreshOneWould) {
     ResampleRotation(plan, order, in, alone_out);
     for (int c = 0; c < 3; ++c) {
       for (std::size_t j = 0; j < shared[c].size(); ++j) {
-        ASSERT_EQ(std::bit_cast<std::uint64_t>(shared[c][j]),
-                  std::bit_cast<std::uint64_t>(alone[c][j]))
+        ASSERT_TRUE(SameBits(shared[c][j], alone[c][j]))
             << "joint " << n << " channel " << c << " output " << j << ": " << shared[c][j]
             << " against " << alone[c][j];
       }

@@ -10,6 +10,7 @@
 #include "tempokey/core/retime/retime.h"
 #include "tempokey/core/retime/time_map.h"
 #include "tests/testing/angle_jumps.h"
+#include "tests/testing/bit_digest.h"
 #include "tests/testing/test_paths.h"
 
 // g++ 12 warns (-Wmissing-field-initializers) about designated initializers that leave members
@@ -32,7 +33,7 @@ Clip ReadOrDie(const std::string& path) {
   return clip.ok() ? *std::move(clip) : Clip{};
 }
 
-bool SameBits(double a, double b) { return std::memcmp(&a, &b, sizeof a) == 0; }
+using ::tempokey::testing::SameBits;
 
 TEST(RetimeCorpusTest, IdentityIsBitExactOnEveryFile) {
   const std::vector<std::string> files = AllSharedBvhFiles();

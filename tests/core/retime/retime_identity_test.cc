@@ -16,7 +16,6 @@
 // std::sin, std::cos and std::atan2, whose last bit another libm may round differently.
 #include <algorithm>
 #include <array>
-#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -42,6 +41,7 @@ namespace {
 using ::tempokey::testing::AllSharedBvhFiles;
 using ::tempokey::testing::BitDigest;
 using ::tempokey::testing::ReferenceResampleRotation;
+using ::tempokey::testing::SameBits;
 
 // The fast path converts with vectorised sine, cosine and arctangent accurate to a few units in
 // the last place where libm's are correctly rounded or nearly so; an angle of up to a few hundred
@@ -171,10 +171,6 @@ std::vector<double> WeightedSumsAsRecorded(const ResamplePlan& plan,
 // it: a sum of up to a few dozen products, each rounded once, and weights that sum to one within
 // as much.
 constexpr double kRecordedSumTolerance = 8 * std::numeric_limits<double>::epsilon();
-
-bool SameBits(double a, double b) {
-  return std::bit_cast<std::uint64_t>(a) == std::bit_cast<std::uint64_t>(b);
-}
 
 // A resampled channel as the digests were recorded: a channel whose samples never change now
 // comes out as its value to the bit (ResampleScalar(): a copy as its own sample, -0 kept, every

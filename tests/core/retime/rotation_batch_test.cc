@@ -7,7 +7,6 @@
 
 #include <algorithm>
 #include <array>
-#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -18,15 +17,14 @@
 #include "core/src/simd/vector_trig.h"
 #include "gtest/gtest.h"
 #include "tempokey/core/model/rotation.h"
+#include "tests/testing/bit_digest.h"
 
 #pragma GCC diagnostic ignored "-Wpsabi"
 
 namespace tempokey::core::retime_internal {
 namespace {
 
-bool SameBits(double a, double b) {
-  return std::bit_cast<std::uint64_t>(a) == std::bit_cast<std::uint64_t>(b);
-}
+using ::tempokey::testing::SameBits;
 
 // A random unit quaternion within `spread_degrees` of `center` (either sign).
 Quat Near(const Quat& center, double spread_degrees, std::mt19937_64& random) {
@@ -251,7 +249,7 @@ MarkleyComparison CompareMarkleyMeans(const MeanCase& c) {
     const bool same_bits = same(got.w, expected.w) && same(got.x, expected.x) &&
                            same(got.y, expected.y) && same(got.z, expected.z);
     const auto describe = [&] {
-      return testing::Message() << "sample " << i << " (" << job.count << " taps, Rayleigh "
+      return ::testing::Message() << "sample " << i << " (" << job.count << " taps, Rayleigh "
                                 << rayleigh << "): got " << got.w << " " << got.x << " " << got.y
                                 << " " << got.z << ", expected " << expected.w << " "
                                 << expected.x << " " << expected.y << " " << expected.z;
@@ -312,7 +310,9 @@ TEST(RotationBatchTest, MarkleyMeansAtTheSquaringsLimitAndWithLargeNegativeWeigh
   }
   const double sixty = std::numbers::pi / 3.0;
   for (double negative : {-0.2, -0.9, -1.2, -1.5, -1.8, -3.0}) {
-    add({{1, 0, 0, 0}, {std::cos(sixty), 0, std::sin(sixty), 0}, {std::cos(0.02), std::sin(0.02), 0, 0}},
+    add({{1, 0, 0, 0},
+         {std::cos(sixty), 0, std::sin(sixty), 0},
+         {std::cos(0.02), std::sin(0.02), 0, 0}},
         {1.0, negative, 1.0});
   }
   const MarkleyComparison comparison = CompareMarkleyMeans(c);
