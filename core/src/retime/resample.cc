@@ -211,15 +211,33 @@ bool IsConstantChannel(std::span<const double> channel, const std::stop_token& s
   return true;
 }
 
+// The first output in [from, end) of kind kCopy, or `end`: a byte search (SampleKind is one
+// byte), where a loop over the kinds took a comparison and branch per output, for every joint
+// (most outputs of a decimation or a slowed section are not copies).
+std::size_t NextCopy(const ResamplePlan& plan, std::size_t from, std::size_t end) {
+  static_assert(sizeof(SampleKind) == 1);
+  if (from >= end) return end;
+  const auto* kinds = reinterpret_cast<const unsigned char*>(plan.kind.data());
+  // Runs of copies (identity stretches) take no call.
+  if (kinds[from] == static_cast<unsigned char>(SampleKind::kCopy)) return from;
+  const void* found = std::memchr(kinds + from, static_cast<int>(SampleKind::kCopy), end - from);
+  return found == nullptr ? end
+                          : static_cast<std::size_t>(static_cast<const unsigned char*>(found) - kinds);
+}
+
 // The outputs of a channel whose samples all compare equal (IsConstantChannel()): copies keep
 // their own sample's bits (-0 and +0 compare equal), every other output is the first sample.
 void WriteConstant(const ResamplePlan& plan, std::span<const double> source,
                    std::span<double> out, const std::stop_token& stop) {
-  StopCheck check(stop);
-  for (std::size_t j = 0; j < out.size(); ++j) {
-    if (check.After(static_cast<std::int64_t>(j))) return;
-    const auto i = plan.kind[j] == SampleKind::kCopy ? static_cast<std::size_t>(plan.first[j]) : 0;
-    out[j] = source[i];
+  constexpr auto kChunk = static_cast<std::size_t>(kResampleStopCheckTaps);
+  for (std::size_t begin = 0; begin < out.size(); begin += kChunk) {
+    if (stop.stop_requested()) return;
+    const std::size_t end = std::min(out.size(), begin + kChunk);
+    std::fill(out.begin() + static_cast<std::ptrdiff_t>(begin),
+              out.begin() + static_cast<std::ptrdiff_t>(end), source[0]);
+    for (std::size_t j = NextCopy(plan, begin, end); j < end; j = NextCopy(plan, j + 1, end)) {
+      out[j] = source[static_cast<std::size_t>(plan.first[j])];
+    }
   }
 }
 
@@ -990,19 +1008,32 @@ std::size_t NextFlagged(const unsigned char* a, const unsigned char* b, std::siz
   return end;
 }
 
-// Writes the copies among outputs [begin, end) and lists the others in `interpolating`. A batch
-// can span a long run of copies: false when a stop was requested on the way (`interpolating`
-// then incomplete).
+// Writes the copies among outputs [begin, end) and lists the others in `interpolating` (null when
+// the schedule lists them already: the copies are then found by NextCopy()). A batch can span a
+// long run of copies: false when a stop was requested on the way (`interpolating` then
+// incomplete).
 bool WriteCopies(const ResamplePlan& plan, std::size_t begin, std::size_t end,
                  const std::array<std::span<const double>, 3>& source,
                  const std::array<std::span<double>, 3>& out, const std::stop_token& stop,
                  std::vector<std::size_t>* interpolating) {
-  if (interpolating != nullptr) interpolating->clear();
   constexpr auto kChunk = static_cast<std::size_t>(kResampleStopCheckTaps);
+  if (interpolating == nullptr) {
+    for (std::size_t chunk = begin; chunk < end; chunk += kChunk) {
+      if (stop.stop_requested()) return false;
+      const std::size_t chunk_end = std::min(end, chunk + kChunk);
+      for (std::size_t j = NextCopy(plan, chunk, chunk_end); j < chunk_end;
+           j = NextCopy(plan, j + 1, chunk_end)) {
+        const auto i = static_cast<std::size_t>(plan.first[j]);
+        for (int c = 0; c < 3; ++c) out[c][j] = source[c][i];
+      }
+    }
+    return true;
+  }
+  interpolating->clear();
   for (std::size_t j = begin; j < end; ++j) {
     if ((j - begin) % kChunk == kChunk - 1 && stop.stop_requested()) return false;
     if (plan.kind[j] != SampleKind::kCopy) {
-      if (interpolating != nullptr) interpolating->push_back(j);
+      interpolating->push_back(j);
       continue;
     }
     const auto i = static_cast<std::size_t>(plan.first[j]);

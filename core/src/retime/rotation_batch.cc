@@ -244,10 +244,24 @@ template <class VT = V>
     return {a, b, c, d};
   } else {
     static_assert(LanesOf<VT> == 8);
-    const QuatLanes low = Gather<V>(quats, at);
-    const QuatLanes high = Gather<V>(quats, at + 4);
-    return {Joined(low.w, high.w), Joined(low.x, high.x), Joined(low.y, high.y),
-            Joined(low.z, high.z)};
+    // Quaternions k and k + 4 side by side in one 8-lane vector, then the 4x4 transpose on both
+    // halves at once: 4 insertions, 4 in-lane unpacks and 4 two-source permutes, where two 4-lane
+    // transposes and their joins took 20 shuffles and as many register moves (a tap of a weighted
+    // mean is mostly this).
+    V8 pair[4];
+    for (int k = 0; k < 4; ++k) {
+      pair[k] = Joined(simd::Load(quats + 4 * at[k]), simd::Load(quats + 4 * at[k + 4]));
+    }
+    // (w0 w1 y0 y1 | w4 w5 y4 y5) and (x0 x1 z0 z1 | x4 x5 z4 z5) from quaternions 0, 1, 4, 5; the
+    // same from 2, 3, 6, 7.
+    const V8 wy01 = __builtin_shufflevector(pair[0], pair[1], 0, 8, 2, 10, 4, 12, 6, 14);
+    const V8 xz01 = __builtin_shufflevector(pair[0], pair[1], 1, 9, 3, 11, 5, 13, 7, 15);
+    const V8 wy23 = __builtin_shufflevector(pair[2], pair[3], 0, 8, 2, 10, 4, 12, 6, 14);
+    const V8 xz23 = __builtin_shufflevector(pair[2], pair[3], 1, 9, 3, 11, 5, 13, 7, 15);
+    return {__builtin_shufflevector(wy01, wy23, 0, 1, 8, 9, 4, 5, 12, 13),
+            __builtin_shufflevector(xz01, xz23, 0, 1, 8, 9, 4, 5, 12, 13),
+            __builtin_shufflevector(wy01, wy23, 2, 3, 10, 11, 6, 7, 14, 15),
+            __builtin_shufflevector(xz01, xz23, 2, 3, 10, 11, 6, 7, 14, 15)};
   }
 }
 
@@ -479,8 +493,10 @@ template <int I, int J, int K, class VT>
       const std::size_t begin = start + static_cast<std::size_t>(g) * L;
       first[g] = begin < count ? begin : start;
       lanes[g] = begin < count ? std::min(L, count - begin) : 0;
-      const QuatLanesOf<VT> q =
-          Normalized(LoadQuats<VT>(quats, first[g], std::max<std::size_t>(lanes[g], 1)));
+      // Not normalized again (QuatToEulerNearest() does): every quaternion given here is a unit
+      // one within rounding, and a square root and a division per sample were about 4 % of the
+      // rotation-aware retime. The angles move by a few units in the last place.
+      const QuatLanesOf<VT> q = LoadQuats<VT>(quats, first[g], std::max<std::size_t>(lanes[g], 1));
       // QuatToMatrix().
       const VT xx = q.x * q.x, yy = q.y * q.y, zz = q.z * q.z;
       const VT xy = q.x * q.y, xz = q.x * q.z, yz = q.y * q.z;

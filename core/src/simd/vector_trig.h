@@ -193,12 +193,17 @@ template <int N, class V>
     swap[k] = ay > ax;
     const V num = swap[k] ? ax : ay;
     const V den = swap[k] ? ay : ax;
-    const V t = den > 0.0 ? num / den : zero;  // in [0, 1]
-    // atan(t) = m pi/4 + sigma atan(u) with m = 0 or 1, then the octant: the angle stays
-    // m pi/4 + sigma atan(u) with m in 0..4 and sigma = +-1, summed once at the end.
-    big[k] = t > kTanEighthPi;
-    // (t - 1) / (t + 1) from the operands: num - den is exact for num >= den / 2 (Sterbenz).
-    u[k] = big[k] ? (num - den) / (num + den) : t;
+    // atan(t), t = num / den in [0, 1], is m pi/4 + sigma atan(u) with m = 0 or 1, then the
+    // octant: the angle stays m pi/4 + sigma atan(u) with m in 0..4 and sigma = +-1, summed once
+    // at the end. u is t, or (t - 1) / (t + 1) from the operands when t > tan(pi/8) (num - den is
+    // exact for num >= den / 2, Sterbenz). The reduction is chosen on the operands, so that one
+    // division gives u: t's division and u's were both made, and the divider's throughput bounds
+    // the conversions back to angles (three arctangents a sample). Within rounding of the
+    // boundary either u is accurate.
+    big[k] = num > kTanEighthPi * den;
+    const V u_num = big[k] ? num - den : num;
+    const V u_den = big[k] ? num + den : den;
+    u[k] = u_den > 0.0 ? u_num / u_den : zero;
   }
   AtanReduced<N>(u, p);
   TEMPOKEY_FOR_EACH(k, N) {
