@@ -227,6 +227,25 @@ template <class VT>
 [[maybe_unused, gnu::always_inline]] inline void StoreInterleaved(double* out,
                                                                   const QuatLanesOf<V8>& q,
                                                                   std::size_t count) {
+  if (count == 2 * kLanes) {
+    // The 8x4 transpose on whole vectors: pairs of components, then quaternions two by two, then
+    // the pairs of quaternions in order; 12 shuffles and 4 stores, where two 4x4 transposes of
+    // the halves took 20 shuffles (the extractions among them) and 8 stores.
+    const V8 wx_even = __builtin_shufflevector(q.w, q.x, 0, 8, 2, 10, 4, 12, 6, 14);
+    const V8 wx_odd = __builtin_shufflevector(q.w, q.x, 1, 9, 3, 11, 5, 13, 7, 15);
+    const V8 yz_even = __builtin_shufflevector(q.y, q.z, 0, 8, 2, 10, 4, 12, 6, 14);
+    const V8 yz_odd = __builtin_shufflevector(q.y, q.z, 1, 9, 3, 11, 5, 13, 7, 15);
+    const V8 q02 = __builtin_shufflevector(wx_even, yz_even, 0, 1, 8, 9, 2, 3, 10, 11);
+    const V8 q13 = __builtin_shufflevector(wx_odd, yz_odd, 0, 1, 8, 9, 2, 3, 10, 11);
+    const V8 q46 = __builtin_shufflevector(wx_even, yz_even, 4, 5, 12, 13, 6, 7, 14, 15);
+    const V8 q57 = __builtin_shufflevector(wx_odd, yz_odd, 4, 5, 12, 13, 6, 7, 14, 15);
+    const V8 rows[4] = {__builtin_shufflevector(q02, q13, 0, 1, 2, 3, 8, 9, 10, 11),
+                        __builtin_shufflevector(q02, q13, 4, 5, 6, 7, 12, 13, 14, 15),
+                        __builtin_shufflevector(q46, q57, 0, 1, 2, 3, 8, 9, 10, 11),
+                        __builtin_shufflevector(q46, q57, 4, 5, 6, 7, 12, 13, 14, 15)};
+    for (int r = 0; r < 4; ++r) std::memcpy(out + 8 * r, &rows[r], sizeof rows[r]);
+    return;
+  }
   StoreInterleaved(out, QuatLanes{LowHalf(q.w), LowHalf(q.x), LowHalf(q.y), LowHalf(q.z)}, count);
   if (count <= kLanes) return;
   StoreInterleaved(out + 4 * kLanes,
