@@ -272,7 +272,8 @@ double BoxHalfWidth(double ratio) { return 0.5 * ratio * std::clamp(ratio - 1.0,
 
 namespace {
 
-// TentWeight() for a > 0, given inv = 1 / (6 a^2): a kernel's taps share one division.
+// TentWeight() for a >= kMinKernelWidth, given inv = 1 / (6 a^2) (finite): a kernel's taps share
+// one division.
 double TentWeightWithInverse(double d, double a, double inv) {
   auto e = [&](double z) {
     // r clamped at zero, then cubed: (+0)^3 inv is the +0 of a branch to 0.0, and the clamp is one
@@ -289,7 +290,8 @@ double TentInverse(double a) { return 1.0 / (6.0 * a * a); }
 }  // namespace
 
 double TentWeight(double d, double a) {
-  if (a <= 0.0) return Hat(d);
+  // Below kMinKernelWidth (the plan's floor) 1 / (6 a^2) would be infinite.
+  if (a < kMinKernelWidth) return Hat(d);
   return TentWeightWithInverse(d, a, TentInverse(a));
 }
 

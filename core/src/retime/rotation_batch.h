@@ -123,8 +123,9 @@ struct EulerTargets {
 // For i < count: the angles QuatToEulerNearest(q[i], order, reference) then moved by NearestTurn()
 // as `targets` says, stored as it says; except where the cosine of the middle angle is below
 // kBatchedMinMiddleCos, where ill_conditioned[i] is set to 1 and the stored angles are
-// unspecified (otherwise 0). Preconditions: valid order; every q[i] of unit length within
-// rounding (as the functions above make them), which is taken as it is, not normalized again.
+// unspecified (otherwise 0). Preconditions: valid order; every q[i] whose angles are used of unit
+// length within rounding (as the functions above make them), which is taken as it is, not
+// normalized again.
 void QuatsToEulerNearest(const EulerOrder& order, ConstQuatArrays q, const EulerTargets& targets,
                          std::size_t count, unsigned char* ill_conditioned);
 

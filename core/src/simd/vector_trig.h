@@ -191,8 +191,14 @@ template <int N, class V>
     const V ax = Abs(x[k]);
     const V ay = Abs(y[k]);
     swap[k] = ay > ax;
-    const V num = swap[k] ? ax : ay;
-    const V den = swap[k] ? ay : ax;
+    V num = swap[k] ? ax : ay;
+    V den = swap[k] ? ay : ax;
+    // Operands this small scaled by 2^54 (exactly; their ratio is the same): the comparison
+    // below rounds its product absolutely near the subnormals, where it would pick the wrong
+    // reduction (atan2(5e-324, 1e-323) came out thousands of units in the last place off).
+    const V scale = den < 0x1p-968 ? Splat<V>(0x1p54) : one;
+    num = num * scale;
+    den = den * scale;
     // atan(t), t = num / den in [0, 1], is m pi/4 + sigma atan(u) with m = 0 or 1, then the
     // octant: the angle stays m pi/4 + sigma atan(u) with m in 0..4 and sigma = +-1, summed once
     // at the end. u is t, or (t - 1) / (t + 1) from the operands when t > tan(pi/8) (num - den is

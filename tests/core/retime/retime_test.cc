@@ -1,5 +1,6 @@
 #include "tempokey/core/retime/retime.h"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <random>
@@ -10,6 +11,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "gtest/gtest.h"
+#include "tempokey/core/retime/resample.h"
 #include "tempokey/core/retime/time_map.h"
 
 // g++ 12 warns (-Wmissing-field-initializers) about designated initializers that leave members
@@ -229,6 +231,25 @@ INSTANTIATE_TEST_SUITE_P(SpeedsGridsFilters, ConstantSpeedTest,
                          ::testing::ValuesIn(ConstantSpeedCases()));
 
 // ---- ramp --------------------------------------------------------------------------------------
+
+// The tent filter's weights: a partition of unity at every phase and width (a resampled constant
+// stays that constant), symmetric within rounding, and the plain hat (linear interpolation) below the plan's
+// smallest width, where 1 / (6 a^2) would be infinite.
+TEST(TentWeightTest, SumsToOneIsSymmetricAndIsTheHatBelowTheSmallestWidth) {
+  for (const double a : {0.25, 1.0, 2.5, 4.0, 9.75}) {
+    for (const double phase : {0.0, 0.125, 0.5, 0.7}) {
+      double sum = 0.0;
+      for (int i = -12; i <= 12; ++i) sum += TentWeight(i - phase, a);
+      EXPECT_NEAR(sum, 1.0, 1e-14) << "a " << a << ", phase " << phase;
+      EXPECT_NEAR(TentWeight(phase, a), TentWeight(-phase, a), 1e-15) << a;
+    }
+  }
+  for (const double a : {1e-101, 1e-200, 5e-324}) {
+    for (const double d : {0.0, 0.5, -0.25, 1.0, 3.0}) {
+      EXPECT_EQ(TentWeight(d, a), std::max(0.0, 1.0 - std::abs(d))) << "a " << a << ", d " << d;
+    }
+  }
+}
 
 TEST(RetimeTest, RampFromHalfToDoubleSpeedLastsItsClosedFormAndSamplesTheExponential) {
   // v(τ) = 0.5 + 1.5τ over 1 s: T_o = ln 4 / 1.5 = 0.924196 s, τ(t) = (v0/m)(e^{mt} - 1).

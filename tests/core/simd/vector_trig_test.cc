@@ -108,9 +108,14 @@ TEST(VectorTrigTest, ArctangentWithinTwoAndAHalfUlpsOverEveryQuadrantAndScale) {
     const double x = unit(random) * (i % 3 == 0 ? std::pow(2.0, exponent(random)) : 1.0);
     points.emplace_back(y, x);
   }
-  // Axes, diagonals, the reduction's boundaries (tan(pi/8)), signed zeros.
-  for (double y : {0.0, -0.0, 1.0, -1.0, 0.41421356237309503, 0.4142135623730951, 1e-310}) {
-    for (double x : {0.0, -0.0, 1.0, -1.0, 2.414213562373095, 1e-310}) points.emplace_back(y, x);
+  // Axes, diagonals, the reduction's boundaries (tan(pi/8)), signed zeros, subnormals (where
+  // the reduction, chosen on the operands, needs them scaled).
+  for (double y : {0.0, -0.0, 1.0, -1.0, 0.41421356237309503, 0.4142135623730951, 1e-310, 5e-324,
+                   1e-323, -2e-323, 4e-309}) {
+    for (double x : {0.0, -0.0, 1.0, -1.0, 2.414213562373095, 1e-310, 5e-324, 1e-323, -3e-323,
+                     1e-308}) {
+      points.emplace_back(y, x);
+    }
   }
   while (points.size() % 4 != 0) points.emplace_back(0.25, 0.5);
 
