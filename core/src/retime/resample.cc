@@ -225,20 +225,31 @@ std::size_t NextCopy(const ResamplePlan& plan, std::size_t from, std::size_t end
                           : static_cast<std::size_t>(static_cast<const unsigned char*>(found) - kinds);
 }
 
+// Calls copy(j) for every output j in [begin, end) of kind kCopy, in order, looking at `stop`
+// once per kResampleStopCheckTaps outputs: false when a stop was requested on the way.
+template <class CopyFn>
+bool ForEachCopy(const ResamplePlan& plan, std::size_t begin, std::size_t end,
+                 const std::stop_token& stop, CopyFn copy) {
+  constexpr auto kChunk = static_cast<std::size_t>(kResampleStopCheckTaps);
+  for (std::size_t chunk = begin; chunk < end; chunk += kChunk) {
+    if (stop.stop_requested()) return false;
+    const std::size_t chunk_end = std::min(end, chunk + kChunk);
+    for (std::size_t j = NextCopy(plan, chunk, chunk_end); j < chunk_end;
+         j = NextCopy(plan, j + 1, chunk_end)) {
+      copy(j);
+    }
+  }
+  return true;
+}
+
 // The outputs of a channel whose samples all compare equal (IsConstantChannel()): copies keep
 // their own sample's bits (-0 and +0 compare equal), every other output is the first sample.
 void WriteConstant(const ResamplePlan& plan, std::span<const double> source,
                    std::span<double> out, const std::stop_token& stop) {
-  constexpr auto kChunk = static_cast<std::size_t>(kResampleStopCheckTaps);
-  for (std::size_t begin = 0; begin < out.size(); begin += kChunk) {
-    if (stop.stop_requested()) return;
-    const std::size_t end = std::min(out.size(), begin + kChunk);
-    std::fill(out.begin() + static_cast<std::ptrdiff_t>(begin),
-              out.begin() + static_cast<std::ptrdiff_t>(end), source[0]);
-    for (std::size_t j = NextCopy(plan, begin, end); j < end; j = NextCopy(plan, j + 1, end)) {
-      out[j] = source[static_cast<std::size_t>(plan.first[j])];
-    }
-  }
+  std::fill(out.begin(), out.end(), source[0]);
+  ForEachCopy(plan, 0, out.size(), stop, [&](std::size_t j) {
+    out[j] = source[static_cast<std::size_t>(plan.first[j])];
+  });
 }
 
 void Unwrap(std::span<const double> degrees, Unwrapped& out) {
@@ -1021,19 +1032,12 @@ bool WriteCopies(const ResamplePlan& plan, std::size_t begin, std::size_t end,
                  const std::array<std::span<const double>, 3>& source,
                  const std::array<std::span<double>, 3>& out, const std::stop_token& stop,
                  std::vector<std::size_t>* interpolating) {
+  auto write_copy = [&](std::size_t j) {
+    const auto i = static_cast<std::size_t>(plan.first[j]);
+    for (int c = 0; c < 3; ++c) out[c][j] = source[c][i];
+  };
+  if (interpolating == nullptr) return ForEachCopy(plan, begin, end, stop, write_copy);
   constexpr auto kChunk = static_cast<std::size_t>(kResampleStopCheckTaps);
-  if (interpolating == nullptr) {
-    for (std::size_t chunk = begin; chunk < end; chunk += kChunk) {
-      if (stop.stop_requested()) return false;
-      const std::size_t chunk_end = std::min(end, chunk + kChunk);
-      for (std::size_t j = NextCopy(plan, chunk, chunk_end); j < chunk_end;
-           j = NextCopy(plan, j + 1, chunk_end)) {
-        const auto i = static_cast<std::size_t>(plan.first[j]);
-        for (int c = 0; c < 3; ++c) out[c][j] = source[c][i];
-      }
-    }
-    return true;
-  }
   interpolating->clear();
   for (std::size_t j = begin; j < end; ++j) {
     if ((j - begin) % kChunk == kChunk - 1 && stop.stop_requested()) return false;
@@ -1041,8 +1045,7 @@ bool WriteCopies(const ResamplePlan& plan, std::size_t begin, std::size_t end,
       interpolating->push_back(j);
       continue;
     }
-    const auto i = static_cast<std::size_t>(plan.first[j]);
-    for (int c = 0; c < 3; ++c) out[c][j] = source[c][i];
+    write_copy(j);
   }
   return true;
 }

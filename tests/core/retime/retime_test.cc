@@ -230,11 +230,9 @@ std::vector<ConstantSpeedCase> ConstantSpeedCases() {
 INSTANTIATE_TEST_SUITE_P(SpeedsGridsFilters, ConstantSpeedTest,
                          ::testing::ValuesIn(ConstantSpeedCases()));
 
-// ---- ramp --------------------------------------------------------------------------------------
-
 // The tent filter's weights: a partition of unity at every phase and width (a resampled constant
-// stays that constant), symmetric within rounding, and the plain hat (linear interpolation) below the plan's
-// smallest width, where 1 / (6 a^2) would be infinite.
+// stays that constant), symmetric within rounding, and the plain hat (linear interpolation) below
+// the plan's smallest width, where 1 / (6 a^2) would be infinite.
 TEST(TentWeightTest, SumsToOneIsSymmetricAndIsTheHatBelowTheSmallestWidth) {
   for (const double a : {0.25, 1.0, 2.5, 4.0, 9.75}) {
     for (const double phase : {0.0, 0.125, 0.5, 0.7}) {
@@ -250,6 +248,8 @@ TEST(TentWeightTest, SumsToOneIsSymmetricAndIsTheHatBelowTheSmallestWidth) {
     }
   }
 }
+
+// ---- ramp --------------------------------------------------------------------------------------
 
 TEST(RetimeTest, RampFromHalfToDoubleSpeedLastsItsClosedFormAndSamplesTheExponential) {
   // v(τ) = 0.5 + 1.5τ over 1 s: T_o = ln 4 / 1.5 = 0.924196 s, τ(t) = (v0/m)(e^{mt} - 1).
