@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <numbers>
 #include <random>
 #include <stop_token>
@@ -247,6 +248,47 @@ TEST(TentWeightTest, SumsToOneIsSymmetricAndIsTheHatBelowTheSmallestWidth) {
       EXPECT_EQ(TentWeight(d, a), std::max(0.0, 1.0 - std::abs(d))) << "a " << a << ", d " << d;
     }
   }
+}
+
+// The plan's tent weights (evaluated four at a time on vectors) are TentWeight() of each tap's
+// offset i - x, bit for bit, at every phase, width and kernel length, the ends' trimmed taps
+// included.
+TEST(TentWeightTest, PlanWeightsAreTentWeightOfEachTapBitForBit) {
+  constexpr std::int64_t kSources = 400;
+  std::mt19937_64 rng(16);
+  std::uniform_real_distribution<double> position(0.0, kSources - 1.0);
+  std::uniform_real_distribution<double> ratio(1.0, 9.0);
+  std::vector<double> positions, ratios;
+  for (int j = 0; j < 2000; ++j) {
+    positions.push_back(position(rng));
+    ratios.push_back(ratio(rng));
+  }
+  // Whole positions, steady ratios and positions near both ends as well.
+  for (const double x : {1.0, 2.0, 7.0, 200.0, 397.5, 398.0, 398.999}) {
+    for (const double rho : {1.5, 2.0, 2.5, 4.0, 8.25}) {
+      positions.push_back(x);
+      ratios.push_back(rho);
+    }
+  }
+  const absl::StatusOr<ResamplePlan> plan =
+      MakeResamplePlan(positions, ratios, kSources, ResampleFilter::kTent);
+  ASSERT_TRUE(plan.ok()) << plan.status();
+  int kernels = 0;
+  for (std::size_t j = 0; j < positions.size(); ++j) {
+    if (plan->kind[j] != SampleKind::kWeighted) continue;
+    ++kernels;
+    const double x = plan->position[j];
+    const double a = plan->width[j];
+    for (std::int64_t k = plan->offset[j]; k < plan->offset[j + 1]; ++k) {
+      const std::int64_t i = plan->first[j] + (k - plan->offset[j]);
+      const double expected = TentWeight(static_cast<double>(i) - x, a);
+      const double got = plan->weights[static_cast<std::size_t>(k)];
+      ASSERT_EQ(std::memcmp(&got, &expected, sizeof got), 0)
+          << "output " << j << " (x " << x << ", width " << a << "), tap " << i << ": " << got
+          << " where TentWeight gives " << expected;
+    }
+  }
+  EXPECT_GT(kernels, 1900);
 }
 
 // ---- ramp --------------------------------------------------------------------------------------
