@@ -529,8 +529,11 @@ template <int I, int J, int K, class VT>
   constexpr int j = J;
   constexpr int k = K;
   constexpr double sign = ((j - i + 3) % 3 == 1) ? 1.0 : -1.0;
-  // On 8 lanes one group: the arctangents' chains of two spill more than they overlap.
-  constexpr int G = L == 8 ? 1 : kEulerGroups;
+  // Two groups on 8 lanes as well: their six arctangents' polynomial chains overlap. (One group
+  // had measured faster while every sample also took a normalization's square root and division;
+  // without them two are 2-6 % faster, paired runs of bench/retime_bench. The same bits: each
+  // lane's operations do not depend on the grouping.)
+  constexpr int G = kEulerGroups;
   for (std::size_t start = 0; start < count; start += G * L) {
     // Group g's samples start at first[g]; a group past the end repeats group 0 and stores
     // nothing.
