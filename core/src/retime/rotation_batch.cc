@@ -682,7 +682,9 @@ template <class VT>
 }
 
 // The weighted means of the groups' samples, LanesOf<VT> lanes at a time: a group of kMeanLanes
-// samples is one 8-lane vector or two 4-lane ones.
+// samples is one 8-lane vector or two 4-lane ones. Two vectors' taps are summed side by side, so
+// that one's square root and division (the normalization, a long chain) overlap the other's sums
+// (each lane's operations are the same either way, so the same bits).
 template <class VT>
 [[gnu::always_inline]] inline void WeightedMeansBody(const double* quats, MeanTables tables,
                                                      std::size_t count, double min_dot,
@@ -692,42 +694,76 @@ template <class VT>
   static_assert(kMeanLanes % L == 0);
   using Q = QuatLanesOf<VT>;
   const VT zero = vector_trig::Splat<VT>(0.0);
-  for (std::size_t first = 0; first < count; first += L) {
-    const std::size_t lanes = std::min(L, count - first);
+  // One vector's mean in the making: samples [first, first + L).
+  struct Mean {
+    std::size_t first;
+    std::int64_t taps;
+    const std::int64_t* source;
+    const double* weight;
+    Q ref;
+    Q sum;
+    VT nearest_pivot;  // min |q·pivot| over the taps
+  };
+  auto begin = [&](std::size_t first) __attribute__((always_inline)) {
     const MeanGroup& group = tables.groups[first / kMeanLanes];
     // This vector's lanes within the group's.
     const std::size_t part = first % kMeanLanes;
-    const std::int64_t* source = tables.source + group.tap_begin + part;
-    const double* weight = tables.weight + group.tap_begin + part;
-    const Q ref = Gather<VT>(quats, group.pivot + part);
-    Q sum = {zero, zero, zero, zero};
-    VT nearest_pivot = vector_trig::Splat<VT>(1.0);  // min |q·pivot| over the taps
-    for (std::int64_t n = 0; n < group.taps; ++n) {
-      const Q q = Gather<VT>(quats, source + kMeanLanes * n);
-      const VT w = simd::Load<VT>(weight + kMeanLanes * n);
-      const VT dot = Dot(q, ref);
-      const VT signed_w = dot < 0.0 ? -w : w;
-      sum = {sum.w + q.w * signed_w, sum.x + q.x * signed_w, sum.y + q.y * signed_w,
-             sum.z + q.z * signed_w};
-      const VT size = vector_trig::Abs(dot);
-      nearest_pivot = size < nearest_pivot ? size : nearest_pivot;
-    }
-    const VT norm = Sqrt(Dot(sum, sum));
+    return Mean{first,
+                group.taps,
+                tables.source + group.tap_begin + part,
+                tables.weight + group.tap_begin + part,
+                Gather<VT>(quats, group.pivot + part),
+                {zero, zero, zero, zero},
+                vector_trig::Splat<VT>(1.0)};
+  };
+  auto add_tap = [&](Mean& m, std::int64_t n) __attribute__((always_inline)) {
+    const Q q = Gather<VT>(quats, m.source + kMeanLanes * n);
+    const VT w = simd::Load<VT>(m.weight + kMeanLanes * n);
+    const VT dot = Dot(q, m.ref);
+    const VT signed_w = dot < 0.0 ? -w : w;
+    m.sum = {m.sum.w + q.w * signed_w, m.sum.x + q.x * signed_w, m.sum.y + q.y * signed_w,
+             m.sum.z + q.z * signed_w};
+    const VT size = vector_trig::Abs(dot);
+    m.nearest_pivot = size < m.nearest_pivot ? size : m.nearest_pivot;
+  };
+  auto finish = [&](const Mean& m) __attribute__((always_inline)) {
+    const std::size_t lanes = std::min(L, count - m.first);
+    const VT norm = Sqrt(Dot(m.sum, m.sum));
     const VT inverse = 1.0 / norm;
-    const Q mean = Scaled(sum, inverse);
+    const Q mean = Scaled(m.sum, inverse);
     const FlagValues<VT> flag;
     // One comparison of the norm, its flags used twice (a comparison used in two places is
     // shared as a mask value, which GCC 12 makes lane by lane on 8 lanes).
     VT markley = norm > 1e-9 ? flag.zero : flag.one;
-    if (!WithinSpread(nearest_pivot, vector_trig::Abs(Dot(mean, ref)), markley, min_dot)) {
-      for (std::int64_t n = 0; n < group.taps; ++n) {
-        const Q q = Gather<VT>(quats, source + kMeanLanes * n);
-        const VT w = simd::Load<VT>(weight + kMeanLanes * n);
+    if (!WithinSpread(m.nearest_pivot, vector_trig::Abs(Dot(mean, m.ref)), markley, min_dot)) {
+      for (std::int64_t n = 0; n < m.taps; ++n) {
+        const Q q = Gather<VT>(quats, m.source + kMeanLanes * n);
+        const VT w = simd::Load<VT>(m.weight + kMeanLanes * n);
         markley = w != 0.0 && vector_trig::Abs(Dot(q, mean)) < min_dot ? flag.one : markley;
       }
     }
-    StoreQuats(out, first, mean, lanes);
-    StoreFlags(needs_markley + first, markley, lanes);
+    StoreQuats(out, m.first, mean, lanes);
+    StoreFlags(needs_markley + m.first, markley, lanes);
+  };
+  std::size_t first = 0;
+  for (; first + L < count; first += 2 * L) {
+    Mean a = begin(first);
+    Mean b = begin(first + L);
+    const std::int64_t both = std::min(a.taps, b.taps);
+    std::int64_t n = 0;
+    for (; n < both; ++n) {
+      add_tap(a, n);
+      add_tap(b, n);
+    }
+    for (std::int64_t k = n; k < a.taps; ++k) add_tap(a, k);
+    for (std::int64_t k = n; k < b.taps; ++k) add_tap(b, k);
+    finish(a);
+    finish(b);
+  }
+  if (first < count) {
+    Mean a = begin(first);
+    for (std::int64_t n = 0; n < a.taps; ++n) add_tap(a, n);
+    finish(a);
   }
 }
 
