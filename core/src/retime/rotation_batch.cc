@@ -516,8 +516,8 @@ TEMPOKEY_CLONES_AVX2 void SlerpKernel(const double* quats, const std::int64_t* i
   }
 }
 
-// Groups of kLanes samples converted back together, their arctangents side by side: one group's
-// chain of divisions and polynomials alone leaves the processor waiting.
+// Groups of LanesOf<VT> samples converted back together (on 4 and 8 lanes), their arctangents
+// side by side: one group's chain of divisions and polynomials alone leaves the processor waiting.
 constexpr int kEulerGroups = 2;
 
 template <int I, int J, int K, class VT>
@@ -682,9 +682,9 @@ template <class VT>
 }
 
 // The weighted means of the groups' samples, LanesOf<VT> lanes at a time: a group of kMeanLanes
-// samples is one 8-lane vector or two 4-lane ones. Two vectors' taps are summed side by side, so
-// that one's square root and division (the normalization, a long chain) overlap the other's sums
-// (each lane's operations are the same either way, so the same bits).
+// samples is one 8-lane vector or two 4-lane ones. Two vectors are in flight at once: their taps
+// summed side by side, then both normalized (a square root, then a division: a long chain that
+// one vector alone leaves waiting). Each lane's operations are the same either way: the same bits.
 template <class VT>
 [[gnu::always_inline]] inline void WeightedMeansBody(const double* quats, MeanTables tables,
                                                      std::size_t count, double min_dot,

@@ -176,6 +176,16 @@ TEST(RotationBatchTest, WeightedMeansAreTheScalarMeansBitForBitAndAskForMarkleyW
   EXPECT_LT(markley, 280);
 }
 
+// Every count up to 40: the vectors summed in pairs, a last one alone (count mod 16 in 1..8 on
+// 8 lanes, count mod 8 in 1..4 on 4), partial vectors and groups of different tap counts.
+TEST(RotationBatchTest, WeightedMeansOfEveryCountUpToFortyAreTheScalarMeansBitForBit) {
+  std::mt19937_64 random(41);
+  for (std::size_t count = 1; count <= 40; ++count) {
+    SCOPED_TRACE(::testing::Message() << count << " samples");
+    ExpectScalarWeightedMeans(MakeMeanCase(random, count));
+  }
+}
+
 TEST(RotationBatchTest, WeightedMeansDecideTheSpreadAsTheScalarFunctionNearItsLimit) {
   std::mt19937_64 random(23);
   // Narrow windows throughout (the test mostly settled from the pivot alone; Markley's mean only
