@@ -303,6 +303,16 @@ double TentWeightWithInverse(double d, double a, double inv) {
 
 double TentInverse(double a) { return 1.0 / (6.0 * a * a); }
 
+// weight(double(first + k) - x) into w[k] for every k in [from, w.size()), one at a time.
+template <class WeightFn>
+void WeightsOneByOne(std::int64_t first, double x, std::span<double> w, std::size_t from,
+                     WeightFn weight) {
+  for (std::size_t k = from; k < w.size(); ++k) {
+    const auto i = first + static_cast<std::int64_t>(k);
+    w[k] = weight(static_cast<double>(i) - x);
+  }
+}
+
 // TentWeightWithInverse(double(first + k) - x, a, inv) into w[k] for every k: four offsets at a
 // time on vectors (simd/vectors.h), each lane with the scalar's operations in its order, so the
 // same bits. Evaluated one at a time, about 25 cycles a weight (the clamps compiled to branches),
@@ -328,10 +338,7 @@ TEMPOKEY_CLONES_AVX2 void TentWeights(std::int64_t first, double x, double a, do
     const V4 index = base + (kd + V4{0.0, 1.0, 2.0, 3.0});
     simd::Store(w.data() + k, weight(index - x));
   }
-  for (; k < w.size(); ++k) {
-    const auto i = first + static_cast<std::int64_t>(k);
-    w[k] = TentWeightWithInverse(static_cast<double>(i) - x, a, inv);
-  }
+  WeightsOneByOne(first, x, w, k, [a, inv](double d) { return TentWeightWithInverse(d, a, inv); });
 }
 
 }  // namespace
@@ -441,10 +448,8 @@ absl::StatusOr<ResamplePlan> MakeResamplePlan(std::span<const double> positions,
         if (width > 0.0) {
           writer.Kernel(x, 1.0 + width, last,
                         [width](std::int64_t first, double at, std::span<double> w) {
-                          for (std::size_t k = 0; k < w.size(); ++k) {
-                            const auto i = first + static_cast<std::int64_t>(k);
-                            w[k] = BoxWeight(static_cast<double>(i) - at, width);
-                          }
+                          WeightsOneByOne(first, at, w, 0,
+                                          [width](double d) { return BoxWeight(d, width); });
                         });
           continue;
         }

@@ -726,6 +726,10 @@ template <class VT>
     const VT size = vector_trig::Abs(dot);
     m.nearest_pivot = size < m.nearest_pivot ? size : m.nearest_pivot;
   };
+  // Taps [from, m.taps) of m.
+  auto add_taps_from = [&](Mean& m, std::int64_t from) __attribute__((always_inline)) {
+    for (std::int64_t n = from; n < m.taps; ++n) add_tap(m, n);
+  };
   auto finish = [&](const Mean& m) __attribute__((always_inline)) {
     const std::size_t lanes = std::min(L, count - m.first);
     const VT norm = Sqrt(Dot(m.sum, m.sum));
@@ -755,14 +759,14 @@ template <class VT>
       add_tap(a, n);
       add_tap(b, n);
     }
-    for (std::int64_t k = n; k < a.taps; ++k) add_tap(a, k);
-    for (std::int64_t k = n; k < b.taps; ++k) add_tap(b, k);
+    add_taps_from(a, n);
+    add_taps_from(b, n);
     finish(a);
     finish(b);
   }
   if (first < count) {
     Mean a = begin(first);
-    for (std::int64_t n = 0; n < a.taps; ++n) add_tap(a, n);
+    add_taps_from(a, 0);
     finish(a);
   }
 }
