@@ -20,6 +20,7 @@
 #include "absl/flags/usage.h"
 #include "absl/strings/str_cat.h"
 #include "server/http/http_front_end.h"
+#include "server/memory_budget.h"
 #include "server/server.h"
 #include "server/server_usage.h"
 #include "spdlog/sinks/stdout_sinks.h"
@@ -109,6 +110,10 @@ int Run(int argc, char** argv) {
   if (positional.size() > 1) {
     spdlog::error("unexpected argument \"{}\" (flags only; see --help)", positional[1]);
     return 2;
+  }
+
+  if (!tempokey::server::TuneAllocatorForServing()) {
+    spdlog::warn("glibc refused the allocator's serving thresholds; its defaults stay");
   }
 
   ServerOptions options;

@@ -2,6 +2,7 @@
 
 #include <malloc.h>
 
+#include <algorithm>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -23,6 +24,12 @@ std::string_view MemoryUseName(MemoryUse use) {
       return "process";
   }
   return "unknown";
+}
+
+bool TuneAllocatorForServing() {
+  // mallopt() returns 1 on success, 0 on error.
+  return mallopt(M_MMAP_THRESHOLD, kServingMmapThresholdBytes) == 1 &&
+         mallopt(M_TRIM_THRESHOLD, kServingTrimThresholdBytes) == 1;
 }
 
 // ---- Reservation ---------------------------------------------------------------------------------
@@ -72,6 +79,7 @@ void MemoryBudget::Reservation::Settle(std::int64_t bytes) {
     std::lock_guard lock(budget_->mu_);
     budget_->used_ += more;
     budget_->used_by_[static_cast<int>(use_)] += more;
+    budget_->peak_since_trim_ = std::max(budget_->peak_since_trim_, budget_->used_);
   }
   bytes_ = bytes;
 }
@@ -112,6 +120,7 @@ bool MemoryBudget::TryClaimLocked(MemoryUse use, std::int64_t more) {
   if (more > capacity_ - used_) return false;
   used_ += more;
   used_by_[static_cast<int>(use)] += more;
+  peak_since_trim_ = std::max(peak_since_trim_, used_);
   return true;
 }
 
@@ -138,10 +147,9 @@ absl::Status MemoryBudget::Claim(MemoryUse use, std::string_view what, std::int6
       " bytes free; retry later or send less"));
 }
 
-bool MemoryBudget::ReleasedLocked(std::int64_t bytes) {
-  released_since_trim_ += bytes;
-  if (released_since_trim_ < std::max(kTrimThresholdBytes, used_ / 4)) return false;
-  released_since_trim_ = 0;
+bool MemoryBudget::TrimDueLocked() {
+  if (peak_since_trim_ - used_ < std::max(kTrimThresholdBytes, used_ / 4)) return false;
+  peak_since_trim_ = used_;
   ++trim_requests_;
   return true;
 }
@@ -152,7 +160,7 @@ void MemoryBudget::Return(MemoryUse use, std::int64_t bytes) {
     std::lock_guard lock(mu_);
     used_ -= bytes;
     used_by_[static_cast<int>(use)] -= bytes;
-    trim = ReleasedLocked(bytes);
+    trim = TrimDueLocked();
   }
   if (trim) trim_cv_.notify_all();
 }
@@ -162,7 +170,9 @@ void MemoryBudget::NoteFreed(std::int64_t bytes) {
   bool trim = false;
   {
     std::lock_guard lock(mu_);
-    trim = ReleasedLocked(bytes);
+    // The memory existed on top of what is reserved now.
+    peak_since_trim_ = std::max(peak_since_trim_, used_ + bytes);
+    trim = TrimDueLocked();
   }
   if (trim) trim_cv_.notify_all();
 }

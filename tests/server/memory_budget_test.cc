@@ -2,6 +2,8 @@
 // handed back to the system after large releases. No gRPC: runs under ThreadSanitizer.
 #include "server/memory_budget.h"
 
+#include <malloc.h>
+
 #include <atomic>
 #include <cstdint>
 #include <memory>
@@ -116,6 +118,85 @@ TEST(MemoryBudgetTest, LargeReleasesHandMemoryBackToTheSystem) {
 
   EXPECT_EQ(budget.trims(), before + 1);
 }
+
+TEST(MemoryBudgetTest, MemoryGivenBackAndClaimedAgainIsNeverTrimmed) {
+  // A stream of calls, each freeing what the next one takes: 400 MB released in all, never more
+  // than 4 MB below the peak. (Counting the released bytes trimmed every 8 MB of them.)
+  MemoryBudget budget(std::int64_t{1} << 30);
+  const std::int64_t before = budget.trims();
+  constexpr std::int64_t kCall = std::int64_t{1} << 20;
+  std::vector<MemoryBudget::Reservation> in_flight;
+  for (int call = 0; call < 400; ++call) {
+    if (in_flight.size() == 4) in_flight.erase(in_flight.begin());
+    in_flight.push_back(*budget.Reserve(kCall, MemoryUse::kProcess, "a Process result"));
+  }
+  in_flight.clear();
+
+  budget.WaitForTrim();
+
+  EXPECT_EQ(budget.trims(), before);
+}
+
+TEST(MemoryBudgetTest, AFallOfTheThresholdBelowThePeakTrimsOnceAndStartsAFreshPeak) {
+  MemoryBudget budget(std::int64_t{1} << 30);
+  const std::int64_t quarter = MemoryBudget::kTrimThresholdBytes / 2;
+  const std::int64_t before = budget.trims();
+  std::vector<MemoryBudget::Reservation> held;
+  for (int i = 0; i < 3; ++i) held.push_back(*budget.Reserve(quarter, MemoryUse::kJob, "a job"));
+
+  held[0].Release();  // half the threshold below the peak
+  budget.WaitForTrim();
+  const std::int64_t after_first = budget.trims();
+  held[1].Release();  // the threshold below the peak
+  budget.WaitForTrim();
+  const std::int64_t after_second = budget.trims();
+  held[2].Release();  // half the threshold below the peak left by the trim
+  budget.WaitForTrim();
+
+  EXPECT_EQ(after_first, before);
+  EXPECT_EQ(after_second, before + 1);
+  EXPECT_EQ(budget.trims(), before + 1);
+}
+
+TEST(MemoryBudgetTest, LargeTransientMessagesTrimAndSmallOnesDoNot) {
+  MemoryBudget budget(std::int64_t{1} << 30);
+  const std::int64_t before = budget.trims();
+
+  for (int i = 0; i < 100; ++i) budget.NoteFreed(std::int64_t{1} << 20);
+  budget.WaitForTrim();
+  const std::int64_t after_small = budget.trims();
+  budget.NoteFreed(MemoryBudget::kTrimThresholdBytes);
+  budget.WaitForTrim();
+
+  EXPECT_EQ(after_small, before);
+  EXPECT_EQ(budget.trims(), before + 1);
+}
+
+#if !defined(TEMPOKEY_SANITIZED)  // the sanitizers bring their own allocator
+// new[] whose pointer escapes, so the compiler cannot leave the allocation out.
+std::unique_ptr<char[]> Allocate(std::size_t bytes) {
+  std::unique_ptr<char[]> buffer = std::make_unique_for_overwrite<char[]>(bytes);
+  asm volatile("" : : "r"(buffer.get()) : "memory");
+  return buffer;
+}
+
+TEST(AllocatorTuningTest, ClipSizedBuffersComeFromTheArenasOnceTunedForServing) {
+  // glibc maps a chunk of its own for any allocation past its mmap threshold, 128 KiB to start
+  // with; mallinfo2().hblks counts those mappings.
+  ASSERT_TRUE(TuneAllocatorForServing());
+  const std::size_t mapped_before = mallinfo2().hblks;
+  std::vector<std::unique_ptr<char[]>> buffers;
+  for (int i = 0; i < 8; ++i) {
+    buffers.push_back(Allocate(std::size_t{kServingMmapThresholdBytes} / 4));  // 256 KiB
+  }
+  const std::size_t mapped_with_buffers = mallinfo2().hblks;
+  const std::unique_ptr<char[]> big = Allocate(std::size_t{kServingMmapThresholdBytes} * 2);
+  const std::size_t mapped_with_big = mallinfo2().hblks;
+
+  EXPECT_EQ(mapped_with_buffers, mapped_before);
+  EXPECT_EQ(mapped_with_big, mapped_before + 1);  // past the threshold: its own mapping still
+}
+#endif
 
 TEST(MemoryBudgetTest, ManyThreadsNeverOvercommit) {
   constexpr std::int64_t kCapacity = 10'000;
