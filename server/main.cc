@@ -112,8 +112,8 @@ int Run(int argc, char** argv) {
     return 2;
   }
 
-  if (!tempokey::server::TuneAllocatorForServing()) {
-    spdlog::warn("glibc refused the allocator's serving thresholds; its defaults stay");
+  if (const absl::Status tuned = tempokey::server::TuneAllocatorForServing(); !tuned.ok()) {
+    spdlog::info("allocator left at its defaults: {}", std::string(tuned.message()));
   }
 
   ServerOptions options;

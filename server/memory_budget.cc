@@ -26,10 +26,17 @@ std::string_view MemoryUseName(MemoryUse use) {
   return "unknown";
 }
 
-bool TuneAllocatorForServing() {
+absl::Status TuneAllocatorForServing() {
   // mallopt() returns 1 on success, 0 on error.
-  return mallopt(M_MMAP_THRESHOLD, kServingMmapThresholdBytes) == 1 &&
-         mallopt(M_TRIM_THRESHOLD, kServingTrimThresholdBytes) == 1;
+  if (mallopt(M_MMAP_THRESHOLD, kServingMmapThresholdBytes) != 1) {
+    return absl::UnavailableError(absl::StrCat("the allocator refused M_MMAP_THRESHOLD=",
+                                               kServingMmapThresholdBytes));
+  }
+  if (mallopt(M_TRIM_THRESHOLD, kServingTrimThresholdBytes) != 1) {
+    return absl::UnavailableError(absl::StrCat("the allocator refused M_TRIM_THRESHOLD=",
+                                               kServingTrimThresholdBytes));
+  }
+  return absl::OkStatus();
 }
 
 // ---- Reservation ---------------------------------------------------------------------------------
@@ -147,9 +154,13 @@ absl::Status MemoryBudget::Claim(MemoryUse use, std::string_view what, std::int6
       " bytes free; retry later or send less"));
 }
 
-bool MemoryBudget::TrimDueLocked() {
-  if (peak_since_trim_ - used_ < std::max(kTrimThresholdBytes, used_ / 4)) return false;
+bool MemoryBudget::TrimDueLocked(std::int64_t bytes) {
+  released_since_trim_ += bytes;
+  const bool fell = peak_since_trim_ - used_ >= std::max(kTrimThresholdBytes, used_ / 4);
+  const bool turned_over = released_since_trim_ >= std::max(kTurnoverTrimBytes, used_);
+  if (!fell && !turned_over) return false;
   peak_since_trim_ = used_;
+  released_since_trim_ = 0;
   ++trim_requests_;
   return true;
 }
@@ -160,7 +171,7 @@ void MemoryBudget::Return(MemoryUse use, std::int64_t bytes) {
     std::lock_guard lock(mu_);
     used_ -= bytes;
     used_by_[static_cast<int>(use)] -= bytes;
-    trim = TrimDueLocked();
+    trim = TrimDueLocked(bytes);
   }
   if (trim) trim_cv_.notify_all();
 }
@@ -172,7 +183,7 @@ void MemoryBudget::NoteFreed(std::int64_t bytes) {
     std::lock_guard lock(mu_);
     // The memory existed on top of what is reserved now.
     peak_since_trim_ = std::max(peak_since_trim_, used_ + bytes);
-    trim = TrimDueLocked();
+    trim = TrimDueLocked(bytes);
   }
   if (trim) trim_cv_.notify_all();
 }

@@ -30,22 +30,24 @@ inline constexpr int kMemoryUseCount = 5;
 // "upload", "stored_clip", "job", "result", "process".
 std::string_view MemoryUseName(MemoryUse use);
 
-// Sets glibc's allocator for serving, before the server's threads start: chunks under
+// Sets glibc's allocator for serving, before the server's threads start: requests under
 // kServingMmapThresholdBytes (a call's clip-sized buffers: 132 channels x 128 frames is 135 KB)
-// come from the arenas instead of mappings of their own, and an arena's free top is handed back
-// by glibc only past kServingTrimThresholdBytes. glibc's defaults (thresholds that start at
-// 128 KiB and follow the largest chunk freed) map and unmap such buffers, or trim the heap they
-// were freed to, on every call: each unmapping or trim is a TLB shootdown on every core, and the
-// next call faults the pages in again. Larger chunks (stored results and operations, large
-// messages) keep their own mappings and go back to the system as soon as they are freed; the
-// rest goes back through MemoryBudget's trims, once what the server holds falls well below its
-// peak. (Setting either threshold also ends glibc's dynamic adjustment of it: the GNU C Library
-// manual, "Malloc Tunable Parameters",
+// are served from the arenas, never by a mapping of their own, and an arena's free top is
+// handed back by glibc once it reaches kServingTrimThresholdBytes. glibc's defaults (thresholds
+// that start at 128 KiB and follow the largest mapped chunk freed, up to 32 MiB, the trim
+// threshold at twice that) map and unmap such buffers, or trim the heap they were freed to, on
+// many calls: each unmapping or trim flushes the TLBs of every core running the server's
+// threads, and the next call faults the pages in again. The rest of the free memory goes back
+// through MemoryBudget's trims. (Setting either threshold also ends glibc's dynamic adjustment
+// of it: the GNU C Library manual, "Malloc Tunable Parameters",
 // https://www.gnu.org/software/libc/manual/html_node/Malloc-Tunable-Parameters.html.)
+// The trim threshold applies to each thread's arena (glibc's heap_trim), so it is kept small:
+// at 32 MiB, arenas kept that much each after large deletes.
 inline constexpr int kServingMmapThresholdBytes = 1 << 20;
-inline constexpr int kServingTrimThresholdBytes = 32 << 20;
-// False when glibc refused a setting (its defaults then stay).
-bool TuneAllocatorForServing();
+inline constexpr int kServingTrimThresholdBytes = 8 << 20;
+// Errors: kUnavailable naming the setting the allocator refused (a sanitizer's allocator
+// refuses both); its defaults then stay.
+absl::Status TuneAllocatorForServing();
 
 class MemoryBudget {
  public:
@@ -54,16 +56,18 @@ class MemoryBudget {
   // the budget's lock; must not reserve.
   using Reclaimer = std::function<void(std::int64_t wanted)>;
 
-  // Free heap memory goes back to the system (the trimming thread's malloc_trim) once what the
-  // budget holds has fallen below its peak since the last trim by a quarter of what it holds,
-  // and by at least this much: glibc keeps freed chunks below its mmap threshold in its arenas
-  // otherwise, so the resident set would stay at its peak after large deletes. Memory that is
-  // given back and claimed again (a stream of jobs, each freeing what the next one takes) is
-  // not trimmed: every trim hands the arenas' free pages back (madvise), and the next
-  // allocations fault them in again, with a TLB shootdown on every core for each trim. Under
-  // the counting of released bytes that this replaced, the service bench's 16 clients
-  // triggered a trim every few calls: about a quarter of the server's CPU.
+  // Free heap memory goes back to the system (the trimming thread's malloc_trim) when either
+  //  - what the budget holds has fallen below its peak since the last trim by a quarter of what
+  //    it holds, and by at least kTrimThresholdBytes (large deletes, a finished large job), or
+  //  - the bytes given back since the last trim reach kTurnoverTrimBytes, and what the budget
+  //    holds (stored clips replaced at a steady level: glibc reuses freed memory only in the
+  //    arena that freed it, and uploads arrive on many threads, so without trims the resident
+  //    set grows well past what the budget holds).
+  // Memory given back and claimed again by the next calls is trimmed only at that turnover, not
+  // every few calls: every trim hands the arenas' free pages back (madvise), and the next
+  // allocations fault them in again.
   static constexpr std::int64_t kTrimThresholdBytes = std::int64_t{8} << 20;
+  static constexpr std::int64_t kTurnoverTrimBytes = std::int64_t{128} << 20;
 
   // `capacity_bytes` >= 1. Starts the trimming thread.
   explicit MemoryBudget(std::int64_t capacity_bytes);
@@ -112,7 +116,8 @@ class MemoryBudget {
   absl::StatusOr<Reservation> Reserve(std::int64_t bytes, MemoryUse use, std::string_view what);
 
   // Memory freed outside any reservation (a large request parsed and dropped, a large response
-  // sent): it was in use on top of what the budget holds, so it counts towards the next trim.
+  // sent): it counts as given back, and as in use on top of what the budget holds now (the
+  // largest such message since the last trim, not their sum, raises the peak).
   void NoteFreed(std::int64_t bytes);
 
   // Adds a reclaimer; call before the budget is shared between threads.
@@ -130,9 +135,9 @@ class MemoryBudget {
   absl::Status Claim(MemoryUse use, std::string_view what, std::int64_t more);
   bool TryClaimLocked(MemoryUse use, std::int64_t more) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
   void Return(MemoryUse use, std::int64_t bytes);
-  // True when a trim is due (the caller notifies the trimmer): what the budget holds fell below
-  // its peak since the last trim by the threshold (kTrimThresholdBytes).
-  bool TrimDueLocked() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+  // Counts `bytes` given back; true when a trim is due (see kTrimThresholdBytes), which starts
+  // a fresh peak and count (the caller notifies the trimmer).
+  bool TrimDueLocked(std::int64_t bytes) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
   void TrimLoop();
 
   const std::int64_t capacity_;
@@ -145,6 +150,7 @@ class MemoryBudget {
   // The most the budget held (and memory noted freed outside it, on top of what it held then)
   // since the last trim.
   std::int64_t peak_since_trim_ ABSL_GUARDED_BY(mu_) = 0;
+  std::int64_t released_since_trim_ ABSL_GUARDED_BY(mu_) = 0;
   std::int64_t trim_requests_ ABSL_GUARDED_BY(mu_) = 0;
   std::int64_t trims_ ABSL_GUARDED_BY(mu_) = 0;
   bool stopping_ ABSL_GUARDED_BY(mu_) = false;
