@@ -32,8 +32,8 @@ std::string_view MemoryUseName(MemoryUse use);
 
 // Sets glibc's allocator for serving, before the server's threads start: requests under
 // kServingMmapThresholdBytes (a call's clip-sized buffers: 132 channels x 128 frames is 135 KB)
-// are served from the arenas, never by a mapping of their own, and an arena's free top is
-// handed back by glibc once it reaches kServingTrimThresholdBytes. glibc's defaults (thresholds
+// are served from the arenas (glibc maps a smaller request only when its arena cannot grow),
+// and an arena's free top is handed back by glibc once it reaches kServingTrimThresholdBytes. glibc's defaults (thresholds
 // that start at 128 KiB and follow the largest mapped chunk freed, up to 32 MiB, the trim
 // threshold at twice that) map and unmap such buffers, or trim the heap they were freed to, on
 // many calls: each unmapping or trim flushes the TLBs of every core running the server's
@@ -45,8 +45,8 @@ std::string_view MemoryUseName(MemoryUse use);
 // at 32 MiB, arenas kept that much each after large deletes.
 inline constexpr int kServingMmapThresholdBytes = 1 << 20;
 inline constexpr int kServingTrimThresholdBytes = 8 << 20;
-// Errors: kUnavailable naming the setting the allocator refused (a sanitizer's allocator
-// refuses both); its defaults then stay.
+// Errors: kUnavailable naming the setting the allocator refused (AddressSanitizer's refuses
+// both); its defaults then stay.
 absl::Status TuneAllocatorForServing();
 
 class MemoryBudget {
