@@ -119,6 +119,13 @@ TEST(MemoryBudgetTest, LargeReleasesHandMemoryBackToTheSystem) {
   EXPECT_EQ(budget.trims(), before + 1);
 }
 
+// Claims `bytes` for a new holder, then gives back the oldest of `held`.
+void ReplaceOldest(MemoryBudget& budget, std::vector<MemoryBudget::Reservation>& held,
+                   std::int64_t bytes, MemoryUse use) {
+  held.push_back(*budget.Reserve(bytes, use, "a replacement"));
+  held.erase(held.begin());
+}
+
 TEST(MemoryBudgetTest, MemoryGivenBackAndClaimedAgainIsNotTrimmedBeforeItsTurnover) {
   // A stream of calls, each freeing what the next one takes: never more than 4 MB below the
   // peak. (Counting every 8 MiB released trimmed every few calls.)
@@ -130,10 +137,7 @@ TEST(MemoryBudgetTest, MemoryGivenBackAndClaimedAgainIsNotTrimmedBeforeItsTurnov
   for (int i = 0; i < kInFlight; ++i) {
     in_flight.push_back(*budget.Reserve(kCall, MemoryUse::kProcess, "a Process result"));
   }
-  auto next_call = [&] {  // gives back the oldest call's megabyte
-    in_flight.push_back(*budget.Reserve(kCall, MemoryUse::kProcess, "a Process result"));
-    in_flight.erase(in_flight.begin());
-  };
+  auto next_call = [&] { ReplaceOldest(budget, in_flight, kCall, MemoryUse::kProcess); };
   for (int i = 0; i + 1 < MemoryBudget::kTurnoverTrimBytes / kCall; ++i) next_call();
   budget.WaitForTrim();
   const std::int64_t before_turnover = budget.trims();
@@ -155,10 +159,7 @@ TEST(MemoryBudgetTest, ReplacingWhatIsHeldAtASteadyLevelTrimsOnceAsMuchWasGivenB
     stored.push_back(*budget.Reserve(kClip, MemoryUse::kStoredClip, "a clip"));
   }
   const std::int64_t before = budget.trims();
-  auto replace_oldest = [&] {
-    stored.push_back(*budget.Reserve(kClip, MemoryUse::kStoredClip, "a clip"));
-    stored.erase(stored.begin());
-  };
+  auto replace_oldest = [&] { ReplaceOldest(budget, stored, kClip, MemoryUse::kStoredClip); };
   for (int i = 0; i + 1 < kStored; ++i) replace_oldest();
   budget.WaitForTrim();
   const std::int64_t before_turnover = budget.trims();
