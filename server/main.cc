@@ -42,6 +42,9 @@ ABSL_FLAG(int64_t, memory_budget_bytes, 0,
 ABSL_FLAG(double, stream_idle_timeout_seconds, 30,
           "End a streaming call whose client sends nothing (or takes no message) for this long; "
           "0: never.");
+ABSL_FLAG(int64_t, process_progress_interval_ms, 100,
+          "A Process call streams its first progress message at once, then at most one per "
+          "this many milliseconds; 0: one per stage or percent.");
 ABSL_FLAG(int64_t, max_message_bytes, int64_t{64} << 20, "Largest message received, in bytes.");
 ABSL_FLAG(int64_t, max_clip_samples, int64_t{32} << 20,
           "Largest clip accepted, in samples (frames x channels).");
@@ -128,6 +131,8 @@ int Run(int argc, char** argv) {
   }
   options.stream_idle_timeout =
       std::chrono::milliseconds(static_cast<std::int64_t>(idle_seconds * 1000.0));
+  options.process_progress_interval =
+      std::chrono::milliseconds(absl::GetFlag(FLAGS_process_progress_interval_ms));
   options.max_message_bytes = absl::GetFlag(FLAGS_max_message_bytes);
   options.max_clip_samples = absl::GetFlag(FLAGS_max_clip_samples);
   options.max_stored_clips = absl::GetFlag(FLAGS_max_stored_clips);

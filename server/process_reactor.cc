@@ -6,7 +6,6 @@
 // call takes one clip and one start. A client silent for the idle timeout before its start, or
 // not taking a result message for that long, loses the call.
 #include <chrono>
-#include <cmath>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -18,6 +17,7 @@
 #include "proto/jobs_convert.h"
 #include "server/job_proto.h"
 #include "server/memory_size.h"
+#include "server/progress_throttle.h"
 #include "server/reactors.h"
 #include "server/status_util.h"
 #include "server/wire_codec.h"
@@ -142,15 +142,13 @@ class ProcessLink final {
 
  private:
   void OnProgress(double fraction, std::string_view stage) {
+    const ProgressThrottle::Clock::time_point now = ProgressThrottle::Clock::now();
     std::lock_guard lock(mu_);
     if (finished_ || result_ready_) return;
-    // Latest wins: a new message per stage or per percent, never a backlog.
-    if (stage == last_stage_ && std::abs(fraction - last_fraction_) < 0.01) return;
-    last_stage_ = std::string(stage);
-    last_fraction_ = fraction;
+    if (!throttle_.ShouldSend(fraction, stage, now)) return;
     v1::Progress progress;
     progress.set_progress(fraction);
-    progress.set_stage(last_stage_);
+    progress.set_stage(std::string(stage));
     pending_progress_ = std::move(progress);
     if (!writing_) WriteNextLocked();
   }
@@ -231,8 +229,7 @@ class ProcessLink final {
   bool finished_ ABSL_GUARDED_BY(mu_) = false;
   bool writing_ ABSL_GUARDED_BY(mu_) = false;
   bool result_ready_ ABSL_GUARDED_BY(mu_) = false;
-  std::string last_stage_ ABSL_GUARDED_BY(mu_);
-  double last_fraction_ ABSL_GUARDED_BY(mu_) = -1.0;
+  ProgressThrottle throttle_ ABSL_GUARDED_BY(mu_){service_->options.process_progress_interval};
   std::optional<v1::Progress> pending_progress_ ABSL_GUARDED_BY(mu_);
   std::optional<wire::ResultSlicer> slicer_ ABSL_GUARDED_BY(mu_);
   std::optional<absl::Status> end_status_ ABSL_GUARDED_BY(mu_);

@@ -292,6 +292,11 @@ absl::Status ValidateServerOptions(const ServerOptions& o) {
         "--stream_idle_timeout_seconds must be >= 0 (0: none), got ",
         static_cast<double>(o.stream_idle_timeout.count()) / 1000.0));
   }
+  if (o.process_progress_interval.count() < 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "--process_progress_interval_ms must be >= 0 (0: a message per stage or percent), got ",
+        o.process_progress_interval.count()));
+  }
   if (o.tls_cert_file.empty() && !o.allow_insecure_remote) {
     if (absl::Status loopback = CheckLoopbackAddress(o.address); !loopback.ok()) {
       return absl::InvalidArgumentError(absl::StrCat(

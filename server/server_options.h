@@ -58,6 +58,9 @@ struct ServerOptions {
   // next message (uploads, Process before its start), or does not take a message the server
   // sends for this long (results, watches, Process output), is ended; 0 disables it.
   std::chrono::milliseconds stream_idle_timeout{30'000};
+  // A Process call streams its first progress report at once, then at most one per this
+  // interval (server/progress_throttle.h); 0 sends one per stage or percent.
+  std::chrono::milliseconds process_progress_interval{100};
   // Connections are closed (GOAWAY) after this long so clients rebalance across replicas;
   // 0 disables it.
   std::chrono::seconds max_connection_age{0};

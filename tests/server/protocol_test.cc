@@ -1,7 +1,8 @@
 // Codes and protocol on a real server: bytes that are not a request get INVALID_ARGUMENT naming
 // the message (every method); an unknown method gets UNIMPLEMENTED with a message; a request_id
 // reused for another request gets ALREADY_EXISTS; requests over a size limit get
-// RESOURCE_EXHAUSTED; a Process call refuses messages after its start; a TLS key that is not its
+// RESOURCE_EXHAUSTED; a Process call refuses messages after its start and streams its progress
+// no more often than the server's interval; a TLS key that is not its
 // certificate's stops the server at start-up with that said; a full queue's retry hint follows
 // how long the running job has run.
 #include <chrono>
@@ -193,6 +194,42 @@ TEST(ProcessProtocolTest, ProcessRefusesAMessageAfterItsStart) {
   EXPECT_THAT(status, GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT,
                                    "Process message 9 arrived after ProcessStart; a Process call "
                                    "takes one clip and one start, then the client only reads"));
+}
+
+TEST(ProcessProtocolTest, AProcessCallStreamsItsFirstProgressAtOnceAndNoneMoreWithinTheInterval) {
+  server::ServerOptions options = TestServerOptions();
+  options.process_progress_interval = std::chrono::hours(1);
+  std::unique_ptr<server::Server> server = StartServer(options);
+  ASSERT_NE(server, nullptr);
+  auto stub = v1::MotionService::NewStub(Connect(server->target()));
+  grpc::ClientContext context;
+  SetDeadline(context);
+  auto process = stub->Process(&context);
+  const core::Clip clip = MakeClip(8, 400);
+  for (const v1::ProcessRequest& request : ProcessClipRequests(clip)) {
+    ASSERT_TRUE(process->Write(request));
+  }
+  // 24 stages of 27 channels: a report per stage and per channel, all within the hour.
+  v1::ProcessRequest start;
+  *start.mutable_start()->mutable_operations() = WrapOperations(24);
+  ASSERT_TRUE(process->Write(start));
+  process->WritesDone();
+  std::vector<v1::ProcessResponse> responses;
+  v1::ProcessResponse response;
+  while (process->Read(&response)) responses.push_back(response);
+
+  TEMPOKEY_ASSERT_GRPC_OK(process->Finish());
+  ASSERT_GE(responses.size(), 2u);
+  EXPECT_TRUE(responses[0].has_progress());
+  EXPECT_EQ(responses[0].progress().progress(), 0.0);
+  std::vector<v1::ResultPart> parts;
+  for (std::size_t i = 1; i < responses.size(); ++i) {
+    EXPECT_TRUE(responses[i].has_result()) << "message " << i + 1 << " is progress";
+    parts.push_back(responses[i].result());
+  }
+  absl::StatusOr<core::Clip> result = AssembleClipResult(parts);
+  ASSERT_TRUE(result.ok()) << result.status();
+  EXPECT_EQ(*result, WrappedCopy(clip));
 }
 
 TEST_F(ProtocolTest, HalfClosingAfterTheStartIsTheNormalEnd) {

@@ -162,6 +162,8 @@ TEST(ValidateServerOptionsTest, RefusesWhatNoServerCanRunWith) {
        "--memory_budget_bytes must be >= 0 (0: half the memory the process may use), got -1"},
       {[](ServerOptions& o) { o.stream_idle_timeout = std::chrono::milliseconds(-1500); },
        "--stream_idle_timeout_seconds must be >= 0 (0: none), got -1.5"},
+      {[](ServerOptions& o) { o.process_progress_interval = std::chrono::milliseconds(-5); },
+       "--process_progress_interval_ms must be >= 0 (0: a message per stage or percent), got -5"},
   };
   for (const Case& c : cases) {
     ServerOptions options;
