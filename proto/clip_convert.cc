@@ -11,6 +11,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "proto/prefault.h"
 #include "tempokey/core/model/numbers.h"
 #include "tempokey/core/model/status.h"
 
@@ -317,6 +318,8 @@ absl::Status ClipAssembler::Append(std::vector<double>& dest, const double* data
     TEMPOKEY_RETURN_IF_ERROR(
         Allocate((grown - capacity) * static_cast<std::int64_t>(sizeof(double))));
     dest.reserve(static_cast<std::size_t>(grown));
+    // The capacity just charged is about to be filled: map it at once rather than page by page.
+    PrefaultForWriting(dest.data() + size, (dest.capacity() - dest.size()) * sizeof(double));
   }
   dest.insert(dest.end(), data, data + n);
   return absl::OkStatus();
