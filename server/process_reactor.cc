@@ -185,12 +185,12 @@ class ProcessLink final {
   }
 
   void WriteNextLocked() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
-    message_.Clear();
+    ArenaMessage<v1::ProcessResponse> message;
     if (pending_progress_) {
-      *message_.mutable_progress() = *std::move(pending_progress_);
+      *message->mutable_progress() = *std::move(pending_progress_);
       pending_progress_.reset();
     } else if (slicer_) {
-      if (!slicer_->Next(message_.mutable_result())) {
+      if (!slicer_->Next(message->mutable_result())) {
         FinishLocked(absl::OkStatus());
         return;
       }
@@ -198,7 +198,7 @@ class ProcessLink final {
       return;  // nothing to say yet
     }
     writing_ = true;
-    SerializeMessage(message_, &buffer_);
+    SerializeMessage(*message, &buffer_);
     service_->BytesOut(static_cast<std::int64_t>(buffer_.Length()));
     if (idle_ != nullptr) idle_->Arm();
     reactor_->StartWrite(&buffer_);
@@ -233,7 +233,6 @@ class ProcessLink final {
   std::optional<v1::Progress> pending_progress_ ABSL_GUARDED_BY(mu_);
   std::optional<wire::ResultSlicer> slicer_ ABSL_GUARDED_BY(mu_);
   std::optional<absl::Status> end_status_ ABSL_GUARDED_BY(mu_);
-  v1::ProcessResponse message_ ABSL_GUARDED_BY(mu_);
   grpc::ByteBuffer buffer_ ABSL_GUARDED_BY(mu_);  // the write in flight
   std::shared_ptr<IdleReaper::Timer> idle_;
   StreamSlot* slot_ ABSL_GUARDED_BY(mu_) = nullptr;
@@ -280,9 +279,10 @@ class ProcessReactor final : public ProcessReactorBase {
           "client only reads")));
       return;
     }
+    ArenaMessage<v1::ProcessRequest> request;
     absl::Status status =
-        ParseMessage(buffer_, absl::StrCat("Process message ", messages_), &request_);
-    if (status.ok()) status = Accept();
+        ParseMessage(buffer_, absl::StrCat("Process message ", messages_), request.get());
+    if (status.ok()) status = Accept(*request);
     if (!status.ok()) {
       ReleaseInput();
       link_->FinishNow(status);
@@ -325,16 +325,16 @@ class ProcessReactor final : public ProcessReactorBase {
     StartRead(&buffer_);
   }
 
-  absl::Status Accept() {
-    switch (request_.part_case()) {
+  absl::Status Accept(const v1::ProcessRequest& request) {
+    switch (request.part_case()) {
       case v1::ProcessRequest::kHeader:
-        return assembler_->AddHeader(request_.header());
+        return assembler_->AddHeader(request.header());
       case v1::ProcessRequest::kSamples:
-        return assembler_->AddSamples(request_.samples());
+        return assembler_->AddSamples(request.samples());
       case v1::ProcessRequest::kSampleSlices:
-        return assembler_->AddSampleSlices(request_.sample_slices());
+        return assembler_->AddSampleSlices(request.sample_slices());
       case v1::ProcessRequest::kStart:
-        return Start(request_.start());
+        return Start(request.start());
       case v1::ProcessRequest::PART_NOT_SET:
         break;
     }
@@ -381,7 +381,6 @@ class ProcessReactor final : public ProcessReactorBase {
   bool started_ = false;
   std::int64_t messages_ = 0;
   grpc::ByteBuffer buffer_;
-  v1::ProcessRequest request_;
   // Declared before the assembler, which charges it.
   MemoryBudget::Reservation clip_memory_;
   std::optional<wire::ClipAssembler> assembler_;

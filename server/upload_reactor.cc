@@ -55,8 +55,10 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
     }
     ++messages_;
     service_->BytesIn(static_cast<std::int64_t>(buffer_.Length()));
-    absl::Status status = ParseMessage(buffer_, absl::StrCat("upload message ", messages_), &request_);
-    if (status.ok()) status = Accept();
+    ArenaMessage<v1::UploadClipRequest> request;
+    absl::Status status =
+        ParseMessage(buffer_, absl::StrCat("upload message ", messages_), request.get());
+    if (status.ok()) status = Accept(*request);
     if (!status.ok()) {
       spdlog::debug("upload refused at message {}: {}", messages_, status.ToString());
       ReleaseHeld();
@@ -103,16 +105,16 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
     Finish(ToGrpcStatus(status, call_));
   }
 
-  absl::Status Accept() {
-    switch (request_.part_case()) {
+  absl::Status Accept(const v1::UploadClipRequest& request) {
+    switch (request.part_case()) {
       case v1::UploadClipRequest::kHeader:
-        TEMPOKEY_RETURN_IF_ERROR(assembler_->AddHeader(request_.header()));
+        TEMPOKEY_RETURN_IF_ERROR(assembler_->AddHeader(request.header()));
         digest_.emplace(assembler_->clip());
         return absl::OkStatus();
       case v1::UploadClipRequest::kSamples:
-        return AcceptSlice(request_.samples());
+        return AcceptSlice(request.samples());
       case v1::UploadClipRequest::kSampleSlices:
-        for (const v1::ChannelSamples& slice : request_.sample_slices().slices()) {
+        for (const v1::ChannelSamples& slice : request.sample_slices().slices()) {
           TEMPOKEY_RETURN_IF_ERROR(AcceptSlice(slice));
         }
         return absl::OkStatus();
@@ -166,7 +168,6 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
   StreamSlot slot_;
   std::shared_ptr<IdleReaper::Timer> idle_;
   grpc::ByteBuffer buffer_;
-  v1::UploadClipRequest request_;
   // Declared before the assembler, which charges it.
   MemoryBudget::Reservation reservation_;
   std::optional<wire::ClipAssembler> assembler_;
