@@ -15,6 +15,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
+#include "proto/arena_message.h"
 #include "proto/jobs_convert.h"
 #include "proto/operations_convert.h"
 #include "grpcpp/client_context.h"
@@ -446,12 +447,13 @@ absl::StatusOr<core::PipelineResult> Client::GetJobResult(const std::string& job
     PrepareContext(scope, context);
     std::unique_ptr<grpc::ClientReader<v1::ResultPart>> reader =
         stub_->GetJobResult(&context, request);
-    v1::ResultPart part;
     bool received = false;
     absl::Status assembled;
-    while (reader->Read(&part)) {
+    for (;;) {
+      wire::ArenaMessage<v1::ResultPart> part;
+      if (!reader->Read(part.get())) break;
       received = true;
-      assembled = assembler->AddPart(part);
+      assembled = assembler->AddPart(*part);
       if (!assembled.ok()) {
         context.TryCancel();
         break;
@@ -493,16 +495,17 @@ absl::StatusOr<core::PipelineResult> Client::Process(const core::Clip& clip,
     }
     if (open) stream->WritesDone();
 
-    v1::ProcessResponse response;
     bool received = false;
     absl::Status assembled;
-    while (stream->Read(&response)) {
+    for (;;) {
+      wire::ArenaMessage<v1::ProcessResponse> response;
+      if (!stream->Read(response.get())) break;
       received = true;
-      if (response.has_progress()) {
-        core::ReportProgress(progress, response.progress().progress(),
-                             response.progress().stage());
-      } else if (response.has_result()) {
-        assembled = assembler->AddPart(response.result());
+      if (response->has_progress()) {
+        core::ReportProgress(progress, response->progress().progress(),
+                             response->progress().stage());
+      } else if (response->has_result()) {
+        assembled = assembler->AddPart(response->result());
         if (!assembled.ok()) {
           context.TryCancel();
           break;

@@ -23,13 +23,6 @@ absl::Status ParseMessage(const grpc::ByteBuffer& buffer, std::string_view what,
       message->GetDescriptor()->full_name(), " message"));
 }
 
-google::protobuf::ArenaOptions MessageArenaOptions() {
-  google::protobuf::ArenaOptions options;
-  options.start_block_size = std::size_t{64} << 10;
-  options.max_block_size = std::size_t{1} << 20;
-  return options;
-}
-
 void SerializeMessage(const google::protobuf::Message& message, grpc::ByteBuffer* buffer) {
   buffer->Clear();  // the writer wants an empty buffer
   bool own_buffer = false;

@@ -7,11 +7,13 @@
 #include <string_view>
 
 #include "absl/status/status.h"
-#include "google/protobuf/arena.h"
 #include "google/protobuf/message.h"
 #include "grpcpp/support/byte_buffer.h"
+#include "proto/arena_message.h"
 
 namespace tempokey::server {
+
+using wire::ArenaMessage;
 
 // Parses `buffer` into `message` (cleared first). `what` names the message in the error
 // ("SubmitJob request", "upload message 3").
@@ -22,33 +24,6 @@ absl::Status ParseMessage(const grpc::ByteBuffer& buffer, std::string_view what,
 
 // `message` serialized into `buffer` (replacing what it held).
 void SerializeMessage(const google::protobuf::Message& message, grpc::ByteBuffer* buffer);
-
-// Blocks of 64 KiB growing to 1 MiB: see ArenaMessage.
-google::protobuf::ArenaOptions MessageArenaOptions();
-
-// One request or response message whose fields live in an arena of their own, all freed together
-// when it goes out of scope. A clip's slices parse into a message per channel, each with its own
-// repeated field: from the heap that was some 400 allocations and frees per Process call, about
-// a quarter of the server's CPU under 16 clients with malloc and free together; from the arena a
-// few blocks (measured: 0.73-0.88 -> 0.65-0.73 ms of server CPU per job). For a message parsed,
-// used and dropped within one callback.
-template <typename Message>
-class ArenaMessage {
- public:
-  ArenaMessage()
-      : arena_(MessageArenaOptions()),
-        message_(google::protobuf::Arena::CreateMessage<Message>(&arena_)) {}
-  ArenaMessage(const ArenaMessage&) = delete;
-  ArenaMessage& operator=(const ArenaMessage&) = delete;
-
-  Message* get() { return message_; }
-  Message& operator*() { return *message_; }
-  Message* operator->() { return message_; }
-
- private:
-  google::protobuf::Arena arena_;
-  Message* message_;  // owned by arena_
-};
 
 }  // namespace tempokey::server
 

@@ -1,0 +1,48 @@
+// A tempokey.v1 message whose fields live in an arena of its own, for the server's and the
+// client's streams.
+#ifndef TEMPOKEY_PROTO_ARENA_MESSAGE_H_
+#define TEMPOKEY_PROTO_ARENA_MESSAGE_H_
+
+#include <cstddef>
+
+#include "google/protobuf/arena.h"
+
+namespace tempokey::wire {
+
+// Blocks of 64 KiB growing to 1 MiB: a clip's slices for a few hundred channels fit in one or two.
+inline google::protobuf::ArenaOptions MessageArenaOptions() {
+  google::protobuf::ArenaOptions options;
+  options.start_block_size = std::size_t{64} << 10;
+  options.max_block_size = std::size_t{1} << 20;
+  return options;
+}
+
+// One request or response message whose fields live in an arena of their own, all freed together
+// when it goes out of scope. A clip's slices parse into a message per channel, each with its own
+// repeated field: from the heap that was some 400 allocations and frees per Process call, and
+// malloc and free took about a quarter of the server's CPU under 16 clients; from the arena it is
+// a few blocks (measured: 0.70-1.0 -> 0.61-0.73 ms of server CPU per job). For a message parsed
+// or built, used and dropped within one step of a stream: one per message, never one reused
+// across messages (an arena frees nothing before it ends, so a reused message would hold every
+// message's fields).
+template <typename Message>
+class ArenaMessage {
+ public:
+  ArenaMessage()
+      : arena_(MessageArenaOptions()),
+        message_(google::protobuf::Arena::CreateMessage<Message>(&arena_)) {}
+  ArenaMessage(const ArenaMessage&) = delete;
+  ArenaMessage& operator=(const ArenaMessage&) = delete;
+
+  Message* get() { return message_; }
+  Message& operator*() { return *message_; }
+  Message* operator->() { return message_; }
+
+ private:
+  google::protobuf::Arena arena_;
+  Message* message_;  // owned by arena_
+};
+
+}  // namespace tempokey::wire
+
+#endif  // TEMPOKEY_PROTO_ARENA_MESSAGE_H_
