@@ -9,11 +9,14 @@
 
 namespace tempokey::wire {
 
-// Blocks of 64 KiB growing to 1 MiB: a clip's slices for a few hundred channels fit in one or two.
+// Blocks of 64 KiB growing to 256 KiB: a short clip's slices for a few hundred channels take
+// two or three. Below glibc's mapping threshold as the server sets it (1 MiB, memory_budget.h),
+// so blocks come from the heap and are reused, not mapped and zeroed afresh for every message (a
+// larger field gets a block of its own size, as it would get its own allocation without an arena).
 inline google::protobuf::ArenaOptions MessageArenaOptions() {
   google::protobuf::ArenaOptions options;
   options.start_block_size = std::size_t{64} << 10;
-  options.max_block_size = std::size_t{1} << 20;
+  options.max_block_size = std::size_t{256} << 10;
   return options;
 }
 
