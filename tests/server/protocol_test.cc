@@ -202,55 +202,29 @@ TEST(ProcessProtocolTest, AProcessCallStreamsItsFirstProgressAtOnceAndNoneMoreWi
   std::unique_ptr<server::Server> server = StartServer(options);
   ASSERT_NE(server, nullptr);
   auto stub = v1::MotionService::NewStub(Connect(server->target()));
-  grpc::ClientContext context;
-  SetDeadline(context);
-  auto process = stub->Process(&context);
   const core::Clip clip = MakeClip(8, 400);
-  for (const v1::ProcessRequest& request : ProcessClipRequests(clip)) {
-    ASSERT_TRUE(process->Write(request));
-  }
-  // 24 stages of 27 channels: a report per stage and per channel, all within the hour.
-  v1::ProcessRequest start;
-  *start.mutable_start()->mutable_operations() = WrapOperations(24);
-  ASSERT_TRUE(process->Write(start));
-  process->WritesDone();
-  std::vector<v1::ProcessResponse> responses;
-  v1::ProcessResponse response;
-  while (process->Read(&response)) responses.push_back(response);
 
-  TEMPOKEY_ASSERT_GRPC_OK(process->Finish());
+  // 24 stages of 27 channels: a report per stage and per channel, all within the hour.
+  const ProcessOutcome outcome = RunProcess(*stub, clip, WrapOperations(24));
+
+  TEMPOKEY_ASSERT_GRPC_OK(outcome.status);
+  const std::vector<v1::ProcessResponse>& responses = outcome.responses;
   ASSERT_GE(responses.size(), 2u);
   EXPECT_TRUE(responses[0].has_progress());
   EXPECT_EQ(responses[0].progress().progress(), 0.0);
-  std::vector<v1::ResultPart> parts;
   for (std::size_t i = 1; i < responses.size(); ++i) {
     EXPECT_TRUE(responses[i].has_result()) << "message " << i + 1 << " is progress";
-    parts.push_back(responses[i].result());
   }
-  absl::StatusOr<core::Clip> result = AssembleClipResult(parts);
+  absl::StatusOr<core::Clip> result = AssembleClipResult(outcome.ResultParts());
   ASSERT_TRUE(result.ok()) << result.status();
   EXPECT_EQ(*result, WrappedCopy(clip));
 }
 
 TEST_F(ProtocolTest, HalfClosingAfterTheStartIsTheNormalEnd) {
-  grpc::ClientContext context;
-  SetDeadline(context);
-  auto process = stub_->Process(&context);
-  for (const v1::ProcessRequest& request : ProcessClipRequests(MakeClip(1, 40))) {
-    ASSERT_TRUE(process->Write(request));
-  }
-  v1::ProcessRequest start;
-  *start.mutable_start()->mutable_operations() = WrapOperations();
-  ASSERT_TRUE(process->Write(start));
-  process->WritesDone();
-  std::vector<v1::ResultPart> parts;
-  v1::ProcessResponse response;
-  while (process->Read(&response)) {
-    if (response.has_result()) parts.push_back(response.result());
-  }
+  const ProcessOutcome outcome = RunProcess(*stub_, MakeClip(1, 40), WrapOperations());
 
-  TEMPOKEY_ASSERT_GRPC_OK(process->Finish());
-  absl::StatusOr<core::Clip> result = AssembleClipResult(parts);
+  TEMPOKEY_ASSERT_GRPC_OK(outcome.status);
+  absl::StatusOr<core::Clip> result = AssembleClipResult(outcome.ResultParts());
   ASSERT_TRUE(result.ok()) << result.status();
   EXPECT_EQ(*result, WrappedCopy(MakeClip(1, 40)));
 }

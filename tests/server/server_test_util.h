@@ -219,6 +219,40 @@ inline std::vector<v1::ProcessRequest> ProcessClipRequests(const core::Clip& cli
   return requests;
 }
 
+// A whole Process call: `clip`, a start with `operations`, the half-close, then every response.
+struct ProcessOutcome {
+  grpc::Status status;
+  std::vector<v1::ProcessResponse> responses;
+
+  // The result parts among the responses, in order.
+  std::vector<v1::ResultPart> ResultParts() const {
+    std::vector<v1::ResultPart> parts;
+    for (const v1::ProcessResponse& response : responses) {
+      if (response.has_result()) parts.push_back(response.result());
+    }
+    return parts;
+  }
+};
+
+inline ProcessOutcome RunProcess(v1::MotionService::Stub& stub, const core::Clip& clip,
+                                 const google::protobuf::RepeatedPtrField<v1::Operation>& operations) {
+  ProcessOutcome outcome;
+  grpc::ClientContext context;
+  SetDeadline(context);
+  auto process = stub.Process(&context);
+  for (const v1::ProcessRequest& request : ProcessClipRequests(clip)) {
+    EXPECT_TRUE(process->Write(request));
+  }
+  v1::ProcessRequest start;
+  *start.mutable_start()->mutable_operations() = operations;
+  EXPECT_TRUE(process->Write(start));
+  process->WritesDone();
+  v1::ProcessResponse response;
+  while (process->Read(&response)) outcome.responses.push_back(response);
+  outcome.status = process->Finish();
+  return outcome;
+}
+
 struct JobOutcome {
   grpc::Status status;
   v1::Job job;
