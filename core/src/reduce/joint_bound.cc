@@ -27,14 +27,6 @@ constexpr double kTightenAim = 0.9;
 // ... by at least this factor and at most this one per round.
 constexpr double kMinTightenFactor = 0.25;
 constexpr double kMaxTightenFactor = 0.9;
-// First budgets shared along the chains: a point moved by n channels gets from each at most
-// kChainShareScale / n^kChainSharePower of the bound. The guarantee's 1 / n assumes every error
-// at its budget and all aligned; independent errors would add up like sqrt(n). Between the two,
-// chosen on the shared clips (README, "World-space bound"): at 1 cm on Bandai 26 013 keys where
-// each channel alone taking the whole bound gave 26 324, with 2 114 channel fits instead of 2 962;
-// at 0.5 % of the height on CMU 131_01 3 788 keys instead of 3 867, verified in the first round.
-constexpr double kChainShareScale = 2.5;
-constexpr double kChainSharePower = 0.75;
 
 bool IsConstant(std::span<const double> samples) {
   return std::all_of(samples.begin(), samples.end(),
@@ -174,14 +166,6 @@ std::vector<double> JointBoundPlan::InitialBudgets(double bound) const {
       // The exact angle whose chord at the lever's distance is the bound.
       const double distance = lever_[c] / kRadiansPerDegree;
       budgets[c] = 2.0 * std::asin(std::min(1.0, bound / (2.0 * distance))) / kRadiansPerDegree;
-    }
-  }
-  for (const std::vector<int>& chain : chain_) {
-    const double share =
-        kChainShareScale / std::pow(static_cast<double>(chain.size()), kChainSharePower);
-    for (int c : chain) {
-      const auto ch = static_cast<std::size_t>(c);
-      budgets[ch] = std::min(budgets[ch], share * bound / lever_[ch]);
     }
   }
   return budgets;

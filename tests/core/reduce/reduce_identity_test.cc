@@ -163,24 +163,20 @@ TEST(ReduceIdentityTest, ToleranceWithAKeyBudgetKeepsItsPinnedKeys) {
 // bits. Against libm's (79ea94a), on these 8 clips: the same 30 191 keys on the same frames, 1 228
 // values different by at most 1.8e-11 (2.9e-14 of the value), tangents by at most 1.2e-10, the
 // worst joint error by at most 5.5e-14 of itself.
-// Re-recorded again for a change of behaviour: the first budgets shared along each point's chain
-// (joint_bound.cc, kChainShareScale). Bandai at 1 cm: 26 013 keys instead of 26 324, the worst
-// joint 0.986 cm instead of 0.985; CMU 131_01 at 0.5 % of the height: 3 788 keys instead of
-// 3 867, verified in the first round.
 TEST(ReduceIdentityTest, JointBoundKeepsItsPinnedKeysOnEverySharedClip) {
   ReduceOptions options;
   options.tolerance.joint_tolerance = JointTolerance{.value = 1.0};
-  ExpectPinned(BandaiClips(), options, "0x665933a5d44fc8bc",
-               {{0.90288566793757308, 0.28170746672707669, 14, 1, 141.00895960412188},
-                {0.96897430131644358, 0.2259622884894964, 1760, 1, 139.26022742434219},
-                {0.98606343652216832, 0.26263827018069985, 323, 1, 134.00558336779474},
-                {0.98232959866537239, 0.30041143088211031, 73, 1, 138.46896344816713},
-                {0.85658219296282445, 0.28107974298916616, 77, 1, 139.24327880346522},
-                {0.90576629702943012, 0.27285719541805231, 136, 1, 137.35009895359738},
-                {0.71783977153355716, 0.19589064898326403, 75, 1, 139.80910452445104}});
+  ExpectPinned(BandaiClips(), options, "0x1b3f386f9fdb0d8d",
+               {{0.98498094035847117, 0.33062701834235525, 51, 1, 141.00895960412188},
+                {0.84703177570547561, 0.21132391519468707, 1618, 1, 139.26022742434219},
+                {0.89469173499104648, 0.26772013873735456, 213, 1, 134.00558336779474},
+                {0.86839545573913279, 0.25295916187818324, 205, 1, 138.46896344816713},
+                {0.93315357959910339, 0.27518403805729857, 56, 1, 139.24327880346522},
+                {0.8646347341870565, 0.26002979544587351, 136, 1, 137.35009895359738},
+                {0.93911125077074942, 0.29501377409559465, 20, 1, 139.80910452445104}});
   options.tolerance.joint_tolerance = JointTolerance{.value = 0.5, .percent_of_height = true};
-  ExpectPinned({AllClips()[0]}, options, "0xbb64dab5a2ab309a",
-               {{0.11946546551181797, 0.031354250332333744, 342, 0.12636889675091262,
+  ExpectPinned({AllClips()[0]}, options, "0x704e8a3579555815",
+               {{0.1033398887701321, 0.029561861526390454, 409, 0.12636889675091262,
                  25.273779350182526}});
 }
 

@@ -11,12 +11,8 @@
 //      ozz-animation's optimizer measures a joint's error by default (10 cm) to stand for the
 //      skin around a bone: a hand or head whose end site sits on the joint still keeps its
 //      orientation.
-//   2. Budgets: each channel alone may use the whole bound (ozz-style: a rotation channel of
-//      lever r gets 2·asin(D / 2r), a position channel D), but the n non-constant channels on a
-//      point's chain share it, each getting at most 2.5 · D / (lever · n^0.75): between the
-//      guarantee's D / (lever · n) and the sqrt(n) of independent errors, chosen on the shared
-//      clips (fewer keys and fewer refits than the whole bound each). Per-channel bounds given
-//      as well cap them.
+//   2. Budgets (ozz-style, each channel alone may use the whole bound): a rotation channel of
+//      lever r gets 2·asin(D / 2r), a position channel D; per-channel bounds given as well cap them.
 //   3. Fit every channel with tolerance_fit within its budget; place every point of the result at
 //      every frame by forward kinematics and compare with the source.
 //   4. For each point over D, tighten only the channels on its chain (its joint's and its
