@@ -10,9 +10,10 @@
 namespace tempokey::wire {
 
 // Blocks of 64 KiB growing to 256 KiB: a short clip's slices for a few hundred channels take
-// two or three. Below glibc's mapping threshold as the server sets it (1 MiB, memory_budget.h),
-// so blocks come from the heap and are reused, not mapped and zeroed afresh for every message (a
-// larger field gets a block of its own size, as it would get its own allocation without an arena).
+// two or three. Below the mapping threshold the server gives glibc (1 MiB, memory_budget.h), so
+// there blocks come from the heap and are reused, not mapped and zeroed afresh for every message;
+// a larger field gets a block of its own size, as it would get its own allocation without an
+// arena. (A client keeps glibc's own threshold, which adapts upwards the same way.)
 inline google::protobuf::ArenaOptions MessageArenaOptions() {
   google::protobuf::ArenaOptions options;
   options.start_block_size = std::size_t{64} << 10;
@@ -20,14 +21,14 @@ inline google::protobuf::ArenaOptions MessageArenaOptions() {
   return options;
 }
 
-// One request or response message whose fields live in an arena of their own, all freed together
+// One message parsed from the wire whose fields live in an arena of their own, all freed together
 // when it goes out of scope. A clip's slices parse into a message per channel, each with its own
 // repeated field: from the heap that was some 400 allocations and frees per Process call, and
 // malloc and free took about a quarter of the server's CPU under 16 clients; from the arena it is
-// a few blocks (measured: 0.70-1.0 -> 0.61-0.73 ms of server CPU per job). For a message parsed
-// or built, used and dropped within one step of a stream: one per message, never one reused
-// across messages (an arena frees nothing before it ends, so a reused message would hold every
-// message's fields).
+// a few blocks (paired runs: 0.75-0.80 -> 0.67-0.70 ms of server CPU per job). For a message
+// parsed, used and dropped within one step of a stream: one per message, never one reused across
+// messages (an arena frees nothing before it ends). Not for messages built from parts made on the
+// heap: moving a message between arenas copies it.
 template <typename Message>
 class ArenaMessage {
  public:

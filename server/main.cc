@@ -44,7 +44,8 @@ ABSL_FLAG(double, stream_idle_timeout_seconds, 30,
           "0: never.");
 ABSL_FLAG(int64_t, process_progress_interval_ms, 100,
           "A Process call streams its first progress message at once, then at most one per "
-          "this many milliseconds; 0: one per stage or percent.");
+          "this many milliseconds, the latest sent when the interval ends; 0: every new stage "
+          "label (one per channel) or percent. At most 3600000.");
 ABSL_FLAG(int64_t, max_message_bytes, int64_t{64} << 20, "Largest message received, in bytes.");
 ABSL_FLAG(int64_t, max_clip_samples, int64_t{32} << 20,
           "Largest clip accepted, in samples (frames x channels).");

@@ -13,6 +13,8 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "grpcpp/alarm.h"
+#include "proto/arena_message.h"
 #include "proto/clip_convert.h"
 #include "proto/jobs_convert.h"
 #include "server/job_proto.h"
@@ -31,7 +33,7 @@ using ProcessReactorBase = grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteB
 
 // State shared by the reactor (gRPC threads) and the worker running the pipeline; outlives the
 // reactor while the worker holds it.
-class ProcessLink final {
+class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
  public:
   ProcessLink(ServiceContext* service, ProcessReactorBase* reactor,
               grpc::CallbackServerContext* call)
@@ -145,12 +147,52 @@ class ProcessLink final {
     const ProgressThrottle::Clock::time_point now = ProgressThrottle::Clock::now();
     std::lock_guard lock(mu_);
     if (finished_ || result_ready_) return;
-    if (!throttle_.ShouldSend(fraction, stage, now)) return;
+    switch (throttle_.Offer(fraction, stage, now)) {
+      case ProgressThrottle::Verdict::kSend:
+        SendProgressLocked(ProgressReport{fraction, std::string(stage)});
+        return;
+      case ProgressThrottle::Verdict::kDefer:
+        ArmFlushLocked(now);
+        return;
+      case ProgressThrottle::Verdict::kDrop:
+        return;
+    }
+  }
+
+  // Latest wins: replaces a progress message not yet written.
+  void SendProgressLocked(const ProgressReport& report) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
     v1::Progress progress;
-    progress.set_progress(fraction);
-    progress.set_stage(std::string(stage));
+    progress.set_progress(report.fraction);
+    progress.set_stage(report.stage);
     pending_progress_ = std::move(progress);
     if (!writing_) WriteNextLocked();
+  }
+
+  // Sends the deferred report when it is due, on gRPC's timer. One alarm at a time: a report
+  // deferred while one is set replaces the one it will send. The alarm holds the link weakly: a
+  // link gone by then (the call ended) has nothing to send.
+  void ArmFlushLocked(ProgressThrottle::Clock::time_point now) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
+    if (flush_armed_) return;
+    const std::optional<ProgressThrottle::Clock::time_point> due = throttle_.deferred_due();
+    if (!due) return;
+    flush_armed_ = true;
+    flush_alarm_ = std::make_unique<grpc::Alarm>();
+    flush_alarm_->Set(std::chrono::system_clock::now() + (*due - now),
+                      [weak = weak_from_this()](bool fired) {
+                        if (const std::shared_ptr<ProcessLink> link = weak.lock()) {
+                          link->OnFlushDue(fired);
+                        }
+                      });
+  }
+
+  void OnFlushDue(bool fired) {
+    std::lock_guard lock(mu_);
+    flush_armed_ = false;
+    if (!fired || finished_ || result_ready_) return;
+    if (std::optional<ProgressReport> report =
+            throttle_.TakeDeferred(ProgressThrottle::Clock::now())) {
+      SendProgressLocked(*report);
+    }
   }
 
   void OnResult(absl::StatusOr<core::PipelineResult> result) {
@@ -185,12 +227,12 @@ class ProcessLink final {
   }
 
   void WriteNextLocked() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
-    ArenaMessage<v1::ProcessResponse> message;
+    message_.Clear();
     if (pending_progress_) {
-      *message->mutable_progress() = *std::move(pending_progress_);
+      *message_.mutable_progress() = *std::move(pending_progress_);
       pending_progress_.reset();
     } else if (slicer_) {
-      if (!slicer_->Next(message->mutable_result())) {
+      if (!slicer_->Next(message_.mutable_result())) {
         FinishLocked(absl::OkStatus());
         return;
       }
@@ -198,7 +240,7 @@ class ProcessLink final {
       return;  // nothing to say yet
     }
     writing_ = true;
-    SerializeMessage(*message, &buffer_);
+    SerializeMessage(message_, &buffer_);
     service_->BytesOut(static_cast<std::int64_t>(buffer_.Length()));
     if (idle_ != nullptr) idle_->Arm();
     reactor_->StartWrite(&buffer_);
@@ -230,9 +272,14 @@ class ProcessLink final {
   bool writing_ ABSL_GUARDED_BY(mu_) = false;
   bool result_ready_ ABSL_GUARDED_BY(mu_) = false;
   ProgressThrottle throttle_ ABSL_GUARDED_BY(mu_){service_->options.process_progress_interval};
+  bool flush_armed_ ABSL_GUARDED_BY(mu_) = false;
+  std::unique_ptr<grpc::Alarm> flush_alarm_ ABSL_GUARDED_BY(mu_);
   std::optional<v1::Progress> pending_progress_ ABSL_GUARDED_BY(mu_);
   std::optional<wire::ResultSlicer> slicer_ ABSL_GUARDED_BY(mu_);
   std::optional<absl::Status> end_status_ ABSL_GUARDED_BY(mu_);
+  // On the heap, not in an arena: the slicer builds its parts on the heap and moves them in, which
+  // across arenas would be a copy.
+  v1::ProcessResponse message_ ABSL_GUARDED_BY(mu_);
   grpc::ByteBuffer buffer_ ABSL_GUARDED_BY(mu_);  // the write in flight
   std::shared_ptr<IdleReaper::Timer> idle_;
   StreamSlot* slot_ ABSL_GUARDED_BY(mu_) = nullptr;
@@ -279,7 +326,7 @@ class ProcessReactor final : public ProcessReactorBase {
           "client only reads")));
       return;
     }
-    ArenaMessage<v1::ProcessRequest> request;
+    wire::ArenaMessage<v1::ProcessRequest> request;
     absl::Status status =
         ParseMessage(buffer_, absl::StrCat("Process message ", messages_), request.get());
     if (status.ok()) status = Accept(*request);

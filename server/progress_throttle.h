@@ -1,43 +1,65 @@
-// Which of a pipeline's progress reports a Process call streams to its client. A pipeline reports
-// progress per channel and per stage; a message per report would make a short call's client read
-// more progress than result, and each message costs the server a write and a hand-off between
-// the worker and gRPC's threads (paired runs of bench/service_bench: a 132-channel x 128-frame
-// retime's round trip p50 fell from 1.6-2.0 ms to 1.2-1.4 ms with one message instead of 6-7).
-// So:
-//   - the first report is always sent: it tells the client its pipeline left the queue;
-//   - after it, a report is sent only if its stage differs or its fraction moved by at least a
-//     percent since the last one sent (latest wins, never a backlog), and at least `interval`
-//     after the last one sent. A report inside the interval is dropped, not delayed: the next
-//     report past it carries the newer state, and the result supersedes them all.
+// Which of a pipeline's progress reports a Process call streams to its client, and when. A
+// pipeline reports progress per channel and per stage; a message per report would make a short
+// call's client read more progress than result, and each message costs the server a write and a
+// hand-off between the worker and gRPC's threads (paired runs of bench/service_bench: a
+// 132-channel x 128-frame retime's round trip p50 fell from 1.6-2.0 ms to 1.2-1.4 ms with one
+// message instead of 6-7). So:
+//   - the first report is sent at once: it tells the client its pipeline left the queue;
+//   - a report that repeats the last one sent (same stage, fraction within a percent) is dropped;
+//   - any other report is sent at once if `interval` has passed since the last one sent, and
+//     otherwise deferred: the latest deferred report is sent when the interval ends (the caller
+//     sets a timer for deferred_due()), unless a newer report or the result comes first. So the
+//     client never keeps a stale stage for longer than the interval, and a short call's client
+//     gets its first report and its result.
 //
-// No gRPC and no clock of its own (the caller passes the time), so it is unit-tested with
-// chosen times. Not thread-safe: the caller serializes reports.
+// No gRPC and no clock of its own (the caller passes the time), so it is unit-tested with chosen
+// times. Not thread-safe: the caller serializes calls.
 #ifndef TEMPOKEY_SERVER_PROGRESS_THROTTLE_H_
 #define TEMPOKEY_SERVER_PROGRESS_THROTTLE_H_
 
 #include <chrono>
+#include <optional>
 #include <string>
 #include <string_view>
 
 namespace tempokey::server {
 
+struct ProgressReport {
+  double fraction = 0.0;  // 0..1
+  std::string stage;
+};
+
 class ProgressThrottle {
  public:
   using Clock = std::chrono::steady_clock;
 
-  // `interval` >= 0; 0 sends every report that moved by a stage or a percent.
+  enum class Verdict {
+    kSend,   // send it now; it is the last one sent
+    kDefer,  // kept as the deferred report (replacing an older one), due at deferred_due()
+    kDrop,   // a repeat of the last report sent
+  };
+
+  // `interval` >= 0; 0 sends every report that is not a repeat.
   explicit ProgressThrottle(Clock::duration interval) : interval_(interval) {}
 
-  // Whether a report of `fraction` (0..1) at `stage`, made at `now`, is to be sent; if so it
-  // becomes the last one sent. `now` never goes back between calls.
-  bool ShouldSend(double fraction, std::string_view stage, Clock::time_point now);
+  // What to do with a report of `fraction` at `stage`, made at `now` (never earlier than the
+  // previous call's `now`).
+  Verdict Offer(double fraction, std::string_view stage, Clock::time_point now);
+
+  // When the deferred report is due (the last send plus the interval); nullopt without one.
+  std::optional<Clock::time_point> deferred_due() const;
+
+  // The deferred report, now the last one sent at `now`; nullopt without one.
+  std::optional<ProgressReport> TakeDeferred(Clock::time_point now);
 
  private:
+  bool IsRepeat(double fraction, std::string_view stage) const;
+
   Clock::duration interval_;
   bool sent_any_ = false;
-  std::string last_stage_;
-  double last_fraction_ = 0.0;
+  ProgressReport last_sent_;
   Clock::time_point last_sent_at_;
+  std::optional<ProgressReport> deferred_;
 };
 
 }  // namespace tempokey::server

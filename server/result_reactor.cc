@@ -70,12 +70,11 @@ class SlicedResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuff
   }
 
   void WriteNext() {
-    ArenaMessage<v1::ResultPart> part;
-    if (!slicer_->Next(part.get())) {
+    if (!slicer_->Next(&part_)) {
       End(grpc::Status::OK);
       return;
     }
-    SerializeMessage(*part, &buffer_);
+    SerializeMessage(part_, &buffer_);
     service_->BytesOut(static_cast<std::int64_t>(buffer_.Length()));
     if (idle_ != nullptr) idle_->Arm();
     StartWrite(&buffer_);
@@ -94,6 +93,7 @@ class SlicedResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuff
   StreamSlot slot_;
   std::optional<wire::ResultSlicer> slicer_;
   std::shared_ptr<IdleReaper::Timer> idle_;
+  v1::ResultPart part_;
   grpc::ByteBuffer buffer_;
 };
 

@@ -292,9 +292,11 @@ absl::Status ValidateServerOptions(const ServerOptions& o) {
         "--stream_idle_timeout_seconds must be >= 0 (0: none), got ",
         static_cast<double>(o.stream_idle_timeout.count()) / 1000.0));
   }
-  if (o.process_progress_interval.count() < 0) {
+  if (o.process_progress_interval < std::chrono::milliseconds(0) ||
+      o.process_progress_interval > std::chrono::hours(1)) {
     return absl::InvalidArgumentError(absl::StrCat(
-        "--process_progress_interval_ms must be >= 0 (0: a message per stage or percent), got ",
+        "--process_progress_interval_ms must be in [0, 3600000] (0: every new stage label or "
+        "percent), got ",
         o.process_progress_interval.count()));
   }
   if (o.tls_cert_file.empty() && !o.allow_insecure_remote) {

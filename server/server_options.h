@@ -59,7 +59,8 @@ struct ServerOptions {
   // sends for this long (results, watches, Process output), is ended; 0 disables it.
   std::chrono::milliseconds stream_idle_timeout{30'000};
   // A Process call streams its first progress report at once, then at most one per this
-  // interval (server/progress_throttle.h); 0 sends one per stage or percent.
+  // interval, the latest kept and sent when it ends (server/progress_throttle.h); 0 sends every
+  // new stage label (one per channel) or percent. At most one hour.
   std::chrono::milliseconds process_progress_interval{100};
   // Connections are closed (GOAWAY) after this long so clients rebalance across replicas;
   // 0 disables it.

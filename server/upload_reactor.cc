@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "proto/arena_message.h"
 #include "proto/clip_convert.h"
 #include "proto/clip_digest.h"
 #include "server/memory_size.h"
@@ -55,7 +56,7 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
     }
     ++messages_;
     service_->BytesIn(static_cast<std::int64_t>(buffer_.Length()));
-    ArenaMessage<v1::UploadClipRequest> request;
+    wire::ArenaMessage<v1::UploadClipRequest> request;
     absl::Status status =
         ParseMessage(buffer_, absl::StrCat("upload message ", messages_), request.get());
     if (status.ok()) status = Accept(*request);

@@ -9,11 +9,8 @@
 #include "absl/status/status.h"
 #include "google/protobuf/message.h"
 #include "grpcpp/support/byte_buffer.h"
-#include "proto/arena_message.h"
 
 namespace tempokey::server {
-
-using wire::ArenaMessage;
 
 // Parses `buffer` into `message` (cleared first). `what` names the message in the error
 // ("SubmitJob request", "upload message 3").

@@ -1,5 +1,6 @@
-// ProgressThrottle with chosen times: the first report always goes out; later ones need a new
-// stage or a percent of movement, and the interval since the last one sent.
+// ProgressThrottle with chosen times: the first report goes out at once; a repeat of the last one
+// sent is dropped; any other report inside the interval is deferred, the latest one kept and due
+// when the interval ends.
 #include "server/progress_throttle.h"
 
 #include <chrono>
@@ -11,43 +12,72 @@ namespace {
 
 using std::chrono::milliseconds;
 using Clock = ProgressThrottle::Clock;
+using Verdict = ProgressThrottle::Verdict;
 
 const Clock::time_point kStart = Clock::time_point() + std::chrono::hours(1);
 
 TEST(ProgressThrottleTest, TheFirstReportIsSentWhateverTheInterval) {
   ProgressThrottle throttle(std::chrono::hours(1));
 
-  EXPECT_TRUE(throttle.ShouldSend(0.0, "retime", kStart));
+  EXPECT_EQ(throttle.Offer(0.0, "retime", kStart), Verdict::kSend);
+  EXPECT_FALSE(throttle.deferred_due().has_value());
 }
 
-TEST(ProgressThrottleTest, ReportsInsideTheIntervalAreDroppedAndTheNextOnePastItIsSent) {
+TEST(ProgressThrottleTest, ReportsInsideTheIntervalAreDeferredAndTheLatestIsDueWhenItEnds) {
   ProgressThrottle throttle(milliseconds(100));
-  ASSERT_TRUE(throttle.ShouldSend(0.0, "retime", kStart));
+  ASSERT_EQ(throttle.Offer(0.0, "retime 1/2", kStart), Verdict::kSend);
 
-  EXPECT_FALSE(throttle.ShouldSend(0.5, "retime", kStart + milliseconds(10)));
-  EXPECT_FALSE(throttle.ShouldSend(0.0, "reduce", kStart + milliseconds(99)));
-  EXPECT_TRUE(throttle.ShouldSend(0.2, "reduce", kStart + milliseconds(100)));
-  // The interval counts from the last report sent, not from the last one made.
-  EXPECT_FALSE(throttle.ShouldSend(0.3, "reduce", kStart + milliseconds(199)));
-  EXPECT_TRUE(throttle.ShouldSend(0.3, "reduce", kStart + milliseconds(200)));
+  EXPECT_EQ(throttle.Offer(0.5, "retime 2/2", kStart + milliseconds(10)), Verdict::kDefer);
+  EXPECT_EQ(throttle.Offer(0.5, "reduce", kStart + milliseconds(20)), Verdict::kDefer);
+  ASSERT_EQ(throttle.deferred_due(), kStart + milliseconds(100));
+  const std::optional<ProgressReport> due = throttle.TakeDeferred(kStart + milliseconds(100));
+
+  ASSERT_TRUE(due.has_value());
+  EXPECT_EQ(due->stage, "reduce");
+  EXPECT_EQ(due->fraction, 0.5);
+  EXPECT_FALSE(throttle.deferred_due().has_value());
+  EXPECT_FALSE(throttle.TakeDeferred(kStart + milliseconds(150)).has_value());
+}
+
+TEST(ProgressThrottleTest, TheIntervalCountsFromTheLastReportSentEvenAFlushedOne) {
+  ProgressThrottle throttle(milliseconds(100));
+  ASSERT_EQ(throttle.Offer(0.0, "retime", kStart), Verdict::kSend);
+  ASSERT_EQ(throttle.Offer(0.2, "retime", kStart + milliseconds(50)), Verdict::kDefer);
+  ASSERT_TRUE(throttle.TakeDeferred(kStart + milliseconds(100)).has_value());
+
+  EXPECT_EQ(throttle.Offer(0.3, "retime", kStart + milliseconds(150)), Verdict::kDefer);
+  EXPECT_EQ(throttle.deferred_due(), kStart + milliseconds(200));
+  EXPECT_EQ(throttle.Offer(0.4, "retime", kStart + milliseconds(200)), Verdict::kSend);
+  // Sent at once: nothing is left to flush.
+  EXPECT_FALSE(throttle.deferred_due().has_value());
 }
 
 TEST(ProgressThrottleTest, ARepeatOfTheLastReportSentIsDroppedHoweverLateItComes) {
   ProgressThrottle throttle(milliseconds(100));
-  ASSERT_TRUE(throttle.ShouldSend(0.5, "reduce", kStart));
+  ASSERT_EQ(throttle.Offer(0.5, "reduce", kStart), Verdict::kSend);
 
-  EXPECT_FALSE(throttle.ShouldSend(0.509, "reduce", kStart + std::chrono::hours(2)));
-  EXPECT_TRUE(throttle.ShouldSend(0.51, "reduce", kStart + std::chrono::hours(2)));
+  EXPECT_EQ(throttle.Offer(0.509, "reduce", kStart + std::chrono::hours(2)), Verdict::kDrop);
+  EXPECT_EQ(throttle.Offer(0.51, "reduce", kStart + std::chrono::hours(2)), Verdict::kSend);
 }
 
-TEST(ProgressThrottleTest, AZeroIntervalSendsEveryNewStageAndEveryPercent) {
-  ProgressThrottle throttle(milliseconds(0));
-  ASSERT_TRUE(throttle.ShouldSend(0.0, "retime", kStart));
+TEST(ProgressThrottleTest, ARepeatOfTheLastReportSentCancelsTheDeferredOne) {
+  ProgressThrottle throttle(milliseconds(100));
+  ASSERT_EQ(throttle.Offer(0.5, "reduce", kStart), Verdict::kSend);
+  ASSERT_EQ(throttle.Offer(0.6, "reduce", kStart + milliseconds(10)), Verdict::kDefer);
 
-  EXPECT_FALSE(throttle.ShouldSend(0.005, "retime", kStart));
-  EXPECT_TRUE(throttle.ShouldSend(0.01, "retime", kStart));
-  EXPECT_TRUE(throttle.ShouldSend(0.01, "reduce", kStart));
-  EXPECT_FALSE(throttle.ShouldSend(0.015, "reduce", kStart));
+  // The latest state is what the client already shows.
+  EXPECT_EQ(throttle.Offer(0.5, "reduce", kStart + milliseconds(20)), Verdict::kDrop);
+  EXPECT_FALSE(throttle.TakeDeferred(kStart + milliseconds(100)).has_value());
+}
+
+TEST(ProgressThrottleTest, AZeroIntervalSendsEveryReportButRepeats) {
+  ProgressThrottle throttle(milliseconds(0));
+  ASSERT_EQ(throttle.Offer(0.0, "retime", kStart), Verdict::kSend);
+
+  EXPECT_EQ(throttle.Offer(0.005, "retime", kStart), Verdict::kDrop);
+  EXPECT_EQ(throttle.Offer(0.01, "retime", kStart), Verdict::kSend);
+  EXPECT_EQ(throttle.Offer(0.01, "reduce", kStart), Verdict::kSend);
+  EXPECT_EQ(throttle.Offer(0.015, "reduce", kStart), Verdict::kDrop);
 }
 
 }  // namespace

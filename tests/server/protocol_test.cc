@@ -196,7 +196,7 @@ TEST(ProcessProtocolTest, ProcessRefusesAMessageAfterItsStart) {
                                    "takes one clip and one start, then the client only reads"));
 }
 
-TEST(ProcessProtocolTest, AProcessCallStreamsItsFirstProgressAtOnceAndNoneMoreWithinTheInterval) {
+TEST(ProcessProtocolTest, AProcessCallStreamsOnlyItsFirstProgressWhileTheIntervalLasts) {
   server::ServerOptions options = TestServerOptions();
   options.process_progress_interval = std::chrono::hours(1);
   std::unique_ptr<server::Server> server = StartServer(options);
@@ -204,7 +204,7 @@ TEST(ProcessProtocolTest, AProcessCallStreamsItsFirstProgressAtOnceAndNoneMoreWi
   auto stub = v1::MotionService::NewStub(Connect(server->target()));
   const core::Clip clip = MakeClip(8, 400);
 
-  // 24 stages of 27 channels: a report per stage and per channel, all within the hour.
+  // 24 steps, a report each, all deferred within the hour and superseded by the result.
   const ProcessOutcome outcome = RunProcess(*stub, clip, WrapOperations(24));
 
   TEMPOKEY_ASSERT_GRPC_OK(outcome.status);

@@ -163,7 +163,11 @@ TEST(ValidateServerOptionsTest, RefusesWhatNoServerCanRunWith) {
       {[](ServerOptions& o) { o.stream_idle_timeout = std::chrono::milliseconds(-1500); },
        "--stream_idle_timeout_seconds must be >= 0 (0: none), got -1.5"},
       {[](ServerOptions& o) { o.process_progress_interval = std::chrono::milliseconds(-5); },
-       "--process_progress_interval_ms must be >= 0 (0: a message per stage or percent), got -5"},
+       "--process_progress_interval_ms must be in [0, 3600000] (0: every new stage label or "
+       "percent), got -5"},
+      {[](ServerOptions& o) { o.process_progress_interval = std::chrono::hours(2); },
+       "--process_progress_interval_ms must be in [0, 3600000] (0: every new stage label or "
+       "percent), got 7200000"},
   };
   for (const Case& c : cases) {
     ServerOptions options;
