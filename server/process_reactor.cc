@@ -170,7 +170,10 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
 
   // Sends the deferred report when it is due, on gRPC's timer. One alarm at a time: a report
   // deferred while one is set replaces the one it will send. The alarm holds the link weakly: a
-  // link gone by then (the call ended) has nothing to send.
+  // link gone by then (the call ended) has nothing to send. gRPC never runs the callback inside
+  // Set() (it goes through its executor), so setting it under mu_ cannot deadlock. Costs a short
+  // call one alarm set and cancelled (perf stat: 23.6 -> 24.0 context switches per sequential
+  // call).
   void ArmFlushLocked(ProgressThrottle::Clock::time_point now) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
     if (flush_armed_) return;
     const std::optional<ProgressThrottle::Clock::time_point> due = throttle_.deferred_due();
@@ -186,12 +189,17 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
   }
 
   void OnFlushDue(bool fired) {
+    const ProgressThrottle::Clock::time_point now = ProgressThrottle::Clock::now();
     std::lock_guard lock(mu_);
     flush_armed_ = false;
     if (!fired || finished_ || result_ready_) return;
-    if (std::optional<ProgressReport> report =
-            throttle_.TakeDeferred(ProgressThrottle::Clock::now())) {
+    if (std::optional<ProgressReport> report = throttle_.TakeDeferred(now)) {
       SendProgressLocked(*report);
+    } else {
+      // The worker sent a report when this one was due and deferred a newer one: set the timer
+      // again for that one's due time. (Replacing the alarm from its own callback is safe: gRPC
+      // keeps the alarm's state until its callback returns.)
+      ArmFlushLocked(now);
     }
   }
 

@@ -49,7 +49,8 @@ class ProgressThrottle {
   // When the deferred report is due (the last send plus the interval); nullopt without one.
   std::optional<Clock::time_point> deferred_due() const;
 
-  // The deferred report, now the last one sent at `now`; nullopt without one.
+  // The deferred report, now the last one sent at `now`; nullopt without one, or before it is
+  // due (then deferred_due() tells when).
   std::optional<ProgressReport> TakeDeferred(Clock::time_point now);
 
  private:

@@ -52,6 +52,31 @@ TEST(ProgressThrottleTest, TheIntervalCountsFromTheLastReportSentEvenAFlushedOne
   EXPECT_FALSE(throttle.deferred_due().has_value());
 }
 
+TEST(ProgressThrottleTest, ADeferredReportIsNotTakenBeforeItIsDue) {
+  ProgressThrottle throttle(milliseconds(100));
+  ASSERT_EQ(throttle.Offer(0.0, "channel 1", kStart), Verdict::kSend);
+  ASSERT_EQ(throttle.Offer(0.1, "channel 2", kStart + milliseconds(10)), Verdict::kDefer);
+  // The worker reaches the due time first and sends; then it defers another report.
+  ASSERT_EQ(throttle.Offer(0.2, "channel 3", kStart + milliseconds(100)), Verdict::kSend);
+  ASSERT_EQ(throttle.Offer(0.3, "channel 4", kStart + milliseconds(101)), Verdict::kDefer);
+
+  // A timer set for the first due time fires late.
+  EXPECT_FALSE(throttle.TakeDeferred(kStart + milliseconds(102)).has_value());
+  EXPECT_EQ(throttle.deferred_due(), kStart + milliseconds(200));
+  const std::optional<ProgressReport> due = throttle.TakeDeferred(kStart + milliseconds(200));
+  ASSERT_TRUE(due.has_value());
+  EXPECT_EQ(due->stage, "channel 4");
+}
+
+TEST(ProgressThrottleTest, AFlushedReportCountsAsTheLastOneSent) {
+  ProgressThrottle throttle(milliseconds(100));
+  ASSERT_EQ(throttle.Offer(0.0, "retime", kStart), Verdict::kSend);
+  ASSERT_EQ(throttle.Offer(0.2, "retime", kStart + milliseconds(10)), Verdict::kDefer);
+  ASSERT_TRUE(throttle.TakeDeferred(kStart + milliseconds(100)).has_value());
+
+  EXPECT_EQ(throttle.Offer(0.205, "retime", kStart + milliseconds(300)), Verdict::kDrop);
+}
+
 TEST(ProgressThrottleTest, ARepeatOfTheLastReportSentIsDroppedHoweverLateItComes) {
   ProgressThrottle throttle(milliseconds(100));
   ASSERT_EQ(throttle.Offer(0.5, "reduce", kStart), Verdict::kSend);
