@@ -33,11 +33,11 @@ std::string_view MemoryUseName(MemoryUse use);
 // Sets glibc's allocator for serving, before the server's threads start: requests under
 // kServingMmapThresholdBytes (a call's clip-sized buffers: 132 channels x 128 frames is 135 KB)
 // are served from the arenas (glibc maps a smaller request only when its arena cannot grow),
-// and an arena's free top is handed back by glibc once it reaches kServingTrimThresholdBytes. glibc's defaults (thresholds
-// that start at 128 KiB and follow the largest mapped chunk freed, up to 32 MiB, the trim
-// threshold at twice that) map and unmap such buffers, or trim the heap they were freed to, on
-// many calls: each unmapping or trim flushes the TLBs of every core running the server's
-// threads, and the next call faults the pages in again. The rest of the free memory goes back
+// and an arena's free top is handed back by glibc once it reaches kServingTrimThresholdBytes.
+// glibc's defaults (thresholds that start at 128 KiB and follow the largest mapped chunk freed,
+// up to 32 MiB, the trim threshold at twice that) map and unmap such buffers, or trim the heap
+// they were freed to, on many calls: each unmapping or trim flushes the TLBs of every core
+// running the server's threads, and the next call faults the pages in again. The rest of the free memory goes back
 // through MemoryBudget's trims. (Setting either threshold also ends glibc's dynamic adjustment
 // of it: the GNU C Library manual, "Malloc Tunable Parameters",
 // https://www.gnu.org/software/libc/manual/html_node/Malloc-Tunable-Parameters.html.)

@@ -36,7 +36,8 @@ std::optional<ProgressThrottle::Clock::time_point> ProgressThrottle::deferred_du
 std::optional<ProgressReport> ProgressThrottle::TakeDeferred(Clock::time_point now) {
   // Not before it is due: a timer set for an earlier due time (the worker sent a report at that
   // time itself, then deferred another) must not send two within the interval.
-  if (!deferred_ || now < last_sent_at_ + interval_) return std::nullopt;
+  const std::optional<Clock::time_point> due = deferred_due();
+  if (!due || now < *due) return std::nullopt;
   last_sent_ = *std::move(deferred_);
   deferred_.reset();
   last_sent_at_ = now;

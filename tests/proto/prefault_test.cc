@@ -28,7 +28,8 @@ class PrefaultTest : public ::testing::Test {
   void SetUp() override {
     page_ = static_cast<std::size_t>(sysconf(_SC_PAGESIZE));
     bytes_ = 64 * page_;
-    void* mapped = mmap(nullptr, bytes_, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    void* mapped =
+        mmap(nullptr, bytes_, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
     ASSERT_NE(mapped, MAP_FAILED);
     region_ = static_cast<unsigned char*>(mapped);
     // With transparent huge pages set to "always" the kernel may map a whole 2 MiB page around

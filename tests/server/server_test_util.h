@@ -234,8 +234,9 @@ struct ProcessOutcome {
   }
 };
 
-inline ProcessOutcome RunProcess(v1::MotionService::Stub& stub, const core::Clip& clip,
-                                 const google::protobuf::RepeatedPtrField<v1::Operation>& operations) {
+inline ProcessOutcome RunProcess(
+    v1::MotionService::Stub& stub, const core::Clip& clip,
+    const google::protobuf::RepeatedPtrField<v1::Operation>& operations) {
   ProcessOutcome outcome;
   grpc::ClientContext context;
   SetDeadline(context);
