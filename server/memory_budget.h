@@ -37,9 +37,9 @@ std::string_view MemoryUseName(MemoryUse use);
 // glibc's defaults (thresholds that start at 128 KiB and follow the largest mapped chunk freed,
 // up to 32 MiB, the trim threshold at twice that) map and unmap such buffers, or trim the heap
 // they were freed to, on many calls: each unmapping or trim flushes the TLBs of every core
-// running the server's threads, and the next call faults the pages in again. The rest of the free memory goes back
-// through MemoryBudget's trims. (Setting either threshold also ends glibc's dynamic adjustment
-// of it: the GNU C Library manual, "Malloc Tunable Parameters",
+// running the server's threads, and the next call faults the pages in again. The rest of the
+// free memory goes back through MemoryBudget's trims. (Setting either threshold also ends
+// glibc's dynamic adjustment of it: the GNU C Library manual, "Malloc Tunable Parameters",
 // https://www.gnu.org/software/libc/manual/html_node/Malloc-Tunable-Parameters.html.)
 // The trim threshold applies to each thread's arena (glibc's heap_trim), so it is kept small:
 // at 32 MiB, arenas kept that much each after large deletes.
