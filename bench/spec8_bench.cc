@@ -427,6 +427,11 @@ void RunNoise(const std::vector<SharedClip>& clips, const Flags& flags) {
            .higher_is_better = false,
            .peer = "smoothing spline s = N sigma^2",
            .peer_value = spline.MsPerMillion()});
+    Print({.id = "noise.keys." + set,
+           .figure = "noise, sigma estimated, " + set + ", keys of non-constant rotation channels",
+           .value = ours.KeyPercent(),
+           .unit = "% of samples",
+           .higher_is_better = false});
   }
 }
 

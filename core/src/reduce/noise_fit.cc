@@ -1103,13 +1103,30 @@ absl::Status reduce_internal::CheckNoiseFit(std::span<const double> samples, dou
   return ValidateOptions(options);
 }
 
-absl::StatusOr<SplineFit> reduce_internal::FitSmoothedToNoise(std::span<const double> smooth,
-                                                              double sigma,
-                                                              const NoiseFitOptions& options,
-                                                              std::stop_token stop) {
+int reduce_internal::InitialKeySpacing(std::span<const double> curve, double bound) {
+  if (curve.size() < 5) return kMaxInitialKeySpacing;
+  std::vector<double> fourth(curve.size() - 4);
+  for (std::size_t f = 0; f < fourth.size(); ++f) {
+    fourth[f] = std::abs(curve[f] - 4.0 * curve[f + 1] + 6.0 * curve[f + 2] -
+                         4.0 * curve[f + 3] + curve[f + 4]);
+  }
+  const auto middle = fourth.begin() + static_cast<std::ptrdiff_t>(fourth.size() / 2);
+  std::nth_element(fourth.begin(), middle, fourth.end());
+  // L^4 |fourth| / 384 = bound; a zero median (a line, a parabola) leaves the widest spacing.
+  const double spacing =
+      kInitialSpacingOverSegment * std::sqrt(std::sqrt(384.0 * bound / *middle));
+  return static_cast<int>(std::clamp(std::floor(spacing), static_cast<double>(kMinInitialKeySpacing),
+                                     static_cast<double>(kMaxInitialKeySpacing)));
+}
+
+absl::StatusOr<SplineFit> reduce_internal::FitKeysToNoise(std::span<const double> curve,
+                                                          double sigma,
+                                                          const NoiseFitOptions& options,
+                                                          std::stop_token stop) {
   TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
   const double bound = options.key_sigmas * sigma;
-  return FitWithinTolerance({&smooth, 1}, {&bound, 1}, {}, stop);
+  const ToleranceFitOptions fit{.initial_spacing_frames = InitialKeySpacing(curve, bound)};
+  return FitWithinTolerance({&curve, 1}, {&bound, 1}, fit, stop);
 }
 
 absl::StatusOr<SplineFit> reduce_internal::FitToNoise(std::span<const double> samples,
@@ -1122,7 +1139,7 @@ absl::StatusOr<SplineFit> reduce_internal::FitToNoise(std::span<const double> sa
   absl::StatusOr<std::vector<double>> smooth =
       SmoothToNoise(samples, sigma, options, factors, stop);
   if (!smooth.ok()) return smooth.status();
-  return FitSmoothedToNoise(*smooth, sigma, options, stop);
+  return FitKeysToNoise(*smooth, sigma, options, stop);
 }
 
 }  // namespace tempokey::core

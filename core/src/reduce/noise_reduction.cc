@@ -78,18 +78,23 @@ absl::StatusOr<NoiseCurves> FitNoiseCurves(const Clip& clip,
   SmootherFactors factors;  // shared by the channels: they have the same length
   options.guard_sigmas = params.guard_sigmas;
   options.key_sigmas = params.key_sigmas;
+  // Channels fitted as they are: all samples equal (two flat keys), or an estimate of exactly 0,
+  // no white noise at all in the third differences (the motion makes up all of them, or there
+  // are fewer than 7 samples): nothing for the smoother to take out.
   std::vector<bool> flat;
+  std::vector<bool> noiseless;
   for (int c = 0; c < count; ++c) {
     TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
     const std::span<const double> samples = inputs[c];
     const std::optional<double> given = IsRotation(clip.channels[c].kind)
                                             ? params.rotation_sigma_degrees
                                             : params.position_sigma;
-    out.sigmas.push_back(given ? *given
-                               : std::max(params.min_sigma, EstimateNoiseSigma(samples)));
+    const double estimate = given ? *given : EstimateNoiseSigma(samples);
+    out.sigmas.push_back(given ? *given : std::max(params.min_sigma, estimate));
     out.estimated.push_back(!given.has_value());
     flat.push_back(std::all_of(samples.begin(), samples.end(),
                                [&](double v) { return v == samples.front(); }));
+    noiseless.push_back(!given && estimate == 0.0);
   }
   // The channels to smooth are smoothed a few at a time (SmoothGroupToNoise()): `group` holds
   // the next ones, `smooth` their curves.
@@ -103,31 +108,36 @@ absl::StatusOr<NoiseCurves> FitNoiseCurves(const Clip& clip,
     if (flat[static_cast<std::size_t>(c)]) {
       out.curves.push_back(FlatCurve(samples.size(), samples.front(), clip.frame_time_seconds));
     } else {
-      if (next_in_group == group.size()) {
+      std::span<const double> curve = samples;
+      if (noiseless[static_cast<std::size_t>(c)]) {
         TEMPOKEY_RETURN_IF_ERROR(
             Annotate(CheckNoiseFit(samples, sigma, options), ChannelLabel(clip, c)));
-        group.assign(1, c);
-        std::vector<std::span<const double>> spans = {samples};
-        std::vector<double> sigmas = {sigma};
-        // The following channels to smooth join while they pass the checks (one that fails
-        // reports its error in its turn, after the channels before it).
-        for (int d = c + 1; d < count && group.size() < kSmootherGroup; ++d) {
-          const auto ud = static_cast<std::size_t>(d);
-          if (flat[ud]) continue;
-          if (!CheckNoiseFit(inputs[d], out.sigmas[ud], options).ok()) break;
-          group.push_back(d);
-          spans.push_back(inputs[d]);
-          sigmas.push_back(out.sigmas[ud]);
+      } else {
+        if (next_in_group == group.size()) {
+          TEMPOKEY_RETURN_IF_ERROR(
+              Annotate(CheckNoiseFit(samples, sigma, options), ChannelLabel(clip, c)));
+          group.assign(1, c);
+          std::vector<std::span<const double>> spans = {samples};
+          std::vector<double> sigmas = {sigma};
+          // The following channels to smooth join while they pass the checks (one that fails
+          // reports its error in its turn, after the channels before it).
+          for (int d = c + 1; d < count && group.size() < kSmootherGroup; ++d) {
+            const auto ud = static_cast<std::size_t>(d);
+            if (flat[ud] || noiseless[ud]) continue;
+            if (!CheckNoiseFit(inputs[d], out.sigmas[ud], options).ok()) break;
+            group.push_back(d);
+            spans.push_back(inputs[d]);
+            sigmas.push_back(out.sigmas[ud]);
+          }
+          absl::StatusOr<std::vector<std::vector<double>>> smoothed =
+              SmoothGroupToNoise(spans, sigmas, options, factors, stop);
+          if (!smoothed.ok()) return Annotate(smoothed.status(), ChannelLabel(clip, c));
+          smooth = *std::move(smoothed);
+          next_in_group = 0;
         }
-        absl::StatusOr<std::vector<std::vector<double>>> smoothed =
-            SmoothGroupToNoise(spans, sigmas, options, factors, stop);
-        if (!smoothed.ok()) return Annotate(smoothed.status(), ChannelLabel(clip, c));
-        smooth = *std::move(smoothed);
-        next_in_group = 0;
+        curve = smooth[next_in_group++];
       }
-      absl::StatusOr<SplineFit> fit =
-          FitSmoothedToNoise(smooth[next_in_group], sigma, options, stop);
-      ++next_in_group;
+      absl::StatusOr<SplineFit> fit = FitKeysToNoise(curve, sigma, options, stop);
       if (!fit.ok()) return Annotate(fit.status(), ChannelLabel(clip, c));
       out.curves.push_back(CurveOf(*fit, clip.frame_time_seconds));
     }

@@ -236,6 +236,52 @@ TEST(NoiseReductionTest, ChannelsOfOneClipComeOutAsEachDoesAlone) {
   }
 }
 
+// A channel in which the estimate finds no noise at all is fitted from its samples: its keys stay
+// within key_sigmas * min_sigma of every sample. Smoothed at min_sigma instead, the corner would
+// be rounded off by up to guard_sigmas * min_sigma.
+TEST(NoiseReductionTest, ANoiselessChannelIsKeyedWithinTheKeyBoundOfItsSamples) {
+  std::vector<double> cornered = Truth(600);
+  for (int f = 0; f < 600; ++f) cornered[static_cast<std::size_t>(f)] += 0.5 * std::abs(f - 300);
+  ASSERT_EQ(EstimateNoiseSigma(cornered), 0.0);
+  ReduceOptions options;
+  options.method = ReduceMethod::kNoise;
+
+  absl::StatusOr<ReduceResult> result =
+      ReduceKeys(TwoChannelClip(cornered, cornered), options);
+
+  ASSERT_TRUE(result.ok()) << result.status();
+  const NoiseParams& noise = options.noise;
+  for (const ChannelReduction& channel : result->report.channels) {
+    SCOPED_TRACE(channel.channel_index);
+    EXPECT_EQ(channel.noise_sigma, noise.min_sigma);
+    EXPECT_TRUE(channel.noise_sigma_estimated);
+    EXPECT_LE(channel.max_error, noise.key_sigmas * noise.min_sigma);
+  }
+}
+
+// The fit starts from keys about as far apart as the bound allows on a curve of that fourth
+// difference: c f^4 has fourth differences 24 c at every frame, and L^4 24 c / 384 = bound at
+// L = 5.5 / kInitialSpacingOverSegment for the bound below.
+TEST(NoiseFitTest, KeysStartAsFarApartAsTheCurvesFourthDifferenceAllows) {
+  constexpr double kC = 1e-3;
+  std::vector<double> quartic;
+  for (int f = 0; f < 40; ++f) quartic.push_back(kC * std::pow(f, 4));
+  const double segment = 5.5 / reduce_internal::kInitialSpacingOverSegment;
+  const double bound = std::pow(segment, 4) * 24.0 * kC / 384.0;
+  std::vector<double> line;
+  for (int f = 0; f < 40; ++f) line.push_back(3.0 * f - 7.0);
+
+  EXPECT_EQ(reduce_internal::InitialKeySpacing(quartic, bound), 5);
+  EXPECT_EQ(reduce_internal::InitialKeySpacing(quartic, bound * 1e-6),
+            reduce_internal::kMinInitialKeySpacing);
+  EXPECT_EQ(reduce_internal::InitialKeySpacing(quartic, bound * 1e6),
+            reduce_internal::kMaxInitialKeySpacing);
+  EXPECT_EQ(reduce_internal::InitialKeySpacing(line, 1e-9),
+            reduce_internal::kMaxInitialKeySpacing);
+  EXPECT_EQ(reduce_internal::InitialKeySpacing(std::span(quartic).first(4), bound),
+            reduce_internal::kMaxInitialKeySpacing);
+}
+
 TEST(NoiseReductionTest, InvalidNoiseParamsAreNamed) {
   ReduceOptions options;
   options.method = ReduceMethod::kNoise;

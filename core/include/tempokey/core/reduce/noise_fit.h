@@ -59,7 +59,11 @@
 // 3. Keys: FitWithinTolerance() (tolerance_fit.h) on the denoised curve with the bound
 //    key_sigmas * sigma: the fewest least-squares C1 Hermite keys on frames, slopes free, within
 //    that small fraction of the noise of the denoised curve at every frame. The keyed curve is
-//    therefore within (guard_sigmas + key_sigmas) * sigma of the data at every frame.
+//    therefore within (guard_sigmas + key_sigmas) * sigma of the data at every frame. The fit's
+//    insertion starts from keys about as dense as that bound needs on the curve (2.5 times the L
+//    at which a cubic segment's L^4 |fourth difference| / 384 reaches it, for the median fourth
+//    difference, in [2, 16] frames) rather than 16 frames apart: at a bound this small the keys
+//    end dense, and a fit that starts near its final density ends with fewer keys in fewer rounds.
 //
 // Measured on the jitter benchmark (SPEC 8, bench/filter_bench): see README "Measured".
 #ifndef TEMPOKEY_CORE_REDUCE_NOISE_FIT_H_

@@ -72,8 +72,8 @@ struct ToleranceParams {
 struct NoiseParams {
   std::optional<double> rotation_sigma_degrees;  // finite, > 0 when set
   std::optional<double> position_sigma;          // position and scalar channels
-  // An estimate below this is raised to it, so a noiseless channel still gets a fit (and is
-  // barely smoothed). Value units; finite, > 0.
+  // An estimate below this is raised to it, so a noiseless channel still gets a fit. Value
+  // units; finite, > 0.
   double min_sigma = 1e-4;
   double guard_sigmas = 5.0;  // [2, 100], NoiseFitOptions
   double key_sigmas = 0.2;    // [0.01, 10], NoiseFitOptions
@@ -181,7 +181,10 @@ absl::Status ValidateReduceForLayout(const ReduceOptions& options, std::int64_t 
 //     keys land at fractional frames.
 //   `noise`: per channel, the given noise level of its kind or EstimateNoiseSigma() of its
 //     (filtered, unwrapped) samples, at least min_sigma, then FitToNoise() (noise_fit.h); keys on
-//     integer frames, non-weighted, C1. The report carries each channel's level.
+//     integer frames, non-weighted, C1. A channel whose estimate is exactly 0 (no white noise in
+//     its third differences: the motion makes up all of them) has nothing to take out and is not
+//     smoothed: its keys are fitted to its samples, within key_sigmas * min_sigma of each. The
+//     report carries each channel's level.
 // With the Euler filter on (ReduceOptions::euler_filter), the input is filtered first and the
 // curves and errors refer to the filtered angles (the same rotations).
 // A lone channel whose samples are all equal gets two flat keys at the first and last frame (one
