@@ -1112,10 +1112,13 @@ int reduce_internal::InitialKeySpacing(std::span<const double> curve, double bou
   }
   const auto middle = fourth.begin() + static_cast<std::ptrdiff_t>(fourth.size() / 2);
   std::nth_element(fourth.begin(), middle, fourth.end());
-  // L^4 |fourth| / 384 = bound; a zero median (a line, a parabola) leaves the widest spacing.
+  // L^4 |fourth| / 384 = bound; a zero median (a line, a parabola) leaves the widest spacing, and
+  // so does a NaN one (samples near the largest doubles, whose differences overflow).
   const double spacing =
       kInitialSpacingOverSegment * std::sqrt(std::sqrt(384.0 * bound / *middle));
-  return static_cast<int>(std::clamp(std::floor(spacing), static_cast<double>(kMinInitialKeySpacing),
+  if (std::isnan(spacing)) return kMaxInitialKeySpacing;
+  return static_cast<int>(std::clamp(std::floor(spacing),
+                                     static_cast<double>(kMinInitialKeySpacing),
                                      static_cast<double>(kMaxInitialKeySpacing)));
 }
 

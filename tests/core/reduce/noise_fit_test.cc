@@ -200,9 +200,12 @@ TEST(NoiseReductionTest, ReportCarriesEachChannelsEstimatedOrGivenNoise) {
 }
 
 // A reduction shares the smoother's factors between channels and solves many levels and block
-// windows together; each channel must still come out exactly as it does smoothed on its own.
+// windows together; each channel must still come out exactly as it does smoothed on its own. A
+// noiseless channel among them (estimate 0) is keyed from its samples and leaves the smoothing of
+// the others as it was.
 TEST(NoiseReductionTest, ChannelsOfOneClipComeOutAsEachDoesAlone) {
   constexpr int kFrames = 1000;  // 16 blocks of 60 and one of 40: windows of four lengths
+  constexpr int kNoiseless = 2;
   Clip clip;
   clip.name = "noise";
   clip.frame_time_seconds = 1.0 / 120.0;
@@ -214,6 +217,10 @@ TEST(NoiseReductionTest, ChannelsOfOneClipComeOutAsEachDoesAlone) {
     clip.channels.push_back({.joint = -1, .kind = ChannelKind::kXPosition,
                              .name = "p" + std::to_string(c), .samples = std::move(samples)});
   }
+  clip.channels.insert(clip.channels.begin() + kNoiseless,
+                       {.joint = -1, .kind = ChannelKind::kXPosition, .name = "clean",
+                        .samples = Truth(kFrames)});
+  ASSERT_EQ(EstimateNoiseSigma(clip.channels[kNoiseless].samples), 0.0);
   ReduceOptions options;
   options.method = ReduceMethod::kNoise;
 
@@ -221,10 +228,13 @@ TEST(NoiseReductionTest, ChannelsOfOneClipComeOutAsEachDoesAlone) {
 
   ASSERT_TRUE(together.ok()) << together.status();
   // Backwards, so that no channel finds the factors the clip left behind in the same order.
-  for (int c = 3; c >= 0; --c) {
+  for (int c = 4; c >= 0; --c) {
     SCOPED_TRACE(c);
     const double sigma = together->report.channels[c].noise_sigma;
-    absl::StatusOr<SplineFit> alone = FitToNoise(clip.channels[c].samples, sigma);
+    const std::vector<double>& samples = clip.channels[c].samples;
+    absl::StatusOr<SplineFit> alone =
+        c == kNoiseless ? reduce_internal::FitKeysToNoise(samples, sigma, {}, {})
+                        : FitToNoise(samples, sigma);
     ASSERT_TRUE(alone.ok()) << alone.status();
     const std::vector<Key>& keys = together->keyed.curves[c].keys;
     ASSERT_EQ(keys.size(), alone->frames.size());
@@ -237,8 +247,8 @@ TEST(NoiseReductionTest, ChannelsOfOneClipComeOutAsEachDoesAlone) {
 }
 
 // A channel in which the estimate finds no noise at all is fitted from its samples: its keys stay
-// within key_sigmas * min_sigma of every sample. Smoothed at min_sigma instead, the corner would
-// be rounded off by up to guard_sigmas * min_sigma.
+// within key_sigmas * min_sigma of every sample. Smoothed at min_sigma instead, the curve would
+// move by up to guard_sigmas * min_sigma (2e-4 at this clip's ends).
 TEST(NoiseReductionTest, ANoiselessChannelIsKeyedWithinTheKeyBoundOfItsSamples) {
   std::vector<double> cornered = Truth(600);
   for (int f = 0; f < 600; ++f) cornered[static_cast<std::size_t>(f)] += 0.5 * std::abs(f - 300);
@@ -262,7 +272,7 @@ TEST(NoiseReductionTest, ANoiselessChannelIsKeyedWithinTheKeyBoundOfItsSamples) 
 // The fit starts from keys about as far apart as the bound allows on a curve of that fourth
 // difference: c f^4 has fourth differences 24 c at every frame, and L^4 24 c / 384 = bound at
 // L = 5.5 / kInitialSpacingOverSegment for the bound below.
-TEST(NoiseFitTest, KeysStartAsFarApartAsTheCurvesFourthDifferenceAllows) {
+TEST(NoiseFitTest, InitialSpacingFollowsTheMedianFourthDifference) {
   constexpr double kC = 1e-3;
   std::vector<double> quartic;
   for (int f = 0; f < 40; ++f) quartic.push_back(kC * std::pow(f, 4));
@@ -280,6 +290,12 @@ TEST(NoiseFitTest, KeysStartAsFarApartAsTheCurvesFourthDifferenceAllows) {
             reduce_internal::kMaxInitialKeySpacing);
   EXPECT_EQ(reduce_internal::InitialKeySpacing(std::span(quartic).first(4), bound),
             reduce_internal::kMaxInitialKeySpacing);
+  // Fourth differences of samples near the largest doubles overflow (inf - inf).
+  std::vector<double> huge;
+  for (int f = 0; f < 40; ++f) huge.push_back(f % 2 == 0 ? 1e308 : 0.9e308);
+  EXPECT_EQ(reduce_internal::InitialKeySpacing(huge, bound),
+            reduce_internal::kMaxInitialKeySpacing);
+  EXPECT_TRUE(FitToNoise(huge, 1.0).ok());
 }
 
 TEST(NoiseReductionTest, InvalidNoiseParamsAreNamed) {

@@ -100,7 +100,8 @@ std::vector<double> SmoothToNoise(std::span<const double> samples, double sigma,
                                   const NoiseFitOptions& options = {});
 
 // Steps 2 and 3 on one channel's `samples` (finite) for noise level `sigma` (finite, > 0). One
-// frame gives one key; a constant channel two flat keys.
+// frame gives one key; a constant channel two flat keys. (ReduceKeys()'s `noise` method does this
+// for every channel but one whose estimate is exactly 0, which it fits without step 2: reduce.h.)
 //
 // Errors: kInvalidArgument for no samples, a non-finite sample ("sample 40 is NaN"), sigma not
 // finite and > 0, options out of range ("key_sigmas must be in [0.01, 10], got 0"); kCancelled
