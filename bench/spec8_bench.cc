@@ -9,9 +9,11 @@
 //             of CPU per million samples (all channels), keys of the rotation channels without
 //             constant ones. Peer: the greedy Catmull-Rom Hermite of greedy_hermite.h on the same
 //             channels and bounds.
-//   noise     the noise-aware method with sigma estimated: ms per million samples. Peer: the
-//             smoothing spline of smoothing_spline.h with s = N sigma^2, sigma estimated the same
-//             way (EstimateNoiseSigma()).
+//   noise     the noise-aware method with sigma estimated: ms per million samples, and keys of
+//             the rotation channels without constant ones. Peer: the smoothing spline of
+//             smoothing_spline.h with s = N sigma^2, sigma estimated the same way
+//             (EstimateNoiseSigma()), on every channel (also those whose estimate is 0, which the
+//             noise method keys without smoothing).
 //   world     the world-space bound: 1 cm on the Bandai clips, 0.5 % of the height on CMU: ms per
 //             million samples. Peer: the per-channel 0.5 degree reduction of the same clips.
 //   paper     `paper`, all 96 channels of CMU 131_01, 8 iterations: seconds.

@@ -73,7 +73,11 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
     std::stop_callback forward(pool_stop, [this] { stop_.request_stop(); });
     absl::StatusOr<core::PipelineResult> result = core::RunPipeline(
         clip_, steps_,
-        [this](double fraction, std::string_view stage) { OnProgress(fraction, stage); },
+        [this](double fraction, std::string_view stage) {
+          OnProgress(fraction, stage);
+          const TestHooks& hooks = service_->options.test_hooks;
+          if (hooks.on_process_progress) hooks.on_process_progress(fraction, stage);
+        },
         stop_.get_token(), service_->clip_limits);
     DropInput();  // the input is no longer needed while the result streams out
     const auto ended = std::chrono::steady_clock::now();

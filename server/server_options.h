@@ -20,6 +20,9 @@ struct TestHooks {
   // Called on the worker thread right before a job's pipeline (or a Process call's pipeline)
   // runs, with the job id ("" for Process). May block; the job counts as running meanwhile.
   std::function<void(std::string_view job_id)> on_job_start;
+  // Called on the worker thread after each progress report of a Process call's pipeline was
+  // offered to the call (sent, deferred or dropped by its ProgressThrottle). May block.
+  std::function<void(double fraction, std::string_view stage)> on_process_progress;
 };
 
 struct ServerOptions {

@@ -7,7 +7,10 @@
 // how long the running job has run.
 #include <chrono>
 #include <memory>
+#include <mutex>
 #include <string>
+#include <string_view>
+#include <utility>
 #include <vector>
 
 #include "gmock/gmock.h"
@@ -215,6 +218,60 @@ TEST(ProcessProtocolTest, AProcessCallStreamsOnlyItsFirstProgressWhileTheInterva
   for (std::size_t i = 1; i < responses.size(); ++i) {
     EXPECT_TRUE(responses[i].has_result()) << "message " << i + 1 << " is progress";
   }
+  absl::StatusOr<core::Clip> result = AssembleClipResult(outcome.ResultParts());
+  ASSERT_TRUE(result.ok()) << result.status();
+  EXPECT_EQ(*result, WrappedCopy(clip));
+}
+
+// A deferred report reaches the client when the interval ends, while the pipeline still runs: the
+// worker is held right after offering its second report until the client has read a second
+// message, which can then only be that report (sent when the interval ends if it was deferred, at
+// once if the interval had already passed). Without the flush the client reads nothing more until
+// the hold gives up (StartGate::kWaitLimit) or the call's deadline passes: the test then fails
+// (checked by disabling the flush: it failed after 60 s).
+TEST(ProcessProtocolTest, ADeferredProgressReachesTheClientWhileThePipelineIsHeld) {
+  struct Offered {
+    std::mutex mutex;
+    std::vector<std::pair<double, std::string>> reports;
+  };
+  auto offered = std::make_shared<Offered>();
+  auto gate = std::make_shared<StartGate>();
+  server::ServerOptions options = TestServerOptions();
+  options.process_progress_interval = std::chrono::milliseconds(20);
+  options.test_hooks.on_process_progress = [offered, gate](double fraction,
+                                                           std::string_view stage) {
+    std::size_t count = 0;
+    {
+      std::lock_guard lock(offered->mutex);
+      offered->reports.emplace_back(fraction, std::string(stage));
+      count = offered->reports.size();
+    }
+    if (count == 2) gate->Arrive();
+  };
+  std::unique_ptr<server::Server> server = StartServer(options);
+  ASSERT_NE(server, nullptr);
+  auto stub = v1::MotionService::NewStub(Connect(server->target()));
+  const core::Clip clip = MakeClip(8, 400);
+  int read = 0;
+
+  const ProcessOutcome outcome =
+      RunProcess(*stub, clip, WrapOperations(24), [&](const v1::ProcessResponse&) {
+        if (++read == 2) gate->Open();
+      });
+  gate->Open();
+
+  TEMPOKEY_ASSERT_GRPC_OK(outcome.status);
+  const std::vector<v1::ProcessResponse>& responses = outcome.responses;
+  ASSERT_GE(responses.size(), 3u);
+  std::lock_guard lock(offered->mutex);
+  ASSERT_GE(offered->reports.size(), 2u);
+  for (int i : {0, 1}) {
+    SCOPED_TRACE(i);
+    ASSERT_TRUE(responses[i].has_progress());
+    EXPECT_EQ(responses[i].progress().progress(), offered->reports[i].first);
+    EXPECT_EQ(responses[i].progress().stage(), offered->reports[i].second);
+  }
+  EXPECT_NE(offered->reports[1], offered->reports[0]);
   absl::StatusOr<core::Clip> result = AssembleClipResult(outcome.ResultParts());
   ASSERT_TRUE(result.ok()) << result.status();
   EXPECT_EQ(*result, WrappedCopy(clip));

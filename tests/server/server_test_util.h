@@ -234,9 +234,11 @@ struct ProcessOutcome {
   }
 };
 
+// `on_read` (optional) sees each response as it arrives, before the next is read.
 inline ProcessOutcome RunProcess(
     v1::MotionService::Stub& stub, const core::Clip& clip,
-    const google::protobuf::RepeatedPtrField<v1::Operation>& operations) {
+    const google::protobuf::RepeatedPtrField<v1::Operation>& operations,
+    const std::function<void(const v1::ProcessResponse&)>& on_read = {}) {
   ProcessOutcome outcome;
   grpc::ClientContext context;
   SetDeadline(context);
@@ -249,7 +251,10 @@ inline ProcessOutcome RunProcess(
   EXPECT_TRUE(process->Write(start));
   process->WritesDone();
   v1::ProcessResponse response;
-  while (process->Read(&response)) outcome.responses.push_back(response);
+  while (process->Read(&response)) {
+    if (on_read) on_read(response);
+    outcome.responses.push_back(response);
+  }
   outcome.status = process->Finish();
   return outcome;
 }

@@ -1105,18 +1105,19 @@ absl::Status reduce_internal::CheckNoiseFit(std::span<const double> samples, dou
 
 int reduce_internal::InitialKeySpacing(std::span<const double> curve, double bound) {
   if (curve.size() < 5) return kMaxInitialKeySpacing;
-  std::vector<double> fourth(curve.size() - 4);
-  for (std::size_t f = 0; f < fourth.size(); ++f) {
-    fourth[f] = std::abs(curve[f] - 4.0 * curve[f + 1] + 6.0 * curve[f + 2] -
-                         4.0 * curve[f + 3] + curve[f + 4]);
+  // Sixteenths of the fourth differences: weights of total 1, so no finite samples overflow them
+  // (and each is the fourth difference / 16 exactly, short of underflow: powers of two).
+  std::vector<double> sixteenths(curve.size() - 4);
+  for (std::size_t f = 0; f < sixteenths.size(); ++f) {
+    sixteenths[f] = std::abs(curve[f] / 16.0 - curve[f + 1] / 4.0 + 3.0 * curve[f + 2] / 8.0 -
+                             curve[f + 3] / 4.0 + curve[f + 4] / 16.0);
   }
-  const auto middle = fourth.begin() + static_cast<std::ptrdiff_t>(fourth.size() / 2);
-  std::nth_element(fourth.begin(), middle, fourth.end());
-  // L^4 |fourth| / 384 = bound; a zero median (a line, a parabola) leaves the widest spacing, and
-  // so does a NaN one (samples near the largest doubles, whose differences overflow).
+  const auto middle = sixteenths.begin() + static_cast<std::ptrdiff_t>(sixteenths.size() / 2);
+  std::nth_element(sixteenths.begin(), middle, sixteenths.end());
+  // L^4 |fourth| / 384 = bound, i.e. L^4 = 24 bound / sixteenth; a zero median (a line, a
+  // parabola) or a huge bound leaves the widest spacing.
   const double spacing =
-      kInitialSpacingOverSegment * std::sqrt(std::sqrt(384.0 * bound / *middle));
-  if (std::isnan(spacing)) return kMaxInitialKeySpacing;
+      kInitialSpacingOverSegment * std::sqrt(std::sqrt(24.0 * bound / *middle));
   return static_cast<int>(std::clamp(std::floor(spacing),
                                      static_cast<double>(kMinInitialKeySpacing),
                                      static_cast<double>(kMaxInitialKeySpacing)));

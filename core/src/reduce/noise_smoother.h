@@ -72,14 +72,14 @@ absl::StatusOr<SplineFit> FitKeysToNoise(std::span<const double> curve, double s
 // as dense as the keys it will end with. A cubic Hermite segment of L frames follows a curve to
 // within L^4 |fourth derivative| / 384, so the spacing is kInitialSpacingOverSegment times the L at
 // which that reaches the bound for the median |fourth difference| of the curve, floored, within
-// [kMinInitialKeySpacing, kMaxInitialKeySpacing] (the widest for fewer than 5 frames, a zero
-// median, or fourth differences that overflow: the tolerance method's 16). Measured on the shared clips (bench/noise_estimate_bench,
+// [kMinInitialKeySpacing, kMaxInitialKeySpacing] (the widest for fewer than 5 frames or a zero
+// median: the tolerance method's 16). Measured on the shared clips (bench/noise_estimate_bench,
 // bench/spec8_bench --only=noise): a fit started near its final density ends with fewer keys in
 // fewer insertion rounds than one started 16 frames apart; started at L itself, some clips end
 // with more (Bandai's bow 25.5 % of samples against 21.8 %), at 2.5 L none of them does.
 inline constexpr double kInitialSpacingOverSegment = 2.5;
 inline constexpr int kMinInitialKeySpacing = 2;
-inline constexpr int kMaxInitialKeySpacing = 16;
+inline constexpr int kMaxInitialKeySpacing = ToleranceFitOptions{}.initial_spacing_frames;
 int InitialKeySpacing(std::span<const double> curve, double bound);
 
 }  // namespace tempokey::core::reduce_internal

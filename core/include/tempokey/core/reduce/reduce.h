@@ -73,8 +73,10 @@ struct NoiseParams {
   std::optional<double> rotation_sigma_degrees;  // finite, > 0 when set
   std::optional<double> position_sigma;          // position and scalar channels
   // An estimate below this is raised to it, so a noiseless channel still gets a fit. An estimate
-  // of exactly 0 is not smoothed: min_sigma then sets only its key bound, key_sigmas *
-  // min_sigma. Value units; finite, > 0.
+  // of exactly 0 (the estimate's verdict that the motion makes up all of the third differences)
+  // is not smoothed: min_sigma then sets only its key bound, key_sigmas * min_sigma. A small
+  // estimate above 0 (white noise found, below this) is smoothed at min_sigma. Value units;
+  // finite, > 0.
   double min_sigma = 1e-4;
   double guard_sigmas = 5.0;  // [2, 100], NoiseFitOptions
   double key_sigmas = 0.2;    // [0.01, 10], NoiseFitOptions
