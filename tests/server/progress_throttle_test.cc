@@ -16,6 +16,14 @@ using Verdict = ProgressThrottle::Verdict;
 
 const Clock::time_point kStart = Clock::time_point() + std::chrono::hours(1);
 
+// On a throttle of 100 ms: sends "retime" 0.0 at kStart, defers 0.2 at kStart + `deferred_at`
+// and flushes it when due, at kStart + 100 ms.
+void SendDeferAndFlush(ProgressThrottle& throttle, milliseconds deferred_at) {
+  ASSERT_EQ(throttle.Offer(0.0, "retime", kStart), Verdict::kSend);
+  ASSERT_EQ(throttle.Offer(0.2, "retime", kStart + deferred_at), Verdict::kDefer);
+  ASSERT_TRUE(throttle.TakeDeferred(kStart + milliseconds(100)).has_value());
+}
+
 TEST(ProgressThrottleTest, TheFirstReportIsSentWhateverTheInterval) {
   ProgressThrottle throttle(std::chrono::hours(1));
 
@@ -41,9 +49,7 @@ TEST(ProgressThrottleTest, ReportsInsideTheIntervalAreDeferredAndTheLatestIsDueW
 
 TEST(ProgressThrottleTest, TheIntervalCountsFromTheLastReportSentEvenAFlushedOne) {
   ProgressThrottle throttle(milliseconds(100));
-  ASSERT_EQ(throttle.Offer(0.0, "retime", kStart), Verdict::kSend);
-  ASSERT_EQ(throttle.Offer(0.2, "retime", kStart + milliseconds(50)), Verdict::kDefer);
-  ASSERT_TRUE(throttle.TakeDeferred(kStart + milliseconds(100)).has_value());
+  ASSERT_NO_FATAL_FAILURE(SendDeferAndFlush(throttle, milliseconds(50)));
 
   EXPECT_EQ(throttle.Offer(0.3, "retime", kStart + milliseconds(150)), Verdict::kDefer);
   EXPECT_EQ(throttle.deferred_due(), kStart + milliseconds(200));
@@ -70,9 +76,7 @@ TEST(ProgressThrottleTest, ADeferredReportIsNotTakenBeforeItIsDue) {
 
 TEST(ProgressThrottleTest, AFlushedReportCountsAsTheLastOneSent) {
   ProgressThrottle throttle(milliseconds(100));
-  ASSERT_EQ(throttle.Offer(0.0, "retime", kStart), Verdict::kSend);
-  ASSERT_EQ(throttle.Offer(0.2, "retime", kStart + milliseconds(10)), Verdict::kDefer);
-  ASSERT_TRUE(throttle.TakeDeferred(kStart + milliseconds(100)).has_value());
+  ASSERT_NO_FATAL_FAILURE(SendDeferAndFlush(throttle, milliseconds(10)));
 
   EXPECT_EQ(throttle.Offer(0.205, "retime", kStart + milliseconds(300)), Verdict::kDrop);
 }
