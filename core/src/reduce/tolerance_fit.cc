@@ -1093,9 +1093,13 @@ class Fitter {
 
   void Insert(SplineFit& fit) {
     const auto last = static_cast<std::int64_t>(frame_count_ - 1);
-    const std::int64_t spacing = options_.initial_spacing_frames;
-    for (std::int64_t f = 0; f < last; f += spacing) fit.frames.push_back(f);
-    fit.frames.push_back(last);
+    if (!options_.initial_frames.empty()) {
+      fit.frames.assign(options_.initial_frames.begin(), options_.initial_frames.end());
+    } else {
+      const std::int64_t spacing = options_.initial_spacing_frames;
+      for (std::int64_t f = 0; f < last; f += spacing) fit.frames.push_back(f);
+      fit.frames.push_back(last);
+    }
     std::vector<std::int64_t> next;
     int kept = 0;
     for (int round = 0; round < kMaxInsertionRounds; ++round) {
@@ -1531,6 +1535,22 @@ absl::Status ValidateInputs(std::span<const std::span<const double>> channels,
   if (options.initial_spacing_frames < 1 || options.initial_spacing_frames > 1'000'000) {
     return absl::InvalidArgumentError(absl::StrCat(
         "initial_spacing_frames must be in [1, 1000000], got ", options.initial_spacing_frames));
+  }
+  if (!options.initial_frames.empty()) {
+    const std::span<const std::int64_t> frames = options.initial_frames;
+    const auto last = static_cast<std::int64_t>(n) - 1;
+    if (frames.front() != 0 || frames.back() != last) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "initial_frames must run from frame 0 to the last frame, ", last, ", got ",
+          frames.front(), " to ", frames.back()));
+    }
+    for (std::size_t k = 1; k < frames.size(); ++k) {
+      if (frames[k] <= frames[k - 1]) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            "initial_frames must be strictly increasing: key ", k, " at frame ", frames[k],
+            " follows frame ", frames[k - 1]));
+      }
+    }
   }
   if (options.lawson_iterations < 0 || options.lawson_iterations > 100) {
     return absl::InvalidArgumentError(

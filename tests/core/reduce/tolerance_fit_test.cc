@@ -201,6 +201,36 @@ TEST(ToleranceFitTest, EveryOptionSettingKeepsTheBound) {
   }
 }
 
+TEST(ToleranceFitTest, TheFitStartsFromTheGivenKeyFrames) {
+  const Samples sine = Sine(400, 1.0, 90.0);
+  std::vector<std::int64_t> every_third;
+  for (std::int64_t f = 0; f < 399; f += 3) every_third.push_back(f);
+  every_third.push_back(399);
+  // Keys every third frame already fit a slow sine far within the bound: nothing is inserted,
+  // and without slides the removal only takes keys away.
+  const absl::StatusOr<SplineFit> fit =
+      Fit({sine}, {0.01}, {.slide_frames = 0, .initial_frames = every_third});
+
+  ASSERT_TRUE(fit.ok()) << fit.status();
+  EXPECT_LE(MaxError(*fit, 0, sine), 0.01);
+  EXPECT_LT(fit->frames.size(), every_third.size());
+  for (std::int64_t frame : fit->frames) {
+    EXPECT_TRUE(frame % 3 == 0 || frame == 399) << "key at frame " << frame;
+  }
+}
+
+TEST(ToleranceFitTest, ARefitFromTheKeysOfALooserFitKeepsTheTighterBound) {
+  const Samples sine = Sine(600, 40.0, 70.0);
+  const absl::StatusOr<SplineFit> loose = Fit({sine}, {0.5});
+  ASSERT_TRUE(loose.ok()) << loose.status();
+
+  const absl::StatusOr<SplineFit> tight = Fit({sine}, {0.05}, {.initial_frames = loose->frames});
+
+  ASSERT_TRUE(tight.ok()) << tight.status();
+  EXPECT_LE(MaxError(*tight, 0, sine), 0.05);
+  EXPECT_GT(tight->frames.size(), loose->frames.size());
+}
+
 TEST(ToleranceFitTest, InvalidInputsAreRefusedWithReasons) {
   const Samples good = Sine(50, 1.0, 20.0);
   Samples with_nan = good;
@@ -218,6 +248,18 @@ TEST(ToleranceFitTest, InvalidInputsAreRefusedWithReasons) {
             "channel 0: the bound must be finite and > 0, got inf");
   EXPECT_EQ(Fit({good}, {0.1}, {.initial_spacing_frames = 0}).status().message(),
             "initial_spacing_frames must be in [1, 1000000], got 0");
+  const std::vector<std::int64_t> from_one = {1, 49};
+  EXPECT_EQ(Fit({good}, {0.1}, {.initial_frames = from_one}).status().message(),
+            "initial_frames must run from frame 0 to the last frame, 49, got 1 to 49");
+  const std::vector<std::int64_t> short_of_end = {0, 48};
+  EXPECT_EQ(Fit({good}, {0.1}, {.initial_frames = short_of_end}).status().message(),
+            "initial_frames must run from frame 0 to the last frame, 49, got 0 to 48");
+  const std::vector<std::int64_t> repeated = {0, 20, 20, 49};
+  EXPECT_EQ(Fit({good}, {0.1}, {.initial_frames = repeated}).status().message(),
+            "initial_frames must be strictly increasing: key 2 at frame 20 follows frame 20");
+  const std::vector<std::int64_t> one_key = {0};
+  EXPECT_EQ(Fit({good}, {0.1}, {.initial_frames = one_key}).status().message(),
+            "initial_frames must run from frame 0 to the last frame, 49, got 0 to 0");
   EXPECT_EQ(Fit({good}, {0.1}, {.lawson_iterations = -1}).status().message(),
             "lawson_iterations must be in [0, 100], got -1");
   EXPECT_EQ(Fit({good}, {0.1}, {.slide_frames = 5000}).status().message(),

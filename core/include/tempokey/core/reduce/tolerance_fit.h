@@ -10,9 +10,9 @@
 //
 // The method (values and slopes are always least-squares fits, which follow the motion and not
 // its jitter, never interpolated samples):
-//   1. Insertion. Keys every `initial_spacing_frames`; fit all values and slopes by least squares
-//      (one block-tridiagonal solve); insert a key at the worst frame of every segment over the
-//      bound; repeat until none is.
+//   1. Insertion. Keys every `initial_spacing_frames` (or on `initial_frames`); fit all values
+//      and slopes by least squares (one block-tridiagonal solve); insert a key at the worst frame
+//      of every segment over the bound; repeat until none is.
 //   2. Removal, left to right. Try to drop each key: in a window of up to two keys on each side,
 //      refit the nearest key on each side by least squares (the outer ones fixed unless they are
 //      the clip's first or last), as it is and with the next key moved by up to `slide_frames`
@@ -45,6 +45,10 @@ struct ToleranceFitOptions {
   int lawson_iterations = 3;
   // How far the key after a removed one may move to make the removal fit, in frames; [0, 1000].
   int slide_frames = 3;
+  // When not empty, the key frames the insertion starts from instead of initial_spacing_frames
+  // apart (a refit at a tighter bound starts from the keys of its fit at a looser one): strictly
+  // increasing, from 0 to samples - 1.
+  std::span<const std::int64_t> initial_frames;
 };
 
 // The fitted spline of a group of channels: shared key frames, per channel values and slopes.
