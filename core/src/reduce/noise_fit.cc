@@ -1129,8 +1129,7 @@ absl::StatusOr<SplineFit> reduce_internal::FitKeysToNoise(std::span<const double
                                                           std::stop_token stop) {
   TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
   const double bound = options.key_sigmas * sigma;
-  ToleranceFitOptions fit;
-  fit.initial_spacing_frames = InitialKeySpacing(curve, bound);
+  const ToleranceFitOptions fit{.initial_spacing_frames = InitialKeySpacing(curve, bound)};
   return FitWithinTolerance({&curve, 1}, {&bound, 1}, fit, stop);
 }
 

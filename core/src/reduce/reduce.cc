@@ -300,16 +300,18 @@ std::vector<Curve> MidRangeCurves(const Clip& clip,
   return curves;
 }
 
+// Per alignment group, the key frames of its last fit (empty before its first, and for a constant
+// channel's two flat keys).
+using GroupKeyFrames = std::vector<std::vector<std::int64_t>>;
+
 // The tolerance fit of the groups `which` (indices into `groups`), channel c within bounds[c];
-// writes their curves into `curves` (one per channel of the clip). With `start_frames` (one entry
-// per group): a group's fit starts from the key frames of its entry when there are any (its last
-// fit's), and its new key frames replace them.
+// writes their curves into `curves` (one per channel of the clip). Each group's fit starts from
+// its entry of `last_frames` when it has one, and leaves its new key frames there.
 absl::Status FitGroups(const Clip& clip, std::span<const std::span<const double>> inputs,
                        const std::vector<std::vector<int>>& groups,
                        std::span<const std::size_t> which, std::span<const double> bounds,
-                       std::vector<Curve>& curves, const ProgressFn& progress,
-                       std::stop_token stop,
-                       std::vector<std::vector<std::int64_t>>* start_frames = nullptr) {
+                       std::vector<Curve>& curves, GroupKeyFrames& last_frames,
+                       const ProgressFn& progress, std::stop_token stop) {
   for (std::size_t i = 0; i < which.size(); ++i) {
     TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
     const std::vector<int>& group = groups[which[i]];
@@ -326,14 +328,14 @@ absl::Status FitGroups(const Clip& clip, std::span<const std::span<const double>
       // Capped: a huge bound times a huge scale must not become infinite (the fit refuses it).
       group_bounds.push_back(std::min(bounds[c], std::numeric_limits<double>::max()));
     }
-    ToleranceFitOptions options;
-    if (start_frames != nullptr) options.initial_frames = (*start_frames)[which[i]];
-    absl::StatusOr<SplineFit> fit = FitWithinTolerance(channels, group_bounds, options, stop);
+    std::vector<std::int64_t>& frames = last_frames[which[i]];
+    absl::StatusOr<SplineFit> fit = FitWithinTolerance(
+        channels, group_bounds, {.initial_frames = std::move(frames)}, stop);
     if (!fit.ok()) return Annotate(fit.status(), ChannelLabel(clip, group.front()));
-    if (start_frames != nullptr) (*start_frames)[which[i]] = fit->frames;
     for (std::size_t k = 0; k < group.size(); ++k) {
       curves[group[k]] = SplineCurve(*fit, k, clip.frame_time_seconds);
     }
+    frames = std::move(fit->frames);
     ReportProgressOf(progress, static_cast<double>(i + 1) / static_cast<double>(which.size()),
                      "reduce ", group.back() + 1, "/", clip.channels.size());
   }
@@ -383,9 +385,10 @@ class ToleranceFitter {
     if (!bounds_.joint) {
       std::vector<std::size_t> all(groups_.size());
       for (std::size_t g = 0; g < all.size(); ++g) all[g] = g;
+      GroupKeyFrames no_start(groups_.size());
       TEMPOKEY_RETURN_IF_ERROR(FitGroups(clip_, inputs_, groups_, all,
-                                         Scaled(bounds_.channel, scale), out.curves, progress,
-                                         stop));
+                                         Scaled(bounds_.channel, scale), out.curves, no_start,
+                                         progress, stop));
       return out;
     }
     // Progress follows the first round, which fits every group; later rounds refit a few.
@@ -393,15 +396,15 @@ class ToleranceFitter {
     const ProgressFn quiet;
     // A group refitted at tighter budgets starts from the keys of its last fit rather than from
     // keys initial_spacing_frames apart: its insertion has fewer rounds to go and its removal
-    // fewer keys to try. It keeps fewer keys too, at every joint bound of reduce_quality_bench's
-    // world tables but 2 cm on the Bandai clips (8.57 -> 8.68 %; 1 cm 11.93 -> 11.59 %, README).
-    std::vector<std::vector<std::int64_t>> start_frames(groups_.size());
+    // fewer keys to try (measured, and its keys at other bounds, in the README's world-bound
+    // profile).
+    GroupKeyFrames last_frames(groups_.size());
     const reduce_internal::GroupFitter fit_groups =
         [&](std::span<const std::size_t> which, std::span<const double> bounds,
             std::vector<Curve>& curves) {
           const absl::Status status =
-              FitGroups(clip_, inputs_, groups_, which, bounds, curves,
-                        first_round ? progress : quiet, stop, &start_frames);
+              FitGroups(clip_, inputs_, groups_, which, bounds, curves, last_frames,
+                        first_round ? progress : quiet, stop);
           first_round = false;
           return status;
         };

@@ -1537,11 +1537,11 @@ absl::Status ValidateInputs(std::span<const std::span<const double>> channels,
         "initial_spacing_frames must be in [1, 1000000], got ", options.initial_spacing_frames));
   }
   if (!options.initial_frames.empty()) {
-    const std::span<const std::int64_t> frames = options.initial_frames;
+    const std::vector<std::int64_t>& frames = options.initial_frames;
     const auto last = static_cast<std::int64_t>(n) - 1;
     if (frames.front() != 0 || frames.back() != last) {
       return absl::InvalidArgumentError(absl::StrCat(
-          "initial_frames must run from frame 0 to the last frame, ", last, ", got ",
+          "initial_frames must start at frame 0 and end at the last frame (", last, "), got ",
           frames.front(), " to ", frames.back()));
     }
     for (std::size_t k = 1; k < frames.size(); ++k) {

@@ -190,7 +190,7 @@ TEST(ToleranceFitTest, LongSegmentsBeyondTheTabledLengthsFitToo) {
 
 TEST(ToleranceFitTest, EveryOptionSettingKeepsTheBound) {
   const Samples sine = Sine(900, 60.0, 170.0);
-  for (const ToleranceFitOptions options :
+  for (const ToleranceFitOptions& options :
        {ToleranceFitOptions{.initial_spacing_frames = 1, .lawson_iterations = 0, .slide_frames = 0},
         ToleranceFitOptions{.initial_spacing_frames = 900, .lawson_iterations = 5,
                             .slide_frames = 6}}) {
@@ -219,16 +219,35 @@ TEST(ToleranceFitTest, TheFitStartsFromTheGivenKeyFrames) {
   }
 }
 
-TEST(ToleranceFitTest, ARefitFromTheKeysOfALooserFitKeepsTheTighterBound) {
-  const Samples sine = Sine(600, 40.0, 70.0);
-  const absl::StatusOr<SplineFit> loose = Fit({sine}, {0.5});
+TEST(ToleranceFitTest, EveryStartKeepsTheBound) {
+  const Samples fast = Sine(600, 40.0, 23.0);
+  const absl::StatusOr<SplineFit> loose = Fit({fast}, {0.5});
   ASSERT_TRUE(loose.ok()) << loose.status();
+  std::vector<std::int64_t> every_frame(600);
+  for (std::int64_t f = 0; f < 600; ++f) every_frame[f] = f;
+  std::vector<std::int64_t> clustered = {0};
+  for (std::int64_t f = 290; f < 310; ++f) clustered.push_back(f);
+  clustered.push_back(599);
 
-  const absl::StatusOr<SplineFit> tight = Fit({sine}, {0.05}, {.initial_frames = loose->frames});
+  for (const std::vector<std::int64_t>& start :
+       {loose->frames, every_frame, std::vector<std::int64_t>{0, 599}, clustered}) {
+    const absl::StatusOr<SplineFit> fit = Fit({fast}, {0.05}, {.initial_frames = start});
 
-  ASSERT_TRUE(tight.ok()) << tight.status();
-  EXPECT_LE(MaxError(*tight, 0, sine), 0.05);
-  EXPECT_GT(tight->frames.size(), loose->frames.size());
+    ASSERT_TRUE(fit.ok()) << fit.status();
+    EXPECT_LE(MaxError(*fit, 0, fast), 0.05) << "from " << start.size() << " keys";
+  }
+}
+
+TEST(ToleranceFitTest, OneAndTwoFrameChannelsTakeTheirOnlyStart) {
+  const absl::StatusOr<SplineFit> one = Fit({Samples{3.0}}, {0.1}, {.initial_frames = {0}});
+  ASSERT_TRUE(one.ok()) << one.status();
+  EXPECT_EQ(one->frames, (std::vector<std::int64_t>{0}));
+
+  const absl::StatusOr<SplineFit> two =
+      Fit({Samples{3.0, 5.0}}, {0.1}, {.initial_frames = {0, 1}});
+  ASSERT_TRUE(two.ok()) << two.status();
+  EXPECT_EQ(two->frames, (std::vector<std::int64_t>{0, 1}));
+  EXPECT_LE(MaxError(*two, 0, Samples{3.0, 5.0}), 0.1);
 }
 
 TEST(ToleranceFitTest, InvalidInputsAreRefusedWithReasons) {
@@ -248,18 +267,14 @@ TEST(ToleranceFitTest, InvalidInputsAreRefusedWithReasons) {
             "channel 0: the bound must be finite and > 0, got inf");
   EXPECT_EQ(Fit({good}, {0.1}, {.initial_spacing_frames = 0}).status().message(),
             "initial_spacing_frames must be in [1, 1000000], got 0");
-  const std::vector<std::int64_t> from_one = {1, 49};
-  EXPECT_EQ(Fit({good}, {0.1}, {.initial_frames = from_one}).status().message(),
-            "initial_frames must run from frame 0 to the last frame, 49, got 1 to 49");
-  const std::vector<std::int64_t> short_of_end = {0, 48};
-  EXPECT_EQ(Fit({good}, {0.1}, {.initial_frames = short_of_end}).status().message(),
-            "initial_frames must run from frame 0 to the last frame, 49, got 0 to 48");
-  const std::vector<std::int64_t> repeated = {0, 20, 20, 49};
-  EXPECT_EQ(Fit({good}, {0.1}, {.initial_frames = repeated}).status().message(),
+  EXPECT_EQ(Fit({good}, {0.1}, {.initial_frames = {1, 49}}).status().message(),
+            "initial_frames must start at frame 0 and end at the last frame (49), got 1 to 49");
+  EXPECT_EQ(Fit({good}, {0.1}, {.initial_frames = {0, 48}}).status().message(),
+            "initial_frames must start at frame 0 and end at the last frame (49), got 0 to 48");
+  EXPECT_EQ(Fit({good}, {0.1}, {.initial_frames = {0, 20, 20, 49}}).status().message(),
             "initial_frames must be strictly increasing: key 2 at frame 20 follows frame 20");
-  const std::vector<std::int64_t> one_key = {0};
-  EXPECT_EQ(Fit({good}, {0.1}, {.initial_frames = one_key}).status().message(),
-            "initial_frames must run from frame 0 to the last frame, 49, got 0 to 0");
+  EXPECT_EQ(Fit({good}, {0.1}, {.initial_frames = {0}}).status().message(),
+            "initial_frames must start at frame 0 and end at the last frame (49), got 0 to 0");
   EXPECT_EQ(Fit({good}, {0.1}, {.lawson_iterations = -1}).status().message(),
             "lawson_iterations must be in [0, 100], got -1");
   EXPECT_EQ(Fit({good}, {0.1}, {.slide_frames = 5000}).status().message(),

@@ -19,8 +19,8 @@
 //      ancestors' position channels, the rotation channels above it) by the factor its error
 //      asks for, never below the guaranteed budget: D / (lever · n), n the number of non-constant
 //      channels on the chain, with which the triangle inequality alone keeps the point within D
-//      whatever the errors. Refit what changed, each group's fit starting from the keys of its
-//      last one (fewer keys to insert and to try removing); repeat. From round
+//      whatever the errors. Refit what changed (reduce.cc's fitter starts each refit from the
+//      keys of the group's last fit: fewer keys to insert and to try removing); repeat. From round
 //      kJointBoundSnapRound every channel on a chain still over the bound takes its guaranteed
 //      budget, so the next verification passes: the bound always holds (checked, not assumed).
 #ifndef TEMPOKEY_CORE_REDUCE_JOINT_BOUND_H_

@@ -45,10 +45,11 @@ struct ToleranceFitOptions {
   int lawson_iterations = 3;
   // How far the key after a removed one may move to make the removal fit, in frames; [0, 1000].
   int slide_frames = 3;
-  // When not empty, the key frames the insertion starts from instead of initial_spacing_frames
-  // apart (a refit at a tighter bound starts from the keys of its fit at a looser one): strictly
-  // increasing, from 0 to samples - 1.
-  std::span<const std::int64_t> initial_frames;
+  // When not empty, the key frames the insertion starts from, in place of keys
+  // initial_spacing_frames apart (which is then not used, though still checked): strictly
+  // increasing, from 0 to samples - 1. A refit at a tighter bound can start from the keys of its
+  // fit at a looser one. Whatever the start, the fit keeps its bound.
+  std::vector<std::int64_t> initial_frames = {};
 };
 
 // The fitted spline of a group of channels: shared key frames, per channel values and slopes.
