@@ -4,11 +4,12 @@
 // 1 MiB and more in the server). Four ways, each on a fresh anonymous mapping, written in 1 MiB
 // copies as the server's upload writes its samples:
 //   plain      advised MADV_NOHUGEPAGE: the first write faults every base page in;
-//   populated  the same, MADV_POPULATE_WRITE first (what the clip assembler does), then the write;
+//   populated  the same, MADV_POPULATE_WRITE first (what the clip assembler does for a channel's
+//              grown capacity: PrefaultForWriting(), proto/prefault.h), then the write;
 //   rewrite    the populated mapping written a second time;
 //   huge       2 MiB-aligned, advised MADV_HUGEPAGE, populated whole (2 MiB pages), then written:
-//              shown only when the kernel takes the advice (transparent huge pages "madvise" or
-//              "always").
+//              shown only when transparent huge pages are not "[never]" and the kernel takes the
+//              advice.
 // Prints each as ms per 50 MB and MB/s of what is written (the median of the repeats), and the
 // kernel's transparent huge page mode.
 //
@@ -84,9 +85,22 @@ std::string HugePageMode() {
   return mode.empty() ? "unknown" : mode;
 }
 
-// Milliseconds of each way, one repeat; a way the kernel refuses is left out (negative).
+// Kilobytes of this process's anonymous memory in transparent huge pages; -1 when unknown.
+double AnonHugeKilobytes() {
+  std::ifstream in("/proc/self/smaps_rollup");
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.rfind("AnonHugePages:", 0) == 0) return std::atof(line.c_str() + 14);
+  }
+  return -1.0;
+}
+
+// Milliseconds of each way, one repeat; a way the kernel refuses is left out (negative). And the
+// share of the huge way's mapping the kernel did give 2 MiB pages (under memory pressure it falls
+// back to base pages).
 struct Repeat {
   double plain = -1.0, populated = -1.0, rewrite = -1.0, huge = -1.0;
+  double huge_share = -1.0;
 };
 
 Repeat MeasureOnce(std::size_t bytes, std::size_t page, const std::vector<char>& piece) {
@@ -113,14 +127,19 @@ Repeat MeasureOnce(std::size_t bytes, std::size_t page, const std::vector<char>&
       }
     }
   }
-  {
+  if (HugePageMode().find("[never]") == std::string::npos) {
     const std::size_t rounded = (bytes + kHugePage - 1) / kHugePage * kHugePage;
     Mapping m(rounded, kHugePage);
+    const double huge_before = AnonHugeKilobytes();
     if (m.ok() && madvise(m.data(), rounded, MADV_HUGEPAGE) == 0) {
       const auto start = Clock::now();
       if (madvise(m.data(), rounded, MADV_POPULATE_WRITE) == 0) {
         WriteAll(m.data(), bytes, piece);
         r.huge = MillisecondsSince(start);
+        const double huge_after = AnonHugeKilobytes();
+        if (huge_before >= 0.0 && huge_after >= 0.0) {
+          r.huge_share = (huge_after - huge_before) * 1024.0 / static_cast<double>(rounded);
+        }
       }
     }
   }
@@ -131,7 +150,7 @@ int Run(std::size_t bytes, int repeats) {
   const auto page = static_cast<std::size_t>(sysconf(_SC_PAGESIZE));
   std::vector<char> piece(kPiece);
   for (std::size_t i = 0; i < piece.size(); ++i) piece[i] = static_cast<char>(i * 31);
-  std::vector<double> plain, populated, rewrite, huge;
+  std::vector<double> plain, populated, rewrite, huge, huge_share;
   for (int i = 0; i < repeats; ++i) {
     const Repeat r = MeasureOnce(bytes, page, piece);
     if (r.plain < 0.0) {
@@ -142,6 +161,7 @@ int Run(std::size_t bytes, int repeats) {
     if (r.populated >= 0.0) populated.push_back(r.populated);
     if (r.rewrite >= 0.0) rewrite.push_back(r.rewrite);
     if (r.huge >= 0.0) huge.push_back(r.huge);
+    if (r.huge_share >= 0.0) huge_share.push_back(r.huge_share);
   }
   const double per50 = 50e6 / static_cast<double>(bytes);
   auto line = [&](const char* name, const std::vector<double>& ms, const char* missing) {
@@ -159,7 +179,12 @@ int Run(std::size_t bytes, int repeats) {
   line("plain", plain, "");
   line("populated", populated, "not measured: MADV_POPULATE_WRITE needs Linux 5.14");
   line("rewrite", rewrite, "not measured: MADV_POPULATE_WRITE needs Linux 5.14");
-  line("huge", huge, "not measured: the kernel refused MADV_HUGEPAGE or MADV_POPULATE_WRITE");
+  line("huge", huge,
+       "not measured: transparent huge pages are off, or the kernel refused the advice");
+  if (!huge_share.empty()) {
+    std::printf("  %-10s %.0f %% of the huge way's mapping in 2 MiB pages (median)\n", "",
+                100.0 * Median(huge_share));
+  }
   return 0;
 }
 

@@ -19,8 +19,8 @@ namespace tempokey::core::reduce_internal {
 
 // Fits every channel of the alignment groups `groups` (indices into the caller's groups) within
 // bounds[c] (value units), writing curves[c] of each. Called again for the groups whose budgets
-// were tightened; it may keep what it learnt of a group between calls (reduce.cc's starts a
-// refit from the keys of the group's last fit).
+// were tightened; it may keep what it learnt of a group between calls (reduce.cc's fitter
+// starts a refit from the keys of the group's last fit).
 using GroupFitter = std::function<absl::Status(std::span<const std::size_t> groups,
                                                std::span<const double> bounds,
                                                std::vector<Curve>& curves)>;

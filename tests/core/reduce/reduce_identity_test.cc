@@ -160,12 +160,13 @@ TEST(ReduceIdentityTest, ToleranceWithAKeyBudgetKeepsItsPinnedKeys) {
 
 // Re-recorded when forward kinematics took the vector kernels' sines and cosines: a joint bound
 // refits channels by the world-space errors it measures, so its keys follow those errors' last
-// bits. Against libm's (79ea94a), on these 8 clips: the same 30 191 keys on the same frames, 1 228
-// values different by at most 1.8e-11 (2.9e-14 of the value), tangents by at most 1.2e-10, the
-// worst joint error by at most 5.5e-14 of itself. Re-recorded again when a refit began to start
-// from the keys of the group's last fit (issue 16, a change of keys made for speed): Bandai at
-// 1 cm 26 324 -> 25 606 keys, CMU 131_01 at 0.5 % of the height 5.34 -> 5.20 % of its samples
-// (reduce_quality_bench world), every joint still within the bound.
+// bits. Against libm's (79ea94a), on these 8 clips: the same keys (then 30 191) on the same
+// frames, 1 228 values different by at most 1.8e-11 (2.9e-14 of the value), tangents by at most
+// 1.2e-10, the worst joint error by at most 5.5e-14 of itself. Re-recorded again when a refit
+// began to start from the keys of the group's last fit (issue 16, a change of keys made for
+// speed): Bandai at 1 cm 26 324 -> 25 606 keys, CMU 131_01 at 0.5 % of the height 5.34 -> 5.20 %
+// of its non-constant channels' samples (reduce_quality_bench world), every joint still within
+// the bound.
 TEST(ReduceIdentityTest, JointBoundKeepsItsPinnedKeysOnEverySharedClip) {
   ReduceOptions options;
   options.tolerance.joint_tolerance = JointTolerance{.value = 1.0};
