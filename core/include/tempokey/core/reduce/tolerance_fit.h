@@ -68,8 +68,9 @@ struct SplineFit {
 // Errors: kInvalidArgument for no channels, channels of different or zero length, a non-finite
 // sample ("channel 2: sample 40 is NaN"), a bound that is not finite and > 0, options out of
 // range, initial_frames not from frame 0 to the last or not strictly increasing ("initial_frames
-// must be strictly increasing: key 2 at frame 20 follows frame 20"); kCancelled when `stop` is requested (checked every 65536 samples of work: insertion
-// rounds, segments, removal windows and verification alike).
+// must be strictly increasing: key 2 at frame 20 follows frame 20"); kCancelled when `stop` is
+// requested (checked every 65536 samples of work: insertion rounds, segments, removal windows and
+// verification alike).
 // Thread-safe: a pure function of its arguments.
 absl::StatusOr<SplineFit> FitWithinTolerance(std::span<const std::span<const double>> channels,
                                              std::span<const double> max_errors,
