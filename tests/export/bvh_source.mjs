@@ -1,9 +1,9 @@
 // A minimal BVH reader for the export checks, written apart from tempokey's C++ reader: the
-// hierarchy (names, offsets, channel lists, parents) and the motion rows. Each joint's local
-// transform per frame follows the BVH convention: translation = the offset with each position
-// channel replacing its axis; rotation = the rotation channels composed in listed order
-// (intrinsic, left to right: `Zrotation Xrotation Yrotation` is Rz·Rx·Ry), built here with
-// three.js quaternions from axis angles.
+// hierarchy (names, offsets, channel lists, parents, end sites' offsets) and the motion rows. Each
+// joint's local transform per frame follows the BVH convention: translation = the offset with each
+// position channel replacing its axis; rotation = the rotation channels composed in listed order
+// (intrinsic, left to right: `Zrotation Xrotation Yrotation` is Rz·Rx·Ry), built here with three.js
+// quaternions from axis angles.
 import * as THREE from 'three';
 
 export function parseBvh(text) {
@@ -19,7 +19,7 @@ export function parseBvh(text) {
     if (word === 'ROOT' || word === 'JOINT') {
       const joint = {
         name: next(), parent: stack.length ? stack[stack.length - 1] : -1,
-        offset: [0, 0, 0], channels: [],
+        offset: [0, 0, 0], channels: [], endSites: [],
       };
       joints.push(joint);
       stack.push(joints.length - 1);
@@ -28,7 +28,8 @@ export function parseBvh(text) {
       next();  // Site
       next();  // {
       next();  // OFFSET
-      next(); next(); next();
+      const site = [Number(next()), Number(next()), Number(next())];
+      joints[stack[stack.length - 1]].endSites.push(site);
       next();  // }
     } else if (word === 'OFFSET') {
       const joint = joints[stack[stack.length - 1]];

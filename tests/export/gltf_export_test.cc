@@ -4,6 +4,7 @@
 // source frame (tests/export/three_check.mjs reads the source BVH with its own reader).
 #include "tempokey/core/io/gltf.h"
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -29,6 +30,10 @@ constexpr double kFloat32RotationSlackDegrees = 1e-3;
 // ~15000 degrees/s, moves 0.006 degrees in that time. (Keyed fits are verified in C++ with the
 // same float32 times and double queries, so their bound already includes it.)
 constexpr double kFloat32TimeSlackDegrees = 0.01;
+// World positions from float32 rotations and translations along a chain of up to ~10 joints of
+// up to ~150 cm (Bandai) or ~30 units (CMU): each rounding moves a point by about 1e-5 of the
+// chain's length.
+constexpr double kFloat32WorldSlack = 1e-3;
 
 std::string Stem(const std::string& path) {
   const std::size_t slash = path.rfind('/');
@@ -64,6 +69,30 @@ std::string WriteSampled(const std::string& path, GltfContainer container, const
                                        container == GltfContainer::kText ? ".gltf" : ".glb");
   EXPECT_TRUE(WriteFileAtomically(out, file->bytes).ok());
   return out;
+}
+
+// Reduces `path` under a joint bound (`joint`), writes the reduction baked at the source's
+// frames as a sampled glTF in `dir` and returns the file and the world error tempokey reports.
+struct WorldBounded {
+  std::string file;
+  WorldErrorReport report;
+};
+WorldBounded WriteWorldBounded(const std::string& path, std::optional<JointTolerance> joint,
+                               const std::string& dir) {
+  absl::StatusOr<Clip> source = ReadBvhFile(path);
+  EXPECT_TRUE(source.ok()) << source.status();
+  ReduceOptions options;
+  options.tolerance.joint_tolerance = joint;
+  absl::StatusOr<ReduceResult> reduced = ReduceKeys(*source, options);
+  EXPECT_TRUE(reduced.ok()) << reduced.status();
+  absl::StatusOr<Clip> baked = Bake(reduced->keyed);
+  EXPECT_TRUE(baked.ok()) << baked.status();
+  absl::StatusOr<GltfFile> file = FormatGltfSampled(*baked, GltfContainer::kBinary);
+  EXPECT_TRUE(file.ok()) << file.status();
+  const std::string out =
+      absl::StrCat(dir, "/", Stem(path), joint ? "_joint_bound" : "_per_channel", ".glb");
+  EXPECT_TRUE(WriteFileAtomically(out, file->bytes).ok());
+  return {out, *reduced->report.world};
 }
 
 void ExpectThreeWithin(const std::string& bvh, const std::string& gltf, double rotation_bound,
@@ -122,6 +151,36 @@ TEST(GltfExportTest, ThreeJsStaysWithinTighterAndLooserBoundsToo) {
                         tolerance, dir);
     }
   }
+}
+
+// Forward kinematics that is not tempokey's: three.js's scene graph places every joint and end
+// site of the reduction (played from a glTF) and of the source (this folder's own BVH reader), and
+// the world-space bound must hold there, with the same worst distance tempokey reports. A
+// per-channel reduction, which lets a hand move 2.2 cm, shows the check can fail.
+TEST(GltfExportTest, ThreeJsPlacesEveryPointOfAJointBoundReductionWithinTheBound) {
+  const std::string dir = testing::MakeTempDir();
+  for (const std::string& path : testing::AllSharedBvhFiles()) {
+    const bool cmu = path.find("/cmu/") != std::string::npos;
+    const WorldBounded reduced = WriteWorldBounded(
+        path, cmu ? JointTolerance{.value = 0.5, .percent_of_height = true}
+                  : JointTolerance{.value = 1.0},
+        dir);
+    const std::vector<JsonValue> lines =
+        RunNodeScript("world_check.mjs", {path, reduced.file}, dir);
+    ASSERT_EQ(lines.size(), 1u) << path;
+
+    const double placed = NumberOf(lines[0], "max_world_error");
+    EXPECT_LE(placed, reduced.report.joint_tolerance + kFloat32WorldSlack) << path;
+    EXPECT_NEAR(placed, reduced.report.max_error, kFloat32WorldSlack) << path;
+  }
+  const std::string dance = testing::SharedBvh("bandai/dataset-1_dance-short_normal_001.bvh");
+  const WorldBounded per_channel = WriteWorldBounded(dance, std::nullopt, dir);
+  const std::vector<JsonValue> lines =
+      RunNodeScript("world_check.mjs", {dance, per_channel.file}, dir);
+  ASSERT_EQ(lines.size(), 1u);
+  EXPECT_GT(NumberOf(lines[0], "max_world_error"), 2.0);
+  EXPECT_NEAR(NumberOf(lines[0], "max_world_error"), per_channel.report.max_error,
+              kFloat32WorldSlack);
 }
 
 TEST(GltfExportTest, ThreeJsPlaysSampledClipsAsTheSourceItself) {
