@@ -18,6 +18,7 @@
 #include "proto/arena_message.h"
 #include "proto/jobs_convert.h"
 #include "proto/operations_convert.h"
+#include "proto/scratch_arena.h"
 #include "grpcpp/client_context.h"
 #include "grpcpp/create_channel.h"
 #include "grpcpp/generic/generic_stub.h"
@@ -205,20 +206,20 @@ namespace {
 template <typename Request, typename Writer>
 absl::Status WriteSamples(const core::Clip& clip, std::int64_t slice_bytes, bool batched,
                           Writer& writer) {
-  Request request;
-  auto write = [&]() -> absl::Status {
-    if (!writer.Write(request)) return absl::AbortedError("stream closed");
-    return absl::OkStatus();
-  };
   if (batched) {
-    return wire::ForEachSamplesBatch(clip, slice_bytes, [&](v1::SampleSlices&& slices) {
-      *request.mutable_sample_slices() = std::move(slices);
-      return write();
-    });
+    // Each batch built in this thread's scratch arena, written and dropped.
+    wire::SamplesBatcher batches(clip, slice_bytes);
+    for (;;) {
+      wire::ScratchMessage<Request> request;
+      if (!batches.Next(request->mutable_sample_slices())) return absl::OkStatus();
+      if (!writer.Write(*request)) return absl::AbortedError("stream closed");
+    }
   }
+  Request request;
   return wire::ForEachSamplesSlice(clip, slice_bytes, [&](v1::ChannelSamples&& samples) {
     *request.mutable_samples() = std::move(samples);
-    return write();
+    if (!writer.Write(request)) return absl::AbortedError("stream closed");
+    return absl::OkStatus();
   });
 }
 
@@ -450,7 +451,7 @@ absl::StatusOr<core::PipelineResult> Client::GetJobResult(const std::string& job
     bool received = false;
     absl::Status assembled;
     for (;;) {
-      wire::ArenaMessage<v1::ResultPart> part;
+      wire::ScratchMessage<v1::ResultPart> part;
       if (!reader->Read(part.get())) break;
       received = true;
       assembled = assembler->AddPart(*part);
@@ -471,8 +472,9 @@ absl::StatusOr<core::PipelineResult> Client::Process(const core::Clip& clip,
                                                      const core::ProgressFn& progress) const {
   TEMPOKEY_RETURN_IF_ERROR(core::ValidateClip(clip));
   const CallScope scope = BeginCall();
-  v1::ProcessRequest header_request;
-  *header_request.mutable_header() = wire::ClipHeaderToProto(clip);
+  // The header in an arena of its own: a message and a name per channel, kept for retries.
+  wire::ArenaMessage<v1::ProcessRequest> header_request;
+  header_request->set_allocated_header(wire::ClipHeaderOnArena(clip, header_request->GetArena()));
   v1::ProcessRequest start_request;
   for (const core::PipelineStep& step : steps) {
     *start_request.mutable_start()->add_operations() = wire::PipelineStepToProto(step);
@@ -487,7 +489,7 @@ absl::StatusOr<core::PipelineResult> Client::Process(const core::Clip& clip,
     PrepareContext(scope, context);
     std::unique_ptr<grpc::ClientReaderWriter<v1::ProcessRequest, v1::ProcessResponse>> stream =
         stub_->Process(&context);
-    bool open = stream->Write(header_request);
+    bool open = stream->Write(*header_request);
     if (open) {
       absl::Status sent =
           WriteSamples<v1::ProcessRequest>(clip, options_.slice_bytes, batched, *stream);
@@ -498,7 +500,7 @@ absl::StatusOr<core::PipelineResult> Client::Process(const core::Clip& clip,
     bool received = false;
     absl::Status assembled;
     for (;;) {
-      wire::ArenaMessage<v1::ProcessResponse> response;
+      wire::ScratchMessage<v1::ProcessResponse> response;
       if (!stream->Read(response.get())) break;
       received = true;
       if (response->has_progress()) {

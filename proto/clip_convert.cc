@@ -3,7 +3,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <iterator>
 #include <limits>
 #include <map>
@@ -25,26 +24,6 @@ std::int64_t ValuesPerSlice(std::int64_t slice_bytes, std::int64_t bytes_per_val
   if (slice_bytes <= 0) slice_bytes = kDefaultSliceBytes;
   slice_bytes = std::min(slice_bytes, kMaxSliceBytes);
   return std::max<std::int64_t>(1, slice_bytes / bytes_per_value);
-}
-
-// Index of the first value in [data, data + n) that is not finite or lies beyond
-// core::kMaxSampleMagnitude, or n. The exponent test vectorizes; the scan runs over every sample
-// that comes off the wire. |x| < 2^29 (biased exponent below 1023 + 29) is always within the
-// bound (2^29 < 1e9 < 2^30); only a slice holding a larger exponent is scanned exactly.
-std::int64_t FirstOutOfRange(const double* data, std::int64_t n) {
-  constexpr std::uint64_t kExponent = 0x7ff0000000000000ull;
-  constexpr std::uint64_t kFirstUnsafe = std::uint64_t{1023 + 29} << 52;
-  std::uint64_t any = 0;
-  for (std::int64_t i = 0; i < n; ++i) {
-    std::uint64_t bits;
-    std::memcpy(&bits, &data[i], sizeof bits);
-    any |= static_cast<std::uint64_t>((bits & kExponent) >= kFirstUnsafe);
-  }
-  if (any == 0) return n;
-  for (std::int64_t i = 0; i < n; ++i) {
-    if (!(std::abs(data[i]) <= core::kMaxSampleMagnitude)) return i;
-  }
-  return n;
 }
 
 absl::Status Invalid(std::string message) { return absl::InvalidArgumentError(message); }
@@ -76,12 +55,10 @@ std::int64_t LayoutBytesEstimate(const v1::ClipHeader& header) {
 
 // ---- clip header ---------------------------------------------------------------------------------
 
-v1::Vec3 Vec3ToProto(const core::Vec3& v) {
-  v1::Vec3 out;
-  out.set_x(v[0]);
-  out.set_y(v[1]);
-  out.set_z(v[2]);
-  return out;
+void SetVec3(const core::Vec3& v, v1::Vec3* out) {
+  out->set_x(v[0]);
+  out->set_y(v[1]);
+  out->set_z(v[2]);
 }
 
 core::Vec3 Vec3FromProto(const v1::Vec3& v) { return {v.x(), v.y(), v.z()}; }
@@ -89,6 +66,45 @@ core::Vec3 Vec3FromProto(const v1::Vec3& v) { return {v.x(), v.y(), v.z()}; }
 // "frames 100..199" (inclusive bounds, as people count frames).
 std::string FrameRange(std::int64_t begin, std::int64_t end) {
   return absl::StrCat("frames ", begin, "..", end - 1);
+}
+
+// Fills the empty `header` with `clip`'s layout; every submessage lands in `header`'s arena.
+void AppendClipHeader(const core::Clip& clip, v1::ClipHeader* header) {
+  header->set_name(clip.name);
+  header->set_frame_time_seconds(clip.frame_time_seconds);
+  header->set_frame_count(clip.frame_count);
+  header->mutable_joints()->Reserve(static_cast<int>(clip.skeleton.joints.size()));
+  for (const core::Joint& joint : clip.skeleton.joints) {
+    v1::Joint* j = header->add_joints();
+    j->set_name(joint.name);
+    j->set_parent_index(joint.parent);
+    SetVec3(joint.offset, j->mutable_offset());
+    for (const core::Vec3& end_site : joint.end_sites) {
+      SetVec3(end_site, j->add_end_site_offsets());
+    }
+  }
+  header->mutable_channels()->Reserve(static_cast<int>(clip.channels.size()));
+  for (const core::Channel& channel : clip.channels) {
+    v1::ChannelInfo* c = header->add_channels();
+    if (channel.joint >= 0) c->set_joint_index(channel.joint);
+    c->set_kind(ChannelKindToProto(channel.kind));
+    c->set_name(channel.name);
+  }
+  for (const core::Marker& marker : clip.markers) {
+    v1::Marker* m = header->add_markers();
+    m->set_name(marker.name);
+    m->set_time_seconds(marker.time_seconds);
+    m->set_duration_seconds(marker.duration_seconds);
+  }
+}
+
+// Fills the empty `slice` with samples [first_frame, first_frame + count) of a channel.
+void AppendSamplesSlice(const core::Clip& clip, int channel_index, std::int64_t first_frame,
+                        std::int64_t count, v1::ChannelSamples* slice) {
+  const double* samples = clip.channels[channel_index].samples.data() + first_frame;
+  slice->set_channel_index(channel_index);
+  slice->set_first_frame(first_frame);
+  slice->mutable_samples()->Add(samples, samples + count);
 }
 
 }  // namespace
@@ -140,32 +156,13 @@ absl::StatusOr<core::ChannelKind> ChannelKindFromProto(int kind) {
 
 v1::ClipHeader ClipHeaderToProto(const core::Clip& clip) {
   v1::ClipHeader header;
-  header.set_name(clip.name);
-  header.set_frame_time_seconds(clip.frame_time_seconds);
-  header.set_frame_count(clip.frame_count);
-  header.mutable_joints()->Reserve(static_cast<int>(clip.skeleton.joints.size()));
-  for (const core::Joint& joint : clip.skeleton.joints) {
-    v1::Joint* j = header.add_joints();
-    j->set_name(joint.name);
-    j->set_parent_index(joint.parent);
-    *j->mutable_offset() = Vec3ToProto(joint.offset);
-    for (const core::Vec3& end_site : joint.end_sites) {
-      *j->add_end_site_offsets() = Vec3ToProto(end_site);
-    }
-  }
-  header.mutable_channels()->Reserve(static_cast<int>(clip.channels.size()));
-  for (const core::Channel& channel : clip.channels) {
-    v1::ChannelInfo* c = header.add_channels();
-    if (channel.joint >= 0) c->set_joint_index(channel.joint);
-    c->set_kind(ChannelKindToProto(channel.kind));
-    c->set_name(channel.name);
-  }
-  for (const core::Marker& marker : clip.markers) {
-    v1::Marker* m = header.add_markers();
-    m->set_name(marker.name);
-    m->set_time_seconds(marker.time_seconds);
-    m->set_duration_seconds(marker.duration_seconds);
-  }
+  AppendClipHeader(clip, &header);
+  return header;
+}
+
+v1::ClipHeader* ClipHeaderOnArena(const core::Clip& clip, google::protobuf::Arena* arena) {
+  auto* header = google::protobuf::Arena::CreateMessage<v1::ClipHeader>(arena);
+  AppendClipHeader(clip, header);
   return header;
 }
 
@@ -233,11 +230,16 @@ std::int64_t SamplesPerSlice(std::int64_t slice_bytes) {
 
 v1::ChannelSamples SamplesSliceToProto(const core::Clip& clip, int channel_index,
                                        std::int64_t first_frame, std::int64_t count) {
-  const double* samples = clip.channels[channel_index].samples.data() + first_frame;
   v1::ChannelSamples slice;
-  slice.set_channel_index(channel_index);
-  slice.set_first_frame(first_frame);
-  slice.mutable_samples()->Add(samples, samples + count);
+  AppendSamplesSlice(clip, channel_index, first_frame, count, &slice);
+  return slice;
+}
+
+v1::ChannelSamples* SamplesSliceOnArena(const core::Clip& clip, int channel_index,
+                                        std::int64_t first_frame, std::int64_t count,
+                                        google::protobuf::Arena* arena) {
+  auto* slice = google::protobuf::Arena::CreateMessage<v1::ChannelSamples>(arena);
+  AppendSamplesSlice(clip, channel_index, first_frame, count, slice);
   return slice;
 }
 
@@ -254,27 +256,37 @@ absl::Status ForEachSamplesSlice(const core::Clip& clip, std::int64_t slice_byte
   return absl::OkStatus();
 }
 
+SamplesBatcher::SamplesBatcher(const core::Clip& clip, std::int64_t slice_bytes)
+    : clip_(clip), budget_(SamplesPerSlice(slice_bytes)) {}
+
+bool SamplesBatcher::Next(v1::SampleSlices* batch) {
+  google::protobuf::Arena* const arena = batch->GetArena();
+  std::int64_t used = 0;
+  while (channel_ < clip_.channels.size()) {
+    const auto total = static_cast<std::int64_t>(clip_.channels[channel_].samples.size());
+    if (first_ >= total) {
+      ++channel_;
+      first_ = 0;
+      continue;
+    }
+    const std::int64_t n = std::min(budget_ - used, total - first_);
+    batch->mutable_slices()->AddAllocated(
+        SamplesSliceOnArena(clip_, static_cast<int>(channel_), first_, n, arena));
+    first_ += n;
+    used += n;
+    if (used == budget_) return true;
+  }
+  return batch->slices_size() > 0;
+}
+
 absl::Status ForEachSamplesBatch(const core::Clip& clip, std::int64_t slice_bytes,
                                  const std::function<absl::Status(v1::SampleSlices&&)>& emit) {
-  const std::int64_t budget = SamplesPerSlice(slice_bytes);
-  v1::SampleSlices batch;
-  std::int64_t used = 0;
-  for (std::size_t c = 0; c < clip.channels.size(); ++c) {
-    const auto total = static_cast<std::int64_t>(clip.channels[c].samples.size());
-    for (std::int64_t first = 0; first < total;) {
-      const std::int64_t n = std::min(budget - used, total - first);
-      *batch.add_slices() = SamplesSliceToProto(clip, static_cast<int>(c), first, n);
-      first += n;
-      used += n;
-      if (used == budget) {
-        TEMPOKEY_RETURN_IF_ERROR(emit(std::move(batch)));
-        batch.Clear();
-        used = 0;
-      }
-    }
+  SamplesBatcher batches(clip, slice_bytes);
+  for (;;) {
+    v1::SampleSlices batch;
+    if (!batches.Next(&batch)) return absl::OkStatus();
+    TEMPOKEY_RETURN_IF_ERROR(emit(std::move(batch)));
   }
-  if (batch.slices_size() > 0) return emit(std::move(batch));
-  return absl::OkStatus();
 }
 
 v1::Clip ClipToProto(const core::Clip& clip) {
@@ -407,7 +419,9 @@ absl::Status ClipAssembler::AddSamples(const v1::ChannelSamples& samples) {
   }
 
   const double* data = samples.samples().data();
-  if (const std::int64_t bad = FirstOutOfRange(data, n); bad < n) {
+  if (const auto bad = static_cast<std::int64_t>(
+          core::FirstSampleOutOfRange({data, static_cast<std::size_t>(n)}));
+      bad < n) {
     return Invalid(absl::StrCat(
         "samples message ", messages_, ": ", core::ChannelLabel(clip_, c), ": sample at frame ",
         first + bad, " is ", core::DescribeDouble(data[bad]),
@@ -505,6 +519,14 @@ void AppendKeys(const core::Curve& curve, std::size_t begin, std::size_t end, bo
   }
 }
 
+// Fills the empty `piece` with keys [first_key, first_key + count) of `curve`.
+void AppendCurveSlice(int channel_index, const core::Curve& curve, std::int64_t first_key,
+                      std::int64_t count, v1::KeyedCurve* piece) {
+  piece->set_channel_index(channel_index);
+  AppendKeys(curve, static_cast<std::size_t>(first_key),
+             static_cast<std::size_t>(first_key + count), IsWeighted(curve), piece);
+}
+
 }  // namespace
 
 v1::KeyedCurve KeyedCurveToProto(int channel_index, const core::Curve& curve) {
@@ -527,9 +549,15 @@ v1::KeyedClip KeyedClipToProto(const core::KeyedClip& keyed) {
 v1::KeyedCurve KeyedCurveSliceToProto(int channel_index, const core::Curve& curve,
                                       std::int64_t first_key, std::int64_t count) {
   v1::KeyedCurve piece;
-  piece.set_channel_index(channel_index);
-  AppendKeys(curve, static_cast<std::size_t>(first_key),
-             static_cast<std::size_t>(first_key + count), IsWeighted(curve), &piece);
+  AppendCurveSlice(channel_index, curve, first_key, count, &piece);
+  return piece;
+}
+
+v1::KeyedCurve* KeyedCurveSliceOnArena(int channel_index, const core::Curve& curve,
+                                       std::int64_t first_key, std::int64_t count,
+                                       google::protobuf::Arena* arena) {
+  auto* piece = google::protobuf::Arena::CreateMessage<v1::KeyedCurve>(arena);
+  AppendCurveSlice(channel_index, curve, first_key, count, piece);
   return piece;
 }
 

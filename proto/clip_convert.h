@@ -15,6 +15,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "google/protobuf/arena.h"
 #include "tempokey/core/model/clip.h"
 #include "tempokey/core/model/keyed_clip.h"
 #include "tempokey/v1/clip.pb.h"
@@ -32,6 +33,10 @@ inline constexpr std::int64_t kDefaultSliceBytes = 1 << 20;
 
 // The layout of `clip` (everything but samples).
 v1::ClipHeader ClipHeaderToProto(const core::Clip& clip);
+// The same, built in `arena`, which owns it (nullptr: on the heap, the caller's): for a message
+// assembled in place (set_allocated_..., AddAllocated() of a message in the same arena take it
+// without a copy).
+v1::ClipHeader* ClipHeaderOnArena(const core::Clip& clip, google::protobuf::Arena* arena);
 
 // Calls `emit` with consecutive slices of `clip`'s samples, channel by channel, each carrying at
 // most `slice_bytes` of samples (at least one sample; `slice_bytes` <= 0 means
@@ -45,6 +50,23 @@ absl::Status ForEachSamplesSlice(const core::Clip& clip, std::int64_t slice_byte
 absl::Status ForEachSamplesBatch(const core::Clip& clip, std::int64_t slice_bytes,
                                  const std::function<absl::Status(v1::SampleSlices&&)>& emit);
 
+// ForEachSamplesBatch()'s batches one at a time, each built in the arena of the message it fills
+// (a scratch arena: scratch_arena.h), for a sender that writes each batch as it is made.
+// `clip` must outlive the batcher.
+class SamplesBatcher {
+ public:
+  SamplesBatcher(const core::Clip& clip, std::int64_t slice_bytes);
+
+  // Fills the empty `batch` with the next batch; false once every sample was given.
+  bool Next(v1::SampleSlices* batch);
+
+ private:
+  const core::Clip& clip_;
+  std::int64_t budget_;  // samples per batch
+  std::size_t channel_ = 0;
+  std::int64_t first_ = 0;  // the next frame of channel_ to give
+};
+
 // Header plus one whole-channel slice per channel.
 v1::Clip ClipToProto(const core::Clip& clip);
 
@@ -56,6 +78,10 @@ std::int64_t SamplesPerSlice(std::int64_t slice_bytes);
 // Precondition: the range lies inside the channel (callers iterate within it).
 v1::ChannelSamples SamplesSliceToProto(const core::Clip& clip, int channel_index,
                                        std::int64_t first_frame, std::int64_t count);
+// The same, built in `arena` (as ClipHeaderOnArena()).
+v1::ChannelSamples* SamplesSliceOnArena(const core::Clip& clip, int channel_index,
+                                        std::int64_t first_frame, std::int64_t count,
+                                        google::protobuf::Arena* arena);
 
 // The layout a header describes (every channel's samples empty), checked with
 // core::ValidateClipLayout() against `limits`, and its markers (finite time, duration >= 0).
@@ -145,6 +171,10 @@ v1::KeyedClip KeyedClipToProto(const core::KeyedClip& keyed);
 // Precondition: the range lies inside the curve.
 v1::KeyedCurve KeyedCurveSliceToProto(int channel_index, const core::Curve& curve,
                                       std::int64_t first_key, std::int64_t count);
+// The same, built in `arena` (as ClipHeaderOnArena()).
+v1::KeyedCurve* KeyedCurveSliceOnArena(int channel_index, const core::Curve& curve,
+                                       std::int64_t first_key, std::int64_t count,
+                                       google::protobuf::Arena* arena);
 // How many keys of `curve` one piece of at most `slice_bytes` carries (>= 1).
 std::int64_t KeysPerSlice(const core::Curve& curve, std::int64_t slice_bytes);
 

@@ -23,54 +23,58 @@ bool ResultSlicer::Done() const {
   return channel_ >= static_cast<int>(std::get<core::KeyedClip>(result_->output).curves.size());
 }
 
-bool ResultSlicer::NextSamples(std::int64_t budget_bytes, v1::ChannelSamples* samples) {
+v1::ChannelSamples* ResultSlicer::NextSamples(std::int64_t budget_bytes,
+                                              google::protobuf::Arena* arena) {
   const core::Clip& clip = std::get<core::Clip>(result_->output);
   while (channel_ < static_cast<int>(clip.channels.size())) {
     const auto total = static_cast<std::int64_t>(clip.channels[channel_].samples.size());
     if (offset_ < total) {
       const std::int64_t n = std::min(wire::SamplesPerSlice(budget_bytes), total - offset_);
-      *samples = wire::SamplesSliceToProto(clip, channel_, offset_, n);
+      v1::ChannelSamples* samples = wire::SamplesSliceOnArena(clip, channel_, offset_, n, arena);
       offset_ += n;
       if (offset_ == total) {
         ++channel_;
         offset_ = 0;
       }
-      return true;
+      return samples;
     }
     ++channel_;
     offset_ = 0;
   }
-  return false;
+  return nullptr;
 }
 
-bool ResultSlicer::NextCurve(std::int64_t budget_bytes, v1::KeyedCurve* piece) {
+v1::KeyedCurve* ResultSlicer::NextCurve(std::int64_t budget_bytes, google::protobuf::Arena* arena) {
   const core::KeyedClip& keyed = std::get<core::KeyedClip>(result_->output);
   // Every curve sends at least one piece (a valid curve has keys; an empty one sends one empty
   // piece).
-  if (channel_ >= static_cast<int>(keyed.curves.size())) return false;
+  if (channel_ >= static_cast<int>(keyed.curves.size())) return nullptr;
   const core::Curve& curve = keyed.curves[channel_];
   const auto total = static_cast<std::int64_t>(curve.keys.size());
   const std::int64_t n = std::min(wire::KeysPerSlice(curve, budget_bytes), total - offset_);
-  *piece = wire::KeyedCurveSliceToProto(channel_, curve, offset_, n);
+  v1::KeyedCurve* piece = wire::KeyedCurveSliceOnArena(channel_, curve, offset_, n, arena);
   offset_ += n;
   if (offset_ >= total) {
     ++channel_;
     offset_ = 0;
   }
-  return true;
+  return piece;
 }
 
 bool ResultSlicer::Next(v1::ResultPart* part) {
   part->Clear();
+  // Every piece is built in the part's arena and handed to it: no copy, and in a scratch arena
+  // (scratch_arena.h) no allocation of its own.
+  google::protobuf::Arena* const arena = part->GetArena();
   const auto* clip = std::get_if<core::Clip>(&result_->output);
   const auto* keyed = std::get_if<core::KeyedClip>(&result_->output);
   if (!header_sent_) {
     header_sent_ = true;
     v1::ResultHeader* header = part->mutable_header();
     if (clip != nullptr) {
-      *header->mutable_clip() = wire::ClipHeaderToProto(*clip);
+      header->set_allocated_clip(wire::ClipHeaderOnArena(*clip, arena));
     } else {
-      *header->mutable_keyed_clip() = wire::ClipHeaderToProto(keyed->layout);
+      header->set_allocated_keyed_clip(wire::ClipHeaderOnArena(keyed->layout, arena));
     }
     for (const core::StepReport& report : result_->reports) {
       *header->add_reports() = wire::StepReportToProto(report);
@@ -79,24 +83,37 @@ bool ResultSlicer::Next(v1::ResultPart* part) {
   }
   if (Done()) return false;
   if (!batch_parts_) {
-    return clip != nullptr ? NextSamples(slice_bytes_, part->mutable_samples())
-                           : NextCurve(slice_bytes_, part->mutable_curve());
+    if (clip != nullptr) {
+      v1::ChannelSamples* samples = NextSamples(slice_bytes_, arena);
+      if (samples == nullptr) return false;
+      part->set_allocated_samples(samples);
+    } else {
+      v1::KeyedCurve* piece = NextCurve(slice_bytes_, arena);
+      if (piece == nullptr) return false;
+      part->set_allocated_curve(piece);
+    }
+    return true;
   }
   // Batched: pieces until the budget is spent (each piece takes what is left of it).
   std::int64_t used = 0;
+  bool added = false;
   while (used < slice_bytes_ && !Done()) {
     if (clip != nullptr) {
-      v1::ChannelSamples* samples = part->mutable_sample_slices()->add_slices();
-      NextSamples(slice_bytes_ - used, samples);
+      v1::ChannelSamples* samples = NextSamples(slice_bytes_ - used, arena);
+      if (samples == nullptr) break;
+      part->mutable_sample_slices()->mutable_slices()->AddAllocated(samples);
+      added = true;
       used += static_cast<std::int64_t>(samples->samples_size()) *
               static_cast<std::int64_t>(sizeof(double));
     } else {
-      v1::KeyedCurve* piece = part->mutable_curves()->add_curves();
-      NextCurve(slice_bytes_ - used, piece);
+      v1::KeyedCurve* piece = NextCurve(slice_bytes_ - used, arena);
+      if (piece == nullptr) break;
+      part->mutable_curves()->mutable_curves()->AddAllocated(piece);
+      added = true;
       used += static_cast<std::int64_t>(piece->ByteSizeLong());
     }
   }
-  return true;
+  return added;  // nothing left but empty channels: done
 }
 
 ResultAssembler::ResultAssembler(core::ClipLimits limits) : limits_(limits), clip_(limits) {}

@@ -40,9 +40,10 @@ class ResultSlicer {
 
  private:
   // The next slice of samples or piece of a curve, at most `budget_bytes` of values (at least
-  // one value, or an empty curve's one empty piece) into `samples` / `curve`; false when done.
-  bool NextSamples(std::int64_t budget_bytes, v1::ChannelSamples* samples);
-  bool NextCurve(std::int64_t budget_bytes, v1::KeyedCurve* curve);
+  // one value, or an empty curve's one empty piece), built in `arena` (nullptr: on the heap, the
+  // caller's); nullptr when done.
+  v1::ChannelSamples* NextSamples(std::int64_t budget_bytes, google::protobuf::Arena* arena);
+  v1::KeyedCurve* NextCurve(std::int64_t budget_bytes, google::protobuf::Arena* arena);
   bool Done() const;
 
   std::shared_ptr<const core::PipelineResult> result_;

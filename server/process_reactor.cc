@@ -14,7 +14,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "grpcpp/alarm.h"
-#include "proto/arena_message.h"
+#include "proto/scratch_arena.h"
 #include "proto/clip_convert.h"
 #include "proto/jobs_convert.h"
 #include "server/job_proto.h"
@@ -239,12 +239,13 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
   }
 
   void WriteNextLocked() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
-    message_.Clear();
+    // Built, serialized and dropped here: gRPC writes the serialized copy.
+    wire::ScratchMessage<v1::ProcessResponse> message;
     if (pending_progress_) {
-      *message_.mutable_progress() = *std::move(pending_progress_);
+      *message->mutable_progress() = *std::move(pending_progress_);
       pending_progress_.reset();
     } else if (slicer_) {
-      if (!slicer_->Next(message_.mutable_result())) {
+      if (!slicer_->Next(message->mutable_result())) {
         FinishLocked(absl::OkStatus());
         return;
       }
@@ -252,7 +253,7 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
       return;  // nothing to say yet
     }
     writing_ = true;
-    SerializeMessage(message_, &buffer_);
+    SerializeMessage(*message, &buffer_);
     service_->BytesOut(static_cast<std::int64_t>(buffer_.Length()));
     if (idle_ != nullptr) idle_->Arm();
     reactor_->StartWrite(&buffer_);
@@ -289,9 +290,6 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
   std::optional<v1::Progress> pending_progress_ ABSL_GUARDED_BY(mu_);
   std::optional<wire::ResultSlicer> slicer_ ABSL_GUARDED_BY(mu_);
   std::optional<absl::Status> end_status_ ABSL_GUARDED_BY(mu_);
-  // On the heap, not in an arena: the slicer builds its parts on the heap and moves them in, which
-  // across arenas would be a copy.
-  v1::ProcessResponse message_ ABSL_GUARDED_BY(mu_);
   grpc::ByteBuffer buffer_ ABSL_GUARDED_BY(mu_);  // the write in flight
   std::shared_ptr<IdleReaper::Timer> idle_;
   StreamSlot* slot_ ABSL_GUARDED_BY(mu_) = nullptr;
@@ -338,7 +336,7 @@ class ProcessReactor final : public ProcessReactorBase {
           "client only reads")));
       return;
     }
-    wire::ArenaMessage<v1::ProcessRequest> request;
+    wire::ScratchMessage<v1::ProcessRequest> request;
     absl::Status status =
         ParseMessage(buffer_, absl::StrCat("Process message ", messages_), request.get());
     if (status.ok()) status = Accept(*request);

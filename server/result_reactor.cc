@@ -10,6 +10,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "proto/jobs_convert.h"
+#include "proto/scratch_arena.h"
 #include "server/job_proto.h"
 #include "server/reactors.h"
 #include "server/status_util.h"
@@ -70,11 +71,13 @@ class SlicedResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuff
   }
 
   void WriteNext() {
-    if (!slicer_->Next(&part_)) {
+    // Built, serialized and dropped here: gRPC writes the serialized copy.
+    wire::ScratchMessage<v1::ResultPart> part;
+    if (!slicer_->Next(part.get())) {
       End(grpc::Status::OK);
       return;
     }
-    SerializeMessage(part_, &buffer_);
+    SerializeMessage(*part, &buffer_);
     service_->BytesOut(static_cast<std::int64_t>(buffer_.Length()));
     if (idle_ != nullptr) idle_->Arm();
     StartWrite(&buffer_);
@@ -93,7 +96,6 @@ class SlicedResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuff
   StreamSlot slot_;
   std::optional<wire::ResultSlicer> slicer_;
   std::shared_ptr<IdleReaper::Timer> idle_;
-  v1::ResultPart part_;
   grpc::ByteBuffer buffer_;
 };
 

@@ -10,6 +10,8 @@
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "proto/scratch_arena.h"
+#include "tempokey/v1/motion_service.pb.h"
 #include "tests/server/server_test_util.h"
 
 namespace tempokey::wire {
@@ -92,6 +94,53 @@ TEST(ClipConvertTest, BatchesFillTheSliceBudgetAcrossChannelsAndReassembleInAnyO
   ASSERT_TRUE(assembler.AddHeader(ClipHeaderToProto(clip)).ok());
   for (const v1::SampleSlices& batch : batches) ASSERT_TRUE(assembler.AddSampleSlices(batch).ok());
   absl::StatusOr<core::Clip> back = std::move(assembler).Finish();
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_EQ(*back, clip);
+}
+
+TEST(ClipConvertTest, PiecesBuiltInAnArenaAreTheHeapOnesByteForByte) {
+  const core::Clip clip = ClipWithExtras();
+  core::Curve curve;
+  for (int k = 0; k < 3; ++k) {
+    core::Key& key = curve.keys.emplace_back();
+    key.time_seconds = 0.5 * k;
+    key.value = 1.0 - k;
+    key.in_tangent = 0.25 * k;
+    key.out_tangent = -0.25 * k;
+  }
+  curve.keys[1].in_weight = 0.25;  // a weighted curve: six columns
+  google::protobuf::Arena arena;
+
+  const v1::ClipHeader* header = ClipHeaderOnArena(clip, &arena);
+  const v1::ChannelSamples* slice = SamplesSliceOnArena(clip, 2, 5, 30, &arena);
+  const v1::KeyedCurve* piece = KeyedCurveSliceOnArena(4, curve, 1, 2, &arena);
+
+  EXPECT_EQ(header->GetArena(), &arena);
+  EXPECT_EQ(header->SerializeAsString(), ClipHeaderToProto(clip).SerializeAsString());
+  EXPECT_EQ(slice->GetArena(), &arena);
+  EXPECT_EQ(slice->SerializeAsString(), SamplesSliceToProto(clip, 2, 5, 30).SerializeAsString());
+  EXPECT_EQ(piece->GetArena(), &arena);
+  EXPECT_EQ(piece->SerializeAsString(), KeyedCurveSliceToProto(4, curve, 1, 2).SerializeAsString());
+}
+
+TEST(ClipConvertTest, BatchesBuiltInScratchArenasReassembleTheClip) {
+  const core::Clip clip = MakeClip(4, 128);
+  SamplesBatcher batches(clip, 8 * 500);
+  ClipAssembler assembler;
+  ASSERT_TRUE(assembler.AddHeader(ClipHeaderToProto(clip)).ok());
+  int count = 0;
+  for (;;) {
+    ScratchMessage<v1::ProcessRequest> request;
+    if (!batches.Next(request->mutable_sample_slices())) break;
+    ++count;
+    // What a sender writes: the bytes, parsed again by protobuf.
+    v1::ProcessRequest received;
+    ASSERT_TRUE(received.ParseFromString(request->SerializeAsString()));
+    ASSERT_TRUE(assembler.AddSampleSlices(received.sample_slices()).ok());
+  }
+  absl::StatusOr<core::Clip> back = std::move(assembler).Finish();
+
+  EXPECT_EQ(count, 4);  // ceil(15 x 128 / 500), as ForEachSamplesBatch() cuts it
   ASSERT_TRUE(back.ok()) << back.status();
   EXPECT_EQ(*back, clip);
 }

@@ -6,12 +6,14 @@
 #include <algorithm>
 #include <memory>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "proto/clip_convert.h"
 #include "proto/operations_convert.h"
+#include "proto/scratch_arena.h"
 #include "tempokey/core/io/bvh.h"
 #include "tests/server/test_clips.h"
 #include "tests/testing/test_paths.h"
@@ -111,6 +113,46 @@ TEST(ResultSlicerTest, KeyedResultBatchesCurvesAndReassemblesExactly) {
   EXPECT_LT(small.size(), 1 + keyed.curves.size());
   for (const auto* parts : {&single, &batched, &small}) {
     EXPECT_EQ(std::get<core::KeyedClip>(Reassemble(*parts).output), keyed);
+  }
+}
+
+// Each part serialized, built on the heap or in a scratch arena (as the server writes them).
+std::vector<std::string> SerializedParts(const core::PipelineResult& result, bool batch_parts,
+                                         bool in_scratch_arena) {
+  ResultSlicer slicer(std::make_shared<const core::PipelineResult>(result), 1024, batch_parts);
+  std::vector<std::string> parts;
+  for (;;) {
+    std::string bytes;
+    if (in_scratch_arena) {
+      ScratchMessage<v1::ResultPart> part;
+      EXPECT_TRUE(part.shared());
+      if (!slicer.Next(part.get())) break;
+      bytes = part->SerializeAsString();
+    } else {
+      v1::ResultPart part;
+      if (!slicer.Next(&part)) break;
+      bytes = part.SerializeAsString();
+    }
+    parts.push_back(std::move(bytes));
+  }
+  return parts;
+}
+
+TEST(ResultSlicerTest, PartsBuiltInAScratchArenaAreTheHeapOnesByteForByte) {
+  const core::Clip clip = MakeClip(10, 50);
+  core::PipelineResult sampled;
+  sampled.output = clip;
+  core::PipelineResult keyed;
+  keyed.output = KeyedOf(clip, 12);
+
+  for (const core::PipelineResult* result : {&sampled, &keyed}) {
+    for (bool batch_parts : {false, true}) {
+      SCOPED_TRACE(batch_parts ? "batched" : "single");
+      const std::vector<std::string> heap = SerializedParts(*result, batch_parts, false);
+      const std::vector<std::string> scratch = SerializedParts(*result, batch_parts, true);
+      EXPECT_GT(heap.size(), 2u);
+      EXPECT_EQ(scratch, heap);
+    }
   }
 }
 

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <span>
 #include <algorithm>
 #include <string>
 #include <vector>
@@ -244,7 +245,7 @@ namespace {
 // The index of the first sample beyond kMaxSampleMagnitude or not a number, or one in the block
 // before it (at most the size), scanned in blocks (simd/block_scan.h): every sample of every clip
 // is read here, before any work on it.
-TEMPOKEY_CLONES_AVX2 std::size_t FirstOutOfRange(const std::vector<double>& samples) {
+TEMPOKEY_CLONES_AVX2 std::size_t FirstOutOfRange(std::span<const double> samples) {
   using simd::ScanMask;
   using simd::ScanVector;
   const auto out_of_range = [](const double* p) __attribute__((always_inline)) {
@@ -256,7 +257,15 @@ TEMPOKEY_CLONES_AVX2 std::size_t FirstOutOfRange(const std::vector<double>& samp
   return simd::FirstFlaggedBlock(samples.data(), 0, samples.size(), out_of_range);
 }
 
+bool InRange(double sample) { return std::abs(sample) <= kMaxSampleMagnitude; }
+
 }  // namespace
+
+std::size_t FirstSampleOutOfRange(std::span<const double> samples) {
+  std::size_t i = FirstOutOfRange(samples);
+  while (i < samples.size() && InRange(samples[i])) ++i;
+  return i;
+}
 
 absl::Status ValidateClip(const Clip& clip, const ClipLimits& limits) {
   if (absl::Status layout = ValidateClipLayout(clip, limits); !layout.ok()) return layout;
@@ -268,19 +277,17 @@ absl::Status ValidateClip(const Clip& clip, const ClipLimits& limits) {
                                                      " samples, the clip has ", clip.frame_count,
                                                      " frames"));
     }
-    for (std::size_t i = FirstOutOfRange(samples); i < samples.size(); ++i) {
+    if (const std::size_t i = FirstSampleOutOfRange(samples); i < samples.size()) {
       // Which rule failed is sorted out only on failure.
-      if (!(std::abs(samples[i]) <= kMaxSampleMagnitude)) {
-        if (!std::isfinite(samples[i])) {
-          return absl::InvalidArgumentError(absl::StrCat(ChannelLabel(clip, static_cast<int>(c)),
-                                                         ": sample ", i, " is ",
-                                                         DescribeDouble(samples[i])));
-        }
-        return absl::InvalidArgumentError(absl::StrCat(
-            ChannelLabel(clip, static_cast<int>(c)), ": sample ", i, " is ",
-            DescribeDouble(samples[i]), ", beyond the +-", DescribeDouble(kMaxSampleMagnitude),
-            " a clip may hold"));
+      if (!std::isfinite(samples[i])) {
+        return absl::InvalidArgumentError(absl::StrCat(ChannelLabel(clip, static_cast<int>(c)),
+                                                       ": sample ", i, " is ",
+                                                       DescribeDouble(samples[i])));
       }
+      return absl::InvalidArgumentError(absl::StrCat(
+          ChannelLabel(clip, static_cast<int>(c)), ": sample ", i, " is ",
+          DescribeDouble(samples[i]), ", beyond the +-", DescribeDouble(kMaxSampleMagnitude),
+          " a clip may hold"));
     }
   }
   return absl::OkStatus();

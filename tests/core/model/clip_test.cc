@@ -2,6 +2,7 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <vector>
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
@@ -39,6 +40,30 @@ std::string ValidateMessage(const Clip& clip, const ClipLimits& limits = {},
 // A size over a server limit is RESOURCE_EXHAUSTED (README "Status codes"), not a malformed clip.
 std::string OverLimitMessage(const Clip& clip, const ClipLimits& limits) {
   return ValidateMessage(clip, limits, absl::StatusCode::kResourceExhausted);
+}
+
+// Every position of arrays long enough for several scan blocks and a tail, each bad kind of
+// value, and the bound itself (within) against the next double (beyond).
+TEST(FirstSampleOutOfRangeTest, FindsTheFirstBadSampleWhereverItIs) {
+  const double beyond = std::nextafter(kMaxSampleMagnitude, 2 * kMaxSampleMagnitude);
+  const double bad_values[] = {std::numeric_limits<double>::quiet_NaN(),
+                               std::numeric_limits<double>::infinity(),
+                               -std::numeric_limits<double>::infinity(), beyond, -beyond};
+  for (std::size_t size : {0u, 1u, 3u, 37u, 131u}) {
+    std::vector<double> samples(size);
+    for (std::size_t i = 0; i < size; ++i) {
+      samples[i] = i % 2 == 0 ? kMaxSampleMagnitude : -kMaxSampleMagnitude;
+    }
+    EXPECT_EQ(FirstSampleOutOfRange(samples), size) << size;
+    for (std::size_t at = 0; at < size; ++at) {
+      for (double bad : bad_values) {
+        std::vector<double> copy = samples;
+        copy[at] = bad;
+        if (at + 1 < size) copy[size - 1] = bad;  // a later one does not hide the first
+        EXPECT_EQ(FirstSampleOutOfRange(copy), at) << "size " << size << " value " << bad;
+      }
+    }
+  }
 }
 
 TEST(ValidateClipTest, AcceptsValidClip) {

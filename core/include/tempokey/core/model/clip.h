@@ -3,8 +3,10 @@
 #define TEMPOKEY_CORE_MODEL_CLIP_H_
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -122,6 +124,11 @@ inline constexpr double kMaxSampleMagnitude = 1e9;
 inline constexpr double kMaxTimeSeconds = 1e11;
 inline constexpr double kMaxKeyValueMagnitude = 1e12;
 inline constexpr double kMaxKeyTangent = 1e100;
+
+// The index of the first of `samples` that is not a number or lies beyond kMaxSampleMagnitude,
+// or samples.size() when every one is within it. Scans in vector blocks: every sample that
+// reaches the library (a file, a message off the wire) goes through here.
+std::size_t FirstSampleOutOfRange(std::span<const double> samples);
 
 // OK when `seconds` is a frame time in [kMinFrameTimeSeconds, kMaxFrameTimeSeconds].
 // Errors: kInvalidArgument "<what> must be in [1e-06, 3600] seconds, got 1e-320".
