@@ -14,6 +14,7 @@
 //   service_bench [--server_binary=PATH] [--clip=PATH|synthetic] [--calls=N] [--warmup=N]
 //                 [--clients=N] [--seconds=S] [--flood_seconds=S] [--upload_mb=MB]
 //                 [--uploads=N] [--server_log_level=LEVEL] [--phases=latency,throughput,...]
+//   (--phases=latency_retime: the latency phase's first row alone, the SPEC 8 figure, to profile)
 //
 // A plain harness, not Google Benchmark: the figures are percentiles and rates over one server
 // process, which Benchmark's per-iteration model does not report. The bench and the server share
@@ -89,7 +90,7 @@ struct BenchFlags {
   // The server's own default: one log line per job is part of what a deployment pays.
   std::string server_log_level = "info";
   // Comma-separated subset of latency,throughput,flood,upload (in that order), e.g. to profile one;
-  // latency_retime is the latency phase's first row alone (the SPEC 8 figure), for profiles.
+  // latency_retime is the latency phase's first row alone (the SPEC 8 figure; latency includes it).
   std::string phases = "latency,throughput,flood,upload";
 };
 
@@ -693,26 +694,25 @@ void RecordMemory(const ServerChild& server, const std::string& when, Summary& s
               m.rss_mib, m.peak_mib);
 }
 
-// The SPEC 8 latency figure alone: the film-rate retime's round trips.
-void RunRetimeLatency(const BenchFlags& flags, const ServerChild& server, const core::Clip& clip,
-                      Summary& summary) {
-  std::printf("\n1. Process latency, %d sequential calls after %d warm-up calls, one client\n",
-              flags.calls, flags.warmup);
-  const std::unique_ptr<client::Client> c = ClientOnOwnConnection(server.target());
-  summary.latency.push_back(
-      MeasureLatency(*c, server, clip, RetimeToFilmRate(), flags.warmup, flags.calls));
-  PrintLatency(summary.latency.back(), flags.calls);
-}
-
+// `retime_only`: the SPEC 8 figure's row alone (the film-rate retime), for profiles.
 void RunLatencyPhase(const BenchFlags& flags, const ServerChild& server, const core::Clip& clip,
-                     Summary& summary) {
+                     bool retime_only, Summary& summary) {
   std::printf("\n1. Process latency, %d sequential calls after %d warm-up calls, one client\n",
               flags.calls, flags.warmup);
   const std::unique_ptr<client::Client> c = ClientOnOwnConnection(server.target());
-  for (const Operation& operation : {RetimeToFilmRate(), WrapRotations(), ReduceWithinTolerance()}) {
+  std::vector<Operation> operations = {RetimeToFilmRate()};
+  if (!retime_only) {
+    operations.push_back(WrapRotations());
+    operations.push_back(ReduceWithinTolerance());
+  }
+  for (const Operation& operation : operations) {
     summary.latency.push_back(
         MeasureLatency(*c, server, clip, operation, flags.warmup, flags.calls));
     PrintLatency(summary.latency.back(), flags.calls);
+  }
+  if (retime_only) {
+    RecordMemory(server, "latency", summary);
+    return;
   }
   Operation one_channel = WrapRotations();
   one_channel.name = absl::StrCat("convert, 1 ch x ", clip.sample_count(), " f");
@@ -846,10 +846,8 @@ int Run(int argc, char** argv) {
 
   Summary summary;
   RecordMemory(**server, "start", summary);
-  if (Wants(flags, "latency")) {
-    RunLatencyPhase(flags, **server, *clip, summary);
-  } else if (Wants(flags, "latency_retime")) {
-    RunRetimeLatency(flags, **server, *clip, summary);
+  if (Wants(flags, "latency") || Wants(flags, "latency_retime")) {
+    RunLatencyPhase(flags, **server, *clip, /*retime_only=*/!Wants(flags, "latency"), summary);
   }
   if (Wants(flags, "throughput")) RunThroughputPhase(flags, **server, *clip, summary);
   if (Wants(flags, "flood")) RunFloodPhase(flags, **server, *clip, summary);

@@ -207,13 +207,15 @@ template <typename Request, typename Writer>
 absl::Status WriteSamples(const core::Clip& clip, std::int64_t slice_bytes, bool batched,
                           Writer& writer) {
   if (batched) {
-    // Each batch built in this thread's scratch arena, written and dropped.
+    // One request in this thread's scratch arena for every batch, cleared between them so that
+    // each batch reuses the last one's slices (SamplesBatcher).
+    wire::ScratchMessage<Request> request;
     wire::SamplesBatcher batches(clip, slice_bytes);
-    for (;;) {
-      wire::ScratchMessage<Request> request;
-      if (!batches.Next(request->mutable_sample_slices())) return absl::OkStatus();
+    while (batches.Next(request->mutable_sample_slices())) {
       if (!writer.Write(*request)) return absl::AbortedError("stream closed");
+      request->mutable_sample_slices()->Clear();
     }
+    return absl::OkStatus();
   }
   Request request;
   return wire::ForEachSamplesSlice(clip, slice_bytes, [&](v1::ChannelSamples&& samples) {

@@ -25,10 +25,13 @@ inline google::protobuf::ArenaOptions MessageArenaOptions() {
 // when it goes out of scope. A clip's slices parse into a message per channel, each with its own
 // repeated field: from the heap that was some 400 allocations and frees per Process call, and
 // malloc and free took about a quarter of the server's CPU under 16 clients; from the arena it is
-// a few blocks (paired runs: 0.75-0.80 -> 0.67-0.70 ms of server CPU per job). For a message
-// parsed, used and dropped within one step of a stream: one per message, never one reused across
-// messages (an arena frees nothing before it ends). Not for messages built from parts made on the
-// heap: moving a message between arenas copies it.
+// a few blocks (paired runs: 0.75-0.80 -> 0.67-0.70 ms of server CPU per job). For a message kept
+// for a while (a client's header, sent again on a retry) and for an upload's slices (not
+// measured with the scratch arena: an upload's time is in page faults); the Process and result
+// streams' messages, made and dropped within one step, use ScratchMessage (scratch_arena.h),
+// which keeps its block from one message to the next. An arena frees nothing before it ends: not for a message cleared and refilled
+// without bound. Not for messages built from parts made on the heap: moving a message between
+// arenas copies it.
 template <typename Message>
 class ArenaMessage {
  public:

@@ -260,7 +260,6 @@ SamplesBatcher::SamplesBatcher(const core::Clip& clip, std::int64_t slice_bytes)
     : clip_(clip), budget_(SamplesPerSlice(slice_bytes)) {}
 
 bool SamplesBatcher::Next(v1::SampleSlices* batch) {
-  google::protobuf::Arena* const arena = batch->GetArena();
   std::int64_t used = 0;
   while (channel_ < clip_.channels.size()) {
     const auto total = static_cast<std::int64_t>(clip_.channels[channel_].samples.size());
@@ -270,13 +269,12 @@ bool SamplesBatcher::Next(v1::SampleSlices* batch) {
       continue;
     }
     const std::int64_t n = std::min(budget_ - used, total - first_);
-    batch->mutable_slices()->AddAllocated(
-        SamplesSliceOnArena(clip_, static_cast<int>(channel_), first_, n, arena));
+    AppendSamplesSlice(clip_, static_cast<int>(channel_), first_, n, batch->add_slices());
     first_ += n;
     used += n;
     if (used == budget_) return true;
   }
-  return batch->slices_size() > 0;
+  return used > 0;
 }
 
 absl::Status ForEachSamplesBatch(const core::Clip& clip, std::int64_t slice_bytes,

@@ -50,14 +50,16 @@ absl::Status ForEachSamplesSlice(const core::Clip& clip, std::int64_t slice_byte
 absl::Status ForEachSamplesBatch(const core::Clip& clip, std::int64_t slice_bytes,
                                  const std::function<absl::Status(v1::SampleSlices&&)>& emit);
 
-// ForEachSamplesBatch()'s batches one at a time, each built in the arena of the message it fills
-// (a scratch arena: scratch_arena.h), for a sender that writes each batch as it is made.
-// `clip` must outlive the batcher.
+// ForEachSamplesBatch()'s batches one at a time, into a message the sender keeps: each batch is
+// built in that message's arena (a scratch arena: scratch_arena.h), and a batch cleared with
+// Clear() lends its slices and their arrays to the next, so a long upload's 1 MiB batches take no
+// new memory after the first (a batch in a fresh arena each time cost a long upload a block of
+// its size allocated, faulted in and given back per batch). `clip` must outlive the batcher.
 class SamplesBatcher {
  public:
   SamplesBatcher(const core::Clip& clip, std::int64_t slice_bytes);
 
-  // Fills the empty `batch` with the next batch; false once every sample was given.
+  // Adds the next batch to the empty (or cleared) `batch`; false once every sample was given.
   bool Next(v1::SampleSlices* batch);
 
  private:

@@ -63,8 +63,10 @@ v1::KeyedCurve* ResultSlicer::NextCurve(std::int64_t budget_bytes, google::proto
 
 bool ResultSlicer::Next(v1::ResultPart* part) {
   part->Clear();
-  // Every piece is built in the part's arena and handed to it: no copy, and in a scratch arena
-  // (scratch_arena.h) no allocation of its own.
+  // The header's and the samples' and curves' pieces are built in the part's arena and handed to
+  // it without a copy: in a scratch arena (scratch_arena.h), a few blocks instead of a message, an
+  // array and names per channel from the heap. (The step reports, a few small messages, are
+  // copied in.)
   google::protobuf::Arena* const arena = part->GetArena();
   const auto* clip = std::get_if<core::Clip>(&result_->output);
   const auto* keyed = std::get_if<core::KeyedClip>(&result_->output);

@@ -11,6 +11,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "google/protobuf/arena.h"
 #include "proto/clip_convert.h"
 #include "tempokey/core/model/clip.h"
 #include "tempokey/core/pipeline/pipeline.h"

@@ -12,17 +12,20 @@
 
 namespace tempokey::wire {
 
-// The block each thread keeps: a Process call's clip of a few hundred short channels (header,
-// slices and their arrays; about 150 KB for 132 channels x 128 frames) fits in it. A larger
-// message takes more blocks, given back when it is dropped.
+// The block each thread keeps: a Process call's clip of about 200 channels of 128 frames (header,
+// slices and their arrays; about 150 KB for 132 channels) fits in it. A larger message takes more
+// blocks, given back when it is dropped.
 inline constexpr std::size_t kScratchBlockBytes = std::size_t{256} << 10;
 
 namespace scratch_internal {
 
 // The calling thread's scratch arena, or nullptr while a ScratchMessage of this thread holds it.
 google::protobuf::Arena* Acquire();
-// Ends the hold: frees everything in the arena but its kept block.
-void Release();
+// Ends the hold of `arena`, which Acquire() gave on this thread: frees everything in it but its
+// kept block. Aborts, naming the misuse, when `arena` is not this thread's held arena (a
+// message destroyed on another thread would otherwise reset that thread's arena under its
+// message).
+void Release(google::protobuf::Arena* arena);
 // Bytes the calling thread's scratch arena holds (its kept block once released), for tests.
 std::size_t ThreadArenaBytes();
 
@@ -33,9 +36,10 @@ std::size_t ThreadArenaBytes();
 // call was some 600 allocations and frees on the heap (a message and a repeated field per
 // channel, and the header's per-channel messages and names), and a parsed request some 64 KiB
 // arena blocks taken from glibc and given back, whose frees made glibc consolidate its bins.
-// While one is alive on a thread, another on the same thread (a write started from within a
-// read's handling) gets an arena of its own. Must be destroyed on the thread that made it (a
-// local variable).
+// While one is alive on a thread, another on the same thread gets an arena of its own (a
+// client's progress callback, run while a response is held, may make another call). Must be
+// destroyed on the thread that made it: a local variable. In AddressSanitizer builds the kept
+// block is poisoned between messages, so a pointer kept into a dropped message is still caught.
 template <typename Message>
 class ScratchMessage {
  public:
@@ -45,7 +49,7 @@ class ScratchMessage {
                                                                                    : &*own_);
   }
   ~ScratchMessage() {
-    if (shared_ != nullptr) scratch_internal::Release();
+    if (shared_ != nullptr) scratch_internal::Release(shared_);
   }
   ScratchMessage(const ScratchMessage&) = delete;
   ScratchMessage& operator=(const ScratchMessage&) = delete;

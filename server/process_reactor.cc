@@ -14,9 +14,9 @@
 
 #include "absl/strings/str_cat.h"
 #include "grpcpp/alarm.h"
-#include "proto/scratch_arena.h"
 #include "proto/clip_convert.h"
 #include "proto/jobs_convert.h"
+#include "proto/scratch_arena.h"
 #include "server/job_proto.h"
 #include "server/memory_size.h"
 #include "server/progress_throttle.h"
@@ -239,21 +239,24 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
   }
 
   void WriteNextLocked() ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
-    // Built, serialized and dropped here: gRPC writes the serialized copy.
-    wire::ScratchMessage<v1::ProcessResponse> message;
-    if (pending_progress_) {
-      *message->mutable_progress() = *std::move(pending_progress_);
-      pending_progress_.reset();
-    } else if (slicer_) {
-      if (!slicer_->Next(message->mutable_result())) {
-        FinishLocked(absl::OkStatus());
-        return;
+    if (!pending_progress_ && !slicer_) return;  // nothing to say yet
+    bool done = false;
+    {
+      // Built, serialized and dropped here: gRPC writes the serialized copy.
+      wire::ScratchMessage<v1::ProcessResponse> message;
+      if (pending_progress_) {
+        *message->mutable_progress() = *std::move(pending_progress_);
+        pending_progress_.reset();
+      } else {
+        done = !slicer_->Next(message->mutable_result());
       }
-    } else {
-      return;  // nothing to say yet
+      if (!done) SerializeMessage(*message, &buffer_);
+    }
+    if (done) {
+      FinishLocked(absl::OkStatus());
+      return;
     }
     writing_ = true;
-    SerializeMessage(*message, &buffer_);
     service_->BytesOut(static_cast<std::int64_t>(buffer_.Length()));
     if (idle_ != nullptr) idle_->Arm();
     reactor_->StartWrite(&buffer_);
@@ -336,10 +339,13 @@ class ProcessReactor final : public ProcessReactorBase {
           "client only reads")));
       return;
     }
-    wire::ScratchMessage<v1::ProcessRequest> request;
-    absl::Status status =
-        ParseMessage(buffer_, absl::StrCat("Process message ", messages_), request.get());
-    if (status.ok()) status = Accept(*request);
+    absl::Status status;
+    {
+      // Parsed, taken into the clip (or the start) and dropped here.
+      wire::ScratchMessage<v1::ProcessRequest> request;
+      status = ParseMessage(buffer_, absl::StrCat("Process message ", messages_), request.get());
+      if (status.ok()) status = Accept(*request);
+    }
     if (!status.ok()) {
       ReleaseInput();
       link_->FinishNow(status);

@@ -71,13 +71,17 @@ class SlicedResultReactor final : public grpc::ServerWriteReactor<grpc::ByteBuff
   }
 
   void WriteNext() {
-    // Built, serialized and dropped here: gRPC writes the serialized copy.
-    wire::ScratchMessage<v1::ResultPart> part;
-    if (!slicer_->Next(part.get())) {
+    bool done = false;
+    {
+      // Built, serialized and dropped here: gRPC writes the serialized copy.
+      wire::ScratchMessage<v1::ResultPart> part;
+      done = !slicer_->Next(part.get());
+      if (!done) SerializeMessage(*part, &buffer_);
+    }
+    if (done) {
       End(grpc::Status::OK);
       return;
     }
-    SerializeMessage(*part, &buffer_);
     service_->BytesOut(static_cast<std::int64_t>(buffer_.Length()));
     if (idle_ != nullptr) idle_->Arm();
     StartWrite(&buffer_);

@@ -290,13 +290,11 @@ absl::StatusOr<Clip> Bake(const KeyedClip& keyed, std::optional<double> frame_ti
       SampleCurve(keyed.curves[c], frame_time, std::span<double>(samples).subspan(first, count),
                   static_cast<std::int64_t>(first));
     }
-    for (std::size_t f = 0; f < samples.size(); ++f) {
-      if (!(std::abs(samples[f]) <= kMaxSampleMagnitude)) {
-        return absl::InvalidArgumentError(absl::StrCat(
-            ChannelLabel(clip, static_cast<int>(c)), ": baked sample ", f, " is ",
-            DescribeDouble(samples[f]), ", beyond the +-", DescribeDouble(kMaxSampleMagnitude),
-            " a clip may hold (the curve's tangents overshoot)"));
-      }
+    if (const std::size_t f = FirstSampleOutOfRange(samples); f < samples.size()) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          ChannelLabel(clip, static_cast<int>(c)), ": baked sample ", f, " is ",
+          DescribeDouble(samples[f]), ", beyond the +-", DescribeDouble(kMaxSampleMagnitude),
+          " a clip may hold (the curve's tangents overshoot)"));
     }
   }
   return clip;

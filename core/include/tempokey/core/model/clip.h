@@ -126,8 +126,9 @@ inline constexpr double kMaxKeyValueMagnitude = 1e12;
 inline constexpr double kMaxKeyTangent = 1e100;
 
 // The index of the first of `samples` that is not a number or lies beyond kMaxSampleMagnitude,
-// or samples.size() when every one is within it. Scans in vector blocks: every sample that
-// reaches the library (a file, a message off the wire) goes through here.
+// or samples.size() when every one is within it. Scans in vector blocks: every sample a clip
+// takes in (ValidateClip(), a message off the wire, a baked curve) goes through here.
+// Thread-safe (reads only `samples`).
 std::size_t FirstSampleOutOfRange(std::span<const double> samples);
 
 // OK when `seconds` is a frame time in [kMinFrameTimeSeconds, kMaxFrameTimeSeconds].
