@@ -9,38 +9,12 @@
 // "max_translation_error", "worst_translation": {"joint", "frame"}, "rotation_keys",
 // "rotation_tracks"}. Rotation error: the angle of the rotation between three.js's pose and the
 // source's; translation error: the largest component difference, file units. Exit 1 on errors.
-import { readFileSync } from 'node:fs';
 import * as THREE from 'three';
-import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
-import { parseBvh, localRotation, localTranslation } from './bvh_source.mjs';
-
-// three.js's FileLoader (which GLTFLoader uses for the embedded data: URI buffer, through node's
-// fetch) reports progress with the browser's ProgressEvent, which node lacks.
-globalThis.ProgressEvent ??= class ProgressEvent extends Event {
-  constructor(type, init = {}) {
-    super(type);
-    Object.assign(this, init);
-  }
-};
-
-function toArrayBuffer(buffer) {
-  return buffer.buffer.slice(buffer.byteOffset, buffer.byteOffset + buffer.byteLength);
-}
-
-function load(path) {
-  const bytes = readFileSync(path);
-  const data = path.endsWith('.glb') ? toArrayBuffer(bytes) : bytes.toString('utf8');
-  return new Promise((resolve, reject) => {
-    new GLTFLoader().parse(data, '', resolve, reject);
-  });
-}
+import { localRotation, localTranslation } from './bvh_source.mjs';
+import { readCheckInputs } from './check_inputs.mjs';
 
 async function main() {
-  const [bvhPath, gltfPath] = process.argv.slice(2);
-  if (!bvhPath || !gltfPath) throw new Error('usage: three_check.mjs SOURCE.bvh FILE.gltf');
-  const bvh = parseBvh(readFileSync(bvhPath, 'utf8'));
-  const gltf = await load(gltfPath);
-  if (gltf.animations.length !== 1) throw new Error(`expected 1 animation, got ${gltf.animations.length}`);
+  const { bvh, gltf, gltfPath } = await readCheckInputs('three_check.mjs');
   const clip = gltf.animations[0];
   const scene = gltf.scene;
   const mixer = new THREE.AnimationMixer(scene);

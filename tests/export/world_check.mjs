@@ -9,28 +9,9 @@
 // Prints one JSON object: {"file", "frames", "points", "max_world_error", "worst": {"point",
 // "frame"}}; distances in file units. End sites are placed by their joint's world matrix in both
 // scenes (their offsets are the source's). Exit 1 on errors.
-import { readFileSync } from 'node:fs';
 import * as THREE from 'three';
-import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
-import { parseBvh, localRotation, localTranslation } from './bvh_source.mjs';
-
-// three.js's FileLoader reports progress with the browser's ProgressEvent, which node lacks.
-globalThis.ProgressEvent ??= class ProgressEvent extends Event {
-  constructor(type, init = {}) {
-    super(type);
-    Object.assign(this, init);
-  }
-};
-
-function load(path) {
-  const bytes = readFileSync(path);
-  const data = path.endsWith('.glb')
-    ? bytes.buffer.slice(bytes.byteOffset, bytes.byteOffset + bytes.byteLength)
-    : bytes.toString('utf8');
-  return new Promise((resolve, reject) => {
-    new GLTFLoader().parse(data, '', resolve, reject);
-  });
-}
+import { localRotation, localTranslation } from './bvh_source.mjs';
+import { readCheckInputs } from './check_inputs.mjs';
 
 // The source skeleton as a three.js hierarchy: one Object3D per joint.
 function sourceScene(bvh) {
@@ -54,11 +35,7 @@ function worldPoints(bvh, objects, out) {
 }
 
 async function main() {
-  const [bvhPath, gltfPath] = process.argv.slice(2);
-  if (!bvhPath || !gltfPath) throw new Error('usage: world_check.mjs SOURCE.bvh FILE.gltf');
-  const bvh = parseBvh(readFileSync(bvhPath, 'utf8'));
-  const gltf = await load(gltfPath);
-  if (gltf.animations.length !== 1) throw new Error(`expected 1 animation, got ${gltf.animations.length}`);
+  const { bvh, gltf, gltfPath } = await readCheckInputs('world_check.mjs');
   const mixer = new THREE.AnimationMixer(gltf.scene);
   const action = mixer.clipAction(gltf.animations[0]);
   action.setLoop(THREE.LoopOnce, 1);
