@@ -246,13 +246,8 @@ namespace {
 // before it (at most the size), scanned in blocks (simd/block_scan.h): every sample of every clip
 // is read here, before any work on it.
 TEMPOKEY_CLONES_AVX2 std::size_t FirstOutOfRange(std::span<const double> samples) {
-  using simd::ScanMask;
-  using simd::ScanVector;
   const auto out_of_range = [](const double* p) __attribute__((always_inline)) {
-    // |v| by clearing the sign bit; a NaN compares false, so it is out too.
-    const ScanVector size =
-        (ScanVector)((ScanMask)simd::LoadScanVector(p) & std::numeric_limits<std::int64_t>::max());
-    return !(size <= kMaxSampleMagnitude);
+    return simd::BeyondMagnitude(p, kMaxSampleMagnitude);
   };
   return simd::FirstFlaggedBlock(samples.data(), 0, samples.size(), out_of_range);
 }

@@ -143,10 +143,43 @@ double SolveBezierParameter(double x0, double x1, double x2, double x3, double x
   return SolveMonotonicCubic(a, b, c, d3, target, guess.value_or(target / d3));
 }
 
+namespace {
+
+// A weight CheckWeight() accepts.
+bool WeightWithin(const std::optional<double>& weight) {
+  return !weight || (*weight > 0.0 && *weight <= 1.0);
+}
+
+// Whether ValidateCurve() accepts `keys` (not empty): the same conditions, taken in one pass
+// without a status per check. A NaN or an infinity fails every comparison it is in. The keys of
+// every fitted curve are checked (ReduceKeys()), so this runs once per key of every result; the
+// checks that build the message run only when this says no.
+bool KeysWithinLimits(const std::vector<Key>& keys) {
+  bool within = true;
+  for (std::size_t k = 0; k < keys.size(); ++k) {
+    const Key& key = keys[k];
+    within &= std::abs(key.time_seconds) <= kMaxTimeSeconds;
+    within &= std::abs(key.value) <= kMaxKeyValueMagnitude;
+    within &= std::abs(key.in_tangent) <= kMaxKeyTangent;
+    within &= std::abs(key.out_tangent) <= kMaxKeyTangent;
+    within &= WeightWithin(key.in_weight) && WeightWithin(key.out_weight);
+    if (k == 0) continue;
+    const Key& previous = keys[k - 1];
+    within &= key.time_seconds > previous.time_seconds;
+    within &= !(previous.out_weight.value_or(kDefaultWeight) +
+                    key.in_weight.value_or(kDefaultWeight) >
+                1.0 + kWeightSumSlack);
+  }
+  return within;
+}
+
+}  // namespace
+
 absl::Status ValidateCurve(const Curve& curve, std::string_view label) {
   if (curve.keys.empty()) {
     return absl::InvalidArgumentError(absl::StrCat(AsAbsl(label), ": the curve has no keys"));
   }
+  if (KeysWithinLimits(curve.keys)) return absl::OkStatus();
   for (std::size_t k = 0; k < curve.keys.size(); ++k) {
     const Key& key = curve.keys[k];
     TEMPOKEY_RETURN_IF_ERROR(CheckBounded(label, k, "time", key.time_seconds, kMaxTimeSeconds));

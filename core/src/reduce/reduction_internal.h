@@ -14,8 +14,9 @@
 namespace tempokey::core::reduce_internal {
 
 // The samples key reduction fits and measures, one span per channel of `clip`: a rotation
-// channel's samples unwrapped (UnwrapDegrees()) into a copy held here, any other channel's
-// samples where the clip holds them. Borrows `clip`, which must outlive this; neither copyable
+// channel's samples unwrapped (UnwrapDegrees()) into a copy held here when that changes any of
+// their bits, any other channel's samples (and a rotation's that unwrapping leaves as they are)
+// where the clip holds them. Borrows `clip`, which must outlive this; neither copyable
 // nor movable, since the spans point into it.
 class FittedSamples {
  public:

@@ -3,10 +3,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <span>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "core/src/simd/block_scan.h"
+#include "core/src/simd/instruction_set.h"
 #include "reduction_internal.h"
 #include "world_error_internal.h"
 #include "tempokey/core/reduce/reduce.h"
@@ -109,6 +112,30 @@ void UnwrapInto(std::span<const double> degrees, std::vector<double>& out) {
   for (std::size_t i = 1; i < out.size(); ++i) out[i] += 0.0;
 }
 
+// Whether UnwrapDegrees() leaves `degrees` as they are, bit for bit: every step well under half a
+// turn, so its shift stays +0, and no -0 after the first sample, which adding that +0 would turn
+// into +0. Scanned in vector blocks (simd/block_scan.h): most captures need no copy at all.
+TEMPOKEY_CLONES_AVX2 bool UnwrapKeepsBits(std::span<const double> degrees) {
+  using simd::ScanMask;
+  using simd::ScanVector;
+  const std::size_t n = degrees.size();
+  const double* d = degrees.data();
+  const auto flagged = [](const double* p) __attribute__((always_inline)) {
+    const ScanVector v = simd::LoadScanVector(p);
+    const ScanVector step = v - simd::LoadScanVector(p - 1);
+    const ScanVector size =
+        (ScanVector)((ScanMask)step & std::numeric_limits<std::int64_t>::max());
+    // -0 is the bits of the smallest 64-bit integer.
+    const ScanMask turn = !(size < kSafeStepDegrees);
+    return turn | ((ScanMask)v == std::numeric_limits<std::int64_t>::min());
+  };
+  for (std::size_t i = n < 2 ? n : simd::FirstFlaggedBlock(d, 1, n, flagged); i < n; ++i) {
+    if (!(std::abs(d[i] - d[i - 1]) < kSafeStepDegrees)) return false;
+    if (d[i] == 0.0 && std::signbit(d[i])) return false;
+  }
+  return true;
+}
+
 }  // namespace
 
 FittedSamples::FittedSamples(const Clip& clip) {
@@ -117,7 +144,7 @@ FittedSamples::FittedSamples(const Clip& clip) {
       [](const Channel& channel) { return IsRotation(channel.kind); })));
   channels_.reserve(clip.channels.size());
   for (const Channel& channel : clip.channels) {
-    if (IsRotation(channel.kind)) {
+    if (IsRotation(channel.kind) && !UnwrapKeepsBits(channel.samples)) {
       // Reserved above: the buffers the earlier spans point into never move.
       std::vector<double>& copy = unwrapped_.emplace_back();
       UnwrapInto(channel.samples, copy);

@@ -11,6 +11,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
+#include <limits>
 
 namespace tempokey::core::simd {
 
@@ -46,6 +47,14 @@ template <class Flagged>
     if (any[0] != 0) return i;
   }
   return i;
+}
+
+// The flags of the four samples at p that are not a number or beyond `bound` in magnitude (|v| by
+// clearing the sign bit; a NaN compares false, so it is flagged too).
+[[gnu::always_inline]] inline ScanMask BeyondMagnitude(const double* p, double bound) {
+  const ScanVector size =
+      (ScanVector)((ScanMask)LoadScanVector(p) & std::numeric_limits<std::int64_t>::max());
+  return !(size <= bound);
 }
 
 #pragma GCC diagnostic pop

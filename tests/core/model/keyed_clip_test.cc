@@ -167,6 +167,65 @@ TEST(ValidateKeyedClipTest, MalformedCurvesAreNamed) {
   }
 }
 
+// Every field of a key at, and just past, each end of its range, one field at a time: the bound
+// itself is accepted, anything past it (NaN and the infinities included) refused with the key and
+// the field named.
+TEST(ValidateCurveTest, EachFieldIsRefusedJustPastItsLimitAndAcceptedAtIt) {
+  struct Field {
+    const char* name;
+    double Key::*member;
+    double bound;
+  } fields[] = {
+      {"time", &Key::time_seconds, kMaxTimeSeconds},
+      {"value", &Key::value, kMaxKeyValueMagnitude},
+      {"in tangent", &Key::in_tangent, kMaxKeyTangent},
+      {"out tangent", &Key::out_tangent, kMaxKeyTangent},
+  };
+  for (const Field& field : fields) {
+    // Key 1 of two is changed; key 0 sits before any time used.
+    auto curve_with = [&](double value) {
+      Curve curve{{Key{.time_seconds = -kMaxTimeSeconds}, Key{.time_seconds = 0.0}}};
+      curve.keys[1].*field.member = value;
+      return curve;
+    };
+    const double over = std::nextafter(field.bound, INFINITY);
+    EXPECT_TRUE(ValidateCurve(curve_with(field.bound), "c").ok()) << field.name;
+    if (field.member != &Key::time_seconds) {  // key 1's time must stay after key 0's
+      EXPECT_TRUE(ValidateCurve(curve_with(-field.bound), "c").ok()) << field.name;
+    }
+    for (double bad : {over, -over, double{NAN}, double{INFINITY}, -double{INFINITY}}) {
+      const absl::Status status = ValidateCurve(curve_with(bad), "c");
+      const std::string prefix = std::string("c: key 1: ") + field.name + " ";
+      EXPECT_EQ(status.code(), absl::StatusCode::kInvalidArgument) << field.name << " " << bad;
+      EXPECT_EQ(std::string(status.message()).substr(0, prefix.size()), prefix)
+          << status.message();
+    }
+  }
+}
+
+// Weights: unset or in (0, 1], and a segment's two at most 1 (+ kWeightSumSlack), an unset one
+// counting as 1/3.
+TEST(ValidateCurveTest, WeightsAreRefusedOutsideTheirRangeAndOverOneTogether) {
+  auto curve_with = [](std::optional<double> out_weight, std::optional<double> in_weight) {
+    return Curve{{Key{.time_seconds = 0.0, .out_weight = out_weight},
+                  Key{.time_seconds = 1.0, .in_weight = in_weight}}};
+  };
+  EXPECT_TRUE(ValidateCurve(curve_with(std::nullopt, std::nullopt), "c").ok());
+  EXPECT_TRUE(ValidateCurve(curve_with(0.5, 0.5), "c").ok());
+  EXPECT_TRUE(ValidateCurve(curve_with(0.6, 0.4 + 1e-10), "c").ok());
+  EXPECT_TRUE(ValidateCurve(curve_with(1e-300, 0.5), "c").ok());
+  for (double bad : {0.0, -0.0, -0.5, std::nextafter(1.0, 2.0), double{NAN}, double{INFINITY}}) {
+    EXPECT_FALSE(ValidateCurve(curve_with(bad, std::nullopt), "c").ok()) << bad;
+    EXPECT_FALSE(ValidateCurve(curve_with(std::nullopt, bad), "c").ok()) << bad;
+  }
+  EXPECT_FALSE(ValidateCurve(curve_with(0.6, 0.4 + 2e-9), "c").ok());
+  const absl::Status over = ValidateCurve(curve_with(0.7, std::nullopt), "c");
+  EXPECT_NE(std::string(over.message()).find("c: key 1: in weight plus the previous key's out "
+                                             "weight is"),
+            std::string::npos)
+      << over.message();
+}
+
 TEST(ValidateKeyedClipTest, CurveCountMustMatchChannels) {
   const KeyedClip keyed{TwoChannelLayout(), {Curve{{Key{}}}}};
 

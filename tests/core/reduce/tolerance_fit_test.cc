@@ -12,6 +12,7 @@
 #include <string>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "gtest/gtest.h"
 
 // g++ 12 warns (-Wmissing-field-initializers) about designated initializers that leave members
@@ -248,6 +249,26 @@ TEST(ToleranceFitTest, OneAndTwoFrameChannelsTakeTheirOnlyStart) {
   ASSERT_TRUE(two.ok()) << two.status();
   EXPECT_EQ(two->frames, (std::vector<std::int64_t>{0, 1}));
   EXPECT_LE(MaxError(*two, 0, Samples{3.0, 5.0}), 0.1);
+}
+
+// The first non-finite sample is named wherever it lies: in a vector block, in the tail after the
+// last whole block, or alone; the largest finite doubles pass the check.
+TEST(ToleranceFitTest, TheFirstNonFiniteSampleIsNamedWhereverItIs) {
+  for (std::size_t n : {1, 3, 37, 131}) {
+    for (std::size_t at = 0; at < n; ++at) {
+      for (double bad : {std::numeric_limits<double>::quiet_NaN(),
+                         std::numeric_limits<double>::infinity(),
+                         -std::numeric_limits<double>::infinity()}) {
+        Samples samples(n, std::numeric_limits<double>::max());
+        samples[at] = bad;
+        if (at + 1 < n) samples[n - 1] = bad;  // a later one is not the one named
+        EXPECT_EQ(Fit({Samples(n, 0.0), samples}, {0.1, 0.1}).status().message(),
+                  absl::StrCat("channel 1: sample ", at, " is ",
+                               std::isnan(bad) ? "NaN" : "infinite"))
+            << n << " " << at;
+      }
+    }
+  }
 }
 
 TEST(ToleranceFitTest, InvalidInputsAreRefusedWithReasons) {
