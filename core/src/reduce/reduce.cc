@@ -323,6 +323,8 @@ absl::Status FitGroups(const Clip& clip, std::span<const std::span<const double>
     }
     std::vector<std::span<const double>> channels;
     std::vector<double> group_bounds;
+    channels.reserve(group.size());
+    group_bounds.reserve(group.size());
     for (int c : group) {
       channels.emplace_back(inputs[c]);
       // Capped: a huge bound times a huge scale must not become infinite (the fit refuses it).
@@ -622,10 +624,11 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
   // ValidateClip() and ValidateReduceOptions() accept; a curve that does not is a broken
   // invariant, reported as such rather than handed on as infinite tangents or key times.
   for (int c = 0; c < channel_count; ++c) {
-    if (absl::Status valid = ValidateCurve(result.keyed.curves[c], ChannelLabel(clip, c));
-        !valid.ok()) {
-      return absl::InternalError(absl::StrCat("the fit produced an invalid curve: ",
-                                              valid.message()));
+    // The channel's label is made only for the message (a string per channel otherwise).
+    if (!ValidateCurve(result.keyed.curves[c], "").ok()) {
+      return absl::InternalError(
+          absl::StrCat("the fit produced an invalid curve: ",
+                       ValidateCurve(result.keyed.curves[c], ChannelLabel(clip, c)).message()));
     }
   }
   // The clip was validated above and the curves are ours: measure without MeasureReduction()'s
