@@ -1127,9 +1127,15 @@ class Fitter {
   // the segments between them, for channel c of `run`; stops early once it exceeds `limit`.
   // `worst_key` (optional) receives the window position of the worst key frame or the start of
   // the worst segment.
-  double WindowRatio(std::size_t c, const KeyRun& run, int key_first, int key_last,
-                     double limit = std::numeric_limits<double>::infinity(),
-                     int* worst_key = nullptr) {
+  // Out of line: inlined into the removal loop, with the rest of that loop around it, GCC kept
+  // its running maximum in memory, a store and a load per key (paired runs of spec8_bench
+  // --only=tolerance: Bandai 83.4-85.4 -> 81.5-82.1 ms per M samples out of line, CMU 57.5-58.5
+  // -> 56.2-58.3). Also tried and slower: FitWindow() out of line as well; the keys' maximum as a
+  // tree (Bandai 88-90).
+  [[gnu::noinline]] double WindowRatio(std::size_t c, const KeyRun& run, int key_first,
+                                       int key_last,
+                                       double limit = std::numeric_limits<double>::infinity(),
+                                       int* worst_key = nullptr) {
     const std::span<const double> s = channels_[c];
     const double error_limit = limit * bounds_[c];
     double worst = 0.0;
