@@ -1,6 +1,7 @@
 #include "tempokey/core/model/keyed_clip.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <string>
@@ -82,6 +83,22 @@ double EvaluateWeightedSegment(const Key& a, const Key& b, double time_seconds) 
 }
 
 bool IsPlainSegment(const Key& a, const Key& b) { return !a.out_weight && !b.in_weight; }
+
+// Whether every key has the same value, not -0, with tangents of 0 and no weights (a constant
+// channel's flat keys): then the curve is that value at every time, bit for bit. Between keys
+// the plain segment adds terms that are all +-0 to the value (its rise is +0, its tangents 0),
+// which leaves any value but -0 as it is.
+bool IsFlatCurve(const std::vector<Key>& keys) {
+  const double value = keys.front().value;
+  if (value == 0.0 && std::signbit(value)) return false;
+  for (const Key& key : keys) {
+    if (std::bit_cast<std::uint64_t>(key.value) != std::bit_cast<std::uint64_t>(value) ||
+        key.in_tangent != 0.0 || key.out_tangent != 0.0 || key.in_weight || key.out_weight) {
+      return false;
+    }
+  }
+  return true;
+}
 
 // out[i] = EvaluatePlainSegment(a, b, (first_frame + i) * frame_time_seconds) for every i, on
 // vectors of frames. The frame number is first_frame + i with i converted from a 32-bit integer
@@ -242,6 +259,10 @@ void SampleCurve(const Curve& curve, double frame_time_seconds, std::span<double
   const std::vector<Key>& keys = curve.keys;
   if (keys.empty()) {
     std::fill(out.begin(), out.end(), 0.0);
+    return;
+  }
+  if (IsFlatCurve(keys)) {
+    std::fill(out.begin(), out.end(), keys.front().value);
     return;
   }
   // `next` is the first key strictly after the current time, as EvaluateCurve()'s search finds

@@ -39,6 +39,9 @@ ChannelErrors CompareChannel(std::span<const double> samples, int c, const Curve
   out.summary.channel_index = c;
   out.summary.key_count = static_cast<std::int64_t>(curve.keys.size());
   out.summary.sample_count = static_cast<std::int64_t>(samples.size());
+  // Every error 0 (a constant channel's flat keys): the loop below would only add zeros, one
+  // after another, to a +0 sum; the same figures without its chain of additions.
+  if (std::equal(samples.begin(), samples.end(), fitted.begin())) return out;
   for (std::size_t f = 0; f < samples.size(); ++f) {
     const double error = std::abs(fitted[f] - samples[f]);
     out.squared_sum += error * error;

@@ -1,5 +1,6 @@
 #include "tempokey/core/model/keyed_clip.h"
 
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <random>
@@ -96,6 +97,42 @@ TEST(SampleCurveTest, EqualsEvaluateCurveBitForBitOnRandomCurves) {
     for (std::size_t i = 0; i < sampled.size(); ++i) {
       const double expected = EvaluateCurve(curve, static_cast<double>(i) * frame_time);
       ASSERT_EQ(sampled[i], expected) << "trial " << trial << " sample " << i;
+    }
+  }
+}
+
+// Flat keys (a constant channel's) at any value, -0 included, with zero tangents of either sign;
+// and curves that are nearly flat (a tangent of 1e-300, a weight): every sample is what
+// EvaluateCurve() gives at its time, bit for bit, before, between and after the keys.
+TEST(SampleCurveTest, FlatAndNearlyFlatCurvesGiveEvaluateCurvesBits) {
+  const double frame_time = 1.0 / 30.0;
+  for (double value : {1.5, -2.25, 0.0, -0.0, 1e12, 5e-324, -5e-324}) {
+    for (int variant = 0; variant < 5; ++variant) {
+      Curve curve;
+      for (int k = 0; k < (variant == 1 ? 5 : 2); ++k) {
+        curve.keys.push_back(Key{.time_seconds = (2.0 + 9.0 * k) * frame_time, .value = value,
+                                 .in_tangent = k % 2 == 0 ? 0.0 : -0.0,
+                                 .out_tangent = k % 2 == 0 ? -0.0 : 0.0});
+      }
+      if (variant == 2) curve.keys[0].out_tangent = 1e-300;
+      if (variant == 3) curve.keys[1].in_weight = 0.25;
+      if (variant == 4) curve.keys[1].value = std::nextafter(value, 1.0);
+      const double last_frame = curve.keys.back().time_seconds / frame_time;
+      std::vector<double> sampled(static_cast<std::size_t>(last_frame) + 4);
+      SampleCurve(curve, frame_time, sampled);
+      std::vector<double> piece(sampled.size() - 5);
+      SampleCurve(curve, frame_time, piece, 5);
+      for (std::size_t i = 0; i < sampled.size(); ++i) {
+        const double expected = EvaluateCurve(curve, static_cast<double>(i) * frame_time);
+        ASSERT_EQ(std::bit_cast<std::uint64_t>(sampled[i]), std::bit_cast<std::uint64_t>(expected))
+            << "value " << value << " variant " << variant << " sample " << i << ": "
+            << sampled[i] << " against " << expected;
+        if (i >= 5) {
+          ASSERT_EQ(std::bit_cast<std::uint64_t>(piece[i - 5]),
+                    std::bit_cast<std::uint64_t>(expected))
+              << "value " << value << " variant " << variant << " piece sample " << i;
+        }
+      }
     }
   }
 }
