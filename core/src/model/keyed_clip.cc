@@ -168,7 +168,8 @@ bool WeightWithin(const std::optional<double>& weight) {
 }
 
 // Whether ValidateCurve() accepts `keys` (not empty): the same conditions, taken in one pass
-// without a status per check. A NaN or an infinity fails every comparison it is in. The keys of
+// without a status per check. A NaN or an infinity in any field fails that field's bound (and a
+// weight sum is checked only beside weights that passed theirs, as ValidateCurve() does). The keys of
 // every fitted curve are checked (ReduceKeys()), so this runs once per key of every result; the
 // checks that build the message run only when this says no.
 bool KeysWithinLimits(const std::vector<Key>& keys) {
@@ -183,9 +184,9 @@ bool KeysWithinLimits(const std::vector<Key>& keys) {
     if (k == 0) continue;
     const Key& previous = keys[k - 1];
     within &= key.time_seconds > previous.time_seconds;
-    within &= !(previous.out_weight.value_or(kDefaultWeight) +
-                    key.in_weight.value_or(kDefaultWeight) >
-                1.0 + kWeightSumSlack);
+    within &= previous.out_weight.value_or(kDefaultWeight) +
+                  key.in_weight.value_or(kDefaultWeight) <=
+              1.0 + kWeightSumSlack;
   }
   return within;
 }

@@ -578,7 +578,7 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
     TEMPOKEY_ASSIGN_OR_RETURN(const EulerFilterReport euler, ApplyEulerFilter(*filtered));
     result.report.euler_filtered_frames = euler.frames_changed;
   }
-  // Rotations unwrapped into copies, every other channel read in place.
+  // Rotations that unwrapping changes unwrapped into copies, every other channel read in place.
   const reduce_internal::FittedSamples fitted(filtered ? *filtered : clip);
   const std::span<const std::span<const double>> inputs = fitted.channels();
   // Measures joints through the skeleton: the report's world error, and the joint bound's

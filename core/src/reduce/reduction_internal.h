@@ -27,7 +27,7 @@ class FittedSamples {
   std::span<const std::span<const double>> channels() const { return channels_; }
 
  private:
-  std::vector<std::vector<double>> unwrapped_;     // one per rotation channel
+  std::vector<std::vector<double>> unwrapped_;     // one per rotation channel unwrapping changed
   std::vector<std::span<const double>> channels_;  // one per channel
 };
 

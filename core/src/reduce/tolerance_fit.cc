@@ -751,9 +751,12 @@ class Fitter {
       return !Stopping(n);
     }
     v.clear();
-    // Allocation only (pages are touched below), with room for the next insertion round's keys
-    // (at most twice as many), up to a key a frame.
-    v.reserve(std::max(size, std::min(2 * size, frame_count_)));
+    // Allocation only: pages are touched below. A short buffer gets room for the next insertion
+    // round's keys (at most twice as many, up to a key a frame), so that it grows once rather
+    // than every round; a long one gets just its size, as the peak memory of a noisy channel's
+    // fit (a key almost every frame) matters more, and as Solve() resumes a long elimination only
+    // when the blocks did not grow (their capacity decides that path).
+    v.reserve(size <= kZeroFillPiece ? std::max(size, std::min(2 * size, frame_count_)) : size);
     for (std::size_t done = 0; done < size;) {
       const std::size_t next = std::min(size, done + kZeroFillPiece);
       v.resize(next);
@@ -1129,9 +1132,9 @@ class Fitter {
   // the worst segment.
   // Out of line: inlined into the removal loop, with the rest of that loop around it, GCC kept
   // its running maximum in memory, a store and a load per key (paired runs of spec8_bench
-  // --only=tolerance: Bandai 83.4-85.4 -> 81.5-82.1 ms per M samples out of line, CMU 57.5-58.5
-  // -> 56.2-58.3). Also tried and slower: FitWindow() out of line as well; the keys' maximum as a
-  // tree (Bandai 88-90).
+  // --only=tolerance: Bandai 83.4-85.4 -> 81.5-82.1 ms per M samples out of line; CMU within its
+  // spread). Also tried, and no faster: FitWindow() out of line as well; the keys' maximum taken
+  // as a tree (Bandai 88-90).
   [[gnu::noinline]] double WindowRatio(std::size_t c, const KeyRun& run, int key_first,
                                        int key_last,
                                        double limit = std::numeric_limits<double>::infinity(),

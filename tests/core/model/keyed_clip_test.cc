@@ -119,9 +119,11 @@ TEST(SampleCurveTest, FlatAndNearlyFlatCurvesGiveEvaluateCurvesBits) {
       if (variant == 4) curve.keys[1].value = std::nextafter(value, 1.0);
       const double last_frame = curve.keys.back().time_seconds / frame_time;
       std::vector<double> sampled(static_cast<std::size_t>(last_frame) + 4);
-      SampleCurve(curve, frame_time, sampled);
       std::vector<double> piece(sampled.size() - 5);
+
+      SampleCurve(curve, frame_time, sampled);
       SampleCurve(curve, frame_time, piece, 5);
+
       for (std::size_t i = 0; i < sampled.size(); ++i) {
         const double expected = EvaluateCurve(curve, static_cast<double>(i) * frame_time);
         ASSERT_EQ(std::bit_cast<std::uint64_t>(sampled[i]), std::bit_cast<std::uint64_t>(expected))
@@ -226,13 +228,16 @@ TEST(ValidateCurveTest, EachFieldIsRefusedJustPastItsLimitAndAcceptedAtIt) {
       return curve;
     };
     const double over = std::nextafter(field.bound, INFINITY);
+
     EXPECT_TRUE(ValidateCurve(curve_with(field.bound), "c").ok()) << field.name;
     if (field.member != &Key::time_seconds) {  // key 1's time must stay after key 0's
       EXPECT_TRUE(ValidateCurve(curve_with(-field.bound), "c").ok()) << field.name;
     }
     for (double bad : {over, -over, double{NAN}, double{INFINITY}, -double{INFINITY}}) {
-      const absl::Status status = ValidateCurve(curve_with(bad), "c");
       const std::string prefix = std::string("c: key 1: ") + field.name + " ";
+
+      const absl::Status status = ValidateCurve(curve_with(bad), "c");
+
       EXPECT_EQ(status.code(), absl::StatusCode::kInvalidArgument) << field.name << " " << bad;
       EXPECT_EQ(std::string(status.message()).substr(0, prefix.size()), prefix)
           << status.message();
@@ -247,6 +252,7 @@ TEST(ValidateCurveTest, WeightsAreRefusedOutsideTheirRangeAndOverOneTogether) {
     return Curve{{Key{.time_seconds = 0.0, .out_weight = out_weight},
                   Key{.time_seconds = 1.0, .in_weight = in_weight}}};
   };
+
   EXPECT_TRUE(ValidateCurve(curve_with(std::nullopt, std::nullopt), "c").ok());
   EXPECT_TRUE(ValidateCurve(curve_with(0.5, 0.5), "c").ok());
   EXPECT_TRUE(ValidateCurve(curve_with(0.6, 0.4 + 1e-10), "c").ok());

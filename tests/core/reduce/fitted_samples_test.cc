@@ -54,6 +54,7 @@ std::vector<double> Smooth(std::size_t n) {
 TEST(FittedSamplesTest, ARotationThatNeedsNoUnwrappingIsReadInPlace) {
   for (std::size_t n : {0, 1, 2, 33, 100}) {
     const Clip clip = OneRotationAndOnePosition(Smooth(n));
+
     const FittedSamples fitted(clip);
 
     ASSERT_EQ(fitted.channels().size(), 2u);
@@ -78,6 +79,7 @@ TEST(FittedSamplesTest, WrapsAndNegativeZerosAnywhereAreUnwrappedIntoACopy) {
           rotation[at] += kind == 1 ? 185.0 : -359.0;
         }
         const Clip clip = OneRotationAndOnePosition(rotation);
+
         const FittedSamples fitted(clip);
 
         // Only -0 at the first sample, which unwrapping never touches, keeps the clip's samples.
@@ -108,6 +110,7 @@ TEST(FittedSamplesTest, RandomRotationsAreUnwrappedBitForBit) {
       rotation[i] = e == 0 ? 0.0 : e == 1 ? -0.0 : e < 20 ? wrapped : angle;
     }
     const Clip clip = OneRotationAndOnePosition(rotation);
+
     const FittedSamples fitted(clip);
 
     ExpectSameBits(fitted.channels()[0], Unwrapped(rotation), "rotation");

@@ -2,7 +2,9 @@
 #include "tempokey/core/reduce/tolerance_fit.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <future>
 #include <latch>
 #include <limits>
@@ -55,6 +57,53 @@ Samples Sine(int frames, double amplitude, double period_frames, double phase = 
     s[f] = amplitude * std::sin(2.0 * M_PI * f / period_frames + phase);
   }
   return s;
+}
+
+void ExpectSameFitBits(const SplineFit& got, const SplineFit& expected, const char* what) {
+  ASSERT_EQ(got.frames, expected.frames) << what;
+  ASSERT_EQ(got.values.size(), expected.values.size()) << what;
+  for (std::size_t c = 0; c < got.values.size(); ++c) {
+    for (std::size_t k = 0; k < got.frames.size(); ++k) {
+      ASSERT_EQ(std::bit_cast<std::uint64_t>(got.values[c][k]),
+                std::bit_cast<std::uint64_t>(expected.values[c][k]))
+          << what << ": channel " << c << " key " << k;
+      ASSERT_EQ(std::bit_cast<std::uint64_t>(got.slopes[c][k]),
+                std::bit_cast<std::uint64_t>(expected.slopes[c][k]))
+          << what << ": channel " << c << " key " << k;
+    }
+  }
+}
+
+// A thread keeps a fit's solve blocks and weights for its next fit (tolerance_fit.cc): what the
+// fit before left in them, large or small, trimmed or kept, changes no bit of the next fit, which
+// equals the same fit run first on a thread of its own.
+TEST(ToleranceFitTest, AFitIsTheSameWhateverFitTheThreadRanBefore) {
+  std::mt19937 random(29);
+  std::normal_distribution<double> noise(0.0, 1.0);
+  Samples noisy(40000);  // keyed almost every frame: blocks past what a thread keeps (1 MiB)
+  for (double& v : noisy) v = noise(random);
+  Samples medium = Sine(3000, 30.0, 37.0);
+  for (double& v : medium) v += 0.2 * noise(random);
+  const Samples smooth = Sine(400, 20.0, 90.0, 0.3);
+  const Samples wavy = Sine(700, 5.0, 23.0, 1.1);
+  auto fresh = [](const Samples& samples, double bound) {
+    return std::async(std::launch::async, [&] { return FitOne(samples, bound); }).get();
+  };
+  const absl::StatusOr<SplineFit> smooth_alone = fresh(smooth, 0.05);
+  const absl::StatusOr<SplineFit> wavy_alone = fresh(wavy, 0.01);
+  ASSERT_TRUE(smooth_alone.ok() && wavy_alone.ok());
+
+  // On this thread: a large fit, then a small one; a medium one, then small ones, in turn.
+  ASSERT_TRUE(FitOne(noisy, 0.05).ok());
+  const absl::StatusOr<SplineFit> smooth_after_large = FitOne(smooth, 0.05);
+  ASSERT_TRUE(FitOne(medium, 0.1).ok());
+  const absl::StatusOr<SplineFit> wavy_after_medium = FitOne(wavy, 0.01);
+  const absl::StatusOr<SplineFit> smooth_after_wavy = FitOne(smooth, 0.05);
+
+  ASSERT_TRUE(smooth_after_large.ok() && wavy_after_medium.ok() && smooth_after_wavy.ok());
+  ExpectSameFitBits(*smooth_after_large, *smooth_alone, "after a large fit");
+  ExpectSameFitBits(*wavy_after_medium, *wavy_alone, "after a medium fit");
+  ExpectSameFitBits(*smooth_after_wavy, *smooth_alone, "after a small fit");
 }
 
 TEST(ToleranceFitTest, CubicIsTwoKeysThatReproduceIt) {
@@ -262,7 +311,10 @@ TEST(ToleranceFitTest, TheFirstNonFiniteSampleIsNamedWhereverItIs) {
         Samples samples(n, std::numeric_limits<double>::max());
         samples[at] = bad;
         if (at + 1 < n) samples[n - 1] = bad;  // a later one is not the one named
-        EXPECT_EQ(Fit({Samples(n, 0.0), samples}, {0.1, 0.1}).status().message(),
+
+        const absl::StatusOr<SplineFit> fit = Fit({Samples(n, 0.0), samples}, {0.1, 0.1});
+
+        EXPECT_EQ(fit.status().message(),
                   absl::StrCat("channel 1: sample ", at, " is ",
                                std::isnan(bad) ? "NaN" : "infinite"))
             << n << " " << at;
