@@ -169,7 +169,7 @@ bool WeightWithin(const std::optional<double>& weight) {
 
 // Whether ValidateCurve() accepts `keys` (not empty): the same conditions, taken in one pass
 // without a status per check. A NaN or an infinity in any field fails that field's bound (and a
-// weight sum is checked only beside weights that passed theirs, as ValidateCurve() does). The keys of
+// weight sum counts only beside weights that passed theirs, as in ValidateCurve()). The keys of
 // every fitted curve are checked (ReduceKeys()), so this runs once per key of every result; the
 // checks that build the message run only when this says no.
 bool KeysWithinLimits(const std::vector<Key>& keys) {
