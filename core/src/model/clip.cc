@@ -240,26 +240,10 @@ absl::Status ValidateClipLayout(const Clip& clip, const ClipLimits& limits) {
   return absl::OkStatus();
 }
 
-namespace {
-
-// The index of the first sample beyond kMaxSampleMagnitude or not a number, or one in the block
-// before it (at most the size), scanned in blocks (simd/block_scan.h): every sample of every clip
-// is read here, before any work on it.
-TEMPOKEY_CLONES_AVX2 std::size_t FirstOutOfRange(std::span<const double> samples) {
-  const auto out_of_range = [](const double* p) __attribute__((always_inline)) {
-    return simd::BeyondMagnitude(p, kMaxSampleMagnitude);
-  };
-  return simd::FirstFlaggedBlock(samples.data(), 0, samples.size(), out_of_range);
-}
-
-bool InRange(double sample) { return std::abs(sample) <= kMaxSampleMagnitude; }
-
-}  // namespace
-
-std::size_t FirstSampleOutOfRange(std::span<const double> samples) {
-  std::size_t i = FirstOutOfRange(samples);
-  while (i < samples.size() && InRange(samples[i])) ++i;
-  return i;
+// Scanned in blocks (simd/block_scan.h): every sample of every clip is read here, before any
+// work on it.
+TEMPOKEY_CLONES_AVX2 std::size_t FirstSampleOutOfRange(std::span<const double> samples) {
+  return simd::FirstBeyondMagnitude(samples.data(), samples.size(), kMaxSampleMagnitude);
 }
 
 absl::Status ValidateClip(const Clip& clip, const ClipLimits& limits) {

@@ -93,28 +93,6 @@ void FinishReport(double squared_sum, ReductionReport& report) {
                          : 0.0;
 }
 
-// Whether every step between consecutive samples is well under half a turn, so that
-// UnwrapDegrees() adds no turns anywhere.
-bool StepsUnderHalfTurn(std::span<const double> degrees) {
-  bool under = true;
-  for (std::size_t i = 1; i < degrees.size(); ++i) {
-    under &= std::abs(degrees[i] - degrees[i - 1]) < kSafeStepDegrees;
-  }
-  return under;
-}
-
-// UnwrapDegrees(degrees) as a copy. When no step reaches half a turn, its shift stays +0 and it
-// only adds that to every sample after the first (which turns a -0 into +0): done here without
-// its serial dependence from sample to sample, the same values.
-void UnwrapInto(std::span<const double> degrees, std::vector<double>& out) {
-  out.assign(degrees.begin(), degrees.end());
-  if (!StepsUnderHalfTurn(degrees)) {
-    UnwrapDegrees(out);
-    return;
-  }
-  for (std::size_t i = 1; i < out.size(); ++i) out[i] += 0.0;
-}
-
 // Whether UnwrapDegrees() leaves `degrees` as they are, bit for bit: every step well under half a
 // turn, so its shift stays +0, and no -0 after the first sample, which adding that +0 would turn
 // into +0. Scanned in vector blocks (simd/block_scan.h): most captures need no copy at all.
@@ -149,8 +127,8 @@ FittedSamples::FittedSamples(const Clip& clip) {
   for (const Channel& channel : clip.channels) {
     if (IsRotation(channel.kind) && !UnwrapKeepsBits(channel.samples)) {
       // Reserved above: the buffers the earlier spans point into never move.
-      std::vector<double>& copy = unwrapped_.emplace_back();
-      UnwrapInto(channel.samples, copy);
+      std::vector<double>& copy = unwrapped_.emplace_back(channel.samples);
+      UnwrapDegrees(copy);
       channels_.emplace_back(copy);
     } else {
       channels_.emplace_back(channel.samples);

@@ -1585,14 +1585,8 @@ class Fitter {
 // The index of the first of `samples` that is not finite, or samples.size(): in vector blocks
 // (simd/block_scan.h), as every sample of every fitted channel is read here first.
 TEMPOKEY_CLONES_AVX2 std::size_t FirstNonFinite(std::span<const double> samples) {
-  constexpr double kLargest = std::numeric_limits<double>::max();
-  std::size_t i = simd::FirstFlaggedBlock(
-      samples.data(), 0, samples.size(),
-      [](const double* p) __attribute__((always_inline)) {
-        return simd::BeyondMagnitude(p, kLargest);
-      });
-  while (i < samples.size() && std::isfinite(samples[i])) ++i;
-  return i;
+  return simd::FirstBeyondMagnitude(samples.data(), samples.size(),
+                                    std::numeric_limits<double>::max());
 }
 
 absl::Status ValidateInputs(std::span<const std::span<const double>> channels,

@@ -8,6 +8,7 @@
 #ifndef TEMPOKEY_CORE_SRC_SIMD_BLOCK_SCAN_H_
 #define TEMPOKEY_CORE_SRC_SIMD_BLOCK_SCAN_H_
 
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -55,6 +56,18 @@ template <class Flagged>
   const ScanVector size =
       (ScanVector)((ScanMask)LoadScanVector(p) & std::numeric_limits<std::int64_t>::max());
   return !(size <= bound);
+}
+
+// The index of the first of data[0, n) that is not a number or beyond `bound` in magnitude, or
+// n: the flagged block found in vectors, the sample in it one by one.
+[[gnu::always_inline]] inline std::size_t FirstBeyondMagnitude(const double* data, std::size_t n,
+                                                               double bound) {
+  std::size_t i = FirstFlaggedBlock(data, 0, n, [bound](const double* p)
+                                                    __attribute__((always_inline)) {
+                                                      return BeyondMagnitude(p, bound);
+                                                    });
+  while (i < n && std::abs(data[i]) <= bound) ++i;
+  return i;
 }
 
 #pragma GCC diagnostic pop
