@@ -139,6 +139,37 @@ TEST(SampleCurveTest, FlatAndNearlyFlatCurvesGiveEvaluateCurvesBits) {
   }
 }
 
+// The closed form, not EvaluateCurve(): flat keys are their value at every time. For -0 the
+// IEEE sums give -0 at and outside the keys (the key's value itself) and +0 between them, where
+// the Hermite adds its +0 terms (-0 + +0 = +0).
+TEST(SampleCurveTest, FlatKeysAreTheirValueAtEveryFrame) {
+  const double frame_time = 1.0 / 120.0;
+  for (double value : {3.25, -7.5, 0.0, 1e-310, -1e12}) {
+    const Curve curve{{Key{.time_seconds = 4 * frame_time, .value = value},
+                       Key{.time_seconds = 9 * frame_time, .value = value},
+                       Key{.time_seconds = 30 * frame_time, .value = value, .in_tangent = -0.0}}};
+    std::vector<double> sampled(40);
+
+    SampleCurve(curve, frame_time, sampled);
+
+    for (std::size_t i = 0; i < sampled.size(); ++i) {
+      ASSERT_EQ(std::bit_cast<std::uint64_t>(sampled[i]), std::bit_cast<std::uint64_t>(value))
+          << "value " << value << " frame " << i;
+    }
+  }
+  const Curve negative_zero{{Key{.time_seconds = 4 * frame_time, .value = -0.0},
+                             Key{.time_seconds = 9 * frame_time, .value = -0.0}}};
+  std::vector<double> sampled(12);
+
+  SampleCurve(negative_zero, frame_time, sampled);
+
+  for (std::size_t i = 0; i < sampled.size(); ++i) {
+    const bool between_keys = i > 4 && i < 9;
+    EXPECT_EQ(std::signbit(sampled[i]), !between_keys) << "frame " << i;
+    EXPECT_EQ(sampled[i], 0.0) << "frame " << i;
+  }
+}
+
 TEST(SampleCurveTest, PiecesFromALaterFirstFrameEqualTheWholeCurveBitForBit) {
   std::mt19937 random(13);
   std::uniform_real_distribution<double> value(-100.0, 100.0);

@@ -115,6 +115,16 @@ TEST(FittedSamplesTest, RandomRotationsAreUnwrappedBitForBit) {
 
     ExpectSameBits(fitted.channels()[0], Unwrapped(rotation), "rotation");
     ExpectSameBits(fitted.channels()[1], rotation, "position");
+    // The closed form of unwrapping, not UnwrapDegrees(): every sample moved by whole turns
+    // only, and no step between samples over half a turn.
+    const std::span<const double> unwrapped = fitted.channels()[0];
+    for (std::size_t i = 0; i < n; ++i) {
+      const double turns = (unwrapped[i] - rotation[i]) / 360.0;
+      EXPECT_NEAR(turns, std::round(turns), 1e-9) << "trial " << trial << " sample " << i;
+      if (i > 0) {
+        EXPECT_LE(std::abs(unwrapped[i] - unwrapped[i - 1]), 180.0) << i;
+      }
+    }
     if (::testing::Test::HasFailure()) return;
   }
 }
