@@ -34,13 +34,11 @@ constexpr int kMaxInsertionRounds = 64;
 // Samples of work (frames x channels fitted or measured) between two looks at the stop token:
 // about a millisecond.
 constexpr std::int64_t kStopCheckSamples = std::int64_t{1} << 16;
-// Frames of segments a long solve sums between two counts of its work for the stop token: a
-// small part of kStopCheckSamples, so that a stop is still seen about as soon.
+// Keys and frames a whole channel's solve takes between two counts of its work for the stop
+// token: a small part of kStopCheckSamples, so that a stop is still seen about as soon.
 constexpr std::int64_t kStopCountPiece = 4096;
-// Keys whose own terms a long solve adds between two counts of its work for the stop token.
-constexpr int kKeysPerStopCount = 1024;
-// Elements a ZeroFill() sets between two looks at the stop token.
-constexpr std::size_t kZeroFillPiece = 65536;
+// Elements a GrowTo() adds between two looks at the stop token.
+constexpr std::size_t kGrowthPiece = 65536;
 // A removal whose window misses the bound by up to this factor is worth reweighting.
 constexpr double kLawsonReach = 1.5;
 // A ratio known to be over the bound.
@@ -643,7 +641,7 @@ class GramCache {
 // millions of keys leaves nothing behind on the thread. A fit started on a thread whose vectors
 // are lent already (none is today: fits do not nest) gets vectors of its own.
 struct FitScratch {
-  std::vector<Mat2> diag, upper, eliminated;
+  std::vector<Mat2> upper, eliminated;
   std::vector<Vec2> rhs;
   std::vector<double> lawson;
   bool lent = false;
@@ -667,7 +665,6 @@ class ScratchLease {
   ScratchLease& operator=(const ScratchLease&) = delete;
   ~ScratchLease() {
     if (own_) return;
-    Trim(scratch_->diag);
     Trim(scratch_->upper);
     Trim(scratch_->eliminated);
     Trim(scratch_->rhs);
@@ -738,27 +735,21 @@ class Fitter {
     return stopped_;
   }
 
-  // Sets `v` to `n` zeros a piece at a time, looking at the stop token between pieces: a noisy
-  // channel keys almost every frame, and its solve's vectors are then hundreds of megabytes to
-  // fault in. False when a stop was seen.
+  // Makes `v` hold at least `n` elements, keeping those it holds; new ones are added a piece at a
+  // time, looking at the stop token between pieces: a noisy channel keys almost every frame, and
+  // its solve's vectors are then hundreds of megabytes to fault in. A short buffer gets room for
+  // the next insertion round's keys (at most twice as many, up to a key a frame), so that it grows
+  // once rather than every round; a long one gets just its size, as the peak memory of a noisy
+  // channel's fit (a key almost every frame) matters more. False when a stop was seen.
   template <class T>
-  bool ZeroFill(std::vector<T>& v, std::int64_t n) {
+  bool GrowTo(std::vector<T>& v, std::int64_t n) {
     const auto size = static_cast<std::size_t>(n);
-    if (size <= kZeroFillPiece && size <= v.capacity()) {
-      // A buffer already large enough (every solve of a fit after its first): one fill.
-      v.resize(size);
-      std::fill(v.begin(), v.end(), T{});
-      return !Stopping(n);
+    if (size <= v.size()) return true;
+    if (size > v.capacity()) {
+      v.reserve(size <= kGrowthPiece ? std::max(size, std::min(2 * size, frame_count_)) : size);
     }
-    v.clear();
-    // Allocation only: pages are touched below. A short buffer gets room for the next insertion
-    // round's keys (at most twice as many, up to a key a frame), so that it grows once rather
-    // than every round; a long one gets just its size, as the peak memory of a noisy channel's
-    // fit (a key almost every frame) matters more, and as Solve() resumes a long elimination only
-    // when the blocks did not grow (their capacity decides that path).
-    v.reserve(size <= kZeroFillPiece ? std::max(size, std::min(2 * size, frame_count_)) : size);
-    for (std::size_t done = 0; done < size;) {
-      const std::size_t next = std::min(size, done + kZeroFillPiece);
+    for (std::size_t done = v.size(); done < size;) {
+      const std::size_t next = std::min(size, done + kGrowthPiece);
       v.resize(next);
       if (Stopping(static_cast<std::int64_t>(next - done))) return false;
       done = next;
@@ -796,33 +787,13 @@ class Fitter {
         upper[i] = {0.0, 0.0, 0.0, 0.0};
         rhs[i] = {0.0, 0.0};
       }
-      SolveIn<false>({diag.data(), upper.data(), rhs.data(), eliminated.data()}, s, run, first,
-                     last, weights, weights_origin);
+      SolveIn({diag.data(), upper.data(), rhs.data(), eliminated.data()}, s, run, first, last,
+              weights, weights_origin);
       return;
     }
-    // Growing the blocks past a piece is ZeroFill()'s work (a piece at a time, looking at the
-    // stop token).
-    const auto size = static_cast<std::size_t>(n);
-    if (size > kZeroFillPiece &&
-        (size > diag_.capacity() || size > upper_.capacity() || size > rhs_.capacity())) {
-      kept = 0;
-    }
-    if (kept > 0) {
-      // The kept keys' blocks stay; the others start from zero.
-      for (auto* v : {&diag_, &upper_}) {
-        v->resize(size);
-        std::fill(v->begin() + kept, v->end(), Mat2{});
-      }
-      rhs_.resize(size);
-      std::fill(rhs_.begin() + kept, rhs_.end(), Vec2{});
-      if (Stopping(n - kept)) return;
-    } else if (!ZeroFill(diag_, n) || !ZeroFill(upper_, n) || !ZeroFill(rhs_, n)) {
-      return;
-    }
-    eliminated_.resize(static_cast<std::size_t>(n));
-    SolveIn<true>({diag_.data(), upper_.data(), rhs_.data(), eliminated_.data()}, s, run, first,
-                  last, weights, weights_origin, kept);
-    if (!stopped_) long_solve_keys_ = n;
+    // Longer: FitAll()'s solve of a whole channel (first == 0, last == run.count - 1, no
+    // weights), the only solve of more than a window's keys.
+    SolveRun(s, run, kept);
   }
 
   // The sums of one segment of `length` >= 2 frames starting at `data` that the rows of its free
@@ -951,31 +922,24 @@ class Fitter {
     Mat2* eliminated;
   };
 
-  // Solve() on `blocks`; kLong: a solve long enough to look at the stop token inside.
-  template <bool kLong>
+  // Solve() of a window (at most kWindowKeys keys, n = last - first + 1 of them free) on
+  // `blocks`, zero to start with.
   void SolveIn(SolveBlocks blocks, std::span<const double> s, const KeyRun& run, int first,
-               int last, const double* weights, std::int64_t weights_origin, int kept = 0) {
+               int last, const double* weights, std::int64_t weights_origin) {
     const int n = last - first + 1;
     Mat2* diag = blocks.diag;
     Mat2* upper = blocks.upper;
     Vec2* rhs = blocks.rhs;
     Mat2* eliminated = blocks.eliminated;
     auto weight = [&](std::int64_t f) { return weights ? weights[f - weights_origin] : 1.0; };
-    // A noisy channel keys almost every frame: millions of keys in one solve, counted for the
-    // stop token a piece of keys at a time.
-    for (int piece = kept; piece < n; piece += kKeysPerStopCount) {
-      const int piece_end = std::min(n, piece + kKeysPerStopCount);
-      if (kLong && Stopping(piece_end - piece)) return;
-      for (int i = piece; i < piece_end; ++i) {
-        const std::int64_t f = run.frames[first + i];
-        const double w = weight(f) + kRidge;
-        diag[i][0] += w;
-        rhs[i][0] += w * s[f];
-        diag[i][3] += kRidge;
-        rhs[i][1] += kRidge * CentralDifference(s, f);
-      }
+    for (int i = 0; i < n; ++i) {
+      const std::int64_t f = run.frames[first + i];
+      const double w = weight(f) + kRidge;
+      diag[i][0] += w;
+      rhs[i][0] += w * s[f];
+      diag[i][3] += kRidge;
+      rhs[i][1] += kRidge * CentralDifference(s, f);
     }
-    // Segment j's frames added to the blocks of its free keys.
     // Segment j's sums added to the blocks of its free keys: kEnds says which are free (only
     // the first and last segments of a solve can have a fixed end).
     auto add_segment = [&]<FreeEnds kEnds>(int j, std::int64_t fa, std::int64_t length) {
@@ -1035,39 +999,11 @@ class Fitter {
       if (i + 1 < n) eliminated[i] = Multiply(inverse, upper[i]);
       rhs[i] = Apply(inverse, rhs[i]);
     };
-    int seg_first = std::max(first - 1, 0);
+    const int seg_first = std::max(first - 1, 0);
     const int seg_last = std::min(last, run.count - 2);
-    if (kept > 0) {
-      // Resuming after `kept` eliminated keys (first == 0): segment kept - 1 adds only to key
-      // kept, what the both-free sums give its end key (each sum the same however many are
-      // taken: FreeEnds).
-      const int j = kept - 1;
-      const std::int64_t fa = run.frames[j];
-      const std::int64_t length = run.frames[j + 1] - fa;
-      if (kLong && Stopping(length)) return;
-      if (length >= 2) {
-        std::array<double, 4> moment;
-        const double* gram =
-            SegmentSums<FreeEnds::kEndOnly>(s.data() + fa, length, nullptr, moment.data());
-        diag[kept] = {diag[kept][0] + gram[10], diag[kept][1] + gram[11],
-                      diag[kept][2] + gram[14], diag[kept][3] + gram[15]};
-        rhs[kept] = {rhs[kept][0] + moment[2], rhs[kept][1] + moment[3]};
-      }
-      seg_first = kept;
-    }
-    // A whole long channel is one solve: look at the stop token inside it too (the result is
-    // then not used), its segments' frames counted here and handed over a piece at a time.
-    std::int64_t pending = 0;
     for (int j = seg_first; j <= seg_last; ++j) {
       const std::int64_t fa = run.frames[j];
       const std::int64_t length = run.frames[j + 1] - fa;
-      if (kLong) {
-        pending += length;
-        if (pending >= kStopCountPiece) {
-          if (Stopping(pending)) return;
-          pending = 0;
-        }
-      }
       if (length >= 2) {
         if (j < first) {
           add_segment.template operator()<FreeEnds::kEndOnly>(j, fa, length);
@@ -1079,18 +1015,109 @@ class Fitter {
       }
       if (j >= first) eliminate(j - first);  // key j's last segment
     }
-    if (kLong && Stopping(pending)) return;
     // The last key when it has no segment after it; then back substitution.
     for (int i = std::max(seg_last - first + 1, 0); i < n; ++i) eliminate(i);
+    BackSubstitute(run, first, n, rhs, eliminated);
+  }
+
+  // Back substitution of the `n` free keys from `first` of `run`, eliminated into `rhs` and
+  // `eliminated` (SolveIn(), SolveRun()).
+  static void BackSubstitute(const KeyRun& run, int first, int n, const Vec2* rhs,
+                             const Mat2* eliminated) {
     Vec2 x = rhs[n - 1];
-    run.values[last] = x[0];
-    run.slopes[last] = x[1];
+    run.values[first + n - 1] = x[0];
+    run.slopes[first + n - 1] = x[1];
     for (int i = n - 2; i >= 0; --i) {
       const Vec2 next = Apply(eliminated[i], x);
       x = {rhs[i][0] - next[0], rhs[i][1] - next[1]};
       run.values[first + i] = x[0];
       run.slopes[first + i] = x[1];
     }
+  }
+
+  // Solve() of every key of `run`, all free and unweighted (FitAll()'s solve of a channel), in
+  // one pass over the keys: each key's blocks (its own terms, then the end-key sums of the
+  // segment before it, then the start-key sums and the coupling of the segment after it) are
+  // built in registers and the key eliminated at once. Those are the operations SolveIn() takes
+  // on zeroed blocks, on the same values in the same order, so the same bits; only the
+  // eliminated blocks, right-hand sides and couplings are stored (eliminated_, rhs_, upper_).
+  //
+  // `kept`: the first `kept` keys' stored blocks are those the previous solve of this channel
+  // left, and are what this one would compute (KeptKeys()): the elimination resumes after them.
+  // A solve counts its keys and frames for the stop token (a whole noisy channel is millions of
+  // keys); once a stop is seen it returns, its result not to be used.
+  void SolveRun(std::span<const double> s, const KeyRun& run, int kept) {
+    const int n = run.count;
+    if (!GrowTo(eliminated_, n) || !GrowTo(upper_, n) || !GrowTo(rhs_, n)) return;
+    Mat2* eliminated = eliminated_.data();
+    Mat2* upper = upper_.data();
+    Vec2* rhs = rhs_.data();
+    const double w = 1.0 + kRidge;  // an unweighted key's own weight, with the ridge
+    // The end-key sums of the segment before key i (zero-length segments add none).
+    bool carry = false;
+    std::array<double, 4> carry_gram;
+    Vec2 carry_moment;
+    if (kept > 0) {
+      const std::int64_t fa = run.frames[kept - 1];
+      const std::int64_t length = run.frames[kept] - fa;
+      if (length >= 2) {
+        std::array<double, 4> moment;
+        const double* g =
+            SegmentSums<FreeEnds::kEndOnly>(s.data() + fa, length, nullptr, moment.data());
+        carry = true;
+        carry_gram = {g[10], g[11], g[14], g[15]};
+        carry_moment = {moment[2], moment[3]};
+      }
+    }
+    std::int64_t pending = 0;  // work not yet counted for the stop token
+    for (int i = kept; i < n; ++i) {
+      const std::int64_t f = run.frames[i];
+      Mat2 d = {0.0 + w, 0.0, 0.0, 0.0 + kRidge};
+      Vec2 r = {0.0 + w * s[f], 0.0 + kRidge * CentralDifference(s, f)};
+      if (carry) {
+        d = {d[0] + carry_gram[0], d[1] + carry_gram[1], d[2] + carry_gram[2],
+             d[3] + carry_gram[3]};
+        r = {r[0] + carry_moment[0], r[1] + carry_moment[1]};
+      }
+      Mat2 u = {0.0, 0.0, 0.0, 0.0};
+      carry = false;
+      pending += 1;
+      if (i + 1 < n) {
+        const std::int64_t length = run.frames[i + 1] - f;
+        pending += length;
+        if (length >= 2) {
+          std::array<double, 4> moment;
+          const double* g =
+              SegmentSums<FreeEnds::kBoth>(s.data() + f, length, nullptr, moment.data());
+          d = {d[0] + g[0], d[1] + g[1], d[2] + g[4], d[3] + g[5]};
+          r = {r[0] + moment[0], r[1] + moment[1]};
+          u = {u[0] + g[2], u[1] + g[3], u[2] + g[6], u[3] + g[7]};
+          carry = true;
+          carry_gram = {g[10], g[11], g[14], g[15]};
+          carry_moment = {moment[2], moment[3]};
+        }
+      }
+      if (i > 0) {
+        const Mat2& pu = upper[i - 1];
+        const Mat2 lower = {pu[0], pu[2], pu[1], pu[3]};  // U_{i-1} transposed
+        const Mat2 lc = Multiply(lower, eliminated[i - 1]);
+        d = {d[0] - lc[0], d[1] - lc[1], d[2] - lc[2], d[3] - lc[3]};
+        const Vec2 ld = Apply(lower, rhs[i - 1]);
+        r = {r[0] - ld[0], r[1] - ld[1]};
+      }
+      const Mat2 inverse = Inverse(d);
+      upper[i] = u;
+      // The last key couples to nothing after it: its eliminated block is never read.
+      if (i + 1 < n) eliminated[i] = Multiply(inverse, u);
+      rhs[i] = Apply(inverse, r);
+      if (pending >= kStopCountPiece) {
+        if (Stopping(pending)) return;
+        pending = 0;
+      }
+    }
+    if (Stopping(pending)) return;
+    BackSubstitute(run, 0, n, rhs, eliminated);
+    long_solve_keys_ = n;
   }
 
   // ---- errors ----------------------------------------------------------------------------------
@@ -1250,7 +1277,10 @@ class Fitter {
     for (std::size_t c = 0; c < channels_.size(); ++c) {
       if (Stopping(static_cast<std::int64_t>(frame_count_))) return;
       const auto keys = static_cast<std::int64_t>(fit.frames.size());
-      if (!ZeroFill(fit.values[c], keys) || !ZeroFill(fit.slopes[c], keys)) return;
+      // Every value and slope is written by the solve.
+      if (!GrowTo(fit.values[c], keys) || !GrowTo(fit.slopes[c], keys)) return;
+      fit.values[c].resize(static_cast<std::size_t>(keys));
+      fit.slopes[c].resize(static_cast<std::size_t>(keys));
       Solve(channels_[c], RunOf(fit, c), 0, count - 1, nullptr, 0, kept);
     }
   }
@@ -1569,10 +1599,9 @@ class Fitter {
   };
   PairHead pair_head_;
   ScratchLease lease_;
-  std::vector<Mat2>& diag_ = lease_.scratch().diag;
   std::vector<Mat2>& upper_ = lease_.scratch().upper;
   std::vector<Mat2>& eliminated_ = lease_.scratch().eliminated;
-  // Keys of this fit's last solve if it was a completed long one (its blocks are in diag_ ...),
+  // Keys of this fit's last solve if it was a completed SolveRun() (its blocks are in upper_ ...),
   // else 0.
   int long_solve_keys_ = 0;
   std::vector<Vec2>& rhs_ = lease_.scratch().rhs;

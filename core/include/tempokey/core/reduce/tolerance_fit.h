@@ -72,7 +72,7 @@ struct SplineFit {
 // requested (checked every 65536 samples of work: insertion rounds, segments, removal windows and
 // verification alike).
 // Thread-safe: a pure function of its arguments. Each calling thread keeps the fit's solve blocks
-// and weights for its next fit (at most 1 MiB a vector, five vectors) until it exits.
+// and weights for its next fit (at most 1 MiB a vector, four vectors) until it exits.
 absl::StatusOr<SplineFit> FitWithinTolerance(std::span<const std::span<const double>> channels,
                                              std::span<const double> max_errors,
                                              const ToleranceFitOptions& options = {},
