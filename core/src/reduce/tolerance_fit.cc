@@ -1321,9 +1321,11 @@ class Fitter {
   // Least-squares fit of the free keys of every channel of `w`; returns the worst error relative
   // to the bound over the window and all channels, exact up to `limit` (beyond it, some value
   // above it).
+  template <bool kLone>
   double FitWindow(Window& w, double limit, int* worst_key = nullptr) {
     double worst = 0.0;
-    for (std::size_t c = 0; c < channels_.size() && worst <= limit; ++c) {
+    const std::size_t c_count = kLone ? 1 : channels_.size();
+    for (std::size_t c = 0; c < c_count && worst <= limit; ++c) {
       KeyRun run = w.Run(c);
       Solve(channels_[c], run, w.free_first, w.free_last);
       int where = 0;
@@ -1415,7 +1417,17 @@ class Fitter {
   }
 
   void Remove(SplineFit& fit) {
-    const std::size_t c_count = channels_.size();
+    if (channels_.size() == 1) {
+      RemoveKeys<true>(fit);
+    } else {
+      RemoveKeys<false>(fit);
+    }
+  }
+
+  // Remove() of a lone channel (kLone: its loops over channels known to take one) or a group.
+  template <bool kLone>
+  void RemoveKeys(SplineFit& fit) {
+    const std::size_t c_count = kLone ? 1 : channels_.size();
     const int count = static_cast<int>(fit.frames.size());
     if (count <= 2) return;
     SplineFit out;
@@ -1493,7 +1505,7 @@ class Fitter {
         trial.frames[before] = moved;
         if (Stopping(trial_work)) return;
         int worst_key = 0;
-        const double ratio = FitWindow(trial, reach, &worst_key);
+        const double ratio = FitWindow<kLone>(trial, reach, &worst_key);
         if (ratio <= 1.0) {
           removed = true;
           break;
