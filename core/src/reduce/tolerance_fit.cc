@@ -635,8 +635,9 @@ class GramCache {
 // The blocks and weights a fit solves with, lent by each thread to one fit at a time: a
 // reduction runs one fit per channel (hundreds a clip), and each fit growing its own from nothing
 // cost about twenty allocations, which with the rest of a fit's (about fifty) took about 4 % of
-// `tolerance` on Bandai's clips (perf). Their contents never outlive a fit: every solve fills
-// what it reads (the blocks a solve keeps from the one before are tracked per fit). A vector is
+// `tolerance` on Bandai's clips (perf). What one fit leaves in them is never read by the next:
+// every solve writes what it reads (the blocks a solve keeps from the one before are tracked per
+// fit). A vector is
 // given back emptied of its memory when it holds more than kKeptScratchBytes, so a fit of
 // millions of keys leaves nothing behind on the thread. A fit started on a thread whose vectors
 // are lent already (none is today: fits do not nest) gets vectors of its own.
@@ -735,18 +736,38 @@ class Fitter {
     return stopped_;
   }
 
-  // Makes `v` hold at least `n` elements, keeping those it holds; new ones are added a piece at a
-  // time, looking at the stop token between pieces: a noisy channel keys almost every frame, and
-  // its solve's vectors are then hundreds of megabytes to fault in. A short buffer gets room for
-  // the next insertion round's keys (at most twice as many, up to a key a frame), so that it grows
-  // once rather than every round; a long one gets just its size, as the peak memory of a noisy
-  // channel's fit (a key almost every frame) matters more. False when a stop was seen.
+  // Makes `v` hold at least `n` elements, of which the first `keep` (at most v.size()) keep their
+  // values; the others are whatever they were or zero. Memory is touched a piece at a time, looking
+  // at the stop token between pieces: a noisy channel keys almost every frame, and its solve's
+  // vectors are then hundreds of megabytes to fault in and to copy. Outgrowing its capacity, a
+  // buffer is replaced: with nothing to keep, its memory is given back first (the peak is the new
+  // buffer alone); else the kept elements are copied a piece at a time. A short buffer gets room
+  // for the next insertion round's keys (at most twice as many, up to a key a frame), so that it
+  // grows once rather than every round; a long one gets just its size, as the peak memory of a
+  // noisy channel's fit (a key almost every frame) matters more. False when a stop was seen.
   template <class T>
-  bool GrowTo(std::vector<T>& v, std::int64_t n) {
+  bool GrowTo(std::vector<T>& v, std::int64_t n, std::int64_t keep = 0) {
     const auto size = static_cast<std::size_t>(n);
     if (size <= v.size()) return true;
     if (size > v.capacity()) {
-      v.reserve(size <= kGrowthPiece ? std::max(size, std::min(2 * size, frame_count_)) : size);
+      const std::size_t capacity =
+          size <= kGrowthPiece ? std::max(size, std::min(2 * size, frame_count_)) : size;
+      const auto kept = static_cast<std::size_t>(keep);
+      if (kept == 0) {
+        std::vector<T>().swap(v);
+        v.reserve(capacity);
+      } else {
+        std::vector<T> grown;
+        grown.reserve(capacity);
+        for (std::size_t done = 0; done < kept;) {
+          const std::size_t next = std::min(kept, done + kGrowthPiece);
+          grown.insert(grown.end(), v.begin() + static_cast<std::ptrdiff_t>(done),
+                       v.begin() + static_cast<std::ptrdiff_t>(next));
+          if (Stopping(static_cast<std::int64_t>(next - done))) return false;
+          done = next;
+        }
+        v.swap(grown);
+      }
     }
     for (std::size_t done = v.size(); done < size;) {
       const std::size_t next = std::min(size, done + kGrowthPiece);
@@ -1039,8 +1060,10 @@ class Fitter {
   // one pass over the keys: each key's blocks (its own terms, then the end-key sums of the
   // segment before it, then the start-key sums and the coupling of the segment after it) are
   // built in registers and the key eliminated at once. Those are the operations SolveIn() takes
-  // on zeroed blocks, on the same values in the same order, so the same bits; only the
-  // eliminated blocks, right-hand sides and couplings are stored (eliminated_, rhs_, upper_).
+  // for each of a window's keys (on zeroed blocks: the key's terms, its segments' sums, its
+  // elimination), on the same values in the same order, so the same bits as solving the whole
+  // channel that way; only the eliminated blocks, right-hand sides and couplings are stored
+  // (eliminated_, rhs_, upper_).
   //
   // `kept`: the first `kept` keys' stored blocks are those the previous solve of this channel
   // left, and are what this one would compute (KeptKeys()): the elimination resumes after them.
@@ -1048,7 +1071,9 @@ class Fitter {
   // keys); once a stop is seen it returns, its result not to be used.
   void SolveRun(std::span<const double> s, const KeyRun& run, int kept) {
     const int n = run.count;
-    if (!GrowTo(eliminated_, n) || !GrowTo(upper_, n) || !GrowTo(rhs_, n)) return;
+    if (!GrowTo(eliminated_, n, kept) || !GrowTo(upper_, n, kept) || !GrowTo(rhs_, n, kept)) {
+      return;
+    }
     Mat2* eliminated = eliminated_.data();
     Mat2* upper = upper_.data();
     Vec2* rhs = rhs_.data();
