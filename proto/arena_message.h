@@ -30,8 +30,8 @@ inline google::protobuf::ArenaOptions MessageArenaOptions() {
 // measured with the scratch arena: an upload's time is in page faults); the Process and result
 // streams' messages, made and dropped within one step, use ScratchMessage (scratch_arena.h),
 // which keeps its block from one message to the next. An arena frees nothing before it ends: not
-// for a message cleared and refilled without bound. Not for messages built from parts made on the heap: moving a message between
-// arenas copies it.
+// for a message cleared and refilled without bound. Not for messages built from parts made on
+// the heap: moving a message between arenas copies it.
 template <typename Message>
 class ArenaMessage {
  public:

@@ -593,6 +593,26 @@ double CentralDifference(std::span<const double> s, std::int64_t f) {
   return 0.5 * (s[f + 1] - s[f - 1]);
 }
 
+// A key's own terms in its blocks, from zero: its sample weighted by `w` (the frame's weight plus
+// the ridge), and the ridge pulling its slope towards the samples' central difference.
+inline void KeyTerms(std::span<const double> s, std::int64_t frame, double w, Mat2& diag,
+                     Vec2& rhs) {
+  diag = {0.0 + w, 0.0, 0.0, 0.0 + kRidge};
+  rhs = {0.0 + w * s[frame], 0.0 + kRidge * CentralDifference(s, frame)};
+}
+
+// Forward elimination's step from one key to the next: the next key's blocks less what the key
+// before gives through their coupling `upper` (its eliminated block `eliminated` and right-hand
+// side `rhs_before`): D' = D - U^T E, r' = r - U^T r_before.
+inline void SubtractCoupling(const Mat2& upper, const Mat2& eliminated, const Vec2& rhs_before,
+                             Mat2& diag, Vec2& rhs) {
+  const Mat2 lower = {upper[0], upper[2], upper[1], upper[3]};  // U transposed
+  const Mat2 lc = Multiply(lower, eliminated);
+  diag = {diag[0] - lc[0], diag[1] - lc[1], diag[2] - lc[2], diag[3] - lc[3]};
+  const Vec2 ld = Apply(lower, rhs_before);
+  rhs = {rhs[0] - ld[0], rhs[1] - ld[1]};
+}
+
 // Whether a and b are the same double, bit for bit (so +0 and -0 differ).
 inline bool SameBits(double a, double b) {
   return std::bit_cast<std::uint64_t>(a) == std::bit_cast<std::uint64_t>(b);
@@ -637,10 +657,9 @@ class GramCache {
 // cost about twenty allocations, which with the rest of a fit's (about fifty) took about 4 % of
 // `tolerance` on Bandai's clips (perf). What one fit leaves in them is never read by the next:
 // every solve writes what it reads (the blocks a solve keeps from the one before are tracked per
-// fit). A vector is
-// given back emptied of its memory when it holds more than kKeptScratchBytes, so a fit of
-// millions of keys leaves nothing behind on the thread. A fit started on a thread whose vectors
-// are lent already (none is today: fits do not nest) gets vectors of its own.
+// fit). A vector is given back emptied of its memory when it holds more than kKeptScratchBytes,
+// so a fit of millions of keys leaves nothing behind on the thread. A fit started on a thread
+// whose vectors are lent already (none is today: fits do not nest) gets vectors of its own.
 struct FitScratch {
   std::vector<Mat2> upper, eliminated;
   std::vector<Vec2> rhs;
@@ -798,16 +817,12 @@ class Fitter {
       return;
     }
     if (n <= kWindowKeys) {
-      // A removal window's solve (or a short channel's): its blocks on the stack, only the n in
-      // use zeroed (zeroing whole arrays costs a string instruction's start-up, more than the
-      // solve). The caller counts the window's work for the stop token.
+      // A removal window's solve (or a short channel's): its blocks on the stack, only the n
+      // couplings in use zeroed (zeroing whole arrays costs a string instruction's start-up, more
+      // than the solve). The caller counts the window's work for the stop token.
       std::array<Mat2, kWindowKeys> diag, upper, eliminated;
       std::array<Vec2, kWindowKeys> rhs;
-      for (int i = 0; i < n; ++i) {
-        diag[i] = {0.0, 0.0, 0.0, 0.0};
-        upper[i] = {0.0, 0.0, 0.0, 0.0};
-        rhs[i] = {0.0, 0.0};
-      }
+      for (int i = 0; i < n; ++i) upper[i] = {0.0, 0.0, 0.0, 0.0};
       SolveIn({diag.data(), upper.data(), rhs.data(), eliminated.data()}, s, run, first, last,
               weights, weights_origin);
       return;
@@ -861,9 +876,7 @@ class Fitter {
     const std::int64_t* f = run.frames;
     // A free key's own terms: its sample (weighted) and the ridge, added to zero blocks.
     auto key_terms = [&](std::int64_t frame, Mat2& diag, Vec2& rhs) {
-      const double w = (weights ? weights[frame - weights_origin] : 1.0) + kRidge;
-      diag = {0.0 + w, 0.0, 0.0, 0.0 + kRidge};
-      rhs = {0.0 + w * s[frame], 0.0 + kRidge * CentralDifference(s, frame)};
+      KeyTerms(s, frame, (weights ? weights[frame - weights_origin] : 1.0) + kRidge, diag, rhs);
     };
     auto segment_weights = [&](std::int64_t fa) {
       return weights ? weights + (fa - weights_origin) : nullptr;
@@ -921,11 +934,7 @@ class Fitter {
       d2 = {d2[0] + g[0], d2[1] + g[1], d2[2] + g[4], d2[3] + g[5]};
       r2 = {r2[0] + moment[0], r2[1] + moment[1]};
     }
-    const Mat2 lower = {u1[0], u1[2], u1[1], u1[3]};  // U_1 transposed
-    const Mat2 lc = Multiply(lower, e1);
-    d2 = {d2[0] - lc[0], d2[1] - lc[1], d2[2] - lc[2], d2[3] - lc[3]};
-    const Vec2 ld = Apply(lower, r1);
-    r2 = {r2[0] - ld[0], r2[1] - ld[1]};
+    SubtractCoupling(u1, e1, r1, d2, r2);
     const Vec2 x2 = Apply(Inverse(d2), r2);
     run.values[2] = x2[0];
     run.slopes[2] = x2[1];
@@ -934,8 +943,9 @@ class Fitter {
     run.slopes[1] = r1[1] - next[1];
   }
 
-  // The blocks of one solve, per free key: its diagonal block, the block coupling it to the next
-  // free key, its right-hand side (all zero to start with), and the eliminated coupling.
+  // The blocks of one solve, per free key: its diagonal block and right-hand side (set from the
+  // key's own terms first), the block coupling it to the next free key (zero to start with), and
+  // the eliminated coupling.
   struct SolveBlocks {
     Mat2* diag;
     Mat2* upper;
@@ -944,7 +954,7 @@ class Fitter {
   };
 
   // Solve() of a window (at most kWindowKeys keys, n = last - first + 1 of them free) on
-  // `blocks`, zero to start with.
+  // `blocks`, their couplings zero to start with.
   void SolveIn(SolveBlocks blocks, std::span<const double> s, const KeyRun& run, int first,
                int last, const double* weights, std::int64_t weights_origin) {
     const int n = last - first + 1;
@@ -955,11 +965,7 @@ class Fitter {
     auto weight = [&](std::int64_t f) { return weights ? weights[f - weights_origin] : 1.0; };
     for (int i = 0; i < n; ++i) {
       const std::int64_t f = run.frames[first + i];
-      const double w = weight(f) + kRidge;
-      diag[i][0] += w;
-      rhs[i][0] += w * s[f];
-      diag[i][3] += kRidge;
-      rhs[i][1] += kRidge * CentralDifference(s, f);
+      KeyTerms(s, f, weight(f) + kRidge, diag[i], rhs[i]);
     }
     // Segment j's sums added to the blocks of its free keys: kEnds says which are free (only
     // the first and last segments of a solve can have a fixed end).
@@ -1006,15 +1012,7 @@ class Fitter {
     // segment, so that the next segments' sums can proceed while its divisions complete (the same
     // operations on the same values as eliminating after all segments).
     auto eliminate = [&](int i) __attribute__((always_inline)) {
-      if (i > 0) {
-        const Mat2& u = upper[i - 1];
-        const Mat2 lower = {u[0], u[2], u[1], u[3]};  // U_{i-1} transposed
-        const Mat2 lc = Multiply(lower, eliminated[i - 1]);
-        diag[i] = {diag[i][0] - lc[0], diag[i][1] - lc[1], diag[i][2] - lc[2],
-                   diag[i][3] - lc[3]};
-        const Vec2 ld = Apply(lower, rhs[i - 1]);
-        rhs[i] = {rhs[i][0] - ld[0], rhs[i][1] - ld[1]};
-      }
+      if (i > 0) SubtractCoupling(upper[i - 1], eliminated[i - 1], rhs[i - 1], diag[i], rhs[i]);
       const Mat2 inverse = Inverse(diag[i]);
       // The last key couples to nothing after it: its eliminated block is never read.
       if (i + 1 < n) eliminated[i] = Multiply(inverse, upper[i]);
@@ -1097,8 +1095,9 @@ class Fitter {
     std::int64_t pending = 0;  // work not yet counted for the stop token
     for (int i = kept; i < n; ++i) {
       const std::int64_t f = run.frames[i];
-      Mat2 d = {0.0 + w, 0.0, 0.0, 0.0 + kRidge};
-      Vec2 r = {0.0 + w * s[f], 0.0 + kRidge * CentralDifference(s, f)};
+      Mat2 d;
+      Vec2 r;
+      KeyTerms(s, f, w, d, r);
       if (carry) {
         d = {d[0] + carry_gram[0], d[1] + carry_gram[1], d[2] + carry_gram[2],
              d[3] + carry_gram[3]};
@@ -1122,14 +1121,7 @@ class Fitter {
           carry_moment = {moment[2], moment[3]};
         }
       }
-      if (i > 0) {
-        const Mat2& pu = upper[i - 1];
-        const Mat2 lower = {pu[0], pu[2], pu[1], pu[3]};  // U_{i-1} transposed
-        const Mat2 lc = Multiply(lower, eliminated[i - 1]);
-        d = {d[0] - lc[0], d[1] - lc[1], d[2] - lc[2], d[3] - lc[3]};
-        const Vec2 ld = Apply(lower, rhs[i - 1]);
-        r = {r[0] - ld[0], r[1] - ld[1]};
-      }
+      if (i > 0) SubtractCoupling(upper[i - 1], eliminated[i - 1], rhs[i - 1], d, r);
       const Mat2 inverse = Inverse(d);
       upper[i] = u;
       // The last key couples to nothing after it: its eliminated block is never read.
