@@ -8,7 +8,7 @@ cd "$(dirname "${BASH_SOURCE[0]}")/.."
 jobs="${TEMPOKEY_JOBS:-$(nproc)}"
 asan_dir="${TEMPOKEY_ASAN_BUILD_DIR:-build-asan}"
 tsan_dir="${TEMPOKEY_TSAN_BUILD_DIR:-build-tsan}"
-tsan_targets=(job_pool_test job_manager_test memory_budget_test idle_reaper_test)
+tsan_targets=(job_pool_test job_manager_test memory_budget_test idle_reaper_test background_digest_test)
 
 printf '\n== ASan + UBSan build (core and server tests)\n'
 cmake -S . -B "$asan_dir" -G Ninja -DCMAKE_BUILD_TYPE=Debug -DTEMPOKEY_BUILD_BENCH=OFF \

@@ -17,6 +17,7 @@
 #include "server/job_pool.h"
 #include "server/memory_budget.h"
 #include "server/metrics.h"
+#include "server/background_digest.h"
 #include "server/server_options.h"
 #include "tempokey/core/model/clip.h"
 
@@ -37,6 +38,8 @@ struct ServiceContext {
   std::vector<std::string> operations;  // what GetServerInfo offers
   std::atomic<bool> draining{false};
   std::atomic<int> open_streams{0};
+  // Uploads hashing on threads of their own (BackgroundClipDigest).
+  DigestThreads digest_threads;
 
   // The bearer-token check of every MotionService and reflection call: the caller's owner id
   // ("" when no tokens are configured), when the call carries "authorization: Bearer <one of

@@ -1,5 +1,6 @@
 // UploadClip: a ClipHeader, then ChannelSamples slices; each message is checked as it arrives
-// (wire::ClipAssembler) and digested, so a bad upload stops at its first bad message. Memory is
+// (wire::ClipAssembler), so a bad upload stops at its first bad message, and digested beside the
+// reads that follow (BackgroundClipDigest). Memory is
 // charged to the server's budget as samples arrive, never for the sizes the header declares.
 // A client that sends nothing for the idle timeout while the server waits gets
 // DEADLINE_EXCEEDED and its stream slot back.
@@ -12,7 +13,7 @@
 #include "absl/strings/str_cat.h"
 #include "proto/arena_message.h"
 #include "proto/clip_convert.h"
-#include "proto/clip_digest.h"
+#include "server/background_digest.h"
 #include "server/memory_size.h"
 #include "server/reactors.h"
 #include "server/status_util.h"
@@ -56,10 +57,11 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
     }
     ++messages_;
     service_->BytesIn(static_cast<std::int64_t>(buffer_.Length()));
-    wire::ArenaMessage<v1::UploadClipRequest> request;
+    // Shared with the digest, which may hash the message's samples after this returns.
+    auto request = std::make_shared<wire::ArenaMessage<v1::UploadClipRequest>>();
     absl::Status status =
-        ParseMessage(buffer_, absl::StrCat("upload message ", messages_), request.get());
-    if (status.ok()) status = Accept(*request);
+        ParseMessage(buffer_, absl::StrCat("upload message ", messages_), request->get());
+    if (status.ok()) status = Accept(request);
     if (!status.ok()) {
       spdlog::debug("upload refused at message {}: {}", messages_, status.ToString());
       ReleaseHeld();
@@ -106,17 +108,20 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
     Finish(ToGrpcStatus(status, call_));
   }
 
-  absl::Status Accept(const v1::UploadClipRequest& request) {
+  using Request = std::shared_ptr<wire::ArenaMessage<v1::UploadClipRequest>>;
+
+  absl::Status Accept(const Request& message) {
+    const v1::UploadClipRequest& request = **message;
     switch (request.part_case()) {
       case v1::UploadClipRequest::kHeader:
         TEMPOKEY_RETURN_IF_ERROR(assembler_->AddHeader(request.header()));
-        digest_.emplace(assembler_->clip());
+        digest_.emplace(assembler_->clip(), &service_->digest_threads);
         return absl::OkStatus();
       case v1::UploadClipRequest::kSamples:
-        return AcceptSlice(request.samples());
+        return AcceptSlice(message, request.samples());
       case v1::UploadClipRequest::kSampleSlices:
         for (const v1::ChannelSamples& slice : request.sample_slices().slices()) {
-          TEMPOKEY_RETURN_IF_ERROR(AcceptSlice(slice));
+          TEMPOKEY_RETURN_IF_ERROR(AcceptSlice(message, slice));
         }
         return absl::OkStatus();
       case v1::UploadClipRequest::PART_NOT_SET:
@@ -126,9 +131,9 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
         absl::StrCat("upload message ", messages_, " has neither header nor samples"));
   }
 
-  absl::Status AcceptSlice(const v1::ChannelSamples& samples) {
+  absl::Status AcceptSlice(const Request& message, const v1::ChannelSamples& samples) {
     TEMPOKEY_RETURN_IF_ERROR(assembler_->AddSamples(samples));
-    digest_->Offer(samples.channel_index(), samples.first_frame(),
+    digest_->Offer(message, samples.channel_index(), samples.first_frame(),
                    std::span<const double>(samples.samples().data(),
                                            static_cast<std::size_t>(samples.samples_size())));
     return absl::OkStatus();
@@ -142,6 +147,7 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
     TEMPOKEY_ASSIGN_OR_RETURN(core::Clip clip, std::move(*assembler_).Finish());
     assembler_.reset();
     const std::string id = digest_->Finish(clip);
+    digest_.reset();  // its thread, if it started one, ends here rather than with the call
     const std::int64_t frames = clip.frame_count;
     const auto channels = static_cast<std::int32_t>(clip.channels.size());
     const std::int64_t samples = clip.sample_count();
@@ -172,7 +178,7 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
   // Declared before the assembler, which charges it.
   MemoryBudget::Reservation reservation_;
   std::optional<wire::ClipAssembler> assembler_;
-  std::optional<wire::IncrementalClipDigest> digest_;
+  std::optional<BackgroundClipDigest> digest_;
   std::int64_t messages_ = 0;
   std::mutex mu_;
   bool finished_ ABSL_GUARDED_BY(mu_) = false;

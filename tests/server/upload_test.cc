@@ -6,6 +6,7 @@
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "proto/clip_digest.h"
 #include "server/server.h"
 #include "tempokey/core/io/bvh.h"
 #include "tests/server/server_test_util.h"
@@ -124,6 +125,25 @@ TEST_F(UploadTest, ClipLargerThanFourMiBUploadsInChunks) {
   EXPECT_EQ(outcome.response.sample_count(), 135 * 4000);
   EXPECT_EQ(again.response.clip_id(), outcome.response.clip_id());
   EXPECT_TRUE(again.response.already_stored());
+}
+
+// Past its first MiB an upload's samples are hashed on a thread of their own while the next
+// messages are read (server/background_digest.h): the id is still the clip's content id
+// computed here in one piece, whether the slices come in order or backwards.
+TEST_F(UploadTest, LargeUploadsIdIsTheContentIdOfTheClipInEitherOrder) {
+  const core::Clip clip = MakeClip(44, 4000);
+  const std::string expected = wire::ClipContentId(clip);
+
+  UploadOutcome forwards = UploadClip(*stub_, clip, 256 << 10);
+  // Hashed again (a clip is looked up by the id its samples give), then found stored.
+  UploadOutcome backwards =
+      UploadMessages(*stub_, UploadRequests(clip, 256 << 10, /*reverse=*/true));
+
+  TEMPOKEY_ASSERT_GRPC_OK(forwards.status);
+  TEMPOKEY_ASSERT_GRPC_OK(backwards.status);
+  EXPECT_EQ(forwards.response.clip_id(), expected);
+  EXPECT_EQ(backwards.response.clip_id(), expected);
+  EXPECT_TRUE(backwards.response.already_stored());
 }
 
 TEST_F(UploadTest, RealClipTiledPastFourMiBUploads) {

@@ -1,0 +1,116 @@
+#include "server/background_digest.h"
+
+#include <algorithm>
+#include <system_error>
+#include <utility>
+
+#include "spdlog/spdlog.h"
+
+namespace tempokey::server {
+
+DigestThreads::DigestThreads()
+    : max_(std::max(1, static_cast<int>(std::thread::hardware_concurrency()))) {}
+
+bool DigestThreads::TryAcquire() {
+  int in_use = in_use_.load();
+  while (in_use < max_) {
+    if (in_use_.compare_exchange_weak(in_use, in_use + 1)) return true;
+  }
+  return false;
+}
+
+BackgroundClipDigest::BackgroundClipDigest(const core::Clip& layout, DigestThreads* threads)
+    : BackgroundClipDigest(layout, threads, Limits{}) {}
+
+BackgroundClipDigest::BackgroundClipDigest(const core::Clip& layout, DigestThreads* threads,
+                                           Limits limits)
+    : digest_(layout), limits_(limits), threads_(threads) {}
+
+BackgroundClipDigest::~BackgroundClipDigest() {
+  if (!thread_.joinable()) return;
+  {
+    std::lock_guard lock(mu_);
+    stopping_ = true;
+  }
+  changed_.notify_all();
+  thread_.join();
+  if (threads_ != nullptr) threads_->Release();
+}
+
+void BackgroundClipDigest::Offer(std::shared_ptr<const void> keep, int channel,
+                                 std::int64_t first_frame, std::span<const double> samples) {
+  const std::size_t bytes = samples.size_bytes();
+  if (!thread_.joinable()) {
+    if (thread_failed_ || hashed_here_ + bytes <= limits_.inline_bytes) {
+      OfferHere(channel, first_frame, samples);
+      return;
+    }
+    if (!StartThread()) {
+      thread_failed_ = true;
+      OfferHere(channel, first_frame, samples);
+      return;
+    }
+  }
+  {
+    std::unique_lock lock(mu_);
+    changed_.wait(lock, [&] {
+      return pending_bytes_ == 0 || pending_bytes_ + bytes <= limits_.max_pending_bytes;
+    });
+    queue_.push_back({std::move(keep), channel, first_frame, samples});
+    pending_bytes_ += bytes;
+  }
+  changed_.notify_all();
+}
+
+bool BackgroundClipDigest::StartThread() {
+  if (threads_ != nullptr && !threads_->TryAcquire()) return false;
+  try {
+    thread_ = std::thread([this] { Run(); });
+  } catch (const std::system_error& error) {
+    spdlog::warn("upload digest: no thread ({}), hashing where the samples arrive", error.what());
+    if (threads_ != nullptr) threads_->Release();
+    return false;
+  }
+  return true;
+}
+
+void BackgroundClipDigest::OfferHere(int channel, std::int64_t first_frame,
+                                     std::span<const double> samples) {
+  digest_.Offer(channel, first_frame, samples);
+  hashed_here_ += samples.size_bytes();
+}
+
+std::string BackgroundClipDigest::Finish(const core::Clip& clip) {
+  if (thread_.joinable()) {
+    std::unique_lock lock(mu_);
+    changed_.wait(lock, [&] { return pending_bytes_ == 0; });
+  }
+  return digest_.Finish(clip);
+}
+
+std::size_t BackgroundClipDigest::pending_bytes() const {
+  std::lock_guard lock(mu_);
+  return pending_bytes_;
+}
+
+void BackgroundClipDigest::Run() {
+  for (;;) {
+    Piece piece;
+    {
+      std::unique_lock lock(mu_);
+      changed_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
+      if (stopping_) return;  // the pieces still queued are dropped with the digest
+      piece = std::move(queue_.front());
+      queue_.pop_front();
+    }
+    digest_.Offer(piece.channel, piece.first_frame, piece.samples);
+    piece.keep.reset();  // the message's memory goes back before the caller is told
+    {
+      std::lock_guard lock(mu_);
+      pending_bytes_ -= piece.samples.size_bytes();
+    }
+    changed_.notify_all();
+  }
+}
+
+}  // namespace tempokey::server
