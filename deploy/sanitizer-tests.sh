@@ -1,14 +1,15 @@
 #!/usr/bin/env bash
 # Sanitizer stage of the test suite: only what needs it, to stay inside CI's budget.
 #   ASan + UBSan: core, proto and server tests (Debug, no benchmarks, no CLI tests).
-#   TSan: the job pool, job manager, memory budget and idle reaper tests, which have no gRPC in
-#   them (Debian's gRPC is not instrumented, so TSan would report noise inside it).
+#   TSan: the job pool, job manager, memory budget, idle reaper and upload digest tests, which
+#   have no gRPC in them (Debian's gRPC is not instrumented, so TSan would report noise inside it).
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 jobs="${TEMPOKEY_JOBS:-$(nproc)}"
 asan_dir="${TEMPOKEY_ASAN_BUILD_DIR:-build-asan}"
 tsan_dir="${TEMPOKEY_TSAN_BUILD_DIR:-build-tsan}"
-tsan_targets=(job_pool_test job_manager_test memory_budget_test idle_reaper_test background_digest_test)
+tsan_targets=(job_pool_test job_manager_test memory_budget_test idle_reaper_test
+              background_digest_test)
 
 printf '\n== ASan + UBSan build (core and server tests)\n'
 cmake -S . -B "$asan_dir" -G Ninja -DCMAKE_BUILD_TYPE=Debug -DTEMPOKEY_BUILD_BENCH=OFF \

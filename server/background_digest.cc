@@ -7,6 +7,12 @@
 #include "spdlog/spdlog.h"
 
 namespace tempokey::server {
+namespace {
+
+// Samples the thread hashes between two looks at whether the digest is going.
+constexpr std::size_t kHashPieceSamples = (std::size_t{1} << 20) / sizeof(double);
+
+}  // namespace
 
 DigestThreads::DigestThreads()
     : max_(std::max(1, static_cast<int>(std::thread::hardware_concurrency()))) {}
@@ -24,7 +30,11 @@ BackgroundClipDigest::BackgroundClipDigest(const core::Clip& layout, DigestThrea
 
 BackgroundClipDigest::BackgroundClipDigest(const core::Clip& layout, DigestThreads* threads,
                                            Limits limits)
-    : digest_(layout), limits_(limits), threads_(threads) {}
+    : digest_(layout),
+      limits_(limits),
+      threads_(threads),
+      frame_count_(layout.frame_count),
+      channel_count_(static_cast<int>(layout.channels.size())) {}
 
 BackgroundClipDigest::~BackgroundClipDigest() {
   if (!thread_.joinable()) return;
@@ -39,22 +49,24 @@ BackgroundClipDigest::~BackgroundClipDigest() {
 
 void BackgroundClipDigest::Offer(std::shared_ptr<const void> keep, int channel,
                                  std::int64_t first_frame, std::span<const double> samples) {
+  // wire::IncrementalClipDigest hashes such samples from the finished clip instead.
+  if (!Continues(channel, first_frame, samples.size())) return;
   const std::size_t bytes = samples.size_bytes();
   if (!thread_.joinable()) {
-    if (thread_failed_ || hashed_here_ + bytes <= limits_.inline_bytes) {
-      OfferHere(channel, first_frame, samples);
-      return;
-    }
-    if (!StartThread()) {
-      thread_failed_ = true;
+    if (thread_failed_ || hashed_here_ + bytes <= limits_.inline_bytes || !StartThread()) {
       OfferHere(channel, first_frame, samples);
       return;
     }
   }
+  if (bytes > limits_.max_pending_bytes) {
+    WaitFor([&] { return pending_bytes_ == 0; });
+    OfferHere(channel, first_frame, samples);
+    return;
+  }
   {
     std::unique_lock lock(mu_);
     changed_.wait(lock, [&] {
-      return pending_bytes_ == 0 || pending_bytes_ + bytes <= limits_.max_pending_bytes;
+      return pending_bytes_ + bytes <= limits_.max_pending_bytes;
     });
     queue_.push_back({std::move(keep), channel, first_frame, samples});
     pending_bytes_ += bytes;
@@ -62,14 +74,14 @@ void BackgroundClipDigest::Offer(std::shared_ptr<const void> keep, int channel,
   changed_.notify_all();
 }
 
-bool BackgroundClipDigest::StartThread() {
-  if (threads_ != nullptr && !threads_->TryAcquire()) return false;
-  try {
-    thread_ = std::thread([this] { Run(); });
-  } catch (const std::system_error& error) {
-    spdlog::warn("upload digest: no thread ({}), hashing where the samples arrive", error.what());
-    if (threads_ != nullptr) threads_->Release();
+bool BackgroundClipDigest::Continues(int channel, std::int64_t first_frame, std::size_t count) {
+  if (channel != next_channel_ || first_frame != next_frame_ || channel >= channel_count_) {
     return false;
+  }
+  next_frame_ += static_cast<std::int64_t>(count);
+  if (next_frame_ == frame_count_) {
+    ++next_channel_;
+    next_frame_ = 0;
   }
   return true;
 }
@@ -80,10 +92,31 @@ void BackgroundClipDigest::OfferHere(int channel, std::int64_t first_frame,
   hashed_here_ += samples.size_bytes();
 }
 
+bool BackgroundClipDigest::StartThread() {
+  if (threads_ != nullptr && !threads_->TryAcquire()) {
+    thread_failed_ = true;
+    return false;
+  }
+  try {
+    thread_ = std::thread([this] { Run(); });
+  } catch (const std::system_error& error) {
+    spdlog::warn("upload digest: no thread ({}), hashing where the samples arrive", error.what());
+    if (threads_ != nullptr) threads_->Release();
+    thread_failed_ = true;
+    return false;
+  }
+  return true;
+}
+
+template <class Predicate>
+void BackgroundClipDigest::WaitFor(Predicate predicate) {
+  std::unique_lock lock(mu_);
+  changed_.wait(lock, predicate);
+}
+
 std::string BackgroundClipDigest::Finish(const core::Clip& clip) {
   if (thread_.joinable()) {
-    std::unique_lock lock(mu_);
-    changed_.wait(lock, [&] { return pending_bytes_ == 0; });
+    WaitFor([&] { return pending_bytes_ == 0; });
   }
   return digest_.Finish(clip);
 }
@@ -98,12 +131,24 @@ void BackgroundClipDigest::Run() {
     Piece piece;
     {
       std::unique_lock lock(mu_);
-      changed_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
+      changed_.wait(lock, [&] {
+        return stopping_ || !queue_.empty();
+      });
       if (stopping_) return;  // the pieces still queued are dropped with the digest
       piece = std::move(queue_.front());
       queue_.pop_front();
     }
-    digest_.Offer(piece.channel, piece.first_frame, piece.samples);
+    // A MiB at a time, so that a digest being dropped waits for one MiB at most.
+    for (std::size_t done = 0; done < piece.samples.size();) {
+      const std::size_t count = std::min(kHashPieceSamples, piece.samples.size() - done);
+      digest_.Offer(piece.channel, piece.first_frame + static_cast<std::int64_t>(done),
+                    piece.samples.subspan(done, count));
+      done += count;
+      if (done < piece.samples.size()) {
+        std::lock_guard lock(mu_);
+        if (stopping_) return;
+      }
+    }
     piece.keep.reset();  // the message's memory goes back before the caller is told
     {
       std::lock_guard lock(mu_);

@@ -1,13 +1,21 @@
 // An upload's content id (wire::IncrementalClipDigest) hashed beside the upload's reads. SHA-256
 // of the samples was about 38 % of the server's CPU in a 50 MB upload, all of it on the thread
-// that reads the stream, between one read and the next (README, "Speed"). Here the first
-// Limits::inline_bytes of samples are hashed where they are offered (a small upload starts no
-// thread); past them, a thread of the digest's own hashes them in the order offered while the
-// caller goes on reading. At most Limits::max_pending_bytes wait to be hashed: an offer beyond
-// them waits for the thread to catch up, so the memory an upload holds for its hashing is
-// bounded, and no wait is longer than hashing that much (about two milliseconds per 4 MiB
-// here). How many uploads hash on threads of their own at once is bounded server-wide
-// (DigestThreads): past that, an upload hashes where its samples arrive, as it did before.
+// that reads the stream, between one read and the next (README, "Speed").
+//
+// Here the first Limits::inline_bytes of samples are hashed where they are offered (a small
+// upload starts no thread); past them, a thread of the digest's own hashes the offers in the
+// order made, a MiB at a time, while the caller goes on reading. Bounds:
+// - At most Limits::max_pending_bytes of samples wait to be hashed: an offer that would pass them
+//   waits for the thread to catch up. An offer larger than the bound waits until nothing is
+//   pending and is then hashed where it is made, as before. So no wait is longer than hashing
+//   max_pending_bytes (about 2 ms per 4 MiB here), and what the digest holds is the messages its
+//   pending samples came in: those samples, and the slices already hashed of the message at the
+//   head of the queue (a batch of slices is let go with its last slice).
+// - Offers that do not continue the canonical order (wire::IncrementalClipDigest hashes those
+//   from the finished clip) are dropped here, not queued: they start no thread and hold nothing.
+// - How many uploads hash on threads of their own at once is bounded server-wide
+//   (DigestThreads): past that, an upload hashes where its samples arrive, as it did before.
+// - The destructor waits for at most the MiB being hashed.
 //
 // No gRPC in here, so it is unit-tested under ThreadSanitizer.
 #ifndef TEMPOKEY_SERVER_BACKGROUND_DIGEST_H_
@@ -31,11 +39,11 @@
 namespace tempokey::server {
 
 // The threads BackgroundClipDigest may start at once, over every upload of a server: one per
-// core by default, so the memory offers wait in is at most that many times their bound.
-// Thread-safe.
+// core by default (std::thread::hardware_concurrency()), so the memory offers wait in is at most
+// that many times their bound. Thread-safe.
 class DigestThreads {
  public:
-  DigestThreads();  // std::thread::hardware_concurrency(), at least 1
+  DigestThreads();
   explicit DigestThreads(int max) : max_(max) {}
   bool TryAcquire();
   void Release() { in_use_.fetch_sub(1); }
@@ -51,7 +59,7 @@ class BackgroundClipDigest {
   struct Limits {
     // Samples hashed where they are offered before the thread starts.
     std::size_t inline_bytes = std::size_t{1} << 20;
-    // Samples offered but not yet hashed, at most (a larger single offer waits for none).
+    // Samples offered but not yet hashed, at most.
     std::size_t max_pending_bytes = std::size_t{4} << 20;
   };
 
@@ -66,7 +74,7 @@ class BackgroundClipDigest {
 
   // wire::IncrementalClipDigest::Offer(): samples of `channel` from `first_frame`, already
   // accepted by the assembler. `keep` owns the memory `samples` lie in and is held until they are
-  // hashed. Waits while taking them would leave more than max_pending_bytes unhashed.
+  // hashed. May wait (above).
   void Offer(std::shared_ptr<const void> keep, int channel, std::int64_t first_frame,
              std::span<const double> samples);
 
@@ -76,7 +84,7 @@ class BackgroundClipDigest {
 
   // Whether offers went to the thread (tests).
   bool hashing_in_background() const { return thread_.joinable(); }
-  // Bytes offered and not hashed yet (tests).
+  // Bytes of samples offered to the thread and not hashed yet (tests).
   std::size_t pending_bytes() const;
 
  private:
@@ -87,10 +95,17 @@ class BackgroundClipDigest {
     std::span<const double> samples;
   };
 
-  // Hashes offers where they are made: before the thread starts, or when it could not start.
+  // Whether samples of `channel` from `first_frame` continue the canonical order; if so, moves
+  // the order's position past `count` of them.
+  bool Continues(int channel, std::int64_t first_frame, std::size_t count);
+  // Hashes an offer where it is made: before the thread starts, when it could not start, or when
+  // the offer is larger than the bound.
   void OfferHere(int channel, std::int64_t first_frame, std::span<const double> samples);
   // Claims one of threads_ and starts the thread; false when none is free or it cannot start.
   bool StartThread();
+  // Waits until the thread has hashed what makes `predicate` true (under mu_).
+  template <class Predicate>
+  void WaitFor(Predicate predicate);
   void Run();  // the thread
 
   // Touched by the thread while offers are pending, by the caller otherwise (the queue's mutex
@@ -98,6 +113,10 @@ class BackgroundClipDigest {
   wire::IncrementalClipDigest digest_;
   const Limits limits_;
   DigestThreads* const threads_;
+  const std::int64_t frame_count_;
+  const int channel_count_;
+  int next_channel_ = 0;  // the canonical order's position reached by the offers taken
+  std::int64_t next_frame_ = 0;
   std::size_t hashed_here_ = 0;  // bytes hashed by OfferHere()
   bool thread_failed_ = false;   // no thread could be started: every offer hashed here
   mutable std::mutex mu_;

@@ -1,9 +1,8 @@
 // UploadClip: a ClipHeader, then ChannelSamples slices; each message is checked as it arrives
 // (wire::ClipAssembler), so a bad upload stops at its first bad message, and digested beside the
-// reads that follow (BackgroundClipDigest). Memory is
-// charged to the server's budget as samples arrive, never for the sizes the header declares.
-// A client that sends nothing for the idle timeout while the server waits gets
-// DEADLINE_EXCEEDED and its stream slot back.
+// reads that follow (BackgroundClipDigest). Memory is charged to the server's budget as samples
+// arrive, never for the sizes the header declares. A client that sends nothing for the idle
+// timeout while the server waits gets DEADLINE_EXCEEDED and its stream slot back.
 #include <memory>
 #include <mutex>
 #include <optional>

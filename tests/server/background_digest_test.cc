@@ -3,6 +3,10 @@
 // against the published SHA-256 vectors in clip_digest_test), whatever the order of the slices;
 // what it holds for hashing stays within its bound and is let go once hashed or dropped. Run
 // under ThreadSanitizer too (deploy/sanitizer-tests.sh).
+//
+// Where the slices come in order, Finish() is given a clip of the same layout whose samples all
+// differ: wire::IncrementalClipDigest reads from the clip only what was not offered in order, so
+// the id comes out right only if the offers themselves were hashed, each once, in order.
 #include "server/background_digest.h"
 
 #include <algorithm>
@@ -25,7 +29,7 @@ constexpr std::int64_t kFrames = 3000;
 constexpr std::int64_t kSliceFrames = 500;  // 4000 bytes a slice
 constexpr std::size_t kSliceBytes = kSliceFrames * sizeof(double);
 
-core::Clip SixChannels() {
+core::Clip SixChannels(double phase = 0.0) {
   core::Clip clip;
   clip.name = "six";
   clip.frame_time_seconds = 1.0 / 120.0;
@@ -36,34 +40,52 @@ core::Clip SixChannels() {
     clip.channels[c].name = "c" + std::to_string(c);
     clip.channels[c].samples.resize(kFrames);
     for (std::int64_t f = 0; f < kFrames; ++f) {
-      clip.channels[c].samples[f] = std::sin(0.01 * static_cast<double>(f * (c + 1))) * 90.0;
+      const double t = 0.01 * static_cast<double>(f * (c + 1)) + phase;
+      clip.channels[c].samples[f] = std::sin(t) * 90.0;
     }
   }
   return clip;
 }
 
-// One slice as an upload message carries it: its own copy of the samples, owned by `keep`.
+// The same layout, every sample different: what Finish() must not need to read.
+core::Clip OtherSamples() { return SixChannels(/*phase=*/1.0); }
+
+// One slice as an upload message carries it: samples owned by `keep`, a message of its own
+// unless several slices share one (a batch).
 struct Slice {
   std::shared_ptr<std::vector<double>> keep;
   int channel = 0;
   std::int64_t first_frame = 0;
+  std::span<const double> samples;
 };
 
-std::vector<Slice> Slices(const core::Clip& clip, bool reverse) {
+enum class Order { kCanonical, kReverse };
+
+// The clip's slices; `per_message` consecutive slices share one message.
+std::vector<Slice> Slices(const core::Clip& clip, Order order, int per_message = 1) {
   std::vector<Slice> slices;
+  std::shared_ptr<std::vector<double>> message;
   for (int c = 0; c < kChannels; ++c) {
     for (std::int64_t f = 0; f < kFrames; f += kSliceFrames) {
+      const int index = static_cast<int>(slices.size());
+      if (index % per_message == 0) {
+        message = std::make_shared<std::vector<double>>();
+        message->reserve(static_cast<std::size_t>(per_message * kSliceFrames));
+      }
       const auto* first = clip.channels[c].samples.data() + f;
-      slices.push_back({std::make_shared<std::vector<double>>(first, first + kSliceFrames), c, f});
+      const std::size_t at = message->size();
+      message->insert(message->end(), first, first + kSliceFrames);
+      slices.push_back(
+          {message, c, f, std::span<const double>(*message).subspan(at, kSliceFrames)});
     }
   }
-  if (reverse) std::reverse(slices.begin(), slices.end());
+  if (order == Order::kReverse) std::reverse(slices.begin(), slices.end());
   return slices;
 }
 
 void OfferAll(BackgroundClipDigest& digest, const std::vector<Slice>& slices) {
   for (const Slice& slice : slices) {
-    digest.Offer(slice.keep, slice.channel, slice.first_frame, std::span<const double>(*slice.keep));
+    digest.Offer(slice.keep, slice.channel, slice.first_frame, slice.samples);
   }
 }
 
@@ -71,35 +93,53 @@ void OfferAll(BackgroundClipDigest& digest, const std::vector<Slice>& slices) {
 constexpr BackgroundClipDigest::Limits kSmallLimits = {.inline_bytes = 2 * kSliceBytes,
                                                        .max_pending_bytes = 3 * kSliceBytes};
 
-TEST(BackgroundClipDigestTest, IdHashedOnTheThreadIsTheClipsContentId) {
+TEST(BackgroundClipDigestTest, SlicesInOrderAreHashedOnTheThreadIntoTheClipsContentId) {
   const core::Clip clip = SixChannels();
   BackgroundClipDigest digest(clip, nullptr, kSmallLimits);
 
-  OfferAll(digest, Slices(clip, /*reverse=*/false));
+  OfferAll(digest, Slices(clip, Order::kCanonical));
 
   EXPECT_TRUE(digest.hashing_in_background());
-  EXPECT_EQ(digest.Finish(clip), wire::ClipContentId(clip));
+  EXPECT_EQ(digest.Finish(OtherSamples()), wire::ClipContentId(clip));
 }
 
-TEST(BackgroundClipDigestTest, IdHashedWhereOfferedIsTheClipsContentId) {
+TEST(BackgroundClipDigestTest, SmallUploadIsHashedWhereOfferedIntoTheClipsContentId) {
   const core::Clip clip = SixChannels();
   BackgroundClipDigest digest(clip, nullptr,
                               {.inline_bytes = 1 << 20, .max_pending_bytes = 1 << 20});
 
-  OfferAll(digest, Slices(clip, /*reverse=*/false));
+  OfferAll(digest, Slices(clip, Order::kCanonical));
 
   EXPECT_FALSE(digest.hashing_in_background());
+  EXPECT_EQ(digest.Finish(OtherSamples()), wire::ClipContentId(clip));
+}
+
+TEST(BackgroundClipDigestTest, SlicesOutOfOrderStartNoThreadAndGiveTheSameId) {
+  const core::Clip clip = SixChannels();
+  BackgroundClipDigest digest(clip, nullptr, kSmallLimits);
+  std::vector<std::weak_ptr<std::vector<double>>> held;
+  {
+    const std::vector<Slice> slices = Slices(clip, Order::kReverse);
+    for (const Slice& slice : slices) held.push_back(slice.keep);
+    OfferAll(digest, slices);
+  }
+
+  // Only the last slice offered (channel 0, frame 0) continues the canonical order: it alone is
+  // hashed, where it is offered (within inline_bytes); the others are left to Finish() and not
+  // held, though they are far more than inline_bytes.
+  EXPECT_FALSE(digest.hashing_in_background());
+  for (const auto& slice : held) EXPECT_TRUE(slice.expired());
   EXPECT_EQ(digest.Finish(clip), wire::ClipContentId(clip));
 }
 
-TEST(BackgroundClipDigestTest, SlicesInReverseOrderGiveTheSameId) {
+TEST(BackgroundClipDigestTest, SlicesSharingAMessageGiveTheSameId) {
   const core::Clip clip = SixChannels();
   BackgroundClipDigest digest(clip, nullptr, kSmallLimits);
 
-  OfferAll(digest, Slices(clip, /*reverse=*/true));
+  OfferAll(digest, Slices(clip, Order::kCanonical, /*per_message=*/4));
 
   EXPECT_TRUE(digest.hashing_in_background());
-  EXPECT_EQ(digest.Finish(clip), wire::ClipContentId(clip));
+  EXPECT_EQ(digest.Finish(OtherSamples()), wire::ClipContentId(clip));
 }
 
 TEST(BackgroundClipDigestTest, SamplesWaitingToBeHashedNeverExceedTheBound) {
@@ -107,25 +147,36 @@ TEST(BackgroundClipDigestTest, SamplesWaitingToBeHashedNeverExceedTheBound) {
   BackgroundClipDigest digest(clip, nullptr, kSmallLimits);
   std::size_t most = 0;
 
-  for (const Slice& slice : Slices(clip, /*reverse=*/false)) {
-    digest.Offer(slice.keep, slice.channel, slice.first_frame,
-                 std::span<const double>(*slice.keep));
+  for (const Slice& slice : Slices(clip, Order::kCanonical)) {
+    digest.Offer(slice.keep, slice.channel, slice.first_frame, slice.samples);
     most = std::max(most, digest.pending_bytes());
   }
 
   EXPECT_LE(most, kSmallLimits.max_pending_bytes);
-  EXPECT_EQ(digest.Finish(clip), wire::ClipContentId(clip));
+  EXPECT_EQ(digest.Finish(OtherSamples()), wire::ClipContentId(clip));
   EXPECT_EQ(digest.pending_bytes(), 0u);
 }
 
-TEST(BackgroundClipDigestTest, AnOfferLargerThanTheBoundIsTakenWhenNothingWaits) {
+TEST(BackgroundClipDigestTest, AnOfferLargerThanTheBoundIsHashedWhereMadeAfterThoseWaiting) {
   const core::Clip clip = SixChannels();
   BackgroundClipDigest digest(clip, nullptr,
-                              {.inline_bytes = 0, .max_pending_bytes = kSliceBytes / 2});
+                              {.inline_bytes = 0, .max_pending_bytes = 2 * kSliceBytes});
+  std::size_t most = 0;
+  // Channel 0 in slices, then every other channel whole (six slices' worth, over the bound).
+  for (const Slice& slice : Slices(clip, Order::kCanonical)) {
+    if (slice.channel != 0) continue;
+    digest.Offer(slice.keep, slice.channel, slice.first_frame, slice.samples);
+    most = std::max(most, digest.pending_bytes());
+  }
+  for (int c = 1; c < kChannels; ++c) {
+    auto whole = std::make_shared<std::vector<double>>(clip.channels[c].samples);
+    digest.Offer(whole, c, 0, *whole);
+    most = std::max(most, digest.pending_bytes());
+  }
 
-  OfferAll(digest, Slices(clip, /*reverse=*/false));
-
-  EXPECT_EQ(digest.Finish(clip), wire::ClipContentId(clip));
+  EXPECT_TRUE(digest.hashing_in_background());
+  EXPECT_LE(most, 2 * kSliceBytes);
+  EXPECT_EQ(digest.Finish(OtherSamples()), wire::ClipContentId(clip));
 }
 
 TEST(BackgroundClipDigestTest, SlicesAreLetGoOnceHashed) {
@@ -133,7 +184,7 @@ TEST(BackgroundClipDigestTest, SlicesAreLetGoOnceHashed) {
   BackgroundClipDigest digest(clip, nullptr, kSmallLimits);
   std::vector<std::weak_ptr<std::vector<double>>> held;
   {
-    const std::vector<Slice> slices = Slices(clip, /*reverse=*/false);
+    const std::vector<Slice> slices = Slices(clip, Order::kCanonical);
     for (const Slice& slice : slices) held.push_back(slice.keep);
     OfferAll(digest, slices);
   }
@@ -149,7 +200,7 @@ TEST(BackgroundClipDigestTest, DroppedWithSlicesQueuedItLetsThemGoAndReturns) {
   {
     BackgroundClipDigest digest(clip, nullptr,
                                 {.inline_bytes = 0, .max_pending_bytes = 1 << 20});
-    const std::vector<Slice> slices = Slices(clip, /*reverse=*/false);
+    const std::vector<Slice> slices = Slices(clip, Order::kCanonical);
     for (const Slice& slice : slices) held.push_back(slice.keep);
     OfferAll(digest, slices);
     // Destroyed here without Finish(): a refused or cancelled upload.
@@ -164,14 +215,26 @@ TEST(BackgroundClipDigestTest, WithEveryThreadTakenAnUploadHashesWhereItsSamples
   BackgroundClipDigest first(clip, &threads, kSmallLimits);
   BackgroundClipDigest second(clip, &threads, kSmallLimits);
 
-  OfferAll(first, Slices(clip, /*reverse=*/false));
-  OfferAll(second, Slices(clip, /*reverse=*/true));
+  OfferAll(first, Slices(clip, Order::kCanonical));
+  OfferAll(second, Slices(clip, Order::kCanonical));
 
   EXPECT_TRUE(first.hashing_in_background());
   EXPECT_FALSE(second.hashing_in_background());
   EXPECT_EQ(threads.in_use(), 1);
-  EXPECT_EQ(first.Finish(clip), wire::ClipContentId(clip));
-  EXPECT_EQ(second.Finish(clip), wire::ClipContentId(clip));
+  EXPECT_EQ(first.Finish(OtherSamples()), wire::ClipContentId(clip));
+  EXPECT_EQ(second.Finish(OtherSamples()), wire::ClipContentId(clip));
+}
+
+TEST(BackgroundClipDigestTest, WithNoThreadAllowedEveryUploadHashesWhereItsSamplesArrive) {
+  const core::Clip clip = SixChannels();
+  DigestThreads none(0);
+  BackgroundClipDigest digest(clip, &none, kSmallLimits);
+
+  OfferAll(digest, Slices(clip, Order::kCanonical));
+
+  EXPECT_FALSE(digest.hashing_in_background());
+  EXPECT_EQ(none.in_use(), 0);
+  EXPECT_EQ(digest.Finish(OtherSamples()), wire::ClipContentId(clip));
 }
 
 TEST(BackgroundClipDigestTest, ItsThreadIsGivenBackWhenTheDigestGoes) {
@@ -179,15 +242,15 @@ TEST(BackgroundClipDigestTest, ItsThreadIsGivenBackWhenTheDigestGoes) {
   DigestThreads threads(1);
   {
     BackgroundClipDigest digest(clip, &threads, kSmallLimits);
-    OfferAll(digest, Slices(clip, /*reverse=*/false));
+    OfferAll(digest, Slices(clip, Order::kCanonical));
     EXPECT_EQ(threads.in_use(), 1);
   }
   EXPECT_EQ(threads.in_use(), 0);
 
   BackgroundClipDigest next(clip, &threads, kSmallLimits);
-  OfferAll(next, Slices(clip, /*reverse=*/false));
+  OfferAll(next, Slices(clip, Order::kCanonical));
   EXPECT_TRUE(next.hashing_in_background());
-  EXPECT_EQ(next.Finish(clip), wire::ClipContentId(clip));
+  EXPECT_EQ(next.Finish(OtherSamples()), wire::ClipContentId(clip));
 }
 
 }  // namespace

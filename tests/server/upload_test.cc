@@ -146,6 +146,32 @@ TEST_F(UploadTest, LargeUploadsIdIsTheContentIdOfTheClipInEitherOrder) {
   EXPECT_TRUE(backwards.response.already_stored());
 }
 
+// Refused or cancelled past its first MiB, while its samples are being hashed on the digest's
+// thread, an upload ends as before, and the next one is hashed and stored right.
+TEST_F(UploadTest, LargeUploadEndedMidwayWhileHashingLeavesTheServerServing) {
+  const core::Clip clip = MakeClip(44, 4000);
+  std::vector<v1::UploadClipRequest> refused = UploadRequests(clip, 256 << 10);
+  ASSERT_GT(refused.size(), 12u);
+  refused.insert(refused.begin() + 12, refused[11]);  // the same slice twice: an overlap
+  grpc::ClientContext context;
+  SetDeadline(context);
+  v1::UploadClipResponse response;
+  auto cancelled = stub_->UploadClip(&context, &response);
+  const std::vector<v1::UploadClipRequest> requests = UploadRequests(clip, 256 << 10);
+  for (std::size_t i = 0; i < 12; ++i) ASSERT_TRUE(cancelled->Write(requests[i]));
+
+  const UploadOutcome refusal = UploadMessages(*stub_, refused);
+  context.TryCancel();
+  const grpc::Status cancel = cancelled->Finish();
+  const UploadOutcome next = UploadClip(*stub_, clip, 1 << 20);
+
+  EXPECT_EQ(refusal.status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_EQ(cancel.error_code(), grpc::StatusCode::CANCELLED);
+  TEMPOKEY_ASSERT_GRPC_OK(next.status);
+  EXPECT_EQ(next.response.clip_id(), wire::ClipContentId(clip));
+  EXPECT_FALSE(next.response.already_stored());
+}
+
 TEST_F(UploadTest, RealClipTiledPastFourMiBUploads) {
   absl::StatusOr<core::Clip> dance = core::ReadBvhFile(SharedBvh(kDanceClip));
   ASSERT_TRUE(dance.ok()) << dance.status();
