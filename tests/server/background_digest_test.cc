@@ -89,6 +89,15 @@ void OfferAll(BackgroundClipDigest& digest, const std::vector<Slice>& slices) {
   }
 }
 
+// What the caller held of the slices it offered, once it let them go: what the digest still holds.
+using Held = std::vector<std::weak_ptr<std::vector<double>>>;
+Held OfferAllAndLetGo(BackgroundClipDigest& digest, std::vector<Slice> slices) {
+  Held held;
+  for (const Slice& slice : slices) held.push_back(slice.keep);
+  OfferAll(digest, slices);
+  return held;
+}
+
 // Small limits, so that a clip of 144 KB of samples crosses them many times.
 constexpr BackgroundClipDigest::Limits kSmallLimits = {.inline_bytes = 2 * kSliceBytes,
                                                        .max_pending_bytes = 3 * kSliceBytes};
@@ -117,12 +126,7 @@ TEST(BackgroundClipDigestTest, SmallUploadIsHashedWhereOfferedIntoTheClipsConten
 TEST(BackgroundClipDigestTest, SlicesOutOfOrderStartNoThreadAndGiveTheSameId) {
   const core::Clip clip = SixChannels();
   BackgroundClipDigest digest(clip, nullptr, kSmallLimits);
-  std::vector<std::weak_ptr<std::vector<double>>> held;
-  {
-    const std::vector<Slice> slices = Slices(clip, Order::kReverse);
-    for (const Slice& slice : slices) held.push_back(slice.keep);
-    OfferAll(digest, slices);
-  }
+  const Held held = OfferAllAndLetGo(digest, Slices(clip, Order::kReverse));
 
   // Only the last slice offered (channel 0, frame 0) continues the canonical order: it alone is
   // hashed, where it is offered (within inline_bytes); the others are left to Finish() and not
@@ -182,12 +186,7 @@ TEST(BackgroundClipDigestTest, AnOfferLargerThanTheBoundIsHashedWhereMadeAfterTh
 TEST(BackgroundClipDigestTest, SlicesAreLetGoOnceHashed) {
   const core::Clip clip = SixChannels();
   BackgroundClipDigest digest(clip, nullptr, kSmallLimits);
-  std::vector<std::weak_ptr<std::vector<double>>> held;
-  {
-    const std::vector<Slice> slices = Slices(clip, Order::kCanonical);
-    for (const Slice& slice : slices) held.push_back(slice.keep);
-    OfferAll(digest, slices);
-  }
+  const Held held = OfferAllAndLetGo(digest, Slices(clip, Order::kCanonical));
 
   digest.Finish(clip);
 
@@ -196,45 +195,37 @@ TEST(BackgroundClipDigestTest, SlicesAreLetGoOnceHashed) {
 
 TEST(BackgroundClipDigestTest, DroppedWithSlicesQueuedItLetsThemGoAndReturns) {
   const core::Clip clip = SixChannels();
-  std::vector<std::weak_ptr<std::vector<double>>> held;
+  Held held;
   {
     BackgroundClipDigest digest(clip, nullptr,
                                 {.inline_bytes = 0, .max_pending_bytes = 1 << 20});
-    const std::vector<Slice> slices = Slices(clip, Order::kCanonical);
-    for (const Slice& slice : slices) held.push_back(slice.keep);
-    OfferAll(digest, slices);
+    held = OfferAllAndLetGo(digest, Slices(clip, Order::kCanonical));
     // Destroyed here without Finish(): a refused or cancelled upload.
   }
 
   for (const auto& slice : held) EXPECT_TRUE(slice.expired());
 }
 
-TEST(BackgroundClipDigestTest, WithEveryThreadTakenAnUploadHashesWhereItsSamplesArrive) {
+TEST(BackgroundClipDigestTest, PastTheThreadLimitAnUploadHashesWhereItsSamplesArrive) {
   const core::Clip clip = SixChannels();
-  DigestThreads threads(1);
-  BackgroundClipDigest first(clip, &threads, kSmallLimits);
-  BackgroundClipDigest second(clip, &threads, kSmallLimits);
+  DigestThreads one(1);
+  DigestThreads none(0);
+  BackgroundClipDigest first(clip, &one, kSmallLimits);
+  BackgroundClipDigest second(clip, &one, kSmallLimits);
+  BackgroundClipDigest third(clip, &none, kSmallLimits);
 
-  OfferAll(first, Slices(clip, Order::kCanonical));
-  OfferAll(second, Slices(clip, Order::kCanonical));
+  for (BackgroundClipDigest* digest : {&first, &second, &third}) {
+    OfferAll(*digest, Slices(clip, Order::kCanonical));
+  }
 
   EXPECT_TRUE(first.hashing_in_background());
   EXPECT_FALSE(second.hashing_in_background());
-  EXPECT_EQ(threads.in_use(), 1);
-  EXPECT_EQ(first.Finish(OtherSamples()), wire::ClipContentId(clip));
-  EXPECT_EQ(second.Finish(OtherSamples()), wire::ClipContentId(clip));
-}
-
-TEST(BackgroundClipDigestTest, WithNoThreadAllowedEveryUploadHashesWhereItsSamplesArrive) {
-  const core::Clip clip = SixChannels();
-  DigestThreads none(0);
-  BackgroundClipDigest digest(clip, &none, kSmallLimits);
-
-  OfferAll(digest, Slices(clip, Order::kCanonical));
-
-  EXPECT_FALSE(digest.hashing_in_background());
+  EXPECT_FALSE(third.hashing_in_background());
+  EXPECT_EQ(one.in_use(), 1);
   EXPECT_EQ(none.in_use(), 0);
-  EXPECT_EQ(digest.Finish(OtherSamples()), wire::ClipContentId(clip));
+  for (BackgroundClipDigest* digest : {&first, &second, &third}) {
+    EXPECT_EQ(digest->Finish(OtherSamples()), wire::ClipContentId(clip));
+  }
 }
 
 TEST(BackgroundClipDigestTest, ItsThreadIsGivenBackWhenTheDigestGoes) {
