@@ -4,6 +4,7 @@
 #include <system_error>
 #include <utility>
 
+#include "server/server_options.h"
 #include "spdlog/spdlog.h"
 
 namespace tempokey::server {
@@ -14,8 +15,7 @@ constexpr std::size_t kHashPieceSamples = (std::size_t{1} << 20) / sizeof(double
 
 }  // namespace
 
-DigestThreads::DigestThreads()
-    : max_(std::max(1, static_cast<int>(std::thread::hardware_concurrency()))) {}
+DigestThreads::DigestThreads() : max_(DefaultWorkerCount()) {}
 
 bool DigestThreads::TryAcquire() {
   int in_use = in_use_.load();

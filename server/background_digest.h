@@ -39,8 +39,8 @@
 namespace tempokey::server {
 
 // The threads BackgroundClipDigest may start at once, over every upload of a server: one per
-// core by default (std::thread::hardware_concurrency()), so the memory offers wait in is at most
-// that many times their bound. Thread-safe.
+// CPU the server may use by default (DefaultWorkerCount(): its affinity, within its cgroup's CPU
+// quota), so the memory offers wait in is at most that many times their bound. Thread-safe.
 class DigestThreads {
  public:
   DigestThreads();

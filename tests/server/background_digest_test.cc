@@ -19,6 +19,7 @@
 
 #include "gtest/gtest.h"
 #include "proto/clip_digest.h"
+#include "server/server_options.h"
 #include "tempokey/core/model/clip.h"
 
 namespace tempokey::server {
@@ -226,6 +227,17 @@ TEST(BackgroundClipDigestTest, PastTheThreadLimitAnUploadHashesWhereItsSamplesAr
   for (BackgroundClipDigest* digest : {&first, &second, &third}) {
     EXPECT_EQ(digest->Finish(OtherSamples()), wire::ClipContentId(clip));
   }
+}
+
+TEST(DigestThreadsTest, AllowsByDefaultOneThreadPerCpuTheServerMayUse) {
+  DigestThreads threads;
+  const int cpus = DefaultWorkerCount();  // the affinity mask within the cgroup's CPU quota
+
+  for (int i = 0; i < cpus; ++i) EXPECT_TRUE(threads.TryAcquire()) << i;
+  EXPECT_FALSE(threads.TryAcquire());
+  EXPECT_EQ(threads.in_use(), cpus);
+  for (int i = 0; i < cpus; ++i) threads.Release();
+  EXPECT_EQ(threads.in_use(), 0);
 }
 
 TEST(BackgroundClipDigestTest, ItsThreadIsGivenBackWhenTheDigestGoes) {
