@@ -54,10 +54,21 @@ struct Sha256 {
 
 struct IncrementalClipDigest::Hasher : Sha256 {};
 
+bool CanonicalSampleOrder::Advance(int channel, std::int64_t first_frame, std::size_t count) {
+  if (channel != channel_ || first_frame != frame_ || channel >= channel_count_) return false;
+  frame_ += static_cast<std::int64_t>(count);
+  if (frame_ == frame_count_) {
+    ++channel_;
+    frame_ = 0;
+  }
+  return true;
+}
+
 IncrementalClipDigest::IncrementalClipDigest(const core::Clip& layout)
     : hasher_(std::make_unique<Hasher>()),
       frame_count_(layout.frame_count),
-      channel_count_(static_cast<int>(layout.channels.size())) {
+      channel_count_(static_cast<int>(layout.channels.size())),
+      hashed_(frame_count_, channel_count_) {
   Hasher& h = *hasher_;
   h.Str("tempokey.clip.v1");
   h.Str(layout.name);
@@ -89,21 +100,17 @@ IncrementalClipDigest::~IncrementalClipDigest() = default;
 
 void IncrementalClipDigest::Offer(int channel, std::int64_t first_frame,
                                   std::span<const double> samples) {
-  if (channel != next_channel_ || first_frame != next_frame_) return;
-  hasher_->Bytes(samples.data(), samples.size_bytes());
-  next_frame_ += static_cast<std::int64_t>(samples.size());
-  if (next_frame_ == frame_count_) {
-    ++next_channel_;
-    next_frame_ = 0;
+  if (hashed_.Advance(channel, first_frame, samples.size())) {
+    hasher_->Bytes(samples.data(), samples.size_bytes());
   }
 }
 
 std::string IncrementalClipDigest::Finish(const core::Clip& clip) {
-  for (; next_channel_ < channel_count_; ++next_channel_) {
-    const std::vector<double>& samples = clip.channels[next_channel_].samples;
-    hasher_->Bytes(samples.data() + next_frame_,
-                   static_cast<std::size_t>(frame_count_ - next_frame_) * sizeof(double));
-    next_frame_ = 0;
+  for (int c = hashed_.channel(); c < channel_count_; ++c) {
+    const std::int64_t from = c == hashed_.channel() ? hashed_.frame() : 0;
+    const std::vector<double>& samples = clip.channels[c].samples;
+    hasher_->Bytes(samples.data() + from,
+                   static_cast<std::size_t>(frame_count_ - from) * sizeof(double));
   }
   return hasher_->Hex();
 }

@@ -10,6 +10,7 @@
 #ifndef TEMPOKEY_PROTO_CLIP_DIGEST_H_
 #define TEMPOKEY_PROTO_CLIP_DIGEST_H_
 
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -25,6 +26,26 @@ std::string ClipContentId(const core::Clip& clip);
 
 // "sha256:<64 lowercase hex>" of `bytes` (the same as `sha256sum`). Thread-safe.
 std::string Sha256Id(std::string_view bytes);
+
+// Where the canonical order of a clip's samples has reached: channel 0, 1, ... each frame 0..N-1.
+class CanonicalSampleOrder {
+ public:
+  CanonicalSampleOrder(std::int64_t frame_count, int channel_count)
+      : frame_count_(frame_count), channel_count_(channel_count) {}
+
+  // Whether `count` samples of `channel` from `first_frame` come next in the order; if so, moves
+  // past them.
+  bool Advance(int channel, std::int64_t first_frame, std::size_t count);
+
+  int channel() const { return channel_; }      // the next sample's channel (channel_count: none)
+  std::int64_t frame() const { return frame_; }  // and frame
+
+ private:
+  std::int64_t frame_count_;
+  int channel_count_;
+  int channel_ = 0;
+  std::int64_t frame_ = 0;
+};
 
 // Digests a clip while it is being assembled: samples that continue the canonical order are
 // hashed as they arrive (uploads sent channel by channel in frame order cost nothing extra at
@@ -48,8 +69,7 @@ class IncrementalClipDigest {
   std::unique_ptr<Hasher> hasher_;
   std::int64_t frame_count_ = 0;
   int channel_count_ = 0;
-  int next_channel_ = 0;          // canonical position reached so far
-  std::int64_t next_frame_ = 0;
+  CanonicalSampleOrder hashed_;  // how far the samples hashed so far reach
 };
 
 }  // namespace tempokey::wire

@@ -33,8 +33,7 @@ BackgroundClipDigest::BackgroundClipDigest(const core::Clip& layout, DigestThrea
     : digest_(layout),
       limits_(limits),
       threads_(threads),
-      frame_count_(layout.frame_count),
-      channel_count_(static_cast<int>(layout.channels.size())) {}
+      taken_(layout.frame_count, static_cast<int>(layout.channels.size())) {}
 
 BackgroundClipDigest::~BackgroundClipDigest() {
   if (!thread_.joinable()) return;
@@ -50,7 +49,7 @@ BackgroundClipDigest::~BackgroundClipDigest() {
 void BackgroundClipDigest::Offer(std::shared_ptr<const void> keep, int channel,
                                  std::int64_t first_frame, std::span<const double> samples) {
   // wire::IncrementalClipDigest hashes such samples from the finished clip instead.
-  if (!Continues(channel, first_frame, samples.size())) return;
+  if (!taken_.Advance(channel, first_frame, samples.size())) return;
   const std::size_t bytes = samples.size_bytes();
   if (!thread_.joinable()) {
     if (thread_failed_ || hashed_here_ + bytes <= limits_.inline_bytes || !StartThread()) {
@@ -72,18 +71,6 @@ void BackgroundClipDigest::Offer(std::shared_ptr<const void> keep, int channel,
     pending_bytes_ += bytes;
   }
   changed_.notify_all();
-}
-
-bool BackgroundClipDigest::Continues(int channel, std::int64_t first_frame, std::size_t count) {
-  if (channel != next_channel_ || first_frame != next_frame_ || channel >= channel_count_) {
-    return false;
-  }
-  next_frame_ += static_cast<std::int64_t>(count);
-  if (next_frame_ == frame_count_) {
-    ++next_channel_;
-    next_frame_ = 0;
-  }
-  return true;
 }
 
 void BackgroundClipDigest::OfferHere(int channel, std::int64_t first_frame,

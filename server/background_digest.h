@@ -95,9 +95,6 @@ class BackgroundClipDigest {
     std::span<const double> samples;
   };
 
-  // Whether samples of `channel` from `first_frame` continue the canonical order; if so, moves
-  // the order's position past `count` of them.
-  bool Continues(int channel, std::int64_t first_frame, std::size_t count);
   // Hashes an offer where it is made: before the thread starts, when it could not start, or when
   // the offer is larger than the bound.
   void OfferHere(int channel, std::int64_t first_frame, std::span<const double> samples);
@@ -113,10 +110,7 @@ class BackgroundClipDigest {
   wire::IncrementalClipDigest digest_;
   const Limits limits_;
   DigestThreads* const threads_;
-  const std::int64_t frame_count_;
-  const int channel_count_;
-  int next_channel_ = 0;  // the canonical order's position reached by the offers taken
-  std::int64_t next_frame_ = 0;
+  wire::CanonicalSampleOrder taken_;  // how far the offers taken so far reach
   std::size_t hashed_here_ = 0;  // bytes hashed by OfferHere()
   bool thread_failed_ = false;   // no thread could be started: every offer hashed here
   mutable std::mutex mu_;
