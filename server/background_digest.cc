@@ -15,7 +15,12 @@ constexpr std::size_t kHashPieceSamples = (std::size_t{1} << 20) / sizeof(double
 
 }  // namespace
 
-DigestThreads::DigestThreads() : max_(DefaultWorkerCount()) {}
+DigestThreads::DigestThreads() : DigestThreads(DefaultWorkerCount()) {}
+
+DigestThreads::DigestThreads(int max)
+    : DigestThreads(max, [](std::function<void()> body) { return std::thread(std::move(body)); }) {}
+
+DigestThreads::DigestThreads(int max, Starter start) : max_(max), start_(std::move(start)) {}
 
 bool DigestThreads::TryAcquire() {
   int in_use = in_use_.load();
@@ -85,7 +90,8 @@ bool BackgroundClipDigest::StartThread() {
     return false;
   }
   try {
-    thread_ = std::thread([this] { Run(); });
+    auto body = [this] { Run(); };
+    thread_ = threads_ != nullptr ? threads_->Start(body) : std::thread(body);
   } catch (const std::system_error& error) {
     spdlog::warn("upload digest: no thread ({}), hashing where the samples arrive", error.what());
     if (threads_ != nullptr) threads_->Release();

@@ -26,11 +26,13 @@
 #include <cstddef>
 #include <cstdint>
 #include <deque>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <span>
 #include <string>
 #include <thread>
+#include <utility>
 
 #include "absl/base/thread_annotations.h"
 #include "proto/clip_digest.h"
@@ -43,14 +45,24 @@ namespace tempokey::server {
 // quota), so the memory offers wait in is at most that many times their bound. Thread-safe.
 class DigestThreads {
  public:
+  // Starts a thread running `body`, or throws std::system_error as std::thread's constructor does
+  // when the system cannot start one.
+  using Starter = std::function<std::thread(std::function<void()> body)>;
+
   DigestThreads();
-  explicit DigestThreads(int max) : max_(max) {}
+  explicit DigestThreads(int max);
+  // `start` in place of std::thread's constructor (tests: a start that fails).
+  DigestThreads(int max, Starter start);
   bool TryAcquire();
   void Release() { in_use_.fetch_sub(1); }
   int in_use() const { return in_use_.load(); }
+  int max() const { return max_; }
+  // A thread running `body`, claimed or not (throws as Starter).
+  std::thread Start(std::function<void()> body) const { return start_(std::move(body)); }
 
  private:
   const int max_;
+  const Starter start_;
   std::atomic<int> in_use_{0};
 };
 

@@ -58,6 +58,17 @@ class GaugeCollectable : public prometheus::Collectable {
       add("tempokey_memory_budget_bytes", "The server's memory budget (--memory_budget_bytes).",
           static_cast<double>(sources_.memory_budget()));
     }
+    if (sources_.digest_threads) {
+      add("tempokey_upload_digest_threads",
+          "Uploads whose content id is being hashed on a thread of its own.",
+          sources_.digest_threads());
+    }
+    if (sources_.digest_threads_max) {
+      add("tempokey_upload_digest_threads_max",
+          "Uploads that may hash on threads of their own at once (past them, an upload hashes "
+          "where its samples arrive).",
+          sources_.digest_threads_max());
+    }
     if (sources_.memory_used) {
       prometheus::MetricFamily family;
       family.name = "tempokey_memory_used_bytes";

@@ -1,6 +1,6 @@
 // Prometheus metrics of the server, exposed over HTTP on their own address (prometheus-cpp
 // Exposer): jobs by outcome, queue depth, running jobs, job latency, bytes in and out, the memory
-// budget and its use.
+// budget and its use, uploads hashing on threads of their own.
 //
 // The HTTP server (CivetWeb) runs kMetricsThreads threads and drops a connection that has not
 // sent a whole request within kMetricsRequestTimeout, so a few slow or idle clients cannot keep
@@ -31,6 +31,10 @@ struct MetricsGaugeSources {
   std::function<std::int64_t()> memory_budget;
   // Bytes of the budget in use by kind ("upload", "stored_clip", "job", "result", "process").
   std::function<std::vector<std::pair<std::string, std::int64_t>>()> memory_used;
+  // Uploads whose content id is being hashed on a thread of its own (DigestThreads), and how many
+  // may be at once.
+  std::function<int()> digest_threads;
+  std::function<int()> digest_threads_max;
 };
 
 inline constexpr int kMetricsThreads = 32;

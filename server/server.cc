@@ -269,7 +269,9 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(ServerOptions options) {
                         used.emplace_back(std::string(MemoryUseName(use)), memory->used(use));
                       }
                       return used;
-                    }},
+                    },
+                .digest_threads = [context] { return context->digest_threads.in_use(); },
+                .digest_threads_max = [context] { return context->digest_threads.max(); }},
             std::move(check_auth)));
     context->metrics = server->metrics_.get();
   }

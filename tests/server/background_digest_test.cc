@@ -12,9 +12,12 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <span>
 #include <string>
+#include <system_error>
+#include <thread>
 #include <vector>
 
 #include "gtest/gtest.h"
@@ -227,6 +230,25 @@ TEST(BackgroundClipDigestTest, PastTheThreadLimitAnUploadHashesWhereItsSamplesAr
   for (BackgroundClipDigest* digest : {&first, &second, &third}) {
     EXPECT_EQ(digest->Finish(OtherSamples()), wire::ClipContentId(clip));
   }
+}
+
+TEST(BackgroundClipDigestTest, WhenNoThreadCanStartItHashesWhereOfferedAndGivesTheClaimBack) {
+  const core::Clip clip = SixChannels();
+  int starts = 0;
+  DigestThreads threads(2, [&starts](std::function<void()>) -> std::thread {
+    ++starts;
+    throw std::system_error(std::make_error_code(std::errc::resource_unavailable_try_again),
+                            "no thread in this test");
+  });
+  BackgroundClipDigest digest(clip, &threads, kSmallLimits);
+
+  OfferAll(digest, Slices(clip, Order::kCanonical));
+
+  EXPECT_EQ(starts, 1);  // tried once, then every offer hashed where made
+  EXPECT_FALSE(digest.hashing_in_background());
+  EXPECT_EQ(threads.in_use(), 0);
+  EXPECT_EQ(digest.pending_bytes(), 0u);
+  EXPECT_EQ(digest.Finish(OtherSamples()), wire::ClipContentId(clip));
 }
 
 TEST(DigestThreadsTest, AllowsByDefaultOneThreadPerCpuTheServerMayUse) {

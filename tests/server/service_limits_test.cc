@@ -7,6 +7,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "absl/strings/numbers.h"
@@ -14,7 +15,9 @@
 #include "gtest/gtest.h"
 #include "server/job_manager.h"
 #include "server/server.h"
+#include "proto/clip_digest.h"
 #include "proto/retry_hint.h"
+#include "server/server_options.h"
 #include "tests/server/http_util.h"
 #include "tests/server/server_test_util.h"
 
@@ -177,6 +180,59 @@ TEST(MetricsTest, ScrapeShowsJobsBytesAndLatencyMoving) {
   EXPECT_LE(Sample(now, "tempokey_running_jobs"), static_cast<double>(TestServerOptions().workers));
   EXPECT_EQ(Sample(now, "tempokey_stored_jobs"), 3.0);
   EXPECT_EQ(Sample(now, "tempokey_stored_clips"), 1.0);
+}
+
+// An upload past its first MiB hashes its content id on a thread of its own
+// (server/background_digest.h): the gauge shows it while the stream is open and not once it has
+// ended. Scrapes are polled (bounded) because the server reads the stream on its own threads.
+TEST(MetricsTest, ScrapeShowsAnUploadHashingOnAThreadOfItsOwnUntilItEnds) {
+  server::ServerOptions options = TestServerOptions();
+  options.metrics_address = "127.0.0.1:0";
+  std::unique_ptr<server::Server> server = StartServer(options);
+  ASSERT_NE(server, nullptr);
+  auto stub = v1::MotionService::NewStub(Connect(server->target()));
+  auto threads_in_use = [&]() -> std::optional<double> {
+    const std::optional<std::string> scrape = HttpGet(server->metrics_port(), "/metrics");
+    if (!scrape.has_value()) return std::nullopt;
+    return Sample(ParseSamples(*scrape), "tempokey_upload_digest_threads");
+  };
+  auto poll_until = [&](double wanted) {
+    const auto deadline = std::chrono::steady_clock::now() + kCallDeadline;
+    std::optional<double> seen = threads_in_use();
+    while (seen != wanted && std::chrono::steady_clock::now() < deadline) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      seen = threads_in_use();
+    }
+    return seen;
+  };
+  const core::Clip clip = MakeClip(44, 4000);  // 135 channels x 4000 frames: 4.3 MB of samples
+  const std::vector<v1::UploadClipRequest> requests = UploadRequests(clip, 256 << 10);
+  constexpr std::size_t kPastTheFirstMiB = 64;  // messages: the header, then a channel each
+  ASSERT_GT(requests.size(), kPastTheFirstMiB);
+  const std::optional<double> before = threads_in_use();
+
+  grpc::ClientContext context;
+  SetDeadline(context);
+  v1::UploadClipResponse response;
+  auto upload = stub->UploadClip(&context, &response);
+  for (std::size_t i = 0; i < kPastTheFirstMiB; ++i) ASSERT_TRUE(upload->Write(requests[i]));
+  const std::optional<double> while_open = poll_until(1.0);
+  for (std::size_t i = kPastTheFirstMiB; i < requests.size(); ++i) {
+    ASSERT_TRUE(upload->Write(requests[i]));
+  }
+  upload->WritesDone();
+  const grpc::Status status = upload->Finish();
+  const std::optional<double> after = poll_until(0.0);
+  const std::optional<std::string> scrape = HttpGet(server->metrics_port(), "/metrics");
+  ASSERT_TRUE(scrape.has_value());
+
+  EXPECT_EQ(before, 0.0);
+  EXPECT_EQ(while_open, 1.0);
+  TEMPOKEY_ASSERT_GRPC_OK(status);
+  EXPECT_EQ(response.clip_id(), wire::ClipContentId(clip));
+  EXPECT_EQ(after, 0.0);
+  EXPECT_EQ(Sample(ParseSamples(*scrape), "tempokey_upload_digest_threads_max"),
+            static_cast<double>(server::DefaultWorkerCount()));
 }
 
 }  // namespace
