@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <functional>
 #include <limits>
 #include <memory>
 #include <numbers>
@@ -52,6 +53,15 @@ constexpr int kTraceNodes = 512;
 // Rows of a band solve (or of a level interpolation) between two looks at the stop token: a
 // millisecond or two of work, so a stop ends even a channel of millions of frames at once.
 constexpr std::size_t kStopCheckRows = std::size_t{1} << 16;
+
+// The innermost ScopedSmootherStopProbe of this thread, or null (always, outside tests).
+thread_local const std::function<void(reduce_internal::SmootherStopSite)>* stop_probe = nullptr;
+
+// Every look at the stop token inside one channel's smoothing.
+bool StopRequested(const std::stop_token& stop, reduce_internal::SmootherStopSite site) {
+  if (stop_probe != nullptr) [[unlikely]] (*stop_probe)(site);
+  return stop.stop_requested();
+}
 
 // (2 sin(w / 2))^2 at the midpoints w of the integral below, computed once.
 const std::array<double, kTraceNodes>& TraceNodeSquares() {
@@ -100,12 +110,12 @@ class BandSolver {
     // The rows in pieces of kStopCheckRows, the token looked at between pieces (not per row:
     // the loops stay as tight as without it).
     for (std::size_t begin = 0; begin < n; begin += kStopCheckRows) {
-      if (stop.stop_requested()) return false;
+      if (StopRequested(stop, reduce_internal::SmootherStopSite::kBandRows)) return false;
       const std::size_t end = std::min(n, begin + kStopCheckRows);
       for (std::size_t i = begin; i < end; ++i) ForwardRow(i, x, lambda, y);
     }
     for (std::size_t end = n; end > 0;) {
-      if (stop.stop_requested()) return false;
+      if (StopRequested(stop, reduce_internal::SmootherStopSite::kBandRows)) return false;
       const std::size_t begin = end > kStopCheckRows ? end - kStopCheckRows : 0;
       for (std::size_t i = end; i-- > begin;) BackRow(i, n, y);
       end = begin;
@@ -246,11 +256,11 @@ class LaneBandSolver {
       std::fill_n(band_.begin() + static_cast<std::ptrdiff_t>(i * kLaneRow), kGuardLanes, 1.0);
     }
     for (std::size_t begin = 0; begin < n; begin += kStopCheckRows) {
-      if (stop.stop_requested()) return false;
+      if (StopRequested(stop, reduce_internal::SmootherStopSite::kBandRows)) return false;
       ForwardLaneRows(n, begin, std::min(n, begin + kStopCheckRows), x, lambda, band_.data(), y);
     }
     for (std::size_t end = n; end > 0;) {
-      if (stop.stop_requested()) return false;
+      if (StopRequested(stop, reduce_internal::SmootherStopSite::kBandRows)) return false;
       const std::size_t begin = end > kStopCheckRows ? end - kStopCheckRows : 0;
       BackLaneRows(n, begin, end, band_.data(), y);
       end = begin;
@@ -575,6 +585,14 @@ struct reduce_internal::SmootherFactors::Store {
 };
 
 reduce_internal::SmootherFactors::SmootherFactors() : store_(std::make_unique<Store>()) {}
+
+reduce_internal::ScopedSmootherStopProbe::ScopedSmootherStopProbe(
+    std::function<void(SmootherStopSite)> probe)
+    : probe_(std::move(probe)), outer_(stop_probe) {
+  stop_probe = &probe_;
+}
+
+reduce_internal::ScopedSmootherStopProbe::~ScopedSmootherStopProbe() { stop_probe = outer_; }
 reduce_internal::SmootherFactors::~SmootherFactors() = default;
 
 namespace {
@@ -626,10 +644,14 @@ class NoiseSmoother {
     const std::size_t n = group.front()->n_;
     if (n <= kOrder + 1) return y;
     const std::vector<double> global = BestSingleLevels(group);
-    if (group.front()->Stopping()) return StopAll(group, std::move(y));
+    if (group.front()->Stopping(reduce_internal::SmootherStopSite::kPhase)) {
+      return StopAll(group, std::move(y));
+    }
     // Per block: the level of least SURE on the block, solved with context on both sides.
     std::vector<std::vector<double>> block_log = BestBlockLevels(group, global);
-    if (group.front()->Stopping()) return StopAll(group, std::move(y));
+    if (group.front()->Stopping(reduce_internal::SmootherStopSite::kPhase)) {
+      return StopAll(group, std::move(y));
+    }
     // Lanes beyond the group repeat its last channel.
     const std::size_t lanes = group.size() == 1 ? 1 : kGuardLanes;
     const auto channel_of = [&](std::size_t lane) { return std::min(lane, group.size() - 1); };
@@ -710,8 +732,8 @@ class NoiseSmoother {
     return lowered;
   }
   // Looks at the stop token; true (and from then on) once a stop was requested.
-  bool Stopping() {
-    if (!stopped_) stopped_ = stop_.stop_requested();
+  bool Stopping(reduce_internal::SmootherStopSite site) {
+    if (!stopped_) stopped_ = StopRequested(stop_, site);
     return stopped_;
   }
 
@@ -795,7 +817,7 @@ class NoiseSmoother {
     std::vector<Batch> batches;  // of the step, each distinct one once
     std::vector<std::size_t> batch_of;  // per unit of the step
     for (std::size_t first = 0; first < units.size(); first += per_step) {
-      if (Stopping()) return false;
+      if (Stopping(reduce_internal::SmootherStopSite::kSearchStep)) return false;
       const std::size_t step = std::min(per_step, units.size() - first);
       batches.clear();
       batch_of.clear();
@@ -988,7 +1010,7 @@ class NoiseSmoother {
     double exponent = std::numeric_limits<double>::quiet_NaN();
     double power = 0.0;
     for (std::size_t begin = 0; begin < lambda.size(); begin += kStopCheckRows) {
-      if (Stopping()) return false;
+      if (Stopping(reduce_internal::SmootherStopSite::kLevelRows)) return false;
       const std::size_t end = std::min(lambda.size(), begin + kStopCheckRows);
       for (std::size_t r = begin; r < end; ++r) {
         const double position = (static_cast<double>(r) + 1.5 - 0.5 * block) / block;

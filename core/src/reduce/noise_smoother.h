@@ -6,6 +6,8 @@
 #ifndef TEMPOKEY_CORE_SRC_REDUCE_NOISE_SMOOTHER_H_
 #define TEMPOKEY_CORE_SRC_REDUCE_NOISE_SMOOTHER_H_
 
+#include <cstddef>
+#include <functional>
 #include <memory>
 #include <span>
 #include <stop_token>
@@ -33,6 +35,28 @@ class SmootherFactors {
 };
 
 inline constexpr std::size_t kMaxSmootherFactorBytes = std::size_t{32} << 20;
+
+// Where one channel's smoothing looks at its stop token: between steps of a level search's window
+// solves, between its phases (the whole channel's levels, the blocks' levels), every
+// kStopCheckRows penalty rows of a guard round's levels, and every kStopCheckRows rows of a band
+// solve (forward and back).
+enum class SmootherStopSite { kSearchStep, kPhase, kLevelRows, kBandRows };
+
+// A test's view of those looks: while one is in scope, `probe` is called on this thread with the
+// site just before each look at the token, so that a test can request the stop at a chosen look
+// (from inside the work, with no race between threads) and count the looks that follow. The
+// smoothing runs on the thread that calls it. Probes nest: the innermost is called.
+class ScopedSmootherStopProbe {
+ public:
+  explicit ScopedSmootherStopProbe(std::function<void(SmootherStopSite)> probe);
+  ~ScopedSmootherStopProbe();
+  ScopedSmootherStopProbe(const ScopedSmootherStopProbe&) = delete;
+  ScopedSmootherStopProbe& operator=(const ScopedSmootherStopProbe&) = delete;
+
+ private:
+  std::function<void(SmootherStopSite)> probe_;
+  const std::function<void(SmootherStopSite)>* outer_;
+};
 
 // SmoothToNoise() and FitToNoise() (noise_fit.h) reusing `factors`. Both look at `stop` every
 // few milliseconds of work (between batches of window solves, per guard round, and every 65536

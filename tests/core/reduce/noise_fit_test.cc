@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <numbers>
+#include <optional>
 #include <random>
 #include <span>
 #include <stop_token>
@@ -426,6 +427,109 @@ TEST(NoiseCancellationTest, SmootherWithATokenNeverStoppedGivesTheSameCurveBitFo
       reduce_internal::SmoothToNoise(samples, kSigma, {}, factors, stop.get_token());
 
   ASSERT_TRUE(smooth.ok()) << smooth.status();
+  EXPECT_EQ(*smooth, SmoothToNoise(samples, kSigma));
+}
+
+// Where a test requests the stop inside a channel's smoothing: at the nth look at the token at
+// `site`, counted from the latest look at `after` when given (so "the nth band-rows look after a
+// levels look" is a look of a guard round's band solve).
+struct StopPlan {
+  reduce_internal::SmootherStopSite site;
+  int nth = 1;
+  std::optional<reduce_internal::SmootherStopSite> after;
+  std::string name;
+};
+
+// The stop requested as `plan` says (reduce_internal::ScopedSmootherStopProbe: from inside the
+// work, so no race between threads): whether that look came, the result, and the looks that came
+// after the stop.
+struct StopSeen {
+  bool reached = false;
+  int looks_after = 0;
+  absl::StatusCode code = absl::StatusCode::kOk;
+};
+
+StopSeen SmoothStoppedAt(const StopPlan& plan, int channel_count, int frames) {
+  std::vector<std::vector<double>> channels;
+  for (int c = 0; c < channel_count; ++c) channels.push_back(LongNoisySine(frames));
+  const std::vector<std::span<const double>> spans(channels.begin(), channels.end());
+  const std::vector<double> sigmas(channels.size(), kSigma);
+  reduce_internal::SmootherFactors factors;
+  std::stop_source stop;
+  StopSeen seen;
+  bool counting = !plan.after.has_value();
+  int looks_at_site = 0;
+  const reduce_internal::ScopedSmootherStopProbe probe(
+      [&](reduce_internal::SmootherStopSite at) {
+        if (stop.stop_requested()) {
+          ++seen.looks_after;
+          return;
+        }
+        if (at == plan.after) {
+          counting = true;
+          looks_at_site = 0;
+        }
+        if (counting && at == plan.site && ++looks_at_site == plan.nth) {
+          seen.reached = true;
+          stop.request_stop();
+        }
+      });
+  seen.code = reduce_internal::SmoothGroupToNoise(spans, sigmas, {}, factors, stop.get_token())
+                  .status()
+                  .code();
+  return seen;
+}
+
+TEST(NoiseCancellationTest, AStopSeenAtAnyLookInsideAChannelsSmoothingEndsItAtOnce) {
+  using Site = reduce_internal::SmootherStopSite;
+  // A band solve looks every 65536 rows (kStopCheckRows), forward then back. One channel of
+  // 200 000 frames solves its guard rounds alone (BandSolver: four looks each way); two of
+  // 140 000 frames, under the lanes' memory bound (about 150 000), side by side
+  // (LaneBandSolver: three looks each way).
+  struct Case {
+    int channels;
+    int frames;
+    int band_looks_each_way;
+  };
+  for (const Case& c : {Case{1, 200'000, 4}, Case{2, 140'000, 3}}) {
+    const int way = c.band_looks_each_way;
+    const std::vector<StopPlan> plans = {
+        {Site::kSearchStep, 1, {}, "a search's window solves"},
+        {Site::kSearchStep, 2, {}, "the next step of window solves"},
+        {Site::kPhase, 1, {}, "after the channel's levels"},
+        {Site::kPhase, 2, {}, "after the blocks' levels"},
+        {Site::kLevelRows, 1, {}, "a guard round's levels"},
+        {Site::kLevelRows, 2, {}, "the next rows of a guard round's levels"},
+        {Site::kBandRows, 1, {}, "a search's band solve"},
+        {Site::kBandRows, 1, Site::kLevelRows, "a guard round's band solve, forward"},
+        {Site::kBandRows, way, Site::kLevelRows, "a guard round's band solve, last rows forward"},
+        {Site::kBandRows, way + 1, Site::kLevelRows, "a guard round's band solve, first back"},
+        {Site::kBandRows, 2 * way, Site::kLevelRows, "a guard round's band solve, last back"},
+    };
+    for (const StopPlan& plan : plans) {
+      const StopSeen seen = SmoothStoppedAt(plan, c.channels, c.frames);
+
+      const std::string where = plan.name + ", channels: " + std::to_string(c.channels);
+      EXPECT_TRUE(seen.reached) << where;
+      EXPECT_EQ(seen.code, absl::StatusCode::kCancelled) << where;
+      EXPECT_EQ(seen.looks_after, 0) << where;
+    }
+  }
+}
+
+TEST(NoiseCancellationTest, AProbeThatNeverStopsLeavesTheCurveBitForBit) {
+  const std::vector<double> samples = LongNoisySine(5000);
+  reduce_internal::SmootherFactors factors;
+  const std::stop_source stop;
+  int looks = 0;
+  const reduce_internal::ScopedSmootherStopProbe probe(
+      [&](reduce_internal::SmootherStopSite) { ++looks; });
+
+  const absl::StatusOr<std::vector<double>> smooth =
+      reduce_internal::SmoothToNoise(samples, kSigma, {}, factors, stop.get_token());
+
+  ASSERT_TRUE(smooth.ok()) << smooth.status();
+  EXPECT_GT(looks, 0);
   EXPECT_EQ(*smooth, SmoothToNoise(samples, kSigma));
 }
 
