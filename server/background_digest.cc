@@ -1,6 +1,7 @@
 #include "server/background_digest.h"
 
 #include <algorithm>
+#include <exception>
 #include <system_error>
 #include <utility>
 
@@ -89,16 +90,23 @@ bool BackgroundClipDigest::StartThread() {
     thread_failed_ = true;
     return false;
   }
+  // Any failure to start (std::system_error from the system, std::bad_alloc for the thread's
+  // state, a starter that returns no thread) leaves the upload hashing where its samples arrive:
+  // an exception let out of here would end the reactor's read callback without a next read or a
+  // finish, and the call would hang with its claim held.
+  std::string failure;
   try {
     auto body = [this] { Run(); };
     thread_ = threads_ != nullptr ? threads_->Start(body) : std::thread(body);
-  } catch (const std::system_error& error) {
-    spdlog::warn("upload digest: no thread ({}), hashing where the samples arrive", error.what());
-    if (threads_ != nullptr) threads_->Release();
-    thread_failed_ = true;
-    return false;
+    if (!thread_.joinable()) failure = "the starter returned no thread";
+  } catch (const std::exception& error) {
+    failure = error.what();
   }
-  return true;
+  if (failure.empty()) return true;
+  spdlog::warn("upload digest: no thread ({}), hashing where the samples arrive", failure);
+  if (threads_ != nullptr) threads_->Release();
+  thread_failed_ = true;
+  return false;
 }
 
 template <class Predicate>

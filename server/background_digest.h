@@ -45,8 +45,9 @@ namespace tempokey::server {
 // quota), so the memory offers wait in is at most that many times their bound. Thread-safe.
 class DigestThreads {
  public:
-  // Starts a thread running `body`, or throws std::system_error as std::thread's constructor does
-  // when the system cannot start one.
+  // Starts a thread running `body` and returns it, or throws (std::system_error, as std::thread's
+  // constructor does when the system cannot start one). Any exception, or a thread that is not
+  // joinable, counts as a failed start.
   using Starter = std::function<std::thread(std::function<void()> body)>;
 
   DigestThreads();

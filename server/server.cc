@@ -313,6 +313,9 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(ServerOptions options) {
 Server::~Server() {
   Drain();
   grpc_server_.reset();  // before the service and context its calls use
+  // Its endpoint serves until it goes, and its gauges and bearer check read context_, which is
+  // declared after it and so would go first.
+  metrics_.reset();
 }
 
 int Server::open_streams() const { return context_->open_streams.load(); }

@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <new>
 #include <span>
 #include <string>
 #include <system_error>
@@ -232,23 +233,43 @@ TEST(BackgroundClipDigestTest, PastTheThreadLimitAnUploadHashesWhereItsSamplesAr
   }
 }
 
+// Ways a thread's start can fail: the system refuses one (what std::thread throws then), another
+// exception (std::thread's own allocation), a starter that returns no thread.
+enum class StartFailure { kSystemError, kOtherException, kNoThread };
+
+DigestThreads::Starter FailingStarter(StartFailure failure, int& starts) {
+  return [failure, &starts](std::function<void()>) -> std::thread {
+    ++starts;
+    switch (failure) {
+      case StartFailure::kSystemError:
+        throw std::system_error(std::make_error_code(std::errc::resource_unavailable_try_again),
+                                "no thread in this test");
+      case StartFailure::kOtherException:
+        throw std::bad_alloc();
+      case StartFailure::kNoThread:
+        break;
+    }
+    return std::thread();
+  };
+}
+
 TEST(BackgroundClipDigestTest, WhenNoThreadCanStartItHashesWhereOfferedAndGivesTheClaimBack) {
   const core::Clip clip = SixChannels();
-  int starts = 0;
-  DigestThreads threads(2, [&starts](std::function<void()>) -> std::thread {
-    ++starts;
-    throw std::system_error(std::make_error_code(std::errc::resource_unavailable_try_again),
-                            "no thread in this test");
-  });
-  BackgroundClipDigest digest(clip, &threads, kSmallLimits);
+  for (const StartFailure failure :
+       {StartFailure::kSystemError, StartFailure::kOtherException, StartFailure::kNoThread}) {
+    int starts = 0;
+    DigestThreads threads(2, FailingStarter(failure, starts));
+    BackgroundClipDigest digest(clip, &threads, kSmallLimits);
 
-  OfferAll(digest, Slices(clip, Order::kCanonical));
+    OfferAll(digest, Slices(clip, Order::kCanonical));
 
-  EXPECT_EQ(starts, 1);  // tried once, then every offer hashed where made
-  EXPECT_FALSE(digest.hashing_in_background());
-  EXPECT_EQ(threads.in_use(), 0);
-  EXPECT_EQ(digest.pending_bytes(), 0u);
-  EXPECT_EQ(digest.Finish(OtherSamples()), wire::ClipContentId(clip));
+    const int kind = static_cast<int>(failure);
+    EXPECT_EQ(starts, 1) << kind;  // tried once, then every offer hashed where made
+    EXPECT_FALSE(digest.hashing_in_background()) << kind;
+    EXPECT_EQ(threads.in_use(), 0) << kind;
+    EXPECT_EQ(digest.pending_bytes(), 0u) << kind;
+    EXPECT_EQ(digest.Finish(OtherSamples()), wire::ClipContentId(clip)) << kind;
+  }
 }
 
 TEST(DigestThreadsTest, AllowsByDefaultOneThreadPerCpuTheServerMayUse) {

@@ -13,10 +13,10 @@
 #include "absl/strings/numbers.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
-#include "server/job_manager.h"
-#include "server/server.h"
 #include "proto/clip_digest.h"
 #include "proto/retry_hint.h"
+#include "server/job_manager.h"
+#include "server/server.h"
 #include "server/server_options.h"
 #include "tests/server/http_util.h"
 #include "tests/server/server_test_util.h"
@@ -184,55 +184,93 @@ TEST(MetricsTest, ScrapeShowsJobsBytesAndLatencyMoving) {
 
 // An upload past its first MiB hashes its content id on a thread of its own
 // (server/background_digest.h): the gauge shows it while the stream is open and not once it has
-// ended. Scrapes are polled (bounded) because the server reads the stream on its own threads.
+// ended; an upload open under its first MiB shows none. Scrapes are polled (bounded, within the
+// calls' deadline) because the server reads the streams on its own threads.
 TEST(MetricsTest, ScrapeShowsAnUploadHashingOnAThreadOfItsOwnUntilItEnds) {
   server::ServerOptions options = TestServerOptions();
   options.metrics_address = "127.0.0.1:0";
   std::unique_ptr<server::Server> server = StartServer(options);
   ASSERT_NE(server, nullptr);
   auto stub = v1::MotionService::NewStub(Connect(server->target()));
-  auto threads_in_use = [&]() -> std::optional<double> {
-    const std::optional<std::string> scrape = HttpGet(server->metrics_port(), "/metrics");
-    if (!scrape.has_value()) return std::nullopt;
-    return Sample(ParseSamples(*scrape), "tempokey_upload_digest_threads");
+  auto scrape = [&](const std::string& name) -> std::optional<double> {
+    const std::optional<std::string> text = HttpGet(server->metrics_port(), "/metrics");
+    if (!text.has_value()) return std::nullopt;
+    return Sample(ParseSamples(*text), name);
   };
-  auto poll_until = [&](double wanted) {
-    const auto deadline = std::chrono::steady_clock::now() + kCallDeadline;
-    std::optional<double> seen = threads_in_use();
-    while (seen != wanted && std::chrono::steady_clock::now() < deadline) {
+  const std::string threads = "tempokey_upload_digest_threads";
+  const std::string bytes_in = R"(tempokey_bytes_total{direction="in"})";
+  constexpr auto kPollLimit = std::chrono::seconds(30);
+  auto poll_until = [&](const std::string& name, auto holds) {
+    const auto deadline = std::chrono::steady_clock::now() + kPollLimit;
+    std::optional<double> seen = scrape(name);
+    while (!(seen.has_value() && holds(*seen)) && std::chrono::steady_clock::now() < deadline) {
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
-      seen = threads_in_use();
+      seen = scrape(name);
     }
     return seen;
   };
+  auto equals = [](double wanted) { return [wanted](double seen) { return seen == wanted; }; };
+  auto bytes_of = [](const std::vector<v1::UploadClipRequest>& requests, std::size_t count) {
+    double bytes = 0.0;
+    for (std::size_t i = 0; i < count; ++i) {
+      bytes += static_cast<double>(requests[i].ByteSizeLong());
+    }
+    return bytes;
+  };
+  const std::optional<double> before = scrape(threads);
+
+  // A small upload held open, every message but its last read by the server: no thread.
+  const core::Clip small_clip = MakeClip(1, 1000);  // 6 channels x 1000 frames: 48 KB
+  const std::vector<v1::UploadClipRequest> small = UploadRequests(small_clip, 256 << 10);
+  ASSERT_GT(small.size(), 2u);
+  const double bytes_before = scrape(bytes_in).value_or(-1.0);
+  grpc::ClientContext small_context;
+  SetDeadline(small_context);
+  v1::UploadClipResponse small_response;
+  auto small_upload = stub->UploadClip(&small_context, &small_response);
+  for (std::size_t i = 0; i + 1 < small.size(); ++i) ASSERT_TRUE(small_upload->Write(small[i]));
+  const double small_bytes = bytes_of(small, small.size() - 1);
+  const std::optional<double> read =
+      poll_until(bytes_in, [&](double seen) { return seen >= bytes_before + small_bytes; });
+  const std::optional<double> while_small_open = scrape(threads);
+  ASSERT_TRUE(small_upload->Write(small.back()));
+  small_upload->WritesDone();
+  const grpc::Status small_status = small_upload->Finish();
+
+  // A large one, held open past its first MiB.
   const core::Clip clip = MakeClip(44, 4000);  // 135 channels x 4000 frames: 4.3 MB of samples
   const std::vector<v1::UploadClipRequest> requests = UploadRequests(clip, 256 << 10);
-  constexpr std::size_t kPastTheFirstMiB = 64;  // messages: the header, then a channel each
-  ASSERT_GT(requests.size(), kPastTheFirstMiB);
-  const std::optional<double> before = threads_in_use();
-
+  constexpr std::size_t kMessagesPastTheFirstMiB = 64;  // the header, then a channel each
+  ASSERT_GT(requests.size(), kMessagesPastTheFirstMiB);
   grpc::ClientContext context;
   SetDeadline(context);
   v1::UploadClipResponse response;
   auto upload = stub->UploadClip(&context, &response);
-  for (std::size_t i = 0; i < kPastTheFirstMiB; ++i) ASSERT_TRUE(upload->Write(requests[i]));
-  const std::optional<double> while_open = poll_until(1.0);
-  for (std::size_t i = kPastTheFirstMiB; i < requests.size(); ++i) {
+  for (std::size_t i = 0; i < kMessagesPastTheFirstMiB; ++i) {
     ASSERT_TRUE(upload->Write(requests[i]));
   }
+  const std::optional<double> while_open = poll_until(threads, equals(1.0));
+  for (std::size_t i = kMessagesPastTheFirstMiB; i < requests.size(); ++i) {
+    ASSERT_TRUE(upload->Write(requests[i]));
+  }
+  // The thread is claimed until the upload's digest goes, after its last message.
+  const std::optional<double> before_the_end = scrape(threads);
   upload->WritesDone();
   const grpc::Status status = upload->Finish();
-  const std::optional<double> after = poll_until(0.0);
-  const std::optional<std::string> scrape = HttpGet(server->metrics_port(), "/metrics");
-  ASSERT_TRUE(scrape.has_value());
+  const std::optional<double> after = poll_until(threads, equals(0.0));
+  const std::optional<double> most = scrape("tempokey_upload_digest_threads_max");
 
   EXPECT_EQ(before, 0.0);
+  ASSERT_TRUE(read.has_value());
+  EXPECT_GE(*read, bytes_before + small_bytes);
+  EXPECT_EQ(while_small_open, 0.0);
+  TEMPOKEY_ASSERT_GRPC_OK(small_status);
   EXPECT_EQ(while_open, 1.0);
+  EXPECT_EQ(before_the_end, 1.0);
   TEMPOKEY_ASSERT_GRPC_OK(status);
   EXPECT_EQ(response.clip_id(), wire::ClipContentId(clip));
   EXPECT_EQ(after, 0.0);
-  EXPECT_EQ(Sample(ParseSamples(*scrape), "tempokey_upload_digest_threads_max"),
-            static_cast<double>(server::DefaultWorkerCount()));
+  EXPECT_EQ(most, static_cast<double>(server::DefaultWorkerCount()));
 }
 
 }  // namespace

@@ -585,6 +585,7 @@ struct reduce_internal::SmootherFactors::Store {
 };
 
 reduce_internal::SmootherFactors::SmootherFactors() : store_(std::make_unique<Store>()) {}
+reduce_internal::SmootherFactors::~SmootherFactors() = default;
 
 reduce_internal::ScopedSmootherStopProbe::ScopedSmootherStopProbe(
     std::function<void(SmootherStopSite)> probe)
@@ -593,7 +594,6 @@ reduce_internal::ScopedSmootherStopProbe::ScopedSmootherStopProbe(
 }
 
 reduce_internal::ScopedSmootherStopProbe::~ScopedSmootherStopProbe() { stop_probe = outer_; }
-reduce_internal::SmootherFactors::~SmootherFactors() = default;
 
 namespace {
 
@@ -732,8 +732,10 @@ class NoiseSmoother {
     return lowered;
   }
   // Looks at the stop token; true (and from then on) once a stop was requested.
+  // Looks every time (a stop once requested stays requested), so that a test's probe sees work
+  // that goes on past a stop.
   bool Stopping(reduce_internal::SmootherStopSite site) {
-    if (!stopped_) stopped_ = StopRequested(stop_, site);
+    if (StopRequested(stop_, site)) stopped_ = true;
     return stopped_;
   }
 

@@ -37,9 +37,9 @@ class SmootherFactors {
 inline constexpr std::size_t kMaxSmootherFactorBytes = std::size_t{32} << 20;
 
 // Where one channel's smoothing looks at its stop token: between steps of a level search's window
-// solves, between its phases (the whole channel's levels, the blocks' levels), every
-// kStopCheckRows penalty rows of a guard round's levels, and every kStopCheckRows rows of a band
-// solve (forward and back).
+// solves, between its phases (the whole channel's levels, the blocks' levels), every 65536
+// penalty rows of a guard round's levels, and every 65536 rows of a band solve (forward, then
+// back).
 enum class SmootherStopSite { kSearchStep, kPhase, kLevelRows, kBandRows };
 
 // A test's view of those looks: while one is in scope, `probe` is called on this thread with the
