@@ -94,15 +94,16 @@ bool BackgroundClipDigest::StartThread() {
   // state, a starter that returns no thread) leaves the upload hashing where its samples arrive:
   // an exception let out of here would end the reactor's read callback without a next read or a
   // finish, and the call would hang with its claim held.
-  std::string failure;
+  std::string failure = "the starter returned no thread";
   try {
     auto body = [this] { Run(); };
     thread_ = threads_ != nullptr ? threads_->Start(body) : std::thread(body);
-    if (!thread_.joinable()) failure = "the starter returned no thread";
+    if (thread_.joinable()) return true;
   } catch (const std::exception& error) {
     failure = error.what();
+  } catch (...) {
+    failure = "an exception that is not a std::exception";
   }
-  if (failure.empty()) return true;
   spdlog::warn("upload digest: no thread ({}), hashing where the samples arrive", failure);
   if (threads_ != nullptr) threads_->Release();
   thread_failed_ = true;

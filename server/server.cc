@@ -314,7 +314,9 @@ Server::~Server() {
   Drain();
   grpc_server_.reset();  // before the service and context its calls use
   // Its endpoint serves until it goes, and its gauges and bearer check read context_, which is
-  // declared after it and so would go first.
+  // declared after it and so would go first. Nothing records into it any more (the calls and
+  // the workers are done).
+  context_->metrics = nullptr;
   metrics_.reset();
 }
 

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <exception>
 #include <functional>
 #include <memory>
 #include <new>
@@ -234,8 +235,20 @@ TEST(BackgroundClipDigestTest, PastTheThreadLimitAnUploadHashesWhereItsSamplesAr
 }
 
 // Ways a thread's start can fail: the system refuses one (what std::thread throws then), another
-// exception (std::thread's own allocation), a starter that returns no thread.
-enum class StartFailure { kSystemError, kOtherException, kNoThread };
+// exception (std::thread's own allocation), one that says nothing, one that is not a
+// std::exception, a starter that returns no thread.
+enum class StartFailure {
+  kSystemError,
+  kOtherException,
+  kSilentException,
+  kNotAnException,
+  kNoThread,
+};
+
+// An exception whose what() is empty.
+struct Silent : std::exception {
+  const char* what() const noexcept override { return ""; }
+};
 
 DigestThreads::Starter FailingStarter(StartFailure failure, int& starts) {
   return [failure, &starts](std::function<void()>) -> std::thread {
@@ -246,6 +259,10 @@ DigestThreads::Starter FailingStarter(StartFailure failure, int& starts) {
                                 "no thread in this test");
       case StartFailure::kOtherException:
         throw std::bad_alloc();
+      case StartFailure::kSilentException:
+        throw Silent();
+      case StartFailure::kNotAnException:
+        throw 42;
       case StartFailure::kNoThread:
         break;
     }
@@ -256,7 +273,8 @@ DigestThreads::Starter FailingStarter(StartFailure failure, int& starts) {
 TEST(BackgroundClipDigestTest, WhenNoThreadCanStartItHashesWhereOfferedAndGivesTheClaimBack) {
   const core::Clip clip = SixChannels();
   for (const StartFailure failure :
-       {StartFailure::kSystemError, StartFailure::kOtherException, StartFailure::kNoThread}) {
+       {StartFailure::kSystemError, StartFailure::kOtherException, StartFailure::kSilentException,
+        StartFailure::kNotAnException, StartFailure::kNoThread}) {
     int starts = 0;
     DigestThreads threads(2, FailingStarter(failure, starts));
     BackgroundClipDigest digest(clip, &threads, kSmallLimits);
