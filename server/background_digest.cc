@@ -133,9 +133,7 @@ void BackgroundClipDigest::Run() {
     Piece piece;
     {
       std::unique_lock lock(mu_);
-      changed_.wait(lock, [&] {
-        return stopping_ || !queue_.empty();
-      });
+      changed_.wait(lock, [&] { return stopping_ || !queue_.empty(); });
       if (stopping_) return;  // the pieces still queued are dropped with the digest
       piece = std::move(queue_.front());
       queue_.pop_front();
