@@ -1,7 +1,7 @@
 // The cost model (core/pipeline/cost.h) against real runs: for pipelines that stress each inner
-// loop (the paper's DP passes once steps are fractional, the tolerance fit on white noise,
-// rotation-aware retimes, wide smoothing, baking), the predicted seconds next to the measured
-// ones on this machine, one core. The model's constants are chosen so that the worst workload of
+// loop (the paper's DP passes once steps are fractional, the tolerance fit on white noise and on
+// long calm motion, the noise method, rotation-aware retimes, wide smoothing, baking), the
+// predicted seconds next to the measured ones on this machine, one core. The model's constants are chosen so that the worst workload of
 // each kind is predicted at or above its measured time (ratio >= 1) and typical ones are
 // over-predicted by a bounded factor.
 //
@@ -65,6 +65,37 @@ ReduceStep Tolerance(double bound, std::optional<std::int64_t> budget = std::nul
   return step;
 }
 
+ReduceStep Noise() {
+  ReduceStep step;
+  step.options.method = ReduceMethod::kNoise;
+  return step;
+}
+
+ReduceStep JointBound(double percent_of_height) {
+  ReduceStep step;
+  step.options.tolerance.joint_tolerance = JointTolerance{percent_of_height, true};
+  return step;
+}
+
+// Slow motion well within a bound of 0.5: the tolerance fit merges its keys into segments as long
+// as a removal may make them (kMaxMergedSegmentFrames), the work of every merge growing with them.
+Clip CalmClip(std::int64_t frames) {
+  Clip clip;
+  clip.name = "calm";
+  clip.frame_time_seconds = 1.0 / 120.0;
+  clip.frame_count = frames;
+  Channel channel;
+  channel.kind = ChannelKind::kXRotation;
+  channel.name = "calm";
+  channel.samples.resize(static_cast<std::size_t>(frames));
+  for (std::int64_t f = 0; f < frames; ++f) {
+    channel.samples[static_cast<std::size_t>(f)] =
+        0.2 * std::sin(2.0 * M_PI * static_cast<double>(f) / 150'000.0);
+  }
+  clip.channels.push_back(std::move(channel));
+  return clip;
+}
+
 RetimeStep Speed(double speed, ResampleFilter filter = ResampleFilter::kTent,
                  RetimeMethod method = RetimeMethod::kExact) {
   RetimeStep step;
@@ -94,6 +125,7 @@ int Run(const std::string& filter) {
   const Clip noise_4k = NoiseClip(1, 4000, 10.0, ChannelKind::kXRotation);
   const Clip noise_1m = NoiseClip(1, 1'000'000, 10.0, ChannelKind::kXPosition);
   const Clip noise_100k = NoiseClip(1, 100'000, 10.0, ChannelKind::kXPosition);
+  const Clip calm_1m = CalmClip(1'000'000);
   RetimeStep to_30fps;
   to_30fps.options.output_rate = FrameRate{30, 1};
 
@@ -109,6 +141,11 @@ int Run(const std::string& filter) {
       {"tolerance/noise1m/1e-9", &noise_1m, {Tolerance(1e-9)}},
       {"tolerance/cmu/budget3000", &*cmu, {Tolerance(0.5, 3000)}},
       {"tolerance/noise100k/budget1000", &noise_100k, {Tolerance(0.5, 1000)}},
+      {"tolerance/calm1m/0.5", &calm_1m, {Tolerance(0.5)}},
+      {"tolerance/cmu/joint0.05%", &*cmu, {JointBound(0.05)}},
+      {"noise/noise1m", &noise_1m, {Noise()}},
+      {"noise/calm1m", &calm_1m, {Noise()}},
+      {"noise/cmu", &*cmu, {Noise()}},
       {"retime/cmu/slow0.5", &*cmu, {Speed(0.5)}},
       {"retime/cmu/fast3", &*cmu, {Speed(3.0)}},
       {"retime/cmu/fast3/lanczos3", &*cmu, {Speed(3.0, ResampleFilter::kLanczos3)}},

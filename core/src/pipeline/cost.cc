@@ -27,6 +27,9 @@ constexpr double kPaperRetimeSecondsPerStep = 10e-9;
 constexpr double kPaperRetimeBisections = 64.0;
 // Tolerance fit: one sample of one fit on white noise (every frame ends up keyed: the worst).
 constexpr double kToleranceSecondsPerSample = 2.5e-6;
+// Noise-aware method: one sample of one channel (its noise estimate, Euler filter, smoothing
+// and the fit of the smoothed curve) on white noise, the worst input measured (about 1.6 us).
+constexpr double kNoiseSecondsPerSample = 4e-6;
 // Paper fit: one x(s) = frame solve and data term of one x-combination in one pass (no cached
 // shape: fractional steps), one DP state pair of one segment in one pass, one smoothing tap.
 constexpr double kPaperSecondsPerSolve = 70e-9;
@@ -186,6 +189,12 @@ StepCost ReduceCost(const Shape& in, const ReduceStep& step) {
     cost.work = absl::StrCat("reduce (tolerance): ", Plural(in.channels, "channel", "channels"),
                              " x ", in.frames, " frames");
     if (fits > 1.0) absl::StrAppend(&cost.work, " x up to ", fits, " fits (key budget)");
+    return cost;
+  }
+  if (step.options.method == ReduceMethod::kNoise) {
+    cost.seconds = in.samples() * kNoiseSecondsPerSample + measure;
+    cost.work = absl::StrCat("reduce (noise): ", Plural(in.channels, "channel", "channels"),
+                             " x ", in.frames, " frames");
     return cost;
   }
   const PaperParams& p = step.options.paper;

@@ -1495,6 +1495,13 @@ class Fitter {
       base.free_last = after == kWindowSide ? base.count - 2 : base.count - 1;
       // The key after the removed one may slide, unless it is the clip's last.
       const bool can_slide = i + 1 < count - 1;
+      // The merged segment runs from the last accepted key to the key after the removed one
+      // (wherever it slides): no longer than kMaxMergedSegmentFrames, or the key stays.
+      const std::int64_t merge_start = base.frames[before - 1];
+      if (fit.frames[i + 1] - merge_start > kMaxMergedSegmentFrames) {
+        push(i);
+        continue;
+      }
       // Samples of work of one trial (a fit and a measure of the window's frames, every channel):
       // a candidate may take up to slide_frames + 1 trials, each counted for the stop token.
       const std::int64_t trial_work = (base.frames[base.count - 1] - base.frames[0] + 1) *
@@ -1511,7 +1518,10 @@ class Fitter {
       int direction = 0;
       for (int d = 0; !removed && d <= (can_slide ? options_.slide_frames : 0); ++d) {
         const std::int64_t moved = base.frames[before] + direction * d;
-        if (d > 0 && (moved <= base.frames[before - 1] || moved >= fit.frames[i + 2])) break;
+        if (d > 0 && (moved <= base.frames[before - 1] || moved >= fit.frames[i + 2] ||
+                      moved - merge_start > kMaxMergedSegmentFrames)) {
+          break;
+        }
         // A solve writes only the free keys, so after the first trial the fixed keys still hold
         // the base's values and only the frames need resetting.
         if (d == 0) {

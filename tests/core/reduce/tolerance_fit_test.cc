@@ -222,6 +222,14 @@ TEST(ToleranceFitTest, AlternatingSamplesAreFollowedWithinTheBound) {
   EXPECT_LE(fit->frames.size(), 64u);
 }
 
+std::int64_t LongestSegment(const SplineFit& fit) {
+  std::int64_t longest = 0;
+  for (std::size_t k = 1; k < fit.frames.size(); ++k) {
+    longest = std::max(longest, fit.frames[k] - fit.frames[k - 1]);
+  }
+  return longest;
+}
+
 TEST(ToleranceFitTest, LongSegmentsBeyondTheTabledLengthsFitToo) {
   // A slow sine over 200 000 frames: segments run far past the 256-frame basis tables.
   const Samples slow = Sine(200'000, 10.0, 150'000.0);
@@ -231,11 +239,53 @@ TEST(ToleranceFitTest, LongSegmentsBeyondTheTabledLengthsFitToo) {
   ASSERT_TRUE(fit.ok()) << fit.status();
   EXPECT_LE(MaxError(*fit, 0, slow), 0.05);
   EXPECT_LT(fit->frames.size(), 200u);
-  std::int64_t longest = 0;
-  for (std::size_t k = 1; k < fit->frames.size(); ++k) {
-    longest = std::max(longest, fit->frames[k] - fit->frames[k - 1]);
-  }
-  EXPECT_GT(longest, 256);
+  EXPECT_GT(LongestSegment(*fit), 256);
+}
+
+TEST(ToleranceFitTest, ARemovalMakesNoSegmentLongerThanTheLimit) {
+  // Slow motion well within the bound over 100 000 frames: two keys would do, but merging keys
+  // one at a time into one segment costs the square of its length; the removal stops at the
+  // limit and keeps a key there.
+  const Samples calm = Sine(100'000, 0.2, 150'000.0);
+
+  const absl::StatusOr<SplineFit> fit = FitOne(calm, 0.5);
+
+  ASSERT_TRUE(fit.ok()) << fit.status();
+  EXPECT_LE(MaxError(*fit, 0, calm), 0.5);
+  EXPECT_EQ(LongestSegment(*fit), kMaxMergedSegmentFrames);
+  // Merging stops only at the limit: about one key per limit's length.
+  EXPECT_LE(fit->frames.size(), static_cast<std::size_t>(2 * (100'000 / kMaxMergedSegmentFrames) + 2));
+}
+
+TEST(ToleranceFitTest, AChannelAsLongAsTheLimitIsStillOneSegment) {
+  const auto frames = static_cast<int>(kMaxMergedSegmentFrames);
+  const Samples at_limit = Sine(frames + 1, 0.2, 150'000.0);
+  const Samples past_limit = Sine(frames + 2, 0.2, 150'000.0);
+
+  const absl::StatusOr<SplineFit> one_segment = FitOne(at_limit, 0.5);
+  const absl::StatusOr<SplineFit> two_segments = FitOne(past_limit, 0.5);
+
+  ASSERT_TRUE(one_segment.ok()) << one_segment.status();
+  ASSERT_TRUE(two_segments.ok()) << two_segments.status();
+  EXPECT_EQ(one_segment->frames, (std::vector<std::int64_t>{0, frames}));
+  EXPECT_EQ(two_segments->frames.size(), 3u);
+  EXPECT_LE(LongestSegment(*two_segments), kMaxMergedSegmentFrames);
+  EXPECT_LE(MaxError(*two_segments, 0, past_limit), 0.5);
+}
+
+TEST(ToleranceFitTest, ASlideStopsAtTheLimitToo) {
+  // Still, then a small quick step just before the limit: the merge from frame 0 misses at the
+  // step, after the key that may slide, so the slides would carry that key (and the merged
+  // segment) away past the limit; found by a search over steps, with the slides unlimited.
+  Samples step(4300, 0.0);
+  for (std::size_t f = 4087; f < step.size(); ++f) step[f] = 0.8;
+  step[4086] = 0.4;
+
+  const absl::StatusOr<SplineFit> fit = FitOne(step, 0.5);
+
+  ASSERT_TRUE(fit.ok()) << fit.status();
+  EXPECT_LE(LongestSegment(*fit), kMaxMergedSegmentFrames);
+  EXPECT_LE(MaxError(*fit, 0, step), 0.5);
 }
 
 TEST(ToleranceFitTest, EveryOptionSettingKeepsTheBound) {

@@ -16,7 +16,9 @@
 //   reduce     tolerance: channels x frames x fits, the fits 1 without a key budget, else the
 //              budget search's (1 + up to 20 halvings or doublings up to the scale whose bounds
 //              cover every channel's range, + 12 bisections); the per-sample constant is the one
-//              measured on white noise, the worst input (every frame keyed).
+//              measured on white noise, the worst input (every frame keyed; a smooth channel
+//              costs less because a removal merges at most kMaxMergedSegmentFrames).
+//              noise: channels x frames, the per-sample constant measured on white noise.
 //              paper: channels x [frames x smoothing taps (2 ceil(3 sigma) + 1) + max_iterations
 //              x (frames x 81 basis solves + keys x 81 x 81 DP states)], keys at most
 //              frames / min_key_spacing + 2: the worst case of a pass, when steps have become
