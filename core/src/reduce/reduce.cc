@@ -380,16 +380,18 @@ class ToleranceFitter {
     if (bounds_.joint) joint_plan_.emplace(*meter, inputs);
   }
 
+  // `start_spacing` (frames, > 0): every group's fit starts from keys that far apart instead of
+  // its default start.
   absl::StatusOr<ToleranceCurves> Fit(double scale, const ProgressFn& progress,
-                                      std::stop_token stop) {
+                                      std::stop_token stop, std::int64_t start_spacing = 0) {
     ToleranceCurves out;
     out.curves.resize(clip_.channels.size());
     if (!bounds_.joint) {
       std::vector<std::size_t> all(groups_.size());
       for (std::size_t g = 0; g < all.size(); ++g) all[g] = g;
-      GroupKeyFrames no_start(groups_.size());
+      GroupKeyFrames start = StartFrames(start_spacing);
       TEMPOKEY_RETURN_IF_ERROR(FitGroups(clip_, inputs_, groups_, all,
-                                         Scaled(bounds_.channel, scale), out.curves, no_start,
+                                         Scaled(bounds_.channel, scale), out.curves, start,
                                          progress, stop));
       return out;
     }
@@ -400,7 +402,7 @@ class ToleranceFitter {
     // keys initial_spacing_frames apart: its insertion has fewer rounds to go and its removal
     // fewer keys to try (measured, and its keys at other bounds, in the README's world-bound
     // profile).
-    GroupKeyFrames last_frames(groups_.size());
+    GroupKeyFrames last_frames = StartFrames(start_spacing);
     const reduce_internal::GroupFitter fit_groups =
         [&](std::span<const std::size_t> which, std::span<const double> bounds,
             std::vector<Curve>& curves) {
@@ -435,7 +437,35 @@ class ToleranceFitter {
 
   std::optional<double> joint_bound() const { return bounds_.joint; }
 
+  // The spacing of keys that keeps a fit started from them within `budget` keys (>= 2 per
+  // channel) when none is inserted or removed: a lone constant channel takes its two flat keys,
+  // every other channel an equal share of the rest.
+  std::int64_t BudgetSpacing(std::int64_t budget) const {
+    std::int64_t flat = 0;
+    for (const std::vector<int>& group : groups_) {
+      if (group.size() == 1 && IsConstant(inputs_[group[0]])) ++flat;
+    }
+    const auto varying = static_cast<std::int64_t>(inputs_.size()) - flat;
+    const std::int64_t keys = varying > 0 ? (budget - 2 * flat) / varying : 2;
+    const std::int64_t gaps = std::max<std::int64_t>(keys - 1, 1);
+    const std::int64_t last = std::max<std::int64_t>(clip_.frame_count - 1, 1);
+    return (last + gaps - 1) / gaps;
+  }
+
  private:
+  // Every group's start: keys `spacing` frames apart from the first frame, and the last; none
+  // (the fit's default start) for spacing 0.
+  GroupKeyFrames StartFrames(std::int64_t spacing) const {
+    GroupKeyFrames start(groups_.size());
+    if (spacing <= 0) return start;
+    std::vector<std::int64_t> frames;
+    const std::int64_t last = clip_.frame_count - 1;
+    for (std::int64_t f = 0; f < last; f += spacing) frames.push_back(f);
+    frames.push_back(last);
+    for (std::vector<std::int64_t>& group_start : start) group_start = frames;
+    return start;
+  }
+
   const Clip& clip_;
   std::span<const std::span<const double>> inputs_;
   std::vector<std::vector<int>> groups_;
@@ -475,8 +505,8 @@ absl::StatusOr<ToleranceCurves> ToleranceFit(const Clip& clip,
     }
     if (over == 0.0) return best;  // even the tightest bound searched fits the budget
   } else {
-    // Doubling, up to the scale whose bounds cover every channel's range: the fit there keeps
-    // two keys per channel, which the budget allows (checked above).
+    // Doubling, up to the scale whose bounds cover every channel's range: there two keys per
+    // channel, which the budget allows (checked above), are within every bound.
     over = 1.0;
     const double ceiling = fitter.CoveringScale();
     bool found = false;
@@ -492,9 +522,22 @@ absl::StatusOr<ToleranceCurves> ToleranceFit(const Clip& clip,
       }
     }
     if (!found) {
-      // The fit kept more than two keys per channel even where two flat keys are within every
-      // bound (not seen in practice): take those. With a joint bound they keep it too, since
-      // every channel is then within its guaranteed budget.
+      // The fit keeps more keys than the budget even where two flat keys are within every bound:
+      // on a clip longer than kMaxMergedSegmentFrames a varying channel keeps at least a key
+      // per that many frames, as no removal merges further. Started from the budget's share of
+      // keys, evenly spaced (more than that limit apart, so none is merged), the fit keeps them
+      // at that scale (their least-squares curve stays within the channel's range) unless a
+      // curve misses somewhere and the fit inserts keys.
+      TEMPOKEY_ASSIGN_OR_RETURN(
+          ToleranceCurves spread,
+          fitter.Fit(ceiling, quiet, stop, fitter.BudgetSpacing(budget)));
+      if (KeyCount(spread.curves) <= budget) {
+        ReportProgressOf(progress, 1.0, "reduce ", clip.channels.size(), "/",
+                         clip.channels.size());
+        return spread;
+      }
+      // Else two flat keys per channel. With a joint bound they keep it too, since every
+      // channel is then within its guaranteed budget.
       best.curves = MidRangeCurves(clip, inputs);
       best.samples.clear();
       best.world_errors.reset();

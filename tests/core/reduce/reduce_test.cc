@@ -213,6 +213,36 @@ TEST(ReduceKeysTest, KeyBudgetOfTwoKeysPerChannelIsMetHoweverSmallTheBound) {
   }
 }
 
+TEST(ReduceKeysTest, KeyBudgetBelowAKeyPerMergeLimitSpreadsItsKeysEvenly) {
+  // Four slow sines (range 60) and a constant over 10 000 frames: a varying channel keeps at
+  // least four keys whatever the bound (no removal merges past 4096 frames), over a budget of
+  // 14 (15 when the constant shares the others' frames). Two flat keys per channel would miss by
+  // half the range; the budget's three keys per channel, evenly spaced and fitted, follow the
+  // motion.
+  std::vector<std::vector<double>> channels(5, std::vector<double>(10'000, 1.5));
+  for (int c = 0; c < 4; ++c) {
+    for (int f = 0; f < 10'000; ++f) channels[c][f] = 30.0 * std::sin(2.0 * M_PI * f / 9000.0 + c);
+  }
+  const Clip clip = ScalarClip(channels);
+  ReduceOptions options = ToleranceOptions(0.5, 0.5, 0.01);
+  options.tolerance.key_budget = 14;
+  ReduceOptions aligned = options;
+  aligned.tolerance.pose_alignment = PoseAlignment::kClip;
+  aligned.tolerance.key_budget = 15;
+
+  const absl::StatusOr<ReduceResult> result = ReduceKeys(clip, options);
+  const absl::StatusOr<ReduceResult> shared = ReduceKeys(clip, aligned);
+
+  for (const absl::StatusOr<ReduceResult>* r : {&result, &shared}) {
+    ASSERT_TRUE(r->ok()) << r->status();
+    EXPECT_EQ((*r)->report.key_count, r == &result ? 14 : 15);
+    EXPECT_LT((*r)->report.max_error, 5.0);
+    const std::vector<Key>& keys = (*r)->keyed.curves[0].keys;
+    ASSERT_EQ(keys.size(), 3u);
+    EXPECT_DOUBLE_EQ(keys[1].time_seconds, 5000.0 / 30.0);
+  }
+}
+
 TEST(ReduceKeysTest, ReportIsMeasureReductionOfTheKeysItReturns) {
   const Clip clip = MixedClip();
   ReduceOptions tolerance = ToleranceOptions(0.2, 0.05, 0.001);
