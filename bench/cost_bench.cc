@@ -1,9 +1,9 @@
 // The cost model (core/pipeline/cost.h) against real runs: for pipelines that stress each inner
 // loop (the paper's DP passes once steps are fractional, the tolerance fit on white noise and on
 // long calm motion, the noise method, rotation-aware retimes, wide smoothing, baking), the
-// predicted seconds next to the measured ones on this machine, one core. The model's constants are chosen so that the worst workload of
-// each kind is predicted at or above its measured time (ratio >= 1) and typical ones are
-// over-predicted by a bounded factor.
+// predicted seconds next to the measured ones on this machine, one core. The model's constants
+// are chosen so that the worst workload of each kind is predicted at or above its measured time
+// (ratio >= 1) and typical ones are over-predicted by a bounded factor.
 //
 //   cost_bench [filter]      runs every workload whose name contains `filter`; those named
 //                            slow/... (minutes) only when `filter` starts with slow/
@@ -77,9 +77,11 @@ ReduceStep JointBound(double percent_of_height) {
   return step;
 }
 
-// Slow motion well within a bound of 0.5: the tolerance fit merges its keys into segments as long
-// as a removal may make them (kMaxMergedSegmentFrames), the work of every merge growing with them.
-Clip CalmClip(std::int64_t frames) {
+// Slow motion well within a bound of 0.5, with Gaussian jitter of `jitter`: the tolerance fit
+// merges its keys into segments as long as a removal may make them (kMaxMergedSegmentFrames),
+// the work of every merge growing with them; jitter near the bound makes more of the merges
+// slide and reweight before they fit.
+Clip CalmClip(std::int64_t frames, double jitter = 0.0) {
   Clip clip;
   clip.name = "calm";
   clip.frame_time_seconds = 1.0 / 120.0;
@@ -88,9 +90,12 @@ Clip CalmClip(std::int64_t frames) {
   channel.kind = ChannelKind::kXRotation;
   channel.name = "calm";
   channel.samples.resize(static_cast<std::size_t>(frames));
+  std::mt19937_64 random(5);
+  std::normal_distribution<double> noise(0.0, jitter);
   for (std::int64_t f = 0; f < frames; ++f) {
     channel.samples[static_cast<std::size_t>(f)] =
-        0.2 * std::sin(2.0 * M_PI * static_cast<double>(f) / 150'000.0);
+        0.2 * std::sin(2.0 * M_PI * static_cast<double>(f) / 150'000.0) +
+        (jitter > 0.0 ? noise(random) : 0.0);
   }
   clip.channels.push_back(std::move(channel));
   return clip;
@@ -126,6 +131,7 @@ int Run(const std::string& filter) {
   const Clip noise_1m = NoiseClip(1, 1'000'000, 10.0, ChannelKind::kXPosition);
   const Clip noise_100k = NoiseClip(1, 100'000, 10.0, ChannelKind::kXPosition);
   const Clip calm_1m = CalmClip(1'000'000);
+  const Clip jittery_calm_1m = CalmClip(1'000'000, 0.15);
   RetimeStep to_30fps;
   to_30fps.options.output_rate = FrameRate{30, 1};
 
@@ -142,6 +148,7 @@ int Run(const std::string& filter) {
       {"tolerance/cmu/budget3000", &*cmu, {Tolerance(0.5, 3000)}},
       {"tolerance/noise100k/budget1000", &noise_100k, {Tolerance(0.5, 1000)}},
       {"tolerance/calm1m/0.5", &calm_1m, {Tolerance(0.5)}},
+      {"tolerance/calm1m+jitter0.15/0.5", &jittery_calm_1m, {Tolerance(0.5)}},
       {"tolerance/cmu/joint0.05%", &*cmu, {JointBound(0.05)}},
       {"noise/noise1m", &noise_1m, {Noise()}},
       {"noise/calm1m", &calm_1m, {Noise()}},

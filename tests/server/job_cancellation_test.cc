@@ -274,7 +274,7 @@ TEST_F(WorkLimitTest, ARequestPredictedOverTheLimitIsRefusedUpFrontWithTheEstima
 }
 
 TEST_F(WorkLimitTest, ANoiseReductionOfALongCaptureIsAdmittedAndRuns) {
-  // 96 channels slowed to a tenth (9 931 frames): the noise method takes about a second of one
+  // 96 channels slowed to a tenth (9 931 frames): the noise method takes about half a second of one
   // core on them. It was costed as the paper's method (68 s), over the default limit.
   const UploadOutcome upload = UploadClip(*stub_, MakeClip(31, 994));
   TEMPOKEY_ASSERT_GRPC_OK(upload.status);

@@ -134,8 +134,8 @@ double ToleranceBound(const ToleranceParams& t, ChannelKind kind) {
 }
 
 // Fits a key budget's search may run: 1 at the given bounds, then up to kBudgetHalvings
-// halvings or the doublings up to the scale whose bounds cover every channel's range, then the
-// bisections.
+// halvings or the doublings up to the scale whose bounds cover every channel's range (and one
+// more there, from keys spread evenly, when no fit keeps to the budget), then the bisections.
 double BudgetFits(const Shape& in, const ToleranceParams& t) {
   double ceiling = 1.0;
   const bool known = in.data != nullptr && !in.data->channels.empty() &&
@@ -155,7 +155,7 @@ double BudgetFits(const Shape& in, const ToleranceParams& t) {
     ceiling = std::max(1.0, range / bound);
   }
   const double doublings = std::ceil(std::log2(std::min(ceiling, 1e300)));
-  return 1.0 + std::max(kBudgetHalvings, doublings) + kBudgetBisections;
+  return 1.0 + std::max(kBudgetHalvings, doublings + 1.0) + kBudgetBisections;
 }
 
 StepCost RetimeCost(const Shape& in, const Shape& out, const RetimeStep& step) {

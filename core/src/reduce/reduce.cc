@@ -488,7 +488,8 @@ absl::StatusOr<ToleranceCurves> ToleranceFit(const Clip& clip,
   TEMPOKEY_RETURN_IF_ERROR(CheckKeyBudget(params, static_cast<std::int64_t>(clip.channels.size()),
                                           clip.frame_count));
   const ProgressFn quiet;
-  auto fit = [&](double scale) { return fitter.Fit(scale, quiet, stop); };
+  std::int64_t start_spacing = 0;  // the fits' default start (see below)
+  auto fit = [&](double scale) { return fitter.Fit(scale, quiet, stop, start_spacing); };
   // Bracket: `within` keeps to the budget, `over` does not.
   double within = 1.0;
   double over = 0.0;
@@ -527,23 +528,24 @@ absl::StatusOr<ToleranceCurves> ToleranceFit(const Clip& clip,
       // per that many frames, as no removal merges further. Started from the budget's share of
       // keys, evenly spaced (more than that limit apart, so none is merged), the fit keeps them
       // at that scale (their least-squares curve stays within the channel's range) unless a
-      // curve misses somewhere and the fit inserts keys.
-      TEMPOKEY_ASSIGN_OR_RETURN(
-          ToleranceCurves spread,
-          fitter.Fit(ceiling, quiet, stop, fitter.BudgetSpacing(budget)));
-      if (KeyCount(spread.curves) <= budget) {
+      // curve misses somewhere and the fit inserts keys; the bisection below then looks from
+      // that start for the smallest scale whose fit still keeps to the budget.
+      start_spacing = fitter.BudgetSpacing(budget);
+      TEMPOKEY_ASSIGN_OR_RETURN(ToleranceCurves spread, fit(ceiling));
+      if (KeyCount(spread.curves) > budget) {
+        // Two flat keys per channel. With a joint bound they keep it too, since every channel
+        // is then within its guaranteed budget.
+        best.curves = MidRangeCurves(clip, inputs);
+        best.samples.clear();
+        best.world_errors.reset();
+        best.joint_bound = fitter.joint_bound() ? *fitter.joint_bound() * ceiling : 0.0;
         ReportProgressOf(progress, 1.0, "reduce ", clip.channels.size(), "/",
                          clip.channels.size());
-        return spread;
+        return best;
       }
-      // Else two flat keys per channel. With a joint bound they keep it too, since every
-      // channel is then within its guaranteed budget.
-      best.curves = MidRangeCurves(clip, inputs);
-      best.samples.clear();
-      best.world_errors.reset();
-      best.joint_bound = fitter.joint_bound() ? *fitter.joint_bound() * ceiling : 0.0;
-      ReportProgressOf(progress, 1.0, "reduce ", clip.channels.size(), "/", clip.channels.size());
-      return best;
+      best = std::move(spread);
+      within = ceiling;
+      over = 1.0;  // the bounds asked for: from this start too, their fit keeps more keys
     }
   }
   for (int step = 0; step < kBudgetBisections; ++step) {

@@ -1502,6 +1502,11 @@ class Fitter {
         push(i);
         continue;
       }
+      // A slide back towards the removed key lengthens the segment after the slid key: no
+      // further than the limit either, unless it was longer already (a start's).
+      const std::int64_t after_limit =
+          can_slide ? std::max(kMaxMergedSegmentFrames, fit.frames[i + 2] - fit.frames[i + 1])
+                    : 0;
       // Samples of work of one trial (a fit and a measure of the window's frames, every channel):
       // a candidate may take up to slide_frames + 1 trials, each counted for the stop token.
       const std::int64_t trial_work = (base.frames[base.count - 1] - base.frames[0] + 1) *
@@ -1519,7 +1524,8 @@ class Fitter {
       for (int d = 0; !removed && d <= (can_slide ? options_.slide_frames : 0); ++d) {
         const std::int64_t moved = base.frames[before] + direction * d;
         if (d > 0 && (moved <= base.frames[before - 1] || moved >= fit.frames[i + 2] ||
-                      moved - merge_start > kMaxMergedSegmentFrames)) {
+                      moved - merge_start > kMaxMergedSegmentFrames ||
+                      fit.frames[i + 2] - moved > after_limit)) {
           break;
         }
         // A solve writes only the free keys, so after the first trial the fixed keys still hold

@@ -254,7 +254,8 @@ TEST(ToleranceFitTest, ARemovalMakesNoSegmentLongerThanTheLimit) {
   EXPECT_LE(MaxError(*fit, 0, calm), 0.5);
   EXPECT_EQ(LongestSegment(*fit), kMaxMergedSegmentFrames);
   // Merging stops only at the limit: about one key per limit's length.
-  EXPECT_LE(fit->frames.size(), static_cast<std::size_t>(2 * (100'000 / kMaxMergedSegmentFrames) + 2));
+  const auto limit_lengths = static_cast<std::size_t>(100'000 / kMaxMergedSegmentFrames);
+  EXPECT_LE(fit->frames.size(), 2 * limit_lengths + 2);
 }
 
 TEST(ToleranceFitTest, AChannelAsLongAsTheLimitIsStillOneSegment) {
@@ -273,15 +274,59 @@ TEST(ToleranceFitTest, AChannelAsLongAsTheLimitIsStillOneSegment) {
   EXPECT_LE(MaxError(*two_segments, 0, past_limit), 0.5);
 }
 
-TEST(ToleranceFitTest, ASlideStopsAtTheLimitToo) {
-  // Still, then a small quick step just before the limit: the merge from frame 0 misses at the
-  // step, after the key that may slide, so the slides would carry that key (and the merged
-  // segment) away past the limit; found by a search over steps, with the slides unlimited.
-  Samples step(4300, 0.0);
-  for (std::size_t f = 4087; f < step.size(); ++f) step[f] = 0.8;
-  step[4086] = 0.4;
+// Still until `first`, then `height` from `first + 1` on, reached in a smooth step of `width`
+// frames: a small quick step the fit meets only near where its merges reach the limit.
+Samples StillThenStep(int frames, int first, int width, double height) {
+  Samples s(static_cast<std::size_t>(frames), 0.0);
+  for (int f = first + 1; f < frames; ++f) {
+    const double x = std::min(1.0, static_cast<double>(f - first) / width);
+    s[f] = height * x * x * (3.0 - 2.0 * x);
+  }
+  return s;
+}
 
-  const absl::StatusOr<SplineFit> fit = FitOne(step, 0.5);
+TEST(ToleranceFitTest, ASlideStopsAtTheLimitToo) {
+  // The merge from frame 0 misses at the step, after the key that may slide, so the slides would
+  // carry that key (and the merged segment) away past the limit: by 3 frames for the first step,
+  // by 1 for the second (steps found by a search, with the slides' limit lifted or one frame
+  // longer).
+  for (const Samples& step :
+       {StillThenStep(4300, 4085, 2, 0.8), StillThenStep(4300, 4085, 1, 0.8)}) {
+    const absl::StatusOr<SplineFit> fit = FitOne(step, 0.5);
+
+    ASSERT_TRUE(fit.ok()) << fit.status();
+    EXPECT_LE(LongestSegment(*fit), kMaxMergedSegmentFrames);
+    EXPECT_LE(MaxError(*fit, 0, step), 0.5);
+  }
+}
+
+TEST(ToleranceFitTest, ASlideMayEndExactlyAtTheLimit) {
+  // Keys every 16 frames to 4080, then from 4093: the merge of frame 0 to 4093 misses at the
+  // step just after it, and the slide that fits carries that key to 4096, the limit itself.
+  const Samples step = StillThenStep(4400, 4090, 3, 0.6);
+  ToleranceFitOptions options;
+  for (std::int64_t f = 0; f <= 4080; f += 16) options.initial_frames.push_back(f);
+  for (std::int64_t f = 4093; f < 4399; f += 16) options.initial_frames.push_back(f);
+  options.initial_frames.push_back(4399);
+
+  const absl::StatusOr<SplineFit> fit = Fit({step}, {0.5}, options);
+
+  ASSERT_TRUE(fit.ok()) << fit.status();
+  EXPECT_EQ(fit->frames, (std::vector<std::int64_t>{0, kMaxMergedSegmentFrames, 4399}));
+  EXPECT_LE(MaxError(*fit, 0, step), 0.5);
+}
+
+TEST(ToleranceFitTest, ASlideBackStretchesNoSegmentPastTheLimit) {
+  // A start with a segment of exactly the limit after frame 100, and a step at frame 40: the
+  // removal of the key at 96 slides the key at 100 back towards it, which would stretch that
+  // segment past the limit.
+  Samples step(4296, 0.0);
+  for (std::size_t f = 40; f < step.size(); ++f) step[f] = 1.0;
+  ToleranceFitOptions options;
+  for (std::int64_t f = 0; f < 100; f += 8) options.initial_frames.push_back(f);
+  for (std::int64_t f : {100, 4196, 4295}) options.initial_frames.push_back(f);
+
+  const absl::StatusOr<SplineFit> fit = Fit({step}, {0.5}, options);
 
   ASSERT_TRUE(fit.ok()) << fit.status();
   EXPECT_LE(LongestSegment(*fit), kMaxMergedSegmentFrames);

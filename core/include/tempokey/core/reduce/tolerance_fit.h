@@ -19,9 +19,10 @@
 //      frames (the way the unmoved fit misses); if none fits but the closest misses the bound by
 //      at most 1.5 times, reweight that one towards its worst frames (Lawson's iteration towards
 //      the minimax fit) for up to `lawson_iterations` rounds. Keep the first trial that fits.
-//      No trial makes a segment longer than kMaxMergedSegmentFrames: a trial's work grows with
-//      its window, so without a limit a smooth stretch merged key by key costs the square of its
-//      length (one calm channel of 1 M frames took 132 s, 0.25 s with the limit: cost_bench).
+//      No trial makes a segment longer than kMaxMergedSegmentFrames (by merging, or by a slide
+//      that lengthens the segment after the slid key): a trial's work grows with its window, so
+//      without a limit a smooth stretch merged key by key costs the square of its length (one
+//      calm channel of 1 M frames took 132 s, 0.25 s with the limit: cost_bench).
 //   3. Verification of every frame; a region that cannot be fitted (only possible with keys on
 //      consecutive frames) is keyed at every frame with the samples' values.
 // Channels fitted together (a joint's, or a whole clip's: pose-aligned keys) share key frames and
@@ -41,7 +42,7 @@
 namespace tempokey::core {
 
 // The longest segment a removal makes, in frames (34 s at 120 fps). A start with longer segments
-// (a wide initial_spacing_frames, or initial_frames) may keep segments about as long as its own.
+// (a wide initial_spacing_frames, or initial_frames) may keep them, never lengthened.
 inline constexpr std::int64_t kMaxMergedSegmentFrames = 4096;
 
 struct ToleranceFitOptions {
