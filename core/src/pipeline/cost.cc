@@ -134,8 +134,9 @@ double ToleranceBound(const ToleranceParams& t, ChannelKind kind) {
 }
 
 // Fits a key budget's search may run: 1 at the given bounds, then up to kBudgetHalvings
-// halvings or the doublings up to the scale whose bounds cover every channel's range (and one
-// more there, from keys spread evenly, when no fit keeps to the budget), then the bisections.
+// halvings or the doublings up to the scale whose bounds cover every channel's range (and there,
+// when no fit keeps to the budget, fits from evenly spread keys, as many as the budget allows a
+// channel and then half as many, down to two: at most 1 + log2(frames)), then the bisections.
 double BudgetFits(const Shape& in, const ToleranceParams& t) {
   double ceiling = 1.0;
   const bool known = in.data != nullptr && !in.data->channels.empty() &&
@@ -155,7 +156,9 @@ double BudgetFits(const Shape& in, const ToleranceParams& t) {
     ceiling = std::max(1.0, range / bound);
   }
   const double doublings = std::ceil(std::log2(std::min(ceiling, 1e300)));
-  return 1.0 + std::max(kBudgetHalvings, doublings + 1.0) + kBudgetBisections;
+  const double spread_starts =
+      1.0 + std::ceil(std::log2(std::max(2.0, static_cast<double>(in.frames))));
+  return 1.0 + std::max(kBudgetHalvings, doublings + spread_starts) + kBudgetBisections;
 }
 
 StepCost RetimeCost(const Shape& in, const Shape& out, const RetimeStep& step) {

@@ -380,16 +380,16 @@ class ToleranceFitter {
     if (bounds_.joint) joint_plan_.emplace(*meter, inputs);
   }
 
-  // `start_spacing` (frames, > 0): every group's fit starts from keys that far apart instead of
-  // its default start.
+  // `start_keys` (> 0): every group's fit starts from StartFrames(start_keys) instead of its
+  // default start.
   absl::StatusOr<ToleranceCurves> Fit(double scale, const ProgressFn& progress,
-                                      std::stop_token stop, std::int64_t start_spacing = 0) {
+                                      std::stop_token stop, std::int64_t start_keys = 0) {
     ToleranceCurves out;
     out.curves.resize(clip_.channels.size());
     if (!bounds_.joint) {
       std::vector<std::size_t> all(groups_.size());
       for (std::size_t g = 0; g < all.size(); ++g) all[g] = g;
-      GroupKeyFrames start = StartFrames(start_spacing);
+      GroupKeyFrames start = StartFrames(start_keys);
       TEMPOKEY_RETURN_IF_ERROR(FitGroups(clip_, inputs_, groups_, all,
                                          Scaled(bounds_.channel, scale), out.curves, start,
                                          progress, stop));
@@ -402,7 +402,7 @@ class ToleranceFitter {
     // keys initial_spacing_frames apart: its insertion has fewer rounds to go and its removal
     // fewer keys to try (measured, and its keys at other bounds, in the README's world-bound
     // profile).
-    GroupKeyFrames last_frames = StartFrames(start_spacing);
+    GroupKeyFrames last_frames = StartFrames(start_keys);
     const reduce_internal::GroupFitter fit_groups =
         [&](std::span<const std::size_t> which, std::span<const double> bounds,
             std::vector<Curve>& curves) {
@@ -437,32 +437,40 @@ class ToleranceFitter {
 
   std::optional<double> joint_bound() const { return bounds_.joint; }
 
-  // The spacing of keys that keeps a fit started from them within `budget` keys (>= 2 per
-  // channel) when none is inserted or removed: a lone constant channel takes its two flat keys,
-  // every other channel an equal share of the rest.
-  std::int64_t BudgetSpacing(std::int64_t budget) const {
-    std::int64_t flat = 0;
+  // Keys per moving channel of an evenly spaced start that keeps to `budget` (>= 2 per channel)
+  // when the fit inserts none: a group whose channels are all constant keeps its two keys, the
+  // first frame's and the last's; every other channel takes an equal share of the rest.
+  std::int64_t BudgetShare(std::int64_t budget) const {
+    std::int64_t still = 0;
     for (const std::vector<int>& group : groups_) {
-      if (group.size() == 1 && IsConstant(inputs_[group[0]])) ++flat;
+      if (AllConstant(group)) still += static_cast<std::int64_t>(group.size());
     }
-    const auto varying = static_cast<std::int64_t>(inputs_.size()) - flat;
-    const std::int64_t keys = varying > 0 ? (budget - 2 * flat) / varying : 2;
-    const std::int64_t gaps = std::max<std::int64_t>(keys - 1, 1);
-    const std::int64_t last = std::max<std::int64_t>(clip_.frame_count - 1, 1);
-    return (last + gaps - 1) / gaps;
+    const auto moving = static_cast<std::int64_t>(inputs_.size()) - still;
+    return moving > 0 ? (budget - 2 * still) / moving : 2;
   }
 
  private:
-  // Every group's start: keys `spacing` frames apart from the first frame, and the last; none
-  // (the fit's default start) for spacing 0.
-  GroupKeyFrames StartFrames(std::int64_t spacing) const {
+  bool AllConstant(const std::vector<int>& group) const {
+    return std::all_of(group.begin(), group.end(), [&](int c) { return IsConstant(inputs_[c]); });
+  }
+
+  // Every group's start: `keys` (>= 2) evenly spaced over the clip, the first frame's and the
+  // last's among them, or those two for a group whose channels are all constant; none (the fit's
+  // default start) for keys 0.
+  GroupKeyFrames StartFrames(std::int64_t keys) const {
     GroupKeyFrames start(groups_.size());
-    if (spacing <= 0) return start;
-    std::vector<std::int64_t> frames;
+    if (keys <= 0) return start;
     const std::int64_t last = clip_.frame_count - 1;
+    const std::int64_t gaps = std::max<std::int64_t>(keys - 1, 1);
+    const std::int64_t spacing = std::max<std::int64_t>((last + gaps - 1) / gaps, 1);
+    std::vector<std::int64_t> frames;
     for (std::int64_t f = 0; f < last; f += spacing) frames.push_back(f);
     frames.push_back(last);
-    for (std::vector<std::int64_t>& group_start : start) group_start = frames;
+    const std::vector<std::int64_t> ends =
+        last > 0 ? std::vector<std::int64_t>{0, last} : std::vector<std::int64_t>{0};
+    for (std::size_t g = 0; g < groups_.size(); ++g) {
+      start[g] = AllConstant(groups_[g]) ? ends : frames;
+    }
     return start;
   }
 
@@ -488,8 +496,8 @@ absl::StatusOr<ToleranceCurves> ToleranceFit(const Clip& clip,
   TEMPOKEY_RETURN_IF_ERROR(CheckKeyBudget(params, static_cast<std::int64_t>(clip.channels.size()),
                                           clip.frame_count));
   const ProgressFn quiet;
-  std::int64_t start_spacing = 0;  // the fits' default start (see below)
-  auto fit = [&](double scale) { return fitter.Fit(scale, quiet, stop, start_spacing); };
+  std::int64_t start_keys = 0;  // the fits' default start (see below)
+  auto fit = [&](double scale) { return fitter.Fit(scale, quiet, stop, start_keys); };
   // Bracket: `within` keeps to the budget, `over` does not.
   double within = 1.0;
   double over = 0.0;
@@ -523,16 +531,26 @@ absl::StatusOr<ToleranceCurves> ToleranceFit(const Clip& clip,
       }
     }
     if (!found) {
-      // The fit keeps more keys than the budget even where two flat keys are within every bound:
-      // on a clip longer than kMaxMergedSegmentFrames a varying channel keeps at least a key
-      // per that many frames, as no removal merges further. Started from the budget's share of
-      // keys, evenly spaced (more than that limit apart, so none is merged), the fit keeps them
-      // at that scale (their least-squares curve stays within the channel's range) unless a
-      // curve misses somewhere and the fit inserts keys; the bisection below then looks from
-      // that start for the smallest scale whose fit still keeps to the budget.
-      start_spacing = fitter.BudgetSpacing(budget);
-      TEMPOKEY_ASSIGN_OR_RETURN(ToleranceCurves spread, fit(ceiling));
-      if (KeyCount(spread.curves) > budget) {
+      // The fit keeps more keys than the budget even at the scale where two flat keys per
+      // channel are within every bound: a removal merges no segment past
+      // kMaxMergedSegmentFrames, so a moving channel of a long clip keeps a key per that many
+      // frames; and with a joint bound the first round's budgets (capped at half a turn) may
+      // miss where the covering scale's would not. Started from the budget's share of keys per
+      // moving channel, evenly spaced, the fit at that scale keeps them unless a curve misses
+      // somewhere and it inserts keys; then from half as many, down to two. The bisection below
+      // looks from the start that kept to the budget for the smallest scale that still does.
+      bool spread = false;
+      for (std::int64_t keys = fitter.BudgetShare(budget); !spread; keys /= 2) {
+        start_keys = std::max<std::int64_t>(keys, 2);
+        TEMPOKEY_ASSIGN_OR_RETURN(ToleranceCurves curves, fit(ceiling));
+        if (KeyCount(curves.curves) <= budget) {
+          best = std::move(curves);
+          spread = true;
+        } else if (start_keys == 2) {
+          break;
+        }
+      }
+      if (!spread) {
         // Two flat keys per channel. With a joint bound they keep it too, since every channel
         // is then within its guaranteed budget.
         best.curves = MidRangeCurves(clip, inputs);
@@ -543,12 +561,12 @@ absl::StatusOr<ToleranceCurves> ToleranceFit(const Clip& clip,
                          clip.channels.size());
         return best;
       }
-      best = std::move(spread);
       within = ceiling;
-      over = 1.0;  // the bounds asked for: from this start too, their fit keeps more keys
+      over = 1.0;  // the bounds asked for, which the default start could not keep to either
     }
   }
-  for (int step = 0; step < kBudgetBisections; ++step) {
+  // (Nothing to bisect when the bounds asked for already covered every range.)
+  for (int step = 0; step < kBudgetBisections && over < within; ++step) {
     const double scale = std::sqrt(within * over);
     TEMPOKEY_ASSIGN_OR_RETURN(ToleranceCurves curves, fit(scale));
     if (KeyCount(curves.curves) <= budget) {

@@ -22,10 +22,11 @@ constexpr int kFrames = 240;
 double Radians(double degrees) { return degrees * std::numbers::pi / 180.0; }
 
 // Smooth motion with a deterministic jitter, so fits keep errors up to their bounds.
-std::vector<double> Motion(double base, double amplitude, double rate, double jitter) {
+std::vector<double> Motion(double base, double amplitude, double rate, double jitter,
+                           int frames = kFrames) {
   std::vector<double> out;
   unsigned state = 12345;
-  for (int f = 0; f < kFrames; ++f) {
+  for (int f = 0; f < frames; ++f) {
     state = state * 1103515245u + 12345u;
     const double noise = (static_cast<double>((state >> 8) % 2001) / 1000.0 - 1.0) * jitter;
     out.push_back(base + amplitude * std::sin(rate * f) + 0.3 * amplitude * std::sin(2.7 * rate * f) +
@@ -40,7 +41,7 @@ Clip PlanarChain(double l1, double l2, const std::vector<double>& x, const std::
                  const std::vector<double>* b) {
   Clip clip;
   clip.name = "chain";
-  clip.frame_count = kFrames;
+  clip.frame_count = static_cast<std::int64_t>(x.size());
   clip.skeleton.joints = {{.name = "A", .parent = -1, .channels = {0, 1}},
                           {.name = "B", .parent = 0, .offset = {l1, 0, 0},
                            .end_sites = {{l2, 0, 0}}}};
@@ -207,6 +208,30 @@ TEST(JointBoundTest, CombinesWithPoseAlignmentAndKeyBudgets) {
   const double kept = by_budget->report.world->joint_tolerance;
   EXPECT_GT(kept, 0.5);
   EXPECT_LE(WorstChainError(clip, by_budget->keyed, 30, 20), kept);
+}
+
+TEST(JointBoundTest, AKeyBudgetUnderTheMergeLimitOfALongClipKeepsTheBoundItReports) {
+  // 9 000 frames: each moving channel keeps at least four keys whatever the bound (no removal
+  // merges past 4096 frames), over a budget of 9. The search starts from three keys per
+  // channel, evenly spaced, and looks from there for the tightest joint bound within budget.
+  const std::vector<double> b = Motion(20, 35, 0.0008, 0.4, 9000);
+  const Clip clip = PlanarChain(30, 20, Motion(0, 40, 0.0002, 0.2, 9000),
+                                Motion(90, 30, 0.0005, 0.3, 9000), &b);
+  ReduceOptions budgeted;
+  budgeted.tolerance.joint_tolerance = JointTolerance{.value = 0.5};
+  budgeted.tolerance.pose_alignment = PoseAlignment::kJoint;
+  budgeted.tolerance.key_budget = 9;
+
+  const absl::StatusOr<ReduceResult> result = ReduceKeys(clip, budgeted);
+
+  ASSERT_TRUE(result.ok()) << result.status();
+  EXPECT_LE(result->report.key_count, 9);
+  EXPECT_EQ(KeyTimes(result->keyed.curves[0]), KeyTimes(result->keyed.curves[1]));
+  const double kept = result->report.world->joint_tolerance;
+  EXPECT_LE(WorstChainError(clip, result->keyed, 30, 20), kept);
+  // The search tightened the bound from the one at which two flat keys per channel keep it
+  // (170 here) to well within the chain's reach.
+  EXPECT_LT(kept, 30.0 + 20.0);
 }
 
 TEST(JointBoundTest, RefusesWhatItCannotMeasure) {

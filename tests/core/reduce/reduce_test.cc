@@ -213,22 +213,28 @@ TEST(ReduceKeysTest, KeyBudgetOfTwoKeysPerChannelIsMetHoweverSmallTheBound) {
   }
 }
 
-TEST(ReduceKeysTest, KeyBudgetBelowAKeyPerMergeLimitSpreadsItsKeysEvenly) {
-  // Four slow sines (range 60) and a constant over 10 000 frames: a varying channel keeps at
-  // least four keys whatever the bound (no removal merges past 4096 frames), over a budget of
-  // 14 (15 when the constant shares the others' frames). Two flat keys per channel would miss by
-  // half the range; the budget's three keys per channel, evenly spaced and fitted, follow the
-  // motion.
-  std::vector<std::vector<double>> channels(5, std::vector<double>(10'000, 1.5));
+// Four slow sines of range 60 over 10 000 frames, and a constant when asked for: a moving
+// channel keeps at least four keys whatever the bound (no removal merges past 4096 frames).
+Clip LongSlowSines(bool with_constant) {
+  std::vector<std::vector<double>> channels(with_constant ? 5 : 4,
+                                            std::vector<double>(10'000, 1.5));
   for (int c = 0; c < 4; ++c) {
     for (int f = 0; f < 10'000; ++f) channels[c][f] = 30.0 * std::sin(2.0 * M_PI * f / 9000.0 + c);
   }
-  const Clip clip = ScalarClip(channels);
+  return ScalarClip(channels);
+}
+
+TEST(ReduceKeysTest, KeyBudgetBelowAKeyPerMergeLimitSpreadsItsKeysEvenly) {
+  // A budget of 14 (18 when the constant shares the others' frames) is under the four keys a
+  // moving channel keeps: the search starts from the budget's share, three keys per channel,
+  // evenly spaced. Two flat keys per channel would miss by half the range, 30.
+  constexpr double kFollowsTheMotion = 5.0;
+  const Clip clip = LongSlowSines(/*with_constant=*/true);
   ReduceOptions options = ToleranceOptions(0.5, 0.5, 0.01);
   options.tolerance.key_budget = 14;
   ReduceOptions aligned = options;
   aligned.tolerance.pose_alignment = PoseAlignment::kClip;
-  aligned.tolerance.key_budget = 15;
+  aligned.tolerance.key_budget = 18;
 
   const absl::StatusOr<ReduceResult> result = ReduceKeys(clip, options);
   const absl::StatusOr<ReduceResult> shared = ReduceKeys(clip, aligned);
@@ -236,11 +242,31 @@ TEST(ReduceKeysTest, KeyBudgetBelowAKeyPerMergeLimitSpreadsItsKeysEvenly) {
   for (const absl::StatusOr<ReduceResult>* r : {&result, &shared}) {
     ASSERT_TRUE(r->ok()) << r->status();
     EXPECT_EQ((*r)->report.key_count, r == &result ? 14 : 15);
-    EXPECT_LT((*r)->report.max_error, 5.0);
+    EXPECT_LT((*r)->report.max_error, kFollowsTheMotion);
     const std::vector<Key>& keys = (*r)->keyed.curves[0].keys;
     ASSERT_EQ(keys.size(), 3u);
     EXPECT_DOUBLE_EQ(keys[1].time_seconds, 5000.0 / 30.0);
   }
+}
+
+TEST(ReduceKeysTest, KeyBudgetSearchFromAnEvenStartSpendsWhatTheStartLeaves) {
+  // Budgets of 12 and 15: three keys per channel to start from either way, the three left of 15
+  // inserted where the scale the search settles on needs them.
+  const Clip clip = LongSlowSines(/*with_constant=*/false);
+  ReduceOptions start_only = ToleranceOptions(0.5, 0.5, 0.01);
+  start_only.tolerance.key_budget = 12;
+  ReduceOptions more = start_only;
+  more.tolerance.key_budget = 15;
+
+  const absl::StatusOr<ReduceResult> start = ReduceKeys(clip, start_only);
+  const absl::StatusOr<ReduceResult> spent = ReduceKeys(clip, more);
+
+  ASSERT_TRUE(start.ok()) << start.status();
+  ASSERT_TRUE(spent.ok()) << spent.status();
+  EXPECT_EQ(start->report.key_count, 12);
+  EXPECT_EQ(spent->report.key_count, 15);
+  EXPECT_LT(spent->report.max_error, start->report.max_error);
+  EXPECT_LT(spent->report.rms_error, start->report.rms_error);
 }
 
 TEST(ReduceKeysTest, ReportIsMeasureReductionOfTheKeysItReturns) {

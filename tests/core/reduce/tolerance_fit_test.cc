@@ -333,6 +333,22 @@ TEST(ToleranceFitTest, ASlideBackStretchesNoSegmentPastTheLimit) {
   EXPECT_LE(MaxError(*fit, 0, step), 0.5);
 }
 
+TEST(ToleranceFitTest, ASlideBackMayLeaveTheNextSegmentExactlyAtTheLimit) {
+  // As above with a start segment of 4093 frames after frame 100: the slide back to frame 97
+  // makes it exactly the limit, which is allowed.
+  Samples step(4293, 0.0);
+  for (std::size_t f = 30; f < step.size(); ++f) step[f] = 1.0;
+  ToleranceFitOptions options;
+  for (std::int64_t f = 0; f < 100; f += 8) options.initial_frames.push_back(f);
+  for (std::int64_t f : {100, 4193, 4292}) options.initial_frames.push_back(f);
+
+  const absl::StatusOr<SplineFit> fit = Fit({step}, {0.5}, options);
+
+  ASSERT_TRUE(fit.ok()) << fit.status();
+  EXPECT_EQ(fit->frames, (std::vector<std::int64_t>{0, 97, 4193, 4292}));
+  EXPECT_LE(MaxError(*fit, 0, step), 0.5);
+}
+
 TEST(ToleranceFitTest, EveryOptionSettingKeepsTheBound) {
   const Samples sine = Sine(900, 60.0, 170.0);
   for (const ToleranceFitOptions& options :
