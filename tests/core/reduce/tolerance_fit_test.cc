@@ -316,37 +316,46 @@ TEST(ToleranceFitTest, ASlideMayEndExactlyAtTheLimit) {
   EXPECT_LE(MaxError(*fit, 0, step), 0.5);
 }
 
-TEST(ToleranceFitTest, ASlideBackStretchesNoSegmentPastTheLimit) {
-  // A start with a segment of exactly the limit after frame 100, and a step at frame 40: the
-  // removal of the key at 96 slides the key at 100 back towards it, which would stretch that
-  // segment past the limit.
-  Samples step(4296, 0.0);
-  for (std::size_t f = 40; f < step.size(); ++f) step[f] = 1.0;
+// A step of 1 at `step_at` on a still channel, fitted from keys every 8 frames to 96, then at 100,
+// at 100 + `after` and 99 frames later: the removal of the key at 96 slides the key at 100 back
+// towards it, which lengthens the segment after it.
+struct SlideBackCase {
+  Samples samples;
   ToleranceFitOptions options;
-  for (std::int64_t f = 0; f < 100; f += 8) options.initial_frames.push_back(f);
-  for (std::int64_t f : {100, 4196, 4295}) options.initial_frames.push_back(f);
+};
 
-  const absl::StatusOr<SplineFit> fit = Fit({step}, {0.5}, options);
+SlideBackCase StepBeforeALongStartSegment(int step_at, std::int64_t after) {
+  SlideBackCase c;
+  const std::int64_t last = 100 + after + 99;
+  c.samples.assign(static_cast<std::size_t>(last + 1), 0.0);
+  for (std::int64_t f = step_at; f <= last; ++f) c.samples[static_cast<std::size_t>(f)] = 1.0;
+  for (std::int64_t f = 0; f < 100; f += 8) c.options.initial_frames.push_back(f);
+  for (std::int64_t f : {std::int64_t{100}, 100 + after, last}) {
+    c.options.initial_frames.push_back(f);
+  }
+  return c;
+}
+
+TEST(ToleranceFitTest, ASlideBackStretchesNoSegmentPastTheLimit) {
+  // A start segment of exactly the limit: any slide back would stretch it past the limit.
+  const SlideBackCase c = StepBeforeALongStartSegment(40, kMaxMergedSegmentFrames);
+
+  const absl::StatusOr<SplineFit> fit = Fit({c.samples}, {0.5}, c.options);
 
   ASSERT_TRUE(fit.ok()) << fit.status();
   EXPECT_LE(LongestSegment(*fit), kMaxMergedSegmentFrames);
-  EXPECT_LE(MaxError(*fit, 0, step), 0.5);
+  EXPECT_LE(MaxError(*fit, 0, c.samples), 0.5);
 }
 
 TEST(ToleranceFitTest, ASlideBackMayLeaveTheNextSegmentExactlyAtTheLimit) {
-  // As above with a start segment of 4093 frames after frame 100: the slide back to frame 97
-  // makes it exactly the limit, which is allowed.
-  Samples step(4293, 0.0);
-  for (std::size_t f = 30; f < step.size(); ++f) step[f] = 1.0;
-  ToleranceFitOptions options;
-  for (std::int64_t f = 0; f < 100; f += 8) options.initial_frames.push_back(f);
-  for (std::int64_t f : {100, 4193, 4292}) options.initial_frames.push_back(f);
+  // A start segment of 4093 frames: the slide back to frame 97 makes it exactly the limit.
+  const SlideBackCase c = StepBeforeALongStartSegment(30, kMaxMergedSegmentFrames - 3);
 
-  const absl::StatusOr<SplineFit> fit = Fit({step}, {0.5}, options);
+  const absl::StatusOr<SplineFit> fit = Fit({c.samples}, {0.5}, c.options);
 
   ASSERT_TRUE(fit.ok()) << fit.status();
   EXPECT_EQ(fit->frames, (std::vector<std::int64_t>{0, 97, 4193, 4292}));
-  EXPECT_LE(MaxError(*fit, 0, step), 0.5);
+  EXPECT_LE(MaxError(*fit, 0, c.samples), 0.5);
 }
 
 TEST(ToleranceFitTest, EveryOptionSettingKeepsTheBound) {
