@@ -15,7 +15,8 @@
 //              paper method adds its bisections (about 60 passes over the output).
 //   reduce     tolerance: channels x frames x fits, the fits 1 without a key budget, else the
 //              budget search's (1 + up to 20 halvings or doublings up to the scale whose bounds
-//              cover every channel's range, + 12 bisections); the per-sample constant is the one
+//              cover every channel's range, and there up to 1 + log2(frames) fits from evenly
+//              spread keys, + 12 bisections); the per-sample constant is the one
 //              measured on white noise, the worst input (every frame keyed; a smooth channel
 //              costs less because a removal merges at most kMaxMergedSegmentFrames).
 //              noise: channels x frames, the per-sample constant measured on white noise.
