@@ -150,6 +150,7 @@ int Run(const std::string& filter) {
       {"tolerance/calm1m/0.5", &calm_1m, {Tolerance(0.5)}},
       {"tolerance/calm1m+jitter0.15/0.5", &jittery_calm_1m, {Tolerance(0.5)}},
       {"tolerance/cmu/joint0.05%", &*cmu, {JointBound(0.05)}},
+      {"tolerance/cmu-slowed40x/0.5", &*cmu, {Speed(0.025), Tolerance(0.5)}},
       {"noise/noise1m", &noise_1m, {Noise()}},
       {"noise/calm1m", &calm_1m, {Noise()}},
       {"noise/cmu", &*cmu, {Noise()}},
