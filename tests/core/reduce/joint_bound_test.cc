@@ -70,11 +70,11 @@ std::array<Vec3, 2> ChainPoints(const Clip& clip, const KeyedClip* keyed, double
   return {joint, Vec3{joint[0] + l2 * std::cos(a + b), joint[1] + l2 * std::sin(a + b), 0}};
 }
 
-// The largest distance of B or its end site from the source, over every frame (A moves only with
-// the X channel, whose error is at most the end site's too).
+// The largest distance of B or its end site from the source, over every frame of the clip (A moves
+// only with the X channel, whose error is at most the end site's too).
 double WorstChainError(const Clip& clip, const KeyedClip& keyed, double l1, double l2) {
   double worst = 0.0;
-  for (int f = 0; f < kFrames; ++f) {
+  for (int f = 0; f < static_cast<int>(clip.frame_count); ++f) {
     const auto source = ChainPoints(clip, nullptr, l1, l2, f);
     const auto fitted = ChainPoints(clip, &keyed, l1, l2, f);
     for (int p = 0; p < 2; ++p) {
