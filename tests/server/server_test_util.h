@@ -297,10 +297,12 @@ struct WatchOutcome {
 };
 
 // Reads a whole WatchJob stream; `on_update` (optional) sees each update as it arrives.
+// `deadline` only keeps a hang from holding the test.
 inline WatchOutcome WatchJob(v1::MotionService::Stub& stub, const std::string& job_id,
-                             const std::function<void(const v1::Job&)>& on_update = {}) {
+                             const std::function<void(const v1::Job&)>& on_update = {},
+                             std::chrono::seconds deadline = kCallDeadline) {
   grpc::ClientContext context;
-  SetDeadline(context);
+  SetDeadline(context, deadline);
   v1::WatchJobRequest request;
   request.set_job_id(job_id);
   WatchOutcome outcome;
@@ -315,8 +317,9 @@ inline WatchOutcome WatchJob(v1::MotionService::Stub& stub, const std::string& j
 }
 
 // Watches until the job is terminal and returns the last snapshot.
-inline v1::Job WaitForJob(v1::MotionService::Stub& stub, const std::string& job_id) {
-  WatchOutcome watch = WatchJob(stub, job_id);
+inline v1::Job WaitForJob(v1::MotionService::Stub& stub, const std::string& job_id,
+                          std::chrono::seconds deadline = kCallDeadline) {
+  WatchOutcome watch = WatchJob(stub, job_id, {}, deadline);
   EXPECT_TRUE(watch.status.ok()) << watch.status.error_message();
   return watch.updates.empty() ? v1::Job() : watch.updates.back();
 }
