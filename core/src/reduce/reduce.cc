@@ -562,7 +562,7 @@ absl::StatusOr<ToleranceCurves> ToleranceFit(const Clip& clip,
         return best;
       }
       within = ceiling;
-      over = 1.0;  // the bounds asked for, which the default start could not keep to either
+      over = 1.0;  // the bounds asked for (where the default start kept too many keys)
     }
   }
   // (Nothing to bisect when the bounds asked for already covered every range.)
