@@ -119,6 +119,24 @@ RetimeStep Ramp(RetimeMethod method) {
   return step;
 }
 
+// The limit of 100 000 speed knots (alternating speeds 1 and 1.5) over `clip`, with as many
+// pins (each source frame k on output frame 2k) and holds when asked: the time map's own work,
+// all of it on a clip of a few frames.
+RetimeStep LongWarp(const Clip& clip, bool pins, bool holds) {
+  constexpr int kItems = 100'000;
+  const auto last = static_cast<double>(clip.frame_count - 1);
+  RetimeStep step;
+  step.warp.domain = WarpDomain::kSpeedOverSource;
+  for (int k = 0; k < kItems; ++k) {
+    step.warp.speed.push_back(SpeedKnot{{last * k / kItems, true}, 1.0 + 0.5 * (k % 2)});
+    if (holds) step.warp.holds.push_back(Hold{{last * (k + 0.5) / kItems, true}, 1e-3});
+  }
+  for (std::int64_t f = 1; pins && f < clip.frame_count - 1; ++f) {
+    step.options.pins.push_back(Pin{{static_cast<double>(f), true}, 2 * f});
+  }
+  return step;
+}
+
 int Run(const std::string& filter) {
   const std::string cmu_path = std::string(TEMPOKEY_SHARED_DIR) + "/data/bvh/cmu/131_01.bvh";
   absl::StatusOr<Clip> cmu = ReadBvhFile(cmu_path);
@@ -134,6 +152,8 @@ int Run(const std::string& filter) {
   const Clip jittery_calm_1m = CalmClip(1'000'000, 0.15);
   RetimeStep to_30fps;
   to_30fps.options.output_rate = FrameRate{30, 1};
+  const Clip short_clip = NoiseClip(1, 10, 1.0, ChannelKind::kXRotation);
+  const Clip pinned_clip = NoiseClip(1, 100'001, 1.0, ChannelKind::kXRotation);
 
   const std::vector<Workload> workloads = {
       {"paper/noise16k/30passes/acc1e-300", &noise_16k, {Paper(30, 1e-300)}},
@@ -160,6 +180,9 @@ int Run(const std::string& filter) {
       {"retime/cmu/slow0.1/cubic", &*cmu, {Speed(0.1, ResampleFilter::kCubic)}},
       {"retime/cmu/30fps", &*cmu, {to_30fps}},
       {"retime/cmu/ramp/paper", &*cmu, {Ramp(RetimeMethod::kPaper)}},
+      {"retime/10frames/knots100k", &short_clip, {LongWarp(short_clip, false, false)}},
+      {"retime/10frames/knots100k+holds100k", &short_clip, {LongWarp(short_clip, false, true)}},
+      {"retime/100kframes/knots100k+pins100k", &pinned_clip, {LongWarp(pinned_clip, true, false)}},
       {"reduce+bake/cmu/paper", &*cmu, {Paper(8, 0.01), BakeStep{FrameRate{1000, 1}}}},
       {"convert/cmu", &*cmu, {ConvertStep{true}}},
   };

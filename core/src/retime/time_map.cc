@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <span>
 #include <string>
 #include <utility>
 #include <vector>
@@ -187,6 +188,16 @@ class TimeMapBuilder {
     return static_cast<std::size_t>(std::upper_bound(pin_x_.begin(), pin_x_.end(), s.x0) -
                                     pin_x_.begin());
   }
+  // Indexes segments_ by pin interval (IntervalSegments()), once they are final: an interval's
+  // scale reads only its own segments, so that many pins cost one pass over the segments rather
+  // than one per pin.
+  void IndexIntervals();
+  // The segments of one pin interval, in order. Intervals never decrease along segments_ (its
+  // segments are in source order, a hold between the segments it splits).
+  std::span<const Segment> IntervalSegments(std::size_t interval) const {
+    return std::span<const Segment>(segments_).subspan(
+        interval_begin_[interval], interval_begin_[interval + 1] - interval_begin_[interval]);
+  }
   std::pair<Segment, Segment> SplitAt(const Segment& s, double x) const;
   // The scale c for one interval given its speed-segment duration, hold duration and target;
   // checks the scaled speeds. `context` names what sets the target.
@@ -201,6 +212,8 @@ class TimeMapBuilder {
   double ratio_ = 1.0;
   std::vector<Segment> segments_;
   std::vector<double> pin_x_;  // pinned source positions, increasing
+  // IndexIntervals(): interval i is segments_[interval_begin_[i], interval_begin_[i + 1]).
+  std::vector<std::size_t> interval_begin_;
 };
 
 absl::Status TimeMapBuilder::CheckTimingAndOptions() {
@@ -638,8 +651,8 @@ absl::Status TimeMapBuilder::CheckScaledRange(std::size_t interval, double c,
   if (c == 1.0) return absl::OkStatus();
   const double hi = options_.max_speed * (1.0 + kRangeSlack);
   const double lo = options_.min_speed * (1.0 - kRangeSlack);
-  for (const Segment& s : segments_) {
-    if (s.kind == SegmentKind::kHold || IntervalOf(s) != interval) continue;
+  for (const Segment& s : IntervalSegments(interval)) {
+    if (s.kind == SegmentKind::kHold) continue;
     for (int end = 0; end < 2; ++end) {
       const double speed = (end == 0 ? s.v0 : s.v1) / r() * c;
       const std::string& label = end == 0 ? s.label0 : s.label1;
@@ -660,8 +673,7 @@ absl::StatusOr<double> TimeMapBuilder::IntervalScale(std::size_t interval, doubl
                                                      bool in_seconds) const {
   double speed_frames = 0.0;
   double hold_frames = 0.0;
-  for (const Segment& s : segments_) {
-    if (IntervalOf(s) != interval) continue;
+  for (const Segment& s : IntervalSegments(interval)) {
     (s.kind == SegmentKind::kHold ? hold_frames : speed_frames) += s.duration;
   }
   auto amount = [&](double frames) {
@@ -692,7 +704,19 @@ absl::StatusOr<double> TimeMapBuilder::IntervalScale(std::size_t interval, doubl
   return c;
 }
 
+void TimeMapBuilder::IndexIntervals() {
+  const std::size_t intervals = pin_x_.size() + 1;
+  interval_begin_.assign(intervals + 1, segments_.size());
+  interval_begin_[0] = 0;
+  std::size_t interval = 0;
+  for (std::size_t k = 0; k < segments_.size(); ++k) {
+    const std::size_t own = IntervalOf(segments_[k]);
+    while (interval < own) interval_begin_[++interval] = k;
+  }
+}
+
 absl::Status TimeMapBuilder::ScaleAndLayOut() {
+  IndexIntervals();
   const std::size_t pins = pin_x_.size();
   std::vector<double> start(pins + 1, 0.0);
   for (std::size_t i = 0; i < pins; ++i) {
@@ -708,8 +732,7 @@ absl::Status TimeMapBuilder::ScaleAndLayOut() {
   // The last interval: fit, fit to grid, or as drawn.
   double speed_frames = 0.0;
   double hold_frames = 0.0;
-  for (const Segment& s : segments_) {
-    if (IntervalOf(s) != pins) continue;
+  for (const Segment& s : IntervalSegments(pins)) {
     (s.kind == SegmentKind::kHold ? hold_frames : speed_frames) += s.duration;
   }
   std::optional<double> end;  // the exact end, when a fit sets it

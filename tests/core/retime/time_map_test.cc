@@ -257,6 +257,53 @@ TEST(TimeMapTest, PinsLandExactlyOnTheirFramesWithOneFactorPerInterval) {
   EXPECT_EQ(map.fit_factor(), 1.0);
 }
 
+TEST(TimeMapTest, AHoldAtAPinBelongsToTheIntervalAfterThePin) {
+  // 4 s at 32 fps. Source 1 s -> frame 64 (32 source frames over 64: c = 0.5); then the hold at
+  // source 1 s, 0.5 s long (frames 64..80); then source 1..3 s (64 frames) over the 32 frames
+  // left before frame 112: c = 2. Were the hold counted before the pin, the factors would be
+  // 32 / 48 and 64 / 48.
+  RetimeOptions options;
+  options.pins = {{.source = {1.0, false}, .output_frame = 64},
+                  {.source = {3.0, false}, .output_frame = 112}};
+  TimeWarpSpec warp;
+  warp.holds = {{.at = {1.0, false}, .duration_seconds = 0.5}};
+
+  const TimeMap map = CompileOrDie(1.0 / 32, 129, warp, options);
+  const std::vector<double> x = SourceFrames(map);
+
+  EXPECT_EQ(map.pin_factors(), (std::vector<double>{0.5, 2.0}));
+  ASSERT_EQ(map.output_frame_count(), 145);  // the last second at speed 1 after frame 112
+  EXPECT_EQ(x[64], 32.0);
+  EXPECT_EQ(x[72], 32.0);  // in the hold
+  EXPECT_EQ(x[96], 64.0);
+  EXPECT_EQ(x[112], 96.0);
+}
+
+TEST(TimeMapTest, EachOfManyPinsLandsOnItsFrameWithItsIntervalsOwnFactor) {
+  // A pin on every source frame 1..20000 of a 20002-frame clip; the interval before pin k + 1
+  // (one source frame) stretched over 1 + k % 3 output frames: factor 1 / (1 + k % 3). Each
+  // interval's factor reads its own segments only (as many pins as this once took a second
+  // per thousand, every pin's scale summing every segment).
+  constexpr int kPins = 20'000;
+  RetimeOptions options;
+  std::int64_t frame = 0;
+  for (int k = 0; k < kPins; ++k) {
+    frame += 1 + k % 3;
+    options.pins.push_back({.source = {static_cast<double>(k + 1), true}, .output_frame = frame});
+  }
+
+  const TimeMap map = CompileOrDie(1.0 / 120, kPins + 2, {}, options);
+  const std::vector<double> x = SourceFrames(map);
+
+  ASSERT_EQ(map.pin_factors().size(), static_cast<std::size_t>(kPins));
+  ASSERT_EQ(map.output_frame_count(), frame + 2);  // the last source frame at speed 1
+  for (int k = 0; k < kPins; ++k) {
+    EXPECT_EQ(map.pin_factors()[k], 1.0 / (1 + k % 3)) << "interval " << k;
+    EXPECT_NEAR(x[static_cast<std::size_t>(options.pins[k].output_frame)], k + 1.0, 1e-9)
+        << "pin " << k + 1;
+  }
+}
+
 TEST(TimeMapTest, KnotsOutsideTheClipAreHeldFlat) {
   const TimeMap before =
       CompileOrDie(1.0 / 32, 33, OverSource({Knot(-1, 2.0), Knot(-0.5, 2.0)}), NoGrid());

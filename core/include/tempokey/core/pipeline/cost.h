@@ -12,7 +12,8 @@
 // predicted against measured). Counts are upper bounds where the algorithm has one:
 //   retime     channels x (source + output frames) x filter taps (2 tent/box/linear, 4 cubic,
 //              6 lanczos3) x a per-tap constant (the rotation-aware path's, the slowest); the
-//              paper method adds its bisections (about 60 passes over the output).
+//              paper method adds its bisections (about 60 passes over the output); both add
+//              the time map's compilation, per speed knot, time-map key, hold and pin.
 //   reduce     tolerance: channels x frames x fits, the fits 1 without a key budget, else the
 //              budget search's (1 + up to 20 halvings or doublings up to the scale whose bounds
 //              cover every channel's range, and there up to 1 + log2(frames) fits from evenly
