@@ -5,7 +5,6 @@
 #include <cstdint>
 #include <limits>
 #include <span>
-#include <algorithm>
 #include <string>
 #include <vector>
 
@@ -160,6 +159,10 @@ absl::Status ValidateClipLayout(const Clip& clip, const ClipLimits& limits) {
   }
   absl::flat_hash_set<std::string_view> names;
   std::vector<int> depth(joints.size(), 0);
+  // Whether some joint lists the channel (only its own joint can: checked below), so that each
+  // channel's check that its joint lists it is a lookup, not a search of the joint's list (one
+  // joint may list up to every channel of the clip as scalars).
+  std::vector<char> listed(static_cast<std::size_t>(channel_count), 0);
   for (std::size_t j = 0; j < joints.size(); ++j) {
     const Joint& joint = joints[j];
     if (joint.name.empty()) return absl::InvalidArgumentError(absl::StrCat("joint ", j, " has no name"));
@@ -193,6 +196,7 @@ absl::Status ValidateClipLayout(const Clip& clip, const ClipLimits& limits) {
             "joint ", j, " (", joint.name, ") lists ", ChannelLabel(clip, c),
             " which belongs to joint ", channel.joint));
       }
+      listed[static_cast<std::size_t>(c)] = 1;
       if (channel.kind == ChannelKind::kScalar) continue;
       unsigned& seen = IsRotation(channel.kind) ? rotation_axes : position_axes;
       const unsigned bit = 1u << Axis(channel.kind);
@@ -213,8 +217,7 @@ absl::Status ValidateClipLayout(const Clip& clip, const ClipLimits& limits) {
           absl::StrCat(ChannelLabel(clip, ci), ": joint index ", channel.joint, " out of range"));
     }
     if (channel.joint >= 0) {
-      const auto& listed = joints[channel.joint].channels;
-      if (std::find(listed.begin(), listed.end(), ci) == listed.end()) {
+      if (!listed[static_cast<std::size_t>(c)]) {
         return absl::InvalidArgumentError(absl::StrCat(ChannelLabel(clip, ci),
                                                        " is missing from the channel list of joint ",
                                                        joints[channel.joint].name));
