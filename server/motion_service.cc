@@ -1,5 +1,6 @@
 #include "server/motion_service.h"
 
+#include <algorithm>
 #include <memory>
 #include <optional>
 #include <string>
@@ -229,6 +230,9 @@ grpc::ServerUnaryReactor* MotionService::SubmitJob(grpc::CallbackServerContext* 
                                                    " bytes, over the limit of ",
                                                    kMaxRequestIdBytes));
         }
+        // The labels first: the digest below sorts them, and a request may carry as many as a
+        // message holds (a retry of an accepted request has labels within the limits).
+        TEMPOKEY_RETURN_IF_ERROR(CheckLabels(request.labels()));
         // A retried submit answers with the first job before anything else is looked at, so it
         // succeeds even if its clip was evicted meanwhile; the same request_id with another
         // request is refused (ALREADY_EXISTS), never mistaken for a retry.
@@ -243,7 +247,6 @@ grpc::ServerUnaryReactor* MotionService::SubmitJob(grpc::CallbackServerContext* 
             return absl::OkStatus();
           }
         }
-        TEMPOKEY_RETURN_IF_ERROR(CheckLabels(request.labels()));
 
         std::shared_ptr<const core::Clip> clip;
         std::string clip_id;
@@ -319,7 +322,10 @@ grpc::ServerUnaryReactor* MotionService::ListJobs(grpc::CallbackServerContext* c
         for (int i = 0; i < request.states_size(); ++i) {
           absl::StatusOr<JobState> state = JobStateFromProto(request.states(i));
           if (!state.ok()) return core::Annotate(state.status(), absl::StrCat("states[", i, "]"));
-          query.states.push_back(*state);
+          // Each state once: a request may repeat them as many times as a message holds.
+          if (std::find(query.states.begin(), query.states.end(), *state) == query.states.end()) {
+            query.states.push_back(*state);
+          }
         }
         query.labels = {request.labels().begin(), request.labels().end()};
         TEMPOKEY_ASSIGN_OR_RETURN(ListJobsPage page, context_->jobs->List(query, owner));

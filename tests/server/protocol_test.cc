@@ -141,6 +141,27 @@ TEST_F(ProtocolTest, RequestIdReusedForAnotherRequestIsAlreadyExists) {
   EXPECT_EQ(server_->jobs().job_count(), 1);
 }
 
+TEST_F(ProtocolTest, LabelsOverTheLimitAreRefusedBeforeTheRequestIdIsLookedUp) {
+  // The request id's lookup digests the whole request, labels sorted: a request's labels are
+  // checked against their limit first, so that a flood of them costs no sort. A retry of an
+  // accepted request has labels within the limit, so it is answered as before.
+  const std::string clip_id = UploadClip(*stub_, MakeClip(1, 40)).response.clip_id();
+  v1::SubmitJobRequest first = SubmitRequest(clip_id);
+  first.set_request_id("import-18");
+  v1::SubmitJobRequest flooded = first;
+  for (int i = 0; i < 65; ++i) (*flooded.mutable_labels())["k" + std::to_string(i)] = "v";
+
+  const JobOutcome accepted = Submit(*stub_, first);
+  const JobOutcome refused = Submit(*stub_, flooded);
+  const JobOutcome retried = Submit(*stub_, first);
+
+  TEMPOKEY_ASSERT_GRPC_OK(accepted.status);
+  EXPECT_THAT(refused.status, GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                                           "labels has 65 entries, over the limit of 64"));
+  TEMPOKEY_ASSERT_GRPC_OK(retried.status);
+  EXPECT_EQ(retried.job.job_id(), accepted.job.job_id());
+}
+
 TEST_F(ProtocolTest, RequestsOverASizeLimitAreResourceExhausted) {
   const std::string clip_id = UploadClip(*stub_, MakeClip(1, 40)).response.clip_id();
   v1::SubmitJobRequest labels = SubmitRequest(clip_id);

@@ -142,11 +142,62 @@ TEST(EstimatePipelineCostTest, RetimeWorkFollowsTheOutputTheTimeMapGives) {
   const absl::StatusOr<PipelineCost> same = EstimatePipelineCost(clip, {{ConstantSpeed(1.0)}});
   const absl::StatusOr<PipelineCost> slow = EstimatePipelineCost(clip, {{ConstantSpeed(0.1)}});
 
-  ASSERT_TRUE(same.ok() && slow.ok());
+  // What one knot adds (each step has one), known from a second knot that changes nothing.
+  RetimeStep two_knots = ConstantSpeed(1.0);
+  two_knots.warp.speed.push_back({.time = {1.0, false}, .speed = 1.0});
+  const absl::StatusOr<PipelineCost> same_twice = EstimatePipelineCost(clip, {{two_knots}});
+
+  ASSERT_TRUE(same.ok() && slow.ok() && same_twice.ok());
   EXPECT_EQ(slow->steps[0].work, "retime: 10 channels x (1000 source + 9991 output frames)");
-  // (1000 + 9991) / (1000 + 1000) times the work, but for the one knot's compilation (a
-  // thousandth of it here).
-  EXPECT_NEAR(slow->seconds / same->seconds, 10991.0 / 2000.0, 1e-2);
+  // (1000 + 9991) / (1000 + 1000) times the work, the knot's aside.
+  const double knot = same_twice->seconds - same->seconds;
+  EXPECT_NEAR((slow->seconds - knot) / (same->seconds - knot), 10991.0 / 2000.0, 1e-9);
+}
+
+TEST(EstimatePipelineCostTest, EveryKnotKeyHoldAndPinAddsTheSameWorkToEitherMethod) {
+  // Five items of each kind (with the one knot a speed curve needs), every warp the identity or
+  // within a frame of it, so that every step has the same 121 output frames: only the items
+  // tell the predictions apart, each adding the same.
+  const Clip clip = ScalarClip(1, 121);
+  auto step = [](RetimeMethod method) {
+    RetimeStep s = ConstantSpeed(1.0);
+    s.options.method = method;
+    return s;
+  };
+  const RetimeStep one = step(RetimeMethod::kExact);
+  RetimeStep knots = one;
+  RetimeStep keys = one;
+  keys.warp.domain = WarpDomain::kTimeMapKeys;
+  keys.warp.speed.clear();
+  RetimeStep holds = one;
+  RetimeStep pins = one;
+  const RetimeStep paper_one = step(RetimeMethod::kPaper);
+  RetimeStep paper_knots = paper_one;
+  for (int k = 1; k <= 4; ++k) {
+    const double t = 0.2 * k;
+    knots.warp.speed.push_back({.time = {t, false}, .speed = 1.0});
+    paper_knots.warp.speed.push_back({.time = {t, false}, .speed = 1.0});
+    holds.warp.holds.push_back({.at = {t, false}, .duration_seconds = 1e-9});
+    pins.options.pins.push_back({.source = {24.0 * k, true}, .output_frame = 24 * k});
+  }
+  for (int k = 0; k <= 4; ++k) {
+    keys.warp.keys.push_back({.output = {0.25 * k, false}, .source = {0.25 * k, false}});
+  }
+  auto seconds = [&](const RetimeStep& s) {
+    const absl::StatusOr<PipelineCost> cost = EstimatePipelineCost(clip, {{s}});
+    EXPECT_TRUE(cost.ok()) << cost.status();
+    if (!cost.ok()) return 0.0;
+    EXPECT_EQ(cost->steps[0].work, "retime: 1 channel x (121 source + 121 output frames)");
+    return cost->seconds;
+  };
+
+  const double four_items = seconds(knots) - seconds(one);
+
+  EXPECT_GT(four_items, 0.0);
+  EXPECT_DOUBLE_EQ(seconds(keys) - seconds(one), four_items);
+  EXPECT_DOUBLE_EQ(seconds(holds) - seconds(one), four_items);
+  EXPECT_DOUBLE_EQ(seconds(pins) - seconds(one), four_items);
+  EXPECT_DOUBLE_EQ(seconds(paper_knots) - seconds(paper_one), four_items);
 }
 
 TEST(EstimatePipelineCostTest, ALongWarpIsCostedEvenOnAShortClip) {

@@ -279,6 +279,40 @@ TEST(TimeMapTest, AHoldAtAPinBelongsToTheIntervalAfterThePin) {
   EXPECT_EQ(x[112], 96.0);
 }
 
+TEST(TimeMapTest, EverySegmentOfAPinsIntervalIsHeldToTheSpeedRange) {
+  // Speeds 1, 1, then down to 0.6 at 2 s; the pin at 2 s -> frame 91 scales the interval by
+  // 64 / 79.93: its second segment's end would play at 0.48, under the minimum of 0.5.
+  RetimeOptions options;
+  options.min_speed = 0.5;
+  options.max_speed = 2.0;
+  options.pins = {{.source = {2.0, false}, .output_frame = 91}};
+
+  const absl::StatusOr<TimeMap> map = TimeMap::Compile(
+      1.0 / 32, 129, OverSource({Knot(0, 1.0), Knot(1, 1.0), Knot(2, 0.6)}), options);
+
+  ASSERT_FALSE(map.ok());
+  EXPECT_EQ(map.status().message(),
+            "pin 1 (2s -> frame 91): needs speeds scaled by 0.800726, so speed knot 3 (2s:0.6) "
+            "would play at speed 0.480435, under the minimum 0.5");
+}
+
+TEST(TimeMapTest, APinsIntervalIsHeldToTheSpeedRangeAloneNotWithTheOthers) {
+  // Speed 1 up to 1 s, 0.6 after. The first interval (to frame 40) is scaled by 0.8 and the
+  // second hardly at all; 0.6 x 0.8 would be under the minimum, but no segment has both.
+  RetimeOptions options;
+  options.min_speed = 0.5;
+  options.max_speed = 2.0;
+  options.pins = {{.source = {1.0, false}, .output_frame = 40},
+                  {.source = {3.0, false}, .output_frame = 147}};
+
+  const TimeMap map = CompileOrDie(
+      1.0 / 32, 129, OverSource({Knot(0, 1.0), Knot(1, 1.0), Knot(1, 0.6)}), options);
+
+  ASSERT_EQ(map.pin_factors().size(), 2u);
+  EXPECT_EQ(map.pin_factors()[0], 0.8);
+  EXPECT_NEAR(map.pin_factors()[1], 0.996885, 1e-6);
+}
+
 TEST(TimeMapTest, EachOfManyPinsLandsOnItsFrameWithItsIntervalsOwnFactor) {
   // A pin on every source frame 1..20000 of a 20002-frame clip; the interval before pin k + 1
   // (one source frame) stretched over 1 + k % 3 output frames: factor 1 / (1 + k % 3). Each
