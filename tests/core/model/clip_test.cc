@@ -225,7 +225,9 @@ TEST(ValidateClipTest, OneJointMayListEveryChannelOfTheClipAsScalars) {
   // once per channel, about a second here.)
   Clip clip;
   clip.frame_count = 1;
-  clip.skeleton.joints.push_back({.name = "Props"});
+  Joint props;
+  props.name = "Props";
+  clip.skeleton.joints.push_back(props);
   for (int c = 0; c < 100'000; ++c) {
     clip.channels.push_back({.joint = 0, .kind = ChannelKind::kScalar,
                              .name = absl::StrCat("attribute", c), .samples = {0.0}});
