@@ -233,9 +233,9 @@ grpc::ServerUnaryReactor* MotionService::SubmitJob(grpc::CallbackServerContext* 
         // The labels first: the digest below sorts them, and a request may carry as many as a
         // message holds (a retry of an accepted request has labels within the limits).
         TEMPOKEY_RETURN_IF_ERROR(CheckLabels(request.labels()));
-        // A retried submit answers with the first job before anything else is looked at, so it
-        // succeeds even if its clip was evicted meanwhile; the same request_id with another
-        // request is refused (ALREADY_EXISTS), never mistaken for a retry.
+        // A retried submit answers with the first job before its clip and operations are looked
+        // at, so it succeeds even if its clip was evicted meanwhile; the same request_id with
+        // another request is refused (ALREADY_EXISTS), never mistaken for a retry.
         std::string digest;
         if (!request.request_id().empty()) {
           digest = RequestDigest(request);

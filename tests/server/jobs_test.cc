@@ -356,8 +356,8 @@ TEST_F(JobsTest, ListJobsPagesAndFiltersByState) {
 }
 
 TEST_F(JobsTest, ListJobsWithItsStatesRepeatedFiltersAsWithEachOnce) {
-  // 2 000 000 states (4 MB): the server takes each state once (a list of states searched for
-  // every job held the job manager's lock for seconds per such request).
+  // 2 000 000 states (about 2 MB, packed): the server takes each state once (a list of states
+  // searched for every job held the job manager's lock for seconds per such request).
   const std::string clip_id = Upload(MakeClip(1, 20));
   for (int i = 0; i < 3; ++i) {
     JobOutcome job = Submit(*stub_, SubmitRequest(clip_id));
