@@ -770,14 +770,17 @@ absl::Status TimeMapBuilder::ScaleAndLayOut() {
     if (!end) return first_error;
   }
 
-  for (Segment& s : segments_) s.Scale(scale[IntervalOf(s)]);
-  std::size_t interval = 0;
+  // Each interval scaled by its own factor and laid out from its start (the first from 0).
   double y = 0.0;
-  for (Segment& s : segments_) {
-    const std::size_t own = IntervalOf(s);
-    while (interval < own) y = start[++interval];
-    s.y0 = y;
-    y += s.duration;
+  for (std::size_t i = 0; i <= pins; ++i) {
+    if (interval_begin_[i] == interval_begin_[i + 1]) continue;
+    if (i > 0) y = start[i];
+    for (std::size_t k = interval_begin_[i]; k < interval_begin_[i + 1]; ++k) {
+      Segment& s = segments_[k];
+      s.Scale(scale[i]);
+      s.y0 = y;
+      y += s.duration;
+    }
   }
   map_.y_end_ = end ? *end : std::max(y, start[pins]);
   map_.fit_factor_ = scale[pins];
