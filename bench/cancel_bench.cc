@@ -9,16 +9,21 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <future>
+#include <memory>
 #include <random>
 #include <stop_token>
 #include <string>
 #include <thread>
+#include <variant>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "tempokey/core/io/file_formats.h"
 #include "tempokey/core/pipeline/pipeline.h"
+#include "tempokey/core/reduce/reduce.h"
 
 namespace tempokey::core {
 namespace {
@@ -66,13 +71,49 @@ Clip NoisySineClip(std::int64_t frames) {
   return clip;
 }
 
+// One joint turning slowly about three axes (a few degrees a second): calm motion whose
+// rotation fits merge segments up to their length limit.
+Clip CalmJointClip(std::int64_t frames) {
+  Clip clip = NoiseClip(3, frames, true);
+  for (int c = 0; c < 3; ++c) {
+    std::vector<double>& samples = clip.channels[static_cast<std::size_t>(c)].samples;
+    for (std::size_t f = 0; f < samples.size(); ++f) {
+      samples[f] = 40.0 * std::sin(static_cast<double>(f) * (0.0007 + 0.0002 * c) + c);
+    }
+  }
+  return clip;
+}
+
 struct Workload {
   std::string name;
-  Clip clip;
-  std::vector<PipelineStep> steps;
+  // The work, stopped by the token: a pipeline on a clip, or (export) a file formatted.
+  std::function<absl::Status(std::stop_token)> run;
   // When the stop is requested, ms after the start.
   std::vector<int> delays_ms = {50, 200, 500};
 };
+
+Workload PipelineWorkload(std::string name, Clip clip, std::vector<PipelineStep> steps,
+                          std::vector<int> delays_ms = {50, 200, 500}) {
+  auto shared = std::make_shared<const Clip>(std::move(clip));
+  return {std::move(name),
+          [shared, steps = std::move(steps)](std::stop_token stop) {
+            return RunPipeline(*shared, steps, {}, std::move(stop)).status();
+          },
+          std::move(delays_ms)};
+}
+
+// ExportFile's keyed glb of a reduction of `clip`: every joint's rotation fitted again.
+Workload GltfExportWorkload(std::string name, Clip clip) {
+  auto source = std::make_shared<const Clip>(std::move(clip));
+  auto keyed = std::make_shared<const std::variant<Clip, KeyedClip>>(
+      ReduceKeys(*source, {})->keyed);
+  return {std::move(name), [source, keyed](std::stop_token stop) {
+            return FormatOutput(*keyed, *FindExportFormat("glb"), {},
+                                {.clip = source.get(), .max_rotation_error_degrees = 0.5},
+                                std::move(stop))
+                .status();
+          }};
+}
 
 int Run(const std::string& filter) {
   ReduceStep paper;
@@ -99,31 +140,36 @@ int Run(const std::string& filter) {
   two_keys.options.tolerance.max_scalar_error = 1e9;
 
   std::vector<Workload> workloads;
-  workloads.push_back({"paper fit, 1 x 16000 frames, 1000 passes, accuracy 1e-300",
-                       NoiseClip(1, 16000, false), {paper}});
-  workloads.push_back({"paper smoothing, 1 x 1M frames, sigma 1000", NoiseClip(1, 1'000'000, false),
-                       {smooth_only}});
-  workloads.push_back({"tolerance fit, 1 x 4M frames of noise", NoiseClip(1, 4'000'000, false),
-                       {ReduceStep{}}});
-  workloads.push_back({"noise fit, 1 x 1M frames of a noisy sine, sigma 0.1",
-                       NoisySineClip(1'000'000), {noise}});
-  workloads.push_back({"tolerance fit, pose-aligned clip, 64 x 60000 frames",
-                       NoiseClip(64, 60'000, false), {clip_aligned}});
-  workloads.push_back({"retime lanczos3 x3, rotation-aware joint, 3 x 3M frames",
-                       NoiseClip(3, 3'000'000, true), {lanczos}});
+  workloads.push_back(
+      PipelineWorkload("paper fit, 1 x 16000 frames, 1000 passes, accuracy 1e-300",
+                       NoiseClip(1, 16000, false), {paper}));
+  workloads.push_back(PipelineWorkload("paper smoothing, 1 x 1M frames, sigma 1000",
+                                       NoiseClip(1, 1'000'000, false), {smooth_only}));
+  workloads.push_back(PipelineWorkload("tolerance fit, 1 x 4M frames of noise",
+                                       NoiseClip(1, 4'000'000, false), {ReduceStep{}}));
+  workloads.push_back(PipelineWorkload("noise fit, 1 x 1M frames of a noisy sine, sigma 0.1",
+                                       NoisySineClip(1'000'000), {noise}));
+  workloads.push_back(PipelineWorkload("tolerance fit, pose-aligned clip, 64 x 60000 frames",
+                                       NoiseClip(64, 60'000, false), {clip_aligned}));
+  workloads.push_back(PipelineWorkload("retime lanczos3 x3, rotation-aware joint, 3 x 3M frames",
+                                       NoiseClip(3, 3'000'000, true), {lanczos}));
   // The longest clip the default limits admit, compressed by 1.3: the stops land in the
   // resampling plan (a few seconds), the rotation schedule made from it, the joint's conversions
   // before its first batch, or its batches.
   RetimeStep lanczos_long = lanczos;
   lanczos_long.warp.speed = {SpeedKnot{{0.0, false}, 1.3}};
-  workloads.push_back({"retime lanczos3 x1.3, rotation-aware joint, 3 x 10M frames (2-7 s)",
-                       NoiseClip(3, 10'000'000, true),
-                       {lanczos_long},
-                       {2000, 3000, 3500, 4000, 5000, 7000}});
-  workloads.push_back({"retime paper method, 1 x 4M frames", NoiseClip(1, 4'000'000, false),
-                       {paper_retime}});
-  workloads.push_back({"bake, 1 channel to 10M frames", NoiseClip(1, 83'000, false),
-                       {two_keys, BakeStep{FrameRate{100000, 1}}}});
+  workloads.push_back(
+      PipelineWorkload("retime lanczos3 x1.3, rotation-aware joint, 3 x 10M frames (2-7 s)",
+                       NoiseClip(3, 10'000'000, true), {lanczos_long},
+                       {2000, 3000, 3500, 4000, 5000, 7000}));
+  workloads.push_back(PipelineWorkload("retime paper method, 1 x 4M frames",
+                                       NoiseClip(1, 4'000'000, false), {paper_retime}));
+  workloads.push_back(PipelineWorkload("bake, 1 channel to 10M frames",
+                                       NoiseClip(1, 83'000, false),
+                                       {two_keys, BakeStep{FrameRate{100000, 1}}}));
+  // About 2.4 s uncancelled (ExportFile's work for a reduce job of this clip, 0.5 s).
+  workloads.push_back(GltfExportWorkload(
+      "export keyed glb, calm joint, 3 x 400000 frames (refits)", CalmJointClip(400'000)));
 
   std::printf("%-60s %s\n", "work",
               "stop -> return, ms (stop requested after 50 / 200 / 500 ms, or as the row says)");
@@ -133,20 +179,20 @@ int Run(const std::string& filter) {
     double worst = 0.0;
     for (int delay : w.delays_ms) {
       std::stop_source stop;
-      std::future<absl::StatusOr<PipelineResult>> run = std::async(
-          std::launch::async, [&] { return RunPipeline(w.clip, w.steps, {}, stop.get_token()); });
+      std::future<absl::Status> run =
+          std::async(std::launch::async, [&] { return w.run(stop.get_token()); });
       const bool finished_early =
           run.wait_for(std::chrono::milliseconds(delay)) == std::future_status::ready;
       const Clock::time_point requested = Clock::now();
       stop.request_stop();
-      const absl::StatusOr<PipelineResult> result = run.get();
+      const absl::Status result = run.get();
       const double ms = std::chrono::duration<double, std::milli>(Clock::now() - requested).count();
       if (finished_early) {
         absl::StrAppend(&row, "  (done before the stop)");
         continue;
       }
-      if (result.status().code() != absl::StatusCode::kCancelled) {
-        absl::StrAppend(&row, "  NOT CANCELLED: ", result.status().ToString());
+      if (result.code() != absl::StatusCode::kCancelled) {
+        absl::StrAppend(&row, "  NOT CANCELLED: ", result.ToString());
         continue;
       }
       worst = std::max(worst, ms);

@@ -6,9 +6,11 @@
 // caller's own clips and jobs, count what they store in the memory budget, and end a stream whose
 // client takes no message for the idle timeout.
 #include <algorithm>
+#include <chrono>
 #include <functional>
 #include <memory>
 #include <optional>
+#include <stop_token>
 #include <string>
 #include <utility>
 #include <variant>
@@ -128,6 +130,10 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
     WriteNext();
   }
 
+  // The client cancelled or left: a file still being formatted is stopped (a keyed glTF's fits
+  // can take a worker for many seconds on a long clip).
+  void OnCancel() override { stop_.request_stop(); }
+
   void OnDone() override {
     if (idle_ != nullptr) idle_->Close();
     delete this;
@@ -167,16 +173,33 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
     TEMPOKEY_RETURN_IF_ERROR(slot_.Claim(*service_, /*allow_while_draining=*/true));
     TEMPOKEY_ASSIGN_OR_RETURN(memory_,
                               ReserveMemory(*service_, MemoryUse::kResult, "an exported file"));
+    const auto queued_at = std::chrono::steady_clock::now();
     absl::Status queued = service_->pool->TrySubmit(
-        [this, result = std::move(result), clip = std::move(clip)](std::stop_token) {
-          absl::Status formatted = clip != nullptr ? Format(*clip) : Format(result->output);
+        [this, result = std::move(result), clip = std::move(clip),
+         queued_at](std::stop_token pool_stop) {
+          const TestHooks& hooks = service_->options.test_hooks;
+          if (hooks.on_export_start) hooks.on_export_start(format_->name);
+          const auto started = std::chrono::steady_clock::now();
+          absl::Status formatted;
+          {
+            // The drain deadline stops the formatting as the client's cancel does. Only while
+            // formatting: once End() or a write has begun, this reactor may be deleted.
+            std::stop_callback forward(pool_stop, [this] { stop_.request_stop(); });
+            formatted = clip != nullptr ? Format(*clip) : Format(result->output);
+          }
+          Record(formatted, queued_at, started);
           if (!formatted.ok()) {
             End(ToGrpcStatus(formatted, call_));
             return;
           }
           WriteNext();
         });
-    if (!queued.ok()) return queued;
+    if (!queued.ok()) {
+      if (queued.code() == absl::StatusCode::kResourceExhausted && service_->metrics != nullptr) {
+        service_->metrics->RecordRejected("export");
+      }
+      return queued;
+    }
     return absl::OkStatus();
   }
 
@@ -208,17 +231,36 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
   }
 
   absl::Status Format(const std::variant<core::Clip, core::KeyedClip>& output) {
-    TEMPOKEY_ASSIGN_OR_RETURN(
-        bytes_, core::FormatOutput(output, *format_, service_->clip_limits, gltf_source_));
+    TEMPOKEY_ASSIGN_OR_RETURN(bytes_, core::FormatOutput(output, *format_, service_->clip_limits,
+                                                         gltf_source_, stop_.get_token()));
     file_name_ = absl::StrCat(OutputName(output), core::AsAbsl(format_->extension));
     return Charge();
   }
   absl::Status Format(const core::Clip& clip) {
-    TEMPOKEY_ASSIGN_OR_RETURN(bytes_, core::FormatOutput(std::variant<core::Clip, core::KeyedClip>(clip),
-                                                         *format_, service_->clip_limits));
+    TEMPOKEY_ASSIGN_OR_RETURN(
+        bytes_, core::FormatOutput(std::variant<core::Clip, core::KeyedClip>(clip), *format_,
+                                   service_->clip_limits, {}, stop_.get_token()));
     file_name_ = absl::StrCat(clip.name, core::AsAbsl(format_->extension));
     return Charge();
   }
+  // One line per export, as per job and Process call, and the same metrics (kind "export").
+  void Record(const absl::Status& formatted, std::chrono::steady_clock::time_point queued_at,
+              std::chrono::steady_clock::time_point started) {
+    const std::string_view outcome = formatted.ok() ? "succeeded"
+                                     : formatted.code() == absl::StatusCode::kCancelled
+                                         ? "cancelled"
+                                         : "failed";
+    const auto ended = std::chrono::steady_clock::now();
+    const double queue_ms = std::chrono::duration<double, std::milli>(started - queued_at).count();
+    const double run_ms = std::chrono::duration<double, std::milli>(ended - started).count();
+    spdlog::info("export format={} bytes={} queue_wait_ms={:.1f} run_ms={:.1f} outcome={}{}",
+                 format_->name, bytes_.size(), queue_ms, run_ms, outcome,
+                 formatted.ok() ? "" : absl::StrCat(" error=\"", formatted.message(), "\""));
+    if (service_->metrics != nullptr) {
+      service_->metrics->RecordFinished("export", outcome, (queue_ms + run_ms) / 1000.0);
+    }
+  }
+
   absl::Status Charge() {
     absl::Status charged = memory_.Grow(static_cast<std::int64_t>(bytes_.capacity()));
     if (!charged.ok()) std::string().swap(bytes_);
@@ -261,6 +303,7 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
   ServiceContext* const service_;
   grpc::CallbackServerContext* const call_;
   StreamSlot slot_;
+  std::stop_source stop_;  // the client's cancel and the drain deadline; thread-safe by itself
   std::shared_ptr<IdleReaper::Timer> idle_;
   MemoryBudget::Reservation memory_;  // the formatted file
   const core::ExportFormat* format_ = nullptr;

@@ -23,6 +23,9 @@ struct TestHooks {
   // Called on the worker thread after each progress report of a Process call's pipeline was
   // offered to the call (sent, deferred or dropped by its ProgressThrottle). May block.
   std::function<void(double fraction, std::string_view stage)> on_process_progress;
+  // Called on the worker thread right before an ExportFile call's file is formatted, with its
+  // format's name. May block; the export counts as running meanwhile.
+  std::function<void(std::string_view format)> on_export_start;
 };
 
 struct ServerOptions {

@@ -12,11 +12,14 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "proto/operations_convert.h"
+#include "server/job_pool.h"
 #include "server/server.h"
 #include "tempokey/core/io/bvh.h"
 #include "tempokey/core/io/file_io.h"
 #include "tempokey/core/pipeline/pipeline.h"
+#include "tests/server/http_util.h"
 #include "tests/server/server_test_util.h"
+#include "tests/testing/start_gate.h"
 #include "tests/testing/test_paths.h"
 
 namespace tempokey::testing {
@@ -400,6 +403,104 @@ TEST_F(EditingServiceTest, ServerInfoListsTheExportFormats) {
   EXPECT_EQ(names, (std::vector<std::string>{"bvh", "csv", "json", "anim", "gltf", "glb"}));
   EXPECT_TRUE(info.export_formats(2).keyed());
   EXPECT_FALSE(info.export_formats(0).keyed());
+}
+
+// An export's formatting on a worker held at its start (the on_export_start hook) by a gate, on a
+// server with one worker and metrics: what stops it is seen in the export's outcome.
+class ExportStopTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    server::ServerOptions options = TestServerOptions();
+    options.workers = 1;
+    options.metrics_address = "127.0.0.1:0";
+    options.test_hooks.on_export_start = [g = gate_](std::string_view format) { g->Arrive(format); };
+    server_ = StartServer(std::move(options));
+    ASSERT_NE(server_, nullptr);
+    stub_ = v1::MotionService::NewStub(Connect(server_->target()));
+    // A keyed glTF of CMU 131_01's reduction: its rotations are fitted again, joint by joint.
+    grpc::ClientContext context;
+    SetDeadline(context);
+    v1::ParseClipFileRequest parse;
+    parse.set_file_name("131_01.bvh");
+    parse.set_content(ReadBytes(SharedBvh("cmu/131_01.bvh")));
+    v1::ParseClipFileResponse parsed;
+    TEMPOKEY_ASSERT_GRPC_OK(stub_->ParseClipFile(&context, parse, &parsed));
+    v1::SubmitJobRequest submit;
+    submit.set_clip_id(parsed.clip_id());
+    *submit.add_operations() = wire::PipelineStepToProto(core::ReduceStep{});
+    const JobOutcome job = Submit(*stub_, submit);
+    TEMPOKEY_ASSERT_GRPC_OK(job.status);
+    ASSERT_EQ(WaitForJob(*stub_, job.job.job_id()).state(), v1::JOB_STATE_SUCCEEDED);
+    glb_.set_job_id(job.job.job_id());
+    glb_.set_format("glb");
+  }
+  void TearDown() override {
+    gate_->Open();
+    server_.reset();
+  }
+
+  // Exports glb_ to the end, the gate open: the file's bytes and the call's status.
+  std::pair<std::string, grpc::Status> ExportToEnd() {
+    grpc::ClientContext context;
+    SetDeadline(context);
+    auto reader = stub_->ExportFile(&context, glb_);
+    std::string bytes;
+    v1::FileChunk chunk;
+    while (reader->Read(&chunk)) bytes += chunk.data();
+    return {bytes, reader->Finish()};
+  }
+
+  double ExportsThatEnded(const std::string& outcome) {
+    const std::optional<std::string> scrape = HttpGet(server_->metrics_port(), "/metrics");
+    EXPECT_TRUE(scrape.has_value());
+    return Sample(ParseSamples(scrape.value_or("")),
+                  R"(tempokey_jobs_total{kind="export",outcome=")" + outcome + R"("})");
+  }
+
+  std::shared_ptr<StartGate> gate_ = std::make_shared<StartGate>();
+  std::unique_ptr<server::Server> server_;
+  std::unique_ptr<v1::MotionService::Stub> stub_;
+  v1::ExportFileRequest glb_;
+};
+
+TEST_F(ExportStopTest, AnExportItsClientCancelsIsNotFormattedAndItsWorkerTakesTheNextCall) {
+  grpc::ClientContext context;
+  SetDeadline(context);
+  auto reader = stub_->ExportFile(&context, glb_);
+  ASSERT_TRUE(gate_->WaitArrivals(1));  // the worker holds the export, about to format it
+  context.TryCancel();
+  v1::FileChunk chunk;
+  int chunks = 0;
+  while (reader->Read(&chunk)) ++chunks;
+  const grpc::Status cancelled = reader->Finish();
+  gate_->Open();
+  // One worker: this export runs once the cancelled one has ended, which it counts first.
+  const auto [bytes, status] = ExportToEnd();
+
+  EXPECT_EQ(cancelled.error_code(), grpc::StatusCode::CANCELLED);
+  EXPECT_EQ(chunks, 0);
+  TEMPOKEY_ASSERT_GRPC_OK(status);
+  EXPECT_EQ(bytes.substr(0, 4), "glTF");
+  EXPECT_EQ(ExportsThatEnded("cancelled"), 1.0);
+  EXPECT_EQ(ExportsThatEnded("succeeded"), 1.0);
+}
+
+TEST_F(ExportStopTest, TheDrainDeadlineStopsAnExportAboutToBeFormatted) {
+  grpc::ClientContext context;
+  SetDeadline(context);
+  auto reader = stub_->ExportFile(&context, glb_);
+  ASSERT_TRUE(gate_->WaitArrivals(1));
+  server_->pool().RequestStopAll();  // what Quiesce() does once the drain grace is over
+  gate_->Open();
+  v1::FileChunk chunk;
+  int chunks = 0;
+  while (reader->Read(&chunk)) ++chunks;
+  const grpc::Status status = reader->Finish();
+
+  EXPECT_THAT(status, GrpcStatusIs(grpc::StatusCode::CANCELLED, "cancelled"));
+  EXPECT_EQ(chunks, 0);
+  EXPECT_EQ(ExportsThatEnded("cancelled"), 1.0);
+  EXPECT_EQ(ExportsThatEnded("succeeded"), 0.0);
 }
 
 }  // namespace

@@ -73,7 +73,8 @@ double GltfRotationBoundDegrees(const ReduceOptions& options) {
 namespace {
 
 absl::StatusOr<std::string> FormatGltf(const std::variant<Clip, KeyedClip>& output,
-                                       const ExportFormat& format, const ExportSource& source) {
+                                       const ExportFormat& format, const ExportSource& source,
+                                       std::stop_token stop) {
   if (const auto* clip = std::get_if<Clip>(&output)) {
     TEMPOKEY_ASSIGN_OR_RETURN(GltfFile file, FormatGltfSampled(*clip, format.gltf));
     return std::move(file.bytes);
@@ -88,7 +89,7 @@ absl::StatusOr<std::string> FormatGltf(const std::variant<Clip, KeyedClip>& outp
       FormatGltfKeyed(
           *source.clip, std::get<KeyedClip>(output),
           GltfKeyedOptions{.max_rotation_error_degrees = source.max_rotation_error_degrees},
-          format.gltf));
+          format.gltf, std::move(stop)));
   return std::move(file.bytes);
 }
 
@@ -96,11 +97,13 @@ absl::StatusOr<std::string> FormatGltf(const std::variant<Clip, KeyedClip>& outp
 
 absl::StatusOr<std::string> FormatOutput(const std::variant<Clip, KeyedClip>& output,
                                          const ExportFormat& format, const ClipLimits& limits,
-                                         const ExportSource& source) {
-  if (format.content == FileContent::kEither) return FormatGltf(output, format, source);
+                                         const ExportSource& source, std::stop_token stop) {
+  if (format.content == FileContent::kEither) {
+    return FormatGltf(output, format, source, std::move(stop));
+  }
   if (const auto* keyed = std::get_if<KeyedClip>(&output)) {
     if (format.content == FileContent::kKeyed) return format.format_keyed(*keyed);
-    TEMPOKEY_ASSIGN_OR_RETURN(Clip baked, Bake(*keyed, std::nullopt, limits));
+    TEMPOKEY_ASSIGN_OR_RETURN(Clip baked, Bake(*keyed, std::nullopt, limits, std::move(stop)));
     return format.format_sampled(baked);
   }
   if (format.content == FileContent::kKeyed) {

@@ -1,5 +1,6 @@
 // The list of file formats: each entry writes what the format's own function writes, keyed
 // results in sampled formats are baked first, and clip files are read by their extension.
+#include <stop_token>
 #include <string>
 #include <variant>
 #include <vector>
@@ -71,6 +72,29 @@ TEST(FileFormatsTest, GltfWritesSampledClipsAndCurvesFittedAgainstTheirSource) {
   EXPECT_EQ(unsourced.status().message(),
             "a keyed gltf file is fitted against the clip the curves were reduced from, which is "
             "not available");
+}
+
+TEST(FileFormatsTest, AStopEndsTheFitsOfAKeyedGltfAndTheBakeOfCurvesButNotTheirWriting) {
+  const std::variant<Clip, KeyedClip> sampled = Bandai();
+  const std::variant<Clip, KeyedClip> keyed = Keyed();
+  const ExportSource source{.clip = &Bandai(), .max_rotation_error_degrees = 0.5};
+  std::stop_source stop;
+  stop.request_stop();
+
+  for (const char* name : {"gltf", "glb", "bvh", "csv"}) {
+    const absl::StatusOr<std::string> file =
+        FormatOutput(keyed, *FindExportFormat(name), {}, source, stop.get_token());
+    EXPECT_EQ(file.status().code(), absl::StatusCode::kCancelled) << name;
+  }
+  // Writing what exists already is linear in the file: not stopped.
+  for (const char* name : {"json", "anim"}) {
+    EXPECT_TRUE(FormatOutput(keyed, *FindExportFormat(name), {}, source, stop.get_token()).ok())
+        << name;
+  }
+  for (const char* name : {"bvh", "csv", "glb"}) {
+    EXPECT_TRUE(FormatOutput(sampled, *FindExportFormat(name), {}, {}, stop.get_token()).ok())
+        << name;
+  }
 }
 
 TEST(FileFormatsTest, GltfRotationBoundIsTheRotationToleranceOrHalfADegree) {

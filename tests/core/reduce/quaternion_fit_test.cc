@@ -1,6 +1,7 @@
 #include "tempokey/core/reduce/quaternion_fit.h"
 
 #include <cmath>
+#include <stop_token>
 #include <vector>
 
 #include "gtest/gtest.h"
@@ -19,6 +20,18 @@ TEST(QuaternionFitTest, ConstantRotationNeedsTwoKeys) {
   ASSERT_TRUE(curve.ok()) << curve.status();
   EXPECT_EQ(curve->keys.size(), 2u);
   EXPECT_LE(MaxQuaternionCurveError(*curve, rotations, 1.0 / 30.0), 1e-4);  // float32 values
+}
+
+TEST(QuaternionFitTest, AStopEndsTheFitCancelled) {
+  std::vector<Quat> rotations;
+  for (int i = 0; i < 121; ++i) rotations.push_back(AxisRotation(2, 3.0 * i));
+  std::stop_source stop;
+  stop.request_stop();
+
+  const absl::StatusOr<QuaternionCurve> curve =
+      FitQuaternionCurve(rotations, 1.0 / 30.0, 0.1, stop.get_token());
+
+  EXPECT_EQ(curve.status().code(), absl::StatusCode::kCancelled);
 }
 
 TEST(QuaternionFitTest, SteadyTurnIsFewKeysWithinTheBound) {

@@ -9,6 +9,7 @@
 
 #include <optional>
 #include <span>
+#include <stop_token>
 #include <string>
 #include <string_view>
 #include <variant>
@@ -66,11 +67,16 @@ const ExportFormat* FindExportFormat(std::string_view name);
 // fitted against `source` (FormatGltfKeyed()).
 // Errors: kInvalidArgument for a sampled output in a keyed format ("json holds key-frame curves;
 // a sampled clip has none: reduce it first"); kFailedPrecondition for a keyed output in glTF
-// without a source clip; the formatter's and Bake()'s errors.
+// without a source clip; the formatter's and Bake()'s errors; kCancelled when `stop` is
+// requested during the work that grows faster than the file: a keyed glTF's rotation fits (each
+// joint's, and inside them, FitQuaternionCurve()) and a bake (every 65536 samples). Writing the
+// bytes of a clip or of curves already made is not stopped: it is linear in the file's size,
+// which `limits` bounds.
 // Thread-safe: a pure function of its arguments.
 absl::StatusOr<std::string> FormatOutput(const std::variant<Clip, KeyedClip>& output,
                                          const ExportFormat& format, const ClipLimits& limits = {},
-                                         const ExportSource& source = {});
+                                         const ExportSource& source = {},
+                                         std::stop_token stop = {});
 
 // Parses the text of a clip file named `file_name` with the reader its extension picks (.bvh:
 // ParseBvh(); .csv: ParseCsv() at `csv_frame_time_seconds`, which a CSV file does not store).
