@@ -12,6 +12,7 @@
 #include <functional>
 #include <future>
 #include <memory>
+#include <utility>
 #include <random>
 #include <stop_token>
 #include <string>
@@ -102,17 +103,47 @@ Workload PipelineWorkload(std::string name, Clip clip, std::vector<PipelineStep>
           std::move(delays_ms)};
 }
 
-// ExportFile's keyed glb of a reduction of `clip`: every joint's rotation fitted again.
-Workload GltfExportWorkload(std::string name, Clip clip) {
-  auto source = std::make_shared<const Clip>(std::move(clip));
-  auto keyed = std::make_shared<const std::variant<Clip, KeyedClip>>(
-      ReduceKeys(*source, {})->keyed);
-  return {std::move(name), [source, keyed](std::stop_token stop) {
+// One joint with three position and three rotation channels of noise, and its curves keyed at
+// every frame (what a reduction of noise gives, without the fit's time): a keyed glTF's
+// translation sampler then has a key per frame, and its rotation a fit on noise.
+std::pair<Clip, KeyedClip> NoisyJointKeyedEveryFrame(std::int64_t frames) {
+  Clip clip = NoiseClip(6, frames, true);
+  KeyedClip keyed;
+  for (int c = 0; c < 6; ++c) {
+    Channel& channel = clip.channels[static_cast<std::size_t>(c)];
+    channel.kind = static_cast<ChannelKind>(c);  // X, Y, Z position, then X, Y, Z rotation
+    Curve curve;
+    curve.keys.reserve(channel.samples.size());
+    for (std::size_t f = 0; f < channel.samples.size(); ++f) {
+      curve.keys.push_back({.time_seconds = static_cast<double>(f) * clip.frame_time_seconds,
+                            .value = channel.samples[f]});
+    }
+    keyed.curves.push_back(std::move(curve));
+  }
+  keyed.layout = clip;
+  for (Channel& channel : keyed.layout.channels) channel.samples.clear();
+  return {std::move(clip), std::move(keyed)};
+}
+
+// ExportFile's keyed glb of `keyed`, the curves of `source`: every joint's rotation fitted again.
+Workload GltfExportWorkload(std::string name, Clip source_clip, KeyedClip keyed_clip,
+                            std::vector<int> delays_ms = {50, 200, 500}) {
+  auto source = std::make_shared<const Clip>(std::move(source_clip));
+  auto keyed = std::make_shared<const std::variant<Clip, KeyedClip>>(std::move(keyed_clip));
+  return {std::move(name),
+          [source, keyed](std::stop_token stop) {
             return FormatOutput(*keyed, *FindExportFormat("glb"), {},
                                 {.clip = source.get(), .max_rotation_error_degrees = 0.5},
                                 std::move(stop))
                 .status();
-          }};
+          },
+          std::move(delays_ms)};
+}
+
+// ExportFile's keyed glb of a reduction of `clip`.
+Workload ReducedGltfExportWorkload(std::string name, Clip clip) {
+  KeyedClip keyed = ReduceKeys(clip, {})->keyed;
+  return GltfExportWorkload(std::move(name), std::move(clip), std::move(keyed));
 }
 
 int Run(const std::string& filter) {
@@ -168,8 +199,14 @@ int Run(const std::string& filter) {
                                        NoiseClip(1, 83'000, false),
                                        {two_keys, BakeStep{FrameRate{100000, 1}}}));
   // About 2.4 s uncancelled (ExportFile's work for a reduce job of this clip, 0.5 s).
-  workloads.push_back(GltfExportWorkload(
+  workloads.push_back(ReducedGltfExportWorkload(
       "export keyed glb, calm joint, 3 x 400000 frames (refits)", CalmJointClip(400'000)));
+  // Stops land in the translation sampler's times and keys (about 0.5 s), then in the rotation's
+  // checks, fits and error passes.
+  auto [noisy, noisy_keyed] = NoisyJointKeyedEveryFrame(1'000'000);
+  workloads.push_back(GltfExportWorkload(
+      "export keyed glb, noisy joint keyed every frame, 6 x 1M frames", std::move(noisy),
+      std::move(noisy_keyed), {10, 50, 200, 500, 1000, 2000}));
 
   std::printf("%-60s %s\n", "work",
               "stop -> return, ms (stop requested after 50 / 200 / 500 ms, or as the row says)");

@@ -155,6 +155,7 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
     switch (request.source_case()) {
       case v1::ExportFileRequest::kJobId: {
         TEMPOKEY_RETURN_IF_ERROR(CheckId("job_id", request.job_id()));
+        source_ = absl::StrCat("job=", request.job_id());
         TEMPOKEY_ASSIGN_OR_RETURN(result, service_->jobs->Result(request.job_id(), owner));
         if (format_->content == core::FileContent::kEither &&
             std::holds_alternative<core::KeyedClip>(result->output)) {
@@ -164,6 +165,7 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
       }
       case v1::ExportFileRequest::kClipId: {
         TEMPOKEY_RETURN_IF_ERROR(CheckId("clip_id", request.clip_id()));
+        source_ = absl::StrCat("clip=", request.clip_id());
         TEMPOKEY_ASSIGN_OR_RETURN(clip, service_->clips->Get(owner, request.clip_id()));
         break;
       }
@@ -177,15 +179,20 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
     absl::Status queued = service_->pool->TrySubmit(
         [this, result = std::move(result), clip = std::move(clip),
          queued_at](std::stop_token pool_stop) {
-          const TestHooks& hooks = service_->options.test_hooks;
-          if (hooks.on_export_start) hooks.on_export_start(format_->name);
-          const auto started = std::chrono::steady_clock::now();
+          auto started = std::chrono::steady_clock::now();
           absl::Status formatted;
           {
             // The drain deadline stops the formatting as the client's cancel does. Only while
             // formatting: once End() or a write has begun, this reactor may be deleted.
             std::stop_callback forward(pool_stop, [this] { stop_.request_stop(); });
-            formatted = clip != nullptr ? Format(*clip) : Format(result->output);
+            const TestHooks& hooks = service_->options.test_hooks;
+            if (hooks.on_export_start) hooks.on_export_start(format_->name, stop_.get_token());
+            started = std::chrono::steady_clock::now();
+            // A call cancelled while it waited in the queue is not formatted at all (sampled
+            // formats, JSON and .anim are written without looking at the stop).
+            formatted = stop_.stop_requested() ? absl::CancelledError("cancelled")
+                        : clip != nullptr      ? Format(*clip)
+                                               : Format(result->output);
           }
           Record(formatted, queued_at, started);
           if (!formatted.ok()) {
@@ -253,8 +260,8 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
     const auto ended = std::chrono::steady_clock::now();
     const double queue_ms = std::chrono::duration<double, std::milli>(started - queued_at).count();
     const double run_ms = std::chrono::duration<double, std::milli>(ended - started).count();
-    spdlog::info("export format={} bytes={} queue_wait_ms={:.1f} run_ms={:.1f} outcome={}{}",
-                 format_->name, bytes_.size(), queue_ms, run_ms, outcome,
+    spdlog::info("export {} format={} bytes={} queue_wait_ms={:.1f} run_ms={:.1f} outcome={}{}",
+                 source_, format_->name, bytes_.size(), queue_ms, run_ms, outcome,
                  formatted.ok() ? "" : absl::StrCat(" error=\"", formatted.message(), "\""));
     if (service_->metrics != nullptr) {
       service_->metrics->RecordFinished("export", outcome, (queue_ms + run_ms) / 1000.0);
@@ -307,6 +314,7 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
   std::shared_ptr<IdleReaper::Timer> idle_;
   MemoryBudget::Reservation memory_;  // the formatted file
   const core::ExportFormat* format_ = nullptr;
+  std::string source_;  // "job=<id>" or "clip=<id>", for the log line
   std::shared_ptr<const core::Clip> gltf_clip_;  // a keyed glTF's source, held while formatting
   core::ExportSource gltf_source_;
   std::int64_t chunk_bytes_ = kDefaultChunkBytes;

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cstdint>
 #include <functional>
+#include <stop_token>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -24,8 +25,9 @@ struct TestHooks {
   // offered to the call (sent, deferred or dropped by its ProgressThrottle). May block.
   std::function<void(double fraction, std::string_view stage)> on_process_progress;
   // Called on the worker thread right before an ExportFile call's file is formatted, with its
-  // format's name. May block; the export counts as running meanwhile.
-  std::function<void(std::string_view format)> on_export_start;
+  // format's name and the export's stop token (requested by the client's cancel or the drain
+  // deadline). May block; the export counts as running meanwhile.
+  std::function<void(std::string_view format, std::stop_token stop)> on_export_start;
 };
 
 struct ServerOptions {

@@ -1,9 +1,14 @@
 // The editing calls of MotionService over gRPC against a real server on 127.0.0.1:0: clip files
 // parsed by core's readers, stored clips read back, retime plans against the retime job's own
 // report, the CLI's speed syntax, and files written with the bytes the CLI writes.
+#include <condition_variable>
 #include <fstream>
 #include <memory>
+#include <mutex>
+#include <set>
 #include <sstream>
+#include <stop_token>
+#include <thread>
 #include <string>
 #include <variant>
 #include <vector>
@@ -405,19 +410,61 @@ TEST_F(EditingServiceTest, ServerInfoListsTheExportFormats) {
   EXPECT_FALSE(info.export_formats(0).keyed());
 }
 
-// An export's formatting on a worker held at its start (the on_export_start hook) by a gate, on a
-// server with one worker and metrics: what stops it is seen in the export's outcome.
+// The on_export_start hook of the tests below: every export arrives at `gate`; the arrivals
+// marked by HoldUntilStopped() (1: the first export) then wait, bounded, until the server has
+// requested their stop, so what an export's formatting sees does not depend on when a client's
+// cancel reaches the server.
+class ExportHook {
+ public:
+  void Arrive(std::stop_token stop) {
+    int index = 0;
+    {
+      std::lock_guard lock(mutex_);
+      index = ++arrivals_;
+    }
+    gate.Arrive();
+    bool hold = false;
+    {
+      std::lock_guard lock(mutex_);
+      hold = held_.count(index) > 0;
+    }
+    if (!hold) return;
+    std::mutex waiting;
+    std::condition_variable_any stopped;
+    std::unique_lock lock(waiting);
+    stopped.wait_until(lock, stop, std::chrono::steady_clock::now() + StartGate::kWaitLimit,
+                       [] { return false; });
+  }
+  void HoldUntilStopped(int arrival) {
+    std::lock_guard lock(mutex_);
+    held_.insert(arrival);
+  }
+
+  StartGate gate;
+
+ private:
+  std::mutex mutex_;
+  int arrivals_ = 0;
+  std::set<int> held_;
+};
+
+// Exports on a server with one worker, a queue of two and metrics: what stops an export is seen
+// in its outcome.
 class ExportStopTest : public ::testing::Test {
  protected:
   void SetUp() override {
     server::ServerOptions options = TestServerOptions();
     options.workers = 1;
+    options.queue_capacity = 2;
     options.metrics_address = "127.0.0.1:0";
-    options.test_hooks.on_export_start = [g = gate_](std::string_view format) { g->Arrive(format); };
+    options.test_hooks.on_export_start = [h = hook_](std::string_view, std::stop_token stop) {
+      h->Arrive(std::move(stop));
+    };
     server_ = StartServer(std::move(options));
     ASSERT_NE(server_, nullptr);
     stub_ = v1::MotionService::NewStub(Connect(server_->target()));
-    // A keyed glTF of CMU 131_01's reduction: its rotations are fitted again, joint by joint.
+    // A keyed glTF of CMU 131_01's reduction (its rotations fitted again, joint by joint), and
+    // the clip as BVH text (written without looking at the stop).
     grpc::ClientContext context;
     SetDeadline(context);
     v1::ParseClipFileRequest parse;
@@ -433,74 +480,127 @@ class ExportStopTest : public ::testing::Test {
     ASSERT_EQ(WaitForJob(*stub_, job.job.job_id()).state(), v1::JOB_STATE_SUCCEEDED);
     glb_.set_job_id(job.job.job_id());
     glb_.set_format("glb");
+    bvh_.set_clip_id(parsed.clip_id());
+    bvh_.set_format("bvh");
   }
   void TearDown() override {
-    gate_->Open();
+    hook_->gate.Open();
     server_.reset();
   }
 
-  // Exports glb_ to the end, the gate open: the file's bytes and the call's status.
-  std::pair<std::string, grpc::Status> ExportToEnd() {
+  // An ExportFile call in flight.
+  struct Call {
     grpc::ClientContext context;
-    SetDeadline(context);
-    auto reader = stub_->ExportFile(&context, glb_);
+    std::unique_ptr<grpc::ClientReader<v1::FileChunk>> reader;
+  };
+  std::unique_ptr<Call> Start(const v1::ExportFileRequest& request) {
+    auto call = std::make_unique<Call>();
+    SetDeadline(call->context);
+    call->reader = stub_->ExportFile(&call->context, request);
+    return call;
+  }
+  // The call read to its end: the file's bytes and the call's status.
+  static std::pair<std::string, grpc::Status> Finish(Call& call) {
     std::string bytes;
     v1::FileChunk chunk;
-    while (reader->Read(&chunk)) bytes += chunk.data();
-    return {bytes, reader->Finish()};
+    while (call.reader->Read(&chunk)) bytes += chunk.data();
+    return {bytes, call.reader->Finish()};
   }
 
-  double ExportsThatEnded(const std::string& outcome) {
+  double Exports(const std::string& outcome) {
     const std::optional<std::string> scrape = HttpGet(server_->metrics_port(), "/metrics");
     EXPECT_TRUE(scrape.has_value());
     return Sample(ParseSamples(scrape.value_or("")),
                   R"(tempokey_jobs_total{kind="export",outcome=")" + outcome + R"("})");
   }
 
-  std::shared_ptr<StartGate> gate_ = std::make_shared<StartGate>();
+  std::shared_ptr<ExportHook> hook_ = std::make_shared<ExportHook>();
   std::unique_ptr<server::Server> server_;
   std::unique_ptr<v1::MotionService::Stub> stub_;
   v1::ExportFileRequest glb_;
+  v1::ExportFileRequest bvh_;
 };
 
 TEST_F(ExportStopTest, AnExportItsClientCancelsIsNotFormattedAndItsWorkerTakesTheNextCall) {
-  grpc::ClientContext context;
-  SetDeadline(context);
-  auto reader = stub_->ExportFile(&context, glb_);
-  ASSERT_TRUE(gate_->WaitArrivals(1));  // the worker holds the export, about to format it
-  context.TryCancel();
-  v1::FileChunk chunk;
-  int chunks = 0;
-  while (reader->Read(&chunk)) ++chunks;
-  const grpc::Status cancelled = reader->Finish();
-  gate_->Open();
+  hook_->HoldUntilStopped(1);
+  std::unique_ptr<Call> cancelled = Start(glb_);
+  ASSERT_TRUE(hook_->gate.WaitArrivals(1));  // the worker holds the export, about to format it
+  cancelled->context.TryCancel();
+  const auto [cancelled_bytes, cancelled_status] = Finish(*cancelled);
+  hook_->gate.Open();
   // One worker: this export runs once the cancelled one has ended, which it counts first.
-  const auto [bytes, status] = ExportToEnd();
+  std::unique_ptr<Call> next = Start(glb_);
+  const auto [bytes, status] = Finish(*next);
 
-  EXPECT_EQ(cancelled.error_code(), grpc::StatusCode::CANCELLED);
-  EXPECT_EQ(chunks, 0);
+  EXPECT_EQ(cancelled_status.error_code(), grpc::StatusCode::CANCELLED);
+  EXPECT_EQ(cancelled_bytes, "");
   TEMPOKEY_ASSERT_GRPC_OK(status);
   EXPECT_EQ(bytes.substr(0, 4), "glTF");
-  EXPECT_EQ(ExportsThatEnded("cancelled"), 1.0);
-  EXPECT_EQ(ExportsThatEnded("succeeded"), 1.0);
+  EXPECT_EQ(Exports("cancelled"), 1.0);
+  EXPECT_EQ(Exports("succeeded"), 1.0);
+}
+
+TEST_F(ExportStopTest, AnExportCancelledWhileQueuedIsNotFormatted) {
+  hook_->HoldUntilStopped(2);
+  std::unique_ptr<Call> running = Start(glb_);
+  ASSERT_TRUE(hook_->gate.WaitArrivals(1));
+  // Queued behind it: BVH text, which is written without looking at the stop. Cancelled once
+  // the server has queued it (a call cancelled before its request arrives never reaches it).
+  std::unique_ptr<Call> queued = Start(bvh_);
+  const auto deadline = std::chrono::steady_clock::now() + StartGate::kWaitLimit;
+  while (server_->pool().queue_depth() < 1 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  ASSERT_EQ(server_->pool().queue_depth(), 1);
+  queued->context.TryCancel();
+  const auto [queued_bytes, queued_status] = Finish(*queued);
+  hook_->gate.Open();
+  const auto [running_bytes, running_status] = Finish(*running);
+  // One worker: this export runs after the cancelled one has ended.
+  std::unique_ptr<Call> after = Start(bvh_);
+  const auto [after_bytes, after_status] = Finish(*after);
+
+  EXPECT_EQ(queued_status.error_code(), grpc::StatusCode::CANCELLED);
+  TEMPOKEY_ASSERT_GRPC_OK(running_status);
+  TEMPOKEY_ASSERT_GRPC_OK(after_status);
+  EXPECT_EQ(after_bytes.substr(0, 9), "HIERARCHY");
+  EXPECT_EQ(Exports("cancelled"), 1.0);
+  EXPECT_EQ(Exports("succeeded"), 2.0);
 }
 
 TEST_F(ExportStopTest, TheDrainDeadlineStopsAnExportAboutToBeFormatted) {
-  grpc::ClientContext context;
-  SetDeadline(context);
-  auto reader = stub_->ExportFile(&context, glb_);
-  ASSERT_TRUE(gate_->WaitArrivals(1));
+  std::unique_ptr<Call> call = Start(glb_);
+  ASSERT_TRUE(hook_->gate.WaitArrivals(1));
   server_->pool().RequestStopAll();  // what Quiesce() does once the drain grace is over
-  gate_->Open();
-  v1::FileChunk chunk;
-  int chunks = 0;
-  while (reader->Read(&chunk)) ++chunks;
-  const grpc::Status status = reader->Finish();
+  hook_->gate.Open();
+  const auto [bytes, status] = Finish(*call);
 
   EXPECT_THAT(status, GrpcStatusIs(grpc::StatusCode::CANCELLED, "cancelled"));
-  EXPECT_EQ(chunks, 0);
-  EXPECT_EQ(ExportsThatEnded("cancelled"), 1.0);
-  EXPECT_EQ(ExportsThatEnded("succeeded"), 0.0);
+  EXPECT_EQ(bytes, "");
+  EXPECT_EQ(Exports("cancelled"), 1.0);
+  EXPECT_EQ(Exports("succeeded"), 0.0);
+}
+
+TEST_F(ExportStopTest, AnExportBeyondAFullQueueIsRefusedAndCountedRejected) {
+  std::unique_ptr<Call> running = Start(glb_);
+  ASSERT_TRUE(hook_->gate.WaitArrivals(1));
+  // Three more behind it, in whatever order they reach the server: two fill the queue of two,
+  // and the last to arrive is refused while the gate holds the worker.
+  std::vector<std::unique_ptr<Call>> behind;
+  for (int i = 0; i < 3; ++i) behind.push_back(Start(bvh_));
+  const auto deadline = std::chrono::steady_clock::now() + StartGate::kWaitLimit;
+  while (Exports("rejected") < 1.0 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  hook_->gate.Open();
+  TEMPOKEY_ASSERT_GRPC_OK(Finish(*running).second);
+  std::vector<grpc::StatusCode> codes;
+  for (const std::unique_ptr<Call>& call : behind) codes.push_back(Finish(*call).second.error_code());
+
+  EXPECT_THAT(codes, ::testing::UnorderedElementsAre(grpc::StatusCode::OK, grpc::StatusCode::OK,
+                                                     grpc::StatusCode::RESOURCE_EXHAUSTED));
+  EXPECT_EQ(Exports("rejected"), 1.0);
+  EXPECT_EQ(Exports("succeeded"), 3.0);
 }
 
 }  // namespace

@@ -10,6 +10,7 @@
 #include <cstring>
 #include <optional>
 #include <set>
+#include <stop_token>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -353,24 +354,40 @@ CurvePoint PointOf(const Curve& curve, double t) {
   return point;
 }
 
+// Work between two looks at the stop token in the loops below: well under a millisecond.
+constexpr std::size_t kStopCheckItems = std::size_t{1} << 16;
+
 // The key times of a joint's translation sampler: every position curve's key times, and every
-// source frame inside a weighted segment; distinct as float32.
-std::vector<double> TranslationTimes(const KeyedClip& keyed, const std::array<int, 3>& channels) {
-  std::set<double> times;
+// source frame inside a weighted segment; distinct as float32. kCancelled when `stop` is
+// requested (a joint of millions of frames of keys takes a while).
+absl::StatusOr<std::vector<double>> TranslationTimes(const KeyedClip& keyed,
+                                                     const std::array<int, 3>& channels,
+                                                     const std::stop_token& stop) {
+  std::vector<double> times;
   const double frame_time = keyed.layout.frame_time_seconds;
+  auto add = [&](double t) -> absl::Status {
+    if (times.size() % kStopCheckItems == 0) TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+    times.push_back(t);
+    return absl::OkStatus();
+  };
   for (int c : channels) {
     if (c < 0) continue;
     const std::vector<Key>& keys = keyed.curves[static_cast<std::size_t>(c)].keys;
-    for (const Key& key : keys) times.insert(key.time_seconds);
+    for (const Key& key : keys) TEMPOKEY_RETURN_IF_ERROR(add(key.time_seconds));
     for (std::size_t k = 0; k + 1 < keys.size(); ++k) {
       if (!IsWeightedSegment(keys[k], keys[k + 1])) continue;
       const auto first = static_cast<std::int64_t>(std::ceil(keys[k].time_seconds / frame_time));
       for (std::int64_t i = std::max<std::int64_t>(first, 0);
            static_cast<double>(i) * frame_time < keys[k + 1].time_seconds; ++i) {
-        times.insert(static_cast<double>(i) * frame_time);
+        TEMPOKEY_RETURN_IF_ERROR(add(static_cast<double>(i) * frame_time));
       }
     }
   }
+  // Sorted and each time once, the first of equal ones kept (what a set of them holds: +0 and
+  // -0 are one time), then distinct as float32.
+  std::stable_sort(times.begin(), times.end());
+  times.erase(std::unique(times.begin(), times.end()), times.end());
+  TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
   std::vector<double> distinct;
   for (double t : times) {
     if (distinct.empty() || static_cast<float>(t) > static_cast<float>(distinct.back())) {
@@ -460,10 +477,16 @@ absl::StatusOr<GltfFile> FormatGltfKeyed(const Clip& source, const KeyedClip& ke
   for (std::size_t j = 0; j < source.skeleton.joints.size(); ++j) {
     const std::array<int, 3> channels = PositionChannels(source, static_cast<int>(j));
     if (!HasAny(channels)) continue;
-    const std::vector<double> times = TranslationTimes(keyed, channels);
+    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+    TEMPOKEY_ASSIGN_OR_RETURN(const std::vector<double> times,
+                              TranslationTimes(keyed, channels, stop));
     std::vector<float> input;
     std::vector<float> output;
-    for (double t : times) {
+    for (std::size_t i = 0; i < times.size(); ++i) {
+      if (i % kStopCheckItems == kStopCheckItems - 1) {
+        TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+      }
+      const double t = times[i];
       input.push_back(static_cast<float>(t));
       std::array<CurvePoint, 3> points;
       for (std::size_t axis = 0; axis < 3; ++axis) {

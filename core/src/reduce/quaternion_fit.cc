@@ -101,6 +101,25 @@ absl::Status CheckInputs(std::span<const Quat> rotations, double frame_time, dou
   return absl::OkStatus();
 }
 
+// Frames of the error pass between two looks at the stop token: well under a millisecond.
+constexpr std::size_t kStopCheckFrames = std::size_t{1} << 16;
+
+// Whether `curve` stays within `max_angle_degrees` of `rotations` at every frame: what
+// MaxQuaternionCurveError() <= max_angle_degrees says (a NaN angle counts as within, as the
+// maximum skips it), answered at the first frame over. kCancelled when `stop` is requested.
+absl::StatusOr<bool> StaysWithin(const QuaternionCurve& curve, std::span<const Quat> rotations,
+                                 double frame_time_seconds, double max_angle_degrees,
+                                 const std::stop_token& stop) {
+  for (std::size_t i = 0; i < rotations.size(); ++i) {
+    if (i % kStopCheckFrames == kStopCheckFrames - 1) {
+      TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+    }
+    const Quat q = EvaluateQuaternionCurve(curve, static_cast<double>(i) * frame_time_seconds);
+    if (AngleBetweenDegrees(q, Normalized(rotations[i])) > max_angle_degrees) return false;
+  }
+  return true;
+}
+
 }  // namespace
 
 Quat EvaluateQuaternionCurve(const QuaternionCurve& curve, double time_seconds) {
@@ -141,7 +160,9 @@ absl::StatusOr<QuaternionCurve> FitQuaternionCurve(std::span<const Quat> rotatio
                                                    double frame_time_seconds,
                                                    double max_angle_degrees,
                                                    std::stop_token stop) {
+  TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
   TEMPOKEY_RETURN_IF_ERROR(CheckInputs(rotations, frame_time_seconds, max_angle_degrees));
+  TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
   std::vector<Quat> continuous(rotations.size());
   for (std::size_t i = 0; i < rotations.size(); ++i) continuous[i] = Normalized(rotations[i]);
   MakeSignContinuous(continuous);
@@ -163,9 +184,10 @@ absl::StatusOr<QuaternionCurve> FitQuaternionCurve(std::span<const Quat> rotatio
     absl::StatusOr<SplineFit> fit = FitWithinTolerance(channels, bounds, {}, stop);
     if (!fit.ok()) return fit.status();
     QuaternionCurve curve = KeysOf(*fit, frame_time_seconds);
-    if (MaxQuaternionCurveError(curve, continuous, frame_time_seconds) <= max_angle_degrees) {
-      return curve;
-    }
+    TEMPOKEY_ASSIGN_OR_RETURN(
+        const bool within,
+        StaysWithin(curve, continuous, frame_time_seconds, max_angle_degrees, stop));
+    if (within) return curve;
   }
   return EveryFrame(continuous, frame_time_seconds);
 }
