@@ -6,6 +6,7 @@
 // caller's own clips and jobs, count what they store in the memory budget, and end a stream whose
 // client takes no message for the idle timeout.
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <functional>
 #include <memory>
@@ -132,7 +133,10 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
 
   // The client cancelled or left: a file still being formatted is stopped (a keyed glTF's fits
   // can take a worker for many seconds on a long clip).
-  void OnCancel() override { stop_.request_stop(); }
+  void OnCancel() override {
+    client_cancelled_.store(true);
+    stop_.request_stop();
+  }
 
   void OnDone() override {
     if (idle_ != nullptr) idle_->Close();
@@ -188,11 +192,19 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
             const TestHooks& hooks = service_->options.test_hooks;
             if (hooks.on_export_start) hooks.on_export_start(format_->name, stop_.get_token());
             started = std::chrono::steady_clock::now();
-            // A call cancelled while it waited in the queue is not formatted at all (sampled
-            // formats, JSON and .anim are written without looking at the stop).
-            formatted = stop_.stop_requested() ? absl::CancelledError("cancelled")
-                        : clip != nullptr      ? Format(*clip)
-                                               : Format(result->output);
+            // A call stopped before its formatting began is not formatted at all (sampled
+            // formats, JSON and .anim are written without looking at the stop): cancelled by its
+            // client, or refused as the server shuts down (the drain deadline reached it queued,
+            // or it came after).
+            if (!stop_.stop_requested()) {
+              formatted = clip != nullptr ? Format(*clip) : Format(result->output);
+            } else if (pool_stop.stop_requested() && !client_cancelled_.load()) {
+              formatted = absl::UnavailableError(
+                  "the server is shutting down: its drain deadline passed before this export "
+                  "began");
+            } else {
+              formatted = absl::CancelledError("cancelled");
+            }
           }
           Record(formatted, queued_at, started);
           if (!formatted.ok()) {
@@ -311,6 +323,7 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
   grpc::CallbackServerContext* const call_;
   StreamSlot slot_;
   std::stop_source stop_;  // the client's cancel and the drain deadline; thread-safe by itself
+  std::atomic<bool> client_cancelled_{false};
   std::shared_ptr<IdleReaper::Timer> idle_;
   MemoryBudget::Reservation memory_;  // the formatted file
   const core::ExportFormat* format_ = nullptr;
