@@ -12,11 +12,11 @@
 #include <functional>
 #include <future>
 #include <memory>
-#include <utility>
 #include <random>
 #include <stop_token>
 #include <string>
 #include <thread>
+#include <utility>
 #include <variant>
 #include <vector>
 
@@ -117,8 +117,10 @@ std::pair<Clip, KeyedClip> NoisyJointKeyedEveryFrame(std::int64_t frames) {
     Curve curve;
     curve.keys.reserve(channel.samples.size());
     for (std::size_t f = 0; f < channel.samples.size(); ++f) {
-      curve.keys.push_back({.time_seconds = static_cast<double>(f) * clip.frame_time_seconds,
-                            .value = channel.samples[f]});
+      Key key;
+      key.time_seconds = static_cast<double>(f) * clip.frame_time_seconds;
+      key.value = channel.samples[f];
+      curve.keys.push_back(key);
     }
     keyed.curves.push_back(std::move(curve));
   }
@@ -200,7 +202,7 @@ int Run(const std::string& filter) {
   workloads.push_back(PipelineWorkload("bake, 1 channel to 10M frames",
                                        NoiseClip(1, 83'000, false),
                                        {two_keys, BakeStep{FrameRate{100000, 1}}}));
-  // About 2.4 s uncancelled (ExportFile's work for a reduce job of this clip, 0.5 s).
+  // ExportFile's work for a reduce job of this clip (the reduction itself about 0.5 s).
   workloads.push_back(ReducedGltfExportWorkload(
       "export keyed glb, calm joint, 3 x 400000 frames (refits)", CalmJointClip(400'000)));
   // Stops land in the translation sampler's times and keys (about 0.5 s), then in the rotation's

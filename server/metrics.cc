@@ -168,11 +168,13 @@ absl::StatusOr<std::unique_ptr<Metrics>> Metrics::Start(const std::string& addre
   }
   impl->jobs = &prometheus::BuildCounter()
                     .Name("tempokey_jobs_total")
-                    .Help("Jobs, Process calls and exports by kind and outcome (rejected: queue full).")
+                    .Help("Jobs, Process calls and exports by kind and outcome "
+                          "(rejected: queue full).")
                     .Register(*impl->registry);
   impl->latency = &prometheus::BuildHistogram()
                        .Name("tempokey_job_latency_seconds")
-                       .Help("Time from submission to the end of a job, a Process call or an export's formatting.")
+                       .Help("Time from submission to the end of a job, a Process call or "
+                             "an export's formatting.")
                        .Register(*impl->registry);
   auto& bytes = prometheus::BuildCounter()
                     .Name("tempokey_bytes_total")

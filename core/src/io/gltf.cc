@@ -258,15 +258,15 @@ bool HasAny(const std::array<int, 3>& channels) {
   return channels[0] >= 0 || channels[1] >= 0 || channels[2] >= 0;
 }
 
-// The source rotation of `rotation`'s joint at every frame: its channels composed in listed order.
 // Items (frames, key times) between two looks at the stop token in the loops below: a few
 // milliseconds of the costliest, a joint's rotations (three sines and cosines a frame).
 constexpr std::size_t kStopCheckItems = std::size_t{1} << 16;
 // Translation keys between two looks: each samples three curves (a search and a cubic each).
 constexpr std::size_t kStopCheckKeys = std::size_t{1} << 12;
 
-// A joint's rotation at every frame, signs made continuous. kCancelled when `stop` is requested
-// (looked at every kStopCheckItems frames).
+// The source rotation of `rotation`'s joint at every frame: its channels composed in listed
+// order, signs made continuous. kCancelled when `stop` is requested (looked at every
+// kStopCheckItems frames).
 absl::StatusOr<std::vector<Quat>> JointQuaternions(const Clip& clip,
                                                    const JointRotation& rotation,
                                                    const std::stop_token& stop) {

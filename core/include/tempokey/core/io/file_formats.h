@@ -68,10 +68,10 @@ const ExportFormat* FindExportFormat(std::string_view name);
 // Errors: kInvalidArgument for a sampled output in a keyed format ("json holds key-frame curves;
 // a sampled clip has none: reduce it first"); kFailedPrecondition for a keyed output in glTF
 // without a source clip; the formatter's and Bake()'s errors; kCancelled when `stop` is
-// requested during the work that grows faster than the file: a keyed glTF's rotation fits (each
-// joint's, and inside them, FitQuaternionCurve()) and a bake (every 65536 samples). Writing the
-// bytes of a clip or of curves already made is not stopped: it is linear in the file's size,
-// which `limits` bounds.
+// requested during the work that grows faster than the file: a keyed glTF's formatting
+// (FormatGltfKeyed(): its translation keys, rotations and rotation fits) and a bake (every 65536
+// samples). Writing the bytes of a clip or of curves already made is not stopped: it is linear in
+// the file's size, which `limits` bounds.
 // Thread-safe: a pure function of its arguments.
 absl::StatusOr<std::string> FormatOutput(const std::variant<Clip, KeyedClip>& output,
                                          const ExportFormat& format, const ClipLimits& limits = {},

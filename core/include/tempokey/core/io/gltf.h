@@ -79,8 +79,9 @@ struct GltfKeyedOptions {
 // count): CUBICSPLINE samplers as above.
 // Errors: kInvalidArgument from ValidateClip() / ValidateKeyedClip(), a source whose layout, frame
 // time or frame count differs from the keyed clip's, no skeleton, a bound that is not finite and
-// > 0; kCancelled when `stop` is requested (looked at between joints, every 65536 translation
-// key times and inside each joint's rotation fits, FitQuaternionCurve()). Thread-safe.
+// > 0; kCancelled when `stop` is requested (looked at between joints, in the translation key
+// times and keys, in each joint's rotations and inside its rotation fits, FitQuaternionCurve()).
+// Thread-safe.
 absl::StatusOr<GltfFile> FormatGltfKeyed(const Clip& source, const KeyedClip& keyed,
                                          const GltfKeyedOptions& options, GltfContainer container,
                                          std::stop_token stop = {});
