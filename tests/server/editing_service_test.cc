@@ -1,6 +1,7 @@
 // The editing calls of MotionService over gRPC against a real server on 127.0.0.1:0: clip files
 // parsed by core's readers, stored clips read back, retime plans against the retime job's own
-// report, the CLI's speed syntax, and files written with the bytes the CLI writes.
+// report, the CLI's speed syntax, and files written with the bytes the CLI writes; exports stopped
+// by their client, the drain deadline and a full queue.
 #include <condition_variable>
 #include <fstream>
 #include <memory>
@@ -8,8 +9,8 @@
 #include <set>
 #include <sstream>
 #include <stop_token>
-#include <thread>
 #include <string>
+#include <thread>
 #include <variant>
 #include <vector>
 
@@ -593,7 +594,9 @@ TEST_F(ExportStopTest, AnExportBeyondAFullQueueIsRefusedAndCountedRejected) {
   hook_->gate.Open();
   TEMPOKEY_ASSERT_GRPC_OK(Finish(*running).second);
   std::vector<grpc::StatusCode> codes;
-  for (const std::unique_ptr<Call>& call : behind) codes.push_back(Finish(*call).second.error_code());
+  for (const std::unique_ptr<Call>& call : behind) {
+    codes.push_back(Finish(*call).second.error_code());
+  }
 
   EXPECT_THAT(codes, ::testing::UnorderedElementsAre(grpc::StatusCode::OK, grpc::StatusCode::OK,
                                                      grpc::StatusCode::RESOURCE_EXHAUSTED));
