@@ -1,10 +1,12 @@
 #include "client/clip_files.h"
 
+#include <sched.h>
 #include <sys/stat.h>
 
 #include <algorithm>
 #include <cctype>
 #include <filesystem>
+#include <thread>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -145,6 +147,13 @@ absl::Status WriteKeyedClipFile(const std::string& path, FileFormat format,
       path, ": ", AsAbsl(ExtensionOf(format)), " holds sampled clips, not keyed curves"));
 }
 
+int LocalCpuCount() {
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (sched_getaffinity(0, sizeof(set), &set) == 0 && CPU_COUNT(&set) > 0) return CPU_COUNT(&set);
+  return std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+}
+
 absl::Status WriteOutput(const std::string& path, FileFormat format,
                          const std::variant<core::Clip, core::KeyedClip>& output,
                          const GltfExportSource& gltf) {
@@ -155,7 +164,8 @@ absl::Status WriteOutput(const std::string& path, FileFormat format,
     TEMPOKEY_ASSIGN_OR_RETURN(
         core::GltfFile file,
         core::FormatGltfKeyed(*gltf.source, *keyed,
-                              {.max_rotation_error_degrees = gltf.max_rotation_error_degrees},
+                              {.max_rotation_error_degrees = gltf.max_rotation_error_degrees,
+                               .threads = gltf.threads},
                               GltfContainerOf(format)));
     return core::WriteFileAtomically(path, file.bytes);
   }

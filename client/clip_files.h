@@ -58,7 +58,13 @@ bool IsGltfFormat(FileFormat format);
 struct GltfExportSource {
   const core::Clip* source = nullptr;
   double max_rotation_error_degrees = core::kDefaultMaxRotationErrorDegrees;
+  // Joints whose rotations are fitted at once (core::GltfKeyedOptions::threads): the same file
+  // for any count.
+  int threads = 1;
 };
+
+// CPUs this process may run on (its affinity mask), at least 1: for work the CLI does itself.
+int LocalCpuCount();
 
 // The rotation bound a keyed glTF of `reduce`'s result is fitted to: its rotation tolerance, or
 // the default 0.5 degrees when unset (also under a joint tolerance: the glTF's rotations then

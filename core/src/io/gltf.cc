@@ -4,6 +4,7 @@
 #include "tempokey/core/io/gltf.h"
 
 #include <algorithm>
+#include <atomic>
 #include <array>
 #include <cmath>
 #include <cstdint>
@@ -13,6 +14,8 @@
 #include <stop_token>
 #include <string>
 #include <string_view>
+#include <system_error>
+#include <thread>
 #include <vector>
 
 #include "absl/strings/escaping.h"
@@ -471,6 +474,64 @@ absl::StatusOr<GltfFile> FormatGltfSampled(const Clip& clip, GltfContainer conta
   return file;
 }
 
+// One joint's rotation fitted as glTF keys (FitQuaternionCurve()); errors name the joint.
+absl::StatusOr<QuaternionCurve> FitRotation(const Clip& source, const JointRotation& rotation,
+                                            double max_angle_degrees,
+                                            const std::stop_token& stop) {
+  TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+  TEMPOKEY_ASSIGN_OR_RETURN(const std::vector<Quat> quats,
+                            JointQuaternions(source, rotation, stop));
+  absl::StatusOr<QuaternionCurve> curve =
+      FitQuaternionCurve(quats, source.frame_time_seconds, max_angle_degrees, stop);
+  if (!curve.ok()) {
+    return Annotate(curve.status(),
+                    absl::StrCat("joint ", rotation.joint, " (",
+                                 source.skeleton.joints[static_cast<std::size_t>(rotation.joint)].name,
+                                 ") rotation"));
+  }
+  return curve;
+}
+
+// Every joint's rotation fitted (FitRotation()), on up to `threads` threads (the calling one
+// among them; fewer when a thread cannot start): the curves in joint order, or the first error in
+// joint order, as one thread fitting the joints in turn gives. Joints are taken in order, and
+// none after a failed one is started, so every joint before the first failure is fitted.
+absl::StatusOr<std::vector<QuaternionCurve>> FitRotations(
+    const Clip& source, const std::vector<JointRotation>& rotations, double max_angle_degrees,
+    int threads, const std::stop_token& stop) {
+  const std::size_t count = rotations.size();
+  std::vector<absl::StatusOr<QuaternionCurve>> curves(count, absl::UnknownError("not fitted"));
+  std::atomic<std::size_t> next{0};
+  std::atomic<std::size_t> first_failure{count};
+  auto work = [&] {
+    for (std::size_t r = next++; r < count && r < first_failure.load(); r = next++) {
+      curves[r] = FitRotation(source, rotations[r], max_angle_degrees, stop);
+      if (curves[r].ok()) continue;
+      std::size_t seen = first_failure.load();
+      while (r < seen && !first_failure.compare_exchange_weak(seen, r)) {
+      }
+    }
+  };
+  const auto helpers_wanted = static_cast<std::size_t>(std::max(1, threads)) - 1;
+  std::vector<std::thread> helpers;
+  for (std::size_t t = 0; t < std::min(helpers_wanted, count > 0 ? count - 1 : 0); ++t) {
+    try {
+      helpers.emplace_back(work);
+    } catch (const std::system_error&) {
+      break;  // the threads started so far, and this one, share the joints
+    }
+  }
+  work();
+  for (std::thread& helper : helpers) helper.join();
+  std::vector<QuaternionCurve> fitted;
+  fitted.reserve(count);
+  for (absl::StatusOr<QuaternionCurve>& curve : curves) {
+    if (!curve.ok()) return curve.status();
+    fitted.push_back(*std::move(curve));
+  }
+  return fitted;
+}
+
 absl::StatusOr<GltfFile> FormatGltfKeyed(const Clip& source, const KeyedClip& keyed,
                                          const GltfKeyedOptions& options, GltfContainer container,
                                          std::stop_token stop) {
@@ -517,21 +578,16 @@ absl::StatusOr<GltfFile> FormatGltfKeyed(const Clip& source, const KeyedClip& ke
                         static_cast<int>(j), "translation");
     file.stats.translation_keys += static_cast<std::int64_t>(times.size());
   }
-  for (const JointRotation& rotation : JointRotations(source)) {
-    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
-    TEMPOKEY_ASSIGN_OR_RETURN(const std::vector<Quat> quats,
-                              JointQuaternions(source, rotation, stop));
-    absl::StatusOr<QuaternionCurve> curve = FitQuaternionCurve(
-        quats, source.frame_time_seconds, options.max_rotation_error_degrees, stop);
-    if (!curve.ok()) {
-      return Annotate(curve.status(),
-                      absl::StrCat("joint ", rotation.joint, " (",
-                                   source.skeleton.joints[static_cast<std::size_t>(rotation.joint)].name,
-                                   ") rotation"));
-    }
+  const std::vector<JointRotation> rotations = JointRotations(source);
+  TEMPOKEY_ASSIGN_OR_RETURN(
+      const std::vector<QuaternionCurve> curves,
+      FitRotations(source, rotations, options.max_rotation_error_degrees, options.threads, stop));
+  for (std::size_t r = 0; r < rotations.size(); ++r) {
+    const JointRotation& rotation = rotations[r];
+    const QuaternionCurve& curve = curves[r];
     std::vector<float> input;
     std::vector<float> output;
-    for (const QuaternionKey& key : curve->keys) {
+    for (const QuaternionKey& key : curve.keys) {
       input.push_back(static_cast<float>(key.time_seconds));
       AppendQuat(output, key.in_tangent);
       AppendQuat(output, key.value);
@@ -541,7 +597,7 @@ absl::StatusOr<GltfFile> FormatGltfKeyed(const Clip& source, const KeyedClip& ke
     document.AddChannel(in, document.AddAccessor(output, 4, false), "CUBICSPLINE", rotation.joint,
                         "rotation");
     ++file.stats.animated_joints;
-    file.stats.rotation_keys += static_cast<std::int64_t>(curve->keys.size());
+    file.stats.rotation_keys += static_cast<std::int64_t>(curve.keys.size());
     file.stats.rotation_samples += source.frame_count;
   }
   file.bytes = document.Serialize(container);

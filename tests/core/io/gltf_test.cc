@@ -68,6 +68,25 @@ TEST(GltfTest, GlbHoldsTheJointHierarchyWithOffsetsAndEndSites) {
   EXPECT_EQ(file->stats.rotation_samples, 31 * clip.frame_count);
 }
 
+TEST(GltfTest, AKeyedGlbIsTheSameBytesWhateverTheThreadsFittingItsJoints) {
+  const Clip clip = Cmu();  // 31 joints with rotations
+  const absl::StatusOr<ReduceResult> reduced = ReduceKeys(clip, {});
+  ASSERT_TRUE(reduced.ok()) << reduced.status();
+  auto glb = [&](int threads) {
+    GltfKeyedOptions options;
+    options.threads = threads;
+    const absl::StatusOr<GltfFile> file =
+        FormatGltfKeyed(clip, reduced->keyed, options, GltfContainer::kBinary);
+    EXPECT_TRUE(file.ok()) << file.status();
+    return file.ok() ? file->bytes : std::string();
+  };
+
+  const std::string alone = glb(1);
+
+  ASSERT_GT(alone.size(), 1000u);
+  for (int threads : {0, 2, 3, 8, 64}) EXPECT_TRUE(glb(threads) == alone) << threads << " threads";
+}
+
 TEST(GltfTest, ClipsItCannotHoldAreRefused) {
   Clip plain;
   plain.frame_count = 2;

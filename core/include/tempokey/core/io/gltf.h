@@ -73,6 +73,9 @@ struct GltfKeyedOptions {
   // Largest angle between a glTF rotation and the source rotation at any source frame, degrees,
   // finite and > 0: use the reduction's rotation tolerance.
   double max_rotation_error_degrees = 0.5;
+  // Joints whose rotations are fitted at once, each on a thread (the calling one among them):
+  // the same bytes for any count. <= 1: the calling thread alone.
+  int threads = 1;
 };
 
 // A keyed clip, with `source` the clip it was reduced from (same layout, frame time and frame
