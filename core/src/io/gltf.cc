@@ -4,17 +4,17 @@
 #include "tempokey/core/io/gltf.h"
 
 #include <algorithm>
-#include <atomic>
 #include <array>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <exception>
 #include <optional>
 #include <set>
 #include <stop_token>
 #include <string>
 #include <string_view>
-#include <system_error>
 #include <thread>
 #include <vector>
 
@@ -492,42 +492,61 @@ absl::StatusOr<QuaternionCurve> FitRotation(const Clip& source, const JointRotat
   return curve;
 }
 
+// Working memory of one joint's rotation fit, per frame: its quaternions, their components and
+// the fit's buffers (about 100-125 bytes measured), so a few threads on a long clip stay within
+// kMaxFitThreadsBytes between them.
+constexpr std::int64_t kFitBytesPerFrame = 128;
+constexpr std::int64_t kMaxFitThreadsBytes = std::int64_t{1} << 30;
+
 // Every joint's rotation fitted (FitRotation()), on up to `threads` threads (the calling one
-// among them; fewer when a thread cannot start): the curves in joint order, or the first error in
-// joint order, as one thread fitting the joints in turn gives. Joints are taken in order, and
-// none after a failed one is started, so every joint before the first failure is fitted.
+// among them; fewer when a thread cannot start, and no more than keep their working memory within
+// kMaxFitThreadsBytes): the curves in joint order, or the first error in joint order, as one
+// thread fitting the joints in turn gives. Joints are taken in order, and none after a failed
+// one is started, so every joint before the first failure is fitted. An exception (an
+// allocation's) from a joint's fit is rethrown here, once every thread has ended, when no joint
+// before it failed.
 absl::StatusOr<std::vector<QuaternionCurve>> FitRotations(
     const Clip& source, const std::vector<JointRotation>& rotations, double max_angle_degrees,
     int threads, const std::stop_token& stop) {
   const std::size_t count = rotations.size();
   std::vector<absl::StatusOr<QuaternionCurve>> curves(count, absl::UnknownError("not fitted"));
+  std::vector<std::exception_ptr> thrown(count);
   std::atomic<std::size_t> next{0};
   std::atomic<std::size_t> first_failure{count};
   auto work = [&] {
     for (std::size_t r = next++; r < count && r < first_failure.load(); r = next++) {
-      curves[r] = FitRotation(source, rotations[r], max_angle_degrees, stop);
+      try {
+        curves[r] = FitRotation(source, rotations[r], max_angle_degrees, stop);
+      } catch (...) {
+        thrown[r] = std::current_exception();
+      }
       if (curves[r].ok()) continue;
       std::size_t seen = first_failure.load();
       while (r < seen && !first_failure.compare_exchange_weak(seen, r)) {
       }
     }
   };
-  const auto helpers_wanted = static_cast<std::size_t>(std::max(1, threads)) - 1;
-  std::vector<std::thread> helpers;
-  for (std::size_t t = 0; t < std::min(helpers_wanted, count > 0 ? count - 1 : 0); ++t) {
+  const std::int64_t memory_threads = std::max<std::int64_t>(
+      1, kMaxFitThreadsBytes / std::max<std::int64_t>(1, source.frame_count * kFitBytesPerFrame));
+  const std::size_t wanted = static_cast<std::size_t>(
+      std::min<std::int64_t>(std::max(1, threads), memory_threads));
+  const std::size_t helper_count = std::min(wanted, std::max<std::size_t>(count, 1)) - 1;
+  {
+    std::vector<std::jthread> helpers;  // joined on every way out of this block
     try {
-      helpers.emplace_back(work);
-    } catch (const std::system_error&) {
-      break;  // the threads started so far, and this one, share the joints
+      helpers.reserve(helper_count);
+      for (std::size_t t = 0; t < helper_count; ++t) helpers.emplace_back(work);
+    } catch (...) {
+      // The threads started so far, and this one, share the joints.
     }
+    work();
   }
-  work();
-  for (std::thread& helper : helpers) helper.join();
   std::vector<QuaternionCurve> fitted;
   fitted.reserve(count);
-  for (absl::StatusOr<QuaternionCurve>& curve : curves) {
-    if (!curve.ok()) return curve.status();
-    fitted.push_back(*std::move(curve));
+  for (std::size_t r = 0; r < count; ++r) {
+    if (thrown[r]) std::rethrow_exception(thrown[r]);
+    if (!curves[r].ok()) return curves[r].status();
+    fitted.push_back(*std::move(curves[r]));
   }
   return fitted;
 }

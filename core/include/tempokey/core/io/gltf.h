@@ -74,7 +74,8 @@ struct GltfKeyedOptions {
   // finite and > 0: use the reduction's rotation tolerance.
   double max_rotation_error_degrees = 0.5;
   // Joints whose rotations are fitted at once, each on a thread (the calling one among them):
-  // the same bytes for any count. <= 1: the calling thread alone.
+  // the same bytes for any count. <= 1: the calling thread alone. Fewer on long clips, so that
+  // the fits' working memory (about 128 bytes a frame each) stays within about 1 GiB.
   int threads = 1;
 };
 
