@@ -265,10 +265,7 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
   // One line per export, as per job and Process call, and the same metrics (kind "export").
   void Record(const absl::Status& formatted, std::chrono::steady_clock::time_point queued_at,
               std::chrono::steady_clock::time_point started) {
-    const std::string_view outcome = formatted.ok() ? "succeeded"
-                                     : formatted.code() == absl::StatusCode::kCancelled
-                                         ? "cancelled"
-                                         : "failed";
+    const std::string_view outcome = OutcomeOf(formatted);
     const auto ended = std::chrono::steady_clock::now();
     const double queue_ms = std::chrono::duration<double, std::milli>(started - queued_at).count();
     const double run_ms = std::chrono::duration<double, std::milli>(ended - started).count();

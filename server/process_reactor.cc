@@ -81,9 +81,7 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
         stop_.get_token(), service_->clip_limits);
     DropInput();  // the input is no longer needed while the result streams out
     const auto ended = std::chrono::steady_clock::now();
-    const std::string outcome = result.ok()                                             ? "succeeded"
-                                : result.status().code() == absl::StatusCode::kCancelled ? "cancelled"
-                                                                                         : "failed";
+    const std::string_view outcome = OutcomeOf(result.status());
     const double queue_ms =
         std::chrono::duration<double, std::milli>(started - queued_at_).count();
     const double run_ms = std::chrono::duration<double, std::milli>(ended - started).count();

@@ -14,4 +14,9 @@ grpc::Status ToGrpcStatus(const absl::Status& status, grpc::ServerContextBase* c
   return grpc::Status(static_cast<grpc::StatusCode>(status.code()), std::string(status.message()));
 }
 
+std::string_view OutcomeOf(const absl::Status& status) {
+  if (status.ok()) return "succeeded";
+  return status.code() == absl::StatusCode::kCancelled ? "cancelled" : "failed";
+}
+
 }  // namespace tempokey::server

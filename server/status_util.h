@@ -2,6 +2,8 @@
 #ifndef TEMPOKEY_SERVER_STATUS_UTIL_H_
 #define TEMPOKEY_SERVER_STATUS_UTIL_H_
 
+#include <string_view>
+
 #include "absl/status/status.h"
 #include "grpcpp/server_context.h"
 #include "grpcpp/support/status.h"
@@ -15,6 +17,10 @@ namespace tempokey::server {
 // Call before the call is finished.
 grpc::Status ToGrpcStatus(const absl::Status& status,
                           grpc::ServerContextBase* context = nullptr);
+
+// How a Process call or an export ended, for its log line and the jobs metrics: "succeeded",
+// "cancelled" (kCancelled) or "failed".
+std::string_view OutcomeOf(const absl::Status& status);
 
 }  // namespace tempokey::server
 
