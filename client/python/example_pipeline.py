@@ -13,10 +13,13 @@ and the joints' world-position error (file units and percent of the figure's hei
         --server 127.0.0.1:50051 ../shared/data/bvh/cmu/131_01.bvh -o 131_01-slow.json
 
 Exit codes, as the `tempokey` CLI: 0 ok; 1 failed (bad file, server refusal, unreachable server),
-with one line "error: ..." on stderr; 2 usage (argparse).
+with one line "error: ..." on stderr; 2 usage (argparse, and an output that is the input file
+itself, by any path or link, unless --overwrite is given).
 """
 
 import argparse
+import math
+import os
 import sys
 from typing import Callable, List, Optional, Sequence
 
@@ -33,6 +36,28 @@ def speed_argument(text: str) -> list:
         raise argparse.ArgumentTypeError(str(error)) from None
 
 
+def timeout_argument(text: str) -> float:
+    """--timeout in seconds: a finite number > 0 (connect() also refuses over a year)."""
+    try:
+        seconds = float(text)
+    except ValueError:
+        seconds = math.nan
+    if not (math.isfinite(seconds) and seconds > 0):
+        raise argparse.ArgumentTypeError("expected a number of seconds > 0, got %r" % text)
+    return seconds
+
+
+def noise_argument(text: str) -> object:
+    """--noise: "auto" or a level in degrees; anything else is a usage error (exit 2)."""
+    if text == "auto":
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError("expected a level in degrees or auto, got %r"
+                                         % text) from None
+
+
 def joint_tolerance_argument(text: str) -> str:
     """--joint-tolerance as the CLI reads it: 1 (file units) or 0.5% (of the figure's height)."""
     try:
@@ -47,9 +72,11 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
         description="Retime and key-reduce a BVH clip on tempokey-server; write keyed JSON.")
     parser.add_argument("input", help="BVH file to process")
     parser.add_argument("-o", "--output", required=True, help="keyed-clip JSON file to write")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="allow the output to replace the input file itself")
     parser.add_argument("--server", default="127.0.0.1:50051",
                         help="gRPC target of tempokey-server (default %(default)s)")
-    parser.add_argument("--timeout", type=float, default=120.0,
+    parser.add_argument("--timeout", type=timeout_argument, default=120.0,
                         help="deadline of the call in seconds (default %(default)s)")
     parser.add_argument("--token-file", help="file holding a bearer token for the server")
     parser.add_argument("--speed", default=DEFAULT_SPEED, type=speed_argument,
@@ -67,10 +94,27 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     parser.add_argument("--method", choices=("tolerance", "noise"), default="tolerance",
                         help="reduction: tolerance (within the bounds) or noise (noise-aware, "
                              "levels from --noise)")
-    parser.add_argument("--noise", default="auto",
+    parser.add_argument("--noise", default="auto", type=noise_argument,
                         help="method noise: rotation noise level in degrees or auto "
                              "(default %(default)s: estimated per channel)")
     return parser.parse_args(argv)
+
+
+def output_is_the_input(args: argparse.Namespace) -> Optional[str]:
+    """The CLI's usage error for an output that is the input file itself (the same device and
+    inode: the same path, another path to it, a hard or symbolic link), or None. An output that
+    does not exist yet, or an input that does not (reading it reports that), is not the input."""
+    if args.overwrite:
+        return None
+    try:
+        same = os.path.samefile(args.input, args.output)
+    except OSError:
+        return None
+    if not same:
+        return None
+    named = "" if args.input == args.output else " " + args.input
+    return ("-o %s is the input%s (the same file); choose another output, or give --overwrite "
+            "to replace the input" % (args.output, named))
 
 
 def read_token(path: Optional[str]) -> Optional[str]:
@@ -140,6 +184,10 @@ def run(args: argparse.Namespace) -> None:
 
 def main(argv: Optional[List[str]] = None) -> int:
     args = parse_args(sys.argv[1:] if argv is None else argv)
+    usage = output_is_the_input(args)
+    if usage is not None:
+        print("error: %s" % usage, file=sys.stderr)
+        return 2
     try:
         run(args)
     except tk.TempokeyError as error:

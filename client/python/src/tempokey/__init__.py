@@ -15,7 +15,7 @@ Modules, by purpose:
   tempokey.pipelines  the operations (retime, reduce, bake, convert) and PipelineResult
   tempokey.clips      clips from plain Python values (make_clip), channel names, slicing
   tempokey.formats    BVH files to clips, keyed results to the keyed-clip JSON
-  tempokey.bvh        the strict BVH reader
+  tempokey.bvh        the strict BVH reader (BvhError, BvhFileError)
   tempokey.errors     TempokeyError
   tempokey.v1         the message and service stubs, generated from the protos at build time
 
@@ -30,7 +30,7 @@ except ImportError as error:  # pragma: no cover - an uninstalled source tree
         "tempokey.v1 stubs are missing (%s): install the package (pip install client/python), "
         "which generates them from the protos" % error) from error
 
-from tempokey.bvh import BvhClip, BvhError, BvhJoint, parse_bvh, read_bvh
+from tempokey.bvh import BvhClip, BvhError, BvhFileError, BvhJoint, parse_bvh, read_bvh
 from tempokey.client import (DEFAULT_MAX_RECEIVE_BYTES, HEALTH_STATES, MOTION_SERVICE, Client,
                              connect)
 from tempokey.clips import (CHANNEL_KIND_NAMES, CHANNEL_KINDS, DEFAULT_SLICE_BYTES, ChannelSpec,
@@ -52,7 +52,8 @@ except PackageNotFoundError:  # pragma: no cover - imported from a source tree
     __version__ = "0+unknown"
 
 __all__ = [
-    "BvhClip", "BvhError", "BvhJoint", "CHANNEL_KINDS", "CHANNEL_KIND_NAMES", "ChannelSpec",
+    "BvhClip", "BvhError", "BvhFileError", "BvhJoint", "CHANNEL_KINDS", "CHANNEL_KIND_NAMES",
+    "ChannelSpec",
     "Client", "DEFAULT_MAX_RECEIVE_BYTES", "DEFAULT_SLICE_BYTES", "HEALTH_STATES", "JointSpec",
     "MOTION_SERVICE", "MarkerSpec", "PipelineResult", "REDUCE_OPTIONS", "RETRY_AFTER_METADATA_KEY",
     "RateLike", "ReduceOption", "SpeedLike", "TempokeyError", "TimeLike", "bake_operation",

@@ -29,6 +29,7 @@ from typing import Any, Callable, Iterator, List, Mapping, Optional, Sequence, T
 
 import grpc
 
+from tempokey import _arguments
 from tempokey.clips import (BYTES_PER_SAMPLE, DEFAULT_SLICE_BYTES, channel_label, sample_batches,
                             sample_slices)
 from tempokey.errors import TempokeyError, from_rpc_error, malformed_result
@@ -225,9 +226,12 @@ class Client:
     def __init__(self, channel: grpc.Channel, *, timeout: Optional[float] = 60.0,
                  token: Optional[str] = None, max_attempts: int = 4,
                  slice_bytes: int = DEFAULT_SLICE_BYTES):
-        if max_attempts < 1:
+        timeout = _arguments.timeout(timeout)
+        if token is not None:
+            _check_token(token)
+        if _arguments.integer(max_attempts, "max_attempts") < 1:
             raise ValueError("max_attempts must be >= 1, got %d" % max_attempts)
-        if slice_bytes < BYTES_PER_SAMPLE:
+        if _arguments.integer(slice_bytes, "slice_bytes") < BYTES_PER_SAMPLE:
             raise ValueError("slice_bytes must be >= 8, got %d" % slice_bytes)
         self._channel = channel
         self._stub = motion_service_pb2_grpc.MotionServiceStub(channel)
@@ -320,7 +324,9 @@ class Client:
     def health(self, service: str = "") -> str:
         """grpc.health.v1 state of `service`: "" the server overall (live), MOTION_SERVICE ready
         for jobs (NOT_SERVING while draining). Returns "SERVING", "NOT_SERVING" or "UNKNOWN".
-        Raises: TempokeyError NOT_FOUND for a service the server does not know; call errors."""
+        Raises: TypeError unless `service` is a str; TempokeyError NOT_FOUND for a service the
+        server does not know; call errors."""
+        _arguments.text(service, "service")
         return self._unary(self._health_check, service)
 
     def server_info(self) -> motion_service_pb2.ServerInfo:
@@ -332,8 +338,10 @@ class Client:
         """Streams `clip` (header, then sample slices) and returns the server's answer: clip_id
         ("sha256:<hex>" of the content, so uploading the same clip again gives the same id and
         costs nothing), counts and already_stored. Retried whole on UNAVAILABLE.
-        Raises: TempokeyError INVALID_ARGUMENT (the message names channel, frame and value),
-        RESOURCE_EXHAUSTED over the server's limits; call errors."""
+        Raises: TypeError unless `clip` is a tempokey.v1.Clip; TempokeyError INVALID_ARGUMENT
+        (the message names channel, frame and value), RESOURCE_EXHAUSTED over the server's
+        limits; call errors."""
+        _check_clip(clip)
         slice_bytes = self._effective_slice_bytes()
 
         def requests() -> Iterator[motion_service_pb2.UploadClipRequest]:
@@ -350,8 +358,13 @@ class Client:
         the result stream out, nothing is kept on the server. `on_progress(fraction 0..1, stage)`
         is called on this thread for each progress update (an exception from it cancels the call
         and propagates). Retried whole on UNAVAILABLE while nothing has been received.
-        Raises: TempokeyError as upload_clip, plus the pipeline's own errors
-        ("operation 1 (retime): ..."), and INTERNAL for a malformed result."""
+        Raises: TypeError unless `clip` is a tempokey.v1.Clip, `operations` a list of
+        tempokey.v1.Operation and `on_progress` None or callable; TempokeyError as upload_clip,
+        plus the pipeline's own errors ("operation 1 (retime): ..."), and INTERNAL for a
+        malformed result."""
+        _check_clip(clip)
+        operations = _check_operations(operations)
+        _check_callback(on_progress, "on_progress")
         slice_bytes = self._effective_slice_bytes()
         # Batched result parts; servers without the feature ignore the field.
         start = motion_service_pb2.ProcessStart(operations=operations, batch_parts=True)
@@ -391,11 +404,19 @@ class Client:
         clips: one message). `request_id` makes a retried submit return the first job; a fresh
         one is generated when None, so the library's own retries never create two jobs.
         Returns the job (job_id, state QUEUED...).
-        Raises: ValueError unless exactly one of clip_id and clip is given; TempokeyError
-        NOT_FOUND unknown clip, INVALID_ARGUMENT bad pipeline, RESOURCE_EXHAUSTED queue full
-        (see retry_after_seconds), UNIMPLEMENTED an operation the server lacks."""
+        Raises: ValueError unless exactly one of clip_id and clip is given; TypeError for an
+        argument of the wrong type (see process); TempokeyError NOT_FOUND unknown clip,
+        INVALID_ARGUMENT bad pipeline, RESOURCE_EXHAUSTED queue full (see
+        retry_after_seconds), UNIMPLEMENTED an operation the server lacks."""
+        operations = _check_operations(operations)
         if (clip_id is None) == (clip is None):
             raise ValueError("give exactly one of clip_id and clip")
+        if clip_id is not None:
+            _arguments.text(clip_id, "clip_id")
+        else:
+            _check_clip(clip)
+        if request_id is not None:
+            _arguments.text(request_id, "request_id")
         request = motion_service_pb2.SubmitJobRequest(
             operations=operations, labels=labels or {},
             request_id=request_id or _new_request_id())
@@ -407,15 +428,18 @@ class Client:
 
     def get_job(self, job_id: str) -> motion_service_pb2.Job:
         """The job's current snapshot. Raises: TempokeyError NOT_FOUND for an unknown job."""
+        _arguments.text(job_id, "job_id")
         return self._unary(self._stub.GetJob, motion_service_pb2.GetJobRequest(job_id=job_id))
 
     def cancel_job(self, job_id: str) -> motion_service_pb2.Job:
         """Cancels a job (idempotent). Raises: TempokeyError NOT_FOUND for an unknown job."""
+        _arguments.text(job_id, "job_id")
         return self._unary(self._stub.CancelJob,
                            motion_service_pb2.CancelJobRequest(job_id=job_id))
 
     def delete_job(self, job_id: str) -> None:
         """Deletes a job and its result. Raises: TempokeyError NOT_FOUND for an unknown job."""
+        _arguments.text(job_id, "job_id")
         self._unary(self._stub.DeleteJob, motion_service_pb2.DeleteJobRequest(job_id=job_id))
 
     def watch(self, job_id: str,
@@ -426,6 +450,8 @@ class Client:
         error_message, or CANCELLED).
         Raises: TempokeyError NOT_FOUND unknown job, UNAVAILABLE the server is draining,
         DEADLINE_EXCEEDED after `timeout`; INTERNAL if the watch ended without a snapshot."""
+        _arguments.text(job_id, "job_id")
+        _check_callback(on_update, "on_update")
         request = motion_service_pb2.WatchJobRequest(job_id=job_id)
 
         def attempt(timeout: Optional[float], received: List[bool]) -> motion_service_pb2.Job:
@@ -446,6 +472,8 @@ class Client:
         """The result of a succeeded job, reassembled (see PipelineResult), reports first.
         `slice_bytes` bounds the samples per message (0: the server's 1 MiB).
         Raises: TempokeyError FAILED_PRECONDITION the job has not succeeded, NOT_FOUND."""
+        _arguments.text(job_id, "job_id")
+        slice_bytes = _arguments.integer(slice_bytes, "slice_bytes", _arguments.INT32)
         request = motion_service_pb2.GetJobResultRequest(job_id=job_id, slice_bytes=slice_bytes,
                                                           batch_parts=True)
 
@@ -466,6 +494,30 @@ class Client:
         return self._with_retries(attempt)
 
 
+def _check_clip(clip: Any) -> None:
+    _arguments.message(clip, clip_pb2.Clip, "clip", " (see make_clip and read_bvh_clip)")
+
+
+def _check_operations(operations: Any) -> List[operations_pb2.Operation]:
+    return _arguments.messages(operations, operations_pb2.Operation, "operations",
+                               " (see retime_operation and reduce_operation)")
+
+
+def _check_callback(callback: Any, name: str) -> None:
+    if callback is not None and not callable(callback):
+        raise TypeError("%s must be None or callable, got %s" % (name, type(callback).__name__))
+
+
+def _check_token(token: Any) -> None:
+    """A bearer token travels in an HTTP/2 header: visible ASCII only ("" sends none)."""
+    _arguments.text(token, "token")
+    for index, character in enumerate(token):
+        if not " " < character <= "~":
+            raise ValueError("token: character %d (%r) is not allowed; a bearer token is "
+                             "printable ASCII without spaces (it travels in an HTTP header)"
+                             % (index + 1, character))
+
+
 def _new_request_id() -> str:
     """A fresh random idempotency key (UUID v4 text)."""
     return str(uuid.uuid4())
@@ -482,7 +534,8 @@ def connect(target: str, timeout: Optional[float] = 60.0, token: Optional[str] =
     Args:
       target: any gRPC target: "host:port", "dns:///host:port", "ipv4:127.0.0.1:1,127.0.0.1:2"
         (calls are spread round-robin over the addresses).
-      timeout: deadline of each method call in seconds, covering its retries; None for none.
+      timeout: deadline of each method call in seconds (> 0, at most a year), covering its
+        retries; None for none.
       token: sent as "authorization: Bearer <token>" on every call.
       tls: use TLS; root_certificates (PEM bytes, None: system roots), certificate_chain and
         private_key (PEM bytes, both or neither) for mutual TLS, target_name_override to accept
@@ -491,11 +544,21 @@ def connect(target: str, timeout: Optional[float] = 60.0, token: Optional[str] =
       max_receive_message_bytes: largest message accepted from the server.
       slice_bytes: bytes of samples per sent message (further held to half the server's limit).
 
-    Raises: ValueError for an empty target, TLS settings without tls, a certificate without its
-    key, or a non-positive size.
+    Raises: TypeError for an argument of the wrong type (a str timeout, a float size);
+    ValueError for an empty target, a timeout that is not a finite number of seconds in
+    (0, a year], a token that is not visible ASCII, TLS settings without tls, a certificate
+    without its key, or a non-positive size.
     """
-    if not target:
+    if not _arguments.text(target, "target"):
         raise ValueError("the server target is empty")
+    timeout = _arguments.timeout(timeout)
+    if token is not None:
+        _check_token(token)
+    _arguments.boolean(tls, "tls")
+    if _arguments.integer(max_attempts, "max_attempts") < 1:
+        raise ValueError("max_attempts must be >= 1, got %d" % max_attempts)
+    _arguments.integer(max_receive_message_bytes, "max_receive_message_bytes", _arguments.INT32)
+    _arguments.integer(slice_bytes, "slice_bytes")
     if (certificate_chain is None) != (private_key is None):
         raise ValueError("a client certificate needs its private key and a key its certificate")
     if not tls and (root_certificates or certificate_chain or target_name_override):

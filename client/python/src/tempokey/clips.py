@@ -5,8 +5,10 @@ Units: times in seconds; rotations in degrees; positions in file units.
 """
 
 import dataclasses
-from typing import Iterator, Optional, Sequence, Tuple, Union
+import numbers
+from typing import Any, Iterator, List, Optional, Sequence, Tuple, Union
 
+from tempokey import _arguments
 from tempokey.v1 import clip_pb2
 
 __all__ = [
@@ -58,22 +60,63 @@ class MarkerSpec:
     duration_seconds: float = 0.0
 
 
+def _sequence(values: Any, what: str) -> Sequence[Any]:
+    """`values` if it is a sized iterable other than a string (whose characters would be taken
+    one by one: make_clip(..., samples=["12"]) must not become [1.0, 2.0])."""
+    if (isinstance(values, (str, bytes, bytearray)) or not hasattr(values, "__len__")
+            or not hasattr(values, "__iter__")):
+        raise TypeError("%s must be a list, got %s %s"
+                        % (what, type(values).__name__, _arguments.shown(values)))
+    return values
+
+
 def _vec3(values: Sequence[float], what: str) -> clip_pb2.Vec3:
+    _sequence(values, what)
     if len(values) != 3:
         raise ValueError("%s must have 3 numbers, got %d" % (what, len(values)))
-    x, y, z = (float(v) for v in values)
+    x, y, z = (_arguments.real(v, what) for v in values)
     return clip_pb2.Vec3(x=x, y=y, z=z)
+
+
+class _NotANumber(Exception):
+    pass
+
+
+def _float(value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise _NotANumber()
+    return float(value)
+
+
+def _floats(values: Any, index: int) -> List[float]:
+    """Channel `index`'s samples as floats; anything but a number (a str, a bool, None) is
+    refused, naming the channel and frame. The common types take the fast path."""
+    _sequence(values, "samples[%d]" % index)
+    try:
+        return [v if type(v) is float else float(v) if type(v) is int else _float(v)
+                for v in values]
+    except _NotANumber:
+        pass
+    for frame, value in enumerate(values):
+        _arguments.real(value, "samples[%d][%d] (channel %d, frame %d)"
+                        % (index, frame, index, frame))
+    raise AssertionError("unreachable")
 
 
 def _channel_info(index: int, spec: Union[ChannelSpec, str]) -> clip_pb2.ChannelInfo:
     if isinstance(spec, str):
         spec = ChannelSpec("scalar", name=spec)
+    if not isinstance(spec, ChannelSpec):
+        raise TypeError("channels[%d] must be a ChannelSpec or a str, got %s %s"
+                        % (index, type(spec).__name__, _arguments.shown(spec)))
     if spec.kind not in CHANNEL_KINDS:
         raise ValueError("channel %d: unknown kind %r, expected one of %s"
                          % (index, spec.kind, ", ".join(CHANNEL_KINDS)))
-    info = clip_pb2.ChannelInfo(kind=CHANNEL_KINDS[spec.kind], name=spec.name)
+    info = clip_pb2.ChannelInfo(kind=CHANNEL_KINDS[spec.kind],
+                                name=_arguments.text(spec.name, "channels[%d].name" % index))
     if spec.joint_index is not None:
-        info.joint_index = spec.joint_index
+        info.joint_index = _arguments.integer(spec.joint_index, "channels[%d].joint_index"
+                                              % index, _arguments.INT32)
     return info
 
 
@@ -97,37 +140,56 @@ def make_clip(name: str, frame_time_seconds: float,
     Returns: the clip (header plus one whole-channel ChannelSamples per channel).
 
     Raises:
+      TypeError: an argument of the wrong type, naming it: a string where a list is expected
+        (samples=["12"]), a sample, offset or time that is not a number (a str, a bool, None),
+        a joint or channel index that is not a whole number.
       ValueError: an unknown channel kind, a channel count not matching the sample lists, sample
-        lists of different lengths or holding something that is not a number. Everything else
-        (NaN, a frame time <= 0, joint indices out of range, ...) is checked by the server,
-        which answers INVALID_ARGUMENT naming what is wrong.
+        lists of different lengths, a non-integral index (2.7). Everything else (NaN, a frame
+        time <= 0, joint indices out of range, ...) is checked by the server, which answers
+        INVALID_ARGUMENT naming what is wrong.
     """
+    _arguments.text(name, "name")
+    frame_time_seconds = _arguments.real(frame_time_seconds, "frame_time_seconds")
+    _sequence(channels, "channels")
+    _sequence(samples, "samples")
+    _sequence(joints, "joints")
+    _sequence(markers, "markers")
     if len(channels) != len(samples):
         raise ValueError("%d channels but %d sample lists; give one list per channel"
                          % (len(channels), len(samples)))
-    frame_count = len(samples[0]) if samples else 0
-    header = clip_pb2.ClipHeader(name=name, frame_time_seconds=float(frame_time_seconds),
+    frame_count = len(_sequence(samples[0], "samples[0]")) if len(samples) else 0
+    header = clip_pb2.ClipHeader(name=name, frame_time_seconds=frame_time_seconds,
                                  frame_count=frame_count)
-    for joint in joints:
-        header.joints.add(name=joint.name, parent_index=joint.parent_index,
+    for index, joint in enumerate(joints):
+        if not isinstance(joint, JointSpec):
+            raise TypeError("joints[%d] must be a JointSpec, got %s %s"
+                            % (index, type(joint).__name__, _arguments.shown(joint)))
+        _arguments.text(joint.name, "joints[%d].name" % index)
+        parent_index = _arguments.integer(joint.parent_index, "joints[%d].parent_index" % index,
+                                          _arguments.INT32)
+        header.joints.add(name=joint.name, parent_index=parent_index,
                           offset=_vec3(joint.offset, "joint %s offset" % joint.name),
                           end_site_offsets=[_vec3(site, "joint %s end site" % joint.name)
-                                            for site in joint.end_sites])
+                                            for site in _sequence(
+                                                joint.end_sites, "joint %s end_sites"
+                                                % joint.name)])
     for index, spec in enumerate(channels):
         header.channels.append(_channel_info(index, spec))
-    for marker in markers:
-        header.markers.add(name=marker.name, time_seconds=float(marker.time_seconds),
-                           duration_seconds=float(marker.duration_seconds))
+    for index, marker in enumerate(markers):
+        if not isinstance(marker, MarkerSpec):
+            raise TypeError("markers[%d] must be a MarkerSpec, got %s %s"
+                            % (index, type(marker).__name__, _arguments.shown(marker)))
+        header.markers.add(
+            name=_arguments.text(marker.name, "markers[%d].name" % index),
+            time_seconds=_arguments.real(marker.time_seconds, "markers[%d].time_seconds" % index),
+            duration_seconds=_arguments.real(marker.duration_seconds,
+                                             "markers[%d].duration_seconds" % index))
     clip = clip_pb2.Clip(header=header)
     for index, values in enumerate(samples):
-        if len(values) != frame_count:
+        if len(_sequence(values, "samples[%d]" % index)) != frame_count:
             raise ValueError("channel %d has %d samples, channel 0 has %d; every channel needs "
                              "one sample per frame" % (index, len(values), frame_count))
-        try:
-            floats = [float(v) for v in values]
-        except (TypeError, ValueError) as error:
-            raise ValueError("channel %d: samples must be numbers (%s)" % (index, error)) from None
-        clip.samples.add(channel_index=index, first_frame=0, samples=floats)
+        clip.samples.add(channel_index=index, first_frame=0, samples=_floats(values, index))
     return clip
 
 

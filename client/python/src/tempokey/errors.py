@@ -1,5 +1,9 @@
 """Errors of the tempokey client: a failed call is a TempokeyError carrying the gRPC status code
-and the server's message unchanged; what cannot be encoded at all is a ValueError."""
+and the server's message unchanged. Arguments are checked before anything is sent: a value of
+the wrong type (None or a str for a clip, a str or bool for a number) is a TypeError and what
+cannot be encoded at all (2.7 frames, an infinite timeout) a ValueError, both naming the
+parameter. Files: tempokey.bvh.BvhError (a ValueError, "<file>:<line>:<column>: ...") and
+tempokey.bvh.BvhFileError (an OSError, "<file>: ...")."""
 
 from typing import Any, Optional
 

@@ -11,7 +11,7 @@ The BVH reader itself is tempokey.bvh.
 import json
 import os
 import tempfile
-from typing import Any, Dict
+from typing import Any, Dict, Union
 
 from tempokey import bvh
 from tempokey.clips import CHANNEL_KIND_NAMES, ChannelSpec, JointSpec, make_clip
@@ -30,12 +30,15 @@ def clip_from_bvh(parsed: bvh.BvhClip) -> clip_pb2.Clip:
     return make_clip(parsed.name, parsed.frame_time_seconds, channels, parsed.samples, joints)
 
 
-def read_bvh_clip(path: str) -> clip_pb2.Clip:
-    """Reads the BVH file at `path` as a tempokey.v1.Clip named after the file's stem.
+def read_bvh_clip(path: Union[str, "os.PathLike[str]"], *, max_bytes: int = bvh.MAX_FILE_BYTES,
+                  idle_seconds: float = bvh.STREAM_IDLE_SECONDS) -> clip_pb2.Clip:
+    """Reads the BVH file at `path` as a tempokey.v1.Clip named after the file's stem, with the
+    CLI's caps (see bvh.read_bvh: at most `max_bytes`, a FIFO silent at most `idle_seconds`).
 
-    Raises: OSError when the file cannot be read; bvh.BvhError (a ValueError) naming the line
-    and column of what is malformed."""
-    return clip_from_bvh(bvh.read_bvh(path))
+    Raises: bvh.BvhFileError (an OSError) for a file refused before parsing (a device, over the
+    cap, a silent FIFO), other OSErrors when the file cannot be read; bvh.BvhError (a
+    ValueError) naming the line and column of what is malformed."""
+    return clip_from_bvh(bvh.read_bvh(path, max_bytes=max_bytes, idle_seconds=idle_seconds))
 
 
 def keyed_clip_to_dict(keyed: clip_pb2.KeyedClip) -> Dict[str, Any]:

@@ -8,7 +8,9 @@ values, and what a pipeline gives back.
 
 Values (speeds, tolerances, rates) are the server's to check, with its one set of rules and
 messages; the builders raise ValueError only for what cannot be encoded at all (an unknown name,
-a time without a unit, both fits at once), and TypeError for an unknown keyword.
+a time without a unit, both fits at once, a whole number given as 2.7), and TypeError for an
+unknown keyword or a value of the wrong type (a str or bool where a number is expected, a str
+where True or False is), naming the parameter.
 
 Units: times in seconds unless a name says frames; rotations in degrees; positions in file units.
 """
@@ -18,6 +20,7 @@ import fractions
 import re
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
+from tempokey import _arguments
 from tempokey.v1 import clip_pb2
 from tempokey.v1 import operations_pb2
 
@@ -66,7 +69,8 @@ def time_point(value: TimeLike) -> operations_pb2.TimePoint:
     """A point in time: a number is seconds; a string carries its unit, "2.5s" or "75f" (frames
     of the timeline it refers to).
 
-    Raises: ValueError for a string without a unit or not a number.
+    Raises: ValueError for a string without a unit or not a number; TypeError for anything but
+    a number or a string (a bool, None).
     """
     if isinstance(value, str):
         match = _TIME_PATTERN.match(value)
@@ -76,13 +80,14 @@ def time_point(value: TimeLike) -> operations_pb2.TimePoint:
         if match.group(2) == "s":
             return operations_pb2.TimePoint(seconds=number)
         return operations_pb2.TimePoint(frames=number)
-    return operations_pb2.TimePoint(seconds=float(value))
+    return operations_pb2.TimePoint(seconds=_arguments.real(value, "time"))
 
 
 def speed_knot(time_value: TimeLike, speed: float) -> operations_pb2.SpeedKnot:
     """One knot of a speed curve: at `time_value` (see time_point) play at `speed` (1 normal,
     0.5 half speed, 2 double speed). Speeds are checked by the server (> 0, within its range)."""
-    return operations_pb2.SpeedKnot(time=time_point(time_value), speed=float(speed))
+    return operations_pb2.SpeedKnot(time=time_point(time_value),
+                                    speed=_arguments.real(speed, "speed"))
 
 
 def parse_speed(text: str) -> List[operations_pb2.SpeedKnot]:
@@ -90,6 +95,7 @@ def parse_speed(text: str) -> List[operations_pb2.SpeedKnot]:
 
     Raises: ValueError naming the knot (counted from 1) that is not "time:speed".
     """
+    _arguments.text(text, "speed")
     knots = []
     for number, item in enumerate(text.split(","), start=1):
         time_text, sep, speed_text = item.strip().partition(":")
@@ -105,13 +111,19 @@ def parse_speed(text: str) -> List[operations_pb2.SpeedKnot]:
 def _speed_knots(speed: SpeedLike) -> List[operations_pb2.SpeedKnot]:
     if isinstance(speed, str):
         return parse_speed(speed)
+    if not hasattr(speed, "__iter__"):
+        raise TypeError("speed must be a str such as \"0s:1,2s:0.5\" or a list of (time, speed) "
+                        "pairs, got %s %s" % (type(speed).__name__, _arguments.shown(speed)))
     knots = []
-    for item in speed:
+    for number, item in enumerate(speed, start=1):
         if isinstance(item, operations_pb2.SpeedKnot):
             knots.append(item)
-        else:
-            time_value, value = item
-            knots.append(speed_knot(time_value, value))
+            continue
+        if isinstance(item, (str, bytes)) or not hasattr(item, "__len__") or len(item) != 2:
+            raise TypeError("speed knot %d must be a (time, speed) pair or a SpeedKnot, got %s"
+                            % (number, _arguments.shown(item)))
+        time_value, value = item
+        knots.append(speed_knot(time_value, value))
     return knots
 
 
@@ -122,7 +134,10 @@ def frame_rate(fps: RateLike) -> Tuple[int, int]:
     Raises: ValueError for a rate that is not a positive number.
     """
     if isinstance(fps, tuple):
-        numerator, denominator = (int(v) for v in fps)
+        if len(fps) != 2:
+            raise ValueError("frame rate %r must be a (numerator, denominator) pair" % (fps,))
+        numerator = _arguments.integer(fps[0], "frame rate numerator")
+        denominator = _arguments.integer(fps[1], "frame rate denominator")
     elif isinstance(fps, fractions.Fraction):
         numerator, denominator = fps.numerator, fps.denominator
     else:
@@ -137,6 +152,9 @@ def frame_rate(fps: RateLike) -> Tuple[int, int]:
         numerator, denominator = rate.numerator, rate.denominator
     if numerator <= 0 or denominator <= 0:
         raise ValueError("frame rate %r must be > 0" % (fps,))
+    if max(numerator, denominator) > _arguments.INT64[1]:
+        raise ValueError("frame rate %r is out of range: %d/%d does not fit in 64-bit integers"
+                         % (fps, numerator, denominator))
     return numerator, denominator
 
 
@@ -170,14 +188,19 @@ def retime_operation(speed: Optional[SpeedLike] = None, *, speed_over: str = "so
       euler_filter: rewrite Euler flips of the output as the nearest equivalent angles.
 
     Raises: ValueError for what cannot be encoded (unknown names, both fits, a time without a
-    unit); values are checked by the server (INVALID_ARGUMENT naming the knot).
+    unit, fit_frames or a pin's frame not a whole number); TypeError for a value of the wrong
+    type (a str or bool for a number, anything but True or False for reverse, fit_to_grid and
+    euler_filter); values are checked by the server (INVALID_ARGUMENT naming the knot).
     """
     retime = operations_pb2.RetimeOperation(
-        reverse=reverse, disable_fit_to_grid=not fit_to_grid,
+        reverse=_arguments.boolean(reverse, "reverse"),
+        disable_fit_to_grid=not _arguments.boolean(fit_to_grid, "fit_to_grid"),
         filter=_choice(_FILTERS, filter, "filter"),
         method=_choice(_RETIME_METHODS, method, "retime method"),
         rotation_mode=_choice(_ROTATION_MODES, rotation, "rotation mode"),
-        min_speed=float(min_speed), max_speed=float(max_speed), euler_filter=bool(euler_filter))
+        min_speed=_arguments.real(min_speed, "min_speed"),
+        max_speed=_arguments.real(max_speed, "max_speed"),
+        euler_filter=_arguments.boolean(euler_filter, "euler_filter"))
     if speed is not None:
         if speed_over == "source":
             retime.speed_over_source.extend(_speed_knots(speed))
@@ -185,20 +208,35 @@ def retime_operation(speed: Optional[SpeedLike] = None, *, speed_over: str = "so
             retime.speed_over_output.extend(_speed_knots(speed))
         else:
             raise ValueError("speed_over %r is not 'source' or 'output'" % speed_over)
-    for at, duration_seconds in holds:
-        retime.holds.add(at=time_point(at), duration_seconds=float(duration_seconds))
-    for source, output_frame in pins:
-        retime.pins.add(source=time_point(source), output_frame=int(output_frame))
+    for number, (at, duration_seconds) in enumerate(_pairs(holds, "holds"), start=1):
+        retime.holds.add(at=time_point(at), duration_seconds=_arguments.real(
+            duration_seconds, "hold %d duration_seconds" % number))
+    for number, (source, output_frame) in enumerate(_pairs(pins, "pins"), start=1):
+        retime.pins.add(source=time_point(source), output_frame=_arguments.integer(
+            output_frame, "pin %d output_frame" % number))
     if fit_seconds is not None and fit_frames is not None:
         raise ValueError("give fit_seconds or fit_frames, not both")
     if fit_seconds is not None:
-        retime.fit_seconds = float(fit_seconds)
+        retime.fit_seconds = _arguments.real(fit_seconds, "fit_seconds")
     if fit_frames is not None:
-        retime.fit_frames = int(fit_frames)
+        retime.fit_frames = _arguments.integer(fit_frames, "fit_frames")
     if fps is not None:
         retime.output_rate_numerator, retime.output_rate_denominator = frame_rate(fps)
     return operations_pb2.Operation(retime=retime)
 
+
+def _pairs(items: Any, name: str) -> List[Tuple[Any, Any]]:
+    """`items` as a list of pairs; anything else is a TypeError naming `name` and the item."""
+    if isinstance(items, (str, bytes)) or not hasattr(items, "__iter__"):
+        raise TypeError("%s must be a list of pairs, got %s %s"
+                        % (name, type(items).__name__, _arguments.shown(items)))
+    pairs = []
+    for number, item in enumerate(items, start=1):
+        if isinstance(item, (str, bytes)) or not hasattr(item, "__len__") or len(item) != 2:
+            raise TypeError("%s item %d must be a pair, got %s"
+                            % (name, number, _arguments.shown(item)))
+        pairs.append((item[0], item[1]))
+    return pairs
 
 
 @dataclasses.dataclass(frozen=True)
@@ -244,26 +282,40 @@ def _set_joint_tolerance(reduce: operations_pb2.ReduceOperation,
         reduce.tolerance.max_joint_error = distance
 
 
-def _noise_level(field: str) -> Callable[[operations_pb2.ReduceOperation, Any], None]:
+def _noise_level(keyword: str,
+                 field: str) -> Callable[[operations_pb2.ReduceOperation, Any], None]:
     """Sets noise.<field> to a level; "auto" leaves it unset (estimated per channel)."""
     def apply(reduce: operations_pb2.ReduceOperation, value: Any) -> None:
+        if isinstance(value, str) and value != "auto":
+            raise ValueError("%s must be a number or \"auto\", got %r" % (keyword, value))
         if value != "auto":
-            setattr(reduce.noise, field, float(value))
+            setattr(reduce.noise, field, _arguments.real(value, keyword))
     return apply
+
+
+def _real(keyword: str) -> Callable[[Any], float]:
+    """The converter of a number option: refuses a str or a bool, naming the keyword."""
+    return lambda value: _arguments.real(value, keyword)
 
 
 # The keywords of reduce_operation(), in the order its documentation lists them. A new option of
 # the reduce step is one entry here (its field, converter, methods and description).
 REDUCE_OPTIONS: Dict[str, ReduceOption] = {
-    "tolerance": ReduceOption("tolerance.max_rotation_error_degrees", float, ("tolerance",),
+    "tolerance": ReduceOption("tolerance.max_rotation_error_degrees", _real("tolerance"),
+                              ("tolerance",),
                               "rotation bound in degrees (server default 0.5)"),
-    "position_tolerance": ReduceOption("tolerance.max_position_error", float, ("tolerance",),
+    "position_tolerance": ReduceOption("tolerance.max_position_error",
+                                       _real("position_tolerance"), ("tolerance",),
                                        "position bound in file units (default 0.3 % of the "
                                        "figure's height: the vertical extent of every joint and "
                                        "end site at the first frame)"),
-    "scalar_tolerance": ReduceOption("tolerance.max_scalar_error", float, ("tolerance",),
+    "scalar_tolerance": ReduceOption("tolerance.max_scalar_error", _real("scalar_tolerance"),
+                                     ("tolerance",),
                                      "plain-channel bound (default 0.5)"),
-    "key_budget": ReduceOption("tolerance.key_budget", int, ("tolerance",),
+    "key_budget": ReduceOption("tolerance.key_budget",
+                               lambda value: _arguments.integer(value, "key_budget",
+                                                                _arguments.INT32),
+                               ("tolerance",),
                                "at most this many keys in all (replaces the bounds by one scale "
                                "of them)"),
     "pose_alignment": ReduceOption("tolerance.pose_alignment", _pose_alignment, ("tolerance",),
@@ -276,14 +328,17 @@ REDUCE_OPTIONS: Dict[str, ReduceOption] = {
                                     'percent of the figure\'s height ("0.5%"); unset rotation and '
                                     "position bounds then leave each channel's bound to it",
                                     apply=_set_joint_tolerance),
-    "noise": ReduceOption("noise.rotation_sigma_degrees", float, ("noise",),
+    "noise": ReduceOption("noise.rotation_sigma_degrees", _real("noise"), ("noise",),
                           'rotation channels\' noise level in degrees, or "auto" (default: '
                           "estimated per channel from the data)",
-                          apply=_noise_level("rotation_sigma_degrees")),
-    "position_noise": ReduceOption("noise.position_sigma", float, ("noise",),
+                          apply=_noise_level("noise", "rotation_sigma_degrees")),
+    "position_noise": ReduceOption("noise.position_sigma", _real("position_noise"), ("noise",),
                                    'the same for position and plain channels (file units), or '
-                                   '"auto"', apply=_noise_level("position_sigma")),
-    "euler_filter": ReduceOption("euler_filter", bool, ("tolerance", "paper", "noise"),
+                                   '"auto"', apply=_noise_level("position_noise",
+                                                                "position_sigma")),
+    "euler_filter": ReduceOption("euler_filter",
+                                 lambda value: _arguments.boolean(value, "euler_filter"),
+                                 ("tolerance", "paper", "noise"),
                                  "the Euler filter on the input (True/False); unset takes the "
                                  'method\'s default (on for "noise", off for the others)'),
 }
@@ -310,9 +365,10 @@ def reduce_operation(*, method: str = "tolerance", paper: Optional[Mapping[str, 
         server's default).
 
     Raises:
-      TypeError: a keyword that is not an option.
+      TypeError: a keyword that is not an option, a value of the wrong type (tolerance="0.5",
+        euler_filter="yes").
       ValueError: an unknown method or alignment, a paper field that does not exist, an option
-        of another method. Values are checked by the server.
+        of another method, key_budget not a whole number. Values are checked by the server.
     """
     reduce = operations_pb2.ReduceOperation(method=_choice(_REDUCE_METHODS, method, "method"))
     for keyword, value in options.items():
@@ -356,8 +412,8 @@ def bake_operation(fps: Optional[RateLike] = None) -> operations_pb2.Operation:
 
 def convert_operation(wrap_rotations: bool = False) -> operations_pb2.Operation:
     """Format-level conversion of a sampled clip: re-wrap rotations into (-180, 180]."""
-    return operations_pb2.Operation(
-        convert=operations_pb2.ConvertOperation(wrap_rotations=wrap_rotations))
+    return operations_pb2.Operation(convert=operations_pb2.ConvertOperation(
+        wrap_rotations=_arguments.boolean(wrap_rotations, "wrap_rotations")))
 
 
 # ---- results ------------------------------------------------------------------------------------
