@@ -118,7 +118,29 @@ std::string_view KindOfFile(mode_t mode) {
   if (S_ISCHR(mode)) return "a character device";
   if (S_ISBLK(mode)) return "a block device";
   if (S_ISSOCK(mode)) return "a socket";
+  if (S_ISFIFO(mode)) return "a FIFO";
   return "not a regular file";
+}
+
+// WriteFileAtomically() into a FIFO or character device: opened without waiting for a reader
+// (a FIFO nobody reads is an error, not a hang), then written in full.
+absl::Status WriteToStream(const std::string& path, std::string_view contents) {
+  const int fd = ::open(path.c_str(), O_WRONLY | O_NONBLOCK | O_NOCTTY | O_CLOEXEC);
+  if (fd < 0) {
+    if (errno == ENXIO) {
+      return absl::UnavailableError(absl::StrCat(path, ": is a FIFO with no reader"));
+    }
+    return ErrnoError(errno, path, "cannot open: ");
+  }
+  FdCloser closer(fd);
+  // Blocking writes from here: a reader slower than us is waited for.
+  const int flags = ::fcntl(fd, F_GETFL);
+  if (flags < 0 || ::fcntl(fd, F_SETFL, flags & ~O_NONBLOCK) != 0) {
+    return ErrnoError(errno, path, "cannot set up the write: ");
+  }
+  TEMPOKEY_RETURN_IF_ERROR(WriteAll(fd, contents, path));
+  if (closer.Close() != 0) return ErrnoError(errno, path, "cannot close: ");
+  return absl::OkStatus();
 }
 
 // Line and column (from 1) of byte `offset` of `text`.
@@ -298,6 +320,17 @@ bool IsAtomicWriteTemporary(std::string_view file_name, std::string_view target_
 
 absl::Status WriteFileAtomically(const std::string& path, std::string_view contents) {
   const std::string directory = DirectoryOf(path);
+  // What is not a regular file (or a link to one) is not renamed over: that would put a plain
+  // file in its place, and its reader (or the device) would never see the bytes. A FIFO or a
+  // character device (/dev/null, a terminal) takes them as a stream; a block device or a socket
+  // is refused. A directory is left to the rename, which refuses it.
+  if (struct stat target {}; ::stat(path.c_str(), &target) == 0 && !S_ISREG(target.st_mode) &&
+                             !S_ISDIR(target.st_mode)) {
+    if (S_ISFIFO(target.st_mode) || S_ISCHR(target.st_mode)) return WriteToStream(path, contents);
+    return absl::FailedPreconditionError(
+        absl::StrCat(path, ": is ", AsAbsl(KindOfFile(target.st_mode)),
+                     ", not a regular file; not replaced (write to a regular file)"));
+  }
   std::string temp_path;
   int fd = -1;
   for (int attempt = 0; attempt < kTempNameAttempts && fd < 0; ++attempt) {

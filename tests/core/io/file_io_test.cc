@@ -1,5 +1,9 @@
-// Whole-file reads with a cap; atomic writes that leave the old file or the new one.
+// Whole-file reads with a cap; atomic writes that leave the old file or the new one, and write
+// into a FIFO or character device rather than replace it.
+#include <fcntl.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
+#include <sys/un.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -289,6 +293,75 @@ TEST(WriteFileAtomicallyTest, TargetThatIsADirectoryFailsAndRemovesTheTemporary)
   EXPECT_FALSE(written.ok());
   EXPECT_EQ(std::string(written.message()), path + ": cannot replace the file: is a directory");
   EXPECT_EQ(DirectoryEntries(parent), std::vector<std::string>{"taken"});
+}
+
+// A FIFO is not renamed over (its reader would never see the bytes, and the FIFO would be gone):
+// it takes the bytes as a stream and stays a FIFO.
+TEST(WriteFileAtomicallyTest, FifoWithAReaderIsWrittenIntoAndStaysAFifo) {
+  const std::string parent = testing::MakeTempDir();
+  const std::string path = parent + "/pipe";
+  ASSERT_EQ(::mkfifo(path.c_str(), 0600), 0);
+  // The reader's end open first (a non-blocking open needs no writer), so the write finds it;
+  // the bytes wait in the pipe's buffer until read.
+  const int reader = ::open(path.c_str(), O_RDONLY | O_NONBLOCK);
+  ASSERT_GE(reader, 0);
+
+  absl::Status written = WriteFileAtomically(path, "HIERARCHY\n");
+  char buffer[64] = {};
+  const ssize_t got = ::read(reader, buffer, sizeof buffer);
+  ::close(reader);
+
+  ASSERT_TRUE(written.ok()) << written;
+  EXPECT_EQ(std::string(buffer, got > 0 ? static_cast<std::size_t>(got) : 0), "HIERARCHY\n");
+  struct stat info {};
+  ASSERT_EQ(::stat(path.c_str(), &info), 0);
+  EXPECT_TRUE(S_ISFIFO(info.st_mode));
+  EXPECT_EQ(DirectoryEntries(parent), std::vector<std::string>{"pipe"});
+}
+
+TEST(WriteFileAtomicallyTest, FifoNobodyReadsIsRefusedAtOnceAndStaysAFifo) {
+  const std::string parent = testing::MakeTempDir();
+  const std::string path = parent + "/pipe";
+  ASSERT_EQ(::mkfifo(path.c_str(), 0600), 0);
+
+  absl::Status written = WriteFileAtomically(path, "data");
+
+  EXPECT_EQ(written.code(), absl::StatusCode::kUnavailable);
+  EXPECT_EQ(std::string(written.message()), path + ": is a FIFO with no reader");
+  struct stat info {};
+  ASSERT_EQ(::stat(path.c_str(), &info), 0);
+  EXPECT_TRUE(S_ISFIFO(info.st_mode));
+  EXPECT_EQ(DirectoryEntries(parent), std::vector<std::string>{"pipe"});
+}
+
+// /dev/null takes the bytes and stays the device (renaming over it, as root, made it a file).
+TEST(WriteFileAtomicallyTest, CharacterDeviceIsWrittenIntoNotReplaced) {
+  absl::Status written = WriteFileAtomically("/dev/null", "data");
+
+  ASSERT_TRUE(written.ok()) << written;
+  struct stat info {};
+  ASSERT_EQ(::stat("/dev/null", &info), 0);
+  EXPECT_TRUE(S_ISCHR(info.st_mode));
+}
+
+TEST(WriteFileAtomicallyTest, SocketIsRefusedAndLeftAlone) {
+  const std::string parent = testing::MakeTempDir();
+  const std::string path = parent + "/sock";
+  const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
+  ASSERT_GE(fd, 0);
+  sockaddr_un address{};
+  address.sun_family = AF_UNIX;
+  ASSERT_LT(path.size(), sizeof(address.sun_path));
+  std::copy(path.begin(), path.end(), address.sun_path);
+  ASSERT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof(address)), 0);
+
+  absl::Status written = WriteFileAtomically(path, "data");
+  ::close(fd);
+
+  EXPECT_EQ(written.code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_EQ(std::string(written.message()),
+            path + ": is a socket, not a regular file; not replaced (write to a regular file)");
+  EXPECT_EQ(DirectoryEntries(parent), std::vector<std::string>{"sock"});
 }
 
 TEST(WriteFileAtomicallyTest, PathWithoutDirectoryWritesInTheWorkingDirectory) {

@@ -41,8 +41,14 @@ absl::StatusOr<std::string> ReadTextFile(const std::string& path,
 // it and renames it over `path`, so readers see the old file or the whole new one, never half
 // of it. The temporary is removed on any failure; the target is then untouched.
 // Errors (messages start with `path`): kNotFound the directory does not exist;
-// kPermissionDenied it is not writable; kResourceExhausted the disk is full; kUnavailable other
-// I/O errors, e.g. `path` is a directory ("cannot replace the file: is a directory").
+// kPermissionDenied it is not writable; kResourceExhausted the disk is full;
+// kFailedPrecondition `path` is (or links to) a block device or a socket ("sda: is a block
+// device, not a regular file; not replaced ..."), which is left as it is; kUnavailable other I/O
+// errors, e.g. `path` is a directory ("cannot replace the file: is a directory") or a FIFO no
+// process reads ("out.json: is a FIFO with no reader").
+// A FIFO or a character device (/dev/null, a terminal) is not replaced but written into, as a
+// stream (a reader leaving midway is the writer's SIGPIPE, as for any pipe). A symbolic link to
+// a regular file is itself replaced by the new file (its target is left as it was).
 // Thread-safe; concurrent writers to one path leave one complete version (the last rename).
 absl::Status WriteFileAtomically(const std::string& path, std::string_view contents);
 
