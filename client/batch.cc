@@ -1,10 +1,14 @@
 #include "client/batch.h"
 
+#include <sys/stat.h>
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <filesystem>
+#include <map>
 #include <mutex>
 #include <random>
 #include <system_error>
@@ -54,13 +58,52 @@ std::optional<std::chrono::milliseconds> RetryDelay(const absl::Status& status, 
   const bool retryable = status.code() == absl::StatusCode::kUnavailable ||
                          (status.code() == absl::StatusCode::kResourceExhausted && hint);
   if (!retryable || attempt >= options.max_attempts) return std::nullopt;
-  if (hint) return *hint;
+  if (hint) {
+    // The hint is when the server expects room; the files it refused together wait a random
+    // share longer (up to twice the hint), so they do not all come back at that moment.
+    std::uniform_real_distribution<double> jitter(1.0, 2.0);
+    return std::chrono::milliseconds(
+        static_cast<std::int64_t>(std::ceil(static_cast<double>(hint->count()) * jitter(random))));
+  }
   // Exponential backoff with jitter, so files that failed together do not retry together.
   const double ceiling = std::min(options.max_backoff_seconds,
                                   options.initial_backoff_seconds * std::pow(2.0, attempt - 1));
   std::uniform_real_distribution<double> jitter(0.5 * ceiling, ceiling);
   return std::chrono::milliseconds(static_cast<std::int64_t>(1000.0 * jitter(random)));
 }
+
+// The batch's calls in flight, at most `size` (--jobs), fewer once a server's queue was full:
+// a call refused with RESOURCE_EXHAUSTED while n of the batch's calls were in flight shows that
+// the servers take at most n - 1 of them, so from then on the batch keeps at most that many in
+// flight (never fewer than one). Its refused files then wait for one of its own calls to end
+// rather than spend their attempts on a queue the batch itself keeps full. The limit only
+// shrinks: a batch is one run, and a server that was full may be full again.
+class CallWindow {
+ public:
+  explicit CallWindow(int size) : limit_(std::max(1, size)) {}
+
+  // Waits until a call may start, and counts it.
+  void Enter() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    room_.wait(lock, [this] { return in_flight_ < limit_; });
+    ++in_flight_;
+  }
+  // A call ended; `queue_full`: the server refused it for a full queue.
+  void Leave(bool queue_full) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (queue_full) limit_ = std::max(1, std::min(limit_, in_flight_ - 1));
+      --in_flight_;
+    }
+    room_.notify_all();
+  }
+
+ private:
+  std::mutex mutex_;
+  std::condition_variable room_;
+  int in_flight_ = 0;
+  int limit_;
+};
 
 // Frames, keys and the last reduction's max error of a finished pipeline.
 // A keyed output always comes from a reduction, whose report counts its keys.
@@ -79,7 +122,7 @@ void Describe(const core::PipelineResult& result, BatchFileResult& file) {
 // in front unless the message already starts with its path (reader errors do).
 BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
                             std::span<const core::PipelineStep> steps, const BatchOptions& options,
-                            std::mt19937& random) {
+                            CallWindow& window, std::mt19937& random) {
   const Clock::time_point start = Clock::now();
   BatchFileResult file;
   file.name = item.name;
@@ -118,7 +161,10 @@ BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
       -> absl::StatusOr<core::PipelineResult> {
     while (true) {
       ++file.attempts;
+      window.Enter();
       absl::StatusOr<core::PipelineResult> result = client.Process(input, part);
+      window.Leave(!result.ok() && result.status().code() == absl::StatusCode::kResourceExhausted &&
+                   wire::GetRetryAfter(result.status()).has_value());
       if (result.ok()) return result;
       const std::optional<std::chrono::milliseconds> delay =
           RetryDelay(result.status(), file.attempts, options, random);
@@ -161,6 +207,69 @@ BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
   return finish(absl::OkStatus());
 }
 
+// A recursive batch whose OUTDIR lies below DIR would take its own outputs for inputs on the
+// next run (a folder deeper each time), or write over the clips of that folder.
+absl::Status CheckOutputDirNotBelow(const fs::path& root, const std::string& output_dir) {
+  std::error_code error;
+  const fs::path outputs = fs::weakly_canonical(output_dir, error);
+  const fs::path inputs = fs::weakly_canonical(root, error);
+  if (error || outputs == inputs) return absl::OkStatus();  // OUTDIR = DIR: outputs beside inputs
+  for (fs::path above = outputs.parent_path(); !above.empty(); above = above.parent_path()) {
+    if (above == inputs) {
+      return UsageError(absl::StrCat("batch --recursive: OUTDIR ", output_dir,
+                                     " lies inside DIR ", root.string(),
+                                     ", so its files would be taken as inputs; choose an OUTDIR "
+                                     "outside DIR"));
+    }
+    if (above == above.root_path()) break;
+  }
+  return absl::OkStatus();
+}
+
+// Refuses a plan in which two inputs write one output (walk.bvh and walk.BVH, or walk.csv, whose
+// runs would overwrite each other's), or an output is another file's input (it would replace a
+// clip before or after that clip is read). An output that is its own input is left to
+// CheckOutputIsNotTheInput() (--overwrite).
+absl::Status CheckOutputsApart(std::span<const BatchItem> items) {
+  std::map<std::string, const BatchItem*> writer_of;
+  for (const BatchItem& item : items) {
+    const auto [at, added] = writer_of.emplace(item.output_path, &item);
+    if (!added) {
+      return UsageError(absl::StrCat("batch: ", at->second->name, " and ", item.name,
+                                     " would both be written to ", item.output_path,
+                                     "; rename one, or run them in separate batches"));
+    }
+  }
+  // Inputs by device and inode, and by normal absolute path (an output not written yet).
+  std::map<std::pair<dev_t, ino_t>, const BatchItem*> input_by_inode;
+  std::map<fs::path, const BatchItem*> input_by_path;
+  for (const BatchItem& item : items) {
+    struct stat info {};
+    if (::stat(item.input_path.c_str(), &info) == 0) {
+      input_by_inode.emplace(std::make_pair(info.st_dev, info.st_ino), &item);
+    }
+    std::error_code error;
+    input_by_path.emplace(fs::weakly_canonical(item.input_path, error), &item);
+  }
+  for (const BatchItem& item : items) {
+    const BatchItem* input = nullptr;
+    struct stat info {};
+    if (::stat(item.output_path.c_str(), &info) == 0) {
+      const auto at = input_by_inode.find({info.st_dev, info.st_ino});
+      if (at != input_by_inode.end()) input = at->second;
+    } else {
+      std::error_code error;
+      const auto at = input_by_path.find(fs::weakly_canonical(item.output_path, error));
+      if (!error && at != input_by_path.end()) input = at->second;
+    }
+    if (input != nullptr && input != &item) {
+      return UsageError(absl::StrCat("batch: the output of ", item.name, ", ", item.output_path,
+                                     ", is the input ", input->name, "; choose another OUTDIR"));
+    }
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 absl::StatusOr<std::vector<BatchItem>> PlanBatch(const BatchPlanOptions& options) {
@@ -187,7 +296,9 @@ absl::StatusOr<std::vector<BatchItem>> PlanBatch(const BatchPlanOptions& options
     }
   };
   if (options.recursive) {
-    for (const auto& entry : fs::recursive_directory_iterator(root, error)) consider(entry);
+    TEMPOKEY_RETURN_IF_ERROR(CheckOutputDirNotBelow(root, options.output_dir));
+    fs::recursive_directory_iterator it(root, error);
+    for (; !error && it != fs::recursive_directory_iterator(); it.increment(error)) consider(*it);
   } else {
     for (const auto& entry : fs::directory_iterator(root, error)) consider(entry);
   }
@@ -212,6 +323,7 @@ absl::StatusOr<std::vector<BatchItem>> PlanBatch(const BatchPlanOptions& options
     item.output_path = output.string();
     items.push_back(std::move(item));
   }
+  TEMPOKEY_RETURN_IF_ERROR(CheckOutputsApart(items));
   return items;
 }
 
@@ -251,10 +363,11 @@ BatchSummary RunBatch(const Client& client, std::span<const BatchItem> items,
   std::atomic<std::size_t> next{0};
   std::mutex done_mutex;
   int done = 0;
+  CallWindow window(options.jobs);
   auto worker = [&](unsigned seed) {
     std::mt19937 random(seed);
     for (std::size_t i = next++; i < items.size(); i = next++) {
-      summary.files[i] = ProcessFile(client, items[i], steps, options, random);
+      summary.files[i] = ProcessFile(client, items[i], steps, options, window, random);
       if (options.manifest != nullptr && !summary.files[i].status.ok()) {
         options.manifest->Forget(items[i]);
       }

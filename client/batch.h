@@ -46,8 +46,11 @@ struct BatchPlanOptions {
 // The files of `options.input_dir` (.bvh, and .csv if asked; hidden files skipped), sorted by
 // name, with their output paths: output_dir/<name with the output format's extension>.
 // Errors: kNotFound / kInvalidArgument for a missing input folder or one that is a file;
-// kInvalidArgument "DIR: no .bvh files" when there is nothing to do; a usage error for a keyed
-// output format with a pipeline that ends sampled.
+// kInvalidArgument "DIR: no .bvh files" when there is nothing to do; kUnavailable when a folder
+// cannot be read; usage errors for a keyed output format with a pipeline that ends sampled, for
+// a recursive batch whose output_dir lies inside input_dir (its outputs would be the next run's
+// inputs), for two inputs with one output ("batch: walk.BVH and walk.bvh would both be written
+// to out/walk.json; ...") and for an output that is another file's input.
 absl::StatusOr<std::vector<BatchItem>> PlanBatch(const BatchPlanOptions& options);
 
 // The pipeline a batch runs for `format`: `steps`, plus a bake at the source rate when they end

@@ -7,6 +7,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "client/clip_files.h"
 #include "client/json_members.h"
 #include "google/protobuf/io/coded_stream.h"
 #include "google/protobuf/io/zero_copy_stream_impl_lite.h"
@@ -52,21 +53,6 @@ absl::StatusOr<std::string> StringMember(const Place& place, const JsonValue& ob
   return value->text;
 }
 
-// An optional whole number >= 0 (0 when absent).
-absl::StatusOr<std::int64_t> CountMember(const Place& place, const JsonValue& object,
-                                         std::string_view name) {
-  const JsonValue* value = object.Find(name);
-  if (value == nullptr) return 0;
-  constexpr double kLargestExact = 9007199254740992.0;  // 2^53
-  if (value->type != JsonValue::Type::kNumber || value->number < 0 ||
-      value->number > kLargestExact || value->number != static_cast<double>(
-                                           static_cast<std::int64_t>(value->number))) {
-    return place.Fail(*value,
-                      absl::StrCat("\"", AsAbsl(name), "\" must be a whole number >= 0"));
-  }
-  return static_cast<std::int64_t>(value->number);
-}
-
 absl::StatusOr<ManifestRecord> ParseRecord(const Place& place, const std::string& output,
                                            const JsonValue& value) {
   if (value.type != JsonValue::Type::kObject) {
@@ -78,15 +64,10 @@ absl::StatusOr<ManifestRecord> ParseRecord(const Place& place, const std::string
   TEMPOKEY_ASSIGN_OR_RETURN(record.input_id, StringMember(place, value, "input_id"));
   TEMPOKEY_ASSIGN_OR_RETURN(record.pipeline, StringMember(place, value, "pipeline"));
   TEMPOKEY_ASSIGN_OR_RETURN(record.output_id, StringMember(place, value, "output_id"));
-  TEMPOKEY_ASSIGN_OR_RETURN(record.output_bytes, CountMember(place, value, "output_bytes"));
-  TEMPOKEY_ASSIGN_OR_RETURN(record.frames, CountMember(place, value, "frames"));
-  TEMPOKEY_ASSIGN_OR_RETURN(record.keys, CountMember(place, value, "keys"));
-  if (const JsonValue* error = value.Find("max_error")) {
-    if (error->type != JsonValue::Type::kNumber) {
-      return place.Fail(*error, "\"max_error\" must be a number");
-    }
-    record.max_error = error->number;
-  }
+  TEMPOKEY_ASSIGN_OR_RETURN(record.output_bytes, JsonCount(place, value, "output_bytes"));
+  TEMPOKEY_ASSIGN_OR_RETURN(record.frames, JsonCount(place, value, "frames"));
+  TEMPOKEY_ASSIGN_OR_RETURN(record.keys, JsonCount(place, value, "keys"));
+  TEMPOKEY_ASSIGN_OR_RETURN(record.max_error, JsonNonNegative(place, value, "max_error"));
   return record;
 }
 
@@ -255,9 +236,13 @@ std::optional<ManifestRecord> BatchManifest::FindUpToDate(const BatchItem& item,
                                                           std::string_view pipeline) const {
   const auto [first, last] = known_.equal_range(OutputKey(item));
   std::optional<std::pair<std::int64_t, std::string>> on_disk;  // read once, when needed
+  // An output written over its own input (--overwrite) is the next run's input: its record's
+  // input id is the clip it was made from, and the file now holding the recorded output says
+  // the file is done.
+  const bool in_place = first != last && IsSameFile(item.input_path, item.output_path);
   for (auto it = first; it != last; ++it) {
     const ManifestRecord& record = it->second;
-    if (record.input != item.name || record.input_id != input_id ||
+    if (record.input != item.name || (!in_place && record.input_id != input_id) ||
         record.pipeline != pipeline) {
       continue;
     }
@@ -310,6 +295,12 @@ absl::Status BatchManifest::RecordWritten(const BatchItem& item, std::string_vie
     std::lock_guard<std::mutex> lock(mutex_);
     own_[record.output] = std::move(record);
     ++version_;
+  }
+  if (IsSameFile(item.input_path, item.output_path)) {
+    // The input is gone: until this record is saved, a re-run could not tell the output from a
+    // clip to process again. Saved now, not when due.
+    std::lock_guard<std::mutex> save_lock(save_mutex_);
+    return Save();
   }
   Changed();
   return absl::OkStatus();

@@ -111,7 +111,9 @@ class BatchManifest {
 
   // The record that lets `item` be skipped: one of any manifest for its output with this input
   // id and pipeline, whose output file exists with the recorded size and content (it is read
-  // and hashed). nullopt when there is none, or always after Open(..., force = true).
+  // and hashed). An output that is its own input (--overwrite) needs no input id: the file
+  // holding the recorded output is done. nullopt when there is none, or always after
+  // Open(..., force = true).
   std::optional<ManifestRecord> FindUpToDate(const BatchItem& item, std::string_view input_id,
                                              std::string_view pipeline) const;
 
@@ -119,8 +121,10 @@ class BatchManifest {
   void Keep(const ManifestRecord& record);
 
   // Records `item`'s output as just written by `file` from input `input_id` through
-  // `pipeline`: reads the output back for its size and digest. Errors: read errors of the
-  // output (the record is then dropped, so a re-run redoes the file).
+  // `pipeline`: reads the output back for its size and digest. An output written over its own
+  // input is saved at once (its input is gone; a run killed between the write and this save, a
+  // few milliseconds, redoes the file from its output on the next run). Errors: read errors of
+  // the output (the record is then dropped, so a re-run redoes the file); that save's error.
   absl::Status RecordWritten(const BatchItem& item, std::string_view input_id,
                              std::string_view pipeline, const BatchFileResult& file);
 

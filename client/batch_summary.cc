@@ -1,6 +1,7 @@
 #include "client/batch_summary.h"
 
 #include <algorithm>
+#include <limits>
 #include <map>
 #include <set>
 
@@ -18,13 +19,6 @@ using core::AsAbsl;
 using core::JsonValue;
 
 using Place = JsonPlace;
-
-absl::StatusOr<double> NumberOr(const Place& place, const JsonValue& object,
-                                std::string_view name, double fallback) {
-  TEMPOKEY_ASSIGN_OR_RETURN(const JsonValue* value,
-                            JsonMember(place, object, name, JsonValue::Type::kNumber, false));
-  return value ? value->number : fallback;
-}
 
 std::optional<absl::StatusCode> CodeNamed(std::string_view name) {
   for (int code = 0; code <= static_cast<int>(absl::StatusCode::kUnauthenticated); ++code) {
@@ -61,16 +55,20 @@ absl::StatusOr<BatchFileResult> ParseResult(const Place& place, const JsonValue&
     return place.Fail(*status, absl::StrCat("status must be ok, skipped or failed, got '",
                                             status->text, "'"));
   }
-  TEMPOKEY_ASSIGN_OR_RETURN(double attempts, NumberOr(place, item, "attempts", 0));
-  TEMPOKEY_ASSIGN_OR_RETURN(file.seconds, NumberOr(place, item, "seconds", 0));
-  TEMPOKEY_ASSIGN_OR_RETURN(double frames, NumberOr(place, item, "frames", 0));
-  TEMPOKEY_ASSIGN_OR_RETURN(double keys, NumberOr(place, item, "keys", 0));
+  if (file.status.ok() && file.output_path.empty()) {
+    return place.Fail(item, absl::StrCat("result for '", input->text, "' is ", status->text,
+                                         " but names no \"output\""));
+  }
+  TEMPOKEY_ASSIGN_OR_RETURN(const std::int64_t attempts,
+                            JsonCount(place, item, "attempts", std::numeric_limits<int>::max()));
   file.attempts = static_cast<int>(attempts);
-  file.frames = static_cast<std::int64_t>(frames);
-  file.keys = static_cast<std::int64_t>(keys);
-  TEMPOKEY_ASSIGN_OR_RETURN(const JsonValue* max_error,
-                            JsonMember(place, item, "max_error", JsonValue::Type::kNumber, false));
-  if (max_error != nullptr) file.max_error = max_error->number;
+  TEMPOKEY_ASSIGN_OR_RETURN(std::optional<double> seconds,
+                            JsonNonNegative(place, item, "seconds"));
+  file.seconds = seconds.value_or(0.0);
+  TEMPOKEY_ASSIGN_OR_RETURN(file.frames, JsonCount(place, item, "frames"));
+  TEMPOKEY_ASSIGN_OR_RETURN(file.keys, JsonCount(place, item, "keys"));
+  TEMPOKEY_ASSIGN_OR_RETURN(file.max_error, JsonNonNegative(place, item, "max_error"));
+  TEMPOKEY_ASSIGN_OR_RETURN(file.max_joint_error, JsonNonNegative(place, item, "max_joint_error"));
   return file;
 }
 
@@ -99,7 +97,8 @@ absl::StatusOr<BatchSummary> ParseBatchSummary(std::string_view text, std::strin
     TEMPOKEY_ASSIGN_OR_RETURN(BatchFileResult file, ParseResult(place, item));
     summary.files.push_back(std::move(file));
   }
-  TEMPOKEY_ASSIGN_OR_RETURN(summary.seconds, NumberOr(place, root, "seconds", 0));
+  TEMPOKEY_ASSIGN_OR_RETURN(std::optional<double> seconds, JsonNonNegative(place, root, "seconds"));
+  summary.seconds = seconds.value_or(0.0);
   TEMPOKEY_ASSIGN_OR_RETURN(const JsonValue* shard,
                             JsonMember(place, root, "shard", JsonValue::Type::kString, false));
   if (shard != nullptr) {

@@ -45,7 +45,8 @@ int ExitCodeFor(const absl::Status& status);
 absl::Status ServerError(const absl::Status& status);
 
 // "error: <message>" with line breaks in the message turned into spaces, so an error is always
-// exactly one line. No trailing newline.
+// exactly one line, and other control characters (C0, DEL, C1) shown as \xNN or \u00NN, so a
+// message quoting a file or a server cannot act on the terminal. No trailing newline.
 std::string ErrorLine(const absl::Status& status);
 
 }  // namespace tempokey::client

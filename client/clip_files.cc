@@ -94,20 +94,57 @@ absl::StatusOr<core::Clip> ReadClipFile(const std::string& path,
   return core::ParseCsv(text, path, *csv_frame_time_seconds);
 }
 
+namespace {
+
+// Whether `a` and `b` both exist and are one file. stat() follows symbolic links: a link to a
+// file is that file.
+bool SameExistingFile(const std::string& a, const std::string& b) {
+  struct stat sa {};
+  struct stat sb {};
+  if (::stat(a.c_str(), &sa) != 0 || ::stat(b.c_str(), &sb) != 0) return false;
+  return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
+}
+
+}  // namespace
+
+bool IsSameFile(const std::string& a, const std::string& b) {
+  if (SameExistingFile(a, b)) return true;
+  // One may not be there yet: the same path once both are made absolute and normal.
+  std::error_code error_a, error_b;
+  const std::filesystem::path pa = std::filesystem::weakly_canonical(a, error_a);
+  const std::filesystem::path pb = std::filesystem::weakly_canonical(b, error_b);
+  return !error_a && !error_b && pa == pb;
+}
+
+namespace {
+
+// "-o walk.bvh is the input walk.bvh (the same file)"
+std::string IsTheInput(std::string_view flag, const std::string& output,
+                       const std::string& input) {
+  const std::string same = input == output ? "" : absl::StrCat(" ", input);
+  return absl::StrCat(AsAbsl(flag), " ", output, " is the input", same, " (the same file)");
+}
+
+}  // namespace
+
 absl::Status CheckOutputIsNotTheInput(const std::string& input, const std::string& output,
                                       bool overwrite, std::string_view flag) {
-  if (overwrite) return absl::OkStatus();
-  struct stat in {};
-  struct stat out {};
-  // stat() follows symbolic links: a link to the input is the input.
-  if (::stat(input.c_str(), &in) != 0 || ::stat(output.c_str(), &out) != 0) {
-    return absl::OkStatus();  // no output yet (or no input: reading it reports that)
+  // No output yet (or no input: reading it reports that) is never the input.
+  if (overwrite || !SameExistingFile(input, output)) return absl::OkStatus();
+  return UsageError(absl::StrCat(IsTheInput(flag, output, input),
+                                 "; choose another output, or give --overwrite to replace the "
+                                 "input"));
+}
+
+absl::Status CheckWritesNoneOf(const std::string& output, std::string_view flag,
+                               std::span<const NamedFile> files) {
+  for (const NamedFile& file : files) {
+    if (!IsSameFile(file.path, output)) continue;
+    const std::string same = file.path == output ? "" : absl::StrCat(" (", file.path, ")");
+    return UsageError(absl::StrCat(AsAbsl(flag), " ", output, " is ", AsAbsl(file.what), same,
+                                   "; choose another file"));
   }
-  if (in.st_dev != out.st_dev || in.st_ino != out.st_ino) return absl::OkStatus();
-  const std::string same = input == output ? "" : absl::StrCat(" ", input);
-  return UsageError(absl::StrCat(AsAbsl(flag), " ", output, " is the input", same,
-                                 " (the same file); choose another output, or give --overwrite "
-                                 "to replace the input"));
+  return absl::OkStatus();
 }
 
 absl::Status WriteClipFile(const std::string& path, FileFormat format, const core::Clip& clip) {

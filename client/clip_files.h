@@ -95,6 +95,24 @@ absl::StatusOr<core::Clip> ReadClipFile(const std::string& path,
 absl::Status CheckOutputIsNotTheInput(const std::string& input, const std::string& output,
                                       bool overwrite, std::string_view flag = "-o");
 
+// A file a command reads or writes, and what it is to the command ("the pipeline").
+struct NamedFile {
+  std::string path;
+  std::string what;
+};
+
+// Refuses to write `output` over any of `files` (IsSameFile()), with no way to allow it: for
+// files a command writes besides its outputs (a summary), which never replace an input, an
+// output or a record the command keeps.
+// Errors: a usage error "--summary ops.json is the pipeline; choose another file", naming the
+// file as given when the two paths differ: "--summary ./a.bvh is the input (in/a.bvh); ...".
+absl::Status CheckWritesNoneOf(const std::string& output, std::string_view flag,
+                               std::span<const NamedFile> files);
+
+// Whether `a` and `b` name one file: the same device and inode (symbolic links followed), or,
+// when one does not exist yet, the same absolute path once "." and ".." are resolved.
+bool IsSameFile(const std::string& a, const std::string& b);
+
 // Writes a sampled clip as .bvh or .csv. Errors: kInvalidArgument for a keyed format or a clip
 // BVH cannot hold (no skeleton); write errors naming the path.
 absl::Status WriteClipFile(const std::string& path, FileFormat format, const core::Clip& clip);

@@ -164,7 +164,12 @@ absl::StatusOr<std::optional<double>> InputFrameTimeFromFlags(const ParsedArgs& 
   std::optional<std::string> fps = args.Value("--input-fps");
   if (!fps) return std::optional<double>();
   TEMPOKEY_ASSIGN_OR_RETURN(core::FrameRate rate, ParseFrameRate("--input-fps", *fps));
-  return static_cast<double>(rate.denominator) / static_cast<double>(rate.numerator);
+  const double seconds = static_cast<double>(rate.denominator) / static_cast<double>(rate.numerator);
+  // The clip's own check, named after the flag: "--input-fps 1e15: its frame time must be ...".
+  if (absl::Status valid = core::CheckFrameTime(seconds, "its frame time"); !valid.ok()) {
+    return UsageError(absl::StrCat("--input-fps ", *fps, ": ", valid.message()));
+  }
+  return seconds;
 }
 
 absl::StatusOr<core::Clip> ReadInputClip(const CommandContext& context, const std::string& path) {

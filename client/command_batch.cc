@@ -92,6 +92,17 @@ absl::StatusOr<std::optional<FileFormat>> FormatFromFlags(const ParsedArgs& args
                         std::begin(kFormats)];
 }
 
+// Refuses a --summary that would replace the pipeline, an input, an output or the manifest.
+absl::Status CheckSummaryPath(const std::string& summary_path, const std::string& ops_path,
+                              std::span<const BatchItem> items, const std::string& manifest_path) {
+  std::vector<NamedFile> files = {{ops_path, "the pipeline"}, {manifest_path, "the manifest"}};
+  for (const BatchItem& item : items) {
+    files.push_back({item.input_path, "the input"});
+    files.push_back({item.output_path, absl::StrCat("the output of ", item.name)});
+  }
+  return CheckWritesNoneOf(summary_path, "--summary", files);
+}
+
 absl::Status Batch(CommandContext& context) {
   TEMPOKEY_ASSIGN_OR_RETURN(std::vector<std::string> dirs, context.Positionals(kDirArgument));
   TEMPOKEY_ASSIGN_OR_RETURN(std::string output_dir, context.Required("--output"));
@@ -126,6 +137,10 @@ absl::Status Batch(CommandContext& context) {
                             BatchManifest::Open(output_dir, shard, context.args().Has("--force")));
   RemoveLeftoverTemporaries(items, manifest->path());
   options.manifest = manifest.get();
+  const std::optional<std::string> summary_path = context.args().Value("--summary");
+  if (summary_path) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckSummaryPath(*summary_path, ops_path, items, manifest->path()));
+  }
 
   BatchSummary summary;
   {
@@ -139,9 +154,7 @@ absl::Status Batch(CommandContext& context) {
   const absl::Status recorded = manifest->Finish(items);
   const std::string json = FormatBatchSummaryJson(summary);
   context.out() << json;
-  if (std::optional<std::string> summary_path = context.args().Value("--summary")) {
-    TEMPOKEY_RETURN_IF_ERROR(core::WriteFileAtomically(*summary_path, json));
-  }
+  if (summary_path) TEMPOKEY_RETURN_IF_ERROR(core::WriteFileAtomically(*summary_path, json));
   TEMPOKEY_RETURN_IF_ERROR(recorded);
   const int failed = summary.failed_count();
   if (failed == 0) return absl::OkStatus();

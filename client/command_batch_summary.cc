@@ -8,6 +8,7 @@
 #include "client/batch.h"
 #include "client/batch_summary.h"
 #include "client/cli_errors.h"
+#include "client/clip_files.h"
 #include "client/command.h"
 #include "tempokey/core/io/file_io.h"
 #include "tempokey/core/model/status.h"
@@ -16,6 +17,8 @@ namespace tempokey::client {
 namespace {
 
 constexpr std::int64_t kMaxSummaryBytes = std::int64_t{256} << 20;
+// Missing shards named in the error line; the others are counted.
+constexpr std::size_t kNamedMissingShards = 10;
 
 constexpr FlagSpec kBatchSummaryFlags[] = {
     {"--output", "-o", "FILE", "also write the merged summary to FILE (atomically)"},
@@ -25,6 +28,12 @@ absl::Status BatchSummaryMerge(CommandContext& context) {
   const std::vector<std::string>& paths = context.args().positionals();
   if (paths.empty()) {
     return UsageError("batch-summary: missing SUMMARY (see tempokey batch-summary --help)");
+  }
+  const std::optional<std::string> output = context.args().Value("--output");
+  if (output) {
+    std::vector<NamedFile> inputs;
+    for (const std::string& path : paths) inputs.push_back({path, "a summary to merge"});
+    TEMPOKEY_RETURN_IF_ERROR(CheckWritesNoneOf(*output, "-o", inputs));
   }
   std::vector<NamedSummary> summaries;
   for (const std::string& path : paths) {
@@ -36,17 +45,22 @@ absl::Status BatchSummaryMerge(CommandContext& context) {
 
   const std::string json = FormatBatchSummaryJson(merged);
   context.out() << json;
-  if (std::optional<std::string> output = context.args().Value("--output")) {
-    TEMPOKEY_RETURN_IF_ERROR(core::WriteFileAtomically(*output, json));
-  }
+  if (output) TEMPOKEY_RETURN_IF_ERROR(core::WriteFileAtomically(*output, json));
   if (!merged.missing_shards.empty()) {
+    // The error is one line: the first shards missing, and how many more (the summary printed
+    // lists them all).
+    const std::size_t missing = merged.missing_shards.size();
     std::vector<std::string> names;
-    for (int index : merged.missing_shards) {
-      names.push_back(absl::StrCat(index, "/", merged.merged_shards));
+    for (std::size_t i = 0; i < std::min(missing, kNamedMissingShards); ++i) {
+      names.push_back(absl::StrCat(merged.missing_shards[i], "/", merged.merged_shards));
     }
+    const std::string more =
+        missing > kNamedMissingShards
+            ? absl::StrCat(" and ", missing - kNamedMissingShards, " more")
+            : "";
     return absl::FailedPreconditionError(absl::StrCat(
-        merged.missing_shards.size() == 1 ? "shard " : "shards ", absl::StrJoin(names, ", "),
-        " missing: the run is incomplete (run ", merged.missing_shards.size() == 1 ? "it" : "them",
+        missing == 1 ? "shard " : "shards ", absl::StrJoin(names, ", "), more,
+        " missing: the run is incomplete (run ", missing == 1 ? "it" : "them",
         " with batch --shard)"));
   }
   const int failed = merged.failed_count();

@@ -4,6 +4,8 @@
 #ifndef TEMPOKEY_CLIENT_JSON_MEMBERS_H_
 #define TEMPOKEY_CLIENT_JSON_MEMBERS_H_
 
+#include <cstdint>
+#include <optional>
 #include <string_view>
 
 #include "absl/status/status.h"
@@ -26,11 +28,26 @@ class JsonPlace {
 };
 
 // The member `name` of `object`, which must have `type`; nullptr when absent and not `required`.
-// Errors: kInvalidArgument "...: missing \"name\"", "...: \"name\" must be a string".
+// A name given twice is refused (a reader taking the first would silently drop the second).
+// Errors: kInvalidArgument "...: missing \"name\"", "...: \"name\" must be a string",
+// "...: \"name\" given twice" (at the second).
 absl::StatusOr<const core::JsonValue*> JsonMember(const JsonPlace& place,
                                                   const core::JsonValue& object,
                                                   std::string_view name,
                                                   core::JsonValue::Type type, bool required);
+
+// An optional whole number in [0, max] (0 when absent), e.g. a count of frames or attempts.
+// Errors: those of JsonMember(); kInvalidArgument "...: \"frames\" must be a whole number from
+// 0 to 9007199254740992".
+absl::StatusOr<std::int64_t> JsonCount(const JsonPlace& place, const core::JsonValue& object,
+                                       std::string_view name,
+                                       std::int64_t max = std::int64_t{1} << 53);
+
+// An optional number >= 0 (nullopt when absent), e.g. seconds or an error.
+// Errors: those of JsonMember(); kInvalidArgument "...: \"seconds\" must be >= 0".
+absl::StatusOr<std::optional<double>> JsonNonNegative(const JsonPlace& place,
+                                                      const core::JsonValue& object,
+                                                      std::string_view name);
 
 }  // namespace tempokey::client
 

@@ -110,7 +110,7 @@ TEST(ManifestDocumentTest, MalformedManifestsAreRefusedWithTheirPlace) {
       {head + R"({"a.json": )" + good + R"(, "a.json": )" + good + "}}",
        "m.json:1:197: output \"a.json\" is listed twice"},
       {head + R"({"a.json": {"input": "a.bvh", "input_id": "sha256:1", "pipeline": "sha256:2", "output_bytes": -3, "output_id": "x"}}})",
-       "m.json:1:158: \"output_bytes\" must be a whole number >= 0"},
+       "m.json:1:158: \"output_bytes\" must be a whole number from 0 to 9007199254740992"},
       {head + "{", "m.json:1:65: expected a member name, got the end of the text"},
   };
   for (const Case& c : cases) {

@@ -16,7 +16,7 @@ using ::testing::HasSubstr;
 
 BatchFileResult Ok(const std::string& name) {
   return {.name = name, .output_path = "out/" + name, .attempts = 1, .seconds = 0.25,
-          .keys = 12, .max_error = 0.49977981950762285};
+          .keys = 12, .max_error = 0.49977981950762285, .max_joint_error = 1.8706};
 }
 
 BatchFileResult Skipped(const std::string& name) {
@@ -51,6 +51,7 @@ TEST(BatchSummaryTest, PrintedSummaryParsesBackToTheSameResults) {
   ASSERT_EQ(parsed->files.size(), 3u);
   EXPECT_EQ(parsed->files[2].status, summary.files[2].status);
   EXPECT_EQ(parsed->files[0].max_error, summary.files[0].max_error);
+  EXPECT_EQ(parsed->files[0].max_joint_error, summary.files[0].max_joint_error);
 }
 
 TEST(BatchSummaryTest, ShardsMergeIntoOneSummarySortedByInput) {
@@ -129,9 +130,25 @@ TEST(BatchSummaryTest, DocumentsThatAreNotSummariesAreRefusedWithTheirPlace) {
        "s.json:1:43: status must be ok, skipped or failed, got 'great'"},
       {R"({"results": [{"input": "a.bvh", "status": "failed", "code": "OOPS", "error": "x"}]})",
        "s.json:1:61: unknown status code 'OOPS'"},
-      {R"({"files": 2, "results": [{"input": "a.bvh", "status": "ok"}]})",
+      {R"({"files": 2, "results": [{"input": "a.bvh", "output": "a.json", "status": "ok"}]})",
        "s.json:1:11: \"files\" is 2 but the results count 1"},
       {R"({"shard": "4/4", "results": []})", "s.json:1:11: \"shard\" must be I/N, got '4/4'"},
+      // A summary's numbers are counts and measures: never negative, counts whole, and none
+      // cast to an integer it cannot hold.
+      {R"({"results": [{"input": "a.bvh", "output": "a.json", "status": "ok", "attempts": 1e300}]})",
+       "s.json:1:81: \"attempts\" must be a whole number from 0 to 2147483647"},
+      {R"({"results": [{"input": "a.bvh", "output": "a.json", "status": "ok", "frames": 2.5}]})",
+       "s.json:1:79: \"frames\" must be a whole number from 0 to 9007199254740992"},
+      {R"({"results": [{"input": "a.bvh", "output": "a.json", "status": "ok", "seconds": -1e300}]})",
+       "s.json:1:80: \"seconds\" must be >= 0"},
+      {R"({"results": [{"input": "a.bvh", "output": "a.json", "status": "ok", "max_error": -1}]})",
+       "s.json:1:82: \"max_error\" must be >= 0"},
+      {R"({"seconds": -2, "results": []})", "s.json:1:13: \"seconds\" must be >= 0"},
+      // A done or skipped file has an output; a name given twice is not settled by the first.
+      {R"({"results": [{"input": "a.bvh", "status": "ok"}]})",
+       "s.json:1:14: result for 'a.bvh' is ok but names no \"output\""},
+      {R"({"results": [], "results": [{"input": "a.bvh", "status": "failed", "code": "INTERNAL", "error": "x"}]})",
+       "s.json:1:28: \"results\" given twice"},
   };
   for (const Case& c : cases) {
     absl::StatusOr<BatchSummary> parsed = ParseBatchSummary(c.text, "s.json");

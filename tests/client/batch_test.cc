@@ -263,6 +263,36 @@ TEST_F(BatchTest, UnreachableServerFailsEachFileAfterItsAttempts) {
   EXPECT_TRUE(FilesIn(Path("out")).empty());
 }
 
+// A batch with more files in flight (--jobs 8) than its server takes (one worker, a queue of
+// one): the calls refused for the full queue teach the batch how many the server holds, and the
+// refused files wait for one of the batch's own calls to end instead of spending their attempts
+// on a queue the batch keeps full (with 8 files waiting out the same retry hint, a third of
+// them used to fail after 5 attempts). Every file is done.
+TEST_F(BatchTest, MoreFilesInFlightThanTheServerHoldsAreAllDone) {
+  absl::StatusOr<std::unique_ptr<ServerProcess>> small =
+      ServerProcess::Start(dir_, {"--workers", "1", "--queue_capacity", "1"});
+  ASSERT_TRUE(small.ok()) << small.status();
+  const std::string in = Path("in");
+  fs::create_directories(in);
+  for (int i = 0; i < 12; ++i) {
+    fs::copy_file(SharedBvh("bandai/dataset-1_dance-short_normal_001.bvh"),
+                  absl::StrFormat("%s/dance_%02d.bvh", in, i));
+  }
+
+  ProcessResult run = Batch({in, "-o", Path("out"), "--ops", PipelineFile(kRetimeThenReduce),
+                             "--jobs", "8"},
+                            (*small)->target());
+
+  EXPECT_EQ(run.exit_code, 0) << run.err;
+  const Summary summary = ParseSummary(run.out);
+  EXPECT_EQ(summary.files, 12);
+  EXPECT_EQ(summary.done, 12);
+  for (const auto& [name, entry] : summary.by_input) {
+    EXPECT_EQ(entry.status, "ok") << name << ": " << entry.error;
+    EXPECT_TRUE(fs::exists(entry.output)) << name;
+  }
+}
+
 // SPEC 7's scale-out on one machine: three servers behind one round-robin target, the CLI's
 // batch over them, one server killed (SIGKILL, no drain) once outputs are appearing; every file
 // must still be processed, by the servers that remain.

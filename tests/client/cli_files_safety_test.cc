@@ -10,6 +10,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -136,6 +137,155 @@ TEST_F(OverwriteTest, OverwriteFlagReplacesTheInput) {
   const std::string replaced = Slurp(input_);
   EXPECT_NE(replaced, original_);
   EXPECT_NE(replaced.find("\nFrames: 291\n"), std::string::npos);  // 146 frames at half speed
+}
+
+// A batch that replaced its inputs (--overwrite) and runs again finds them done: the manifest's
+// record of each output, not the input id of a clip that no longer exists, says so. Before, the
+// second run slowed every clip once more and reported it "ok".
+TEST_F(OverwriteTest, AnOverwritingBatchRunAgainSkipsTheFilesItReplaced) {
+  std::filesystem::create_directory(Path("in"));
+  CopyFile(input_, Path("in/walk.bvh"));
+  {
+    std::ofstream ops(Path("ops.json"));
+    ops << R"({"operations": [{"retime": {"speed": "0s:0.5"}}]})";
+  }
+  const std::vector<std::string> batch = {"--server", server_->target(), "batch", Path("in"),
+                                          "-o", Path("in"), "--ops", Path("ops.json"),
+                                          "--overwrite"};
+
+  const ProcessResult first = RunTempokey(batch, dir_);
+  const std::string once = Slurp(Path("in/walk.bvh"));
+  const ProcessResult second = RunTempokey(batch, dir_);
+
+  EXPECT_EQ(first.exit_code, 0) << first.err;
+  EXPECT_NE(once.find("\nFrames: 291\n"), std::string::npos);  // 146 frames at half speed
+  EXPECT_EQ(second.exit_code, 0) << second.err;
+  EXPECT_THAT(second.out, HasSubstr(R"("status": "skipped")"));
+  EXPECT_EQ(Slurp(Path("in/walk.bvh")), once);
+}
+
+// --summary is written besides the outputs: it never replaces the pipeline, an input, an output
+// or the manifest, and the refusal comes before any work (before, a batch whose server was down
+// wrote its summary over its own --ops file).
+TEST_F(OverwriteTest, ASummaryThatWouldReplaceAnInputIsRefusedBeforeAnyWork) {
+  const std::string ops = Path("ops.json");
+  {
+    std::ofstream out(ops);
+    out << R"({"operations": [{"convert": {}}]})";
+  }
+  const std::string ops_text = Slurp(ops);
+  std::filesystem::create_directory(Path("in"));
+  CopyFile(input_, Path("in/walk.bvh"));
+  auto batch = [&](const std::string& summary) {
+    return RunTempokey({"--server", "127.0.0.1:1", "batch", Path("in"), "-o", Path("out"),
+                        "--ops", ops, "--attempts", "1", "--summary", summary},
+                       dir_);
+  };
+
+  const ProcessResult over_ops = batch(ops);
+  const ProcessResult over_input = batch(Path("in/walk.bvh"));
+  const ProcessResult over_output = batch(Path("out/walk.bvh"));
+
+  EXPECT_EQ(over_ops.exit_code, 2);
+  EXPECT_EQ(over_ops.err, "error: --summary " + ops + " is the pipeline; choose another file\n");
+  EXPECT_EQ(Slurp(ops), ops_text);
+  EXPECT_EQ(over_input.exit_code, 2);
+  EXPECT_EQ(over_input.err,
+            "error: --summary " + Path("in/walk.bvh") + " is the input; choose another file\n");
+  EXPECT_EQ(Slurp(Path("in/walk.bvh")), original_);
+  EXPECT_EQ(over_output.exit_code, 2);
+  EXPECT_EQ(over_output.err, "error: --summary " + Path("out/walk.bvh") +
+                                 " is the output of walk.bvh; choose another file\n");
+}
+
+TEST_F(OverwriteTest, BatchSummaryRefusesToWriteOverASummaryItMerges) {
+  const std::string summary = Path("s0.json");
+  {
+    std::ofstream out(summary);
+    out << R"({"shard": "0/1", "results": []})";
+  }
+  const std::string text = Slurp(summary);
+
+  const ProcessResult run = RunTempokey({"batch-summary", summary, "-o", summary}, dir_);
+
+  EXPECT_EQ(run.exit_code, 2);
+  EXPECT_EQ(run.err,
+            "error: -o " + summary + " is a summary to merge; choose another file\n");
+  EXPECT_EQ(Slurp(summary), text);
+}
+
+// Two inputs with one output name would overwrite each other's result on every run (and the
+// manifest would keep one); a recursive batch whose OUTDIR lies inside DIR would take its own
+// outputs for inputs, or write over the clips there.
+TEST_F(OverwriteTest, BatchOutputsThatCollideWithEachOtherOrWithInputsAreRefused) {
+  std::filesystem::create_directories(Path("in/sub"));
+  CopyFile(input_, Path("in/walk.bvh"));
+  CopyFile(input_, Path("in/walk.BVH"));
+  CopyFile(input_, Path("in/sub/walk.bvh"));
+  {
+    std::ofstream ops(Path("ops.json"));
+    ops << R"({"operations": [{"convert": {}}]})";
+  }
+  auto batch = [&](const std::string& in, const std::string& out, bool recursive) {
+    std::vector<std::string> args = {"--server", server_->target(), "batch", in,
+                                     "-o",       out,               "--ops", Path("ops.json")};
+    if (recursive) args.push_back("-r");
+    return RunTempokey(args, dir_);
+  };
+
+  const ProcessResult same_name = batch(Path("in"), Path("out"), false);
+  std::filesystem::remove(Path("in/walk.BVH"));
+  const ProcessResult inside = batch(Path("in"), Path("in/sub"), true);
+
+  EXPECT_EQ(same_name.exit_code, 2);
+  EXPECT_EQ(same_name.err, "error: batch: walk.BVH and walk.bvh would both be written to " +
+                               Path("out/walk.bvh") +
+                               "; rename one, or run them in separate batches\n");
+  EXPECT_FALSE(std::filesystem::exists(Path("out")));
+  EXPECT_EQ(inside.exit_code, 2);
+  EXPECT_THAT(inside.err, StartsWith("error: batch --recursive: OUTDIR " + Path("in/sub") +
+                                     " lies inside DIR " + Path("in")));
+  EXPECT_EQ(Slurp(Path("in/sub/walk.bvh")), original_);
+}
+
+// An output that is a FIFO (a process reading the result) gets the bytes and stays a FIFO;
+// with nobody reading, the CLI says so at once instead of replacing it with a plain file.
+TEST_F(OverwriteTest, AnOutputFifoIsWrittenIntoAndNeverReplaced) {
+  const std::string fifo = Path("out.bvh");
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+
+  const ProcessResult unread = Retime(fifo);
+  const int reader = ::open(fifo.c_str(), O_RDONLY | O_NONBLOCK);
+  ASSERT_GE(reader, 0);
+  std::string received;
+  std::atomic<bool> cli_done{false};
+  std::thread drain([&] {
+    // Reads until the CLI has exited and the pipe is empty: before its write end opens (and
+    // after it closes) a read finds no data, which is no reason to stop until then.
+    char buffer[65536];
+    for (;;) {
+      const ssize_t got = ::read(reader, buffer, sizeof buffer);
+      if (got > 0) {
+        received.append(buffer, static_cast<std::size_t>(got));
+      } else if (cli_done.load()) {
+        break;
+      } else {
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      }
+    }
+  });
+  const ProcessResult read = Retime(fifo);
+  cli_done.store(true);
+  drain.join();
+  ::close(reader);
+
+  EXPECT_EQ(unread.exit_code, 1);
+  EXPECT_EQ(unread.err, "error: " + fifo + ": is a FIFO with no reader\n");
+  EXPECT_EQ(read.exit_code, 0) << read.err;
+  EXPECT_NE(received.find("\nFrames: 291\n"), std::string::npos);
+  struct stat info {};
+  ASSERT_EQ(::stat(fifo.c_str(), &info), 0);
+  EXPECT_TRUE(S_ISFIFO(info.st_mode));
 }
 
 // ---- inputs read with bounded memory -------------------------------------------------------------

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "client/cli_errors.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tempokey/core/io/file_io.h"
@@ -95,6 +96,29 @@ TEST(CliInfoTest, RefusesCsvWithoutARateAsUsage) {
   EXPECT_EQ(run.out, "");
   EXPECT_EQ(run.err, "error: " + path +
                          ": a CSV file does not store its frame rate; give it with --input-fps\n");
+}
+
+TEST(CliInfoTest, AnInputRateOutsideTheFrameTimesAClipMayHaveIsAUsageErrorNamingTheFlag) {
+  const std::string dir = MakeTempDir();
+  const std::string path = dir + "/table.csv";
+  ASSERT_TRUE(core::WriteFileAtomically(path, "a\n1\n").ok());
+
+  CliRun run = RunTempokey({"info", path, "--input-fps", "999999999999999"});
+
+  EXPECT_EQ(run.exit_code, 2);
+  EXPECT_EQ(run.err, "error: --input-fps 999999999999999: its frame time must be in [1e-06, "
+                     "3600] seconds, got 1e-15\n");
+}
+
+// A control character quoted from a file (or a server) is shown, not sent to the terminal: an
+// escape sequence in a pipeline file's value could otherwise clear the user's screen.
+TEST(CliErrorLineTest, ControlCharactersAreShownEscapedOnOneLine) {
+  constexpr char kMessage[] = "speed '0s:1\x1b[2J\0' on\nline 2\r \xc2\x9b ok \xc3\xa9\x7f";
+  const absl::Status status =
+      absl::InvalidArgumentError(std::string(kMessage, sizeof kMessage - 1));
+
+  EXPECT_EQ(ErrorLine(status),
+            "error: speed '0s:1\\x1b[2J\\x00' on line 2  \\u009b ok \xc3\xa9\\x7f");
 }
 
 TEST(CliInfoTest, ReportsAMalformedFileAsOneLineWithItsLocation) {
