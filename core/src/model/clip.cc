@@ -157,6 +157,17 @@ absl::Status ValidateClipLayout(const Clip& clip, const ClipLimits& limits) {
                                                    " joints, over the limit of ",
                                                    limits.max_joints));
   }
+  // Forward kinematics places every joint and end site at every frame (a reduction's world
+  // error, the joint bound): as many positions as samples at most, or a few channels with many
+  // end sites (which carry no samples) would cost memory and time the sample limit does not see.
+  std::int64_t points = static_cast<std::int64_t>(joints.size());
+  for (const Joint& joint : joints) points += static_cast<std::int64_t>(joint.end_sites.size());
+  if (points > 0 && clip.frame_count > limits.max_samples / points) {
+    return OverLimitError(absl::StrCat(
+        "skeleton has ", points, " joints and end sites x ", clip.frame_count,
+        " frames, over the limit of ", limits.max_samples,
+        " positions (as many as the sample limit: each is placed at every frame)"));
+  }
   absl::flat_hash_set<std::string_view> names;
   std::vector<int> depth(joints.size(), 0);
   // Whether some joint lists the channel (only its own joint can: checked below), so that each

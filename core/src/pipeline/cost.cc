@@ -41,6 +41,9 @@ constexpr double kPaperSecondsPerStatePair = 2e-9;
 constexpr double kSmoothSecondsPerTap = 2.5e-9;
 // Measuring a fit: one weighted-Bezier evaluation; bake the same.
 constexpr double kEvaluateSecondsPerSample = 60e-9;
+// A reduction's world error: one joint or end site placed by forward kinematics at one frame,
+// for the source and again for the fitted curves (about 25 ns each measured, rounded up).
+constexpr double kPlaceSecondsPerPoint = 40e-9;
 // Convert: a copy and a remainder per sample.
 constexpr double kConvertSecondsPerSample = 15e-9;
 
@@ -72,9 +75,15 @@ struct Shape {
   double frame_time = 0.0;
   std::int64_t frames = 0;
   std::int64_t channels = 0;
+  // Joints and end sites of the skeleton (which every step keeps).
+  std::int64_t points = 0;
   // The caller's clip, while no step has changed the samples (a key budget reads its ranges).
   const Clip* data = nullptr;
   double samples() const { return static_cast<double>(frames) * static_cast<double>(channels); }
+  // Positions the world error places: every point at every frame, source and fit.
+  double placements() const {
+    return 2.0 * static_cast<double>(frames) * static_cast<double>(points);
+  }
 };
 
 absl::Status ValidateBakeRate(const std::optional<FrameRate>& rate) {
@@ -195,7 +204,8 @@ StepCost ReduceCost(const Shape& in, const ReduceStep& step) {
   StepCost cost;
   const double frames = static_cast<double>(in.frames);
   const double channels = static_cast<double>(in.channels);
-  const double measure = in.samples() * kEvaluateSecondsPerSample;
+  const double measure =
+      in.samples() * kEvaluateSecondsPerSample + in.placements() * kPlaceSecondsPerPoint;
   if (step.options.method == ReduceMethod::kTolerance) {
     const double fits = step.options.tolerance.key_budget
                             ? BudgetFits(in, step.options.tolerance)
@@ -247,6 +257,10 @@ absl::StatusOr<PipelineCost> EstimatePipelineCost(const Clip& clip,
   shape.frame_time = clip.frame_time_seconds;
   shape.frames = clip.frame_count;
   shape.channels = static_cast<std::int64_t>(clip.channels.size());
+  shape.points = static_cast<std::int64_t>(clip.skeleton.joints.size());
+  for (const Joint& joint : clip.skeleton.joints) {
+    shape.points += static_cast<std::int64_t>(joint.end_sites.size());
+  }
   shape.data = &clip;
   PipelineCost total;
   // Step by step, so the first operation at fault is the one named.
@@ -311,6 +325,13 @@ absl::StatusOr<PipelineCost> EstimatePipelineCost(const Clip& clip,
             },
         },
         step);
+    if (cost.ok() && next.points > 0 && next.frames > limits.max_samples / next.points) {
+      // As ValidateClipLayout() for the clip this step makes: its positions within the limit.
+      cost = OverLimitError(absl::StrCat(
+          "the clip it makes has ", next.points, " joints and end sites x ", next.frames,
+          " frames, over the limit of ", limits.max_samples,
+          " positions (as many as the sample limit: each is placed at every frame)"));
+    }
     if (!cost.ok()) return Annotate(cost.status(), StepContext(i, step));
     cost->index = i;
     total.seconds += cost->seconds;

@@ -68,6 +68,21 @@ absl::StatusOr<double> ResolveJointTolerance(const JointTolerance& tolerance,
   return tolerance.value / 100.0 * figure_height;
 }
 
+absl::Status CheckJointBoundAboveRounding(const JointTolerance& tolerance, double bound,
+                                          const PointTrajectories& source) {
+  double reach = 0.0;
+  for (const Vec3& p : source.positions) {
+    reach = std::max({reach, std::abs(p[0]), std::abs(p[1]), std::abs(p[2])});
+  }
+  const double least = kMinJointBoundOfReach * reach;
+  if (bound >= least) return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrCat(
+      "tolerance.joint_tolerance ", FormatJointTolerance(tolerance),
+      " is below what this clip's joint positions can be computed to: at least ",
+      DescribeDouble(least), " file units (", DescribeDouble(kMinJointBoundOfReach), " of the ",
+      DescribeDouble(reach), " file units its joints reach from the origin)"));
+}
+
 namespace reduce_internal {
 
 JointBoundPlan::JointBoundPlan(WorldErrorMeter& meter,

@@ -209,6 +209,10 @@ absl::StatusOr<ToleranceBounds> ResolveBounds(const Clip& clip, const ToleranceP
   ToleranceBounds bounds;
   if (t.joint_tolerance) {  // on a skeleton: ValidateReduceOptionsForClip()
     TEMPOKEY_ASSIGN_OR_RETURN(bounds.joint, ResolveJointTolerance(*t.joint_tolerance, height));
+    if (meter != nullptr) {
+      TEMPOKEY_RETURN_IF_ERROR(
+          CheckJointBoundAboveRounding(*t.joint_tolerance, *bounds.joint, meter->source()));
+    }
   }
   const double position_default = height > 0.0 ? kDefaultPositionErrorHeightFraction * height
                                                : kDefaultMaxPositionErrorWithoutFigure;

@@ -168,6 +168,23 @@ TEST(ValidateClipTest, LimitsOnFramesChannelsSamplesAndJoints) {
   EXPECT_EQ(ValidateMessage(clip, depth), "joint 1 (Spine): nesting deeper than 1");
 }
 
+// End sites carry no samples but forward kinematics places each at every frame: a few channels
+// with thousands of end sites passed the sample limit and cost gigabytes in a reduction's world
+// error. Joints and end sites times frames stay within the sample limit too.
+TEST(ValidateClipTest, JointsAndEndSitesTimesFramesStayWithinTheSampleLimit) {
+  Clip clip = ValidClip();  // 2 joints, 1 end site, 3 frames: 9 positions, 9 samples
+  ClipLimits nine;
+  nine.max_samples = 9;
+  EXPECT_EQ(ValidateMessage(clip, nine), "ok");
+
+  clip.skeleton.joints[1].end_sites.push_back({0, 2, 0});  // 4 points x 3 frames = 12
+
+  EXPECT_EQ(OverLimitMessage(clip, nine),
+            "skeleton has 4 joints and end sites x 3 frames, over the limit of 9 positions (as "
+            "many as the sample limit: each is placed at every frame)");
+  EXPECT_EQ(ValidateMessage(clip), "ok");
+}
+
 TEST(ValidateClipTest, ParentMustBeAnEarlierJoint) {
   Clip self_parent = ValidClip();
   self_parent.skeleton.joints[1].parent = 1;

@@ -261,5 +261,30 @@ TEST(JointBoundTest, RefusesWhatItCannotMeasure) {
             "tolerance.joint_tolerance must be finite and > 0, got -1");
 }
 
+// World positions are doubles: a bound near their rounding at the clip's reach cannot be held,
+// and once ended in an INTERNAL error ("a chain at its guaranteed budgets is still over the
+// bound"). It is refused up front; at the floor itself the bound is held. The chain lies along
+// X (bones of 30 and 20 from the origin): it reaches 50 file units, so the floor is 5e-11.
+TEST(JointBoundTest, ABoundBelowWhatPositionsCanBeComputedToIsRefusedAndTheFloorIsHeld) {
+  const Clip chain = PlanarChain(30, 20, std::vector<double>(kFrames, 0.0),
+                                 std::vector<double>(kFrames, 0.0), nullptr);
+  ReduceOptions tiny;
+  tiny.tolerance.joint_tolerance = JointTolerance{.value = 1e-15};
+  ReduceOptions floor;
+  floor.tolerance.joint_tolerance = JointTolerance{.value = 5.0001e-11};
+
+  const absl::StatusOr<ReduceResult> refused = ReduceKeys(chain, tiny);
+  const absl::StatusOr<ReduceResult> held = ReduceKeys(chain, floor);
+
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(refused.status().message(),
+            "tolerance.joint_tolerance 1e-15 is below what this clip's joint positions can be "
+            "computed to: at least 5e-11 file units (1e-12 of the 50 file units its joints reach "
+            "from the origin)");
+  ASSERT_TRUE(held.ok()) << held.status();
+  ASSERT_TRUE(held->report.world.has_value());
+  EXPECT_LE(held->report.world->max_error, 5.0001e-11);
+}
+
 }  // namespace
 }  // namespace tempokey::core

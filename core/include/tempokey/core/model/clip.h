@@ -140,13 +140,15 @@ absl::Status CheckFrameTime(double seconds, std::string_view what = "frame time"
 struct ClipLimits {
   std::int64_t max_frames = 10'000'000;
   std::int64_t max_channels = 100'000;
-  std::int64_t max_samples = 200'000'000;   // frames x channels (1.6 GB of doubles)
+  std::int64_t max_samples = 200'000'000;   // frames x channels (1.6 GB of doubles); also
+                                             // frames x (joints + end sites)
   int max_joints = 10'000;
   int max_depth = 256;                       // joint nesting
 };
 
 // Checks every invariant of SPEC 1: frame time in [kMinFrameTimeSeconds, kMaxFrameTimeSeconds];
-// frame_count >= 1; every channel has frame_count finite samples of magnitude at most
+// frame_count >= 1; the limits (frames, channels, samples, joints, nesting, and frames x (joints
+// + end sites) within max_samples); every channel has frame_count finite samples of magnitude at most
 // kMaxSampleMagnitude; joint indices valid, parents before children, joint names non-empty and
 // unique, offsets and end sites finite and within kMaxSampleMagnitude; each joint's channel list
 // names channels of that joint, and every joint channel is in its joint's list; rotation channels

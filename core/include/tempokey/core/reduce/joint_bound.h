@@ -30,6 +30,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "tempokey/core/model/kinematics.h"
 
 namespace tempokey::core {
 
@@ -61,6 +62,20 @@ absl::Status ValidateJointTolerance(const JointTolerance& tolerance);
 // height, which is 0 (every joint and end site at one height at the first frame)").
 absl::StatusOr<double> ResolveJointTolerance(const JointTolerance& tolerance,
                                              double figure_height);
+
+// The smallest joint bound, as a fraction of the clip's reach (the largest |coordinate| of any
+// joint or end site at any frame, file units): world positions are computed in doubles, whose
+// rounding at that distance (about 1e-16 of it per operation) no fit can get under; a bound near
+// it would leave chains over the bound at every budget.
+inline constexpr double kMinJointBoundOfReach = 1e-12;
+
+// OK when `bound` (file units, resolved from `tolerance`) is at least kMinJointBoundOfReach of
+// the reach of `source`, the clip's joint and end-site trajectories.
+// Errors: kInvalidArgument "tolerance.joint_tolerance 1e-15 is below what this clip's joint
+// positions can be computed to: at least 1.7e-10 file units (1e-12 of the 170 file units its
+// joints reach from the origin)".
+absl::Status CheckJointBoundAboveRounding(const JointTolerance& tolerance, double bound,
+                                          const PointTrajectories& source);
 
 }  // namespace tempokey::core
 
