@@ -358,6 +358,11 @@ absl::Status ClipAssembler::AddHeader(const v1::ClipHeader& header) {
 }
 
 absl::Status ClipAssembler::AddSampleSlices(const v1::SampleSlices& batch) {
+  // A batch of no slices brings no sample, as an empty slice does: a stream of them would keep
+  // a call alive (each message resets its idle timeout) without ever completing the clip.
+  if (batch.slices().empty()) {
+    return Invalid(absl::StrCat("samples message ", messages_ + 1, ": carries no slices"));
+  }
   for (const v1::ChannelSamples& slice : batch.slices()) {
     TEMPOKEY_RETURN_IF_ERROR(AddSamples(slice));
   }

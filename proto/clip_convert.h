@@ -123,7 +123,8 @@ class ClipAssembler {
 
   absl::Status AddHeader(const v1::ClipHeader& header);
   absl::Status AddSamples(const v1::ChannelSamples& samples);
-  // Each slice of `batch` in order, as if sent one by one (messages are counted per slice).
+  // Each slice of `batch` in order, as if sent one by one (messages are counted per slice); a
+  // batch of no slices is refused ("samples message 3: carries no slices").
   absl::Status AddSampleSlices(const v1::SampleSlices& batch);
   bool has_header() const { return has_header_; }
   // The clip being assembled: after AddHeader() its full layout; a channel's samples hold the

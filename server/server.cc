@@ -283,6 +283,9 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(ServerOptions options) {
   grpc::EnableDefaultHealthCheckService(true);
   grpc::ServerBuilder builder;
   builder.AddListeningPort(options.address, credentials, &server->port_);
+  // gRPC sets SO_REUSEPORT on Linux by default: a second server on a port in use would start
+  // and silently take a share of its connections. Off, the second one fails to listen.
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.SetMaxReceiveMessageSize(static_cast<int>(options.max_message_bytes));
   builder.RegisterService(server->service_.get());
   builder.RegisterCallbackGenericService(server->reflection_.get());

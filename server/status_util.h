@@ -2,6 +2,8 @@
 #ifndef TEMPOKEY_SERVER_STATUS_UTIL_H_
 #define TEMPOKEY_SERVER_STATUS_UTIL_H_
 
+#include <cstddef>
+#include <string>
 #include <string_view>
 
 #include "absl/status/status.h"
@@ -11,7 +13,18 @@
 
 namespace tempokey::server {
 
-// Same code and message (absl codes are the gRPC codes). When `context` is given and `status`
+// Messages sent to clients are at most this long (plus a note of what was cut): a status travels
+// in a header, percent-encoded (up to 3 bytes a byte), and gRPC clients refuse headers over 8 KiB
+// by default, so a message quoting a long input (a 100 KB page token or channel name) reached
+// them as "received initial metadata size exceeds limit" instead of the server's message.
+inline constexpr std::size_t kMaxStatusMessageBytes = 2048;
+
+// `message`, cut to kMaxStatusMessageBytes at a UTF-8 character boundary, with " ... (N more
+// bytes not shown)" when cut.
+std::string CappedStatusMessage(std::string_view message);
+
+// Same code and message (absl codes are the gRPC codes; the message capped by
+// CappedStatusMessage()). When `context` is given and `status`
 // carries a retry hint (wire::SetRetryAfter()), adds it as trailing metadata
 // wire::kRetryAfterMetadataKey.
 // Call before the call is finished.

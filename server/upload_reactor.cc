@@ -119,6 +119,12 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
       case v1::UploadClipRequest::kSamples:
         return AcceptSlice(message, request.samples());
       case v1::UploadClipRequest::kSampleSlices:
+        // No slices brings no sample: a stream of such messages would keep the upload alive
+        // (each resets its idle timeout) without ever completing the clip.
+        if (request.sample_slices().slices().empty()) {
+          return absl::InvalidArgumentError(
+              absl::StrCat("upload message ", messages_, ": sample_slices carries no slices"));
+        }
         for (const v1::ChannelSamples& slice : request.sample_slices().slices()) {
           TEMPOKEY_RETURN_IF_ERROR(AcceptSlice(message, slice));
         }

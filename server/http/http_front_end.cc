@@ -117,9 +117,13 @@ int SendApiError(mg_connection* connection, const absl::Status& status,
 // {"result": ...} / {"error": ...} for server-streaming methods.
 class HttpCallStream final : public JsonBridge::Stream {
  public:
+  // `body_watch` (SlowBodyGuard) ends once the whole body has been read.
   HttpCallStream(mg_connection* connection, const google::protobuf::MethodDescriptor& method,
-                 std::int64_t max_message_bytes)
-      : connection_(connection), method_(method), max_bytes_(max_message_bytes) {}
+                 std::int64_t max_message_bytes, SlowBodyGuard::Watch& body_watch)
+      : connection_(connection),
+        method_(method),
+        max_bytes_(max_message_bytes),
+        body_watch_(body_watch) {}
 
   absl::StatusOr<std::optional<std::string>> NextRequest() override {
     if (!method_.client_streaming()) {
@@ -195,6 +199,7 @@ class HttpCallStream final : public JsonBridge::Stream {
       if (got < 0) return absl::CancelledError("the HTTP request body could not be read");
       if (got == 0) {
         done_reading_ = true;
+        body_watch_.End();
         break;
       }
       buffer_.append(block_.data(), static_cast<std::size_t>(got));
@@ -210,6 +215,7 @@ class HttpCallStream final : public JsonBridge::Stream {
   mg_connection* const connection_;
   const google::protobuf::MethodDescriptor& method_;
   const std::int64_t max_bytes_;
+  SlowBodyGuard::Watch& body_watch_;
   std::string buffer_;
   std::vector<char> block_;
   bool done_reading_ = false;
@@ -308,6 +314,7 @@ absl::StatusOr<std::unique_ptr<HttpFrontEnd>> HttpFrontEnd::Start(const HttpOpti
     return absl::UnavailableError(absl::StrCat("cannot serve HTTP on ", options.address));
   }
   front_end->port_ = port.port;
+  front_end->guard_ = std::make_unique<SlowBodyGuard>(port.port);
   spdlog::info("http: serving the studio on {} (threads={})", front_end->url(), options.threads);
   return front_end;
 }
@@ -347,7 +354,13 @@ int HttpFrontEnd::HandleRequest(mg_connection* connection) {
         !allowed.ok()) {
       return SendApiError(connection, allowed);
     }
-    HttpCallStream stream(connection, *method, bridge_.max_message_bytes());
+    // The body must arrive at a reasonable pace (SlowBodyGuard), not a byte now and then.
+    SlowBodyGuard::Watch body_watch = guard_->Start(
+        info->remote_addr, info->remote_port,
+        SlowBodyGuard::Clock::now() + SlowBodyGuard::Allowance(options_.io_timeout,
+                                                               info->content_length,
+                                                               bridge_.max_message_bytes()));
+    HttpCallStream stream(connection, *method, bridge_.max_message_bytes(), body_watch);
     const JsonBridge::Outcome outcome =
         bridge_.Call(*method, HeaderOf(connection, "Authorization"), stream);
     return stream.Finish(outcome);

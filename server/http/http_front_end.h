@@ -22,6 +22,7 @@
 #include "absl/status/statusor.h"
 #include "server/http/http_options.h"
 #include "server/http/json_bridge.h"
+#include "server/http/slow_body_guard.h"
 #include "server/server.h"
 
 struct mg_context;
@@ -51,6 +52,9 @@ class HttpFrontEnd {
   // as the server's calls do: after Server::Drain() they have ended already. Idempotent.
   void Stop();
 
+  // Request bodies shut down for arriving too slowly (SlowBodyGuard), so far.
+  std::int64_t cut_off_bodies() const { return guard_ == nullptr ? 0 : guard_->cut_off(); }
+
   // civetweb's entry point (internal).
   int HandleRequest(mg_connection* connection);
 
@@ -63,6 +67,8 @@ class HttpFrontEnd {
   bool loopback_only_ = true;
   int port_ = 0;
   std::string host_;
+  // Started once the port is known; stopped after civetweb (Stop()), whose handlers use it.
+  std::unique_ptr<SlowBodyGuard> guard_;
   mg_context* context_ = nullptr;
 };
 

@@ -163,6 +163,19 @@ TEST(ClipConvertTest, ABadSliceInABatchIsNamedLikeASingleOne) {
   EXPECT_THAT(std::string(status.message()), ::testing::EndsWith("sample at frame 4 is NaN"));
 }
 
+// A batch of no slices brings nothing, as an empty slice does: refused, so a stream of them
+// cannot keep a Process call alive without ever completing its clip.
+TEST(ClipConvertTest, ABatchOfNoSlicesIsRefused) {
+  const core::Clip clip = MakeClip(1, 10);
+  ClipAssembler assembler;
+  ASSERT_TRUE(assembler.AddHeader(ClipHeaderToProto(clip)).ok());
+
+  absl::Status status = assembler.AddSampleSlices(v1::SampleSlices());
+
+  EXPECT_EQ(status.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(status.message(), "samples message 1: carries no slices");
+}
+
 TEST(ClipConvertTest, NonPositiveSliceBytesUsesTheDefault) {
   const core::Clip clip = MakeClip(1, 10);
 

@@ -19,6 +19,7 @@
 #include "proto/clip_convert.h"
 #include "proto/retry_hint.h"
 #include "server/job_manager.h"
+#include "server/status_util.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/process_util.h"
 #include "tempokey/core/io/file_io.h"
@@ -27,7 +28,9 @@
 namespace tempokey::testing {
 namespace {
 
+using ::testing::EndsWith;
 using ::testing::HasSubstr;
+using ::testing::StartsWith;
 
 // Not a protobuf message: field 15 with a length far past the end.
 const std::string kGarbage = std::string("\x7a\xff\xff\xff\x0f", 5) + "not a message";
@@ -103,6 +106,38 @@ TEST_F(ProtocolTest, BytesThatAreNotARequestAreInvalidArgumentOnEveryMethod) {
     EXPECT_THAT(status, GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, message)) << method;
   }
   TEMPOKEY_ASSERT_GRPC_OK(UploadClip(*stub_, MakeClip(1, 10)).status);  // still serving
+}
+
+// A message quoting a long input travels in a header, which gRPC clients refuse over 8 KiB: a
+// 100 KB page token came back as "received initial metadata size exceeds limit". The server's
+// messages are capped, so the client reads the server's own message.
+TEST_F(ProtocolTest, AMessageQuotingALongInputReachesTheClientCapped) {
+  grpc::ClientContext context;
+  SetDeadline(context);
+  v1::ListJobsRequest request;
+  request.set_page_token(std::string(100'000, 'x'));
+  v1::ListJobsResponse response;
+
+  const grpc::Status status = stub_->ListJobs(&context, request, &response);
+
+  // The server's message: page_token "xxx...x" is not a token this server issued.
+  const std::size_t full = 12 + 100'000 + 35;
+  const std::string note =
+      " ... (" + std::to_string(full - server::kMaxStatusMessageBytes) + " more bytes not shown)";
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_THAT(status.error_message(), StartsWith("page_token \"xxx"));
+  EXPECT_THAT(status.error_message(), EndsWith(note));
+  EXPECT_EQ(status.error_message().size(), server::kMaxStatusMessageBytes + note.size());
+}
+
+TEST(CappedStatusMessageTest, CutsAtACharacterBoundaryAndSaysHowMuchWasCut) {
+  const std::string short_message(server::kMaxStatusMessageBytes, 'a');
+  // A 2-byte character straddling the cap is left out whole.
+  const std::string straddling = std::string(server::kMaxStatusMessageBytes - 1, 'a') + "\xc3\xa9" + "b";
+
+  EXPECT_EQ(server::CappedStatusMessage(short_message), short_message);
+  EXPECT_EQ(server::CappedStatusMessage(straddling),
+            std::string(server::kMaxStatusMessageBytes - 1, 'a') + " ... (3 more bytes not shown)");
 }
 
 TEST_F(ProtocolTest, UnknownMethodIsUnimplementedWithAMessage) {

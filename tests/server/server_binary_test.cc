@@ -98,6 +98,20 @@ TEST(ServerBinaryTest, LoopbackIsDecidedByTheResolvedAddresses) {
   }
 }
 
+// gRPC sets SO_REUSEPORT on Linux by default: a second server on a busy port started and took a
+// share of the first one's connections without a word. It now fails to listen, and says so.
+TEST(ServerBinaryTest, ASecondServerOnAPortInUseFailsToStartInsteadOfSharingIt) {
+  std::unique_ptr<ServerProcess> first = StartInfoServer({"--workers=1"});
+  ASSERT_NE(first, nullptr);
+
+  const ProcessResult second = RunServer({"--address", first->target(), "--workers=1"});
+
+  EXPECT_EQ(second.exit_code, 1);
+  EXPECT_THAT(second.err, HasSubstr("cannot listen on " + first->target() +
+                                    " (address in use or invalid?)"));
+  EXPECT_EQ(first->Stop(), 0) << first->log();
+}
+
 TEST(ServerBinaryTest, BadFlagValueExitsWithUsageError) {
   const ProcessResult run = RunServer({"--address=127.0.0.1:0", "--queue_capacity=0"});
 

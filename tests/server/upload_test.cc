@@ -261,6 +261,12 @@ INSTANTIATE_TEST_SUITE_P(
         MalformedCase{"EmptyMessage", [](auto& r) { r[3].Clear(); },
                       grpc::StatusCode::INVALID_ARGUMENT,
                       "upload message 4 has neither header nor samples"},
+        // A batch of no slices resets the idle timeout like any message: a stream of them
+        // would hold the call (and a stream slot) for ever without completing the clip.
+        MalformedCase{"SampleSlicesWithNoSlice",
+                      [](auto& r) { r[3].Clear(); r[3].mutable_sample_slices(); },
+                      grpc::StatusCode::INVALID_ARGUMENT,
+                      "upload message 4: sample_slices carries no slices"},
         MalformedCase{"UnspecifiedKind",
                       [](auto& r) {
                         r[0].mutable_header()->mutable_channels(1)->set_kind(

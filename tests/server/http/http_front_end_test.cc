@@ -1,6 +1,11 @@
 // The HTTP front end's pieces: its options against the --address rule, the status mapping and
 // browser rules, and the JSON bridge driving a real server's handlers through its in-process
 // channel.
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -11,11 +16,13 @@
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "google/protobuf/util/json_util.h"
+#include "server/http/http_front_end.h"
 #include "server/http/http_options.h"
 #include "server/http/http_status.h"
 #include "server/http/json_bridge.h"
 #include "server/server.h"
 #include "tempokey/v1/motion_service.pb.h"
+#include "tests/server/http_util.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/test_paths.h"
 
@@ -163,6 +170,57 @@ TEST(JsonBridgeTest, CallsTheServersOwnHandlersWithJsonMessages) {
   EXPECT_EQ(c.status.code(), absl::StatusCode::kInvalidArgument);
   EXPECT_THAT(std::string(c.status.message()),
               HasSubstr("request message 1 is not a tempokey.v1.GetJobRequest in JSON"));
+}
+
+// civetweb's timeout is per read, and mg_read() waits for the whole block it asked for: a client
+// sending its body a byte at a time held a worker thread for as long as it liked (every thread,
+// with as many such clients). A body must now arrive within the I/O timeout plus its length at
+// 64 KiB/s, or its connection is shut down; the front end goes on serving. The bytes here come
+// every 10 ms, far inside the per-read timeout, so only the guard can end the request.
+TEST(HttpFrontEndTest, ARequestBodyTrickledInIsCutOffAndThePageStillServed) {
+  std::unique_ptr<Server> server = testing::StartServer(testing::TestServerOptions());
+  ASSERT_NE(server, nullptr);
+  HttpOptions options = Options("127.0.0.1:0");
+  options.web_root = testing::MakeTempDir();
+  options.io_timeout = std::chrono::milliseconds(2000);
+  absl::StatusOr<std::unique_ptr<HttpFrontEnd>> front_end = HttpFrontEnd::Start(options, *server);
+  ASSERT_TRUE(front_end.ok()) << front_end.status();
+  const int port = (*front_end)->port();
+  const int fd = testing::ConnectLoopback(port);
+  ASSERT_GE(fd, 0);
+  const std::string head =
+      "POST /tempokey.v1.MotionService/GetServerInfo HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+      "Content-Type: application/json\r\nContent-Length: 100000\r\nConnection: close\r\n\r\n";
+  ASSERT_EQ(::send(fd, head.data(), head.size(), MSG_NOSIGNAL), static_cast<ssize_t>(head.size()));
+
+  // A space at a time (JSON whitespace) until the connection ends; 60 s at most.
+  bool ended = false;
+  for (int sent = 0; sent < 6000 && !ended; ++sent) {
+    if (::send(fd, " ", 1, MSG_NOSIGNAL) != 1) {
+      ended = true;
+      break;
+    }
+    pollfd ready{.fd = fd, .events = POLLIN, .revents = 0};
+    ended = ::poll(&ready, 1, 10) > 0;  // readable: the end of the stream (or an answer)
+  }
+  const std::string response = testing::ReadToEnd(fd);
+  ::close(fd);
+  const std::optional<std::string> page = testing::HttpGet(port, "/");
+
+  EXPECT_TRUE(ended);
+  EXPECT_EQ(response, "");  // no answer: the connection was shut down
+  EXPECT_EQ((*front_end)->cut_off_bodies(), 1);
+  ASSERT_TRUE(page.has_value());
+  EXPECT_THAT(*page, ::testing::StartsWith("HTTP/1.1 404"));  // an empty web root, served
+}
+
+TEST(SlowBodyGuardTest, ABodyMayTakeTheTimeoutPlusItsLengthAtTheMinimumRate) {
+  using std::chrono::milliseconds;
+  EXPECT_EQ(SlowBodyGuard::Allowance(milliseconds(30000), 0, 1 << 20), milliseconds(30000));
+  EXPECT_EQ(SlowBodyGuard::Allowance(milliseconds(30000), 64 * 1024 * 10, 1 << 20),
+            milliseconds(40000));
+  // Unknown length (chunked): as long as the largest message.
+  EXPECT_EQ(SlowBodyGuard::Allowance(milliseconds(30000), -1, 64 * 1024 * 4), milliseconds(34000));
 }
 
 }  // namespace

@@ -1,0 +1,141 @@
+#include "server/http/slow_body_guard.h"
+
+#include <arpa/inet.h>
+#include <dirent.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+
+#include <algorithm>
+#include <cstdlib>
+#include <string_view>
+
+#include "spdlog/spdlog.h"
+
+namespace tempokey::server::http {
+namespace {
+
+// The IPv4 address and port of `address` when it is one.
+bool Ipv4Of(const sockaddr_storage& address, in_addr* host, int* port) {
+  if (address.ss_family != AF_INET) return false;
+  const auto* v4 = reinterpret_cast<const sockaddr_in*>(&address);
+  *host = v4->sin_addr;
+  *port = ntohs(v4->sin_port);
+  return true;
+}
+
+}  // namespace
+
+SlowBodyGuard::Watch& SlowBodyGuard::Watch::operator=(Watch&& other) noexcept {
+  if (this != &other) {
+    End();
+    guard_ = other.guard_;
+    id_ = other.id_;
+    other.guard_ = nullptr;
+  }
+  return *this;
+}
+
+void SlowBodyGuard::Watch::End() {
+  if (guard_ == nullptr) return;
+  guard_->End(id_);
+  guard_ = nullptr;
+}
+
+SlowBodyGuard::SlowBodyGuard(int local_port)
+    : local_port_(local_port), thread_([this] { Run(); }) {}
+
+SlowBodyGuard::~SlowBodyGuard() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stopping_ = true;
+  }
+  changed_.notify_all();
+  thread_.join();
+}
+
+SlowBodyGuard::Watch SlowBodyGuard::Start(const std::string& remote_address, int remote_port,
+                                          Clock::time_point deadline) {
+  std::uint64_t id = 0;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    id = next_id_++;
+    watched_[id] = {remote_address, remote_port, deadline};
+  }
+  changed_.notify_all();
+  return Watch(this, id);
+}
+
+SlowBodyGuard::Clock::duration SlowBodyGuard::Allowance(std::chrono::milliseconds io_timeout,
+                                                        std::int64_t content_length,
+                                                        std::int64_t max_bytes) {
+  const std::int64_t bytes = content_length >= 0 ? content_length : max_bytes;
+  return io_timeout + std::chrono::milliseconds(bytes * 1000 / kMinBytesPerSecond);
+}
+
+std::int64_t SlowBodyGuard::cut_off() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return cut_off_;
+}
+
+void SlowBodyGuard::End(std::uint64_t id) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  watched_.erase(id);
+}
+
+void SlowBodyGuard::Run() {
+  std::unique_lock<std::mutex> lock(mutex_);
+  while (!stopping_) {
+    if (watched_.empty()) {
+      changed_.wait(lock);
+      continue;
+    }
+    const auto earliest = std::min_element(
+        watched_.begin(), watched_.end(),
+        [](const auto& a, const auto& b) { return a.second.deadline < b.second.deadline; });
+    if (Clock::now() < earliest->second.deadline) {
+      changed_.wait_until(lock, earliest->second.deadline);
+      continue;
+    }
+    const Watched late = earliest->second;
+    watched_.erase(earliest);
+    ++cut_off_;
+    lock.unlock();
+    const bool cut = CutOff(late);
+    spdlog::warn("http: a request body from {}:{} did not arrive in time{}", late.remote_address,
+                 late.remote_port, cut ? "; its connection was shut down" : "");
+    lock.lock();
+  }
+}
+
+bool SlowBodyGuard::CutOff(const Watched& watched) const {
+  in_addr peer{};
+  if (inet_pton(AF_INET, watched.remote_address.c_str(), &peer) != 1) return false;
+  DIR* fds = opendir("/proc/self/fd");
+  if (fds == nullptr) return false;
+  bool cut = false;
+  while (const dirent* entry = readdir(fds)) {
+    char* end = nullptr;
+    const long fd = std::strtol(entry->d_name, &end, 10);
+    if (end == entry->d_name || *end != '\0') continue;
+    sockaddr_storage local{};
+    sockaddr_storage remote{};
+    socklen_t local_size = sizeof local;
+    socklen_t remote_size = sizeof remote;
+    in_addr local_host{}, remote_host{};
+    int local_port = 0, remote_port = 0;
+    if (getsockname(static_cast<int>(fd), reinterpret_cast<sockaddr*>(&local), &local_size) != 0 ||
+        !Ipv4Of(local, &local_host, &local_port) || local_port != local_port_ ||
+        getpeername(static_cast<int>(fd), reinterpret_cast<sockaddr*>(&remote), &remote_size) != 0 ||
+        !Ipv4Of(remote, &remote_host, &remote_port) || remote_port != watched.remote_port ||
+        remote_host.s_addr != peer.s_addr) {
+      continue;
+    }
+    // Shut down, not closed: the descriptor stays civetweb's, so it cannot be reused under it.
+    cut = shutdown(static_cast<int>(fd), SHUT_RDWR) == 0;
+    break;
+  }
+  closedir(fds);
+  return cut;
+}
+
+}  // namespace tempokey::server::http
