@@ -63,8 +63,9 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
   void Run(std::stop_token pool_stop) {
     {
       std::lock_guard lock(mu_);
-      if (finished_) {  // the client left while the call was queued
+      if (finished_) {  // the client left while the call was queued: logged and counted too
         DropInput();
+        Record("cancelled", std::chrono::steady_clock::now(), 0.0, absl::OkStatus());
         return;
       }
     }
@@ -81,17 +82,23 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
         stop_.get_token(), service_->clip_limits);
     DropInput();  // the input is no longer needed while the result streams out
     const auto ended = std::chrono::steady_clock::now();
-    const std::string_view outcome = OutcomeOf(result.status());
+    Record(OutcomeOf(result.status()), started,
+           std::chrono::duration<double, std::milli>(ended - started).count(), result.status());
+    OnResult(std::move(result));
+  }
+
+  // The call's log line and its jobs metrics: `outcome`, queued until `started`, `run_ms` of
+  // work, `error` (when not OK) in the line.
+  void Record(std::string_view outcome, std::chrono::steady_clock::time_point started,
+              double run_ms, const absl::Status& error) {
     const double queue_ms =
         std::chrono::duration<double, std::milli>(started - queued_at_).count();
-    const double run_ms = std::chrono::duration<double, std::milli>(ended - started).count();
     spdlog::info("process {} queue_wait_ms={:.1f} run_ms={:.1f} outcome={}{}", description_,
                  queue_ms, run_ms, outcome,
-                 result.ok() ? "" : absl::StrCat(" error=\"", result.status().message(), "\""));
+                 error.ok() ? "" : absl::StrCat(" error=\"", error.message(), "\""));
     if (service_->metrics != nullptr) {
       service_->metrics->RecordFinished("process", outcome, (queue_ms + run_ms) / 1000.0);
     }
-    OnResult(std::move(result));
   }
 
   void OnWriteDone(bool ok) {

@@ -566,6 +566,40 @@ TEST_F(ExportStopTest, AnExportCancelledWhileQueuedIsNotFormatted) {
   EXPECT_EQ(Exports("succeeded"), 2.0);
 }
 
+// A Process call whose client leaves while it is queued is logged and counted as cancelled when
+// its turn comes (it used to vanish from the log and the jobs metrics).
+TEST_F(ExportStopTest, AProcessCallAbandonedWhileQueuedIsCountedCancelled) {
+  std::unique_ptr<Call> running = Start(glb_);
+  ASSERT_TRUE(hook_->gate.WaitArrivals(1));
+  grpc::ClientContext context;
+  SetDeadline(context);
+  auto process = stub_->Process(&context);
+  for (const v1::ProcessRequest& request : ProcessClipRequests(MakeClip(1, 10))) {
+    ASSERT_TRUE(process->Write(request));
+  }
+  v1::ProcessRequest start;
+  *start.mutable_start()->mutable_operations() = WrapOperations();
+  ASSERT_TRUE(process->Write(start));
+  const auto deadline = std::chrono::steady_clock::now() + StartGate::kWaitLimit;
+  while (server_->pool().queue_depth() < 1 && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  ASSERT_EQ(server_->pool().queue_depth(), 1);
+  context.TryCancel();
+  const grpc::Status cancelled = process->Finish();
+  hook_->gate.Open();
+  Finish(*running);
+  // One worker: this export runs after the abandoned call's turn.
+  std::unique_ptr<Call> after = Start(bvh_);
+  Finish(*after);
+
+  EXPECT_EQ(cancelled.error_code(), grpc::StatusCode::CANCELLED);
+  const std::optional<std::string> scrape = HttpGet(server_->metrics_port(), "/metrics");
+  ASSERT_TRUE(scrape.has_value());
+  EXPECT_EQ(Sample(ParseSamples(*scrape), R"(tempokey_jobs_total{kind="process",outcome="cancelled"})"),
+            1.0);
+}
+
 TEST_F(ExportStopTest, AnExportTheDrainDeadlineReachesBeforeItBeginsIsRefusedUnavailable) {
   std::unique_ptr<Call> call = Start(bvh_);
   ASSERT_TRUE(hook_->gate.WaitArrivals(1));
