@@ -207,6 +207,14 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
             }
           }
           Record(formatted, queued_at, started);
+          if (formatted.code() == absl::StatusCode::kCancelled && pool_stop.stop_requested() &&
+              !client_cancelled_.load()) {
+            // Stopped by the drain deadline while formatting, not by its client: UNAVAILABLE,
+            // which clients retry on another server, as for a Process call.
+            formatted = absl::UnavailableError(
+                "the server is shutting down: its drain deadline passed while this export was "
+                "formatted; retry on another server");
+          }
           if (!formatted.ok()) {
             End(ToGrpcStatus(formatted, call_));
             return;

@@ -84,6 +84,14 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
     const auto ended = std::chrono::steady_clock::now();
     Record(OutcomeOf(result.status()), started,
            std::chrono::duration<double, std::milli>(ended - started).count(), result.status());
+    if (!result.ok() && result.status().code() == absl::StatusCode::kCancelled &&
+        pool_stop.stop_requested()) {
+      // Stopped by the server's drain deadline, not by its client: UNAVAILABLE, which clients
+      // retry on another server (a batch took CANCELLED for a client's own and failed the file).
+      result = absl::UnavailableError(
+          "the server is shutting down: its drain deadline passed while this call ran; retry on "
+          "another server");
+    }
     OnResult(std::move(result));
   }
 

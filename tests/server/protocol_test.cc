@@ -10,6 +10,7 @@
 #include <mutex>
 #include <string>
 #include <string_view>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -23,6 +24,7 @@
 #include "tests/server/server_test_util.h"
 #include "tests/testing/process_util.h"
 #include "tempokey/core/io/file_io.h"
+#include "tests/testing/start_gate.h"
 #include "tests/testing/test_paths.h"
 
 namespace tempokey::testing {
@@ -340,6 +342,29 @@ TEST_F(ProtocolTest, HalfClosingAfterTheStartIsTheNormalEnd) {
   absl::StatusOr<core::Clip> result = AssembleClipResult(outcome.ResultParts());
   ASSERT_TRUE(result.ok()) << result.status();
   EXPECT_EQ(*result, WrappedCopy(MakeClip(1, 40)));
+}
+
+// A Process call the drain deadline stops ends UNAVAILABLE, which clients (the CLI's batch, the
+// Python package) retry on another server; as CANCELLED a batch took it for a client's own
+// cancel and failed the file.
+TEST(ProcessProtocolTest, AProcessCallTheDrainDeadlineStopsEndsUnavailable) {
+  auto gate = std::make_shared<StartGate>();
+  server::ServerOptions options = TestServerOptions();
+  options.workers = 1;
+  options.test_hooks.on_job_start = [gate](std::string_view id) { gate->Arrive(id); };
+  std::unique_ptr<server::Server> server = StartServer(options);
+  ASSERT_NE(server, nullptr);
+  auto stub = v1::MotionService::NewStub(Connect(server->target()));
+  ProcessOutcome outcome;
+  std::thread call([&] { outcome = RunProcess(*stub, MakeClip(2, 50), WrapOperations()); });
+  ASSERT_TRUE(gate->WaitArrivals(1));
+  server->pool().RequestStopAll();  // what the drain does once its grace is over
+  gate->Open();
+  call.join();
+
+  EXPECT_THAT(outcome.status, GrpcStatusIs(grpc::StatusCode::UNAVAILABLE,
+                                           HasSubstr("its drain deadline passed while this call "
+                                                     "ran; retry on another server")));
 }
 
 TEST(RetryHintTest, FullQueueHintIsAtLeastHowLongTheRunningJobHasRun) {
