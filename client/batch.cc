@@ -288,10 +288,12 @@ absl::StatusOr<std::vector<BatchItem>> PlanBatch(const BatchPlanOptions& options
   std::vector<fs::path> found;
   auto consider = [&](const fs::directory_entry& entry) {
     const fs::path relative = entry.path().lexically_relative(root);
-    // An entry that cannot be examined (a dangling link) is skipped, not an error of the folder.
+    // Every entry named as an input but a folder is one: a dangling or looping link, a FIFO or
+    // a socket then fails when read, with the reader's message, instead of being left out of the
+    // summary without a word.
     std::error_code entry_error;
-    if (entry.is_regular_file(entry_error) && !IsHidden(relative) &&
-        InputFormat(relative, options.include_csv)) {
+    if (!IsHidden(relative) && InputFormat(relative, options.include_csv) &&
+        !entry.is_directory(entry_error)) {
       found.push_back(relative);
     }
   };

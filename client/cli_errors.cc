@@ -38,31 +38,35 @@ absl::Status ServerError(const absl::Status& status) {
                                                   ": ", status.message()));
 }
 
+std::string PrintableText(std::string_view text) {
+  std::string out;
+  out.reserve(text.size());
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const auto c = static_cast<unsigned char>(text[i]);
+    if (c == '\n' || c == '\r') {
+      out += ' ';
+    } else if (c < 0x20 || c == 0x7f) {
+      // A control byte (from a file name, a file or a server) would act on the terminal.
+      absl::StrAppend(&out, "\\x", absl::Hex(c, absl::kZeroPad2));
+    } else if (c == 0xc2 && i + 1 < text.size() &&
+               static_cast<unsigned char>(text[i + 1]) >= 0x80 &&
+               static_cast<unsigned char>(text[i + 1]) <= 0x9f) {
+      // A C1 control character in UTF-8 (U+0080 to U+009F; U+009B starts a terminal sequence).
+      absl::StrAppend(&out, "\\u00",
+                      absl::Hex(static_cast<unsigned char>(text[i + 1]), absl::kZeroPad2));
+      ++i;
+    } else {
+      out += static_cast<char>(c);
+    }
+  }
+  return out;
+}
+
 std::string ErrorLine(const absl::Status& status) {
   std::string_view message = core::AsStd(status.message());
   const std::string code = absl::StatusCodeToString(status.code());
   if (message.empty()) message = code;
-  std::string line = "error: ";
-  line.reserve(line.size() + message.size());
-  for (std::size_t i = 0; i < message.size(); ++i) {
-    const auto c = static_cast<unsigned char>(message[i]);
-    if (c == '\n' || c == '\r') {
-      line += ' ';
-    } else if (c < 0x20 || c == 0x7f) {
-      // A control byte (from a file or a server) would act on the terminal: shown as \xNN.
-      absl::StrAppend(&line, "\\x", absl::Hex(c, absl::kZeroPad2));
-    } else if (c == 0xc2 && i + 1 < message.size() &&
-               static_cast<unsigned char>(message[i + 1]) >= 0x80 &&
-               static_cast<unsigned char>(message[i + 1]) <= 0x9f) {
-      // A C1 control character in UTF-8 (U+0080 to U+009F; U+009B starts a terminal sequence).
-      absl::StrAppend(&line, "\\u00",
-                      absl::Hex(static_cast<unsigned char>(message[i + 1]), absl::kZeroPad2));
-      ++i;
-    } else {
-      line += static_cast<char>(c);
-    }
-  }
-  return line;
+  return absl::StrCat("error: ", PrintableText(message));
 }
 
 }  // namespace tempokey::client

@@ -44,9 +44,13 @@ int ExitCodeFor(const absl::Status& status);
 // user can tell the server's refusals from local ones.
 absl::Status ServerError(const absl::Status& status);
 
-// "error: <message>" with line breaks in the message turned into spaces, so an error is always
-// exactly one line, and other control characters (C0, DEL, C1) shown as \xNN or \u00NN, so a
-// message quoting a file or a server cannot act on the terminal. No trailing newline.
+// `text` on one line for a terminal: line breaks turned into spaces, other control characters
+// (C0, DEL, C1) shown as \xNN or \u00NN, so what it quotes (a file name, a file, a server's
+// message) cannot act on the terminal.
+std::string PrintableText(std::string_view text);
+
+// "error: <message>", the message made PrintableText(): an error is always exactly one line.
+// No trailing newline.
 std::string ErrorLine(const absl::Status& status);
 
 }  // namespace tempokey::client

@@ -6,6 +6,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "client/cli_errors.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
@@ -61,15 +62,18 @@ std::string RenderBatchBar(const BatchCounts& counts, double elapsed_seconds, in
 std::string FormatBatchLogLine(const BatchFileResult& file, int finished, int total) {
   const int digits = static_cast<int>(absl::StrCat(total).size());
   const std::string head = absl::StrFormat("[%*d/%d] ", digits, finished, total);
+  // Names and messages as a terminal should show them (a file name may hold any byte).
+  const std::string name = PrintableText(file.name);
+  const std::string output = PrintableText(file.output_path);
   if (!file.status.ok()) {
-    return absl::StrFormat("%sfailed %s (%s, %.3f s): %s", head, file.name,
+    return absl::StrFormat("%sfailed %s (%s, %.3f s): %s", head, name,
                            Plural(file.attempts, "attempt"), file.seconds,
-                           file.status.message());
+                           PrintableText(core::AsStd(file.status.message())));
   }
   if (file.skipped) {
-    return absl::StrFormat("%sskipped %s -> %s (up to date)", head, file.name, file.output_path);
+    return absl::StrFormat("%sskipped %s -> %s (up to date)", head, name, output);
   }
-  return absl::StrFormat("%sok %s -> %s (%s, %.3f s)", head, file.name, file.output_path,
+  return absl::StrFormat("%sok %s -> %s (%s, %.3f s)", head, name, output,
                          Plural(file.attempts, "attempt"), file.seconds);
 }
 

@@ -2,6 +2,7 @@
 // on folders of real captures; the summary, the files written, failures, and scale-out over a
 // round-robin list of servers with one of them killed mid-batch.
 #include <signal.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <filesystem>
@@ -70,7 +71,7 @@ TEST_F(BatchTest, EveryClipOfTheFolderIsProcessedAndSummarized) {
   const std::string in = FolderOf("in", sources);
   ASSERT_TRUE(core::WriteFileAtomically(in + "/notes.txt", "not a clip").ok());
   ASSERT_TRUE(core::WriteFileAtomically(in + "/.hidden.bvh", "not read").ok());
-  fs::create_symlink(in + "/gone.bvh", in + "/dangling.bvh");  // skipped, not fatal
+  fs::create_directory(in + "/folder.bvh");  // a folder, not a clip: skipped
 
   ProcessResult run = Batch({in, "-o", Path("out"), "--ops", PipelineFile(kRetimeThenReduce),
                              "--jobs", "3", "--summary", Path("summary.json")});
@@ -261,6 +262,24 @@ TEST_F(BatchTest, UnreachableServerFailsEachFileAfterItsAttempts) {
     EXPECT_THAT(entry.error, HasSubstr("server: UNAVAILABLE: ")) << name;
   }
   EXPECT_TRUE(FilesIn(Path("out")).empty());
+}
+
+// An entry named as an input that cannot be read as one (a dangling or looping link) is a failed
+// file of the summary, with the reader's message; it used to be left out without a word.
+TEST_F(BatchTest, InputsThatAreBrokenLinksAreReportedFailedNotLeftOut) {
+  const std::string in = FolderOf("in", {SharedBvh("bandai/dataset-1_walk_active_001.bvh")});
+  ASSERT_EQ(::symlink("/nonexistent/clip.bvh", (in + "/dangling.bvh").c_str()), 0);
+  ASSERT_EQ(::symlink("loop.bvh", (in + "/loop.bvh").c_str()), 0);
+
+  ProcessResult run = Batch({in, "-o", Path("out"), "--ops", PipelineFile(kRetimeThenReduce)});
+
+  EXPECT_EQ(run.exit_code, 1);
+  const Summary summary = ParseSummary(run.out);
+  EXPECT_EQ(summary.files, 3);
+  EXPECT_EQ(summary.failed, 2);
+  EXPECT_EQ(summary.by_input.at("dangling.bvh").error, in + "/dangling.bvh: no such file");
+  EXPECT_THAT(summary.by_input.at("loop.bvh").error, HasSubstr("too many levels of symbolic links"));
+  EXPECT_EQ(summary.by_input.at("dataset-1_walk_active_001.bvh").status, "ok");
 }
 
 // A batch with more files in flight (--jobs 8) than its server takes (one worker, a queue of

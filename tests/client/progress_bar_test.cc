@@ -84,6 +84,16 @@ TEST(ProgressBarTest, LogLinesNameTheFileItsOutputAndOutcome) {
             "numbers after OFFSET, found 1");
 }
 
+// A file name may hold any byte: a line break would split the line, an escape sequence act on
+// the terminal. They are shown as the error line shows them.
+TEST(ProgressBarTest, LogLinesShowControlCharactersInNamesEscaped) {
+  BatchFileResult odd{.name = "a\nb\x1b[2J.bvh", .output_path = "out/a\nb\x1b[2J.json",
+                      .attempts = 1, .seconds = 0.5};
+
+  EXPECT_EQ(FormatBatchLogLine(odd, 1, 1),
+            "[1/1] ok a b\\x1b[2J.bvh -> out/a b\\x1b[2J.json (1 attempt, 0.500 s)");
+}
+
 TEST(ProgressBarTest, LinesModeWritesOneLinePerFileAndCounts) {
   std::ostringstream err;
   BatchProgressDisplay display(err, ProgressMode::kLines, 3, 0);

@@ -15,6 +15,7 @@
 #include "absl/strings/str_cat.h"
 #include "tempokey/core/model/numbers.h"
 #include "tempokey/core/model/status.h"
+#include "text_scan.h"
 
 namespace tempokey::core {
 namespace {
@@ -210,6 +211,11 @@ absl::Status JsonErrorAt(std::string_view source, const JsonValue& at, std::stri
 
 void AppendJsonString(std::string& out, std::string_view text) {
   out += '"';
+  // JSON text is UTF-8: a byte that is not (a Latin-1 file name) becomes U+FFFD.
+  const std::string valid = text_scan::FindNonText(text) == std::string_view::npos
+                                ? std::string()
+                                : text_scan::ValidUtf8(text);
+  if (!valid.empty()) text = valid;
   for (char ch : text) {
     switch (ch) {
       case '"': out += "\\\""; break;

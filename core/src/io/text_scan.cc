@@ -50,8 +50,25 @@ std::size_t FindNonText(std::string_view text) {
   return std::string_view::npos;
 }
 
+std::string ValidUtf8(std::string_view text) {
+  const auto* s = reinterpret_cast<const unsigned char*>(text.data());
+  std::string out;
+  out.reserve(text.size());
+  for (std::size_t i = 0; i < text.size();) {
+    const std::size_t length = s[i] < 0x80 ? 1 : Utf8SequenceLength(s + i, text.size() - i);
+    if (length == 0) {
+      out += "\xEF\xBF\xBD";  // U+FFFD REPLACEMENT CHARACTER
+      ++i;
+    } else {
+      out.append(text.substr(i, length));
+      i += length;
+    }
+  }
+  return out;
+}
+
 std::string FileStem(std::string_view path) {
-  return std::filesystem::path(std::string(path)).stem().string();
+  return ValidUtf8(std::filesystem::path(std::string(path)).stem().string());
 }
 
 }  // namespace tempokey::core::text_scan

@@ -29,7 +29,12 @@ inline bool IsControl(unsigned char c) { return (c < 0x20 && !kIsSpace[c]) || c 
 // or npos.
 std::size_t FindNonText(std::string_view text);
 
-// The file name of `path` without directory and last extension: "data/walk.bvh" -> "walk".
+// `text` with every byte that does not start a valid UTF-8 sequence replaced by U+FFFD (a clip
+// name from a Latin-1 file name must go into protobuf strings and JSON, which hold UTF-8).
+std::string ValidUtf8(std::string_view text);
+
+// The file name of `path` without directory and last extension: "data/walk.bvh" -> "walk"; as
+// ValidUtf8().
 std::string FileStem(std::string_view path);
 
 }  // namespace tempokey::core::text_scan

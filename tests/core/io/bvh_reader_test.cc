@@ -64,6 +64,14 @@ std::string ReplaceAll(std::string text, const std::string& from, const std::str
   return text;
 }
 
+// The clip's name comes from the file name, which may be any bytes (Latin-1 "caf\xe9.bvh"): it
+// goes into protobuf strings and JSON, which hold UTF-8 (the CLI failed with a serialization error
+// and a misleading message), so a byte that is not UTF-8 becomes U+FFFD.
+TEST(BvhReaderTest, ANameFromAFileNameThatIsNotUtf8IsMadeValid) {
+  EXPECT_EQ(Parse(kUnixText, "in/caf\xe9.bvh").name, "caf\xEF\xBF\xBD");
+  EXPECT_EQ(Parse(kUnixText, "in/caf\xc3\xa9.bvh").name, "caf\xc3\xa9");
+}
+
 TEST(BvhReaderTest, StoresSamplesChannelMajorInColumnOrder) {
   const Clip clip = Parse(kUnixText);
 

@@ -29,6 +29,16 @@ TEST(JsonTest, ReadsNestedValuesWithTheirPositions) {
   EXPECT_EQ(fps->Find("x"), nullptr);  // not an object
 }
 
+// JSON is UTF-8: a name from a Latin-1 file name ("caf\xe9") is written with U+FFFD in place of
+// the byte that is not (a batch summary with the raw byte was not JSON any reader took).
+TEST(JsonTest, AStringThatIsNotUtf8IsWrittenWithReplacementCharacters) {
+  std::string out;
+  AppendJsonString(out, "caf\xe9 \xc3\xa9\n");
+
+  EXPECT_EQ(out, "\"caf\xEF\xBF\xBD \xc3\xa9\\n\"");
+  EXPECT_TRUE(ParseJson(out, "s.json").ok());
+}
+
 TEST(JsonTest, DecodesStringEscapes) {
   absl::StatusOr<JsonValue> root = ParseJson(R"("a\"b\\c\n\u0041")", "s.json");
   ASSERT_TRUE(root.ok()) << root.status();

@@ -46,7 +46,8 @@ absl::StatusOr<JsonValue> ParseJson(std::string_view text, std::string_view sour
 // the place of the value in the document it was parsed from.
 absl::Status JsonErrorAt(std::string_view source, const JsonValue& at, std::string_view what);
 
-// Appends `text` to `out` as a JSON string literal (quotes, escapes of '"', '\\' and controls).
+// Appends `text` to `out` as a JSON string literal (quotes, escapes of '"', '\\' and controls;
+// a byte that does not start valid UTF-8, as in a Latin-1 file name, as U+FFFD: JSON is UTF-8).
 void AppendJsonString(std::string& out, std::string_view text);
 
 }  // namespace tempokey::core
