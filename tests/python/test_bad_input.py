@@ -26,7 +26,7 @@ import unittest
 import tempokey as tk
 
 from test_python_client import (CALL_TIMEOUT_SECONDS, CLI_BINARY, CMU_BVH, EXAMPLE, PYTHON,
-                                SUBPROCESS_TIMEOUT_SECONDS, RunningServer)
+                                SUBPROCESS_TIMEOUT_SECONDS, ModuleServer)
 
 # A FIFO test's silence limit: short, since the writer under test never writes.
 SHORT_IDLE_SECONDS = 0.2
@@ -36,22 +36,9 @@ WRITER_JOIN_SECONDS = 60
 SMALL_BVH = ("HIERARCHY\nROOT Hips\n{\n\tOFFSET 0 0 0\n\tCHANNELS 1 Xposition\n}\nMOTION\n"
              "Frames: 2\nFrame Time: 0.1\n1\n2\n")
 
-_server = None
-
-
-def setUpModule():
-    global _server
-    _server = RunningServer().__enter__()
-
-
-def tearDownModule():
-    try:
-        status = _server.stop()
-        if status != 0:
-            raise AssertionError("tempokey-server exited %d after SIGTERM: %s"
-                                 % (status, _server.log()))
-    finally:
-        _server.__exit__(None, None, None)
+_server = ModuleServer()
+setUpModule = _server.start
+tearDownModule = _server.stop
 
 
 def cli_error(path):

@@ -149,22 +149,33 @@ def run_cli(*args):
                           timeout=SUBPROCESS_TIMEOUT_SECONDS)
 
 
-_server = None
+class ModuleServer:
+    """One RunningServer for a test module: `setUpModule = SERVER.start`, `tearDownModule =
+    SERVER.stop`; its address is `SERVER.address` in between. Stopping checks the drain's exit."""
+
+    def __init__(self):
+        self._server = None
+
+    @property
+    def address(self):
+        return self._server.address
+
+    def start(self):
+        self._server = RunningServer().__enter__()
+
+    def stop(self):
+        try:
+            status = self._server.stop()
+            if status != 0:
+                raise AssertionError("tempokey-server exited %d after SIGTERM: %s"
+                                     % (status, self._server.log()))
+        finally:
+            self._server.__exit__(None, None, None)
 
 
-def setUpModule():
-    global _server
-    _server = RunningServer().__enter__()
-
-
-def tearDownModule():
-    try:
-        status = _server.stop()
-        if status != 0:
-            raise AssertionError("tempokey-server exited %d after SIGTERM: %s"
-                                 % (status, _server.log()))
-    finally:
-        _server.__exit__(None, None, None)
+_server = ModuleServer()
+setUpModule = _server.start
+tearDownModule = _server.stop
 
 
 class ServerTestCase(unittest.TestCase):
