@@ -63,9 +63,10 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
   void Run(std::stop_token pool_stop) {
     {
       std::lock_guard lock(mu_);
-      if (finished_) {  // the client left while the call was queued: logged and counted too
+      if (finished_) {  // ended while queued (its client left, an abort): logged and counted too
         DropInput();
-        Record("cancelled", std::chrono::steady_clock::now(), 0.0, absl::OkStatus());
+        Record(OutcomeOf(finished_status_), std::chrono::steady_clock::now(), 0.0,
+               finished_status_);
         return;
       }
     }
@@ -277,6 +278,7 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
 
   void FinishLocked(const absl::Status& status) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_) {
     finished_ = true;
+    finished_status_ = status;
     slicer_.reset();
     if (slot_ != nullptr) slot_->Release();
     reactor_->Finish(ToGrpcStatus(status, call_));
@@ -298,6 +300,7 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
   ProcessReactorBase* reactor_ ABSL_GUARDED_BY(mu_);  // valid until finished_
   grpc::CallbackServerContext* const call_;
   bool finished_ ABSL_GUARDED_BY(mu_) = false;
+  absl::Status finished_status_ ABSL_GUARDED_BY(mu_);  // what the call ended with
   bool writing_ ABSL_GUARDED_BY(mu_) = false;
   bool result_ready_ ABSL_GUARDED_BY(mu_) = false;
   ProgressThrottle throttle_ ABSL_GUARDED_BY(mu_){service_->options.process_progress_interval};

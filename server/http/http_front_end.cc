@@ -224,6 +224,15 @@ class HttpCallStream final : public JsonBridge::Stream {
   std::string single_response_;
 };
 
+// Reads what is left of a refused call's body and returns `code`: civetweb would read it after
+// the handler returns, out of the SlowBodyGuard's watch; read here, it is read under it.
+int DiscardBody(mg_connection* connection, int code) {
+  std::vector<char> block(kReadBlock);  // on the heap: civetweb's threads have small stacks
+  while (mg_read(connection, block.data(), block.size()) > 0) {
+  }
+  return code;
+}
+
 int HandleRequestThunk(mg_connection* connection, void* front_end) {
   return static_cast<HttpFrontEnd*>(front_end)->HandleRequest(connection);
 }
@@ -307,14 +316,15 @@ absl::StatusOr<std::unique_ptr<HttpFrontEnd>> HttpFrontEnd::Start(const HttpOpti
     return absl::UnavailableError(absl::StrCat("cannot serve HTTP on ", options.address, ": ",
                                                error_text[0] != 0 ? error_text : "civetweb failed"));
   }
-  mg_set_request_handler(front_end->context_, "/", HandleRequestThunk, front_end.get());
   mg_server_port port;
   std::memset(&port, 0, sizeof port);
   if (mg_get_server_ports(front_end->context_, 1, &port) < 1) {
     return absl::UnavailableError(absl::StrCat("cannot serve HTTP on ", options.address));
   }
   front_end->port_ = port.port;
+  // Before the handler: a request may come in as soon as it is set, and it uses the guard.
   front_end->guard_ = std::make_unique<SlowBodyGuard>(port.port);
+  mg_set_request_handler(front_end->context_, "/", HandleRequestThunk, front_end.get());
   spdlog::info("http: serving the studio on {} (threads={})", front_end->url(), options.threads);
   return front_end;
 }
@@ -337,29 +347,30 @@ int HttpFrontEnd::HandleRequest(mg_connection* connection) {
   const std::string_view verb = info->request_method;
   const std::string_view path = info->local_uri != nullptr ? info->local_uri : "";
   if (StartsWith(path, kApiPrefix)) {
-    if (verb != "POST") {
-      SendText(connection, 405, "application/json",
-               StatusToJson(absl::InvalidArgumentError("API calls are POST requests")) + "\n",
-               "Allow: POST\r\n");
-      return 405;
-    }
-    const google::protobuf::MethodDescriptor* method = JsonBridge::FindMethod(path);
-    if (method == nullptr) {
-      return SendApiError(connection, absl::UnimplementedError(absl::StrCat(
-                                          "no method ", core::AsAbsl(path.substr(1)), " in this server")));
-    }
-    if (absl::Status allowed = CheckApiRequest(
-            HeaderOf(connection, "Content-Type"), HeaderOf(connection, "Origin"),
-            HeaderOf(connection, "Host"), loopback_only_ && server_.options().auth_tokens.empty());
-        !allowed.ok()) {
-      return SendApiError(connection, allowed);
-    }
-    // The body must arrive at a reasonable pace (SlowBodyGuard), not a byte now and then.
+    // The body must arrive at a reasonable pace (SlowBodyGuard), not a byte now and then; also
+    // when the call is refused below, since civetweb reads the rest of the body after it.
     SlowBodyGuard::Watch body_watch = guard_->Start(
         info->remote_addr, info->remote_port,
         SlowBodyGuard::Clock::now() + SlowBodyGuard::Allowance(options_.io_timeout,
                                                                info->content_length,
                                                                bridge_.max_message_bytes()));
+    if (verb != "POST") {
+      SendText(connection, 405, "application/json",
+               StatusToJson(absl::InvalidArgumentError("API calls are POST requests")) + "\n",
+               "Allow: POST\r\n");
+      return DiscardBody(connection, 405);
+    }
+    const google::protobuf::MethodDescriptor* method = JsonBridge::FindMethod(path);
+    if (method == nullptr) {
+      return DiscardBody(connection, SendApiError(connection, absl::UnimplementedError(absl::StrCat(
+                                          "no method ", core::AsAbsl(path.substr(1)), " in this server"))));
+    }
+    if (absl::Status allowed = CheckApiRequest(
+            HeaderOf(connection, "Content-Type"), HeaderOf(connection, "Origin"),
+            HeaderOf(connection, "Host"), loopback_only_ && server_.options().auth_tokens.empty());
+        !allowed.ok()) {
+      return DiscardBody(connection, SendApiError(connection, allowed));
+    }
     HttpCallStream stream(connection, *method, bridge_.max_message_bytes(), body_watch);
     const JsonBridge::Outcome outcome =
         bridge_.Call(*method, HeaderOf(connection, "Authorization"), stream);

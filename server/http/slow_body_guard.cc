@@ -68,8 +68,13 @@ SlowBodyGuard::Watch SlowBodyGuard::Start(const std::string& remote_address, int
 SlowBodyGuard::Clock::duration SlowBodyGuard::Allowance(std::chrono::milliseconds io_timeout,
                                                         std::int64_t content_length,
                                                         std::int64_t max_bytes) {
-  const std::int64_t bytes = content_length >= 0 ? content_length : max_bytes;
-  return io_timeout + std::chrono::milliseconds(bytes * 1000 / kMinBytesPerSecond);
+  // No more than the largest message counts: a body declaring more is refused at that size
+  // anyway, and a declared 10^15 bytes must not buy years (or overflow).
+  const std::int64_t bytes =
+      content_length >= 0 ? std::min(content_length, max_bytes) : max_bytes;
+  return io_timeout + std::chrono::milliseconds(bytes / kMinBytesPerSecond * 1000 +
+                                                bytes % kMinBytesPerSecond * 1000 /
+                                                    kMinBytesPerSecond);
 }
 
 std::int64_t SlowBodyGuard::cut_off() const {
@@ -98,12 +103,13 @@ void SlowBodyGuard::Run() {
     }
     const Watched late = earliest->second;
     watched_.erase(earliest);
-    ++cut_off_;
     lock.unlock();
     const bool cut = CutOff(late);
     spdlog::warn("http: a request body from {}:{} did not arrive in time{}", late.remote_address,
-                 late.remote_port, cut ? "; its connection was shut down" : "");
+                 late.remote_port,
+                 cut ? "; its connection was shut down" : "; its connection was not found alone");
     lock.lock();
+    if (cut) ++cut_off_;
   }
 }
 
@@ -112,7 +118,10 @@ bool SlowBodyGuard::CutOff(const Watched& watched) const {
   if (inet_pton(AF_INET, watched.remote_address.c_str(), &peer) != 1) return false;
   DIR* fds = opendir("/proc/self/fd");
   if (fds == nullptr) return false;
-  bool cut = false;
+  // The one socket from that peer to the front end's port: with the front end on 0.0.0.0 one
+  // peer address and port may reach two local addresses, and then none is cut.
+  int found = -1;
+  int matches = 0;
   while (const dirent* entry = readdir(fds)) {
     char* end = nullptr;
     const long fd = std::strtol(entry->d_name, &end, 10);
@@ -130,12 +139,12 @@ bool SlowBodyGuard::CutOff(const Watched& watched) const {
         remote_host.s_addr != peer.s_addr) {
       continue;
     }
-    // Shut down, not closed: the descriptor stays civetweb's, so it cannot be reused under it.
-    cut = shutdown(static_cast<int>(fd), SHUT_RDWR) == 0;
-    break;
+    found = static_cast<int>(fd);
+    ++matches;
   }
   closedir(fds);
-  return cut;
+  // Shut down, not closed: the descriptor stays civetweb's, so it cannot be reused under it.
+  return matches == 1 && shutdown(found, SHUT_RDWR) == 0;
 }
 
 }  // namespace tempokey::server::http

@@ -47,13 +47,13 @@ class SlowBodyGuard {
   };
   Watch Start(const std::string& remote_address, int remote_port, Clock::time_point deadline);
 
-  // How long a body may take: the I/O timeout, plus its length at kMinBytesPerSecond (a body of
-  // unknown length counts as `max_bytes`).
+  // How long a body may take: the I/O timeout, plus its length at kMinBytesPerSecond, at most
+  // `max_bytes` counted (a body of unknown length counts as `max_bytes`).
   static Clock::duration Allowance(std::chrono::milliseconds io_timeout,
                                    std::int64_t content_length, std::int64_t max_bytes);
   static constexpr std::int64_t kMinBytesPerSecond = 64 * 1024;
 
-  // Bodies cut off so far.
+  // Connections shut down so far.
   std::int64_t cut_off() const;
 
  private:
@@ -65,7 +65,8 @@ class SlowBodyGuard {
   void End(std::uint64_t id);
   void Run();
   // Shuts down the socket of this process connected from `watched`'s peer to local_port_.
-  // False when none is found (the connection is gone already).
+  // False when none is found (the connection is gone already) or more than one (the same peer
+  // on two local addresses: which is late cannot be told).
   bool CutOff(const Watched& watched) const;
 
   const int local_port_;

@@ -11,6 +11,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "gmock/gmock.h"
@@ -212,6 +213,25 @@ TEST(HttpFrontEndTest, ARequestBodyTrickledInIsCutOffAndThePageStillServed) {
   EXPECT_EQ((*front_end)->cut_off_bodies(), 1);
   ASSERT_TRUE(page.has_value());
   EXPECT_THAT(*page, ::testing::StartsWith("HTTP/1.1 404"));  // an empty web root, served
+
+  // A call refused at once (a form's content type) is answered, and the rest of its body is
+  // read under the same watch: civetweb would read it after the handler, unwatched.
+  const int refused = testing::ConnectLoopback(port);
+  ASSERT_GE(refused, 0);
+  const std::string form =
+      "POST /tempokey.v1.MotionService/GetServerInfo HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+      "Content-Type: text/plain\r\nContent-Length: 100000\r\n\r\n";
+  ASSERT_EQ(::send(refused, form.data(), form.size(), MSG_NOSIGNAL),
+            static_cast<ssize_t>(form.size()));
+  for (int sent = 0; sent < 6000 && (*front_end)->cut_off_bodies() < 2; ++sent) {
+    if (::send(refused, " ", 1, MSG_NOSIGNAL) != 1) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  const std::string refusal = testing::ReadToEnd(refused);
+  ::close(refused);
+
+  EXPECT_EQ((*front_end)->cut_off_bodies(), 2);
+  EXPECT_THAT(refusal, ::testing::StartsWith("HTTP/1.1 4"));
 }
 
 TEST(SlowBodyGuardTest, ABodyMayTakeTheTimeoutPlusItsLengthAtTheMinimumRate) {
@@ -221,6 +241,12 @@ TEST(SlowBodyGuardTest, ABodyMayTakeTheTimeoutPlusItsLengthAtTheMinimumRate) {
             milliseconds(40000));
   // Unknown length (chunked): as long as the largest message.
   EXPECT_EQ(SlowBodyGuard::Allowance(milliseconds(30000), -1, 64 * 1024 * 4), milliseconds(34000));
+  // A declared length beyond the largest message counts as that: 10^15 bytes bought years (and
+  // 10^18 overflowed into a deadline already past).
+  EXPECT_EQ(SlowBodyGuard::Allowance(milliseconds(30000), 1'000'000'000'000'000, 64 * 1024 * 16),
+            milliseconds(46000));
+  EXPECT_EQ(SlowBodyGuard::Allowance(milliseconds(30000), INT64_MAX, 64 * 1024 * 16),
+            milliseconds(46000));
 }
 
 }  // namespace
