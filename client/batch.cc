@@ -74,13 +74,16 @@ std::optional<std::chrono::milliseconds> RetryDelay(const absl::Status& status, 
 
 // The batch's calls in flight, at most `size` (--jobs), fewer once a server's queue was full:
 // a call refused with RESOURCE_EXHAUSTED while n of the batch's calls were in flight shows that
-// the servers take at most n - 1 of them, so from then on the batch keeps at most that many in
-// flight (never fewer than one). Its refused files then wait for one of its own calls to end
-// rather than spend their attempts on a queue the batch itself keeps full. The limit only
-// shrinks: a batch is one run, and a server that was full may be full again.
+// the servers take at most n - 1 of them, so the batch keeps at most that many in flight (never
+// fewer than one). Its refused files then wait for one of its own calls to end rather than
+// spend their attempts on a queue the batch itself keeps full. The room comes back one call at
+// a time, after 4 x the limit calls in a row succeed (the queue may have been full of another
+// client's work, or of one small server's among several).
 class CallWindow {
  public:
-  explicit CallWindow(int size) : limit_(std::max(1, size)) {}
+  enum class Outcome { kOk, kQueueFull, kOther };
+
+  explicit CallWindow(int size) : size_(std::max(1, size)), limit_(size_) {}
 
   // Waits until a call may start, and counts it.
   void Enter() {
@@ -88,21 +91,29 @@ class CallWindow {
     room_.wait(lock, [this] { return in_flight_ < limit_; });
     ++in_flight_;
   }
-  // A call ended; `queue_full`: the server refused it for a full queue.
-  void Leave(bool queue_full) {
+  // A call ended with `outcome`.
+  void Leave(Outcome outcome) {
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      if (queue_full) limit_ = std::max(1, std::min(limit_, in_flight_ - 1));
+      if (outcome == Outcome::kQueueFull) {
+        limit_ = std::max(1, std::min(limit_, in_flight_ - 1));
+        successes_ = 0;
+      } else if (outcome == Outcome::kOk && limit_ < size_ && ++successes_ >= 4 * limit_) {
+        ++limit_;
+        successes_ = 0;
+      }
       --in_flight_;
     }
     room_.notify_all();
   }
 
  private:
+  const int size_;
   std::mutex mutex_;
   std::condition_variable room_;
   int in_flight_ = 0;
   int limit_;
+  int successes_ = 0;  // calls in a row that succeeded since the limit last changed
 };
 
 // Frames, keys and the last reduction's max error of a finished pipeline.
@@ -163,8 +174,11 @@ BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
       ++file.attempts;
       window.Enter();
       absl::StatusOr<core::PipelineResult> result = client.Process(input, part);
-      window.Leave(!result.ok() && result.status().code() == absl::StatusCode::kResourceExhausted &&
-                   wire::GetRetryAfter(result.status()).has_value());
+      window.Leave(result.ok() ? CallWindow::Outcome::kOk
+                   : result.status().code() == absl::StatusCode::kResourceExhausted &&
+                           wire::GetRetryAfter(result.status()).has_value()
+                       ? CallWindow::Outcome::kQueueFull
+                       : CallWindow::Outcome::kOther);
       if (result.ok()) return result;
       const std::optional<std::chrono::milliseconds> delay =
           RetryDelay(result.status(), file.attempts, options, random);
@@ -207,25 +221,6 @@ BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
   return finish(absl::OkStatus());
 }
 
-// A recursive batch whose OUTDIR lies below DIR would take its own outputs for inputs on the
-// next run (a folder deeper each time), or write over the clips of that folder.
-absl::Status CheckOutputDirNotBelow(const fs::path& root, const std::string& output_dir) {
-  std::error_code error;
-  const fs::path outputs = fs::weakly_canonical(output_dir, error);
-  const fs::path inputs = fs::weakly_canonical(root, error);
-  if (error || outputs == inputs) return absl::OkStatus();  // OUTDIR = DIR: outputs beside inputs
-  for (fs::path above = outputs.parent_path(); !above.empty(); above = above.parent_path()) {
-    if (above == inputs) {
-      return UsageError(absl::StrCat("batch --recursive: OUTDIR ", output_dir,
-                                     " lies inside DIR ", root.string(),
-                                     ", so its files would be taken as inputs; choose an OUTDIR "
-                                     "outside DIR"));
-    }
-    if (above == above.root_path()) break;
-  }
-  return absl::OkStatus();
-}
-
 // Refuses a plan in which two inputs write one output (walk.bvh and walk.BVH, or walk.csv, whose
 // runs would overwrite each other's), or an output is another file's input (it would replace a
 // clip before or after that clip is read). An output that is its own input is left to
@@ -240,16 +235,13 @@ absl::Status CheckOutputsApart(std::span<const BatchItem> items) {
                                      "; rename one, or run them in separate batches"));
     }
   }
-  // Inputs by device and inode, and by normal absolute path (an output not written yet).
+  // Inputs by device and inode (an output that does not exist yet is no input).
   std::map<std::pair<dev_t, ino_t>, const BatchItem*> input_by_inode;
-  std::map<fs::path, const BatchItem*> input_by_path;
   for (const BatchItem& item : items) {
     struct stat info {};
     if (::stat(item.input_path.c_str(), &info) == 0) {
       input_by_inode.emplace(std::make_pair(info.st_dev, info.st_ino), &item);
     }
-    std::error_code error;
-    input_by_path.emplace(fs::weakly_canonical(item.input_path, error), &item);
   }
   for (const BatchItem& item : items) {
     const BatchItem* input = nullptr;
@@ -257,10 +249,6 @@ absl::Status CheckOutputsApart(std::span<const BatchItem> items) {
     if (::stat(item.output_path.c_str(), &info) == 0) {
       const auto at = input_by_inode.find({info.st_dev, info.st_ino});
       if (at != input_by_inode.end()) input = at->second;
-    } else {
-      std::error_code error;
-      const auto at = input_by_path.find(fs::weakly_canonical(item.output_path, error));
-      if (!error && at != input_by_path.end()) input = at->second;
     }
     if (input != nullptr && input != &item) {
       return UsageError(absl::StrCat("batch: the output of ", item.name, ", ", item.output_path,
@@ -298,7 +286,8 @@ absl::StatusOr<std::vector<BatchItem>> PlanBatch(const BatchPlanOptions& options
     }
   };
   if (options.recursive) {
-    TEMPOKEY_RETURN_IF_ERROR(CheckOutputDirNotBelow(root, options.output_dir));
+    // An OUTDIR inside DIR is walked too: a clip there is an input, and CheckOutputsApart()
+    // refuses a plan that would write over one (a re-run over last run's .bvh outputs among them).
     fs::recursive_directory_iterator it(root, error);
     for (; !error && it != fs::recursive_directory_iterator(); it.increment(error)) consider(*it);
   } else {

@@ -48,9 +48,9 @@ struct BatchPlanOptions {
 // Errors: kNotFound / kInvalidArgument for a missing input folder or one that is a file;
 // kInvalidArgument "DIR: no .bvh files" when there is nothing to do; kUnavailable when a folder
 // cannot be read; usage errors for a keyed output format with a pipeline that ends sampled, for
-// a recursive batch whose output_dir lies inside input_dir (its outputs would be the next run's
-// inputs), for two inputs with one output ("batch: walk.BVH and walk.bvh would both be written
-// to out/walk.json; ...") and for an output that is another file's input.
+// two inputs with one output ("batch: walk.BVH and walk.bvh would both be written to
+// out/walk.json; ...") and for an output that is another file's input (an output_dir inside
+// input_dir whose clips, or last run's outputs, are inputs too).
 absl::StatusOr<std::vector<BatchItem>> PlanBatch(const BatchPlanOptions& options);
 
 // The pipeline a batch runs for `format`: `steps`, plus a bake at the source rate when they end

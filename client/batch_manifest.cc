@@ -1,6 +1,11 @@
 #include "client/batch_manifest.h"
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 #include <set>
 #include <system_error>
@@ -31,6 +36,9 @@ constexpr int kManifestVersion = 1;
 constexpr std::int64_t kMaxManifestBytes = std::int64_t{256} << 20;
 // A save may take at most this share of the time between saves (see SaveWhenDue()).
 constexpr int kSaveCostFactor = 10;
+// The journal beside a manifest (".tempokey-batch.journal"): records of outputs written over
+// their own inputs, a line each, appended and fsynced as each is written.
+constexpr std::string_view kJournalSuffix = ".journal";
 
 // The bytes of `message` in deterministic serialization, length-prefixed.
 void AppendOperation(std::string& out, const v1::Operation& operation) {
@@ -130,6 +138,60 @@ absl::StatusOr<std::vector<ManifestRecord>> ParseManifest(std::string_view text,
   return records;
 }
 
+// A record's members (input, input_id, pipeline, output_bytes, output_id, frames, keys,
+// max_error), without braces.
+void AppendRecordFields(std::string& out, const ManifestRecord& r) {
+  out += "\"input\": ";
+  core::AppendJsonString(out, r.input);
+  out += ", \"input_id\": ";
+  core::AppendJsonString(out, r.input_id);
+  out += ", \"pipeline\": ";
+  core::AppendJsonString(out, r.pipeline);
+  absl::StrAppend(&out, ", \"output_bytes\": ", r.output_bytes, ", \"output_id\": ");
+  core::AppendJsonString(out, r.output_id);
+  if (r.frames > 0) absl::StrAppend(&out, ", \"frames\": ", r.frames);
+  if (r.keys > 0) absl::StrAppend(&out, ", \"keys\": ", r.keys);
+  if (r.max_error) absl::StrAppend(&out, ", \"max_error\": ", core::FormatDouble(*r.max_error));
+}
+
+// One journal line: {"output": ..., <the record's members>}.
+std::string FormatJournalLine(const ManifestRecord& r) {
+  std::string out = "{\"output\": ";
+  core::AppendJsonString(out, r.output);
+  out += ", ";
+  AppendRecordFields(out, r);
+  out += "}\n";
+  return out;
+}
+
+// The records of a journal's lines; a last line that does not parse (a write cut short by a
+// kill) is left out, any other is an error.
+absl::StatusOr<std::vector<ManifestRecord>> ParseJournal(std::string_view text,
+                                                         std::string_view source) {
+  std::vector<ManifestRecord> records;
+  const Place place(source);
+  std::size_t start = 0;
+  while (start < text.size()) {
+    std::size_t end = text.find('\n', start);
+    const bool last = end == std::string_view::npos || end + 1 >= text.size();
+    if (end == std::string_view::npos) end = text.size();
+    absl::StatusOr<JsonValue> line = core::ParseJson(text.substr(start, end - start), source);
+    absl::StatusOr<const JsonValue*> output =
+        line.ok() ? JsonMember(place, *line, "output", JsonValue::Type::kString, true)
+                  : absl::StatusOr<const JsonValue*>(line.status());
+    absl::StatusOr<ManifestRecord> record =
+        output.ok() ? ParseRecord(place, (*output)->text, *line)
+                    : absl::StatusOr<ManifestRecord>(output.status());
+    if (record.ok()) {
+      records.push_back(*std::move(record));
+    } else if (!last) {
+      return record.status();
+    }
+    start = end + 1;
+  }
+  return records;
+}
+
 std::string FormatManifest(const std::vector<ManifestRecord>& records,
                            const std::optional<BatchShard>& shard) {
   std::vector<const ManifestRecord*> sorted;
@@ -144,17 +206,8 @@ std::string FormatManifest(const std::vector<ManifestRecord>& records,
     const ManifestRecord& r = *sorted[i];
     out += i == 0 ? "\n  " : ",\n  ";
     core::AppendJsonString(out, r.output);
-    out += ": {\"input\": ";
-    core::AppendJsonString(out, r.input);
-    out += ", \"input_id\": ";
-    core::AppendJsonString(out, r.input_id);
-    out += ", \"pipeline\": ";
-    core::AppendJsonString(out, r.pipeline);
-    absl::StrAppend(&out, ", \"output_bytes\": ", r.output_bytes, ", \"output_id\": ");
-    core::AppendJsonString(out, r.output_id);
-    if (r.frames > 0) absl::StrAppend(&out, ", \"frames\": ", r.frames);
-    if (r.keys > 0) absl::StrAppend(&out, ", \"keys\": ", r.keys);
-    if (r.max_error) absl::StrAppend(&out, ", \"max_error\": ", core::FormatDouble(*r.max_error));
+    out += ": {";
+    AppendRecordFields(out, r);
     out += '}';
   }
   out += sorted.empty() ? "}}\n" : "\n}}\n";
@@ -199,7 +252,8 @@ absl::StatusOr<std::unique_ptr<BatchManifest>> BatchManifest::Open(
   std::vector<fs::path> files;
   for (const auto& entry : fs::directory_iterator(output_dir, error)) {
     const std::string name = entry.path().filename().string();
-    if (name.starts_with(kManifestPrefix) && name.ends_with(".json") &&
+    if (name.starts_with(kManifestPrefix) &&
+        (name.ends_with(".json") || name.ends_with(kJournalSuffix)) &&
         entry.is_regular_file(error)) {
       files.push_back(entry.path());
     }
@@ -207,12 +261,14 @@ absl::StatusOr<std::unique_ptr<BatchManifest>> BatchManifest::Open(
   std::sort(files.begin(), files.end());
   for (const fs::path& file : files) {
     TEMPOKEY_ASSIGN_OR_RETURN(std::string text, core::ReadFile(file.string(), kMaxManifestBytes));
-    absl::StatusOr<std::vector<ManifestRecord>> records = ParseManifest(text, file.string());
+    const bool journal = file.string().ends_with(kJournalSuffix);
+    absl::StatusOr<std::vector<ManifestRecord>> records =
+        journal ? ParseJournal(text, file.string()) : ParseManifest(text, file.string());
     if (!records.ok()) {
       return absl::InvalidArgumentError(absl::StrCat(
           records.status().message(), "; remove the file or run with --force"));
     }
-    const bool own = file.filename() == own_name;
+    const bool own = file.filename() == own_name || file.string() == manifest->journal_path_;
     std::lock_guard<std::mutex> lock(manifest->mutex_);
     for (ManifestRecord& record : *records) {
       if (own) manifest->own_[record.output] = record;
@@ -275,6 +331,15 @@ void BatchManifest::Keep(const ManifestRecord& record) {
 absl::Status BatchManifest::RecordWritten(const BatchItem& item, std::string_view input_id,
                                           std::string_view pipeline,
                                           const BatchFileResult& file) {
+  // Not recorded: an output that is no regular file (a FIFO, /dev/null: nothing to read back
+  // and compare on a re-run), or a name that is not UTF-8 (JSON would record it with U+FFFD:
+  // it could never match again, and two such names would collide).
+  std::error_code error;
+  if (!fs::is_regular_file(item.output_path, error) || !core::IsUtf8(item.name) ||
+      !core::IsUtf8(OutputKey(item))) {
+    Forget(item);
+    return absl::OkStatus();
+  }
   absl::StatusOr<std::pair<std::int64_t, std::string>> identity = FileIdentity(item.output_path);
   if (!identity.ok()) {
     Forget(item);
@@ -291,18 +356,40 @@ absl::Status BatchManifest::RecordWritten(const BatchItem& item, std::string_vie
       .keys = file.keys,
       .max_error = file.max_error,
   };
+  absl::Status journaled;
+  if (IsSameFile(item.input_path, item.output_path)) {
+    // The input is gone: until this record is on disk, a re-run could not tell the output from
+    // a clip to process again. Appended to the journal at once (a line, not the whole manifest).
+    journaled = AppendToJournal(FormatJournalLine(record));
+  }
   {
     std::lock_guard<std::mutex> lock(mutex_);
     own_[record.output] = std::move(record);
     ++version_;
   }
-  if (IsSameFile(item.input_path, item.output_path)) {
-    // The input is gone: until this record is saved, a re-run could not tell the output from a
-    // clip to process again. Saved now, not when due.
-    std::lock_guard<std::mutex> save_lock(save_mutex_);
-    return Save();
-  }
   Changed();
+  return journaled;
+}
+
+absl::Status BatchManifest::AppendToJournal(const std::string& line) {
+  std::lock_guard<std::mutex> lock(journal_mutex_);
+  const int fd = ::open(journal_path_.c_str(), O_WRONLY | O_APPEND | O_CREAT | O_CLOEXEC, 0666);
+  if (fd < 0) {
+    return absl::UnavailableError(
+        absl::StrCat(journal_path_, ": cannot open: ", std::strerror(errno)));
+  }
+  std::size_t written = 0;
+  while (written < line.size()) {
+    const ssize_t n = ::write(fd, line.data() + written, line.size() - written);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) break;
+    written += static_cast<std::size_t>(n);
+  }
+  const bool synced = written == line.size() && ::fsync(fd) == 0;
+  ::close(fd);
+  if (!synced) {
+    return absl::UnavailableError(absl::StrCat(journal_path_, ": cannot write the record"));
+  }
   return absl::OkStatus();
 }
 
@@ -329,6 +416,11 @@ absl::Status BatchManifest::Finish(std::span<const BatchItem> items) {
   if (saver_.joinable()) saver_.join();
   std::lock_guard<std::mutex> save_lock(save_mutex_);
   absl::Status saved = Save();
+  if (saved.ok() && first_save_error_.ok()) {
+    // The journal's records are in the manifest now.
+    std::error_code ignored;
+    fs::remove(journal_path_, ignored);
+  }
   return first_save_error_.ok() ? saved : first_save_error_;
 }
 

@@ -122,9 +122,11 @@ class BatchManifest {
 
   // Records `item`'s output as just written by `file` from input `input_id` through
   // `pipeline`: reads the output back for its size and digest. An output written over its own
-  // input is saved at once (its input is gone; a run killed between the write and this save, a
-  // few milliseconds, redoes the file from its output on the next run). Errors: read errors of
-  // the output (the record is then dropped, so a re-run redoes the file); that save's error.
+  // input is also appended to the journal at once (its input is gone; a run killed between the
+  // write and this line, a few milliseconds, redoes the file from its output on the next run).
+  // Not recorded: an output that is no regular file (a FIFO, /dev/null) or whose name is not
+  // UTF-8 (JSON cannot hold it). Errors: read errors of the output (the record is then dropped,
+  // so a re-run redoes the file); the journal's write error.
   absl::Status RecordWritten(const BatchItem& item, std::string_view input_id,
                              std::string_view pipeline, const BatchFileResult& file);
 
@@ -140,7 +142,11 @@ class BatchManifest {
 
  private:
   BatchManifest(std::string output_dir, std::string path, std::optional<BatchShard> shard)
-      : output_dir_(std::move(output_dir)), path_(std::move(path)), shard_(std::move(shard)) {}
+      : output_dir_(std::move(output_dir)),
+        path_(std::move(path)),
+        journal_path_(path_.substr(0, path_.size() - std::string_view(".json").size()) +
+                      ".journal"),
+        shard_(std::move(shard)) {}
 
   std::string OutputKey(const BatchItem& item) const;
   // Tells the saving thread that own_ changed. Called without mutex_ held.
@@ -149,9 +155,16 @@ class BatchManifest {
   void SaveWhenDue(std::stop_token stop);
   // Writes own_ to path_ (atomically) unless that version is already saved.
   absl::Status Save();
+  // Appends `line` to journal_path_ and fsyncs it.
+  absl::Status AppendToJournal(const std::string& line);
 
   const std::string output_dir_;
   const std::string path_;
+  // Records of outputs written over their own inputs, a line each as they are written (a save
+  // of the whole manifest per file cost the square of the files); read back by Open(), removed
+  // by Finish() once the manifest holds them.
+  const std::string journal_path_;
+  std::mutex journal_mutex_;
   const std::optional<BatchShard> shard_;
   // Records of every manifest read at Open(), by output key (several when manifests overlap).
   std::multimap<std::string, ManifestRecord> known_;

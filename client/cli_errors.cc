@@ -2,6 +2,7 @@
 
 #include "absl/strings/cord.h"
 #include "absl/strings/str_cat.h"
+#include "tempokey/core/io/json.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
@@ -48,15 +49,19 @@ std::string PrintableText(std::string_view text) {
     } else if (c < 0x20 || c == 0x7f) {
       // A control byte (from a file name, a file or a server) would act on the terminal.
       absl::StrAppend(&out, "\\x", absl::Hex(c, absl::kZeroPad2));
-    } else if (c == 0xc2 && i + 1 < text.size() &&
-               static_cast<unsigned char>(text[i + 1]) >= 0x80 &&
-               static_cast<unsigned char>(text[i + 1]) <= 0x9f) {
+    } else if (c < 0x80) {
+      out += static_cast<char>(c);
+    } else if (const std::size_t length = core::Utf8CharLength(text.substr(i)); length == 0) {
+      // Not UTF-8 (a Latin-1 file name; a lone 0x9b is a terminal sequence on 8-bit terminals).
+      absl::StrAppend(&out, "\\x", absl::Hex(c, absl::kZeroPad2));
+    } else if (c == 0xc2 && static_cast<unsigned char>(text[i + 1]) <= 0x9f) {
       // A C1 control character in UTF-8 (U+0080 to U+009F; U+009B starts a terminal sequence).
       absl::StrAppend(&out, "\\u00",
                       absl::Hex(static_cast<unsigned char>(text[i + 1]), absl::kZeroPad2));
       ++i;
     } else {
-      out += static_cast<char>(c);
+      out.append(text.substr(i, length));
+      i += length - 1;
     }
   }
   return out;

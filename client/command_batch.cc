@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <filesystem>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
@@ -18,6 +19,7 @@
 #include "client/pipeline_file.h"
 #include "client/progress_bar.h"
 #include "tempokey/core/io/file_io.h"
+#include "tempokey/core/io/json.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
@@ -92,10 +94,19 @@ absl::StatusOr<std::optional<FileFormat>> FormatFromFlags(const ParsedArgs& args
                         std::begin(kFormats)];
 }
 
-// Refuses a --summary that would replace the pipeline, an input, an output or the manifest.
+// Refuses a --summary that would replace the pipeline, an input, an output, or a manifest or
+// journal of OUTDIR (any shard's: every run reads them all).
 absl::Status CheckSummaryPath(const std::string& summary_path, const std::string& ops_path,
-                              std::span<const BatchItem> items, const std::string& manifest_path) {
-  std::vector<NamedFile> files = {{ops_path, "the pipeline"}, {manifest_path, "the manifest"}};
+                              std::span<const BatchItem> items, const std::string& output_dir) {
+  const std::filesystem::path summary(summary_path);
+  if (summary.filename().string().starts_with(kManifestPrefix) &&
+      IsSameFile(summary.parent_path().empty() ? "." : summary.parent_path().string(),
+                 output_dir)) {
+    return UsageError(absl::StrCat("--summary ", summary_path,
+                                   " is a name the batch keeps its records under in OUTDIR; "
+                                   "choose another file"));
+  }
+  std::vector<NamedFile> files = {{ops_path, "the pipeline"}};
   for (const BatchItem& item : items) {
     files.push_back({item.input_path, "the input"});
     files.push_back({item.output_path, absl::StrCat("the output of ", item.name)});
@@ -131,16 +142,23 @@ absl::Status Batch(CommandContext& context) {
   for (const BatchItem& item : items) {
     TEMPOKEY_RETURN_IF_ERROR(CheckOutputIsNotTheInput(
         item.input_path, item.output_path, context.args().Has("--overwrite"), "batch: output"));
+    // The manifest (JSON) cannot record such a name, so a re-run could not tell the output
+    // written over the clip from the clip, and would process it again.
+    if (!core::IsUtf8(item.name) && IsSameFile(item.input_path, item.output_path)) {
+      return UsageError(absl::StrCat("batch --overwrite: ", PrintableText(item.name),
+                                     ": a file name that is not UTF-8 cannot be recorded, so a "
+                                     "re-run would process its output again; rename it"));
+    }
+  }
+  const std::optional<std::string> summary_path = context.args().Value("--summary");
+  if (summary_path) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckSummaryPath(*summary_path, ops_path, items, output_dir));
   }
   TEMPOKEY_ASSIGN_OR_RETURN(const Client* client, context.Connect());
   TEMPOKEY_ASSIGN_OR_RETURN(std::unique_ptr<BatchManifest> manifest,
                             BatchManifest::Open(output_dir, shard, context.args().Has("--force")));
   RemoveLeftoverTemporaries(items, manifest->path());
   options.manifest = manifest.get();
-  const std::optional<std::string> summary_path = context.args().Value("--summary");
-  if (summary_path) {
-    TEMPOKEY_RETURN_IF_ERROR(CheckSummaryPath(*summary_path, ops_path, items, manifest->path()));
-  }
 
   BatchSummary summary;
   {

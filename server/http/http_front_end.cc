@@ -351,7 +351,7 @@ int HttpFrontEnd::HandleRequest(mg_connection* connection) {
     // when the call is refused below, since civetweb reads the rest of the body after it.
     SlowBodyGuard::Watch body_watch = guard_->Start(
         info->remote_addr, info->remote_port,
-        SlowBodyGuard::Clock::now() + SlowBodyGuard::Allowance(options_.io_timeout,
+        SlowBodyGuard::Clock::now() + SlowBodyGuard::Allowance(options_.body_timeout,
                                                                info->content_length,
                                                                bridge_.max_message_bytes()));
     if (verb != "POST") {

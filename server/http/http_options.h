@@ -23,6 +23,9 @@ struct HttpOptions {
   int threads = 16;
   // A request's socket reads and writes time out after this long without progress.
   std::chrono::milliseconds io_timeout{30000};
+  // A request body must arrive within this plus its length at 64 KiB/s (SlowBodyGuard): the
+  // timeout above is per read, which a byte now and then keeps from ever firing.
+  std::chrono::milliseconds body_timeout{30000};
   // An idle keep-alive connection is closed after this long, freeing its thread.
   std::chrono::milliseconds keep_alive_timeout{2000};
 };

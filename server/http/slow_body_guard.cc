@@ -4,6 +4,7 @@
 #include <dirent.h>
 #include <netinet/in.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <cstdlib>
@@ -121,7 +122,8 @@ bool SlowBodyGuard::CutOff(const Watched& watched) const {
   // The one socket from that peer to the front end's port: with the front end on 0.0.0.0 one
   // peer address and port may reach two local addresses, and then none is cut.
   int found = -1;
-  int matches = 0;
+  ino_t found_socket = 0;
+  bool ambiguous = false;
   while (const dirent* entry = readdir(fds)) {
     char* end = nullptr;
     const long fd = std::strtol(entry->d_name, &end, 10);
@@ -139,12 +141,16 @@ bool SlowBodyGuard::CutOff(const Watched& watched) const {
         remote_host.s_addr != peer.s_addr) {
       continue;
     }
+    // Descriptors duplicated from one socket (civetweb keeps such) are one connection.
+    struct stat info {};
+    if (fstat(static_cast<int>(fd), &info) != 0) continue;
+    if (found >= 0 && info.st_ino != found_socket) ambiguous = true;
     found = static_cast<int>(fd);
-    ++matches;
+    found_socket = info.st_ino;
   }
   closedir(fds);
   // Shut down, not closed: the descriptor stays civetweb's, so it cannot be reused under it.
-  return matches == 1 && shutdown(found, SHUT_RDWR) == 0;
+  return found >= 0 && !ambiguous && shutdown(found, SHUT_RDWR) == 0;
 }
 
 }  // namespace tempokey::server::http

@@ -3,6 +3,7 @@
 // syntax and its refusals, the pipeline digest, and the cleanup of a killed run's temporaries.
 #include "client/batch_manifest.h"
 
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <thread>
@@ -186,6 +187,61 @@ TEST_F(BatchManifestTest, RecordedOutputIsUpToDateForTheSameInputAndPipelineOnly
   EXPECT_FALSE(second->FindUpToDate(walk, kOtherInputId, kPipeline));
   EXPECT_FALSE(second->FindUpToDate(walk, kInputId, kOtherPipeline));
   EXPECT_FALSE(second->FindUpToDate(renamed, kInputId, kPipeline));
+}
+
+// An output written over its own input goes to the journal at once, a line each (a save of the
+// whole manifest per file took 16 s for 3 000 files, 61 s for 6 000): a run killed before its
+// manifest was saved still knows the file is done, and a line cut short by the kill is left out.
+TEST_F(BatchManifestTest, AnOutputWrittenOverItsInputIsJournaledAndFoundAfterAKill) {
+  BatchItem walk = Item("walk");
+  walk.input_path = walk.output_path;  // in place (--overwrite)
+  BatchItem run = Item("run");
+  run.input_path = run.output_path;
+  {
+    std::unique_ptr<BatchManifest> killed = Open();
+    Produce(*killed, walk, "curves");
+    Produce(*killed, run, "curves");
+    // No Finish(): the process dies here.
+  }
+  // Whether or not the saving thread got to it, the manifest is lost with the process.
+  fs::remove(out_ + "/.tempokey-batch.json");
+  std::string journal = core::ReadFile(out_ + "/.tempokey-batch.journal").value_or("");
+  ASSERT_EQ(std::count(journal.begin(), journal.end(), '\n'), 2) << journal;
+  journal.resize(journal.size() - 9);  // the last line cut short
+  ASSERT_TRUE(core::WriteFileAtomically(out_ + "/.tempokey-batch.journal", journal).ok());
+
+  std::unique_ptr<BatchManifest> next = Open();
+  const std::optional<ManifestRecord> done = next->FindUpToDate(walk, kOtherInputId, kPipeline);
+  const std::optional<ManifestRecord> lost = next->FindUpToDate(run, kOtherInputId, kPipeline);
+  ASSERT_TRUE(next->Finish(std::vector<BatchItem>{walk, run}).ok());
+
+  // In place, the input id is the output's own: the record's output on disk says done.
+  ASSERT_TRUE(done.has_value());
+  EXPECT_EQ(done->output, "walk.json");
+  EXPECT_FALSE(lost.has_value());
+  EXPECT_FALSE(fs::exists(out_ + "/.tempokey-batch.journal"));  // folded into the manifest
+}
+
+// A name JSON cannot hold (not UTF-8) is not recorded: it could never match again, and two such
+// names differing only in those bytes made one key listed twice, which stopped every later run.
+// Nor is an output that is no regular file (a FIFO): there is nothing to read back.
+TEST_F(BatchManifestTest, NamesThatAreNotUtf8AndOutputsThatAreNotFilesAreNotRecorded) {
+  const BatchItem e9 = Item("caf\xe9");
+  const BatchItem e8 = Item("caf\xe8");
+  BatchItem null_output = Item("null");
+  null_output.output_path = "/dev/null";
+  {
+    std::unique_ptr<BatchManifest> first = Open();
+    Produce(*first, e9, "curves");
+    Produce(*first, e8, "curves");
+    ASSERT_TRUE(first->RecordWritten(null_output, kInputId, kPipeline, {}).ok());
+    ASSERT_TRUE(first->Finish(std::vector<BatchItem>{e9, e8, null_output}).ok());
+  }
+
+  EXPECT_TRUE(OnDisk(".tempokey-batch.json").empty());
+  std::unique_ptr<BatchManifest> second = Open();  // opens: no key listed twice
+  ASSERT_NE(second, nullptr);
+  EXPECT_FALSE(second->FindUpToDate(e9, kInputId, kPipeline));
 }
 
 TEST_F(BatchManifestTest, AlteredOrMissingOutputIsNotUpToDate) {

@@ -185,6 +185,8 @@ TEST_F(OverwriteTest, ASummaryThatWouldReplaceAnInputIsRefusedBeforeAnyWork) {
   const ProcessResult over_ops = batch(ops);
   const ProcessResult over_input = batch(Path("in/walk.bvh"));
   const ProcessResult over_output = batch(Path("out/walk.bvh"));
+  std::filesystem::create_directory(Path("out"));
+  const ProcessResult over_records = batch(Path("out/.tempokey-batch.shard-1-of-2.json"));
 
   EXPECT_EQ(over_ops.exit_code, 2);
   EXPECT_EQ(over_ops.err, "error: --summary " + ops + " is the pipeline; choose another file\n");
@@ -196,6 +198,10 @@ TEST_F(OverwriteTest, ASummaryThatWouldReplaceAnInputIsRefusedBeforeAnyWork) {
   EXPECT_EQ(over_output.exit_code, 2);
   EXPECT_EQ(over_output.err, "error: --summary " + Path("out/walk.bvh") +
                                  " is the output of walk.bvh; choose another file\n");
+  EXPECT_EQ(over_records.exit_code, 2);
+  EXPECT_EQ(over_records.err, "error: --summary " + Path("out/.tempokey-batch.shard-1-of-2.json") +
+                                  " is a name the batch keeps its records under in OUTDIR; choose "
+                                  "another file\n");
 }
 
 TEST_F(OverwriteTest, BatchSummaryRefusesToWriteOverASummaryItMerges) {
@@ -215,8 +221,9 @@ TEST_F(OverwriteTest, BatchSummaryRefusesToWriteOverASummaryItMerges) {
 }
 
 // Two inputs with one output name would overwrite each other's result on every run (and the
-// manifest would keep one); a recursive batch whose OUTDIR lies inside DIR would take its own
-// outputs for inputs, or write over the clips there.
+// manifest would keep one); an output that is another input (a recursive batch whose OUTDIR,
+// inside DIR, holds a clip, or last run's .bvh outputs) would write over it. An OUTDIR inside
+// DIR is fine otherwise: keyed outputs are never inputs.
 TEST_F(OverwriteTest, BatchOutputsThatCollideWithEachOtherOrWithInputsAreRefused) {
   std::filesystem::create_directories(Path("in/sub"));
   CopyFile(input_, Path("in/walk.bvh"));
@@ -236,6 +243,12 @@ TEST_F(OverwriteTest, BatchOutputsThatCollideWithEachOtherOrWithInputsAreRefused
   const ProcessResult same_name = batch(Path("in"), Path("out"), false);
   std::filesystem::remove(Path("in/walk.BVH"));
   const ProcessResult inside = batch(Path("in"), Path("in/sub"), true);
+  {
+    std::ofstream ops(Path("ops.json"));
+    ops << R"({"operations": [{"reduce": {}}]})";
+  }
+  const ProcessResult keyed_inside = batch(Path("in"), Path("in/curves"), true);
+  const ProcessResult keyed_again = batch(Path("in"), Path("in/curves"), true);
 
   EXPECT_EQ(same_name.exit_code, 2);
   EXPECT_EQ(same_name.err, "error: batch: walk.BVH and walk.bvh would both be written to " +
@@ -243,9 +256,12 @@ TEST_F(OverwriteTest, BatchOutputsThatCollideWithEachOtherOrWithInputsAreRefused
                                "; rename one, or run them in separate batches\n");
   EXPECT_FALSE(std::filesystem::exists(Path("out")));
   EXPECT_EQ(inside.exit_code, 2);
-  EXPECT_THAT(inside.err, StartsWith("error: batch --recursive: OUTDIR " + Path("in/sub") +
-                                     " lies inside DIR " + Path("in")));
+  EXPECT_EQ(inside.err, "error: batch: the output of walk.bvh, " + Path("in/sub/walk.bvh") +
+                            ", is the input sub/walk.bvh; choose another OUTDIR\n");
   EXPECT_EQ(Slurp(Path("in/sub/walk.bvh")), original_);
+  EXPECT_EQ(keyed_inside.exit_code, 0) << keyed_inside.err;
+  EXPECT_EQ(keyed_again.exit_code, 0) << keyed_again.err;
+  EXPECT_THAT(keyed_again.out, HasSubstr(R"("skipped": 2)"));
 }
 
 // An output that is a FIFO (a process reading the result) gets the bytes and stays a FIFO;

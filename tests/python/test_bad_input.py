@@ -350,8 +350,23 @@ class ClientArgumentTest(unittest.TestCase):
 
                 self.assertEqual(result.reduction_report.key_count, 2)
 
+    def test_tokens_with_inner_spaces_decimals_and_integer_booleans_are_accepted(self):
+        # What worked before the checks, and means what it says: a token with a space inside (the
+        # server's token file allows it), a Decimal tolerance, 0 or 1 for a switch, a noise level
+        # as text like the CLI's --noise.
+        import decimal
+        tk.connect(_server.address, token="two words").close()
+        self.assertEqual(tk.reduce_operation(tolerance=decimal.Decimal("0.25"))
+                         .reduce.tolerance.max_rotation_error_degrees, 0.25)
+        self.assertTrue(tk.retime_operation(reverse=1).retime.reverse)
+        self.assertFalse(tk.retime_operation(reverse=0).retime.reverse)
+        self.assertEqual(tk.reduce_operation(method="noise", noise="0.1")
+                         .reduce.noise.rotation_sigma_degrees, 0.1)
+        with self.assertRaisesRegex(TypeError, r"^reverse must be True or False, got int 2$"):
+            tk.retime_operation(reverse=2)
+
     def test_connect_refuses_a_token_a_header_cannot_carry(self):
-        for token in ("a\nb", "t\u00f6k", "two words"):
+        for token in ("a\nb", "t\u00f6k", " padded"):
             with self.subTest(token=token):
                 with self.assertRaisesRegex(ValueError, r"^token"):
                     tk.connect(_server.address, token=token)
@@ -400,7 +415,7 @@ class BuilderArgumentTest(unittest.TestCase):
     def test_retime_refuses_strings_for_numbers_and_flags(self):
         cases = [({"fit_seconds": "2"}, TypeError, r"^fit_seconds must be a number"),
                  ({"reverse": "false"}, TypeError, r"^reverse must be True or False"),
-                 ({"fit_to_grid": 0}, TypeError, r"^fit_to_grid must be True or False"),
+                 ({"fit_to_grid": 2}, TypeError, r"^fit_to_grid must be True or False"),
                  ({"pins": [(0, 2.5)]}, ValueError, r"^pin 1 output_frame must be a whole"),
                  ({"holds": [("1s", "2")]}, TypeError, r"^hold 1 duration_seconds must be a "),
                  ({"speed": [(0, "0.5")]}, TypeError, r"^speed must be a number"),

@@ -209,6 +209,17 @@ absl::Status JsonErrorAt(std::string_view source, const JsonValue& at, std::stri
       absl::StrCat(AsAbsl(source), ":", at.line, ":", at.column, ": ", AsAbsl(what)));
 }
 
+std::size_t Utf8CharLength(std::string_view text) { return text_scan::Utf8CharLength(text); }
+
+bool IsUtf8(std::string_view text) {
+  for (std::size_t i = 0; i < text.size();) {
+    const std::size_t length = text_scan::Utf8CharLength(text.substr(i));
+    if (length == 0) return false;
+    i += length;
+  }
+  return true;
+}
+
 void AppendJsonString(std::string& out, std::string_view text) {
   out += '"';
   // JSON text is UTF-8: a byte that is not (a Latin-1 file name) becomes U+FFFD.
@@ -216,7 +227,21 @@ void AppendJsonString(std::string& out, std::string_view text) {
                                 ? std::string()
                                 : text_scan::ValidUtf8(text);
   if (!valid.empty()) text = valid;
-  for (char ch : text) {
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char ch = text[i];
+    // A C1 control (U+0080 to U+009F: 0xC2 0x80..0x9F) escaped: U+009B starts a terminal
+    // sequence, and a summary goes to the terminal.
+    if (static_cast<unsigned char>(ch) == 0xc2 && i + 1 < text.size() &&
+        static_cast<unsigned char>(text[i + 1]) >= 0x80 &&
+        static_cast<unsigned char>(text[i + 1]) <= 0x9f) {
+      static constexpr char kHex[] = "0123456789abcdef";
+      const auto code = static_cast<unsigned char>(text[i + 1]);
+      out += "\\u00";
+      out += kHex[code >> 4];
+      out += kHex[code & 0xf];
+      ++i;
+      continue;
+    }
     switch (ch) {
       case '"': out += "\\\""; break;
       case '\\': out += "\\\\"; break;

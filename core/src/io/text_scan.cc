@@ -50,6 +50,12 @@ std::size_t FindNonText(std::string_view text) {
   return std::string_view::npos;
 }
 
+std::size_t Utf8CharLength(std::string_view text) {
+  if (text.empty()) return 0;
+  const auto* s = reinterpret_cast<const unsigned char*>(text.data());
+  return s[0] < 0x80 ? 1 : Utf8SequenceLength(s, text.size());
+}
+
 std::string ValidUtf8(std::string_view text) {
   const auto* s = reinterpret_cast<const unsigned char*>(text.data());
   std::string out;

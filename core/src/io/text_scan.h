@@ -29,6 +29,9 @@ inline bool IsControl(unsigned char c) { return (c < 0x20 && !kIsSpace[c]) || c 
 // or npos.
 std::size_t FindNonText(std::string_view text);
 
+// Bytes of the valid UTF-8 character that starts `text` (1 for ASCII), 0 when none does.
+std::size_t Utf8CharLength(std::string_view text);
+
 // `text` with every byte that does not start a valid UTF-8 sequence replaced by U+FFFD (a clip
 // name from a Latin-1 file name must go into protobuf strings and JSON, which hold UTF-8).
 std::string ValidUtf8(std::string_view text);

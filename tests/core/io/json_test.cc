@@ -37,6 +37,16 @@ TEST(JsonTest, AStringThatIsNotUtf8IsWrittenWithReplacementCharacters) {
 
   EXPECT_EQ(out, "\"caf\xEF\xBF\xBD \xc3\xa9\\n\"");
   EXPECT_TRUE(ParseJson(out, "s.json").ok());
+  EXPECT_FALSE(IsUtf8("caf\xe9"));
+  EXPECT_TRUE(IsUtf8("caf\xc3\xa9"));
+}
+
+// A summary goes to the terminal: U+009B (CSI) and the other C1 controls are escaped.
+TEST(JsonTest, C1ControlCharactersAreEscaped) {
+  std::string out;
+  AppendJsonString(out, "a\xc2\x9b" "2J");
+
+  EXPECT_EQ(out, "\"a\\u009b2J\"");
 }
 
 TEST(JsonTest, DecodesStringEscapes) {

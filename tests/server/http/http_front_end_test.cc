@@ -183,7 +183,10 @@ TEST(HttpFrontEndTest, ARequestBodyTrickledInIsCutOffAndThePageStillServed) {
   ASSERT_NE(server, nullptr);
   HttpOptions options = Options("127.0.0.1:0");
   options.web_root = testing::MakeTempDir();
-  options.io_timeout = std::chrono::milliseconds(2000);
+  // civetweb's per-read timeout far beyond the test (a loaded machine may stall the sender for
+  // seconds), the body's own 2 s: only the guard can end these requests.
+  options.io_timeout = std::chrono::milliseconds(600000);
+  options.body_timeout = std::chrono::milliseconds(2000);
   absl::StatusOr<std::unique_ptr<HttpFrontEnd>> front_end = HttpFrontEnd::Start(options, *server);
   ASSERT_TRUE(front_end.ok()) << front_end.status();
   const int port = (*front_end)->port();

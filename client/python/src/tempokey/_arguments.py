@@ -31,10 +31,21 @@ def _type_name(value: Any) -> str:
     return type(value).__name__
 
 
+def _is_number(value: Any) -> bool:
+    """A number a float can be made of: any numbers.Real (int, float, Fraction, numpy scalars),
+    decimal.Decimal or another type with __float__; not a bool, a string or bytes (a string of
+    digits is a mistake the caller should see, and a list of them was read digit by digit)."""
+    if isinstance(value, (bool, str, bytes, bytearray)):
+        return False
+    if type(value).__name__ in ("bool_", "bool8"):  # numpy's booleans
+        return False
+    return isinstance(value, numbers.Real) or hasattr(value, "__float__")
+
+
 def real(value: Any, name: str) -> float:
-    """`value` as a float: an int or float (any numbers.Real), not a bool or a string.
+    """`value` as a float: any number (_is_number()), not a bool or a string.
     NaN and infinities pass (the server names them where they matter)."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+    if not _is_number(value):
         raise TypeError("%s must be a number, got %s %s" % (name, _type_name(value), shown(value)))
     return float(value)
 
@@ -42,7 +53,7 @@ def real(value: Any, name: str) -> float:
 def integer(value: Any, name: str, bounds: tuple = INT64) -> int:
     """`value` as an int: an int (any numbers.Integral) or an integral float such as 2.0, within
     `bounds` (the range of the field it is sent in); not a bool, a string or 2.7."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+    if not _is_number(value):
         raise TypeError("%s must be a whole number, got %s %s"
                         % (name, _type_name(value), shown(value)))
     if isinstance(value, numbers.Integral):
@@ -58,11 +69,16 @@ def integer(value: Any, name: str, bounds: tuple = INT64) -> int:
 
 
 def boolean(value: Any, name: str) -> bool:
-    """`value` if it is True or False (a string such as "false" would otherwise be true)."""
-    if not isinstance(value, bool):
-        raise TypeError("%s must be True or False, got %s %s"
-                        % (name, _type_name(value), shown(value)))
-    return value
+    """`value` as a bool: True or False, numpy's booleans, or the integers 0 and 1; not a string
+    (a string such as "false" would otherwise be true) nor another number."""
+    if isinstance(value, bool):
+        return value
+    if type(value).__name__ in ("bool_", "bool8"):  # numpy's booleans
+        return bool(value)
+    if isinstance(value, numbers.Integral) and int(value) in (0, 1):
+        return bool(int(value))
+    raise TypeError("%s must be True or False, got %s %s"
+                    % (name, _type_name(value), shown(value)))
 
 
 def text(value: Any, name: str) -> str:

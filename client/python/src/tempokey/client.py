@@ -509,13 +509,17 @@ def _check_callback(callback: Any, name: str) -> None:
 
 
 def _check_token(token: Any) -> None:
-    """A bearer token travels in an HTTP/2 header: visible ASCII only ("" sends none)."""
+    """A bearer token travels in an HTTP/2 header: printable ASCII, spaces inside it allowed as
+    the server's token file allows them, none at either end ("" sends none)."""
     _arguments.text(token, "token")
     for index, character in enumerate(token):
-        if not " " < character <= "~":
+        if not " " <= character <= "~":
             raise ValueError("token: character %d (%r) is not allowed; a bearer token is "
-                             "printable ASCII without spaces (it travels in an HTTP header)"
+                             "printable ASCII (it travels in an HTTP header)"
                              % (index + 1, character))
+    if token != token.strip(" "):
+        raise ValueError("token: a space at either end is not allowed (the server trims its "
+                         "tokens, so this one could never match)")
 
 
 def _new_request_id() -> str:

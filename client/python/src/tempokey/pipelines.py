@@ -287,7 +287,12 @@ def _noise_level(keyword: str,
     """Sets noise.<field> to a level; "auto" leaves it unset (estimated per channel)."""
     def apply(reduce: operations_pb2.ReduceOperation, value: Any) -> None:
         if isinstance(value, str) and value != "auto":
-            raise ValueError("%s must be a number or \"auto\", got %r" % (keyword, value))
+            # A level spelled as text ("0.1", as the CLI's --noise takes it) is read as a number.
+            try:
+                value = float(value)
+            except ValueError:
+                raise ValueError("%s must be a number or \"auto\", got %r"
+                                 % (keyword, value)) from None
         if value != "auto":
             setattr(reduce.noise, field, _arguments.real(value, keyword))
     return apply

@@ -46,8 +46,15 @@ absl::StatusOr<JsonValue> ParseJson(std::string_view text, std::string_view sour
 // the place of the value in the document it was parsed from.
 absl::Status JsonErrorAt(std::string_view source, const JsonValue& at, std::string_view what);
 
+// Bytes of the valid UTF-8 character that starts `text` (1 for ASCII), 0 when none does (a
+// Latin-1 byte, a stray continuation byte): what a JSON string can hold.
+std::size_t Utf8CharLength(std::string_view text);
+// Whether all of `text` is valid UTF-8.
+bool IsUtf8(std::string_view text);
+
 // Appends `text` to `out` as a JSON string literal (quotes, escapes of '"', '\\' and controls;
-// a byte that does not start valid UTF-8, as in a Latin-1 file name, as U+FFFD: JSON is UTF-8).
+// a byte that does not start valid UTF-8, as in a Latin-1 file name, as U+FFFD: JSON is UTF-8;
+// the C1 controls U+0080 to U+009F as \u0080 to \u009f, so the text cannot act on a terminal).
 void AppendJsonString(std::string& out, std::string_view text);
 
 }  // namespace tempokey::core
