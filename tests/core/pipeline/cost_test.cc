@@ -273,7 +273,7 @@ TEST(EstimatePipelineCostTest, TheNoiseMethodIsCostedAsItself) {
 // three channels and 140 000 end sites ran 34 s under a limit of 20 s, costed from its samples).
 TEST(EstimatePipelineCostTest, AReductionCountsTheWorldErrorOfEveryJointAndEndSite) {
   Clip clip = ScalarClip(3, 500);
-  clip.skeleton.joints = {Joint{.name = "root", .parent = -1, .channels = {0, 1, 2}}};
+  clip.skeleton.joints = {Joint{.name = "root", .parent = -1, .channels = {0, 1, 2}, .end_sites = {}}};
   for (Channel& channel : clip.channels) channel.joint = 0;
   Clip many_ends = clip;
   many_ends.skeleton.joints[0].end_sites.assign(1000, Vec3{0, 1, 0});
