@@ -281,13 +281,15 @@ absl::StatusOr<std::vector<BatchItem>> PlanBatch(const BatchPlanOptions& options
     // summary without a word.
     std::error_code entry_error;
     if (!IsHidden(relative) && InputFormat(relative, options.include_csv) &&
-        !entry.is_directory(entry_error)) {
+        !entry.is_directory(entry_error) &&
+        !(options.is_own_output && options.is_own_output(entry.path().string()))) {
       found.push_back(relative);
     }
   };
   if (options.recursive) {
-    // An OUTDIR inside DIR is walked too: a clip there is an input, and CheckOutputsApart()
-    // refuses a plan that would write over one (a re-run over last run's .bvh outputs among them).
+    // An OUTDIR inside DIR is walked too: a clip there is an input (unless is_own_output says it
+    // is one of the batch's recorded outputs), and CheckOutputsApart() refuses a plan that would
+    // write over one.
     fs::recursive_directory_iterator it(root, error);
     for (; !error && it != fs::recursive_directory_iterator(); it.increment(error)) consider(*it);
   } else {

@@ -41,6 +41,9 @@ struct BatchPlanOptions {
   bool keyed_output = false;    // the pipeline ends with a keyed clip
   bool include_csv = false;     // also take .csv files (needs a frame rate)
   bool recursive = false;       // descend into sub-folders, mirroring them under output_dir
+  // When set, files for which it is true (by their path under input_dir) are no inputs: a
+  // batch's own recorded outputs, in an output_dir inside input_dir.
+  std::function<bool(const std::string& path)> is_own_output;
 };
 
 // The files of `options.input_dir` (.bvh, and .csv if asked; hidden files skipped), sorted by

@@ -164,28 +164,23 @@ std::string FormatJournalLine(const ManifestRecord& r) {
   return out;
 }
 
-// The records of a journal's lines; a last line that does not parse (a write cut short by a
-// kill) is left out, any other is an error.
-absl::StatusOr<std::vector<ManifestRecord>> ParseJournal(std::string_view text,
-                                                         std::string_view source) {
+// The records of a journal's lines. A line that does not parse (a write cut short by a kill or
+// a full disk; an empty line) is left out: it costs at most that file being done again.
+std::vector<ManifestRecord> ParseJournal(std::string_view text, std::string_view source) {
   std::vector<ManifestRecord> records;
   const Place place(source);
   std::size_t start = 0;
   while (start < text.size()) {
     std::size_t end = text.find('\n', start);
-    const bool last = end == std::string_view::npos || end + 1 >= text.size();
     if (end == std::string_view::npos) end = text.size();
     absl::StatusOr<JsonValue> line = core::ParseJson(text.substr(start, end - start), source);
-    absl::StatusOr<const JsonValue*> output =
-        line.ok() ? JsonMember(place, *line, "output", JsonValue::Type::kString, true)
-                  : absl::StatusOr<const JsonValue*>(line.status());
-    absl::StatusOr<ManifestRecord> record =
-        output.ok() ? ParseRecord(place, (*output)->text, *line)
-                    : absl::StatusOr<ManifestRecord>(output.status());
-    if (record.ok()) {
-      records.push_back(*std::move(record));
-    } else if (!last) {
-      return record.status();
+    if (line.ok()) {
+      absl::StatusOr<const JsonValue*> output =
+          JsonMember(place, *line, "output", JsonValue::Type::kString, true);
+      if (output.ok()) {
+        absl::StatusOr<ManifestRecord> record = ParseRecord(place, (*output)->text, *line);
+        if (record.ok()) records.push_back(*std::move(record));
+      }
     }
     start = end + 1;
   }
@@ -258,12 +253,18 @@ absl::StatusOr<std::unique_ptr<BatchManifest>> BatchManifest::Open(
       files.push_back(entry.path());
     }
   }
-  std::sort(files.begin(), files.end());
+  // Manifests first, then journals, whose records are newer.
+  std::sort(files.begin(), files.end(), [](const fs::path& a, const fs::path& b) {
+    const bool a_journal = a.string().ends_with(kJournalSuffix);
+    const bool b_journal = b.string().ends_with(kJournalSuffix);
+    return a_journal != b_journal ? b_journal : a < b;
+  });
   for (const fs::path& file : files) {
     TEMPOKEY_ASSIGN_OR_RETURN(std::string text, core::ReadFile(file.string(), kMaxManifestBytes));
     const bool journal = file.string().ends_with(kJournalSuffix);
     absl::StatusOr<std::vector<ManifestRecord>> records =
-        journal ? ParseJournal(text, file.string()) : ParseManifest(text, file.string());
+        journal ? absl::StatusOr<std::vector<ManifestRecord>>(ParseJournal(text, file.string()))
+                : ParseManifest(text, file.string());
     if (!records.ok()) {
       return absl::InvalidArgumentError(absl::StrCat(
           records.status().message(), "; remove the file or run with --force"));
@@ -281,6 +282,14 @@ absl::StatusOr<std::unique_ptr<BatchManifest>> BatchManifest::Open(
 BatchManifest::~BatchManifest() {
   saver_.request_stop();
   changed_.notify_all();
+}
+
+bool BatchManifest::IsRecordedOutput(const std::string& path) const {
+  std::error_code error;
+  const fs::path file = fs::absolute(path, error).lexically_normal();
+  const fs::path folder = fs::absolute(output_dir_, error).lexically_normal();
+  const std::string key = file.lexically_relative(folder).generic_string();
+  return !key.empty() && !key.starts_with("..") && known_.count(key) > 0;
 }
 
 std::string BatchManifest::OutputKey(const BatchItem& item) const {
@@ -356,36 +365,52 @@ absl::Status BatchManifest::RecordWritten(const BatchItem& item, std::string_vie
       .keys = file.keys,
       .max_error = file.max_error,
   };
-  absl::Status journaled;
-  if (IsSameFile(item.input_path, item.output_path)) {
-    // The input is gone: until this record is on disk, a re-run could not tell the output from
-    // a clip to process again. Appended to the journal at once (a line, not the whole manifest).
-    journaled = AppendToJournal(FormatJournalLine(record));
-  }
+  const bool in_place = IsSameFile(item.input_path, item.output_path);
+  // The input is gone: until this record is on disk, a re-run could not tell the output from a
+  // clip to process again. Appended to the journal at once (a line, not the whole manifest).
+  const absl::Status journaled =
+      in_place ? AppendToJournal(FormatJournalLine(record)) : absl::OkStatus();
   {
     std::lock_guard<std::mutex> lock(mutex_);
     own_[record.output] = std::move(record);
     ++version_;
   }
+  if (!journaled.ok()) {
+    // Then the whole manifest, now; only if that fails too does the file fail (and a re-run
+    // may process its output again).
+    std::lock_guard<std::mutex> save_lock(save_mutex_);
+    if (absl::Status saved = Save(); !saved.ok()) {
+      return absl::Status(saved.code(), absl::StrCat(journaled.message(), "; ", saved.message()));
+    }
+  }
   Changed();
-  return journaled;
+  return absl::OkStatus();
 }
 
 absl::Status BatchManifest::AppendToJournal(const std::string& line) {
   std::lock_guard<std::mutex> lock(journal_mutex_);
-  const int fd = ::open(journal_path_.c_str(), O_WRONLY | O_APPEND | O_CREAT | O_CLOEXEC, 0666);
+  const int fd = ::open(journal_path_.c_str(), O_RDWR | O_APPEND | O_CREAT | O_CLOEXEC, 0666);
   if (fd < 0) {
     return absl::UnavailableError(
         absl::StrCat(journal_path_, ": cannot open: ", std::strerror(errno)));
   }
+  // A line a kill cut short is ended first, so this record starts a line of its own.
+  const off_t size = ::lseek(fd, 0, SEEK_END);
+  char last = '\n';
+  const std::string text =
+      size > 0 && ::pread(fd, &last, 1, size - 1) == 1 && last != '\n' ? "\n" + line : line;
   std::size_t written = 0;
-  while (written < line.size()) {
-    const ssize_t n = ::write(fd, line.data() + written, line.size() - written);
+  while (written < text.size()) {
+    const ssize_t n = ::write(fd, text.data() + written, text.size() - written);
     if (n < 0 && errno == EINTR) continue;
     if (n <= 0) break;
     written += static_cast<std::size_t>(n);
   }
-  const bool synced = written == line.size() && ::fsync(fd) == 0;
+  const bool synced = written == text.size() && ::fsync(fd) == 0;
+  // A short write (a full disk) is taken back, so the next record is not glued onto it.
+  if (!synced && size >= 0 && ::ftruncate(fd, size) != 0) {
+    // The torn line is left; the reader skips it.
+  }
   ::close(fd);
   if (!synced) {
     return absl::UnavailableError(absl::StrCat(journal_path_, ": cannot write the record"));

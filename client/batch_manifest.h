@@ -109,6 +109,10 @@ class BatchManifest {
 
   const std::string& path() const { return path_; }
 
+  // Whether `path` is an output some manifest of OUTDIR records (read at Open()): with OUTDIR
+  // inside DIR, last run's outputs are not this run's inputs.
+  bool IsRecordedOutput(const std::string& path) const;
+
   // The record that lets `item` be skipped: one of any manifest for its output with this input
   // id and pipeline, whose output file exists with the recorded size and content (it is read
   // and hashed). An output that is its own input (--overwrite) needs no input id: the file

@@ -98,10 +98,18 @@ absl::StatusOr<std::optional<FileFormat>> FormatFromFlags(const ParsedArgs& args
 // journal of OUTDIR (any shard's: every run reads them all).
 absl::Status CheckSummaryPath(const std::string& summary_path, const std::string& ops_path,
                               std::span<const BatchItem> items, const std::string& output_dir) {
-  const std::filesystem::path summary(summary_path);
+  namespace fs = std::filesystem;
+  // Absolute and normal, without a trailing separator: OUTDIR may not exist yet ("out/",
+  // "./out" and "out/." are one folder).
+  auto normal = [](const fs::path& path) {
+    std::error_code error;
+    fs::path absolute = fs::absolute(path.empty() ? fs::path(".") : path, error).lexically_normal();
+    return absolute.has_filename() ? absolute : absolute.parent_path();
+  };
+  const fs::path summary(summary_path);
+  const fs::path folder = summary.parent_path().empty() ? fs::path(".") : summary.parent_path();
   if (summary.filename().string().starts_with(kManifestPrefix) &&
-      IsSameFile(summary.parent_path().empty() ? "." : summary.parent_path().string(),
-                 output_dir)) {
+      (normal(folder) == normal(output_dir) || IsSameFile(folder.string(), output_dir))) {
     return UsageError(absl::StrCat("--summary ", summary_path,
                                    " is a name the batch keeps its records under in OUTDIR; "
                                    "choose another file"));
@@ -127,6 +135,11 @@ absl::Status Batch(CommandContext& context) {
     TEMPOKEY_ASSIGN_OR_RETURN(shard, ParseShard(*text));
   }
 
+  // The manifests first: with OUTDIR inside DIR, the outputs they record are no inputs (with
+  // OUTDIR = DIR they are: written over their own inputs, --overwrite).
+  TEMPOKEY_ASSIGN_OR_RETURN(std::unique_ptr<BatchManifest> manifest,
+                            BatchManifest::Open(output_dir, shard, context.args().Has("--force")));
+  const bool outputs_beside_inputs = IsSameFile(dirs[0], output_dir);
   BatchPlanOptions plan{
       .input_dir = dirs[0],
       .output_dir = output_dir,
@@ -134,6 +147,10 @@ absl::Status Batch(CommandContext& context) {
       .keyed_output = core::ProducesKeyedOutput(steps),
       .include_csv = options.csv_frame_time_seconds.has_value(),
       .recursive = context.args().Has("--recursive"),
+      .is_own_output =
+          [&](const std::string& path) {
+            return !outputs_beside_inputs && manifest->IsRecordedOutput(path);
+          },
   };
   TEMPOKEY_ASSIGN_OR_RETURN(std::vector<BatchItem> items, PlanBatch(plan));
   if (shard) {
@@ -155,8 +172,6 @@ absl::Status Batch(CommandContext& context) {
     TEMPOKEY_RETURN_IF_ERROR(CheckSummaryPath(*summary_path, ops_path, items, output_dir));
   }
   TEMPOKEY_ASSIGN_OR_RETURN(const Client* client, context.Connect());
-  TEMPOKEY_ASSIGN_OR_RETURN(std::unique_ptr<BatchManifest> manifest,
-                            BatchManifest::Open(output_dir, shard, context.args().Has("--force")));
   RemoveLeftoverTemporaries(items, manifest->path());
   options.manifest = manifest.get();
 

@@ -210,15 +210,27 @@ TEST_F(BatchManifestTest, AnOutputWrittenOverItsInputIsJournaledAndFoundAfterAKi
   journal.resize(journal.size() - 9);  // the last line cut short
   ASSERT_TRUE(core::WriteFileAtomically(out_ + "/.tempokey-batch.journal", journal).ok());
 
+  // The next run (killed too) appends after the torn line: its record starts a line of its own.
+  BatchItem bow = Item("bow");
+  bow.input_path = bow.output_path;
+  {
+    std::unique_ptr<BatchManifest> again = Open();
+    Produce(*again, bow, "curves");
+  }
+  fs::remove(out_ + "/.tempokey-batch.json");
+
   std::unique_ptr<BatchManifest> next = Open();
   const std::optional<ManifestRecord> done = next->FindUpToDate(walk, kOtherInputId, kPipeline);
   const std::optional<ManifestRecord> lost = next->FindUpToDate(run, kOtherInputId, kPipeline);
-  ASSERT_TRUE(next->Finish(std::vector<BatchItem>{walk, run}).ok());
+  const std::optional<ManifestRecord> after = next->FindUpToDate(bow, kOtherInputId, kPipeline);
+  ASSERT_TRUE(next->Finish(std::vector<BatchItem>{walk, run, bow}).ok());
 
   // In place, the input id is the output's own: the record's output on disk says done.
   ASSERT_TRUE(done.has_value());
   EXPECT_EQ(done->output, "walk.json");
   EXPECT_FALSE(lost.has_value());
+  ASSERT_TRUE(after.has_value());
+  EXPECT_EQ(after->output, "bow.json");
   EXPECT_FALSE(fs::exists(out_ + "/.tempokey-batch.journal"));  // folded into the manifest
 }
 

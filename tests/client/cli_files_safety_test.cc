@@ -264,6 +264,29 @@ TEST_F(OverwriteTest, BatchOutputsThatCollideWithEachOtherOrWithInputsAreRefused
   EXPECT_THAT(keyed_again.out, HasSubstr(R"("skipped": 2)"));
 }
 
+// A recursive batch whose OUTDIR lies inside DIR, with outputs of an input format (.bvh): its
+// recorded outputs are not the next run's inputs, so a re-run skips what is done instead of
+// being refused (or, before, processing its outputs a folder deeper each time).
+TEST_F(OverwriteTest, ARecursiveBatchIntoAFolderInsideItsInputsRunsAgain) {
+  std::filesystem::create_directory(Path("in"));
+  CopyFile(input_, Path("in/walk.bvh"));
+  {
+    std::ofstream ops(Path("ops.json"));
+    ops << R"({"operations": [{"convert": {}}]})";
+  }
+  const std::vector<std::string> batch = {"--server", server_->target(), "batch", Path("in"), "-r",
+                                          "-o", Path("in/conv"), "--ops", Path("ops.json")};
+
+  const ProcessResult first = RunTempokey(batch, dir_);
+  const ProcessResult second = RunTempokey(batch, dir_);
+
+  EXPECT_EQ(first.exit_code, 0) << first.err;
+  EXPECT_EQ(second.exit_code, 0) << second.err;
+  EXPECT_THAT(second.out, HasSubstr(R"("files": 1)"));
+  EXPECT_THAT(second.out, HasSubstr(R"("skipped": 1)"));
+  EXPECT_FALSE(std::filesystem::exists(Path("in/conv/conv")));
+}
+
 // An output that is a FIFO (a process reading the result) gets the bytes and stays a FIFO;
 // with nobody reading, the CLI says so at once instead of replacing it with a plain file.
 TEST_F(OverwriteTest, AnOutputFifoIsWrittenIntoAndNeverReplaced) {

@@ -153,8 +153,21 @@ class JsonReader {
             else if (h >= 'A' && h <= 'F') code |= static_cast<unsigned>(h - 'A' + 10);
             else return Error("expected 4 hex digits");
           }
-          if (code >= 0x80) return Error("expected an ASCII \\u escape");
-          out += static_cast<char>(code);
+          // ASCII and the rest of the Basic Multilingual Plane, as UTF-8 (AppendJsonString()
+          // writes the C1 controls so); not the surrogates, which pair up for other planes.
+          if (code >= 0xd800 && code <= 0xdfff) {
+            return Error("expected a \\u escape outside the surrogates (U+D800 to U+DFFF)");
+          }
+          if (code < 0x80) {
+            out += static_cast<char>(code);
+          } else if (code < 0x800) {
+            out += static_cast<char>(0xc0 | (code >> 6));
+            out += static_cast<char>(0x80 | (code & 0x3f));
+          } else {
+            out += static_cast<char>(0xe0 | (code >> 12));
+            out += static_cast<char>(0x80 | ((code >> 6) & 0x3f));
+            out += static_cast<char>(0x80 | (code & 0x3f));
+          }
           for (int i = 0; i < 4; ++i) Advance();
           break;
         }

@@ -47,6 +47,13 @@ TEST(JsonTest, C1ControlCharactersAreEscaped) {
   AppendJsonString(out, "a\xc2\x9b" "2J");
 
   EXPECT_EQ(out, "\"a\\u009b2J\"");
+  // ... and read back as the character it was (a manifest holding such a name stopped every
+  // later run: the reader took only ASCII escapes).
+  const absl::StatusOr<JsonValue> back = ParseJson(out, "s.json");
+  ASSERT_TRUE(back.ok()) << back.status();
+  EXPECT_EQ(back->text, "a\xc2\x9b" "2J");
+  EXPECT_EQ(ParseJson("\"\\u00e9\\u20ac\"", "s.json")->text, "\xc3\xa9\xe2\x82\xac");
+  EXPECT_FALSE(ParseJson("\"\\ud800\"", "s.json").ok());
 }
 
 TEST(JsonTest, DecodesStringEscapes) {

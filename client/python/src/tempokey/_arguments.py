@@ -35,11 +35,15 @@ def _is_number(value: Any) -> bool:
     """A number a float can be made of: any numbers.Real (int, float, Fraction, numpy scalars),
     decimal.Decimal or another type with __float__; not a bool, a string or bytes (a string of
     digits is a mistake the caller should see, and a list of them was read digit by digit)."""
-    if isinstance(value, (bool, str, bytes, bytearray)):
-        return False
-    if type(value).__name__ in ("bool_", "bool8"):  # numpy's booleans
+    if isinstance(value, (bool, str, bytes, bytearray)) or _is_numpy_bool(value):
         return False
     return isinstance(value, numbers.Real) or hasattr(value, "__float__")
+
+
+def _is_numpy_bool(value: Any) -> bool:
+    """A numpy boolean scalar (numpy.bool_, named "bool" from numpy 2), by its dtype's kind."""
+    dtype = getattr(value, "dtype", None)
+    return getattr(dtype, "kind", None) == "b" and getattr(value, "ndim", None) == 0
 
 
 def real(value: Any, name: str) -> float:
@@ -59,10 +63,13 @@ def integer(value: Any, name: str, bounds: tuple = INT64) -> int:
     if isinstance(value, numbers.Integral):
         whole = int(value)
     else:
-        number = float(value)
-        if not math.isfinite(number) or not number.is_integer():
+        # Exactly (a Decimal or Fraction above 2**53 is not rounded through a float).
+        try:
+            whole = int(value)
+        except (OverflowError, ValueError):  # infinities, NaN
+            raise ValueError("%s must be a whole number, got %s" % (name, shown(value))) from None
+        if whole != value:
             raise ValueError("%s must be a whole number, got %s" % (name, shown(value)))
-        whole = int(number)
     if not bounds[0] <= whole <= bounds[1]:
         raise ValueError("%s %d is out of range [%d, %d]" % (name, whole, bounds[0], bounds[1]))
     return whole
@@ -73,7 +80,7 @@ def boolean(value: Any, name: str) -> bool:
     (a string such as "false" would otherwise be true) nor another number."""
     if isinstance(value, bool):
         return value
-    if type(value).__name__ in ("bool_", "bool8"):  # numpy's booleans
+    if _is_numpy_bool(value):
         return bool(value)
     if isinstance(value, numbers.Integral) and int(value) in (0, 1):
         return bool(int(value))
