@@ -362,8 +362,9 @@ int HttpFrontEnd::HandleRequest(mg_connection* connection) {
     }
     const google::protobuf::MethodDescriptor* method = JsonBridge::FindMethod(path);
     if (method == nullptr) {
-      return DiscardBody(connection, SendApiError(connection, absl::UnimplementedError(absl::StrCat(
-                                          "no method ", core::AsAbsl(path.substr(1)), " in this server"))));
+      const absl::Status unknown = absl::UnimplementedError(
+          absl::StrCat("no method ", core::AsAbsl(path.substr(1)), " in this server"));
+      return DiscardBody(connection, SendApiError(connection, unknown));
     }
     if (absl::Status allowed = CheckApiRequest(
             HeaderOf(connection, "Content-Type"), HeaderOf(connection, "Origin"),

@@ -105,20 +105,28 @@ void SlowBodyGuard::Run() {
     const Watched late = earliest->second;
     watched_.erase(earliest);
     lock.unlock();
-    const bool cut = CutOff(late);
-    spdlog::warn("http: a request body from {}:{} did not arrive in time{}", late.remote_address,
-                 late.remote_port,
-                 cut ? "; its connection was shut down" : "; its connection was not found alone");
+    const int socket = FindSocket(late);
+    if (socket >= 0) {
+      // Counted before the shutdown, so that whoever sees the connection end sees the count.
+      {
+        std::lock_guard<std::mutex> count_lock(mutex_);
+        ++cut_off_;
+      }
+      // Shut down, not closed: the descriptor stays civetweb's, so it is not reused under it.
+      ::shutdown(socket, SHUT_RDWR);
+    }
+    spdlog::warn("http: a request body from {}:{} did not arrive in time; its connection was {}",
+                 late.remote_address, late.remote_port,
+                 socket >= 0 ? "shut down" : "not found alone");
     lock.lock();
-    if (cut) ++cut_off_;
   }
 }
 
-bool SlowBodyGuard::CutOff(const Watched& watched) const {
+int SlowBodyGuard::FindSocket(const Watched& watched) const {
   in_addr peer{};
-  if (inet_pton(AF_INET, watched.remote_address.c_str(), &peer) != 1) return false;
+  if (inet_pton(AF_INET, watched.remote_address.c_str(), &peer) != 1) return -1;
   DIR* fds = opendir("/proc/self/fd");
-  if (fds == nullptr) return false;
+  if (fds == nullptr) return -1;
   // The one socket from that peer to the front end's port: with the front end on 0.0.0.0 one
   // peer address and port may reach two local addresses, and then none is cut.
   int found = -1;
@@ -136,7 +144,8 @@ bool SlowBodyGuard::CutOff(const Watched& watched) const {
     int local_port = 0, remote_port = 0;
     if (getsockname(static_cast<int>(fd), reinterpret_cast<sockaddr*>(&local), &local_size) != 0 ||
         !Ipv4Of(local, &local_host, &local_port) || local_port != local_port_ ||
-        getpeername(static_cast<int>(fd), reinterpret_cast<sockaddr*>(&remote), &remote_size) != 0 ||
+        getpeername(static_cast<int>(fd), reinterpret_cast<sockaddr*>(&remote),
+                    &remote_size) != 0 ||
         !Ipv4Of(remote, &remote_host, &remote_port) || remote_port != watched.remote_port ||
         remote_host.s_addr != peer.s_addr) {
       continue;
@@ -149,8 +158,7 @@ bool SlowBodyGuard::CutOff(const Watched& watched) const {
     found_socket = info.st_ino;
   }
   closedir(fds);
-  // Shut down, not closed: the descriptor stays civetweb's, so it cannot be reused under it.
-  return found >= 0 && !ambiguous && shutdown(found, SHUT_RDWR) == 0;
+  return ambiguous ? -1 : found;
 }
 
 }  // namespace tempokey::server::http
