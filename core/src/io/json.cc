@@ -125,6 +125,15 @@ class JsonReader {
         return out;
       }
       if (static_cast<unsigned char>(ch) < 0x20) return Error("expected a string character");
+      if (static_cast<unsigned char>(ch) >= 0x80) {
+        // JSON text is UTF-8 (RFC 8259 8.1): a byte that does not start a valid sequence is
+        // refused, so that every string read can be written back unchanged.
+        const std::size_t length = text_scan::Utf8CharLength(text_.substr(pos_));
+        if (length == 0) return Error("expected UTF-8 text in the string");
+        out.append(text_.substr(pos_, length));
+        for (std::size_t i = 0; i < length; ++i) Advance();
+        continue;
+      }
       if (ch != '\\') {
         out += ch;
         Advance();

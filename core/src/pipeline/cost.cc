@@ -12,6 +12,7 @@
 #include "absl/strings/str_format.h"
 #include "tempokey/core/model/keyed_clip.h"
 #include "tempokey/core/model/status.h"
+#include "tempokey/core/reduce/joint_bound.h"
 #include "tempokey/core/pipeline/pipeline.h"
 
 namespace tempokey::core {
@@ -287,8 +288,14 @@ absl::StatusOr<PipelineCost> EstimatePipelineCost(const Clip& clip,
               return RetimeCost(shape, next, s);
             },
             [&](const ReduceStep& s) -> absl::StatusOr<StepCost> {
-              // A retime keeps the skeleton: `clip`'s tells whether a joint tolerance can apply.
+              // A retime keeps the skeleton: `clip`'s tells whether a joint tolerance can apply,
+              // and how small it may be.
               TEMPOKEY_RETURN_IF_ERROR(ValidateReduceOptionsForClip(clip, s.options));
+              if (s.options.method == ReduceMethod::kTolerance &&
+                  s.options.tolerance.joint_tolerance) {
+                TEMPOKEY_RETURN_IF_ERROR(
+                    CheckJointBoundForClip(*s.options.tolerance.joint_tolerance, clip));
+              }
               TEMPOKEY_RETURN_IF_ERROR(
                   ValidateReduceForLayout(s.options, shape.channels, shape.frames));
               next.keyed = true;

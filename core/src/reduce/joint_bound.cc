@@ -83,6 +83,41 @@ absl::Status CheckJointBoundAboveRounding(const JointTolerance& tolerance, doubl
       DescribeDouble(reach), " file units its joints reach from the origin)"));
 }
 
+absl::Status CheckJointBoundForClip(const JointTolerance& tolerance, const Clip& clip) {
+  if (clip.skeleton.empty()) return absl::OkStatus();
+  double height = 0.0;
+  if (tolerance.percent_of_height) {
+    TEMPOKEY_ASSIGN_OR_RETURN(height, FigureHeight(clip));
+  }
+  TEMPOKEY_ASSIGN_OR_RETURN(const double bound, ResolveJointTolerance(tolerance, height));
+  const std::vector<Joint>& joints = clip.skeleton.joints;
+  std::vector<double> chain(joints.size(), 0.0);
+  double reach = 0.0;
+  for (std::size_t j = 0; j < joints.size(); ++j) {
+    const Joint& joint = joints[j];
+    double link = std::hypot(joint.offset[0], joint.offset[1], joint.offset[2]);
+    for (int c : joint.channels) {
+      const Channel& channel = clip.channels[static_cast<std::size_t>(c)];
+      if (!IsPosition(channel.kind)) continue;
+      double largest = 0.0;
+      for (double v : channel.samples) largest = std::max(largest, std::abs(v));
+      link += largest;
+    }
+    chain[j] = (joint.parent < 0 ? 0.0 : chain[static_cast<std::size_t>(joint.parent)]) + link;
+    reach = std::max(reach, chain[j]);
+    for (const Vec3& end : joint.end_sites) {
+      reach = std::max(reach, chain[j] + std::hypot(end[0], end[1], end[2]));
+    }
+  }
+  const double least = 2.0 * kMinJointBoundOfReach * reach;
+  if (bound >= least) return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrCat(
+      "tolerance.joint_tolerance ", FormatJointTolerance(tolerance),
+      " is below what this clip's joint positions can be computed to: at least ",
+      DescribeDouble(least), " file units (", DescribeDouble(2.0 * kMinJointBoundOfReach),
+      " of the ", DescribeDouble(reach), " file units its skeleton can reach from the origin)"));
+}
+
 namespace reduce_internal {
 
 JointBoundPlan::JointBoundPlan(WorldErrorMeter& meter,

@@ -41,6 +41,17 @@ TEST(JsonTest, AStringThatIsNotUtf8IsWrittenWithReplacementCharacters) {
   EXPECT_TRUE(IsUtf8("caf\xc3\xa9"));
 }
 
+// JSON text is UTF-8: a raw byte that is not is refused where it stands, so every string read
+// writes back unchanged (the keyed-JSON fuzzer found a name of 0xff bytes read, then written as
+// U+FFFD).
+TEST(JsonTest, AStringThatIsNotUtf8IsRefusedWithItsPlace) {
+  const absl::StatusOr<JsonValue> read = ParseJson("{\"name\": \"ab\xff\"}", "k.json");
+
+  ASSERT_FALSE(read.ok());
+  EXPECT_EQ(std::string(read.status().message()),
+            "k.json:1:13: expected UTF-8 text in the string, got \"\\xff\"");
+}
+
 // A summary goes to the terminal: U+009B (CSI) and the other C1 controls are escaped.
 TEST(JsonTest, C1ControlCharactersAreEscaped) {
   std::string out;

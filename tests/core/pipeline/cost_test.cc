@@ -10,6 +10,7 @@
 #include "gtest/gtest.h"
 #include "tempokey/core/io/bvh.h"
 #include "tempokey/core/pipeline/pipeline.h"
+#include "tempokey/core/reduce/joint_bound.h"
 #include "tests/testing/test_paths.h"
 
 namespace tempokey::core {
@@ -293,6 +294,23 @@ TEST(EstimatePipelineCostTest, AReductionCountsTheWorldErrorOfEveryJointAndEndSi
   EXPECT_EQ(slowed.status().code(), absl::StatusCode::kResourceExhausted);
   EXPECT_THAT(std::string(slowed.status().message()),
               HasSubstr("operation 1 (retime): the clip it makes has 1001 joints and end sites x "));
+}
+
+// What validation accepts must run: a joint bound below what positions can be computed to is
+// refused here, against an upper bound on the skeleton's reach (twice the run's own floor), not
+// when the reduction runs (the pipeline fuzzer found 4.15e-322 accepted, then refused).
+TEST(EstimatePipelineCostTest, AJointBoundBelowTheRoundingOfPositionsIsRefusedBeforeAnyWork) {
+  absl::StatusOr<Clip> clip = ReadBvhFile(testing::SharedBvh("cmu/131_01.bvh"));
+  ASSERT_TRUE(clip.ok()) << clip.status();
+  ReduceStep tiny;
+  tiny.options.tolerance.joint_tolerance = JointTolerance{.value = 1e-15};
+
+  const absl::StatusOr<PipelineCost> cost = EstimatePipelineCost(*clip, {{tiny}});
+
+  EXPECT_EQ(cost.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(cost.status().message()),
+              HasSubstr("operation 1 (reduce): tolerance.joint_tolerance 1e-15 is below what "
+                        "this clip's joint positions can be computed to"));
 }
 
 TEST(EstimatePipelineCostTest, RealCaptureWithDefaultsIsFarBelowAMinute) {

@@ -37,7 +37,8 @@ struct JsonValue {
 
 // Parses one JSON document. `source` names it in messages.
 // Accepts RFC 8259 JSON with these limits: nesting at most 64 levels, numbers must be finite
-// doubles, \u escapes only for the Basic Multilingual Plane outside the surrogates.
+// doubles, strings of UTF-8 text (RFC 8259 8.1), \u escapes only for the Basic Multilingual
+// Plane outside the surrogates.
 // Errors: kInvalidArgument "<source>:<line>:<column>: expected ',' or '}', got 'x'".
 // Thread-safe: a pure function.
 absl::StatusOr<JsonValue> ParseJson(std::string_view text, std::string_view source);

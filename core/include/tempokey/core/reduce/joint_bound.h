@@ -77,6 +77,13 @@ inline constexpr double kMinJointBoundOfReach = 1e-12;
 absl::Status CheckJointBoundAboveRounding(const JointTolerance& tolerance, double bound,
                                           const PointTrajectories& source);
 
+// Before any work (the pipeline's validation): refuses a joint bound below twice the floor of
+// CheckJointBoundAboveRounding(), the reach taken as an upper bound from the skeleton alone
+// (along each chain, every offset's length plus the largest values of the joint's position
+// channels), so that what passes here passes there too, after a retime's overshoot as well.
+// Errors: kInvalidArgument as CheckJointBoundAboveRounding(); those of ResolveJointTolerance().
+absl::Status CheckJointBoundForClip(const JointTolerance& tolerance, const Clip& clip);
+
 }  // namespace tempokey::core
 
 #endif  // TEMPOKEY_CORE_REDUCE_JOINT_BOUND_H_
