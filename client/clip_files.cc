@@ -109,10 +109,16 @@ bool SameExistingFile(const std::string& a, const std::string& b) {
 
 bool IsSameFile(const std::string& a, const std::string& b) {
   if (SameExistingFile(a, b)) return true;
-  // One may not be there yet: the same path once both are made absolute and normal.
+  // One may not be there yet: the same path once both are made absolute and normal, the links
+  // of their existing parts followed, without a trailing separator ("out/", "./out", "out/.").
+  auto normal = [](const std::string& path, std::error_code& error) {
+    namespace fs = std::filesystem;
+    fs::path full = fs::weakly_canonical(fs::absolute(path, error), error).lexically_normal();
+    return full.has_filename() ? full : full.parent_path();
+  };
   std::error_code error_a, error_b;
-  const std::filesystem::path pa = std::filesystem::weakly_canonical(a, error_a);
-  const std::filesystem::path pb = std::filesystem::weakly_canonical(b, error_b);
+  const std::filesystem::path pa = normal(a, error_a);
+  const std::filesystem::path pb = normal(b, error_b);
   return !error_a && !error_b && pa == pb;
 }
 

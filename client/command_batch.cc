@@ -98,18 +98,11 @@ absl::StatusOr<std::optional<FileFormat>> FormatFromFlags(const ParsedArgs& args
 // journal of OUTDIR (any shard's: every run reads them all).
 absl::Status CheckSummaryPath(const std::string& summary_path, const std::string& ops_path,
                               std::span<const BatchItem> items, const std::string& output_dir) {
-  namespace fs = std::filesystem;
-  // Absolute and normal, without a trailing separator: OUTDIR may not exist yet ("out/",
-  // "./out" and "out/." are one folder).
-  auto normal = [](const fs::path& path) {
-    std::error_code error;
-    fs::path absolute = fs::absolute(path.empty() ? fs::path(".") : path, error).lexically_normal();
-    return absolute.has_filename() ? absolute : absolute.parent_path();
-  };
-  const fs::path summary(summary_path);
-  const fs::path folder = summary.parent_path().empty() ? fs::path(".") : summary.parent_path();
+  const std::filesystem::path summary(summary_path);
+  const std::string folder =
+      summary.parent_path().empty() ? std::string(".") : summary.parent_path().string();
   if (summary.filename().string().starts_with(kManifestPrefix) &&
-      (normal(folder) == normal(output_dir) || IsSameFile(folder.string(), output_dir))) {
+      IsSameFile(folder, output_dir)) {
     return UsageError(absl::StrCat("--summary ", summary_path,
                                    " is a name the batch keeps its records under in OUTDIR; "
                                    "choose another file"));

@@ -160,8 +160,7 @@ absl::Status ValidateClipLayout(const Clip& clip, const ClipLimits& limits) {
   // Forward kinematics places every joint and end site at every frame (a reduction's world
   // error, the joint bound): as many positions as samples at most, or a few channels with many
   // end sites (which carry no samples) would cost memory and time the sample limit does not see.
-  std::int64_t points = static_cast<std::int64_t>(joints.size());
-  for (const Joint& joint : joints) points += static_cast<std::int64_t>(joint.end_sites.size());
+  const std::int64_t points = clip.skeleton.point_count();
   if (points > 0 && clip.frame_count > limits.max_samples / points) {
     return OverLimitError(absl::StrCat(
         "skeleton has ", points, " joints and end sites x ", clip.frame_count,

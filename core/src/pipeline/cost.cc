@@ -258,10 +258,7 @@ absl::StatusOr<PipelineCost> EstimatePipelineCost(const Clip& clip,
   shape.frame_time = clip.frame_time_seconds;
   shape.frames = clip.frame_count;
   shape.channels = static_cast<std::int64_t>(clip.channels.size());
-  shape.points = static_cast<std::int64_t>(clip.skeleton.joints.size());
-  for (const Joint& joint : clip.skeleton.joints) {
-    shape.points += static_cast<std::int64_t>(joint.end_sites.size());
-  }
+  shape.points = clip.skeleton.point_count();
   shape.data = &clip;
   PipelineCost total;
   // Step by step, so the first operation at fault is the one named.

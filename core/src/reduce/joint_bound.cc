@@ -68,19 +68,30 @@ absl::StatusOr<double> ResolveJointTolerance(const JointTolerance& tolerance,
   return tolerance.value / 100.0 * figure_height;
 }
 
+namespace {
+
+// OK when `bound` is at least `fraction` of `reach`; the refusal says what `reach` is ("its
+// joints reach" from the origin).
+absl::Status CheckAboveFloor(const JointTolerance& tolerance, double bound, double fraction,
+                             double reach, std::string_view reached) {
+  const double least = fraction * reach;
+  if (bound >= least) return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrCat(
+      "tolerance.joint_tolerance ", FormatJointTolerance(tolerance),
+      " is below what this clip's joint positions can be computed to: at least ",
+      DescribeDouble(least), " file units (", DescribeDouble(fraction), " of the ",
+      DescribeDouble(reach), " file units ", AsAbsl(reached), " from the origin)"));
+}
+
+}  // namespace
+
 absl::Status CheckJointBoundAboveRounding(const JointTolerance& tolerance, double bound,
                                           const PointTrajectories& source) {
   double reach = 0.0;
   for (const Vec3& p : source.positions) {
     reach = std::max({reach, std::abs(p[0]), std::abs(p[1]), std::abs(p[2])});
   }
-  const double least = kMinJointBoundOfReach * reach;
-  if (bound >= least) return absl::OkStatus();
-  return absl::InvalidArgumentError(absl::StrCat(
-      "tolerance.joint_tolerance ", FormatJointTolerance(tolerance),
-      " is below what this clip's joint positions can be computed to: at least ",
-      DescribeDouble(least), " file units (", DescribeDouble(kMinJointBoundOfReach), " of the ",
-      DescribeDouble(reach), " file units its joints reach from the origin)"));
+  return CheckAboveFloor(tolerance, bound, kMinJointBoundOfReach, reach, "its joints reach");
 }
 
 absl::Status CheckJointBoundForClip(const JointTolerance& tolerance, const Clip& clip) {
@@ -109,13 +120,8 @@ absl::Status CheckJointBoundForClip(const JointTolerance& tolerance, const Clip&
       reach = std::max(reach, chain[j] + std::hypot(end[0], end[1], end[2]));
     }
   }
-  const double least = 2.0 * kMinJointBoundOfReach * reach;
-  if (bound >= least) return absl::OkStatus();
-  return absl::InvalidArgumentError(absl::StrCat(
-      "tolerance.joint_tolerance ", FormatJointTolerance(tolerance),
-      " is below what this clip's joint positions can be computed to: at least ",
-      DescribeDouble(least), " file units (", DescribeDouble(2.0 * kMinJointBoundOfReach),
-      " of the ", DescribeDouble(reach), " file units its skeleton can reach from the origin)"));
+  return CheckAboveFloor(tolerance, bound, 2.0 * kMinJointBoundOfReach, reach,
+                         "its skeleton can reach");
 }
 
 namespace reduce_internal {

@@ -53,6 +53,12 @@ struct Skeleton {
   std::vector<Joint> joints;
 
   bool empty() const { return joints.empty(); }
+  // Joints plus end sites: the points forward kinematics places (SkeletonPoints()).
+  std::int64_t point_count() const {
+    std::int64_t count = static_cast<std::int64_t>(joints.size());
+    for (const Joint& joint : joints) count += static_cast<std::int64_t>(joint.end_sites.size());
+    return count;
+  }
   // Index of the joint named `name`, or -1.
   int FindJoint(std::string_view name) const;
 
