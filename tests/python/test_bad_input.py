@@ -14,6 +14,7 @@ it uses; one tempokey-server on 127.0.0.1:0 for the module. No test waits on a c
 silence limit is a parameter the tests lower.
 """
 
+import json
 import os
 import shutil
 import socket
@@ -22,6 +23,8 @@ import subprocess
 import tempfile
 import threading
 import unittest
+
+import grpc
 
 import tempokey as tk
 
@@ -506,6 +509,49 @@ class ExampleOverwriteTest(TemporaryFolderTestCase):
 
                 self.assertEqual(run.returncode, 2)
                 self.assertIn("argument --timeout: expected a number of seconds > 0", run.stderr)
+
+
+class DecodersNotOursTest(TemporaryFolderTestCase):
+    """What the server and the CLI write, read by decoders the project did not write: Python's
+    json module and grpcio."""
+
+    def test_a_batch_summary_and_manifest_with_odd_names_are_json_pythons_decoder_reads(self):
+        # A Latin-1 name (not UTF-8: written with U+FFFD) and one holding U+0085 (a C1 control:
+        # written escaped, \u0085), in one folder with a plain one.
+        folder = self.path("in")
+        os.mkdir(folder)
+        names = [b"caf\xe9.bvh", "nel\u0085.bvh".encode(), b"plain.bvh"]
+        for name in names:
+            with open(os.path.join(os.fsencode(folder), name), "wb") as stream:
+                stream.write(SMALL_BVH.encode())
+        ops = self.write("ops.json", b'{"operations": [{"convert": {}}]}')
+        out = self.path("out")
+
+        run = subprocess.run([CLI_BINARY, "--server", _server.address, "batch", folder, "-o", out,
+                              "--ops", ops, "--progress", "none"], capture_output=True,
+                             timeout=SUBPROCESS_TIMEOUT_SECONDS, stdin=subprocess.DEVNULL)
+
+        self.assertEqual(run.returncode, 0, run.stderr)
+        summary = json.loads(run.stdout.decode("utf-8"))  # strict UTF-8, then JSON
+        self.assertEqual(sorted(r["input"] for r in summary["results"]),
+                         ["caf\ufffd.bvh", "nel\u0085.bvh", "plain.bvh"])
+        with open(os.path.join(out, ".tempokey-batch.json"), encoding="utf-8") as stream:
+            manifest = json.load(stream)
+        # The Latin-1 name is not recorded (it could never match again); the others are.
+        self.assertEqual(sorted(manifest["outputs"]), ["nel\u0085.bvh", "plain.bvh"])
+
+    def test_a_message_quoting_a_long_input_reaches_grpcio_capped(self):
+        # grpcio refuses a status over its 8 KiB header limit: the server's message is cut.
+        with grpc.insecure_channel(_server.address) as channel:
+            stub = tk.motion_service_pb2_grpc.MotionServiceStub(channel)
+            with self.assertRaises(grpc.RpcError) as caught:
+                stub.ListJobs(tk.motion_service_pb2.ListJobsRequest(page_token="x" * 100000),
+                              timeout=CALL_TIMEOUT_SECONDS)
+
+        self.assertEqual(caught.exception.code(), grpc.StatusCode.INVALID_ARGUMENT)
+        self.assertTrue(caught.exception.details().startswith('page_token "xxx'))
+        self.assertRegex(caught.exception.details(), r" \.\.\. \(\d+ more bytes not shown\)$")
+        self.assertLess(len(caught.exception.details()), 2100)
 
 
 if __name__ == "__main__":

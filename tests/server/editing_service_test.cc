@@ -571,6 +571,7 @@ TEST_F(ExportStopTest, AnExportCancelledWhileQueuedIsNotFormatted) {
 TEST_F(ExportStopTest, AProcessCallAbandonedWhileQueuedIsCountedCancelled) {
   std::unique_ptr<Call> running = Start(glb_);
   ASSERT_TRUE(hook_->gate.WaitArrivals(1));
+  const int streams_before = server_->open_streams();
   grpc::ClientContext context;
   SetDeadline(context);
   auto process = stub_->Process(&context);
@@ -585,8 +586,16 @@ TEST_F(ExportStopTest, AProcessCallAbandonedWhileQueuedIsCountedCancelled) {
     std::this_thread::sleep_for(std::chrono::milliseconds(1));
   }
   ASSERT_EQ(server_->pool().queue_depth(), 1);
+  ASSERT_EQ(server_->open_streams(), streams_before + 1);  // the queued call holds a slot
   context.TryCancel();
   const grpc::Status cancelled = process->Finish();
+  // The worker is released only once the server has seen the cancel (its stream slot freed), so
+  // that the call's turn comes after it however loaded the machine.
+  const auto seen = std::chrono::steady_clock::now() + StartGate::kWaitLimit;
+  while (server_->open_streams() > streams_before && std::chrono::steady_clock::now() < seen) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  ASSERT_EQ(server_->open_streams(), streams_before);
   hook_->gate.Open();
   Finish(*running);
   // One worker: this export runs after the abandoned call's turn.
