@@ -13,6 +13,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "grpcpp/support/channel_arguments.h"
+#include "server/http/connection_socket.h"
 #include "server/http/http_status.h"
 #include "spdlog/spdlog.h"
 #include "tempokey/core/model/status.h"
@@ -117,13 +118,30 @@ int SendApiError(mg_connection* connection, const absl::Status& status,
 // {"result": ...} / {"error": ...} for server-streaming methods.
 class HttpCallStream final : public JsonBridge::Stream {
  public:
-  // `body_watch` (SlowBodyGuard) ends once the whole body has been read.
+  // `body_watch` (SlowBodyGuard) ends once the whole body has been read; `local_port` is the
+  // front end's, which with the peer names the connection's socket.
   HttpCallStream(mg_connection* connection, const google::protobuf::MethodDescriptor& method,
-                 std::int64_t max_message_bytes, SlowBodyGuard::Watch& body_watch)
+                 std::int64_t max_message_bytes, SlowBodyGuard::Watch& body_watch,
+                 int local_port)
       : connection_(connection),
         method_(method),
         max_bytes_(max_message_bytes),
-        body_watch_(body_watch) {}
+        body_watch_(body_watch),
+        local_port_(local_port) {}
+
+  // Looked for only once a call has run for a while (kDepartureLook): short calls never scan
+  // the process's descriptors. A departure is the peer's FIN or a reset, as nginx takes it
+  // (proxy_ignore_client_abort off, its default, closes the upstream call when "a client closes
+  // the connection without waiting for a response",
+  // https://nginx.org/en/docs/http/ngx_http_proxy_module.html#proxy_ignore_client_abort).
+  bool ClientGone() override {
+    if (!looked_for_socket_) {
+      looked_for_socket_ = true;
+      const mg_request_info* info = mg_get_request_info(connection_);
+      socket_ = FindConnectionSocket(local_port_, info->remote_addr, info->remote_port);
+    }
+    return socket_ >= 0 && PeerHasLeft(socket_);
+  }
 
   absl::StatusOr<std::optional<std::string>> NextRequest() override {
     if (!method_.client_streaming()) {
@@ -171,6 +189,8 @@ class HttpCallStream final : public JsonBridge::Stream {
 
   // Sends what the call ended with: its one answer or error, or the end of the NDJSON stream.
   int Finish(const JsonBridge::Outcome& outcome) {
+    // Nobody to tell (and civetweb does not know 499, the status logs give such calls).
+    if (outcome.client_gone) return HttpStatusOf(outcome.status.code());
     if (streaming_started_) {
       if (!outcome.status.ok()) {
         const std::string line =
@@ -216,6 +236,9 @@ class HttpCallStream final : public JsonBridge::Stream {
   const google::protobuf::MethodDescriptor& method_;
   const std::int64_t max_bytes_;
   SlowBodyGuard::Watch& body_watch_;
+  const int local_port_;
+  bool looked_for_socket_ = false;
+  int socket_ = -1;  // civetweb's, open while the handler runs
   std::string buffer_;
   std::vector<char> block_;
   bool done_reading_ = false;
@@ -372,9 +395,14 @@ int HttpFrontEnd::HandleRequest(mg_connection* connection) {
         !allowed.ok()) {
       return DiscardBody(connection, SendApiError(connection, allowed));
     }
-    HttpCallStream stream(connection, *method, bridge_.max_message_bytes(), body_watch);
+    HttpCallStream stream(connection, *method, bridge_.max_message_bytes(), body_watch, port_);
     const JsonBridge::Outcome outcome =
         bridge_.Call(*method, HeaderOf(connection, "Authorization"), stream);
+    if (outcome.client_gone) {
+      departed_clients_.fetch_add(1, std::memory_order_relaxed);
+      spdlog::info("http: the client of {} ({}:{}) went away; the call was cancelled",
+                   method->name(), info->remote_addr, info->remote_port);
+    }
     return stream.Finish(outcome);
   }
   if (verb != "GET" && verb != "HEAD") {

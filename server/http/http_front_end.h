@@ -16,6 +16,8 @@
 #ifndef TEMPOKEY_SERVER_HTTP_HTTP_FRONT_END_H_
 #define TEMPOKEY_SERVER_HTTP_HTTP_FRONT_END_H_
 
+#include <atomic>
+#include <cstdint>
 #include <memory>
 #include <string>
 
@@ -54,6 +56,10 @@ class HttpFrontEnd {
 
   // Request bodies shut down for arriving too slowly (SlowBodyGuard), so far.
   std::int64_t cut_off_bodies() const { return guard_ == nullptr ? 0 : guard_->cut_off(); }
+  // API calls cancelled because their client went away while they ran, so far.
+  std::int64_t departed_clients() const {
+    return departed_clients_.load(std::memory_order_relaxed);
+  }
 
   // civetweb's entry point (internal).
   int HandleRequest(mg_connection* connection);
@@ -69,6 +75,7 @@ class HttpFrontEnd {
   std::string host_;
   // Started once the port is known; stopped after civetweb (Stop()), whose handlers use it.
   std::unique_ptr<SlowBodyGuard> guard_;
+  std::atomic<std::int64_t> departed_clients_{0};
   mg_context* context_ = nullptr;
 };
 

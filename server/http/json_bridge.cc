@@ -1,5 +1,7 @@
 #include "server/http/json_bridge.h"
 
+#include <chrono>
+#include <functional>
 #include <string>
 #include <utility>
 #include <vector>
@@ -72,12 +74,28 @@ class DrivenCall {
     call_->WritesDone(&writes_done_tag);
     alive_ = Await(cq_, &writes_done_tag);
   }
-  // False at the end of the response stream (or when the call broke).
-  bool Read(pb::Message& message) {
+  // False at the end of the response stream (or when the call broke). While it waits, asks
+  // `gone` every `look` whether the client has left, and cancels the call once it has
+  // (`*cancelled` is then set; the read ends, failed).
+  bool Read(pb::Message& message, const std::function<bool()>& gone,
+            std::chrono::milliseconds look, bool* cancelled) {
     grpc::ByteBuffer buffer;
     call_->Read(&buffer, &read_tag);
-    if (!Await(cq_, &read_tag)) return false;
-    return grpc::SerializationTraits<pb::Message>::Deserialize(&buffer, &message).ok();
+    while (true) {
+      void* got = nullptr;
+      bool ok = false;
+      const grpc::CompletionQueue::NextStatus next = cq_.AsyncNext(
+          &got, &ok, std::chrono::system_clock::now() + (*cancelled ? std::chrono::hours(1) : look));
+      if (next == grpc::CompletionQueue::SHUTDOWN) return false;
+      if (next == grpc::CompletionQueue::GOT_EVENT) {
+        if (!ok || got != &read_tag) return false;
+        return grpc::SerializationTraits<pb::Message>::Deserialize(&buffer, &message).ok();
+      }
+      if (!*cancelled && gone()) {
+        *cancelled = true;
+        Cancel();
+      }
+    }
   }
   void Cancel() { context_.TryCancel(); }
   grpc::Status Finish() {
@@ -173,7 +191,8 @@ JsonBridge::Outcome JsonBridge::Call(const pb::MethodDescriptor& method,
 
   // Responses, in order, until the stream ends.
   std::unique_ptr<pb::Message> response = NewMessage(method.output_type());
-  while (call.Read(*response)) {
+  const auto gone = [&stream] { return stream.ClientGone(); };
+  while (call.Read(*response, gone, kDepartureLook, &outcome.client_gone)) {
     absl::StatusOr<std::string> json = MessageToJson(*response);
     if (!json.ok()) {
       call.Cancel();
@@ -189,6 +208,11 @@ JsonBridge::Outcome JsonBridge::Call(const pb::MethodDescriptor& method,
     }
     ++outcome.responses;
     response->Clear();
+  }
+  if (outcome.client_gone) {
+    call.Finish();
+    outcome.status = absl::CancelledError("the HTTP client went away");
+    return outcome;
   }
   outcome.status = FromGrpc(call.Finish());
   outcome.retry_after = call.RetryAfter();

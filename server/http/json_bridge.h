@@ -44,7 +44,12 @@ class JsonBridge {
     // One response message as JSON text. False when the client went away: the call is
     // cancelled.
     virtual bool WriteResponse(std::string_view json) = 0;
+    // True once the client has gone. Asked every kDepartureLook while a response is awaited
+    // (every request has been read by then): a long call whose client left is cancelled, not
+    // run to its end for nobody (a Process writes nothing while its pipeline runs).
+    virtual bool ClientGone() { return false; }
   };
+  static constexpr std::chrono::milliseconds kDepartureLook{250};
 
   struct Outcome {
     // The call's status (gRPC's code and message), or the bridge's own INVALID_ARGUMENT for a
@@ -53,6 +58,8 @@ class JsonBridge {
     // The server's retry hint (trailing metadata retry-after-ms), on RESOURCE_EXHAUSTED.
     std::optional<std::chrono::milliseconds> retry_after;
     std::int64_t responses = 0;
+    // The call was cancelled because the client had gone (Stream::ClientGone()).
+    bool client_gone = false;
   };
 
   // Runs one call of `method`: every request `stream` gives (one for unary and server-streaming

@@ -1,30 +1,13 @@
 #include "server/http/slow_body_guard.h"
 
-#include <arpa/inet.h>
-#include <dirent.h>
-#include <netinet/in.h>
 #include <sys/socket.h>
-#include <sys/stat.h>
 
 #include <algorithm>
-#include <cstdlib>
-#include <string_view>
 
+#include "server/http/connection_socket.h"
 #include "spdlog/spdlog.h"
 
 namespace tempokey::server::http {
-namespace {
-
-// The IPv4 address and port of `address` when it is one.
-bool Ipv4Of(const sockaddr_storage& address, in_addr* host, int* port) {
-  if (address.ss_family != AF_INET) return false;
-  const auto* v4 = reinterpret_cast<const sockaddr_in*>(&address);
-  *host = v4->sin_addr;
-  *port = ntohs(v4->sin_port);
-  return true;
-}
-
-}  // namespace
 
 SlowBodyGuard::Watch& SlowBodyGuard::Watch::operator=(Watch&& other) noexcept {
   if (this != &other) {
@@ -105,7 +88,8 @@ void SlowBodyGuard::Run() {
     const Watched late = earliest->second;
     watched_.erase(earliest);
     lock.unlock();
-    const int socket = FindSocket(late);
+    const int socket =
+        FindConnectionSocket(local_port_, late.remote_address, late.remote_port);
     if (socket >= 0) {
       // Counted before the shutdown, so that whoever sees the connection end sees the count.
       {
@@ -120,45 +104,6 @@ void SlowBodyGuard::Run() {
                  socket >= 0 ? "shut down" : "not found alone");
     lock.lock();
   }
-}
-
-int SlowBodyGuard::FindSocket(const Watched& watched) const {
-  in_addr peer{};
-  if (inet_pton(AF_INET, watched.remote_address.c_str(), &peer) != 1) return -1;
-  DIR* fds = opendir("/proc/self/fd");
-  if (fds == nullptr) return -1;
-  // The one socket from that peer to the front end's port: with the front end on 0.0.0.0 one
-  // peer address and port may reach two local addresses, and then none is cut.
-  int found = -1;
-  ino_t found_socket = 0;
-  bool ambiguous = false;
-  while (const dirent* entry = readdir(fds)) {
-    char* end = nullptr;
-    const long fd = std::strtol(entry->d_name, &end, 10);
-    if (end == entry->d_name || *end != '\0') continue;
-    sockaddr_storage local{};
-    sockaddr_storage remote{};
-    socklen_t local_size = sizeof local;
-    socklen_t remote_size = sizeof remote;
-    in_addr local_host{}, remote_host{};
-    int local_port = 0, remote_port = 0;
-    if (getsockname(static_cast<int>(fd), reinterpret_cast<sockaddr*>(&local), &local_size) != 0 ||
-        !Ipv4Of(local, &local_host, &local_port) || local_port != local_port_ ||
-        getpeername(static_cast<int>(fd), reinterpret_cast<sockaddr*>(&remote),
-                    &remote_size) != 0 ||
-        !Ipv4Of(remote, &remote_host, &remote_port) || remote_port != watched.remote_port ||
-        remote_host.s_addr != peer.s_addr) {
-      continue;
-    }
-    // Descriptors duplicated from one socket (civetweb keeps such) are one connection.
-    struct stat info {};
-    if (fstat(static_cast<int>(fd), &info) != 0) continue;
-    if (found >= 0 && info.st_ino != found_socket) ambiguous = true;
-    found = static_cast<int>(fd);
-    found_socket = info.st_ino;
-  }
-  closedir(fds);
-  return ambiguous ? -1 : found;
 }
 
 }  // namespace tempokey::server::http

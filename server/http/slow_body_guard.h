@@ -64,10 +64,6 @@ class SlowBodyGuard {
   };
   void End(std::uint64_t id);
   void Run();
-  // The descriptor of this process's socket connected from `watched`'s peer to local_port_;
-  // -1 when none is found (the connection is gone already) or more than one socket (the same
-  // peer on two local addresses: which is late cannot be told).
-  int FindSocket(const Watched& watched) const;
 
   const int local_port_;
   mutable std::mutex mutex_;

@@ -16,6 +16,7 @@
 
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
+#include "absl/strings/str_cat.h"
 #include "google/protobuf/util/json_util.h"
 #include "server/http/http_front_end.h"
 #include "server/http/http_options.h"
@@ -25,6 +26,7 @@
 #include "tempokey/v1/motion_service.pb.h"
 #include "tests/server/http_util.h"
 #include "tests/server/server_test_util.h"
+#include "tests/server/test_clips.h"
 #include "tests/testing/test_paths.h"
 
 namespace tempokey::server::http {
@@ -235,6 +237,79 @@ TEST(HttpFrontEndTest, ARequestBodyTrickledInIsCutOffAndThePageStillServed) {
 
   EXPECT_EQ((*front_end)->cut_off_bodies(), 2);
   EXPECT_THAT(refusal, ::testing::StartsWith("HTTP/1.1 4"));
+}
+
+// A Process call over HTTP: the clip and its start as NDJSON lines, one message each.
+std::string ProcessRequestOverHttp(const core::Clip& clip) {
+  std::vector<v1::ProcessRequest> requests = testing::ProcessClipRequests(clip);
+  *requests.emplace_back().mutable_start()->mutable_operations() = testing::WrapOperations();
+  std::string body;
+  for (const v1::ProcessRequest& request : requests) {
+    absl::StatusOr<std::string> json = MessageToJson(request);
+    EXPECT_TRUE(json.ok()) << json.status();
+    body += json.value_or("") + "\n";
+  }
+  return absl::StrCat(
+      "POST /tempokey.v1.MotionService/Process HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+      "Content-Type: application/x-ndjson\r\nContent-Length: ", body.size(),
+      "\r\nConnection: close\r\n\r\n", body);
+}
+
+// A Process call writes nothing while its pipeline runs, so a client that left used to be
+// noticed only at the end: the work ran on for nobody (10 s in the probe that found it). Now
+// the bridge looks at the connection while it waits and cancels the call. The worker is held
+// at the departed call's start, so the server can only see the cancel from the front end's
+// look, never from a write; a client that stays behind it gets its answer.
+TEST(HttpFrontEndTest, AProcessCallWhoseClientLeavesIsCancelledWhileItRuns) {
+  ServerOptions server_options = testing::TestServerOptions();
+  server_options.workers = 1;
+  server_options.metrics_address = "127.0.0.1:0";
+  testing::GatedServer gated(std::move(server_options));
+  ASSERT_NE(gated.server, nullptr);
+  HttpOptions options = Options("127.0.0.1:0");
+  options.web_root = testing::MakeTempDir();
+  absl::StatusOr<std::unique_ptr<HttpFrontEnd>> front_end =
+      HttpFrontEnd::Start(options, *gated.server);
+  ASSERT_TRUE(front_end.ok()) << front_end.status();
+  const int port = (*front_end)->port();
+  const std::string request = ProcessRequestOverHttp(testing::MakeClip(2, 60));
+  const int streams_before = gated.server->open_streams();
+
+  const int leaving = testing::ConnectLoopback(port);
+  ASSERT_GE(leaving, 0);
+  ASSERT_EQ(::send(leaving, request.data(), request.size(), MSG_NOSIGNAL),
+            static_cast<ssize_t>(request.size()));
+  ASSERT_TRUE(gated.gate->WaitArrivals(1));  // its pipeline is about to run, held
+  ASSERT_EQ(gated.server->open_streams(), streams_before + 1);
+  ::close(leaving);
+  // The server sees the call cancelled (its stream slot freed) while the worker is still held.
+  const auto deadline = std::chrono::steady_clock::now() + testing::StartGate::kWaitLimit;
+  while (gated.server->open_streams() > streams_before &&
+         std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  ASSERT_EQ(gated.server->open_streams(), streams_before);
+
+  // A client that stays: queued behind the held call, its looks find it there. (The pause only
+  // gives them time to run; what is asserted holds either way.)
+  const int staying = testing::ConnectLoopback(port);
+  ASSERT_GE(staying, 0);
+  ASSERT_EQ(::send(staying, request.data(), request.size(), MSG_NOSIGNAL),
+            static_cast<ssize_t>(request.size()));
+  std::this_thread::sleep_for(3 * JsonBridge::kDepartureLook);
+  gated.gate->Open();
+  const std::string answer = testing::ReadToEnd(staying);
+  ::close(staying);
+  const std::optional<std::string> scrape = testing::HttpGet(gated.server->metrics_port(), "/metrics");
+
+  EXPECT_THAT(answer, ::testing::StartsWith("HTTP/1.1 200"));
+  EXPECT_THAT(answer, HasSubstr("{\"result\":{\"result\":"));
+  EXPECT_THAT(answer, ::testing::Not(HasSubstr("\"error\"")));
+  EXPECT_EQ((*front_end)->departed_clients(), 1);
+  ASSERT_TRUE(scrape.has_value());
+  const auto samples = testing::ParseSamples(*scrape);
+  EXPECT_EQ(testing::Sample(samples, R"(tempokey_jobs_total{kind="process",outcome="cancelled"})"), 1.0);
+  EXPECT_EQ(testing::Sample(samples, R"(tempokey_jobs_total{kind="process",outcome="succeeded"})"), 1.0);
 }
 
 TEST(SlowBodyGuardTest, ABodyMayTakeTheTimeoutPlusItsLengthAtTheMinimumRate) {
