@@ -85,6 +85,31 @@ Clip CalmJointClip(std::int64_t frames) {
   return clip;
 }
 
+// A chain of `joints` joints, each turning slowly about its three axes: a skeleton whose world
+// error (forward kinematics of every joint at every frame) a reduction measures.
+Clip ChainClip(int joints, std::int64_t frames) {
+  Clip clip = NoiseClip(3 * joints, frames, true);
+  clip.skeleton.joints.assign(static_cast<std::size_t>(joints), Joint{});
+  for (int j = 0; j < joints; ++j) {
+    Joint& joint = clip.skeleton.joints[static_cast<std::size_t>(j)];
+    joint.name = absl::StrCat("J", j);
+    joint.parent = j - 1;
+    joint.offset = {0.0, 10.0, 0.0};
+    for (int a = 0; a < 3; ++a) {
+      const int c = 3 * j + a;
+      joint.channels.push_back(c);
+      Channel& channel = clip.channels[static_cast<std::size_t>(c)];
+      channel.joint = j;
+      std::vector<double>& samples = channel.samples;
+      for (std::size_t f = 0; f < samples.size(); ++f) {
+        samples[f] = 30.0 * std::sin(static_cast<double>(f) * (0.001 + 0.0001 * a) + j);
+      }
+    }
+  }
+  clip.skeleton.joints.back().end_sites.push_back({0.0, 10.0, 0.0});
+  return clip;
+}
+
 struct Workload {
   std::string name;
   // The work, stopped by the token: a pipeline on a clip, or (export) a file formatted.
@@ -202,6 +227,9 @@ int Run(const std::string& filter) {
   workloads.push_back(PipelineWorkload("bake, 1 channel to 10M frames",
                                        NoiseClip(1, 83'000, false),
                                        {two_keys, BakeStep{FrameRate{100000, 1}}}));
+  // The world error's forward kinematics: the source placed first (about 0.4 s), before any fit.
+  workloads.push_back(PipelineWorkload("reduce, world error of a 36-joint chain, 400000 frames",
+                                       ChainClip(36, 400'000), {ReduceStep{}}, {20, 100, 250}));
   // ExportFile's work for a reduce job of this clip (the reduction itself about 0.5 s).
   workloads.push_back(ReducedGltfExportWorkload(
       "export keyed glb, calm joint, 3 x 400000 frames (refits)", CalmJointClip(400'000)));

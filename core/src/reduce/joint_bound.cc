@@ -262,6 +262,7 @@ absl::StatusOr<JointBoundCurves> JointBoundPlan::Fit(
     }
     TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
     PointErrors errors = meter_.MeasureChanged(Spans(fitted), refitted);
+    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
 
     // Per channel, the factor the worst point over the bound on its chain asks for.
     std::vector<double> factor(channel_count, 1.0);

@@ -652,7 +652,7 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
   // verification.
   std::optional<reduce_internal::WorldErrorMeter> meter;
   if (!clip.skeleton.empty()) {
-    TEMPOKEY_ASSIGN_OR_RETURN(meter, reduce_internal::WorldErrorMeter::ForValidatedClip(clip));
+    TEMPOKEY_ASSIGN_OR_RETURN(meter, reduce_internal::WorldErrorMeter::ForValidatedClip(clip, stop));
   }
   int iterations = 0;
   double joint_bound = 0.0;
@@ -722,7 +722,10 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
     result.report.channels[c].noise_sigma_estimated = noise.estimated[c];
   }
   if (meter) {
-    if (!world_errors) world_errors = meter->Measure(reduce_internal::Spans(baked));
+    if (!world_errors) {
+      world_errors = meter->Measure(reduce_internal::Spans(baked));
+      TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+    }
     result.report.world = meter->Report(*world_errors, joint_bound);
   }
   return result;

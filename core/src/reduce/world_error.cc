@@ -5,6 +5,7 @@
 #include <cmath>
 #include <utility>
 
+#include "tempokey/core/model/progress.h"
 #include "tempokey/core/model/status.h"
 #include "reduction_internal.h"
 #include "world_error_internal.h"
@@ -31,9 +32,10 @@ absl::StatusOr<WorldErrorMeter> WorldErrorMeter::ForClip(const Clip& clip) {
   return ForValidatedClip(clip);
 }
 
-absl::StatusOr<WorldErrorMeter> WorldErrorMeter::ForValidatedClip(const Clip& clip) {
+absl::StatusOr<WorldErrorMeter> WorldErrorMeter::ForValidatedClip(const Clip& clip,
+                                                                  std::stop_token stop) {
   TEMPOKEY_ASSIGN_OR_RETURN(ForwardKinematics fk, ForwardKinematics::ForLayout(clip));
-  WorldErrorMeter meter(clip, std::move(fk));
+  WorldErrorMeter meter(clip, std::move(fk), std::move(stop));
   // WorldTrajectories(clip), with the meter's own forward kinematics.
   std::vector<std::span<const double>> samples;
   samples.reserve(clip.channels.size());
@@ -42,8 +44,17 @@ absl::StatusOr<WorldErrorMeter> WorldErrorMeter::ForValidatedClip(const Clip& cl
   source.points = meter.fk_.points();
   source.frame_count = clip.frame_count;
   const std::size_t n = source.points.size();
-  source.positions.resize(static_cast<std::size_t>(clip.frame_count) * n);
-  meter.fk_.PoseFrames(samples, 0, static_cast<std::size_t>(clip.frame_count), source.positions);
+  const auto frame_count = static_cast<std::size_t>(clip.frame_count);
+  // Grown a piece at a time within its reserved size, so that zeroing its pages (hundreds of MB
+  // for the longest clips) is stopped with the placing.
+  source.positions.reserve(frame_count * n);
+  for (std::size_t first = 0; first < frame_count; first += kMeasureFrames) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(meter.stop_));
+    const std::size_t count = std::min(kMeasureFrames, frame_count - first);
+    source.positions.resize((first + count) * n);
+    meter.fk_.PoseFrames(samples, first, count,
+                         std::span<Vec3>(source.positions).subspan(first * n, count * n));
+  }
   meter.figure_height_ =
       VerticalExtent(std::span<const Vec3>(source.positions).first(source.points.size()));
   meter.scratch_.resize(kMeasureFrames * source.points.size());
@@ -58,6 +69,7 @@ PointErrors WorldErrorMeter::MeasureFrames(Place place) {
   errors.worst_frame.assign(n, 0);
   const auto frame_count = static_cast<std::size_t>(source_.frame_count);
   for (std::size_t first = 0; first < frame_count; first += kMeasureFrames) {
+    if (stop_.stop_requested()) break;  // the caller looks at the stop before the errors
     const std::size_t count = std::min(kMeasureFrames, frame_count - first);
     place(first, count, std::span<Vec3>(scratch_).first(count * n));
     AddErrors(first, count, errors);

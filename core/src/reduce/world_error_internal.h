@@ -33,8 +33,12 @@ class WorldErrorMeter {
   static absl::StatusOr<WorldErrorMeter> ForClip(const Clip& clip);
 
   // ForClip() for a clip that has passed ValidateClip() already (ReduceKeys()), without checking
-  // its samples again. Errors: kInvalidArgument when the clip has no skeleton.
-  static absl::StatusOr<WorldErrorMeter> ForValidatedClip(const Clip& clip);
+  // its samples again. `stop` is looked at every kMeasureFrames frames placed, here and by every
+  // measure; a measure it stops returns errors of only some frames, so its caller must look at
+  // `stop` before using them. Errors: kInvalidArgument when the clip has no skeleton;
+  // kCancelled when `stop` was requested.
+  static absl::StatusOr<WorldErrorMeter> ForValidatedClip(const Clip& clip,
+                                                           std::stop_token stop = {});
 
   // The errors of `fitted` (one span of frame_count samples per channel of the clip).
   PointErrors Measure(std::span<const std::span<const double>> fitted);
@@ -56,7 +60,8 @@ class WorldErrorMeter {
   double figure_height() const { return figure_height_; }
 
  private:
-  WorldErrorMeter(const Clip& clip, ForwardKinematics fk) : clip_(&clip), fk_(std::move(fk)) {}
+  WorldErrorMeter(const Clip& clip, ForwardKinematics fk, std::stop_token stop)
+      : clip_(&clip), fk_(std::move(fk)), stop_(std::move(stop)) {}
 
   // Adds the errors of frames [first, first + count), placed in scratch_, to `errors`, frame by
   // frame and point by point.
@@ -68,6 +73,7 @@ class WorldErrorMeter {
 
   const Clip* clip_;
   ForwardKinematics fk_;
+  std::stop_token stop_;
   PointTrajectories source_;
   double figure_height_ = 0.0;
   std::vector<Vec3> scratch_;  // placed points, frame-major, of the frames being measured
