@@ -134,6 +134,45 @@ TEST(GltfExportTest, EveryKeyedAndSampledFilePassesTheKhronosValidatorCleanly) {
   }
 }
 
+// A one-frame clip's reduction keys each joint once: glTF allows no CUBICSPLINE sampler with
+// fewer than two keyframes (the validator's ANIMATION_SAMPLER_INPUT_ACCESSOR_TOO_FEW_ELEMENTS),
+// so such samplers are LINEAR; three.js still poses the joints as the BVH does. Two frames keep
+// their cubic samplers.
+TEST(GltfExportTest, OneAndTwoFrameReductionsAreValidAndPlayAsTheSource) {
+  const std::string dir = testing::MakeTempDir();
+  std::vector<std::string> files;
+  std::vector<std::string> sources;
+  for (const int frames : {1, 2}) {
+    std::string bvh =
+        "HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n"
+        "  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation\n"
+        "  JOINT Arm\n  {\n    OFFSET 0 10 0\n    CHANNELS 2 Xrotation Zrotation\n"
+        "    End Site\n    {\n      OFFSET 0 10 0\n    }\n  }\n}\nMOTION\n";
+    absl::StrAppend(&bvh, "Frames: ", frames, "\nFrame Time: 0.0333333\n");
+    for (int f = 0; f < frames; ++f) absl::StrAppend(&bvh, 1 + f, " 2 3 10 20 ", 30 + f, " 40 50\n");
+    const std::string path = absl::StrCat(dir, "/frames_", frames, ".bvh");
+    ASSERT_TRUE(WriteFileAtomically(path, bvh).ok());
+    sources.push_back(path);
+    files.push_back(WriteKeyed(path, 0.5, GltfContainer::kText, dir));
+    files.push_back(WriteKeyed(path, 0.5, GltfContainer::kBinary, dir));
+  }
+
+  const std::vector<JsonValue> reports = RunNodeScript("validate.mjs", files, dir);
+
+  ASSERT_EQ(reports.size(), files.size());
+  for (const JsonValue& report : reports) {
+    const std::string file = report.Find("file")->text;
+    EXPECT_EQ(NumberOf(report, "errors"), 0) << file;
+    for (const JsonValue& message : *report.Find("messages")->array) {
+      ADD_FAILURE() << file << ": " << message.text;
+    }
+  }
+  for (std::size_t i = 0; i < sources.size(); ++i) {
+    ExpectThreeWithin(sources[i], files[2 * i], 0.5, 0.5, dir);
+    ExpectThreeWithin(sources[i], files[2 * i + 1], 0.5, 0.5, dir);
+  }
+}
+
 TEST(GltfExportTest, ThreeJsPlaysEveryKeyedClipWithinTheBoundAtEverySourceFrame) {
   const std::string dir = testing::MakeTempDir();
   for (const std::string& path : testing::AllSharedBvhFiles()) {

@@ -551,6 +551,29 @@ absl::StatusOr<std::vector<QuaternionCurve>> FitRotations(
   return fitted;
 }
 
+namespace {
+
+// A keyed channel: `output` holds in-tangent, value and out-tangent (`components` floats each)
+// per key of `input`, written CUBICSPLINE; a channel of one key (a one-frame clip) is written
+// LINEAR with its value alone, since glTF says a CUBICSPLINE sampler "MUST" have "at least two
+// keyframes" (animation.sampler.schema.json) and one key holds its value either way.
+void AddKeyedChannel(Document& document, std::span<const float> input,
+                     std::span<const float> output, int components, int node,
+                     std::string_view path) {
+  const int in = document.AddAccessor(input, 1, true);
+  if (input.size() < 2) {
+    const auto width = static_cast<std::size_t>(components);
+    document.AddChannel(in, document.AddAccessor(output.subspan(width, width * input.size()),
+                                                 components, false),
+                        "LINEAR", node, path);
+    return;
+  }
+  document.AddChannel(in, document.AddAccessor(output, components, false), "CUBICSPLINE", node,
+                      path);
+}
+
+}  // namespace
+
 absl::StatusOr<GltfFile> FormatGltfKeyed(const Clip& source, const KeyedClip& keyed,
                                          const GltfKeyedOptions& options, GltfContainer container,
                                          std::stop_token stop) {
@@ -592,9 +615,7 @@ absl::StatusOr<GltfFile> FormatGltfKeyed(const Clip& source, const KeyedClip& ke
       for (const CurvePoint& p : points) output.push_back(static_cast<float>(p.value));
       for (const CurvePoint& p : points) output.push_back(static_cast<float>(p.out_slope));
     }
-    const int in = document.AddAccessor(input, 1, true);
-    document.AddChannel(in, document.AddAccessor(output, 3, false), "CUBICSPLINE",
-                        static_cast<int>(j), "translation");
+    AddKeyedChannel(document, input, output, 3, static_cast<int>(j), "translation");
     file.stats.translation_keys += static_cast<std::int64_t>(times.size());
   }
   const std::vector<JointRotation> rotations = JointRotations(source);
@@ -612,9 +633,7 @@ absl::StatusOr<GltfFile> FormatGltfKeyed(const Clip& source, const KeyedClip& ke
       AppendQuat(output, key.value);
       AppendQuat(output, key.out_tangent);
     }
-    const int in = document.AddAccessor(input, 1, true);
-    document.AddChannel(in, document.AddAccessor(output, 4, false), "CUBICSPLINE", rotation.joint,
-                        "rotation");
+    AddKeyedChannel(document, input, output, 4, rotation.joint, "rotation");
     ++file.stats.animated_joints;
     file.stats.rotation_keys += static_cast<std::int64_t>(curve.keys.size());
     file.stats.rotation_samples += source.frame_count;

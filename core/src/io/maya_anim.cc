@@ -189,17 +189,34 @@ void AppendCurve(std::string& out, const KeyedClip& keyed, int c, const FileFram
   out += "  }\n}\n";
 }
 
-// "// tempokey rotateOrder Hips yxz 4;" for every joint with three rotation channels.
+// The three axes of a joint's rotation channels in listed order: a joint with fewer than three
+// takes its missing axes (in x, y, z order) in front, where their zero angles leave the product
+// of the listed ones as it is. `Xrotation Zrotation` (R = Rx·Rz: Z acts first) becomes
+// {Y, X, Z}, whose Maya order "zxy" also turns Z first; Maya's default "xyz" turned X first
+// and put such a joint's children up to a bone's length away.
+EulerOrder CompletedOrder(const Clip& layout, const JointRotation& rotation) {
+  std::array<bool, 3> listed{};
+  for (int c : rotation.channels) listed[Axis(layout.channels[static_cast<std::size_t>(c)].kind)] = true;
+  EulerOrder order{};
+  std::size_t next = 0;
+  for (int axis = 0; axis < 3; ++axis) {
+    if (!listed[static_cast<std::size_t>(axis)]) order[next++] = axis;
+  }
+  for (int c : rotation.channels) order[next++] = Axis(layout.channels[static_cast<std::size_t>(c)].kind);
+  return order;
+}
+
+// "// tempokey rotateOrder Hips yxz 4;" for every joint with rotation channels (one, two or
+// three).
 void AppendRotateOrders(std::string& out, const Clip& layout) {
   bool first = true;
   for (const JointRotation& rotation : JointRotations(layout)) {
-    if (rotation.channels.size() != 3) continue;
     if (first) {
       out +=
           "// Rotation orders: Maya must have these on the joints before the import (README).\n";
       first = false;
     }
-    const MayaRotateOrder order = MayaRotateOrderOf(rotation.order);
+    const MayaRotateOrder order = MayaRotateOrderOf(CompletedOrder(layout, rotation));
     absl::StrAppend(&out, "// tempokey rotateOrder ", layout.skeleton.joints[rotation.joint].name,
                     " ", order.name, " ", order.value, ";\n");
   }

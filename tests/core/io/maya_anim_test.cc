@@ -3,8 +3,10 @@
 #include "tempokey/core/io/maya_anim.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <map>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -302,6 +304,64 @@ TEST(MayaAnimTest, HeaderGivesEachJointTheMayaRotateOrderOfItsBvhChannels) {
   EXPECT_EQ(MayaRotateOrderOf({0, 1, 2}).name, "zyx");
   EXPECT_EQ(MayaRotateOrderOf({0, 1, 2}).value, 5);
   EXPECT_EQ(MayaRotateOrderOf({2, 1, 0}).value, 0);
+}
+
+// The rotateOrder lines of a file: joint -> Maya order name.
+std::map<std::string, std::string> RotateOrders(const std::string& text) {
+  std::map<std::string, std::string> orders;
+  std::size_t at = 0;
+  const std::string prefix = "// tempokey rotateOrder ";
+  while ((at = text.find(prefix, at)) != std::string::npos) {
+    const std::size_t end = text.find(';', at);
+    std::istringstream line(text.substr(at + prefix.size(), end - at - prefix.size()));
+    std::string joint, order;
+    line >> joint >> order;
+    orders[joint] = order;
+    at = end;
+  }
+  return orders;
+}
+
+// A joint with two rotation channels, as Maya shows it once the header's orders are applied: its
+// child placed by Maya's row-vector composition of the curves' values, against the BVH's meaning
+// worked by hand. Without a line, Maya kept "xyz" and the end site sat 14.1 units away.
+TEST(MayaAnimTest, AJointWithTwoRotationChannelsTurnsInItsBvhOrderInMaya) {
+  for (const auto& [channels, expected] : std::vector<std::pair<std::string, Vec3>>{
+           // R = Rx(90) Rz(90): Z turns the bone's (0, 10, 0) to (-10, 0, 0), X keeps it there.
+           {"Xrotation Zrotation", {-10.0, 10.0, 0.0}},
+           // R = Rz(90) Rx(90): X turns it to (0, 0, 10), Z keeps it there.
+           {"Zrotation Xrotation", {0.0, 10.0, 10.0}},
+           // R = Ry(90) Rz(90): Z turns it to (-10, 0, 0), Y to (0, 0, 10).
+           {"Yrotation Zrotation", {0.0, 10.0, 10.0}}}) {
+    const std::string bvh =
+        "HIERARCHY\nROOT Root\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Xposition Yposition Zposition\n"
+        "  JOINT Arm\n  {\n    OFFSET 0 10 0\n    CHANNELS 2 " + channels +
+        "\n    End Site\n    {\n      OFFSET 0 10 0\n    }\n  }\n}\nMOTION\nFrames: 2\n"
+        "Frame Time: 0.0333333\n0 0 0 90 90\n0 0 0 90 90\n";
+    const absl::StatusOr<Clip> clip = ParseBvh(bvh, "arm.bvh");
+    ASSERT_TRUE(clip.ok()) << clip.status();
+    const absl::StatusOr<ReduceResult> reduced = ReduceKeys(*clip, {});
+    ASSERT_TRUE(reduced.ok()) << reduced.status();
+    const absl::StatusOr<std::string> text = FormatMayaAnim(reduced->keyed);
+    ASSERT_TRUE(text.ok()) << text.status();
+    const std::map<std::string, std::string> orders = RotateOrders(*text);
+    ASSERT_EQ(orders.count("Arm"), 1u) << *text;
+    const std::string& order = orders.at("Arm");
+
+    std::map<char, double> angle = {{'x', 0.0}, {'y', 0.0}, {'z', 0.0}};
+    for (const MayaCurveBlock& curve : Parse(*text).curves) {
+      if (curve.node == "Arm") angle[static_cast<char>(std::tolower(curve.attribute.back()))] = Eval(curve, 0.0);
+    }
+    Mat row = RowAxis(order[0], angle[order[0]]);
+    row = Times(row, RowAxis(order[1], angle[order[1]]));
+    row = Times(row, RowAxis(order[2], angle[order[2]]));
+    const Vec3 bone = {0.0, 10.0, 0.0};
+    Vec3 end_site = {0.0, 10.0, 0.0};  // the Arm's position, then its bone turned (p * M)
+    for (int j = 0; j < 3; ++j) {
+      for (int i = 0; i < 3; ++i) end_site[j] += bone[i] * row[i][j];
+    }
+    for (int j = 0; j < 3; ++j) EXPECT_NEAR(end_site[j], expected[j], 1e-9) << channels << " " << order;
+  }
 }
 
 // ---- every shared clip, reduced and evaluated the way Maya would --------------------------------

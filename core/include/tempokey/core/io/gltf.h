@@ -17,7 +17,8 @@
 // Sampled clips (FormatGltfSampled): LINEAR samplers with one key per frame.
 // Keyed clips (FormatGltfKeyed): CUBICSPLINE samplers (in-tangent, value, out-tangent per key;
 // tangents per second, multiplied by the key interval when evaluated, glTF 2.0 "Animation
-// Samplers"):
+// Samplers"; a sampler of one key, from a one-frame clip, is LINEAR with its value alone: glTF
+// requires at least two keyframes of a CUBICSPLINE sampler):
 //   - translation: the keyed position curves, exactly: one time list, the union of the joint's
 //     position curves' key times; a curve is split at the times it lacks (splitting a cubic is
 //     exact: value and slope there). Weighted segments (`paper` keys: a Bezier whose time is not

@@ -61,7 +61,10 @@
 //     matches the BVH channel order, so the header lists, per joint with rotation channels,
 //       // tempokey rotateOrder <joint> <maya order> <enum>;  e.g. "Hips yxz 4"
 //     BVH channels `Zrotation Xrotation Yrotation` mean R = Rz·Rx·Ry on column vectors: Y acts
-//     first, then X, then Z, so Maya's order is the BVH list reversed ("yxz") [XFORM].
+//     first, then X, then Z, so Maya's order is the BVH list reversed ("yxz") [XFORM]. A joint
+//     with one or two rotation channels gets a line too: its missing axes (angle 0) are listed
+//     first, so `Xrotation Zrotation` (Z acts first) is "zxy"; Maya's default "xyz" would turn X
+//     first.
 //     README "Opening results" has the Maya step that applies these lines before the import.
 #ifndef TEMPOKEY_CORE_IO_MAYA_ANIM_H_
 #define TEMPOKEY_CORE_IO_MAYA_ANIM_H_
