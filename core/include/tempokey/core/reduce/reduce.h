@@ -89,7 +89,8 @@ struct ReduceOptions {
   NoiseParams noise;
   // The Euler filter (euler_filter.h) on the input before fitting; unset: the method's default,
   // on for `noise` (an Euler flip is not noise and costs keys), off for `tolerance` and `paper`
-  // (their curves keep the input's angles value for value unless asked).
+  // (their curves keep the input's angles unless asked, but for whole turns: rotations are fitted
+  // unwrapped, see ReduceKeys()).
   std::optional<bool> euler_filter;
 };
 
