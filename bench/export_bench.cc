@@ -2,7 +2,7 @@
 // written as Maya .anim and glTF, each measured by an evaluator that is not its writer:
 //   - .anim: the Maya-semantics evaluator of the tests (tests/testing/maya_anim_eval.h), max
 //     error over all channels at every source frame's exact time (frame = t x the unit's rate)
-//     and at the integer frames animators see (rotations compared modulo 360);
+//     and at the frames animators see (FileFrameOfSourceFrame(); rotations compared modulo 360);
 //   - .gltf: three.js (GLTFLoader + AnimationMixer under node, tests/export/three_check.mjs):
 //     max rotation angle and max translation component error over all joints and frames.
 // Keys: Euler keys of the rotation channels as % of their samples (frames x rotation channels),
@@ -64,7 +64,8 @@ AnimErrors MeasureAnim(const Clip& source, const std::string& text) {
     for (std::size_t i = 0; i < channel.samples.size(); ++i) {
       const double frames[2] = {
           static_cast<double>(i) * source.frame_time_seconds * file->frames_per_second,
-          static_cast<double>(i)};
+          testing::FileFrameOfSourceFrame(*file, source.frame_time_seconds,
+                                          static_cast<std::int64_t>(i))};
       for (int k = 0; k < 2; ++k) {
         const double value = *testing::EvaluateMayaCurve(*curve, frames[k]);
         const double d = angle ? std::abs(std::remainder(value - channel.samples[i], 360.0))

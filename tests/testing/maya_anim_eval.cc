@@ -64,20 +64,19 @@ std::optional<double> Number(const std::string& word) {
   return value;
 }
 
-// Frames per second of a Maya time unit name.
+// Frames per second of a time unit name, as the published reader takes them: Autodesk's "ANIM
+// file format" (animVersion 1.1) and the devkit animImportExport's animUnitNames::setFromName()
+// know game|film|pal|ntsc|show|palf|ntscf|hour|min|sec|millisec and refuse every other name
+// ("'120fps' is not a valid time unit. Use game|film|pal|ntsc|show|palf|ntscf|hour|min|sec|
+// millisec instead."), so a file that names another does not load in every Maya.
 std::optional<double> UnitRate(const std::string& name) {
   static const std::pair<const char*, double> kNamed[] = {
-      {"game", 15.0},           {"film", 24.0},          {"pal", 25.0},
-      {"ntsc", 30.0},           {"show", 48.0},          {"palf", 50.0},
-      {"ntscf", 60.0},          {"23.976fps", 24000.0 / 1001.0},
-      {"29.97fps", 30000.0 / 1001.0}, {"47.952fps", 48000.0 / 1001.0},
-      {"59.94fps", 60000.0 / 1001.0}, {"sec", 1.0},     {"millisec", 1000.0},
+      {"game", 15.0}, {"film", 24.0}, {"pal", 25.0},       {"ntsc", 30.0},
+      {"show", 48.0}, {"palf", 50.0}, {"ntscf", 60.0},     {"hour", 1.0 / 3600.0},
+      {"min", 1.0 / 60.0}, {"sec", 1.0}, {"millisec", 1000.0},
   };
   for (const auto& [unit, rate] : kNamed) {
     if (name == unit) return rate;
-  }
-  if (name.size() > 3 && name.substr(name.size() - 3) == "fps") {
-    return Number(name.substr(0, name.size() - 3));
   }
   return std::nullopt;
 }
@@ -275,7 +274,7 @@ absl::StatusOr<MayaAnimFile> ParseMayaAnimText(std::string_view text) {
     } else if (w[0] == "timeUnit" && w.size() == 2) {
       file.time_unit = w[1];
       std::optional<double> rate = UnitRate(w[1]);
-      if (!rate) return Fail(s.line, absl::StrCat("unknown time unit ", w[1]));
+      if (!rate) return Fail(s.line, absl::StrCat("'", w[1], "' is not a valid time unit"));
       file.frames_per_second = *rate;
     } else if (w[0] == "linearUnit" && w.size() == 2) {
       file.linear_unit = w[1];
@@ -315,6 +314,15 @@ absl::StatusOr<double> EvaluateMayaCurve(const MayaCurveBlock& curve, double fra
   const Point p2{b.frame - in->handle.x, b.value - in->handle.y};
   const Point p3{b.frame, b.value};
   return Bezier(p0, p1, p2, p3, frame);
+}
+
+double FileFrameOfSourceFrame(const MayaAnimFile& file, double frame_time_seconds,
+                              std::int64_t frame) {
+  const auto f = static_cast<double>(frame);
+  const double multiple = 1.0 / (frame_time_seconds * file.frames_per_second);
+  const double n = std::round(multiple);
+  if (n >= 1.0 && std::abs(multiple - n) <= 1e-4 * n) return f / n;
+  return f * frame_time_seconds * file.frames_per_second;
 }
 
 }  // namespace tempokey::testing

@@ -17,6 +17,7 @@
 #ifndef TEMPOKEY_TESTS_TESTING_MAYA_ANIM_EVAL_H_
 #define TEMPOKEY_TESTS_TESTING_MAYA_ANIM_EVAL_H_
 
+#include <cstdint>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -59,6 +60,12 @@ absl::StatusOr<MayaAnimFile> ParseMayaAnimText(std::string_view text);
 // The curve's value at `frame` (frames of the file's timeUnit), Maya's semantics above.
 // Errors: kInvalidArgument for an unsupported tangent type or an empty curve.
 absl::StatusOr<double> EvaluateMayaCurve(const MayaCurveBlock& curve, double frame);
+
+// Where animators see source frame `frame` of a clip at `frame_time_seconds` in `file`: when the
+// clip's rate is n times the file's unit (within 1e-4; n = 1: the frame numbers themselves), the
+// file frame frame / n; else the frame's exact time in the unit's frames.
+double FileFrameOfSourceFrame(const MayaAnimFile& file, double frame_time_seconds,
+                              std::int64_t frame);
 
 }  // namespace tempokey::testing
 

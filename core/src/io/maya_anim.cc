@@ -31,28 +31,38 @@ struct TimeUnit {
   double rate;
 };
 
-// The units Maya's .anim reader knows (MTime): the named ones, the NTSC fractional rates
-// (N * 1000/1001) and the numbered "<N>fps" ones, lowest rate to highest.
+// The units every version of Maya's .anim reader accepts: the published format (animVersion 1.1)
+// and the devkit reader's animUnitNames::setFromName() know "game|film|pal|ntsc|show|palf|ntscf"
+// (and hour|min|sec|millisec) and refuse any other name ("'120fps' is not a valid time unit"),
+// so the numbered units of later Maya versions ("120fps") are not written. Lowest rate first.
 constexpr TimeUnit kTimeUnits[] = {
-    {"2fps", 2.0},       {"3fps", 3.0},       {"4fps", 4.0},
-    {"5fps", 5.0},       {"6fps", 6.0},       {"8fps", 8.0},
-    {"10fps", 10.0},     {"12fps", 12.0},     {"game", 15.0},
-    {"16fps", 16.0},     {"20fps", 20.0},     {"23.976fps", 24000.0 / 1001.0},
-    {"film", 24.0},      {"pal", 25.0},       {"29.97fps", 30000.0 / 1001.0},
-    {"ntsc", 30.0},      {"40fps", 40.0},     {"47.952fps", 48000.0 / 1001.0},
-    {"show", 48.0},      {"palf", 50.0},      {"59.94fps", 60000.0 / 1001.0},
-    {"ntscf", 60.0},     {"75fps", 75.0},     {"80fps", 80.0},
-    {"100fps", 100.0},   {"120fps", 120.0},   {"125fps", 125.0},
-    {"150fps", 150.0},   {"200fps", 200.0},   {"240fps", 240.0},
-    {"250fps", 250.0},   {"300fps", 300.0},   {"375fps", 375.0},
-    {"400fps", 400.0},   {"500fps", 500.0},   {"600fps", 600.0},
-    {"750fps", 750.0},   {"1200fps", 1200.0}, {"1500fps", 1500.0},
-    {"2000fps", 2000.0}, {"3000fps", 3000.0}, {"6000fps", 6000.0},
+    {"game", 15.0}, {"film", 24.0}, {"pal", 25.0},   {"ntsc", 30.0},
+    {"show", 48.0}, {"palf", 50.0}, {"ntscf", 60.0},
 };
 
-// The unit whose rate is nearest `frame_rate` in ratio (rates beyond the table take its ends; an
-// infinite rate from a subnormal frame time takes the fastest).
-const TimeUnit& NearestTimeUnit(double frame_rate) {
+// A clip rate within this ratio of a Maya unit's plays at that unit with one file frame per
+// source frame (BVH frame times are written rounded: 0.0083333 s is 120.0005 Hz).
+constexpr double kSameRateTolerance = 1e-4;
+// Clip frames per unit frame, at most: a faster clip takes its nearest unit.
+constexpr double kMaxWholeMultiple = 1000.0;
+
+// The unit of a clip at `frame_rate`: the unit of that rate; else the fastest unit whose rate
+// divides it (120 Hz is ntscf, each source frame half a file frame; 100 Hz palf); else the unit
+// nearest in ratio (rates beyond the table take its ends; an infinite rate from a subnormal frame
+// time takes the fastest). Maya converts the file's times to the scene's rate on import, so a
+// 120 fps scene shows a 120 Hz clip's keys on its whole frames either way.
+const TimeUnit& TimeUnitFor(double frame_rate) {
+  const TimeUnit* dividing = nullptr;
+  for (const TimeUnit& unit : kTimeUnits) {
+    const double multiple = frame_rate / unit.rate;
+    if (std::abs(multiple - 1.0) <= kSameRateTolerance) return unit;
+    const double whole = std::round(multiple);
+    if (whole >= 2.0 && whole <= kMaxWholeMultiple &&
+        std::abs(multiple - whole) <= kSameRateTolerance * whole) {
+      dividing = &unit;  // the table runs from slow to fast: the last that divides is the fastest
+    }
+  }
+  if (dividing != nullptr) return *dividing;
   const double rate = std::clamp(frame_rate, kTimeUnits[0].rate, std::end(kTimeUnits)[-1].rate);
   const TimeUnit* nearest = &kTimeUnits[0];
   double nearest_distance = std::numeric_limits<double>::infinity();
@@ -66,41 +76,51 @@ const TimeUnit& NearestTimeUnit(double frame_rate) {
   return *nearest;
 }
 
-// A clip rate within this ratio of a Maya unit's plays at that unit with one file frame per
-// source frame (BVH frame times are written rounded: 0.0083333 s is 120.0005 Hz).
-constexpr double kSameRateTolerance = 1e-4;
+// Clip frames per file frame: 1 when the clip's rate is the unit's, n when it is n times the
+// unit's (kSameRateTolerance), 0 otherwise.
+int ClipFramesPerUnitFrame(double frame_time_seconds, const TimeUnit& unit) {
+  const double multiple = 1.0 / (frame_time_seconds * unit.rate);
+  const double whole = std::round(multiple);
+  if (whole < 1.0 || whole > kMaxWholeMultiple ||
+      std::abs(multiple - whole) > kSameRateTolerance * whole) {
+    return 0;
+  }
+  return static_cast<int>(whole);
+}
 
-// File frames of the declared unit. When the clip's rate matches the unit (kSameRateTolerance), a
-// file frame is one source frame and times become the source's frame numbers; otherwise a file
-// frame is one unit frame.
+// File frames of the declared unit. When the clip's rate is the unit's or a whole multiple n of it
+// (ClipFramesPerUnitFrame()), a source frame f is file frame f / n exactly (the frame numbers
+// themselves when n is 1); otherwise a file frame is one unit frame (time = seconds x rate).
 class FileFrames {
  public:
   FileFrames(double frame_time_seconds, const TimeUnit& unit)
       : frame_time_(frame_time_seconds),
-        same_rate_(std::abs(unit.rate * frame_time_seconds - 1.0) <= kSameRateTolerance),
-        per_second_(same_rate_ ? 1.0 / frame_time_seconds : unit.rate) {}
+        per_unit_frame_(ClipFramesPerUnitFrame(frame_time_seconds, unit)),
+        per_second_(per_unit_frame_ > 0 ? 1.0 / (frame_time_seconds * per_unit_frame_)
+                                        : unit.rate) {}
 
   // File frames per second (k in maya_anim.h).
   double per_second() const { return per_second_; }
 
-  // The file frame of a time in seconds. On a matching rate a key on a source frame lands on
-  // that frame number exactly (the division's rounding is undone).
+  // The file frame of a time in seconds. On a rate that divides the clip's, a key on a source
+  // frame lands on that frame's file frame exactly (the division's rounding is undone).
   double operator()(double seconds) const {
-    if (!same_rate_) return seconds * per_second_;
+    if (per_unit_frame_ == 0) return seconds * per_second_;
     const double frames = seconds / frame_time_;
     const double whole = std::round(frames);
-    return std::abs(frames - whole) <= 1e-9 * std::max(1.0, std::abs(whole)) ? whole : frames;
+    const bool on_frame = std::abs(frames - whole) <= 1e-9 * std::max(1.0, std::abs(whole));
+    return (on_frame ? whole : frames) / per_unit_frame_;
   }
 
   // The file frame of the clip's frame `frame`.
   double OfClipFrame(std::int64_t frame) const {
     const auto f = static_cast<double>(frame);
-    return same_rate_ ? f : f * frame_time_ * per_second_;
+    return per_unit_frame_ > 0 ? f / per_unit_frame_ : f * frame_time_ * per_second_;
   }
 
  private:
   double frame_time_;
-  bool same_rate_;
+  int per_unit_frame_;
   double per_second_;
 };
 
@@ -237,7 +257,7 @@ MayaRotateOrder MayaRotateOrderOf(const std::array<int, 3>& order) {
 absl::StatusOr<std::string> FormatMayaAnim(const KeyedClip& keyed) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateKeyedClip(keyed));
   const Clip& layout = keyed.layout;
-  const TimeUnit& unit = NearestTimeUnit(layout.frame_rate());
+  const TimeUnit& unit = TimeUnitFor(layout.frame_rate());
   const FileFrames frames(layout.frame_time_seconds, unit);
   std::string out = "animVersion 1.1;\nmayaVersion 2020;\n";
   absl::StrAppend(&out, "timeUnit ", unit.name, ";\n",

@@ -195,12 +195,12 @@ TEST(MayaAnimTest, WeightedKeysAreHandleLengthsInFramesAndValues) {
 }
 
 TEST(MayaAnimTest, BvhRateNearAUnitWritesTheSourceFrameNumbers) {
-  // 0.0083333 s is 120.0005 Hz, within 1e-4 of 120fps: key times are the frame numbers.
+  // 0.0333333 s is 30.0003 Hz, within 1e-4 of ntsc: key times are the frame numbers.
   KeyedClip keyed = ScalarKeyed({}, 994);
-  keyed.layout.frame_time_seconds = 0.0083333;
+  keyed.layout.frame_time_seconds = 0.0333333;
   for (int frame : {0, 500, 993}) {
     Key key;
-    key.time_seconds = frame * 0.0083333;
+    key.time_seconds = frame * 0.0333333;
     keyed.curves[0].keys.push_back(key);
   }
 
@@ -208,11 +208,38 @@ TEST(MayaAnimTest, BvhRateNearAUnitWritesTheSourceFrameNumbers) {
 
   ASSERT_TRUE(text.ok()) << text.status();
   const MayaAnimFile file = Parse(*text);
-  EXPECT_EQ(file.time_unit, "120fps");
+  EXPECT_EQ(file.time_unit, "ntsc");
   ASSERT_EQ(file.curves[0].keys.size(), 3u);
   EXPECT_EQ(file.curves[0].keys[1].frame, 500.0);
   EXPECT_EQ(file.curves[0].keys[2].frame, 993.0);
   EXPECT_EQ(file.end_time, 993.0);
+}
+
+TEST(MayaAnimTest, A120HzBvhIsWrittenInNtscfWithEachFrameHalfAFileFrame) {
+  // 0.0083333 s is 120.0005 Hz: no unit every Maya reads is 120 fps ("120fps" is refused by the
+  // published reader), so ntscf, twice slower: source frame f is file frame f / 2 exactly, and
+  // a slope of 1 unit per second is 1/60 per file frame.
+  KeyedClip keyed = ScalarKeyed({}, 995);
+  keyed.layout.frame_time_seconds = 0.0083333;
+  for (int frame : {0, 495, 994}) {
+    Key key;
+    key.time_seconds = frame * 0.0083333;
+    key.value = key.time_seconds;
+    key.in_tangent = key.out_tangent = 1.0;
+    keyed.curves[0].keys.push_back(key);
+  }
+
+  const absl::StatusOr<std::string> text = FormatMayaAnim(keyed);
+
+  ASSERT_TRUE(text.ok()) << text.status();
+  const MayaAnimFile file = Parse(*text);
+  EXPECT_EQ(file.time_unit, "ntscf");
+  ASSERT_EQ(file.curves[0].keys.size(), 3u);
+  EXPECT_EQ(file.curves[0].keys[1].frame, 247.5);
+  EXPECT_EQ(file.curves[0].keys[2].frame, 497.0);
+  EXPECT_EQ(file.end_time, 497.0);
+  // Halfway between the keys at source frames 495 and 994, in Maya's frames of 1/60 s.
+  EXPECT_NEAR(Eval(file.curves[0], 372.25), 744.5 * 0.0083333, 1e-9);
 }
 
 TEST(MayaAnimTest, RateOffEveryUnitWritesTimesInUnitFrames) {
@@ -241,10 +268,13 @@ TEST(MayaAnimTest, TimeUnitIsTheNearestMayaUnit) {
     double frame_time;
     const char* unit;
   } cases[] = {
-      {1.0 / 24.0, "film"},   {1001.0 / 24000.0, "23.976fps"}, {1.0 / 25.0, "pal"},
-      {1.0 / 30.0, "ntsc"},   {1001.0 / 60000.0, "59.94fps"},  {1.0 / 60.0, "ntscf"},
-      {1.0 / 90.0, "100fps"}, {1.0 / 1000.0, "1200fps"},       {1.0 / 7.0, "8fps"},
-      {10.0, "2fps"},         {1e-5, "6000fps"},               {1e-6, "6000fps"},
+      // Only the units every Maya reads: the clip's own, then the fastest that divides it, then
+      // the nearest in ratio.
+      {1.0 / 24.0, "film"},   {1001.0 / 24000.0, "film"}, {1.0 / 25.0, "pal"},
+      {1.0 / 30.0, "ntsc"},   {1001.0 / 60000.0, "ntscf"}, {1.0 / 60.0, "ntscf"},
+      {1.0 / 90.0, "ntsc"},   {1.0 / 100.0, "palf"},      {1.0 / 120.0, "ntscf"},
+      {1.0 / 1000.0, "palf"}, {1.0 / 7.0, "game"},        {1.0 / 72.0, "film"},
+      {10.0, "game"},         {1e-5, "ntscf"},            {1e-6, "ntscf"},
   };
   for (const Case& c : cases) {
     KeyedClip keyed = ScalarKeyed({Key{}, Key{}}, 2);
@@ -367,7 +397,9 @@ TEST(MayaAnimTest, AJointWithTwoRotationChannelsTurnsInItsBvhOrderInMaya) {
 // ---- every shared clip, reduced and evaluated the way Maya would --------------------------------
 
 // Error of a .anim against the source at every source frame, two ways: at each frame's exact
-// time in Maya's seconds (frame = t x the unit's rate) and at the integer frames animators see.
+// time in Maya's seconds (frame = t x the unit's rate) and at the frames animators see: the
+// file's integer frames when its unit is the clip's rate, else i / n when the clip's rate is n
+// times the unit's (120 Hz in ntscf: frame i at i / 2), else the exact times.
 struct AnimErrors {
   double at_exact_times = 0.0;
   double at_integer_frames = 0.0;
@@ -398,7 +430,9 @@ AnimErrors MeasureAnim(const Clip& source, const MayaAnimFile& file) {
       const double exact_frame = static_cast<double>(i) * source.frame_time_seconds *
                                  file.frames_per_second;
       const double at_exact = Eval(*curve, exact_frame);
-      const double at_integer = Eval(*curve, static_cast<double>(i));
+      const double at_integer = Eval(*curve, testing::FileFrameOfSourceFrame(
+                                                 file, source.frame_time_seconds,
+                                                 static_cast<std::int64_t>(i)));
       errors.at_exact_times = std::max(errors.at_exact_times, distance(at_exact, samples[i]));
       errors.at_integer_frames =
           std::max(errors.at_integer_frames, distance(at_integer, samples[i]));
@@ -456,11 +490,13 @@ TEST(MayaAnimTest, PaperMethodWeightedCurvesEvaluateInMayaAsInCore) {
   ASSERT_TRUE(text.ok()) << text.status();
   const MayaAnimFile file = Parse(*text);
 
+  ASSERT_EQ(file.time_unit, "ntscf");
   ASSERT_EQ(file.curves.size(), source->channels.size());
   double worst = 0.0;
   for (std::size_t c = 0; c < file.curves.size(); ++c) {
     for (std::int64_t i = 0; i < source->frame_count; ++i) {
-      const double maya = Eval(file.curves[c], static_cast<double>(i));
+      // CMU's 120 Hz is written in ntscf: source frame i is file frame i / 2.
+      const double maya = Eval(file.curves[c], static_cast<double>(i) / 2.0);
       const double core = EvaluateCurve(reduced->keyed.curves[c],
                                         static_cast<double>(i) * source->frame_time_seconds);
       worst = std::max(worst, std::abs(maya - core));

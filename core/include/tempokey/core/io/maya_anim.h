@@ -30,15 +30,17 @@
 //   - One `anim` block per channel: attribute rotate.rotateX / translate.translateX ... on the
 //     node named after the joint (a plain channel: its name on a node of that name), input time,
 //     output angular / linear / unitless, pre and post infinity constant.
-//   - Time: timeUnit is the Maya unit whose rate is nearest the clip's (in ratio): game 15, film
-//     24, pal 25, ntsc 30, show 48, palf 50, ntscf 60, 23.976fps / 29.97fps / 47.952fps /
-//     59.94fps (24, 30, 48, 60 x 1000/1001), or "<N>fps" for N in 2, 3, 4, 5, 6, 8, 10, 12, 16,
-//     20, 40, 75, 80, 100, 120, 125, 150, 200, 240, 250, 300, 375, 400, 500, 600, 750, 1200,
-//     1500, 2000, 3000, 6000. When the clip's rate is within 1e-4 (relative) of that unit's, a
-//     file frame is one source frame: key times are the source's frame numbers (a BVH's
-//     0.0083333 s frames are 120fps and key 994 is at 994, as animators expect). Otherwise a
-//     file frame is one unit frame: time = seconds x unit rate (keys may fall between frames).
-//     Call the file frames per second k (1 / frame time, or the unit's rate).
+//   - Time: timeUnit is one of the units every version of Maya's reader accepts: game 15,
+//     film 24, pal 25, ntsc 30, show 48, palf 50, ntscf 60 ([ANIM] lists these; [DEVKIT]'s
+//     animUnitNames::setFromName() refuses any other name, "'120fps' is not a valid time unit",
+//     so the numbered units of later Maya versions are not used). The unit is the clip's rate
+//     (within 1e-4, relative): a file frame is one source frame and key times are the source's
+//     frame numbers; else the fastest unit whose rate divides the clip's n times (120 Hz: ntscf,
+//     n = 2; 100 Hz: palf): source frame f is file frame f / n exactly (a BVH's 0.0083333 s
+//     frames are 120 Hz, so key 995 is at 497.5); else the unit nearest in ratio, with time =
+//     seconds x unit rate (keys may fall between frames). Maya turns the file's times into the
+//     scene's on import, so a 120 fps scene shows a 120 Hz clip's keys on whole frames.
+//     Call the file frames per second k (1 / (n x frame time), or the unit's rate).
 //   - Tangents: every key's in and out tangents are `fixed`, given as angle (degrees) and weight
 //     in UI space: x in file frames, y in the channel's value unit.
 //       * A curve none of whose keys carries a weight (the `tolerance` method's C1 Hermite keys)
