@@ -44,12 +44,8 @@ int ExitCodeFor(const absl::Status& status);
 // user can tell the server's refusals from local ones.
 absl::Status ServerError(const absl::Status& status);
 
-// `text` on one line for a terminal: line breaks turned into spaces, other control characters
-// (C0, DEL, C1) and bytes that are not UTF-8 shown as \xNN or \u00NN, so what it quotes (a file
-// name, a file, a server's message) cannot act on the terminal.
-std::string PrintableText(std::string_view text);
-
-// "error: <message>", the message made PrintableText(): an error is always exactly one line.
+// "error: <message>", the message made core::PrintableText() (line breaks as spaces): an error
+// is always exactly one line.
 // No trailing newline.
 std::string ErrorLine(const absl::Status& status);
 

@@ -20,6 +20,7 @@
 #include "client/progress_bar.h"
 #include "tempokey/core/io/file_io.h"
 #include "tempokey/core/io/json.h"
+#include "tempokey/core/io/printable_text.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
@@ -155,7 +156,7 @@ absl::Status Batch(CommandContext& context) {
     // The manifest (JSON) cannot record such a name, so a re-run could not tell the output
     // written over the clip from the clip, and would process it again.
     if (!core::IsUtf8(item.name) && IsSameFile(item.input_path, item.output_path)) {
-      return UsageError(absl::StrCat("batch --overwrite: ", PrintableText(item.name),
+      return UsageError(absl::StrCat("batch --overwrite: ", core::PrintableText(item.name),
                                      ": a file name that is not UTF-8 cannot be recorded, so a "
                                      "re-run would process its output again; rename it"));
     }

@@ -7,6 +7,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "client/cli_errors.h"
+#include "tempokey/core/io/printable_text.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
@@ -63,12 +64,12 @@ std::string FormatBatchLogLine(const BatchFileResult& file, int finished, int to
   const int digits = static_cast<int>(absl::StrCat(total).size());
   const std::string head = absl::StrFormat("[%*d/%d] ", digits, finished, total);
   // Names and messages as a terminal should show them (a file name may hold any byte).
-  const std::string name = PrintableText(file.name);
-  const std::string output = PrintableText(file.output_path);
+  const std::string name = core::PrintableText(file.name);
+  const std::string output = core::PrintableText(file.output_path);
   if (!file.status.ok()) {
     return absl::StrFormat("%sfailed %s (%s, %.3f s): %s", head, name,
                            Plural(file.attempts, "attempt"), file.seconds,
-                           PrintableText(core::AsStd(file.status.message())));
+                           core::PrintableText(core::AsStd(file.status.message())));
   }
   if (file.skipped) {
     return absl::StrFormat("%sskipped %s -> %s (up to date)", head, name, output);

@@ -29,6 +29,7 @@
 #include "server/wire_codec.h"
 #include "spdlog/spdlog.h"
 #include "tempokey/core/io/file_formats.h"
+#include "tempokey/core/io/printable_text.h"
 #include "tempokey/core/model/status.h"
 #include "tempokey/core/retime/retime.h"
 
@@ -279,7 +280,9 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
     const double run_ms = std::chrono::duration<double, std::milli>(ended - started).count();
     spdlog::info("export {} format={} bytes={} queue_wait_ms={:.1f} run_ms={:.1f} outcome={}{}",
                  source_, format_->name, bytes_.size(), queue_ms, run_ms, outcome,
-                 formatted.ok() ? "" : absl::StrCat(" error=\"", formatted.message(), "\""));
+                 formatted.ok()
+                     ? ""
+                     : absl::StrCat(" error=", core::LogValue(core::AsStd(formatted.message()))));
     if (service_->metrics != nullptr) {
       service_->metrics->RecordFinished("export", outcome, (queue_ms + run_ms) / 1000.0);
     }
@@ -382,8 +385,8 @@ grpc::ServerUnaryReactor* MotionService::ParseClipFile(grpc::CallbackServerConte
             service->clips->Put(owner, id, ShareWithReservation(std::move(clip), std::move(memory))));
         response.set_clip_id(id);
         response.set_already_stored(stored.already_stored);
-        spdlog::info("parse clip file={} clip={} already_stored={}", request->file_name(), id,
-                     stored.already_stored);
+        spdlog::info("parse clip file={} clip={} already_stored={}",
+                     core::LogValue(request->file_name()), id, stored.already_stored);
         return response;
       });
 }

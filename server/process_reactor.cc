@@ -24,6 +24,7 @@
 #include "server/status_util.h"
 #include "server/wire_codec.h"
 #include "spdlog/spdlog.h"
+#include "tempokey/core/io/printable_text.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::server {
@@ -102,9 +103,10 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
               double run_ms, const absl::Status& error) {
     const double queue_ms =
         std::chrono::duration<double, std::milli>(started - queued_at_).count();
+    const std::string error_field =
+        error.ok() ? "" : absl::StrCat(" error=", core::LogValue(core::AsStd(error.message())));
     spdlog::info("process {} queue_wait_ms={:.1f} run_ms={:.1f} outcome={}{}", description_,
-                 queue_ms, run_ms, outcome,
-                 error.ok() ? "" : absl::StrCat(" error=\"", error.message(), "\""));
+                 queue_ms, run_ms, outcome, error_field);
     if (service_->metrics != nullptr) {
       service_->metrics->RecordFinished("process", outcome, (queue_ms + run_ms) / 1000.0);
     }

@@ -31,6 +31,7 @@
 #include "server/service_context.h"
 #include "spdlog/spdlog.h"
 #include "tempokey/core/io/file_io.h"
+#include "tempokey/core/io/printable_text.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::server {
@@ -221,7 +222,8 @@ absl::StatusOr<std::unique_ptr<Server>> Server::Start(ServerOptions options) {
   job_options.on_job_end = [context](const JobSnapshot& job, std::chrono::duration<double> wait,
                                      std::chrono::duration<double> run) {
     const std::string error =
-        job.error.ok() ? "" : absl::StrCat(" error=\"", job.error.message(), "\"");
+        job.error.ok() ? ""
+                       : absl::StrCat(" error=", core::LogValue(core::AsStd(job.error.message())));
     spdlog::info("job id={} clip={} operations={} queue_wait_ms={:.1f} run_ms={:.1f} outcome={}{}",
                  job.job_id, job.spec->clip_id, DescribeSteps(job.spec->steps),
                  wait.count() * 1000.0, run.count() * 1000.0, Outcome(job.state), error);

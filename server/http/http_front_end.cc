@@ -16,6 +16,7 @@
 #include "server/http/connection_socket.h"
 #include "server/http/http_status.h"
 #include "spdlog/spdlog.h"
+#include "tempokey/core/io/printable_text.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::server::http {
@@ -261,7 +262,8 @@ int HandleRequestThunk(mg_connection* connection, void* front_end) {
 }
 
 int LogMessage(const mg_connection*, const char* message) {
-  spdlog::warn("http: {}", message);
+  // civetweb's messages quote what clients sent (a request line, a URI): one log line each.
+  spdlog::warn("http: {}", core::PrintableText(message, core::LineBreaks::kEscaped));
   return 1;
 }
 

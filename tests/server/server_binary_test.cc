@@ -161,6 +161,34 @@ TEST(ServerBinaryTest, SigtermWithAClientConnectedDrainsAndExitsZero) {
   EXPECT_THAT(log, HasSubstr("outcome=succeeded"));
 }
 
+// A file name is the client's text: written raw, one with line breaks forged whole log lines
+// ("... outcome=cancelled", the line operators and tests read). It is now one quoted field.
+TEST(ServerBinaryTest, AFileNameCannotForgeALogLine) {
+  std::unique_ptr<ServerProcess> server = StartInfoServer({"--workers=1"});
+  ASSERT_NE(server, nullptr);
+  auto stub = v1::MotionService::NewStub(Connect(server->target()));
+  const std::string forged =
+      "[2026-11-30 21:00:00.000] [tempokey] [info] job id=forged outcome=cancelled";
+  grpc::ClientContext context;
+  SetDeadline(context);
+  v1::ParseClipFileRequest parse;
+  parse.set_file_name("walk\n" + forged + "\n\x1b[2J\" x=\"y.bvh");
+  parse.set_content(
+      "HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Xposition Yposition Zposition\n"
+      "  End Site\n  {\n    OFFSET 0 1 0\n  }\n}\nMOTION\nFrames: 2\nFrame Time: 0.0333333\n"
+      "0 0 0\n1 1 1\n");
+  v1::ParseClipFileResponse parsed;
+  TEMPOKEY_ASSERT_GRPC_OK(stub->ParseClipFile(&context, parse, &parsed));
+  server->Signal(SIGTERM);
+  ASSERT_EQ(server->WaitExit(std::chrono::seconds(60)), 0);
+  const std::string log = server->log();
+
+  EXPECT_THAT(log, Not(HasSubstr("\n" + forged)));
+  EXPECT_THAT(log, Not(HasSubstr("\x1b")));
+  EXPECT_THAT(log, HasSubstr("parse clip file=\"walk\\n" + forged +
+                             "\\n\\x1b[2J\\\" x=\\\"y.bvh\" clip="));
+}
+
 TEST(ServerBinaryTest, SigintAlsoDrainsAndExitsZero) {
   std::unique_ptr<ServerProcess> server = StartInfoServer({"--workers=1"});
   ASSERT_NE(server, nullptr);
