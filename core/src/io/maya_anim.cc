@@ -35,6 +35,8 @@ struct TimeUnit {
 // and the devkit reader's animUnitNames::setFromName() know "game|film|pal|ntsc|show|palf|ntscf"
 // (and hour|min|sec|millisec) and refuse any other name ("'120fps' is not a valid time unit"),
 // so the numbered units of later Maya versions ("120fps") are not written. Lowest rate first.
+// (The format's page: "timeUnit [game|film|pal|ntsc|show|palf|ntscf|hour|min|sec|millisec]",
+// help.autodesk.com/cloudhelp/2016/ENU/Maya/files/GUID-87541258-2463-497A-A3D7-3DEA4C852644.htm.)
 constexpr TimeUnit kTimeUnits[] = {
     {"game", 15.0}, {"film", 24.0}, {"pal", 25.0},   {"ntsc", 30.0},
     {"show", 48.0}, {"palf", 50.0}, {"ntscf", 60.0},
