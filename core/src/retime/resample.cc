@@ -20,10 +20,13 @@
 namespace tempokey::core {
 namespace {
 
-// Adjacent source rotations further apart than retime_internal::kDiscontinuityDot are a
-// discontinuity (a capture glitch or a flipped solve: no joint turns 90 degrees in one frame at
-// mocap rates). Interpolating across one would invent a pose on an arbitrary geodesic, so samples
-// between them take the nearer source pose instead. Compared as |q_i·q_{i+1}| < cos(90° / 2).
+// Adjacent source rotations further apart than retime_internal::kDiscontinuityDot, 150 degrees,
+// are a discontinuity (a capture glitch or a flipped solve: CMU 131_01's thumb flips by 171-179
+// degrees between frames, and no other step of the shared clips exceeds 60). Interpolating
+// across one would invent a half turn whose direction near 180 degrees is a coin toss, so samples
+// between them take the nearer source pose instead. Real turns up to 150 degrees a frame (a fast
+// spin at 24 or 30 fps) are interpolated: a threshold of 90 degrees held such spins in steps.
+// Compared as |q_i·q_{i+1}| < cos(150° / 2).
 using retime_internal::kDiscontinuityDot;
 
 // Weights below this are dropped from the ends of a span; they are exact zeros analytically

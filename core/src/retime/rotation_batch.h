@@ -88,8 +88,9 @@ struct WeightedMeanJob {
 std::size_t MarkleyMeans(const double* quats, const double* weights,
                          const WeightedMeanJob* jobs, std::size_t count, QuatArrays out);
 
-// Adjacent source rotations with |q_i·q_{i+1}| below this are a discontinuity (resample.cc).
-inline constexpr double kDiscontinuityDot = 0.70710678118654752;
+// Adjacent source rotations with |q_i·q_{i+1}| below this, cos(150° / 2), are a discontinuity
+// (resample.cc): a turn of more than 150 degrees in one frame.
+inline constexpr double kDiscontinuityDot = 0.25881904510252074;
 
 // For i < count, with a = quats[i0[i]] and b = quats[i0[i] + 1] (as EulerToQuats() writes them),
 // b's sign aligned to a: out[i] = Slerp(a, b, t[i]), and discontinuous[i] = 1 where

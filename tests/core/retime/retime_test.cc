@@ -490,10 +490,10 @@ TEST(RetimeTest, CompressingAcrossASeamAveragesTheRotationNotTheNumbers) {
   }
 }
 
-TEST(RetimeTest, RotationJumpOverNinetyDegreesIsHeldNotInterpolated) {
-  // Frame 2 -> 3 flips the X rotation by 170 degrees in one frame (a glitch): the sample half
-  // way between copies the nearer pose instead of inventing one on the geodesic; elsewhere the
-  // slerp interpolates.
+TEST(RetimeTest, RotationJumpOverOneHundredFiftyDegreesIsHeldNotInterpolated) {
+  // Frame 2 -> 3 flips the X rotation by 170 degrees in one frame (a glitch, as CMU's thumb
+  // does): the sample half way between copies the nearer pose instead of inventing a half turn
+  // on the geodesic; elsewhere the slerp interpolates.
   const std::vector<double> x = {0.0, 10.0, 20.0, -150.0, -140.0};
   const std::vector<double> zero(x.size(), 0.0);
   const Clip clip = JointClip(1.0 / 30, {ChannelKind::kXRotation, ChannelKind::kYRotation,
@@ -507,6 +507,30 @@ TEST(RetimeTest, RotationJumpOverNinetyDegreesIsHeldNotInterpolated) {
   EXPECT_NEAR(out[3], 15.0, kAngleTolerance);
   EXPECT_EQ(out[5], -150.0);  // x = 2.5 rounds to the later frame
   EXPECT_NEAR(out[7], -145.0, kAngleTolerance);
+}
+
+// A joint spinning 100 or 140 degrees a frame at 30 fps (a fast spin; the file's angles wrap at
+// +-180) is slowed down 4 times: every output turns a quarter of a step further, as the slerp
+// does. With turns over 90 degrees held as discontinuities, the output stood still for four
+// frames at a time and was up to 50 degrees off.
+TEST(RetimeTest, AFastSpinOfUpToOneHundredFiftyDegreesAFrameIsInterpolated) {
+  for (const double step : {100.0, 140.0}) {
+    std::vector<double> z;
+    for (int i = 0; i < 20; ++i) z.push_back(std::remainder(i * step, 360.0));
+    const std::vector<double> zero(z.size(), 0.0);
+    const Clip clip = JointClip(1.0 / 30, {ChannelKind::kZRotation, ChannelKind::kXRotation,
+                                           ChannelKind::kYRotation}, {z, zero, zero});
+
+    const RetimeResult r = RetimeOrDie(clip, OverSource({Knot(0, 0.25)}), {});
+
+    const std::vector<double>& out = r.clip.channels[0].samples;
+    ASSERT_EQ(out.size(), 77u) << step;
+    for (std::size_t j = 0; j < out.size(); ++j) {
+      const double expected = static_cast<double>(j) * step / 4.0;
+      EXPECT_NEAR(std::remainder(out[j] - expected, 360.0), 0.0, kAngleTolerance)
+          << step << " output " << j;
+    }
+  }
 }
 
 // Rotation matrix of one axis, written out independently of the library.

@@ -22,7 +22,8 @@ namespace rotation_reference_internal {
 
 using core::Quat;
 
-inline constexpr double kDiscontinuityDot = 0.70710678118654752;
+// cos(150° / 2): adjacent rotations more than 150 degrees apart are a discontinuity (resample.h).
+inline constexpr double kDiscontinuityDot = 0.25881904510252074;
 
 inline bool HasWrap(std::span<const double> degrees) {
   for (std::size_t i = 1; i < degrees.size(); ++i) {

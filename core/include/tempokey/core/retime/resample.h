@@ -31,9 +31,10 @@
 // joint's order, the Euler solution nearest the source's unwrapped angles at x_j (so the output
 // is continuous wherever the source is), then each angle moved by whole turns to within 180° of
 // the source's value at the nearest sample (so it keeps the source's wrapping convention).
-// Adjacent source rotations more than 90° apart are treated as a discontinuity (a capture
-// glitch or flipped solve; no joint turns 90° in one frame at capture rates): interpolated
-// samples between them copy the nearer source pose rather than invent one on the geodesic.
+// Adjacent source rotations more than 150° apart are treated as a discontinuity (a capture
+// glitch or flipped solve, such as CMU's thumb flipping by 171-179° in a frame): interpolated
+// samples between them copy the nearer source pose rather than invent a half turn on the
+// geodesic. Turns up to 150° a frame (a fast spin at 24 or 30 fps) are interpolated.
 #ifndef TEMPOKEY_CORE_RETIME_RESAMPLE_H_
 #define TEMPOKEY_CORE_RETIME_RESAMPLE_H_
 
