@@ -27,7 +27,9 @@ inline constexpr FlagSpec kRetimeStepFlags[] = {
      true},
     {"--reverse", "", "", "play the clip backwards"},
     {"--fit-frames", "", "N", "scale all speeds so the output has N frames"},
-    {"--fit-seconds", "", "S", "scale all speeds so the output lasts S seconds"},
+    {"--fit-seconds", "", "S",
+     "scale all speeds so the output lasts S seconds (a whole number of frames unless "
+     "--no-fit-to-grid)"},
     {"--no-fit-to-grid", "", "", "do not nudge speeds so the last output frame is the last pose"},
     {"--fps", "", "RATE", "output frame rate: 30, 29.97, 30000/1001 (default: the source's)"},
     {"--filter", "", "NAME", "resampling filter: tent (default), linear, box, cubic, lanczos3"},
