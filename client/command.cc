@@ -177,6 +177,13 @@ absl::StatusOr<std::optional<double>> InputFrameTimeFromFlags(const ParsedArgs& 
 absl::StatusOr<core::Clip> ReadInputClip(const CommandContext& context, const std::string& path) {
   TEMPOKEY_ASSIGN_OR_RETURN(std::optional<double> csv_frame_time,
                             InputFrameTimeFromFlags(context.args()));
+  // A rate given for a file that stores its own would be ignored without a word. (A batch may
+  // mix CSV and BVH inputs: there the flag is for its CSV files.)
+  if (csv_frame_time && FormatForPath("", path, kSampledFormats).value_or(FileFormat::kCsv) ==
+                            FileFormat::kBvh) {
+    return UsageError(absl::StrCat("--input-fps is for CSV input: ", path,
+                                   " stores its own frame time (retime --fps changes the rate)"));
+  }
   return ReadClipFile(path, csv_frame_time);
 }
 

@@ -114,6 +114,16 @@ absl::Status RetimeOptionsFromArgs(const ParsedArgs& args, core::RetimeOptions& 
   if (std::optional<std::string> v = args.Value("--max-speed")) {
     TEMPOKEY_ASSIGN_OR_RETURN(options.max_speed, ParsePositiveDouble("--max-speed", *v));
   }
+  // The core refuses these too, in the names of the options' fields ("output_rate must be
+  // unset"); a command line gets the flags' names.
+  if (options.method == core::RetimeMethod::kPaper) {
+    for (const char* flag : {"--fps", "--fit-frames", "--fit-seconds", "--pin"}) {
+      if (!args.Has(flag)) continue;
+      return UsageError(absl::StrCat("--method paper takes no ", flag,
+                                     ": the published procedure keeps the source's frame rate "
+                                     "and rounds each region's frames itself"));
+    }
+  }
   return absl::OkStatus();
 }
 

@@ -172,6 +172,17 @@ TEST(CliUsageTest, RefusesMistakesWithExitCode2AndOneLine) {
        "error: --speed-over needs --speed\n"},
       {{"retime", cmu, "-o", "out.bvh", "--label", "a=b"},
        "error: --label applies to jobs: add --job or --detach\n"},
+      // The paper's method refused these naming the options' fields ("output_rate must be
+      // unset"); a rate for a BVH, which stores its own, was silently ignored.
+      {{"retime", cmu, "-o", "out.bvh", "--method", "paper", "--fps", "60"},
+       "error: --method paper takes no --fps: the published procedure keeps the source's frame "
+       "rate and rounds each region's frames itself\n"},
+      {{"retime", cmu, "-o", "out.bvh", "--method", "paper", "--fit-seconds", "3"},
+       "error: --method paper takes no --fit-seconds: the published procedure keeps the source's "
+       "frame rate and rounds each region's frames itself\n"},
+      {{"info", cmu, "--input-fps", "30"},
+       "error: --input-fps is for CSV input: " + cmu +
+           " stores its own frame time (retime --fps changes the rate)\n"},
       {{"reduce", cmu, "-o", "out.txt"},
        "error: -o out.txt: unknown format '.txt' (expected .bvh, .csv, .json, .anim, .gltf, .glb)\n"},
       {{"reduce", cmu, "-o", "out.json", "--tolerance", "abc"},
