@@ -75,8 +75,8 @@ TEST_F(CliNoiseTest, BadNoiseLevelIsRefusedBeforeSending) {
 
   EXPECT_EQ(bad.exit_code, 1);
   EXPECT_EQ(bad.err,
-            "error: operation 1 (reduce): noise.rotation_sigma_degrees must be finite and > 0, "
-            "got -1\n");
+            "error: operation 1 (reduce): noise.rotation_sigma_degrees must be in [1e-09, "
+            "1e+09], got -1\n");
   EXPECT_EQ(usage.exit_code, 2);
   EXPECT_THAT(usage.err, HasSubstr("--euler-filter"));
 }

@@ -307,8 +307,18 @@ TEST(NoiseReductionTest, InvalidNoiseParamsAreNamed) {
   options.noise.rotation_sigma_degrees = -1.0;
 
   EXPECT_EQ(ValidateReduceOptions(options).message(),
-            "noise.rotation_sigma_degrees must be finite and > 0, got -1");
+            "noise.rotation_sigma_degrees must be in [1e-09, 1e+09], got -1");
+  // The error bounds' range: 1e-300 kept a key at nearly every frame, 1e308 smoothed flat.
+  options.noise.rotation_sigma_degrees = 1e-300;
+  EXPECT_EQ(ValidateReduceOptions(options).message(),
+            "noise.rotation_sigma_degrees must be in [1e-09, 1e+09], got 1e-300");
   options.noise.rotation_sigma_degrees.reset();
+  options.noise.position_sigma = 1e308;
+  EXPECT_EQ(ValidateReduceOptions(options).message(),
+            "noise.position_sigma must be in [1e-09, 1e+09], got 1e+308");
+  options.noise.position_sigma = 1e9;
+  EXPECT_TRUE(ValidateReduceOptions(options).ok());
+  options.noise.position_sigma.reset();
   options.noise.guard_sigmas = 1.0;
   EXPECT_EQ(ValidateReduceOptions(options).message(),
             "noise.guard_sigmas must be in [2, 100], got 1");
