@@ -77,5 +77,7 @@ class StudioServer:
         return False
 
     def server_log(self):
-        self.log.seek(0)
-        return self.log.read()
+        """The log so far. Read with pread, at no file offset: the server writes through the same
+        open file, so moving its offset (seek) while it runs would put its next lines over old ones."""
+        fd = self.log.fileno()
+        return os.pread(fd, os.fstat(fd).st_size, 0).decode("utf-8", "replace")

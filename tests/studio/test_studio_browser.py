@@ -13,15 +13,20 @@ the bytes with the CLI's files, then open a malformed file. Every wait polls the
 with a deadline that only bounds a hang; nothing asserts a time.
 """
 
+import base64
 import json
 import os
+import random
 import re
+import shutil
 import shlex
 import subprocess
 import sys
 import tempfile
 import time
 import unittest
+import urllib.error
+import urllib.request
 
 from selenium import webdriver
 from selenium.webdriver.chrome.service import Service
@@ -78,6 +83,20 @@ def read_bvh(path):
     return offset, frame_time, rows
 
 
+def api_call(server, method, request):
+    """One unary call of the HTTP/JSON API (README "HTTP API")."""
+    http = urllib.request.Request(server.http_url + "tempokey.v1.MotionService/" + method,
+                                  data=json.dumps(request).encode(),
+                                  headers={"Content-Type": "application/json"})
+    with urllib.request.urlopen(http, timeout=DEADLINE_SECONDS) as answer:
+        return json.loads(answer.read())
+
+
+def job_logged_cancelled(server, job_id):
+    """The server's log line of the job, if it ended cancelled (info level logs one per job)."""
+    return re.search(r"job id=%s .*outcome=cancelled" % re.escape(job_id), server.server_log())
+
+
 def close(a, b, rel):
     return abs(a - b) <= rel * max(1.0, abs(a), abs(b))
 
@@ -117,6 +136,14 @@ class StudioBrowserTest(unittest.TestCase):
         finally:
             cls.driver.quit()
             cls.server.__exit__(None, None, None)
+            busy = getattr(cls, "busy", None)
+            if busy:
+                for job in cls.blockers:
+                    try:
+                        api_call(busy, "CancelJob", {"jobId": job})
+                    except (OSError, urllib.error.URLError):
+                        pass
+                busy.__exit__(None, None, None)
             cls.work.cleanup()
         assert cls.server.exit_code == 0, "the server did not drain cleanly:\n" + cls.server.server_log()
 
@@ -178,6 +205,51 @@ class StudioBrowserTest(unittest.TestCase):
         self.assertEqual(done.returncode, 0, done.stderr)
         return done.stdout
 
+    def type_over(self, element_id, text, end=Keys.ENTER):
+        """Types `text` over a field's value as a person does (select all, type), then `end`.
+        Not clear(): that sends a change event of an empty field, which the knot fields refuse."""
+        field = self.el(element_id)
+        field.click()
+        field.send_keys(Keys.CONTROL, "a")
+        field.send_keys(Keys.DELETE)
+        field.send_keys(text, end)
+
+    def speed_up_first_knot(self):
+        """A click on an empty corner of the editor focuses it; Arrow Up raises the selected knot."""
+        canvas = self.el("editor")
+        (ActionChains(self.driver).move_to_element_with_offset(canvas, canvas.size["width"] // 2 - 30,
+                                                               -canvas.size["height"] // 2 + 20)
+         .click().send_keys(Keys.ARROW_UP).perform())
+
+    def shown(self, element_id):
+        """An element's text if it is shown, else ''."""
+        element = self.el(element_id)
+        return element.text if element.is_displayed() else ""
+
+    def open_clip(self, path):
+        """Opens a file through the picker; waits for its retime and reduction."""
+        self.el("file-input").send_keys(path)
+        name = os.path.basename(path)
+        wait_for(lambda: self.el("clip-info").text.startswith(name + ":"), "the clip " + name)
+        for kind in ("retime", "reduce"):
+            wait_for(lambda: self.data(kind + "-status", "state") == "done", "the %s of %s" % (kind, name))
+
+    def run_shown_command(self, command, cwd):
+        """Runs a command line the page shows as a person pastes it: through /bin/sh, in the
+        folder of the file, with `tempokey` on the PATH (the CLI on this test's server)."""
+        bin_dir = os.path.join(self.work.name, "bin")
+        os.makedirs(bin_dir, exist_ok=True)
+        with open(os.path.join(bin_dir, "tempokey"), "w") as f:
+            f.write('#!/bin/sh\nexec %s --server %s "$@"\n' % (shlex.quote(CLI), self.server.grpc_target))
+        os.chmod(os.path.join(bin_dir, "tempokey"), 0o755)
+        env = dict(os.environ, PATH=bin_dir + os.pathsep + os.environ.get("PATH", ""))
+        return subprocess.run(["/bin/sh", "-c", command], cwd=cwd, env=env, capture_output=True,
+                              text=True, timeout=DEADLINE_SECONDS)
+
+    def studio_jobs(self, server):
+        """The jobs stored on `server` that the page submitted (its label source=studio)."""
+        return api_call(server, "ListJobs", {"labels": {"source": "studio"}, "pageSize": 1000}).get("jobs", [])
+
     def screenshot(self, element_id, name):
         element = self.el(element_id)
         self.driver.execute_script("arguments[0].scrollIntoView(true)", element)
@@ -227,9 +299,7 @@ class StudioBrowserTest(unittest.TestCase):
         last = self.shown_knots()[-1][0]
         wait_for(lambda: float(self.el("knot-time").get_attribute("value")) == last, "the last knot selected")
         for element_id, value in [("knot-time", "5"), ("knot-speed", "1.5")]:
-            field = self.el(element_id)
-            field.clear()
-            field.send_keys(value, Keys.TAB)
+            self.type_over(element_id, value, Keys.TAB)
         knots = self.wait_for_knots(lambda knots: knots[-1] == (5.0, 1.5), "the typed knot")
         # A hold, from its fields.
         before = self.plan_seq()
@@ -437,6 +507,195 @@ class StudioBrowserTest(unittest.TestCase):
                          ["Xposition", "Yposition", "Zrotation"])
         wait_for(lambda: close(float(self.data("duration", "seconds")), 119 / 24, 1e-12),
                  "the plan of the dropped clip: 119 frame times at 24 fps")
+
+    def test_8a_typed_speed_text_is_held_to_the_editors_limits_and_order(self):
+        good = "0s:1,2s:0.5"
+        self.type_over("speed-text", good)
+        self.wait_for_knots(lambda knots: knots == [(0.0, 1.0), (2.0, 0.5)], "the typed curve")
+        # The server's parser takes each of these but the last; the editor could never make them.
+        previous = ""
+        for text, knot in [("0s:1,2s:0", 2), ("0s:1,2s:-1", 2), ("0s:1,2s:1e300", 2), ("0s:1e-9", 1),
+                           ("0s:1,2s:0.5,1s:1", 3), ("0s:1,2x", 2)]:
+            with self.subTest(text=text):
+                self.type_over("speed-text", text)
+                error = wait_for(lambda: self.shown("speed-text-error") not in ("", previous)
+                                 and self.shown("speed-text-error"), "the error of " + text)
+                self.assertIn("knot %d" % knot, error)
+                previous = error
+                # The banner shows the same, current error.
+                self.assertEqual(self.shown("message"), "--speed: " + error)
+        # The knots stayed the good ones; typing their own text again applies (and clears the error).
+        self.type_over("speed-text", good)
+        wait_for(lambda: not self.shown("speed-text-error") and not self.shown("message"), "the error cleared")
+        self.el("editor").send_keys(Keys.ARROW_UP)
+        self.wait_for_knots(lambda knots: knots == [(0.0, 1.01), (2.0, 0.5)], "an edit of the good curve")
+
+    def test_8b_knot_fields_refuse_what_the_editor_cannot_take(self):
+        self.type_over("speed-text", "0s:1,2s:0.5")
+        self.wait_for_knots(lambda knots: knots == [(0.0, 1.0), (2.0, 0.5)], "the typed curve")
+        self.el("editor").send_keys(Keys.TAB)
+        wait_for(lambda: self.el("knot-time").get_attribute("value") == "2", "the second knot selected")
+        for field, value, said in [("knot-speed", "0", 'speed "0"'), ("knot-speed", "-1", 'speed "-1"'),
+                                   ("knot-speed", "", "speed a blank"), ("knot-time", "", "time a blank"),
+                                   ("knot-time", "-1", 'time "-1"')]:
+            with self.subTest(field=field, value=value):
+                self.type_over(field, value, Keys.TAB)
+                wait_for(lambda: said in self.shown("knot-error"), "the message about " + said)
+                self.assertIn("knot 2", self.shown("knot-error"))
+                self.assertEqual(self.el("knot-time").get_attribute("value"), "2")
+                self.assertEqual(self.el("knot-speed").get_attribute("value"), "0.5")
+        self.type_over("knot-speed", "0.75", Keys.TAB)
+        self.wait_for_knots(lambda knots: knots == [(0.0, 1.0), (2.0, 0.75)], "the typed speed")
+        self.assertEqual(self.shown("knot-error"), "")
+
+    def test_8c_speed_limits_never_rewrite_the_knots(self):
+        self.type_over("speed-text", "0s:1,2s:0.5")
+        self.wait_for_knots(lambda knots: knots == [(0.0, 1.0), (2.0, 0.5)], "the typed curve")
+        # A minimum above a knot: the server names the knot; the knot stays.
+        self.type_over("min-speed", "0.6", Keys.TAB)
+        wait_for(lambda: "speed knot 2" in self.shown("message"), "the knot beyond the limits named")
+        # An empty range is refused by the page, the knots kept.
+        self.type_over("min-speed", "10", Keys.TAB)
+        self.type_over("max-speed", "1", Keys.TAB)
+        wait_for(lambda: "empty" in self.shown("message"), "the empty range refused")
+        self.type_over("max-speed", "100", Keys.TAB)
+        before = self.plan_seq()
+        self.type_over("min-speed", "0.01", Keys.TAB)
+        self.settled_plan(before)
+        self.assertEqual(self.el("speed-text").get_attribute("value"), "0s:1,2s:0.5")
+        self.assertEqual(self.shown("message"), "")
+
+    def test_8d_a_refused_reduction_says_so(self):
+        self.type_over("tolerance", "0", Keys.TAB)
+        wait_for(lambda: self.data("reduce-status", "state") == "failed", "the refused reduction")
+        status = self.el("reduce-status").text
+        self.assertTrue(status.startswith("failed: INVALID_ARGUMENT"), status)
+        self.assertIn("max_rotation_error_degrees must be > 0", status)
+        self.type_over("tolerance", "0.5", Keys.TAB)
+        wait_for(lambda: self.data("reduce-status", "state") == "done", "the reduction again")
+
+    def test_8e_command_lines_quote_the_file_name_for_the_shell(self):
+        folder = os.path.join(self.work.name, "hostile")
+        os.makedirs(folder)
+        name = "walk; touch PWNED #it's.bvh"
+        shutil.copy(CMU, os.path.join(folder, name))
+        self.open_clip(os.path.join(folder, name))
+        for status in ("retime-status", "reduce-status"):
+            with self.subTest(command=status):
+                command = self.data(status, "command")
+                self.assertEqual(shlex.split(command)[2], name)
+                done = self.run_shown_command(command, folder)
+                self.assertEqual(done.returncode, 0, done.stderr)
+                self.assertFalse(os.path.exists(os.path.join(folder, "PWNED")), command)
+        self.assertTrue(os.path.exists(os.path.join(folder, "walk; touch PWNED #it's-retimed.bvh")))
+        self.assertTrue(os.path.exists(os.path.join(folder, "walk; touch PWNED #it's-keys.anim")))
+
+    def test_8f_a_clip_without_a_skeleton_retimes_and_downloads_as_csv(self):
+        self.assertTrue(self.el("download-retime-bvh").is_displayed())
+        folder = os.path.join(self.work.name, "plain")
+        os.makedirs(folder)
+        noise = random.Random(7)
+        with open(os.path.join(folder, "sensor.csv"), "w") as f:
+            f.write("pressure,flow\n" + "".join("%.3f,%.3f\n" % (noise.gauss(0, 1), i * 0.1) for i in range(240)))
+        self.type_over("csv-fps", "60", Keys.TAB)
+
+        self.open_clip(os.path.join(folder, "sensor.csv"))
+
+        self.assertIn("sensor.csv: 240 frames at 60 fps", self.el("clip-info").text)
+        self.assertTrue(self.el("preview-note").is_displayed())
+        self.assertIsNone(self.data("preview", "source-root"), "the previous clip's figure is gone")
+        self.assertEqual(self.shown("message"), "")
+        buttons = lambda row: [b.get_attribute("id") for b in self.el(row).find_elements(By.TAG_NAME, "button")]
+        self.assertEqual(buttons("downloads-retime"), ["download-retime-csv"])
+        self.assertEqual(sorted(buttons("downloads-reduce")),
+                         ["download-reduce-anim", "download-reduce-csv", "download-reduce-json"])
+        # The download is what the command line the page shows writes.
+        self.el("download-retime-csv").click()
+        path = os.path.join(self.downloads, "sensor-retimed.csv")
+        wait_for(lambda: os.path.exists(path) and not os.path.exists(path + ".crdownload"), "the CSV download")
+        command = self.data("retime-status", "command")
+        self.assertIn("--input-fps 60", command)
+        done = self.run_shown_command(command, folder)
+        self.assertEqual(done.returncode, 0, done.stderr)
+        with open(path, "rb") as a, open(os.path.join(folder, "sensor-retimed.csv"), "rb") as b:
+            self.assertEqual(a.read(), b.read())
+
+    def test_8g_the_page_keeps_only_the_jobs_it_shows(self):
+        # Every clip opened so far and every edit made its jobs; the page keeps the current clip's
+        # retime and reduction and has deleted the rest.
+        for _ in range(6):
+            self.el("editor").send_keys(Keys.ARROW_UP)
+        wait_for(lambda: self.data("retime-status", "state") == "done"
+                 and self.data("retime-status", "speed-text") == self.el("speed-text").get_attribute("value")
+                 and self.body("planPending") == "false", "the last edit's result")
+        kept = {self.data("retime-status", "job-id"), self.data("reduce-status", "job-id")}
+        wait_for(lambda: {j["jobId"] for j in self.studio_jobs(self.server)} == kept,
+                 "the server to hold only the page's two jobs (it holds %s)" % len(self.studio_jobs(self.server)))
+
+    # ---- long jobs: a server whose one worker is busy, so the page's jobs wait in its queue ------
+    def make_server_busy(self, busy):
+        """Keeps the one worker of `busy` busy with the paper's reduction of a noise channel with
+        1000 passes at accuracy 1e-300 (tests/server/job_cancellation_test.cc's long job; on 64 000
+        frames about half a minute of this 2-core machine's core each), twelve of them, so every job
+        the page submits next waits behind about six minutes of work (still a quarter of a minute
+        on a machine twenty times faster; a loaded machine only makes it longer): its progress, its
+        cancel and its end when the page is left are seen as states. The blockers are cancelled
+        when the tests end."""
+        noise = random.Random(11)
+        text = "noise\n" + "".join("%.4f\n" % noise.gauss(0, 10) for _ in range(64000))
+        clip = api_call(busy, "ParseClipFile", {"fileName": "noise.csv", "csvFrameTimeSeconds": 1 / 120,
+                                                "content": base64.b64encode(text.encode()).decode()})
+        paper = {"reduce": {"method": "REDUCE_METHOD_PAPER", "paper": {"maxIterations": 1000, "accuracy": 1e-300}}}
+        type(self).blockers = [api_call(busy, "SubmitJob", {"clipId": clip["clipId"], "operations": [paper]})["jobId"]
+                               for _ in range(12)]
+
+    def test_9a_long_jobs_show_progress_cancel_and_leave_no_superseded_job(self):
+        # A second server with one worker; the clip is opened while it is idle (parsing a file and
+        # planning a retime run on the workers too), then the worker is kept busy: the reductions
+        # the page asks for next wait in the queue.
+        busy = StudioServer("--workers", "1", "--max_job_cost_seconds", "0", "--log_level", "info").__enter__()
+        type(self).busy = busy
+        self.driver.get(busy.http_url)
+        wait_for(lambda: self.body("ready") == "true", "the page to reach the busy server")
+        self.open_clip(CMU)
+        kept = {self.data("retime-status", "job-id"), self.data("reduce-status", "job-id")}
+        self.make_server_busy(busy)
+
+        self.el("run-reduce").click()
+
+        # Progress: the server's stage of the job, queued behind the busy worker, and a Cancel.
+        wait_for(lambda: self.data("reduce-job", "state") == "JOB_STATE_QUEUED", "the queued reduction")
+        self.assertIn("queued", self.el("reduce-stage").text)
+        self.assertTrue(self.el("reduce-cancel").is_displayed())
+        # Quick edits: each supersedes the queued reduction, which the page cancels and deletes.
+        for tolerance in ("0.4", "0.3", "0.2", "0.1"):
+            job = self.data("reduce-job", "job-id")
+            self.type_over("tolerance", tolerance, Keys.TAB)
+            wait_for(lambda: self.data("reduce-job", "job-id") not in (None, job)
+                     and self.data("reduce-job", "state") == "JOB_STATE_QUEUED", "the next reduction job")
+        waiting = self.data("reduce-job", "job-id")
+        # The page's kept results (the clip's first retime and reduction) stay until replaced.
+        wait_for(lambda: {j["jobId"] for j in self.studio_jobs(busy)} == kept | {waiting},
+                 "the superseded jobs deleted (the server holds %s)" % len(self.studio_jobs(busy)))
+        # Cancel: the job ends cancelled, and the page works on with its previous result.
+        self.el("reduce-cancel").click()
+        wait_for(lambda: self.data("reduce-status", "state") == "cancelled", "the page to show the cancel")
+        self.assertFalse(self.el("reduce-job").is_displayed())
+        wait_for(lambda: job_logged_cancelled(busy, waiting), "the cancelled job in the server's log")
+        self.assertTrue(self.el("download-reduce-json").is_displayed())
+        self.el("run-reduce").click()
+        wait_for(lambda: self.data("reduce-job", "job-id") not in (None, waiting)
+                 and self.data("reduce-job", "state") == "JOB_STATE_QUEUED", "a new reduction queued")
+
+    def test_9b_leaving_the_page_cancels_its_jobs(self):
+        busy = self.busy
+        jobs = [self.data("reduce-job", "job-id")]
+        self.assertNotIn(None, jobs)
+
+        self.driver.get("about:blank")
+
+        for job in jobs:
+            wait_for(lambda: job_logged_cancelled(busy, job), "job %s cancelled once the page is left" % job)
 
 
 if __name__ == "__main__":

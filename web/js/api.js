@@ -11,6 +11,7 @@ export class ApiError extends Error {
     this.code = status.code ?? 2;
     this.status = status.status || 'UNKNOWN';
     this.retryAfterMs = status.retryAfterMs;
+    this.stopped = !!status.stopped;
   }
 }
 
@@ -29,11 +30,43 @@ function headers(contentType) {
   return h;
 }
 
-async function post(method, body, contentType) {
+// Every call can be stopped: by its caller's signal (a newer edit supersedes the run) or by
+// leaving the page. Chrome keeps a fetch's connection open after the page has gone, so without an
+// abort the server goes on answering, and working, for nobody.
+const calls = new Set();  // the AbortControllers of the calls in flight
+
+function stoppedError() {
+  return new ApiError({code: 1, status: 'CANCELLED', message: 'stopped by the page', stopped: true});
+}
+
+// True for the error of a call the page stopped itself (nothing to tell the user).
+export function isStopped(error) {
+  return error instanceof ApiError && error.stopped;
+}
+
+async function stoppable(signal, work) {
+  const controller = new AbortController();
+  const stop = () => controller.abort();
+  if (signal) signal.addEventListener('abort', stop);
+  if (signal && signal.aborted) stop();
+  calls.add(controller);
+  try {
+    if (controller.signal.aborted) throw stoppedError();
+    return await work(controller.signal);
+  } catch (error) {
+    throw controller.signal.aborted ? stoppedError() : error;
+  } finally {
+    calls.delete(controller);
+    if (signal) signal.removeEventListener('abort', stop);
+  }
+}
+
+async function post(method, body, contentType, signal) {
   let response;
   try {
-    response = await fetch(SERVICE + method, {method: 'POST', headers: headers(contentType), body});
+    response = await fetch(SERVICE + method, {method: 'POST', headers: headers(contentType), body, signal});
   } catch (error) {
+    if (signal.aborted) throw error;
     throw new ApiError({code: 14, status: 'UNAVAILABLE', message: 'the server cannot be reached'});
   }
   if (!response.ok) {
@@ -49,18 +82,24 @@ async function post(method, body, contentType) {
 }
 
 // A unary call: the response message.
-export async function call(method, request = {}) {
-  const response = await post(method, JSON.stringify(request), 'application/json');
-  return response.json();
+export function call(method, request = {}, signal = null) {
+  return stoppable(signal, async (own) => {
+    const response = await post(method, JSON.stringify(request), 'application/json', own);
+    return response.json();
+  });
 }
 
 // A call with a streamed answer: every response message, in order. `requests` is one message, or
 // an array of them for client-streaming methods (sent as NDJSON).
-export async function stream(method, requests = {}, onMessage = null) {
+export function stream(method, requests = {}, onMessage = null, signal = null) {
+  return stoppable(signal, (own) => readStream(method, requests, onMessage, own));
+}
+
+async function readStream(method, requests, onMessage, signal) {
   const body = Array.isArray(requests)
     ? requests.map((r) => JSON.stringify(r)).join('\n') + '\n'
     : JSON.stringify(requests);
-  const response = await post(method, body, Array.isArray(requests) ? 'application/x-ndjson' : 'application/json');
+  const response = await post(method, body, Array.isArray(requests) ? 'application/x-ndjson' : 'application/json', signal);
   const reader = response.body.getReader();
   const decoder = new TextDecoder();
   const messages = [];
@@ -86,10 +125,60 @@ export async function stream(method, requests = {}, onMessage = null) {
   return messages;
 }
 
+// ---- jobs -------------------------------------------------------------------------------------
+// The jobs this page submitted and has not deleted: job id -> whether it has ended. A stored job
+// costs the server memory until its TTL, so the page deletes each once it has no use for it, and
+// cancels first one that is still queued or running.
+const jobs = new Map();
+const ENDED = new Set(['JOB_STATE_SUCCEEDED', 'JOB_STATE_FAILED', 'JOB_STATE_CANCELLED']);
+
+export async function submitJob(request, signal = null) {
+  // Not stopped half-way by `signal`: only the answer names the job to cancel.
+  const job = await call('SubmitJob', request);
+  jobs.set(job.jobId, ENDED.has(job.state));
+  if (signal && signal.aborted) {
+    releaseJob(job.jobId);
+    throw stoppedError();
+  }
+  return job;
+}
+
+// The page no longer needs the job: cancelled if it still runs, then deleted once it has ended.
+export async function releaseJob(jobId) {
+  if (!jobs.has(jobId)) return;
+  try {
+    if (!jobs.get(jobId)) {
+      const job = await call('CancelJob', {jobId});
+      // A running job ends at its next stop ("cancelling"); the server deletes ended jobs only.
+      if (!ENDED.has(job.state)) await stream('WatchJob', {jobId});
+    }
+    await call('DeleteJob', {jobId});
+  } catch (error) {
+    // Gone already (NOT_FOUND), or the page is leaving: leave() has told the server.
+  }
+  jobs.delete(jobId);
+}
+
+// The page is hidden for good or for the back/forward cache (pagehide): every call in flight is
+// stopped and the server is told that no job of this page is needed any more, running ones
+// cancelled (they are deleted with the server's job TTL: a delete must wait for their end) and
+// ended ones deleted. keepalive lets these requests outlive the page.
+export function leave() {
+  for (const [jobId, ended] of jobs) send(ended ? 'DeleteJob' : 'CancelJob', {jobId});
+  jobs.clear();
+  for (const controller of calls) controller.abort();
+}
+
+function send(method, request) {
+  fetch(SERVICE + method, {method: 'POST', headers: headers('application/json'),
+    body: JSON.stringify(request), keepalive: true}).catch(() => {});
+}
+
 // Follows a job until it ends; resolves with its last snapshot (SUCCEEDED, FAILED, CANCELLED).
-export async function waitForJob(jobId, onProgress = null) {
-  const snapshots = await stream('WatchJob', {jobId}, onProgress);
+export async function waitForJob(jobId, onProgress = null, signal = null) {
+  const snapshots = await stream('WatchJob', {jobId}, onProgress, signal);
   const last = snapshots[snapshots.length - 1];
+  if (jobs.has(jobId) && ENDED.has(last.state)) jobs.set(jobId, true);
   if (last.state !== 'JOB_STATE_SUCCEEDED') {
     throw new ApiError({code: last.errorCode || 2, status: last.state, message: last.errorMessage || last.state});
   }
@@ -104,8 +193,8 @@ function base64ToBytes(text) {
 }
 
 // ExportFile: {fileName, mediaType, bytes} of a job's result or a stored clip.
-export async function exportFile(source, format) {
-  const chunks = await stream('ExportFile', {...source, format});
+export async function exportFile(source, format, signal = null) {
+  const chunks = await stream('ExportFile', {...source, format}, null, signal);
   const parts = chunks.map((c) => base64ToBytes(c.data));
   const size = parts.reduce((n, p) => n + p.length, 0);
   const bytes = new Uint8Array(size);
@@ -119,8 +208,8 @@ export async function exportFile(source, format) {
 
 // A result stream (GetJobResult, GetClip) joined: {header, reports, channels: Float64Array[] |
 // curves: [{time, value, inTangent, outTangent, inWeight, outWeight}]}.
-export async function fetchResult(method, request) {
-  const parts = await stream(method, {...request, batchParts: true});
+export async function fetchResult(method, request, signal = null) {
+  const parts = await stream(method, {...request, batchParts: true}, null, signal);
   const head = parts[0].header;
   const layout = head.clip || head.keyedClip;
   const frames = Number(layout.frameCount);

@@ -35,24 +35,49 @@ function describe(error) {
   return error instanceof api.ApiError ? `${error.status}: ${error.message}` : String(error.message || error);
 }
 
+// Shows what went wrong with `what`; a call the page stopped itself (a newer edit, leaving the
+// page) is nobody's error and shows nothing.
+function reportError(what, error) {
+  if (api.isStopped(error)) return;
+  if (error instanceof api.ApiError && error.status === 'UNAUTHENTICATED') {
+    $('token-box').hidden = false;
+    showMessage(`${what}: the server wants a bearer token (enter it above): ${error.message}`);
+  } else {
+    showMessage(`${what}: ${describe(error)}`);
+  }
+}
+
 async function guarded(what, work) {
   try {
     return await work();
   } catch (error) {
-    if (error instanceof api.ApiError && error.status === 'UNAUTHENTICATED') {
-      $('token-box').hidden = false;
-      showMessage(`${what}: the server wants a bearer token (enter it above): ${error.message}`);
-    } else {
-      showMessage(`${what}: ${describe(error)}`);
-    }
+    reportError(what, error);
     return undefined;
   }
+}
+
+// Clears the banner if it still shows a message of `what` (the prefix reportError gives it).
+function clearMessageOf(what) {
+  if ($('message').textContent.startsWith(what + ':')) showMessage('');
+}
+
+// A word for a POSIX shell: as it is when it has nothing the shell reads, else in single quotes
+// (a ' inside written '\''), so a pasted command line never runs a file's name.
+function shellWord(word) {
+  const text = String(word);
+  return /^[A-Za-z0-9_.,:\/%+=@-]+$/.test(text) ? text : `'${text.replace(/'/g, "'\\''")}'`;
+}
+
+function commandLine(words) {
+  return words.map(shellWord).join(' ');
 }
 
 // ---- views ---------------------------------------------------------------------------------
 const editor = new VelocityEditor($('editor'), {
   onChange: () => {
     state.lastEdit = performance.now();
+    // The knots moved on: an error about text typed before them no longer applies.
+    if (!$('speed-text-error').hidden) showSpeedTextError('');
     requestPlan();
   },
   onSelect: () => showSelectedKnot(),
@@ -71,12 +96,57 @@ function readBase64(file) {
   });
 }
 
+// The largest file ParseClipFile takes: its request is JSON of at most the server's message limit
+// (GetServerInfo), the file's bytes in it as base64 (4 characters per 3 bytes), less room for the
+// rest of the request.
+function maxFileBytes() {
+  const message = Number(state.info && state.info.maxMessageBytes) || 64 * 1024 * 1024;
+  return Math.floor((message - 64 * 1024) / 4) * 3;
+}
+
+function megabytes(bytes) {
+  return `${+(bytes / (1024 * 1024)).toFixed(1)} MiB`;
+}
+
+// Formats the server can write for this clip: BVH and glTF need a skeleton (the server refuses
+// them for plain channels, "cannot write BVH: the clip has no skeleton").
+const SKELETON_FORMATS = new Set(['bvh', 'gltf', 'glb']);
+
+function hasSkeleton(clip) {
+  return clip.header.joints.length > 0;
+}
+
+let openSeq = 0;
+
 async function openFile(file) {
+  const open = ++openSeq;
   showMessage('');
+  if (file.size > maxFileBytes()) {
+    showMessage(`${file.name} is ${megabytes(file.size)}: the server takes files up to ` +
+        `${megabytes(maxFileBytes())} (its limit of ${state.info.maxMessageBytes} bytes per request, ` +
+        'the file travelling as base64)');
+    return;
+  }
   $('clip-info').dataset.state = 'loading';
+  $('open-status').textContent = `reading ${file.name} (${megabytes(file.size)})…`;
+  try {
+    const clip = await loadClip(file);
+    if (clip && open === openSeq) showClip(clip);
+  } finally {
+    if (open === openSeq) {
+      $('open-status').textContent = '';
+      $('clip-info').dataset.state = state.clip ? 'loaded' : 'empty';
+    }
+  }
+}
+
+// The file parsed and read back by the server: {clip, samples}, or undefined with the message shown.
+async function loadClip(file) {
   const content = await readBase64(file);
+  $('open-status').textContent = `sending ${file.name} to the server…`;
   const request = {fileName: file.name, content};
-  if (/\.csv$/i.test(file.name)) request.csvFrameTimeSeconds = 1 / Number($('csv-fps').value || 30);
+  const csvFps = Number($('csv-fps').value || 30);
+  if (/\.csv$/i.test(file.name)) request.csvFrameTimeSeconds = 1 / csvFps;
   // The server's message names the file, line and column already ("walk.bvh:12:7: ...").
   let parsed;
   try {
@@ -85,28 +155,34 @@ async function openFile(file) {
     if (error instanceof api.ApiError && error.status === 'UNAUTHENTICATED') {
       $('token-box').hidden = false;
     }
-    showMessage(error instanceof api.ApiError && error.status === 'INVALID_ARGUMENT' ? error.message : describe(error));
-  }
-  if (!parsed) {
-    $('clip-info').dataset.state = state.clip ? 'loaded' : 'empty';
-    return;
+    if (!api.isStopped(error)) {
+      showMessage(error instanceof api.ApiError && error.status === 'INVALID_ARGUMENT' ? error.message : describe(error));
+    }
+    return undefined;
   }
   const header = parsed.header;
   const clip = {
     id: parsed.clipId, header, name: header.name, fileName: file.name,
     frameTime: header.frameTimeSeconds, frameCount: Number(header.frameCount),
+    csvFps: request.csvFrameTimeSeconds ? csvFps : null,
   };
   clip.duration = (clip.frameCount - 1) * clip.frameTime;
   const samples = await guarded('reading the clip back', () => api.fetchResult('GetClip', {clipId: clip.id}));
-  if (!samples) return;
+  if (!samples) return undefined;
+  return {clip, samples};
+}
+
+// A new clip replaces the old one and everything made from it: its runs are stopped, its jobs
+// deleted, its preview, results, downloads and commands cleared.
+function showClip({clip, samples}) {
+  forgetResults();
   state.clip = clip;
   state.samples = samples.channels;
   state.holds = [];
   state.plan = null;
-  state.retimeJob = null;
-  state.reduced = null;
+  const header = clip.header;
   const fps = 1 / clip.frameTime;
-  $('clip-info').textContent = `${file.name}: ${clip.frameCount} frames at ${+fps.toFixed(3)} fps, ` +
+  $('clip-info').textContent = `${clip.fileName}: ${clip.frameCount} frames at ${+fps.toFixed(3)} fps, ` +
       `${clip.duration.toFixed(3)} s, ${header.joints.length} joints, ${header.channels.length} channels`;
   $('clip-info').dataset.state = 'loaded';
   $('clip-info').dataset.clipId = clip.id;
@@ -115,11 +191,37 @@ async function openFile(file) {
   editor.setKnots([{t: 0, unit: 's', v: 1}]);
   renderHolds();
   fillChannels();
-  const bvh = await guarded('the source skeleton', () => api.exportFile({clipId: clip.id}, 'bvh'));
-  if (bvh && header.joints.length > 0) preview.setSource(new TextDecoder().decode(bvh.bytes));
+  showChannel();
   showSelectedKnot();
+  state.previewSource = loadPreviewSource(clip);
   requestPlan();
   scheduleReduce(0);
+}
+
+// The source skeleton in the preview (BVH as the server writes it); a clip of plain channels
+// has none to show. Not awaited by the rest: the server may be busy with other work.
+async function loadPreviewSource(clip) {
+  $('preview-note').hidden = hasSkeleton(clip);
+  if (!hasSkeleton(clip)) return;
+  const bvh = await guarded('the source skeleton', () => api.exportFile({clipId: clip.id}, 'bvh'));
+  if (bvh && clip === state.clip) preview.setSource(new TextDecoder().decode(bvh.bytes));
+}
+
+// Stops the runs of the clip open so far and gives its jobs back to the server.
+function forgetResults() {
+  retimeRuns.stop();
+  reduceRuns.stop();
+  for (const kept of [state.retimeJob, state.reduced]) if (kept) api.releaseJob(kept.jobId);
+  state.retimeJob = null;
+  state.reduced = null;
+  preview.clear();
+  $('scrub').max = '0';
+  $('frame-readout').textContent = '–';
+  for (const id of ['downloads-retime', 'downloads-reduce']) $(id).querySelectorAll('button').forEach((b) => b.remove());
+  for (const id of ['retime-command', 'reduce-command']) $(id).textContent = '';
+  for (const kind of ['retime', 'reduce']) showStatus(kind, 'idle', '');
+  $('key-count').textContent = '–';
+  $('reduce-report').tBodies[0].textContent = '';
 }
 
 // ---- retime settings -------------------------------------------------------------------------
@@ -149,31 +251,64 @@ function retimeOperation() {
   return op;
 }
 
+// The file and output words of a command line: a CSV input needs its rate (CSV files do not
+// store one), and a clip without a skeleton is written as CSV (BVH needs one).
+function fileWords(command, suffix, bvhExtension) {
+  const c = state.clip;
+  const stem = c.fileName.replace(/\.[^.]*$/, '');
+  const words = ['tempokey', command, c.fileName, '-o', stem + suffix + (hasSkeleton(c) ? bvhExtension : '.csv')];
+  if (c.csvFps) words.push('--input-fps', c.csvFps);
+  return words;
+}
+
 // The same settings as `tempokey retime` flags (README "Speed curves"); the --speed text is the
 // server's own writing of the knots (ParseSpeedKnots reads it back to the same knots).
 function retimeCommand(speedText) {
-  const c = state.clip;
-  const stem = c.fileName.replace(/\.[^.]*$/, '');
-  const flags = [`tempokey retime ${c.fileName} -o ${stem}-retimed.bvh`, `--speed "${speedText}"`];
-  if (domain() === 'output') flags.push('--speed-over output');
-  for (const h of state.holds) flags.push(`--hold ${h.at}s:${h.duration}`);
+  const words = fileWords('retime', '-retimed', '.bvh');
+  words.push('--speed', speedText);
+  if (domain() === 'output') words.push('--speed-over', 'output');
+  for (const h of state.holds) words.push('--hold', `${h.at}s:${h.duration}`);
   if ($('fps').value) {
     const [n, d] = $('fps').value.split('/');
-    flags.push(`--fps ${d === '1' ? n : n + '/' + d}`);
+    words.push('--fps', d === '1' ? n : n + '/' + d);
   }
-  if (!$('fit-to-grid').checked) flags.push('--no-fit-to-grid');
-  if ($('fit-frames').value) flags.push(`--fit-frames ${Number($('fit-frames').value)}`);
-  if ($('reverse').checked) flags.push('--reverse');
-  if ($('filter').value !== 'tent') flags.push(`--filter ${$('filter').value}`);
-  if ($('retime-method').value !== 'exact') flags.push(`--method ${$('retime-method').value}`);
-  if (Number($('min-speed').value) !== 0.01) flags.push(`--min-speed ${Number($('min-speed').value)}`);
-  if (Number($('max-speed').value) !== 100) flags.push(`--max-speed ${Number($('max-speed').value)}`);
-  return flags.join(' ');
+  if (!$('fit-to-grid').checked) words.push('--no-fit-to-grid');
+  if ($('fit-frames').value) words.push('--fit-frames', Number($('fit-frames').value));
+  if ($('reverse').checked) words.push('--reverse');
+  if ($('filter').value !== 'tent') words.push('--filter', $('filter').value);
+  if ($('retime-method').value !== 'exact') words.push('--method', $('retime-method').value);
+  if (Number($('min-speed').value) !== 0.01) words.push('--min-speed', Number($('min-speed').value));
+  if (Number($('max-speed').value) !== 100) words.push('--max-speed', Number($('max-speed').value));
+  return commandLine(words);
+}
+
+// The speed limits the fields ask for ({min, max}), or {problem} for a range the server would
+// refuse. An empty field is the server's default.
+function speedLimits() {
+  const field = (id, fallback) => ($(id).value.trim() === '' ? fallback : Number($(id).value));
+  const min = field('min-speed', 0.01);
+  const max = field('max-speed', 100);
+  if (!(Number.isFinite(min) && min > 0) || !(Number.isFinite(max) && max > 0)) {
+    return {problem: `the speed limits must be positive numbers, got ${$('min-speed').value || '–'} and ${$('max-speed').value || '–'}`};
+  }
+  if (min > max) return {problem: `the range [${min}, ${max}] is empty: the minimum is above the maximum`};
+  return {min, max};
 }
 
 function settingsChanged() {
   state.lastEdit = performance.now();
-  editor.setLimits(Number($('min-speed').value) || 0.01, Number($('max-speed').value) || 100);
+  // Limits never touch the knots: they bound the editor's drags, and the server names any knot
+  // beyond them; a range the server would refuse is refused here, the curve kept as it is.
+  const limits = speedLimits();
+  const invalid = !!limits.problem;
+  $('min-speed').classList.toggle('invalid', invalid);
+  $('max-speed').classList.toggle('invalid', invalid);
+  if (invalid) {
+    showMessage(`speed limits: ${limits.problem} (the knots are kept)`);
+    return;
+  }
+  clearMessageOf('speed limits');
+  editor.setLimits(limits.min, limits.max);
   requestPlan();
 }
 
@@ -197,11 +332,10 @@ async function runPlan() {
     try {
       const plan = await api.call('PlanRetime', {clipId: state.clip.id, retime: op, maxPoints: 100000});
       applyPlan(plan, op, editTime);
-      $('retime').querySelector('#speed-text').classList.remove('invalid');
-      if ($('message').textContent.startsWith('retime:')) showMessage('');
+      clearMessageOf('retime');
     } catch (error) {
-      showMessage(`retime: ${describe(error)}`);
-      $('retime-status').dataset.state = 'invalid';
+      reportError('retime', error);
+      if (!api.isStopped(error)) $('retime-status').dataset.state = 'invalid';
     }
   }
   planInFlight = false;
@@ -237,50 +371,146 @@ function applyPlan(plan, op, editTime) {
   scheduleRetime();
 }
 
+// ---- runs: one job at a time of each kind ---------------------------------------------------
+// The newest run of a kind (the retime, the reduction) supersedes the one before: its calls are
+// stopped and its job, which nobody will look at, is cancelled and deleted. A run that succeeds
+// keeps its job (the preview and the downloads read it) until the next success replaces it.
+class Runs {
+  constructor() {
+    this.current = null;
+  }
+  start() {
+    this.stop();
+    this.current = {controller: new AbortController(), jobId: null};
+    return this.current;
+  }
+  get signal() {
+    return this.current.controller.signal;
+  }
+  isCurrent(run) {
+    return this.current === run;
+  }
+  // Stops the current run; its job is released unless `keep` (it became the kept result).
+  stop(keep = false) {
+    const run = this.current;
+    if (!run) return;
+    this.current = null;
+    run.controller.abort();
+    if (run.jobId && !keep) api.releaseJob(run.jobId);
+  }
+}
+
+const retimeRuns = new Runs();
+const reduceRuns = new Runs();
+
+// The status line of a kind, with its job's progress and Cancel button while one runs.
+function showStatus(kind, stateName, text) {
+  const status = $(`${kind}-status`);
+  status.textContent = text;
+  status.dataset.state = stateName;
+  if (stateName !== 'done') {
+    for (const name of ['jobId', 'command', 'speedText']) delete status.dataset[name];
+  }
+  if (stateName !== 'running') $(`${kind}-job`).hidden = true;
+}
+
+// A job snapshot's progress as the server reports it: its stage ("queued", "reduce 12/96") and
+// fraction.
+function showProgress(kind, job) {
+  const row = $(`${kind}-job`);
+  row.hidden = false;
+  row.dataset.jobId = job.jobId;
+  row.dataset.state = job.state;
+  $(`${kind}-progress`).value = job.progress || 0;
+  $(`${kind}-stage`).textContent = `${job.stage || job.state} · ${Math.round((job.progress || 0) * 100)} %`;
+}
+
+// Runs a job for `runs`: submits it, shows its progress until it ends, then `finish(job)`
+// (fetching its result, with the run's signal). Resolves with {job, ...finish's answer}, or
+// undefined if the run was superseded or cancelled; throws what went wrong.
+async function runJob(kind, runs, request, finish) {
+  const run = runs.start();
+  const signal = runs.signal;
+  showStatus(kind, 'running', `${kind === 'retime' ? 'retiming' : 'reducing'} on the server…`);
+  $(`${kind}-job`).hidden = false;
+  $(`${kind}-stage`).textContent = 'submitting…';
+  $(`${kind}-progress`).removeAttribute('value');
+  try {
+    const job = await api.submitJob({...request, labels: {source: 'studio'}}, signal);
+    run.jobId = job.jobId;
+    showProgress(kind, job);
+    await api.waitForJob(job.jobId, (snapshot) => runs.isCurrent(run) && showProgress(kind, snapshot), signal);
+    const answer = await finish(job, signal);
+    if (!runs.isCurrent(run)) return undefined;
+    runs.stop(true);
+    return {job, ...answer};
+  } catch (error) {
+    if (!runs.isCurrent(run)) return undefined;  // superseded or cancelled: nothing to report
+    runs.stop();
+    if (api.isStopped(error)) return undefined;  // the page is being left
+    throw error;
+  }
+}
+
+// The Cancel button: the running job is cancelled (and deleted); the page keeps the last result.
+function cancelRun(kind) {
+  const runs = kind === 'retime' ? retimeRuns : reduceRuns;
+  if (!runs.current) return;
+  runs.stop();
+  const kept = kind === 'retime' ? state.retimeJob : state.reduced;
+  showStatus(kind, 'cancelled', kept ? `cancelled; showing the previous result, job ${kept.jobId}` : 'cancelled');
+}
+
+// A run that failed: its status says so, with the server's words.
+function showFailure(kind, error) {
+  reportError(kind, error);
+  showStatus(kind, 'failed', `failed: ${describe(error)}`);
+}
+
 // ---- the retimed result (a stored job, for the preview and the downloads) -----------------------
 let retimeTimer = 0;
-let retimeRun = 0;
 
 function scheduleRetime() {
   clearTimeout(retimeTimer);
-  $('retime-status').dataset.state = 'pending';
-  $('retime-status').textContent = 'retiming soon…';
+  if (!retimeRuns.current) showStatus('retime', 'pending', 'retiming soon…');
   retimeTimer = setTimeout(runRetime, RETIME_DELAY_MS);
 }
 
 async function runRetime() {
-  const run = ++retimeRun;
   const clip = state.clip;
   const op = retimeOperation();
   const speedText = state.plan ? state.plan.speedText : '';
   const command = state.plan ? retimeCommand(speedText) : '';
-  $('retime-status').dataset.state = 'running';
-  $('retime-status').textContent = 'retiming on the server…';
-  const done = await guarded('retime', async () => {
-    const job = await api.call('SubmitJob', {clipId: clip.id, operations: [{retime: op}], labels: {source: 'studio'}});
-    await api.waitForJob(job.jobId);
-    const [file, plan] = await Promise.all([
-      api.exportFile({jobId: job.jobId}, 'bvh'),
-      api.call('PlanRetime', {clipId: clip.id, retime: op, maxPoints: 100000}),
-    ]);
-    return {job, file, plan};
-  });
-  if (run !== retimeRun || clip !== state.clip) return;  // superseded by a newer edit
-  if (!done) {
-    $('retime-status').dataset.state = 'failed';
+  let done;
+  try {
+    done = await runJob('retime', retimeRuns, {clipId: clip.id, operations: [{retime: op}]}, async (job, signal) => {
+      // The preview reads the result as BVH; a clip without a skeleton has no figure to show.
+      const [file, plan] = await Promise.all([
+        hasSkeleton(clip) ? api.exportFile({jobId: job.jobId}, 'bvh', signal) : null,
+        api.call('PlanRetime', {clipId: clip.id, retime: op, maxPoints: 100000}, signal),
+      ]);
+      return {file, plan};
+    });
+  } catch (error) {
+    showFailure('retime', error);
     return;
   }
+  if (!done || clip !== state.clip) return;  // superseded by a newer edit
   const previous = state.retimeJob;
   state.retimeJob = {jobId: done.job.jobId, speedText};
-  if (previous) api.call('DeleteJob', {jobId: previous.jobId}).catch(() => {});
-  preview.setResult(new TextDecoder().decode(done.file.bytes), done.plan);
-  $('scrub').max = String(preview.frameCount() - 1);
+  if (previous) api.releaseJob(previous.jobId);
+  clearMessageOf('retime');
+  if (done.file) {
+    await state.previewSource;
+    if (clip !== state.clip) return;
+    preview.setResult(new TextDecoder().decode(done.file.bytes), done.plan);
+    $('scrub').max = String(Math.max(preview.frameCount() - 1, 0));
+  }
+  showStatus('retime', 'done', `result: ${done.plan.report.outputFrameCount} frames, job ${done.job.jobId}`);
   const status = $('retime-status');
-  status.textContent = `result: ${done.plan.report.outputFrameCount} frames, job ${done.job.jobId}`;
   status.dataset.jobId = done.job.jobId;
   status.dataset.speedText = speedText;
   status.dataset.command = command;
-  status.dataset.state = 'done';
   renderDownloads('downloads-retime', false);
 }
 
@@ -293,32 +523,77 @@ function showSelectedKnot() {
   $('knot-speed').value = String(k.v);
 }
 
+// The typed time and speed of the selected knot. A value the editor cannot take (blank, not a
+// number, a speed not above 0) is refused with a message and the field shows the knot again.
 function applyKnotFields() {
-  if ($('knot-time').value.trim() === '' || $('knot-speed').value.trim() === '') return;
-  const time = Number($('knot-time').value);
-  const speed = Number($('knot-speed').value);
-  if (!Number.isFinite(time) || !Number.isFinite(speed) || speed <= 0) return;
+  const index = editor.selected;
+  const time = $('knot-time').value.trim() === '' ? NaN : Number($('knot-time').value);
+  const speed = $('knot-speed').value.trim() === '' ? NaN : Number($('knot-speed').value);
+  const typed = (id) => ($(id).value.trim() === '' ? 'a blank' : `"${$(id).value}"`);
+  let problem = '';
+  if (!Number.isFinite(time) || time < 0) {
+    problem = `time ${typed('knot-time')} is not a number of ${editor.selectedKnot().unit === 'f' ? 'frames' : 'seconds'} from 0`;
+  } else if (!Number.isFinite(speed) || speed <= 0) {
+    problem = `speed ${typed('knot-speed')} is not a number above 0`;
+  }
+  if (problem) {
+    showKnotError(`knot ${index + 1}: ${problem}; kept at ${knotLabel(editor.selectedKnot())}`);
+    showSelectedKnot();
+    return;
+  }
+  showKnotError('');
   editor.setSelected(time, speed);
 }
 
+function showKnotError(text) {
+  $('knot-error').textContent = text;
+  $('knot-error').hidden = !text;
+}
+
+function knotLabel(k) {
+  return `${k.t}${k.unit}:${k.v}`;
+}
+
+// Typed --speed text: the server's parser (the CLI's) reads it, then the knots must pass the
+// editor's own constraints (its speed limits, times in order), which the parser does not check.
+// The error shows under the text and in the banner alike.
+let speedTextSeq = 0;
+
 async function applySpeedText() {
   const text = $('speed-text').value;
-  // Enter and the blur after it both fire: apply a text once, and never over newer knots.
-  if (state.plan && text === state.plan.speedText) return;
+  // Enter and the blur after it both fire: the knots' own text, with no error shown, is not
+  // applied again (it would undo newer knots); after an error any text is applied.
+  if (state.plan && text === state.plan.speedText && $('speed-text-error').hidden) return;
+  const seq = ++speedTextSeq;
+  let knots;
   try {
     const parsed = await api.call('ParseSpeedKnots', {text});
-    const knots = parsed.knots.map((k) => ('frames' in k.time
+    knots = parsed.knots.map((k) => ('frames' in k.time
       ? {t: k.time.frames, unit: 'f', v: k.speed}
       : {t: k.time.seconds, unit: 's', v: k.speed}));
-    $('speed-text-error').hidden = true;
-    editor.setKnots(knots, Math.min(editor.selected, knots.length - 1));
-    state.lastEdit = performance.now();
-    showSelectedKnot();
-    requestPlan();
   } catch (error) {
-    $('speed-text-error').textContent = describe(error);
-    $('speed-text-error').hidden = false;
+    if (seq === speedTextSeq && !api.isStopped(error)) showSpeedTextError(describe(error));
+    return;
   }
+  if (seq !== speedTextSeq) return;  // a newer text was typed meanwhile
+  const problem = editor.problemWith(knots);
+  if (problem) {
+    showSpeedTextError(problem);
+    return;
+  }
+  showSpeedTextError('');
+  editor.setKnots(knots, Math.min(editor.selected, knots.length - 1));
+  state.lastEdit = performance.now();
+  showSelectedKnot();
+  requestPlan();
+}
+
+function showSpeedTextError(text) {
+  $('speed-text-error').textContent = text;
+  $('speed-text-error').hidden = !text;
+  $('speed-text').classList.toggle('invalid', !!text);
+  if (text) showMessage(`--speed: ${text}`);
+  else clearMessageOf('--speed');
 }
 
 // Source <-> output time: knots keep their speeds and move to where the server's map puts them.
@@ -465,21 +740,19 @@ function reduceOperation() {
 
 // The same reduction as a CLI command (its flags are the CLI's own).
 function reduceCommand() {
-  const c = state.clip;
-  const stem = c.fileName.replace(/\.[^.]*$/, '');
-  const flags = [`tempokey reduce ${c.fileName} -o ${stem}-keys.anim`];
+  const words = fileWords('reduce', '-keys', '.anim');
   const method = $('reduce-method').value;
   if (method === 'paper' || method === 'noise') {
-    flags.push(`--method ${method}`);
+    words.push('--method', method);
   } else if (method === 'joint') {
-    flags.push(`--joint-tolerance ${Number($('joint-tolerance').value)}%`);
+    words.push('--joint-tolerance', `${Number($('joint-tolerance').value)}%`);
   } else {
-    flags.push(`--tolerance ${Number($('tolerance').value)}`);
+    words.push('--tolerance', Number($('tolerance').value));
     if ($('position-tolerance').value.trim() !== '') {
-      flags.push(`--position-tolerance ${Number($('position-tolerance').value)}`);
+      words.push('--position-tolerance', Number($('position-tolerance').value));
     }
   }
-  return flags.join(' ');
+  return commandLine(words);
 }
 
 // Shows the inputs of the chosen method only.
@@ -490,7 +763,6 @@ function showReduceInputs() {
 }
 
 let reduceTimer = 0;
-let reduceRun = 0;
 
 function scheduleReduce(delay = REDUCE_DELAY_MS) {
   clearTimeout(reduceTimer);
@@ -498,40 +770,36 @@ function scheduleReduce(delay = REDUCE_DELAY_MS) {
   const method = $('reduce-method').value;
   if (method === 'tolerance' && $('tolerance').value.trim() === '') return;
   if (method === 'joint' && $('joint-tolerance').value.trim() === '') return;
-  $('reduce-status').dataset.state = 'pending';
+  if (!reduceRuns.current) showStatus('reduce', 'pending', 'reducing soon…');
   reduceTimer = setTimeout(runReduce, delay);
 }
 
 async function runReduce() {
-  const run = ++reduceRun;
   const clip = state.clip;
   const op = reduceOperation();
   const command = reduceCommand();
   showReduceInputs();
-  $('reduce-status').dataset.state = 'running';
-  $('reduce-status').textContent = 'reducing on the server…';
-  const done = await guarded('reduce', async () => {
-    const job = await api.call('SubmitJob', {clipId: clip.id, operations: [{reduce: op}], labels: {source: 'studio'}});
-    await api.waitForJob(job.jobId);
-    const result = await api.fetchResult('GetJobResult', {jobId: job.jobId});
-    return {job, result};
-  });
-  if (run !== reduceRun || clip !== state.clip) return;
-  if (!done) {
-    $('reduce-status').dataset.state = 'failed';
+  let done;
+  try {
+    done = await runJob('reduce', reduceRuns, {clipId: clip.id, operations: [{reduce: op}]}, async (job, signal) => ({
+      result: await api.fetchResult('GetJobResult', {jobId: job.jobId}, signal),
+    }));
+  } catch (error) {
+    showFailure('reduce', error);
     return;
   }
+  if (!done || clip !== state.clip) return;
   const previous = state.reduced;
   const report = done.result.reports.find((r) => r.reduction)?.reduction || {};
   state.reduced = {jobId: done.job.jobId, curves: done.result.curves, report, op};
-  if (previous) api.call('DeleteJob', {jobId: previous.jobId}).catch(() => {});
+  if (previous) api.releaseJob(previous.jobId);
+  clearMessageOf('reduce');
   $('key-count').textContent = String(report.keyCount);
   $('reduce-command').textContent = command;
+  showStatus('reduce', 'done', `${report.keyCount} keys for ${report.sampleCount} samples, job ${done.job.jobId}`);
   const status = $('reduce-status');
-  status.textContent = `${report.keyCount} keys for ${report.sampleCount} samples, job ${done.job.jobId}`;
   status.dataset.jobId = done.job.jobId;
   status.dataset.command = command;
-  status.dataset.state = 'done';
   showChannel();
   renderDownloads('downloads-reduce', true);
 }
@@ -599,6 +867,7 @@ function renderDownloads(id, keyed) {
   row.querySelectorAll('button').forEach((b) => b.remove());
   for (const format of state.info.exportFormats) {
     if (!keyed && format.keyed) continue;
+    if (!hasSkeleton(state.clip) && SKELETON_FORMATS.has(format.name)) continue;
     const button = document.createElement('button');
     button.id = `download-${keyed ? 'reduce' : 'retime'}-${format.name}`;
     button.textContent = format.extension;
@@ -695,6 +964,23 @@ $('joint').addEventListener('change', () => {
 for (const id of ['reduce-method', 'tolerance', 'position-tolerance', 'joint-tolerance']) $(id).addEventListener('change', () => scheduleReduce());
 $('reduce-method').addEventListener('change', showReduceInputs);
 $('run-reduce').addEventListener('click', () => scheduleReduce(0));
+$('retime-cancel').addEventListener('click', () => cancelRun('retime'));
+$('reduce-cancel').addEventListener('click', () => cancelRun('reduce'));
+// Leaving the page (or freezing it in the back/forward cache) stops its calls and its jobs;
+// coming back from that cache runs them again.
+window.addEventListener('pagehide', () => {
+  clearTimeout(retimeTimer);
+  clearTimeout(reduceTimer);
+  api.leave();
+});
+window.addEventListener('pageshow', (e) => {
+  if (!e.persisted || !state.clip) return;
+  state.retimeJob = null;
+  state.reduced = null;
+  forgetResults();
+  requestPlan();
+  scheduleReduce(0);
+});
 $('token').addEventListener('change', (e) => {
   api.setToken(e.target.value.trim());
   showMessage('token set', 'info');

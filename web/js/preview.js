@@ -113,6 +113,23 @@ export class Preview {
     this.showFrame(0);
   }
 
+  // No clip: the figures go (a new clip's, if it has a skeleton, come with setSource).
+  clear() {
+    this.pause();
+    if (this.source) this.source.dispose(this.scene);
+    if (this.result) this.result.dispose(this.scene);
+    this.source = null;
+    this.result = null;
+    this.plan = null;
+    this.frame = 0;
+    if (this.grid) {
+      this.scene.remove(this.grid);
+      this.grid = null;
+    }
+    for (const name of ['outputFrame', 'sourceSeconds', 'resultRoot', 'sourceRoot']) delete this.container.dataset[name];
+    this.render();
+  }
+
   // The retimed result (BVH text) and the plan whose map gives τ_j for its frames.
   setResult(text, plan) {
     if (!this.renderer || !this.source) return;

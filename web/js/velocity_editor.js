@@ -46,10 +46,11 @@ export class VelocityEditor {
     this.frameTime = frameTime;
     this.draw();
   }
+  // The limits bound what drags and keys do to a knot; knots already beyond them are left as the
+  // user made them (drawn in the shaded band), never rewritten.
   setLimits(minSpeed, maxSpeed) {
     this.minSpeed = minSpeed;
     this.maxSpeed = maxSpeed;
-    for (const k of this.knots) k.v = this.clampSpeed(k.v);
     this.draw();
   }
   setKnots(knots, selected = 0) {
@@ -74,6 +75,24 @@ export class VelocityEditor {
     k.t = this.clampTime(this.selected, k.unit === 'f' ? time * this.frameTime : time, k.unit);
     k.v = this.clampSpeed(speed);
     this.changed();
+  }
+  // Why `knots` (typed, e.g. as --speed text) cannot be this editor's, or '': every knot must be
+  // one the mouse and keys could make, a finite time from 0 not before the previous knot's and a
+  // speed within the limits.
+  problemWith(knots) {
+    let previous = 0;
+    for (let i = 0; i < knots.length; ++i) {
+      const k = knots[i];
+      const at = `speed knot ${i + 1} (${k.t}${k.unit}:${k.v})`;
+      const seconds = this.seconds(k);
+      if (!Number.isFinite(seconds) || seconds < 0) return `${at}: time ${k.t}${k.unit} is not a time from 0`;
+      if (seconds < previous) return `${at}: time ${k.t}${k.unit} is before the previous knot's`;
+      if (!Number.isFinite(k.v) || k.v < this.minSpeed || k.v > this.maxSpeed) {
+        return `${at}: speed ${k.v} is outside the limits [${this.minSpeed}, ${this.maxSpeed}]`;
+      }
+      previous = seconds;
+    }
+    return knots.length ? '' : 'no knots';
   }
   clampSpeed(v) {
     return Math.min(Math.max(v, this.minSpeed), this.maxSpeed);
