@@ -319,9 +319,12 @@ absl::StatusOr<double> EvaluateMayaCurve(const MayaCurveBlock& curve, double fra
 double FileFrameOfSourceFrame(const MayaAnimFile& file, double frame_time_seconds,
                               std::int64_t frame) {
   const auto f = static_cast<double>(frame);
-  const double multiple = 1.0 / (frame_time_seconds * file.frames_per_second);
-  const double n = std::round(multiple);
-  if (n >= 1.0 && std::abs(multiple - n) <= 1e-4 * n) return f / n;
+  const double down = 1.0 / (frame_time_seconds * file.frames_per_second);
+  const double n = std::round(down);
+  if (n >= 1.0 && std::abs(down - n) <= 1e-4 * n) return f / n;
+  const double up = frame_time_seconds * file.frames_per_second;
+  const double m = std::round(up);
+  if (m >= 1.0 && std::abs(up - m) <= 1e-4 * m) return f * m;
   return f * frame_time_seconds * file.frames_per_second;
 }
 

@@ -63,7 +63,8 @@ absl::StatusOr<double> EvaluateMayaCurve(const MayaCurveBlock& curve, double fra
 
 // Where animators see source frame `frame` of a clip at `frame_time_seconds` in `file`: when the
 // clip's rate is n times the file's unit (within 1e-4; n = 1: the frame numbers themselves), the
-// file frame frame / n; else the frame's exact time in the unit's frames.
+// file frame frame / n; when the unit's is m times the clip's, frame x m; else the frame's exact
+// time in the unit's frames.
 double FileFrameOfSourceFrame(const MayaAnimFile& file, double frame_time_seconds,
                               std::int64_t frame);
 

@@ -42,29 +42,51 @@ constexpr TimeUnit kTimeUnits[] = {
     {"show", 48.0}, {"palf", 50.0}, {"ntscf", 60.0},
 };
 
-// A clip rate within this ratio of a Maya unit's plays at that unit with one file frame per
-// source frame (BVH frame times are written rounded: 0.0083333 s is 120.0005 Hz).
+// A clip rate within this ratio of a Maya unit's rate, or of a whole multiple or fraction of it,
+// keeps exact frames (BVH frame times are written rounded: 0.0083333 s is 120.0005 Hz).
 constexpr double kSameRateTolerance = 1e-4;
-// Clip frames per unit frame, at most: a faster clip takes its nearest unit.
+// The largest whole multiple looked for either way.
 constexpr double kMaxWholeMultiple = 1000.0;
 
-// The unit of a clip at `frame_rate`: the unit of that rate; else the fastest unit whose rate
-// divides it (120 Hz is ntscf, each source frame half a file frame; 100 Hz palf); else the unit
-// nearest in ratio (rates beyond the table take its ends; an infinite rate from a subnormal frame
-// time takes the fastest). Maya converts the file's times to the scene's rate on import, so a
-// 120 fps scene shows a 120 Hz clip's keys on its whole frames either way.
+// How a clip's frames sit on a unit's: file frame = source frame x `up` / `down`, one of them 1
+// (both 1: the same rate). Zero when neither divides the other: times are then seconds x rate.
+struct FrameRatio {
+  int up = 0;
+  int down = 0;
+  bool exact() const { return up > 0; }
+};
+
+// `multiple` as a whole number within kSameRateTolerance (relative), or 0.
+int WholeMultiple(double multiple) {
+  const double whole = std::round(multiple);
+  if (!(whole >= 1.0 && whole <= kMaxWholeMultiple)) return 0;
+  return std::abs(multiple - whole) <= kSameRateTolerance * whole ? static_cast<int>(whole) : 0;
+}
+
+FrameRatio FrameRatioOf(double frame_rate, const TimeUnit& unit) {
+  if (const int down = WholeMultiple(frame_rate / unit.rate); down > 0) return {1, down};
+  if (const int up = WholeMultiple(unit.rate / frame_rate); up > 0) return {up, 1};
+  return {};
+}
+
+// The unit of a clip at `frame_rate`, the first of: the unit of that rate (key times are the
+// source's frame numbers); the fastest unit whose rate divides it (120 Hz is ntscf, a source frame
+// half a file frame; 100 Hz palf); the slowest unit whose rate it divides (12 Hz is film, a source
+// frame two file frames; 10 Hz ntsc); the unit nearest in ratio (rates beyond the table take its
+// ends; an infinite rate from a subnormal frame time takes the fastest). Maya converts the file's
+// times to the scene's rate on import, so a 120 fps scene shows a 120 Hz clip's keys on its whole
+// frames either way.
 const TimeUnit& TimeUnitFor(double frame_rate) {
   const TimeUnit* dividing = nullptr;
-  for (const TimeUnit& unit : kTimeUnits) {
-    const double multiple = frame_rate / unit.rate;
-    if (std::abs(multiple - 1.0) <= kSameRateTolerance) return unit;
-    const double whole = std::round(multiple);
-    if (whole >= 2.0 && whole <= kMaxWholeMultiple &&
-        std::abs(multiple - whole) <= kSameRateTolerance * whole) {
-      dividing = &unit;  // the table runs from slow to fast: the last that divides is the fastest
-    }
+  const TimeUnit* divided = nullptr;
+  for (const TimeUnit& unit : kTimeUnits) {  // slowest first
+    const FrameRatio ratio = FrameRatioOf(frame_rate, unit);
+    if (ratio.up == 1 && ratio.down == 1) return unit;
+    if (ratio.down > 1) dividing = &unit;                     // the fastest that divides
+    if (ratio.up > 1 && divided == nullptr) divided = &unit;  // the slowest it divides
   }
   if (dividing != nullptr) return *dividing;
+  if (divided != nullptr) return *divided;
   const double rate = std::clamp(frame_rate, kTimeUnits[0].rate, std::end(kTimeUnits)[-1].rate);
   const TimeUnit* nearest = &kTimeUnits[0];
   double nearest_distance = std::numeric_limits<double>::infinity();
@@ -78,51 +100,39 @@ const TimeUnit& TimeUnitFor(double frame_rate) {
   return *nearest;
 }
 
-// Clip frames per file frame: 1 when the clip's rate is the unit's, n when it is n times the
-// unit's (kSameRateTolerance), 0 otherwise.
-int ClipFramesPerUnitFrame(double frame_time_seconds, const TimeUnit& unit) {
-  const double multiple = 1.0 / (frame_time_seconds * unit.rate);
-  const double whole = std::round(multiple);
-  if (whole < 1.0 || whole > kMaxWholeMultiple ||
-      std::abs(multiple - whole) > kSameRateTolerance * whole) {
-    return 0;
-  }
-  return static_cast<int>(whole);
-}
-
-// File frames of the declared unit. When the clip's rate is the unit's or a whole multiple n of it
-// (ClipFramesPerUnitFrame()), a source frame f is file frame f / n exactly (the frame numbers
-// themselves when n is 1); otherwise a file frame is one unit frame (time = seconds x rate).
+// File frames of the declared unit. When the clip's rate and the unit's are whole multiples of
+// one another (FrameRatioOf()), a source frame f is file frame f x up / down (the frame numbers
+// themselves at the same rate; to the printed precision when `down` is not a power of two);
+// otherwise a file frame is one unit frame (time = seconds x rate).
 class FileFrames {
  public:
   FileFrames(double frame_time_seconds, const TimeUnit& unit)
       : frame_time_(frame_time_seconds),
-        per_unit_frame_(ClipFramesPerUnitFrame(frame_time_seconds, unit)),
-        per_second_(per_unit_frame_ > 0 ? 1.0 / (frame_time_seconds * per_unit_frame_)
-                                        : unit.rate) {}
+        ratio_(FrameRatioOf(1.0 / frame_time_seconds, unit)),
+        per_second_(ratio_.exact() ? ratio_.up / (frame_time_seconds * ratio_.down) : unit.rate) {}
 
   // File frames per second (k in maya_anim.h).
   double per_second() const { return per_second_; }
 
-  // The file frame of a time in seconds. On a rate that divides the clip's, a key on a source
-  // frame lands on that frame's file frame exactly (the division's rounding is undone).
+  // The file frame of a time in seconds. On an exact ratio a key on a source frame lands on that
+  // frame's file frame exactly (the division's rounding is undone).
   double operator()(double seconds) const {
-    if (per_unit_frame_ == 0) return seconds * per_second_;
+    if (!ratio_.exact()) return seconds * per_second_;
     const double frames = seconds / frame_time_;
     const double whole = std::round(frames);
     const bool on_frame = std::abs(frames - whole) <= 1e-9 * std::max(1.0, std::abs(whole));
-    return (on_frame ? whole : frames) / per_unit_frame_;
+    return (on_frame ? whole : frames) * ratio_.up / ratio_.down;
   }
 
   // The file frame of the clip's frame `frame`.
   double OfClipFrame(std::int64_t frame) const {
     const auto f = static_cast<double>(frame);
-    return per_unit_frame_ > 0 ? f / per_unit_frame_ : f * frame_time_ * per_second_;
+    return ratio_.exact() ? f * ratio_.up / ratio_.down : f * frame_time_ * per_second_;
   }
 
  private:
   double frame_time_;
-  int per_unit_frame_;
+  FrameRatio ratio_;
   double per_second_;
 };
 

@@ -242,6 +242,28 @@ TEST(MayaAnimTest, A120HzBvhIsWrittenInNtscfWithEachFrameHalfAFileFrame) {
   EXPECT_NEAR(Eval(file.curves[0], 372.25), 744.5 * 0.0083333, 1e-9);
 }
 
+TEST(MayaAnimTest, A12HzClipIsWrittenInFilmWithEachFrameTwoFileFrames) {
+  // Animation "on twos": 12 Hz is no unit every Maya reads, but half of film's 24: source frame
+  // f is file frame 2 f (the nearest unit, game, would have put it at 1.25 f).
+  KeyedClip keyed = ScalarKeyed({}, 100);
+  keyed.layout.frame_time_seconds = 1.0 / 12.0;
+  for (int frame : {0, 7, 99}) {
+    Key key;
+    key.time_seconds = frame / 12.0;
+    keyed.curves[0].keys.push_back(key);
+  }
+
+  const absl::StatusOr<std::string> text = FormatMayaAnim(keyed);
+
+  ASSERT_TRUE(text.ok()) << text.status();
+  const MayaAnimFile file = Parse(*text);
+  EXPECT_EQ(file.time_unit, "film");
+  ASSERT_EQ(file.curves[0].keys.size(), 3u);
+  EXPECT_EQ(file.curves[0].keys[1].frame, 14.0);
+  EXPECT_EQ(file.curves[0].keys[2].frame, 198.0);
+  EXPECT_EQ(file.end_time, 198.0);
+}
+
 TEST(MayaAnimTest, RateOffEveryUnitWritesTimesInUnitFrames) {
   // 27 fps is nearest 25 (pal) but 8% off: times are seconds in pal frames.
   KeyedClip keyed = ScalarKeyed({}, 28);
@@ -274,6 +296,7 @@ TEST(MayaAnimTest, TimeUnitIsTheNearestMayaUnit) {
       {1.0 / 30.0, "ntsc"},   {1001.0 / 60000.0, "ntscf"}, {1.0 / 60.0, "ntscf"},
       {1.0 / 90.0, "ntsc"},   {1.0 / 100.0, "palf"},      {1.0 / 120.0, "ntscf"},
       {1.0 / 1000.0, "palf"}, {1.0 / 7.0, "game"},        {1.0 / 72.0, "film"},
+      {1.0 / 12.0, "film"},   {1.0 / 10.0, "ntsc"},       {1.0 / 8.0, "film"},
       {10.0, "game"},         {1e-5, "ntscf"},            {1e-6, "ntscf"},
   };
   for (const Case& c : cases) {

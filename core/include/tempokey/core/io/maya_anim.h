@@ -36,11 +36,12 @@
 //     so the numbered units of later Maya versions are not used). The unit is the clip's rate
 //     (within 1e-4, relative): a file frame is one source frame and key times are the source's
 //     frame numbers; else the fastest unit whose rate divides the clip's n times (120 Hz: ntscf,
-//     n = 2; 100 Hz: palf): source frame f is file frame f / n exactly (a BVH's 0.0083333 s
-//     frames are 120 Hz, so key 995 is at 497.5); else the unit nearest in ratio, with time =
-//     seconds x unit rate (keys may fall between frames). Maya turns the file's times into the
-//     scene's on import, so a 120 fps scene shows a 120 Hz clip's keys on whole frames.
-//     Call the file frames per second k (1 / (n x frame time), or the unit's rate).
+//     n = 2; 100 Hz: palf): source frame f is file frame f / n (a BVH's 0.0083333 s frames are
+//     120 Hz, so key 995 is at 497.5); else the slowest unit whose rate is m times the clip's
+//     (12 Hz: film, m = 2; 10 Hz: ntsc): f is file frame m f; else the unit nearest in ratio, with
+//     time = seconds x unit rate (keys may fall between frames). Maya turns the file's times into
+//     the scene's on import, so a 120 fps scene shows a 120 Hz clip's keys on whole frames.
+//     Call the file frames per second k (m / (n x frame time), or the unit's rate).
 //   - Tangents: every key's in and out tangents are `fixed`, given as angle (degrees) and weight
 //     in UI space: x in file frames, y in the channel's value unit.
 //       * A curve none of whose keys carries a weight (the `tolerance` method's C1 Hermite keys)
