@@ -100,8 +100,22 @@ ThreeErrors RunThree(const std::string& bvh, const std::string& gltf) {
 }
 
 int Main(int argc, char** argv) {
-  const std::string out_dir = argc > 1 ? argv[1] : "export_bench_out";
+  // The files go to OUTDIR, by default a new folder under the temporary directory: never into
+  // the folder the bench was started from (a checkout).
+  std::string out_dir;
+  if (argc > 1) {
+    out_dir = argv[1];
+  } else {
+    std::string pattern =
+        (std::filesystem::temp_directory_path() / "tempokey-export-bench-XXXXXX").string();
+    if (mkdtemp(pattern.data()) == nullptr) {
+      std::fprintf(stderr, "export_bench: cannot make a folder under %s\n", pattern.c_str());
+      return 1;
+    }
+    out_dir = pattern;
+  }
   std::filesystem::create_directories(out_dir);
+  std::fprintf(stderr, "export_bench: files in %s\n", out_dir.c_str());
   std::printf(
       "%-38s %5s | %9s %9s | %9s %9s | %7s %7s\n", "clip", "tol", "anim exact", "anim int",
       "gltf rot", "gltf pos", "Euler%", "quat%");

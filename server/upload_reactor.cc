@@ -18,6 +18,7 @@
 #include "server/status_util.h"
 #include "server/wire_codec.h"
 #include "spdlog/spdlog.h"
+#include "tempokey/core/io/printable_text.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::server {
@@ -62,7 +63,9 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
         ParseMessage(buffer_, absl::StrCat("upload message ", messages_), request->get());
     if (status.ok()) status = Accept(request);
     if (!status.ok()) {
-      spdlog::debug("upload refused at message {}: {}", messages_, status.ToString());
+      spdlog::debug("upload refused at message {}: {} {}", messages_,
+                    absl::StatusCodeToString(status.code()),
+                    core::LogValue(core::AsStd(status.message())));
       ReleaseHeld();
       FinishOnce(status);
       return;

@@ -193,6 +193,11 @@ JsonBridge::Outcome JsonBridge::Call(const pb::MethodDescriptor& method,
   std::unique_ptr<pb::Message> response = NewMessage(method.output_type());
   const auto gone = [&stream] { return stream.ClientGone(); };
   while (call.Read(*response, gone, kDepartureLook, &outcome.client_gone)) {
+    // A response that crossed the cancel is not sent to a client that has gone.
+    if (outcome.client_gone) {
+      response->Clear();
+      continue;
+    }
     absl::StatusOr<std::string> json = MessageToJson(*response);
     if (!json.ok()) {
       call.Cancel();

@@ -67,8 +67,11 @@ std::int64_t SlowBodyGuard::cut_off() const {
 }
 
 void SlowBodyGuard::End(std::uint64_t id) {
-  std::lock_guard<std::mutex> lock(mutex_);
+  std::unique_lock<std::mutex> lock(mutex_);
   watched_.erase(id);
+  // A cut of this connection under way finishes first: its descriptor is still this
+  // connection's while the handler (the caller) holds it, and could be another's once it ends.
+  changed_.wait(lock, [&] { return cutting_ != id; });
 }
 
 void SlowBodyGuard::Run() {
@@ -86,6 +89,7 @@ void SlowBodyGuard::Run() {
       continue;
     }
     const Watched late = earliest->second;
+    cutting_ = earliest->first;
     watched_.erase(earliest);
     lock.unlock();
     const int socket =
@@ -99,6 +103,10 @@ void SlowBodyGuard::Run() {
       // Shut down, not closed: the descriptor stays civetweb's, so it is not reused under it.
       ::shutdown(socket, SHUT_RDWR);
     }
+    lock.lock();
+    cutting_ = 0;
+    changed_.notify_all();
+    lock.unlock();
     spdlog::warn("http: a request body from {}:{} did not arrive in time; its connection was {}",
                  late.remote_address, late.remote_port,
                  socket >= 0 ? "shut down" : "not found alone");

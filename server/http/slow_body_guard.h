@@ -70,6 +70,9 @@ class SlowBodyGuard {
   std::condition_variable changed_;
   std::map<std::uint64_t, Watched> watched_;
   std::uint64_t next_id_ = 1;
+  // The watch whose connection is being looked for and shut down, outside the lock (0: none):
+  // its End() waits for the cut, so the descriptor cut is still that connection's.
+  std::uint64_t cutting_ = 0;
   std::int64_t cut_off_ = 0;
   bool stopping_ = false;
   std::thread thread_;
