@@ -5,6 +5,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
@@ -117,11 +118,15 @@ absl::Status RetimeOptionsFromArgs(const ParsedArgs& args, core::RetimeOptions& 
   // The core refuses these too, in the names of the options' fields ("output_rate must be
   // unset"); a command line gets the flags' names.
   if (options.method == core::RetimeMethod::kPaper) {
-    for (const char* flag : {"--fps", "--fit-frames", "--fit-seconds", "--pin"}) {
-      if (!args.Has(flag)) continue;
-      return UsageError(absl::StrCat("--method paper takes no ", flag,
-                                     ": the published procedure keeps the source's frame rate "
-                                     "and rounds each region's frames itself"));
+    constexpr std::pair<const char*, const char*> kNotForPaper[] = {
+        {"--fps", "the published procedure keeps the source's frame rate"},
+        {"--fit-frames", "the published procedure rounds each region's frames itself"},
+        {"--fit-seconds", "the published procedure rounds each region's frames itself"},
+        {"--pin", "the published procedure has no pins"},
+        {"--filter", "the published procedure weights samples with its own box"},
+    };
+    for (const auto& [flag, reason] : kNotForPaper) {
+      if (args.Has(flag)) return UsageError(absl::StrCat("--method paper takes no ", flag, ": ", reason));
     }
   }
   return absl::OkStatus();

@@ -176,10 +176,18 @@ TEST(CliUsageTest, RefusesMistakesWithExitCode2AndOneLine) {
       // unset"); a rate for a BVH, which stores its own, was silently ignored.
       {{"retime", cmu, "-o", "out.bvh", "--method", "paper", "--fps", "60"},
        "error: --method paper takes no --fps: the published procedure keeps the source's frame "
-       "rate and rounds each region's frames itself\n"},
+       "rate\n"},
       {{"retime", cmu, "-o", "out.bvh", "--method", "paper", "--fit-seconds", "3"},
-       "error: --method paper takes no --fit-seconds: the published procedure keeps the source's "
-       "frame rate and rounds each region's frames itself\n"},
+       "error: --method paper takes no --fit-seconds: the published procedure rounds each "
+       "region's frames itself\n"},
+      {{"retime", cmu, "-o", "out.bvh", "--method", "paper", "--fit-frames", "300"},
+       "error: --method paper takes no --fit-frames: the published procedure rounds each "
+       "region's frames itself\n"},
+      {{"retime", cmu, "-o", "out.bvh", "--method", "paper", "--pin", "2s:60"},
+       "error: --method paper takes no --pin: the published procedure has no pins\n"},
+      {{"retime", cmu, "-o", "out.bvh", "--method", "paper", "--filter", "lanczos3"},
+       "error: --method paper takes no --filter: the published procedure weights samples with "
+       "its own box\n"},
       {{"info", cmu, "--input-fps", "30"},
        "error: --input-fps is for CSV input: " + cmu +
            " stores its own frame time (retime --fps changes the rate)\n"},
