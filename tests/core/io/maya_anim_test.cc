@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <initializer_list>
 #include <map>
 #include <sstream>
 #include <string>
@@ -194,24 +195,39 @@ TEST(MayaAnimTest, WeightedKeysAreHandleLengthsInFramesAndValues) {
   }
 }
 
-TEST(MayaAnimTest, BvhRateNearAUnitWritesTheSourceFrameNumbers) {
-  // 0.0333333 s is 30.0003 Hz, within 1e-4 of ntsc: key times are the frame numbers.
-  KeyedClip keyed = ScalarKeyed({}, 994);
-  keyed.layout.frame_time_seconds = 0.0333333;
-  for (int frame : {0, 500, 993}) {
+// A scalar channel of `frame_count` frames at `frame_time` keyed on `frames` (value the key's
+// time, slope 1 per second), written as .anim and read back.
+MayaAnimFile WrittenWithKeysOn(double frame_time, std::int64_t frame_count,
+                               std::initializer_list<int> frames) {
+  KeyedClip keyed = ScalarKeyed({}, frame_count);
+  keyed.layout.frame_time_seconds = frame_time;
+  for (int frame : frames) {
     Key key;
-    key.time_seconds = frame * 0.0333333;
+    key.time_seconds = frame * frame_time;
+    key.value = key.time_seconds;
+    key.in_tangent = key.out_tangent = 1.0;
     keyed.curves[0].keys.push_back(key);
   }
-
   const absl::StatusOr<std::string> text = FormatMayaAnim(keyed);
+  EXPECT_TRUE(text.ok()) << text.status();
+  return text.ok() ? Parse(*text) : MayaAnimFile{};
+}
 
-  ASSERT_TRUE(text.ok()) << text.status();
-  const MayaAnimFile file = Parse(*text);
+// The file frames of the one curve's keys.
+std::vector<double> KeyFrames(const MayaAnimFile& file) {
+  std::vector<double> frames;
+  if (!file.curves.empty()) {
+    for (const MayaKeyLine& key : file.curves[0].keys) frames.push_back(key.frame);
+  }
+  return frames;
+}
+
+TEST(MayaAnimTest, BvhRateNearAUnitWritesTheSourceFrameNumbers) {
+  // 0.0333333 s is 30.0003 Hz, within 1e-4 of ntsc: key times are the frame numbers.
+  const MayaAnimFile file = WrittenWithKeysOn(0.0333333, 994, {0, 500, 993});
+
   EXPECT_EQ(file.time_unit, "ntsc");
-  ASSERT_EQ(file.curves[0].keys.size(), 3u);
-  EXPECT_EQ(file.curves[0].keys[1].frame, 500.0);
-  EXPECT_EQ(file.curves[0].keys[2].frame, 993.0);
+  EXPECT_EQ(KeyFrames(file), (std::vector<double>{0.0, 500.0, 993.0}));
   EXPECT_EQ(file.end_time, 993.0);
 }
 
@@ -219,48 +235,23 @@ TEST(MayaAnimTest, A120HzBvhIsWrittenInNtscfWithEachFrameHalfAFileFrame) {
   // 0.0083333 s is 120.0005 Hz: no unit every Maya reads is 120 fps ("120fps" is refused by the
   // published reader), so ntscf, twice slower: source frame f is file frame f / 2 exactly, and
   // a slope of 1 unit per second is 1/60 per file frame.
-  KeyedClip keyed = ScalarKeyed({}, 995);
-  keyed.layout.frame_time_seconds = 0.0083333;
-  for (int frame : {0, 495, 994}) {
-    Key key;
-    key.time_seconds = frame * 0.0083333;
-    key.value = key.time_seconds;
-    key.in_tangent = key.out_tangent = 1.0;
-    keyed.curves[0].keys.push_back(key);
-  }
+  const MayaAnimFile file = WrittenWithKeysOn(0.0083333, 995, {0, 495, 994});
 
-  const absl::StatusOr<std::string> text = FormatMayaAnim(keyed);
-
-  ASSERT_TRUE(text.ok()) << text.status();
-  const MayaAnimFile file = Parse(*text);
   EXPECT_EQ(file.time_unit, "ntscf");
-  ASSERT_EQ(file.curves[0].keys.size(), 3u);
-  EXPECT_EQ(file.curves[0].keys[1].frame, 247.5);
-  EXPECT_EQ(file.curves[0].keys[2].frame, 497.0);
+  EXPECT_EQ(KeyFrames(file), (std::vector<double>{0.0, 247.5, 497.0}));
   EXPECT_EQ(file.end_time, 497.0);
   // Halfway between the keys at source frames 495 and 994, in Maya's frames of 1/60 s.
+  ASSERT_FALSE(file.curves.empty());
   EXPECT_NEAR(Eval(file.curves[0], 372.25), 744.5 * 0.0083333, 1e-9);
 }
 
 TEST(MayaAnimTest, A12HzClipIsWrittenInFilmWithEachFrameTwoFileFrames) {
   // Animation "on twos": 12 Hz is no unit every Maya reads, but half of film's 24: source frame
   // f is file frame 2 f (the nearest unit, game, would have put it at 1.25 f).
-  KeyedClip keyed = ScalarKeyed({}, 100);
-  keyed.layout.frame_time_seconds = 1.0 / 12.0;
-  for (int frame : {0, 7, 99}) {
-    Key key;
-    key.time_seconds = frame / 12.0;
-    keyed.curves[0].keys.push_back(key);
-  }
+  const MayaAnimFile file = WrittenWithKeysOn(1.0 / 12.0, 100, {0, 7, 99});
 
-  const absl::StatusOr<std::string> text = FormatMayaAnim(keyed);
-
-  ASSERT_TRUE(text.ok()) << text.status();
-  const MayaAnimFile file = Parse(*text);
   EXPECT_EQ(file.time_unit, "film");
-  ASSERT_EQ(file.curves[0].keys.size(), 3u);
-  EXPECT_EQ(file.curves[0].keys[1].frame, 14.0);
-  EXPECT_EQ(file.curves[0].keys[2].frame, 198.0);
+  EXPECT_EQ(KeyFrames(file), (std::vector<double>{0.0, 14.0, 198.0}));
   EXPECT_EQ(file.end_time, 198.0);
 }
 
