@@ -85,7 +85,10 @@ void SlowBodyGuard::Run() {
         watched_.begin(), watched_.end(),
         [](const auto& a, const auto& b) { return a.second.deadline < b.second.deadline; });
     if (Clock::now() < earliest->second.deadline) {
-      changed_.wait_until(lock, earliest->second.deadline);
+      // A copy: wait_until() reads its deadline again once woken, and the watch may have ended
+      // (its map node freed) meanwhile, as AddressSanitizer saw in CI.
+      const Clock::time_point deadline = earliest->second.deadline;
+      changed_.wait_until(lock, deadline);
       continue;
     }
     const Watched late = earliest->second;
