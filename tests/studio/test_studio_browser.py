@@ -6,11 +6,14 @@ Run by CTest (label `browser`); tests/studio/CMakeLists.txt sets the environment
   TEMPOKEY_ARTEFACTS_DIR           where the screenshots go (the build tree)
   TEMPOKEY_CHROMIUM, TEMPOKEY_CHROMEDRIVER
 
-The tests run in order on one page, as a person would use it: open 131_01, build a speed curve with
-the mouse and the keyboard, check the duration against the closed form, play the preview and check
-the frame shown, reduce and compare the key count with the CLI's, download every format and compare
-the bytes with the CLI's files, then open a malformed file. Every wait polls the page for a state
-with a deadline that only bounds a hang; nothing asserts a time.
+The tests run in order (unittest sorts them by name: the numbers are that order) on one page, by
+design, as a person would use it: open 131_01, build a speed curve with the mouse and the keyboard,
+check the duration against the closed form, play the preview and check the frame shown, reduce and
+compare the key count with the CLI's, download every format and compare the bytes with the CLI's
+files, then open a malformed file, and so on. Each test starts from the page the one before left,
+so they are not meant to run alone; where one uses what another made (9b the busy server and the
+queued job of 9a) it says so. Every wait polls the page for a state with a deadline that only bounds
+a hang; nothing asserts a time.
 """
 
 import base64
@@ -547,6 +550,40 @@ class StudioBrowserTest(unittest.TestCase):
         self.type_over("knot-speed", "0.75", Keys.TAB)
         self.wait_for_knots(lambda knots: knots == [(0.0, 1.0), (2.0, 0.75)], "the typed speed")
         self.assertEqual(self.shown("knot-error"), "")
+        # Numbers the editor could hold but not there: refused in the --speed text's words, never
+        # clamped silently to the limit or the timeline's end (walk.csv lasts 119/24 s).
+        for field, value, said in [("knot-speed", "500", "speed 500 is outside the limits [0.01, 100]"),
+                                   ("knot-time", "10", "time 10s is after the end of the timeline")]:
+            with self.subTest(field=field, value=value):
+                self.type_over(field, value, Keys.TAB)
+                wait_for(lambda: said in self.shown("knot-error"), "the message about " + said)
+                self.assertIn("knot 2", self.shown("knot-error"))
+                self.assertEqual(self.el("knot-time").get_attribute("value"), "2")
+                self.assertEqual(self.el("knot-speed").get_attribute("value"), "0.75")
+        # Nor past a neighbour: the first knot cannot go after the second.
+        self.el("editor").send_keys(Keys.TAB)
+        wait_for(lambda: self.el("knot-time").get_attribute("value") == "0", "the first knot selected")
+        self.type_over("knot-time", "3", Keys.TAB)
+        wait_for(lambda: "time 3s is after the next knot's" in self.shown("knot-error"), "the neighbour's message")
+        self.assertIn("knot 1", self.shown("knot-error"))
+        self.assertEqual(self.el("knot-time").get_attribute("value"), "0")
+        self.wait_for_knots(lambda knots: knots == [(0.0, 1.0), (2.0, 0.75)], "the knots as they were")
+        # A knot in frames takes the whole frames typed, as typed (walk.csv is at 24 fps: 25 frame
+        # times divided by the frame time is 25.000000000000004). The first knot stays selected.
+        before = self.plan_seq()
+        self.type_over("speed-text", "0s:1,50f:0.5")
+        self.settled_plan(before)
+        self.assertEqual(self.el("speed-text").get_attribute("value"), "0s:1,50f:0.5")
+        self.el("editor").send_keys(Keys.TAB)
+        wait_for(lambda: self.el("knot-time").get_attribute("value") == "50", "the knot in frames selected")
+        self.assertEqual(self.el("knot-unit").text, "f")
+
+        self.type_over("knot-time", "25", Keys.TAB)
+
+        wait_for(lambda: self.el("speed-text").get_attribute("value") != "0s:1,50f:0.5"
+                 and self.body("planPending") == "false", "the typed frame")
+        self.assertEqual(self.el("speed-text").get_attribute("value"), "0s:1,25f:0.5")
+        self.assertEqual(self.el("knot-time").get_attribute("value"), "25")
 
     def test_8c_speed_limits_never_rewrite_the_knots(self):
         self.type_over("speed-text", "0s:1,2s:0.5")
@@ -577,18 +614,24 @@ class StudioBrowserTest(unittest.TestCase):
     def test_8e_command_lines_quote_the_file_name_for_the_shell(self):
         folder = os.path.join(self.work.name, "hostile")
         os.makedirs(folder)
-        name = "walk; touch PWNED #it's.bvh"
-        shutil.copy(CMU, os.path.join(folder, name))
-        self.open_clip(os.path.join(folder, name))
-        for status in ("retime-status", "reduce-status"):
-            with self.subTest(command=status):
-                command = self.data(status, "command")
-                self.assertEqual(shlex.split(command)[2], name)
-                done = self.run_shown_command(command, folder)
-                self.assertEqual(done.returncode, 0, done.stderr)
-                self.assertFalse(os.path.exists(os.path.join(folder, "PWNED")), command)
-        self.assertTrue(os.path.exists(os.path.join(folder, "walk; touch PWNED #it's-retimed.bvh")))
-        self.assertTrue(os.path.exists(os.path.join(folder, "walk; touch PWNED #it's-keys.anim")))
+        # A name the shell would run, one the command would read as a flag (it gets ./ before
+        # it), and one zsh would expand (=cmd: quoted).
+        for name, word in [("walk; touch PWNED #it's.bvh", "'walk; touch PWNED #it'\\''s.bvh'"),
+                           ("-walk.bvh", "./-walk.bvh"), ("=walk.bvh", "'=walk.bvh'")]:
+            stem = name[:-len(".bvh")]
+            shutil.copy(CMU, os.path.join(folder, name))
+            self.open_clip(os.path.join(folder, name))
+            for status, output in (("retime-status", stem + "-retimed.bvh"), ("reduce-status", stem + "-keys.anim")):
+                with self.subTest(name=name, command=status):
+                    command = self.data(status, "command")
+                    self.assertEqual(command.split(" -o ")[0].split(" ", 2)[2], word, command)
+                    args = shlex.split(command)
+                    self.assertEqual(os.path.normpath(args[2]), name)
+                    self.assertEqual(os.path.normpath(args[4]), output)
+                    done = self.run_shown_command(command, folder)
+                    self.assertEqual(done.returncode, 0, done.stderr)
+                    self.assertFalse(os.path.exists(os.path.join(folder, "PWNED")), command)
+                    self.assertTrue(os.path.exists(os.path.join(folder, output)), command)
 
     def test_8f_a_clip_without_a_skeleton_retimes_and_downloads_as_csv(self):
         self.assertTrue(self.el("download-retime-bvh").is_displayed())
@@ -619,6 +662,16 @@ class StudioBrowserTest(unittest.TestCase):
         self.assertEqual(done.returncode, 0, done.stderr)
         with open(path, "rb") as a, open(os.path.join(folder, "sensor-retimed.csv"), "rb") as b:
             self.assertEqual(a.read(), b.read())
+        # The reduction's command writes keys (.anim needs no skeleton), the bytes of the download.
+        self.el("download-reduce-anim").click()
+        path = os.path.join(self.downloads, "sensor-keys.anim")
+        wait_for(lambda: os.path.exists(path) and not os.path.exists(path + ".crdownload"), "the .anim download")
+        command = self.data("reduce-status", "command")
+        self.assertEqual(shlex.split(command)[3:5], ["-o", "sensor-keys.anim"], command)
+        done = self.run_shown_command(command, folder)
+        self.assertEqual(done.returncode, 0, done.stderr)
+        with open(path, "rb") as a, open(os.path.join(folder, "sensor-keys.anim"), "rb") as b:
+            self.assertEqual(a.read(), b.read())
 
     def test_8g_the_page_keeps_only_the_jobs_it_shows(self):
         # Every clip opened so far and every edit made its jobs; the page keeps the current clip's
@@ -631,6 +684,134 @@ class StudioBrowserTest(unittest.TestCase):
         kept = {self.data("retime-status", "job-id"), self.data("reduce-status", "job-id")}
         wait_for(lambda: {j["jobId"] for j in self.studio_jobs(self.server)} == kept,
                  "the server to hold only the page's two jobs (it holds %s)" % len(self.studio_jobs(self.server)))
+
+    def test_8h_the_knots_own_text_clears_its_error_everywhere(self):
+        good = self.el("speed-text").get_attribute("value")
+        self.type_over("speed-text", "0s:1,2s:0")
+        wait_for(lambda: "knot 2" in self.shown("speed-text-error"), "the error of the typed text")
+        self.assertTrue(self.shown("message").startswith("--speed: "))
+        before = self.plan_seq()
+
+        # Another setting: the plan's answer puts the knots' own text back in the field.
+        Select(self.el("filter")).select_by_visible_text("linear")
+
+        self.settled_plan(before)
+        self.assertEqual(self.el("speed-text").get_attribute("value"), good)
+        self.assertEqual(self.shown("speed-text-error"), "")
+        self.assertNotIn("invalid", self.el("speed-text").get_attribute("class"))
+        self.assertEqual(self.shown("message"), "")
+        before = self.plan_seq()
+        Select(self.el("filter")).select_by_visible_text("tent")
+        self.settled_plan(before)
+
+    def hold_fetches(self, method, body_has):
+        """Holds the page's calls of `method` whose request contains `body_has` until
+        window.__held.open() (a gate in front of fetch, so a run is caught half-way however fast
+        the server is); window.__held counts the calls waiting and answered."""
+        self.driver.execute_script("""
+            const [method, bodyHas] = arguments;
+            const real = window.__realFetch || window.fetch;
+            window.__realFetch = real;
+            let open;
+            const opened = new Promise((resolve) => (open = resolve));
+            const held = window.__held = {waiting: 0, answered: 0, open};
+            window.fetch = async (url, init) => {
+              if (!String(url).endsWith('/' + method) || !String(init && init.body).includes(bodyHas)) {
+                return real(url, init);
+              }
+              held.waiting += 1;
+              await opened;
+              try {
+                return await real(url, init);
+              } finally {
+                held.answered += 1;
+              }
+            };""", method, body_has)
+
+    def release_fetches(self):
+        self.driver.execute_script("window.__held.open(); window.fetch = window.__realFetch;")
+
+    def held(self, name):
+        return self.driver.execute_script("return window.__held[arguments[0]]", name)
+
+    def test_8i_a_retime_ending_after_its_settings_were_refused_changes_nothing(self):
+        wait_for(lambda: self.data("retime-status", "state") == "done" and self.body("planPending") == "false",
+                 "the current result")
+        kept = {self.data("retime-status", "job-id"), self.data("reduce-status", "job-id")}
+        wait_for(lambda: {j["jobId"] for j in self.studio_jobs(self.server)} == kept, "only the page's two jobs")
+        self.hold_fetches("SubmitJob", '"retime"')
+        self.type_over("speed-text", "0s:0.05")
+        wait_for(lambda: self.held("waiting") == 1, "the retime of 0s:0.05 submitting its job")
+        self.assertEqual(self.data("retime-status", "state"), "running")
+
+        # A minimum above the knot: the server refuses the plan while the retime runs.
+        self.type_over("min-speed", "0.1", Keys.TAB)
+        wait_for(lambda: "speed knot 1" in self.shown("message"), "the refusal")
+        refusal = self.shown("message")
+        # The run goes on: its job is made. Then either the page shows it (the bug) or gives the
+        # job back, the server holding the two jobs of before.
+        self.release_fetches()
+        wait_for(lambda: self.held("answered") == 1, "the held SubmitJob answered")
+        wait_for(lambda: self.data("retime-status", "state") == "done"
+                 or {j["jobId"] for j in self.studio_jobs(self.server)} == kept, "the run's end")
+
+        self.assertNotEqual(self.data("retime-status", "state"), "done")
+        self.assertEqual(self.shown("message"), refusal)
+        before = self.plan_seq()
+        self.type_over("min-speed", "0.01", Keys.TAB)
+        self.settled_plan(before)
+        self.assertEqual(self.shown("message"), "")
+        wait_for(lambda: self.data("retime-status", "state") == "done"
+                 and self.data("retime-status", "speed-text") == "0s:0.05", "the retime of 0s:0.05")
+
+    def test_8j_back_from_the_back_forward_cache_the_preview_works_again(self):
+        self.open_clip(CMU)
+        wait_for(lambda: self.data("preview", "result-root"), "the preview of the result")
+        job = self.data("retime-status", "job-id")
+        self.driver.execute_script("window.__sameDocument = true")
+
+        self.driver.get(self.server.http_url + "js/api.js")
+        self.driver.back()
+
+        # The same document, frozen and restored (not a new load of the page).
+        wait_for(lambda: self.driver.execute_script("return window.__sameDocument === true"),
+                 "the page restored from the back/forward cache")
+        wait_for(lambda: self.data("retime-status", "job-id") not in (None, job)
+                 and self.data("retime-status", "state") == "done", "the retime run again")
+        wait_for(lambda: self.data("reduce-status", "state") == "done", "the reduction run again")
+        self.assertTrue(self.data("preview", "source-root"), "the source figure")
+        self.assertTrue(self.data("preview", "result-root"), "the result figure")
+        frames = int(self.el("frame-count").text)
+        self.assertEqual(self.el("scrub").get_attribute("max"), str(frames - 1))
+        self.el("step-forward").click()
+        wait_for(lambda: self.data("preview", "output-frame") == "1", "a step of the preview")
+        kept = {self.data("retime-status", "job-id"), self.data("reduce-status", "job-id")}
+        wait_for(lambda: {j["jobId"] for j in self.studio_jobs(self.server)} == kept,
+                 "the server to hold only the page's two jobs (it holds %s)" % len(self.studio_jobs(self.server)))
+
+    def test_8k_a_result_the_preview_cannot_read_is_a_failure_shown(self):
+        # The retimed BVH arrives as text BVHLoader cannot read (the server's own files never are;
+        # the page's fetch answers for it here).
+        self.driver.execute_script(r"""
+            const real = window.__realFetch = window.fetch;
+            window.fetch = async (url, init) => {
+              const body = String(init && init.body);
+              if (!String(url).endsWith('/ExportFile') || !body.includes('"jobId"')) return real(url, init);
+              const answer = await real(url, init);
+              await answer.text();
+              const part = {fileName: 'x.bvh', mediaType: 'text/plain', data: btoa('HIERARCHY\nnot a skeleton\n')};
+              return new Response(JSON.stringify({result: part}) + '\n', {status: 200});
+            };""")
+        try:
+            self.el("editor").send_keys(Keys.ARROW_UP)
+            wait_for(lambda: self.data("retime-status", "state") == "failed", "the failure shown")
+        finally:
+            self.driver.execute_script("window.fetch = window.__realFetch")
+        self.assertIn("the preview cannot show the result", self.el("retime-status").text)
+        self.assertIn("the preview cannot show the result", self.shown("message"))
+        self.el("editor").send_keys(Keys.ARROW_DOWN)
+        wait_for(lambda: self.data("retime-status", "state") == "done", "a result shown again")
+        self.assertEqual(self.shown("message"), "")
 
     # ---- long jobs: a server whose one worker is busy, so the page's jobs wait in its queue ------
     def make_server_busy(self, busy):
@@ -687,7 +868,8 @@ class StudioBrowserTest(unittest.TestCase):
         wait_for(lambda: self.data("reduce-job", "job-id") not in (None, waiting)
                  and self.data("reduce-job", "state") == "JOB_STATE_QUEUED", "a new reduction queued")
 
-    def test_9b_leaving_the_page_cancels_its_jobs(self):
+    def test_9b_leaving_the_page_cancels_its_jobs_and_its_next_load_deletes_them(self):
+        # Runs after 9a, on its page: the busy server (cls.busy) and the reduction 9a left queued.
         busy = self.busy
         jobs = [self.data("reduce-job", "job-id")]
         self.assertNotIn(None, jobs)
@@ -696,6 +878,52 @@ class StudioBrowserTest(unittest.TestCase):
 
         for job in jobs:
             wait_for(lambda: job_logged_cancelled(busy, job), "job %s cancelled once the page is left" % job)
+        # A cancelled job is deleted only once ended, which the page left could not wait for: the
+        # next load of the page in this tab deletes it (the jobs carry the left page's id).
+        self.driver.get(busy.http_url)
+        wait_for(lambda: self.body("ready") == "true", "the page to reach the busy server again")
+        wait_for(lambda: not self.studio_jobs(busy),
+                 "the left page's jobs deleted (the server holds %s)" % len(self.studio_jobs(busy)))
+
+    def test_9c_a_file_over_the_servers_limit_is_refused_before_it_is_sent(self):
+        # A server taking messages of 1 MiB: files up to (1 MiB - 64 KiB) / 4 * 3 bytes.
+        with StudioServer("--max_message_bytes", str(1 << 20)) as small:
+            self.driver.get(small.http_url)
+            wait_for(lambda: self.body("ready") == "true", "the page to reach the small server")
+            big = os.path.join(self.work.name, "big.bvh")
+            with open(big, "wb") as f:
+                f.truncate(((1 << 20) - (1 << 16)) // 4 * 3 + 1)
+
+            self.el("file-input").send_keys(big)
+
+            message = wait_for(lambda: self.shown("message"), "the refusal")
+            self.assertEqual(message, "big.bvh is 0.7 MiB: the server takes files up to 0.7 MiB "
+                             "(its limit of 1048576 bytes per request, the file travelling as base64)")
+            self.assertEqual(self.data("clip-info", "state"), None)
+            # One byte less is sent (and refused by the server's reader: it is no BVH).
+            with open(big, "wb") as f:
+                f.truncate(((1 << 20) - (1 << 16)) // 4 * 3)
+            self.el("file-input").send_keys(big)
+            wait_for(lambda: self.shown("message").startswith("big.bvh:"), "the reader's message")
+
+    def test_9d_a_server_that_wants_a_token_first_still_refuses_a_file_too_big(self):
+        tokens = os.path.join(self.work.name, "tokens")
+        with open(tokens, "w") as f:
+            f.write("studio-test-token\n")
+        with StudioServer("--auth_token_file", tokens) as guarded:
+            self.driver.get(guarded.http_url)
+            wait_for(lambda: self.el("token-box").is_displayed(), "the page to ask for the token")
+            # Over the default limit of 64 MiB per message, not read: a sparse file.
+            big = os.path.join(self.work.name, "huge.bvh")
+            with open(big, "wb") as f:
+                f.truncate(49 << 20)
+
+            self.el("file-input").send_keys(big)
+
+            message = wait_for(lambda: self.shown("message").startswith("huge.bvh") and self.shown("message"),
+                               "the refusal")
+            self.assertIn("the server takes files up to 48 MiB", message)
+            self.assertIn("the default limit of 64 MiB", message)
 
 
 if __name__ == "__main__":

@@ -133,8 +133,12 @@ const jobs = new Map();
 const ENDED = new Set(['JOB_STATE_SUCCEEDED', 'JOB_STATE_FAILED', 'JOB_STATE_CANCELLED']);
 
 export async function submitJob(request, signal = null) {
+  // No job of this page is made while the jobs left by it are being listed (releaseLeftJobs):
+  // one made meanwhile would look left behind.
+  await sweeping;
+  if (signal && signal.aborted) throw stoppedError();
   // Not stopped half-way by `signal`: only the answer names the job to cancel.
-  const job = await call('SubmitJob', request);
+  const job = await call('SubmitJob', {...request, labels: {...request.labels, [PAGE_LABEL]: pageId}});
   jobs.set(job.jobId, ENDED.has(job.state));
   if (signal && signal.aborted) {
     releaseJob(job.jobId);
@@ -161,12 +165,62 @@ export async function releaseJob(jobId) {
 
 // The page is hidden for good or for the back/forward cache (pagehide): every call in flight is
 // stopped and the server is told that no job of this page is needed any more, running ones
-// cancelled (they are deleted with the server's job TTL: a delete must wait for their end) and
-// ended ones deleted. keepalive lets these requests outlive the page.
+// cancelled and ended ones deleted. keepalive lets these requests outlive the page. A cancelled
+// job cannot be deleted before it has ended, and a SubmitJob stopped here may have made its job
+// anyway: this page's id is noted as left, and the next studio page of this browser tab (or this
+// one, back from the back/forward cache) releases the jobs labelled with it (releaseLeftJobs).
 export function leave() {
   for (const [jobId, ended] of jobs) send(ended ? 'DeleteJob' : 'CancelJob', {jobId});
   jobs.clear();
   for (const controller of calls) controller.abort();
+  setLeftPages([...leftPages().filter((id) => id !== pageId), pageId]);
+}
+
+// ---- jobs of pages left -------------------------------------------------------------------------
+// Every job the page submits carries the label page=<this page's id>, an id of its own (a new one
+// each time the page loads). The ids of pages left are kept in sessionStorage (this tab's, this
+// origin's): a page left for good leaves nothing behind for longer than its next load in the tab.
+const PAGE_LABEL = 'page';
+const LEFT_PAGES_KEY = 'tempokey.leftPages';
+export const pageId = Array.from(crypto.getRandomValues(new Uint8Array(12)), (b) => b.toString(16).padStart(2, '0')).join('');
+let sweeping = Promise.resolve();
+
+function leftPages() {
+  try {
+    const ids = JSON.parse(sessionStorage.getItem(LEFT_PAGES_KEY) || '[]');
+    return Array.isArray(ids) ? ids.filter((id) => typeof id === 'string') : [];
+  } catch (error) {
+    return [];
+  }
+}
+
+function setLeftPages(ids) {
+  if (ids.length) sessionStorage.setItem(LEFT_PAGES_KEY, JSON.stringify(ids));
+  else sessionStorage.removeItem(LEFT_PAGES_KEY);
+}
+
+// Releases (cancels, then deletes) every job of the pages left in this tab, this page's own too
+// when it comes back from the back/forward cache, that the page does not know. Resolves once they
+// are listed (the releases go on); no job of this page is submitted before. Throws what ListJobs
+// threw (the ids stay noted for the next try).
+export function releaseLeftJobs() {
+  const listing = (async () => {
+    for (const id of leftPages()) {
+      let pageToken = '';
+      do {
+        const answer = await call('ListJobs', {labels: {[PAGE_LABEL]: id}, pageSize: 1000, pageToken});
+        for (const job of answer.jobs || []) {
+          if (jobs.has(job.jobId)) continue;
+          jobs.set(job.jobId, ENDED.has(job.state));
+          releaseJob(job.jobId);
+        }
+        pageToken = answer.nextPageToken || '';
+      } while (pageToken);
+      setLeftPages(leftPages().filter((left) => left !== id));
+    }
+  })();
+  sweeping = listing.catch(() => {});
+  return listing;
 }
 
 function send(method, request) {

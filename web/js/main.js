@@ -15,7 +15,8 @@ const state = {
   info: null,
   clip: null,           // {id, header, name, fileName, frameTime, frameCount, duration}
   samples: null,        // source channels (Float64Array each)
-  plan: null,
+  plan: null,           // the latest plan the server accepted, with its op
+  planRefused: false,   // the settings since that plan are refused (by the server or the page)
   planSeq: 0,
   lastEdit: 0,
   holds: [],            // [{at, duration}] seconds
@@ -62,10 +63,17 @@ function clearMessageOf(what) {
 }
 
 // A word for a POSIX shell: as it is when it has nothing the shell reads, else in single quotes
-// (a ' inside written '\''), so a pasted command line never runs a file's name.
+// (a ' inside written '\''), so a pasted command line never runs a file's name. A word starting
+// with '=' is quoted too (zsh reads =cmd as the path of cmd).
 function shellWord(word) {
   const text = String(word);
-  return /^[A-Za-z0-9_.,:\/%+=@-]+$/.test(text) ? text : `'${text.replace(/'/g, "'\\''")}'`;
+  return /^[A-Za-z0-9_.,:\/%+=@-]+$/.test(text) && !text.startsWith('=') ? text : `'${text.replace(/'/g, "'\\''")}'`;
+}
+
+// A file's name as a command's argument: a relative name starting with '-' gets './' before it,
+// or the command would read it as a flag (`tempokey retime -walk.bvh` is no file).
+function fileArgument(name) {
+  return name.startsWith('-') ? './' + name : name;
 }
 
 function commandLine(words) {
@@ -122,9 +130,12 @@ async function openFile(file) {
   const open = ++openSeq;
   showMessage('');
   if (file.size > maxFileBytes()) {
+    // Without the server's info (it could not be asked yet: a token first), its default limit.
+    const limit = state.info && state.info.maxMessageBytes
+      ? `its limit of ${state.info.maxMessageBytes} bytes per request`
+      : "the default limit of 64 MiB per request (the server's own is not known yet)";
     showMessage(`${file.name} is ${megabytes(file.size)}: the server takes files up to ` +
-        `${megabytes(maxFileBytes())} (its limit of ${state.info.maxMessageBytes} bytes per request, ` +
-        'the file travelling as base64)');
+        `${megabytes(maxFileBytes())} (${limit}, the file travelling as base64)`);
     return;
   }
   $('clip-info').dataset.state = 'loading';
@@ -132,6 +143,9 @@ async function openFile(file) {
   try {
     const clip = await loadClip(file);
     if (clip && open === openSeq) showClip(clip);
+  } catch (error) {
+    // The file could not be read (FileReader), or the page failed to show what the server sent.
+    if (open === openSeq) reportError(`opening ${file.name}`, error);
   } finally {
     if (open === openSeq) {
       $('open-status').textContent = '';
@@ -203,8 +217,10 @@ function showClip({clip, samples}) {
 async function loadPreviewSource(clip) {
   $('preview-note').hidden = hasSkeleton(clip);
   if (!hasSkeleton(clip)) return;
-  const bvh = await guarded('the source skeleton', () => api.exportFile({clipId: clip.id}, 'bvh'));
-  if (bvh && clip === state.clip) preview.setSource(new TextDecoder().decode(bvh.bytes));
+  await guarded('the source skeleton', async () => {
+    const bvh = await api.exportFile({clipId: clip.id}, 'bvh');
+    if (clip === state.clip) preview.setSource(new TextDecoder().decode(bvh.bytes));
+  });
 }
 
 // Stops the runs of the clip open so far and gives its jobs back to the server.
@@ -252,11 +268,13 @@ function retimeOperation() {
 }
 
 // The file and output words of a command line: a CSV input needs its rate (CSV files do not
-// store one), and a clip without a skeleton is written as CSV (BVH needs one).
-function fileWords(command, suffix, bvhExtension) {
+// store one), and a clip without a skeleton is written as CSV where the output would be BVH (BVH
+// needs a skeleton; .anim does not, and .csv there would be the curves baked, not keys).
+function fileWords(command, suffix, extension) {
   const c = state.clip;
   const stem = c.fileName.replace(/\.[^.]*$/, '');
-  const words = ['tempokey', command, c.fileName, '-o', stem + suffix + (hasSkeleton(c) ? bvhExtension : '.csv')];
+  const output = stem + suffix + (extension === '.bvh' && !hasSkeleton(c) ? '.csv' : extension);
+  const words = ['tempokey', command, fileArgument(c.fileName), '-o', fileArgument(output)];
   if (c.csvFps) words.push('--input-fps', c.csvFps);
   return words;
 }
@@ -305,6 +323,7 @@ function settingsChanged() {
   $('max-speed').classList.toggle('invalid', invalid);
   if (invalid) {
     showMessage(`speed limits: ${limits.problem} (the knots are kept)`);
+    refuseRetime('the speed limits are refused');
     return;
   }
   clearMessageOf('speed limits');
@@ -335,7 +354,7 @@ async function runPlan() {
       clearMessageOf('retime');
     } catch (error) {
       reportError('retime', error);
-      if (!api.isStopped(error)) $('retime-status').dataset.state = 'invalid';
+      if (!api.isStopped(error)) refuseRetime('the server refused the settings');
     }
   }
   planInFlight = false;
@@ -345,6 +364,7 @@ async function runPlan() {
 function applyPlan(plan, op, editTime) {
   state.plan = plan;
   state.plan.op = op;
+  state.planRefused = false;
   const r = plan.report;
   const seconds = r.outputDurationSeconds;
   $('duration').textContent = `${seconds.toFixed(6)} s`;
@@ -353,8 +373,12 @@ function applyPlan(plan, op, editTime) {
   $('fit-factor').textContent = r.fitFactor.toFixed(6);
   $('max-ratio').textContent = r.maxDecimationRatio.toFixed(3);
   $('filtered').textContent = String(r.filteredSampleCount);
-  if (document.activeElement !== $('speed-text')) $('speed-text').value = plan.speedText;
-  $('speed-text-error').hidden = true;
+  if (document.activeElement !== $('speed-text')) {
+    // The text is the knots' own again: an error about text typed before is gone everywhere
+    // (under the text, its red outline, the banner).
+    $('speed-text').value = plan.speedText;
+    showSpeedTextError('');
+  }
   $('retime-command').textContent = retimeCommand(plan.speedText);
   const knotPoints = domain() === 'source'
     ? editor.knots.map((k, i) => ({source: editor.seconds(k), output: plan.knotOutputTimeSeconds[i]}))
@@ -436,7 +460,7 @@ async function runJob(kind, runs, request, finish) {
   $(`${kind}-stage`).textContent = 'submitting…';
   $(`${kind}-progress`).removeAttribute('value');
   try {
-    const job = await api.submitJob({...request, labels: {source: 'studio'}}, signal);
+    const job = await api.submitJob({...request, labels: {source: 'studio'}}, signal);  // + page=<id>
     run.jobId = job.jobId;
     showProgress(kind, job);
     await api.waitForJob(job.jobId, (snapshot) => runs.isCurrent(run) && showProgress(kind, snapshot), signal);
@@ -461,9 +485,13 @@ function cancelRun(kind) {
   showStatus(kind, 'cancelled', kept ? `cancelled; showing the previous result, job ${kept.jobId}` : 'cancelled');
 }
 
+// The banner's words for a run of each kind, apart from the plan's ("retime: ..."): a run's success
+// clears its own failure only, never a refusal of the settings.
+const RUN_WHAT = {retime: 'retime job', reduce: 'reduce job'};
+
 // A run that failed: its status says so, with the server's words.
 function showFailure(kind, error) {
-  reportError(kind, error);
+  reportError(RUN_WHAT[kind], error);
   showStatus(kind, 'failed', `failed: ${describe(error)}`);
 }
 
@@ -476,11 +504,36 @@ function scheduleRetime() {
   retimeTimer = setTimeout(runRetime, RETIME_DELAY_MS);
 }
 
+// Settings refused (the server's plan, or the page's own check): nothing is retimed for them. The
+// retime waiting to run is dropped and a running one stopped, so an older run ending late can
+// neither show its result as the current one nor clear the refusal; the last result stays.
+function refuseRetime(reason) {
+  state.planRefused = true;
+  clearTimeout(retimeTimer);
+  retimeRuns.stop();
+  const kept = state.retimeJob;
+  showStatus('retime', 'invalid', kept ? `not retimed: ${reason}; showing the previous result, job ${kept.jobId}`
+    : `not retimed: ${reason}`);
+}
+
+// The operation of the latest plan the server accepted, if the settings are still those.
+function acceptedOp() {
+  return state.plan && !state.planRefused ? state.plan.op : null;
+}
+
+function sameOp(a, b) {
+  return !!a && !!b && JSON.stringify(a) === JSON.stringify(b);
+}
+
+// Retimes with the latest accepted plan's settings; the result is shown only if those are still
+// the latest accepted ones when it comes (else its job is given back).
 async function runRetime() {
   const clip = state.clip;
-  const op = retimeOperation();
-  const speedText = state.plan ? state.plan.speedText : '';
-  const command = state.plan ? retimeCommand(speedText) : '';
+  const op = acceptedOp();
+  // Settings changed since that plan: their own plan, coming, schedules the retime (or refuses).
+  if (!clip || !op || !sameOp(op, retimeOperation())) return;
+  const speedText = state.plan.speedText;
+  const command = retimeCommand(speedText);
   let done;
   try {
     done = await runJob('retime', retimeRuns, {clipId: clip.id, operations: [{retime: op}]}, async (job, signal) => {
@@ -495,15 +548,29 @@ async function runRetime() {
     showFailure('retime', error);
     return;
   }
-  if (!done || clip !== state.clip) return;  // superseded by a newer edit
+  if (!done) return;  // superseded by a newer edit, cancelled, or stopped by a refusal
+  if (done.file) await state.previewSource;
+  if (clip !== state.clip || !sameOp(op, acceptedOp())) {
+    // A new clip, or settings moved on while it ran: nobody will look at this job.
+    api.releaseJob(done.job.jobId);
+    if (clip === state.clip && !state.planRefused && !retimeRuns.current) {
+      showStatus('retime', 'pending', 'retiming soon…');
+    }
+    return;
+  }
   const previous = state.retimeJob;
   state.retimeJob = {jobId: done.job.jobId, speedText};
   if (previous) api.releaseJob(previous.jobId);
-  clearMessageOf('retime');
+  clearMessageOf(RUN_WHAT.retime);
+  renderDownloads('downloads-retime', false);
   if (done.file) {
-    await state.previewSource;
-    if (clip !== state.clip) return;
-    preview.setResult(new TextDecoder().decode(done.file.bytes), done.plan);
+    try {
+      preview.setResult(new TextDecoder().decode(done.file.bytes), done.plan);
+    } catch (error) {
+      // The job's files download as they are; the preview could not read its BVH.
+      showFailure('retime', new Error(`the preview cannot show the result of job ${done.job.jobId}: ${error.message}`));
+      return;
+    }
     $('scrub').max = String(Math.max(preview.frameCount() - 1, 0));
   }
   showStatus('retime', 'done', `result: ${done.plan.report.outputFrameCount} frames, job ${done.job.jobId}`);
@@ -511,7 +578,6 @@ async function runRetime() {
   status.dataset.jobId = done.job.jobId;
   status.dataset.speedText = speedText;
   status.dataset.command = command;
-  renderDownloads('downloads-retime', false);
 }
 
 // ---- knots, text, holds -----------------------------------------------------------------------
@@ -524,7 +590,9 @@ function showSelectedKnot() {
 }
 
 // The typed time and speed of the selected knot. A value the editor cannot take (blank, not a
-// number, a speed not above 0) is refused with a message and the field shows the knot again.
+// number, a speed not above 0 or beyond the limits, a time past a neighbour's or the timeline's
+// end) is refused with a message, in the words of the --speed text's errors, and the field shows
+// the knot again: nothing typed is clamped silently.
 function applyKnotFields() {
   const index = editor.selected;
   const time = $('knot-time').value.trim() === '' ? NaN : Number($('knot-time').value);
@@ -535,6 +603,8 @@ function applyKnotFields() {
     problem = `time ${typed('knot-time')} is not a number of ${editor.selectedKnot().unit === 'f' ? 'frames' : 'seconds'} from 0`;
   } else if (!Number.isFinite(speed) || speed <= 0) {
     problem = `speed ${typed('knot-speed')} is not a number above 0`;
+  } else {
+    problem = editor.fieldProblem(time, speed);
   }
   if (problem) {
     showKnotError(`knot ${index + 1}: ${problem}; kept at ${knotLabel(editor.selectedKnot())}`);
@@ -788,12 +858,16 @@ async function runReduce() {
     showFailure('reduce', error);
     return;
   }
-  if (!done || clip !== state.clip) return;
+  if (!done) return;
+  if (clip !== state.clip) {
+    api.releaseJob(done.job.jobId);  // a new clip was opened while it ran
+    return;
+  }
   const previous = state.reduced;
   const report = done.result.reports.find((r) => r.reduction)?.reduction || {};
   state.reduced = {jobId: done.job.jobId, curves: done.result.curves, report, op};
   if (previous) api.releaseJob(previous.jobId);
-  clearMessageOf('reduce');
+  clearMessageOf(RUN_WHAT.reduce);
   $('key-count').textContent = String(report.keyCount);
   $('reduce-command').textContent = command;
   showStatus('reduce', 'done', `${report.keyCount} keys for ${report.sampleCount} samples, job ${done.job.jobId}`);
@@ -974,10 +1048,16 @@ window.addEventListener('pagehide', () => {
   api.leave();
 });
 window.addEventListener('pageshow', (e) => {
-  if (!e.persisted || !state.clip) return;
-  state.retimeJob = null;
+  if (!e.persisted) return;
+  // Its jobs cancelled on leaving, and any a stopped SubmitJob made, are released (before any
+  // new job of the page is submitted).
+  guarded('releasing the jobs of the page left', () => api.releaseLeftJobs());
+  if (!state.clip) return;
+  state.retimeJob = null;  // deleted or cancelled on leaving
   state.reduced = null;
   forgetResults();
+  // The figure went with the results: the source skeleton is loaded again for the reruns.
+  state.previewSource = loadPreviewSource(state.clip);
   requestPlan();
   scheduleReduce(0);
 });
@@ -991,6 +1071,8 @@ async function start() {
   const info = await guarded('connecting', () => api.call('GetServerInfo'));
   if (!info) return;
   state.info = info;
+  // The jobs earlier pages of this tab left behind (running when they were left).
+  guarded('releasing the jobs of pages left', () => api.releaseLeftJobs());
   document.body.dataset.ready = 'true';
   if ($('message').className === 'info') showMessage('');
 }

@@ -102,12 +102,14 @@ export class Preview {
   }
 
   // The source clip (BVH text, as the server writes it).
+  // Text BVHLoader cannot read throws, the figures shown before kept.
   setSource(text) {
     if (!this.renderer) return;
+    const source = new Figure(text, SOURCE_COLOUR, this.scene);
     if (this.source) this.source.dispose(this.scene);
     if (this.result) this.result.dispose(this.scene);
     this.result = null;
-    this.source = new Figure(text, SOURCE_COLOUR, this.scene);
+    this.source = source;
     this.source.poseAtFrame(0);
     this.frameCamera();
     this.showFrame(0);
@@ -130,11 +132,13 @@ export class Preview {
     this.render();
   }
 
-  // The retimed result (BVH text) and the plan whose map gives τ_j for its frames.
+  // The retimed result (BVH text) and the plan whose map gives τ_j for its frames. Text BVHLoader
+  // cannot read throws, the figures shown before kept.
   setResult(text, plan) {
     if (!this.renderer || !this.source) return;
+    const result = new Figure(text, RESULT_COLOUR, this.scene);
     if (this.result) this.result.dispose(this.scene);
-    this.result = new Figure(text, RESULT_COLOUR, this.scene);
+    this.result = result;
     this.result.group.position.x = this.spacing;
     this.result.setJointSize(this.jointSize);
     this.plan = plan;

@@ -68,12 +68,13 @@ export class VelocityEditor {
   selectedKnot() {
     return this.knots[this.selected];
   }
-  // Sets the selected knot from numbers typed by the user (seconds or frames as the knot is).
+  // Sets the selected knot from numbers typed by the user, in the knot's own unit (seconds or
+  // frames, so typed whole frames stay whole), once fieldProblem() finds nothing wrong with them.
   setSelected(time, speed) {
     const k = this.selectedKnot();
     if (!k) return;
-    k.t = this.clampTime(this.selected, k.unit === 'f' ? time * this.frameTime : time, k.unit);
-    k.v = this.clampSpeed(speed);
+    k.t = time;
+    k.v = speed;
     this.changed();
   }
   // Why `knots` (typed, e.g. as --speed text) cannot be this editor's, or '': every knot must be
@@ -83,26 +84,49 @@ export class VelocityEditor {
     let previous = 0;
     for (let i = 0; i < knots.length; ++i) {
       const k = knots[i];
-      const at = `speed knot ${i + 1} (${k.t}${k.unit}:${k.v})`;
-      const seconds = this.seconds(k);
-      if (!Number.isFinite(seconds) || seconds < 0) return `${at}: time ${k.t}${k.unit} is not a time from 0`;
-      if (seconds < previous) return `${at}: time ${k.t}${k.unit} is before the previous knot's`;
-      if (!Number.isFinite(k.v) || k.v < this.minSpeed || k.v > this.maxSpeed) {
-        return `${at}: speed ${k.v} is outside the limits [${this.minSpeed}, ${this.maxSpeed}]`;
-      }
-      previous = seconds;
+      const problem = this.knotProblem(k, previous, null);
+      if (problem) return `speed knot ${i + 1} (${k.t}${k.unit}:${k.v}): ${problem}`;
+      previous = this.seconds(k);
     }
     return knots.length ? '' : 'no knots';
+  }
+  // Why the selected knot cannot take `time` (in its own unit) and `speed` typed in its fields,
+  // in problemWith's words, or '': it cannot pass its neighbours, nor the timeline's end if it is
+  // the last, and its speed must be within the limits (nothing typed is clamped silently).
+  fieldProblem(time, speed) {
+    const i = this.selected;
+    const previous = i > 0 ? this.seconds(this.knots[i - 1]) : 0;
+    const next = i < this.knots.length - 1
+      ? {seconds: this.seconds(this.knots[i + 1]), what: "the next knot's"}
+      : {seconds: this.duration, what: `the end of the timeline (${+this.duration.toPrecision(12)}s)`};
+    return this.knotProblem({t: time, unit: this.knots[i].unit, v: speed}, previous, next);
+  }
+  // Why knot `k` cannot be the editor's: its time (seconds) not from 0, before `previous` or
+  // after `next` ({seconds, what}, or null: no bound), or its speed outside the limits.
+  knotProblem(k, previous, next) {
+    const seconds = this.seconds(k);
+    const time = `time ${k.t}${k.unit}`;
+    if (!Number.isFinite(seconds) || seconds < 0) return `${time} is not a time from 0`;
+    if (seconds < previous) return `${time} is before the previous knot's`;
+    if (next && seconds > next.seconds) return `${time} is after ${next.what}`;
+    if (!Number.isFinite(k.v) || k.v < this.minSpeed || k.v > this.maxSpeed) {
+      return `speed ${k.v} is outside the limits [${this.minSpeed}, ${this.maxSpeed}]`;
+    }
+    return '';
   }
   clampSpeed(v) {
     return Math.min(Math.max(v, this.minSpeed), this.maxSpeed);
   }
-  // A knot's time kept between its neighbours' (equal is a step) and inside the timeline.
-  clampTime(index, seconds, unit) {
-    const lo = index > 0 ? this.seconds(this.knots[index - 1]) : 0;
-    const hi = index < this.knots.length - 1 ? this.seconds(this.knots[index + 1]) : this.duration;
-    const s = Math.min(Math.max(seconds, lo), Math.max(lo, hi));
-    return unit === 'f' ? s / this.frameTime : s;
+  // A knot's time `value`, in the knot's own `unit`, kept between its neighbours' (equal is a
+  // step) and inside the timeline. Clamped in that unit, a neighbour of the same unit bounding it
+  // exactly: a knot in frames never picks up a frame time's rounding (61 stays 61, not
+  // 61.00000000000001).
+  clampTime(index, value, unit) {
+    const inUnit = (seconds) => (unit === 'f' ? seconds / this.frameTime : seconds);
+    const bound = (k) => (k.unit === unit ? k.t : inUnit(this.seconds(k)));
+    const lo = index > 0 ? bound(this.knots[index - 1]) : 0;
+    const hi = index < this.knots.length - 1 ? bound(this.knots[index + 1]) : inUnit(this.duration);
+    return Math.min(Math.max(value, lo), Math.max(lo, hi));
   }
   changed() {
     this.draw();
@@ -179,13 +203,14 @@ export class VelocityEditor {
     if (!this.drag) return;
     const [px, py] = this.local(e);
     const k = this.knots[this.drag.index];
-    let seconds = this.timeAt(px);
+    // The time in the knot's own unit (frames or seconds), snapped in that unit.
+    let time = k.unit === 'f' ? this.timeAt(px) / this.frameTime : this.timeAt(px);
     let speed = this.speedAt(py);
     if (!e.shiftKey) {
-      seconds = k.unit === 'f' ? Math.round(seconds / this.frameTime) * this.frameTime : Math.round(seconds * 100) / 100;
+      time = k.unit === 'f' ? Math.round(time) : Math.round(time * 100) / 100;
       speed = Math.round(speed * 100) / 100;
     }
-    k.t = this.clampTime(this.drag.index, seconds, k.unit);
+    k.t = this.clampTime(this.drag.index, time, k.unit);
     if (k.unit === 'f' && !e.shiftKey) k.t = Math.round(k.t);
     k.v = this.clampSpeed(speed);
     this.drag.moved = true;
@@ -231,8 +256,9 @@ export class VelocityEditor {
         break;
       case 'ArrowLeft':
       case 'ArrowRight': {
-        const step = (e.key === 'ArrowLeft' ? -1 : 1) * big * this.frameTime;
-        k.t = this.clampTime(this.selected, this.seconds(k) + step, k.unit);
+        // A frame: 1 for a knot in frames, the frame time for one in seconds.
+        const step = (e.key === 'ArrowLeft' ? -1 : 1) * big * (k.unit === 'f' ? 1 : this.frameTime);
+        k.t = this.clampTime(this.selected, k.t + step, k.unit);
         break;
       }
       case 'ArrowUp':
