@@ -123,10 +123,14 @@ absl::Status RetimeOptionsFromArgs(const ParsedArgs& args, core::RetimeOptions& 
         {"--fit-frames", "the published procedure rounds each region's frames itself"},
         {"--fit-seconds", "the published procedure rounds each region's frames itself"},
         {"--pin", "the published procedure has no pins"},
-        {"--filter", "the published procedure weights samples with its own box"},
     };
     for (const auto& [flag, reason] : kNotForPaper) {
       if (args.Has(flag)) return UsageError(absl::StrCat("--method paper takes no ", flag, ": ", reason));
+    }
+    // Its own box is the one filter it takes (a pipeline may name it).
+    if (std::optional<std::string> filter = args.Value("--filter"); filter && *filter != "box") {
+      return UsageError("--method paper takes no --filter other than box: the published procedure "
+                        "weights samples with its own box");
     }
   }
   return absl::OkStatus();

@@ -186,8 +186,8 @@ TEST(CliUsageTest, RefusesMistakesWithExitCode2AndOneLine) {
       {{"retime", cmu, "-o", "out.bvh", "--method", "paper", "--pin", "2s:60"},
        "error: --method paper takes no --pin: the published procedure has no pins\n"},
       {{"retime", cmu, "-o", "out.bvh", "--method", "paper", "--filter", "lanczos3"},
-       "error: --method paper takes no --filter: the published procedure weights samples with "
-       "its own box\n"},
+       "error: --method paper takes no --filter other than box: the published procedure weights "
+       "samples with its own box\n"},
       {{"info", cmu, "--input-fps", "30"},
        "error: --input-fps is for CSV input: " + cmu +
            " stores its own frame time (retime --fps changes the rate)\n"},
