@@ -125,7 +125,9 @@ absl::Status RetimeOptionsFromArgs(const ParsedArgs& args, core::RetimeOptions& 
         {"--pin", "the published procedure has no pins"},
     };
     for (const auto& [flag, reason] : kNotForPaper) {
-      if (args.Has(flag)) return UsageError(absl::StrCat("--method paper takes no ", flag, ": ", reason));
+      if (args.Has(flag)) {
+        return UsageError(absl::StrCat("--method paper takes no ", flag, ": ", reason));
+      }
     }
     // Its own box is the one filter it takes (a pipeline may name it).
     if (std::optional<std::string> filter = args.Value("--filter"); filter && *filter != "box") {

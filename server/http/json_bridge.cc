@@ -84,8 +84,10 @@ class DrivenCall {
     while (true) {
       void* got = nullptr;
       bool ok = false;
-      const grpc::CompletionQueue::NextStatus next = cq_.AsyncNext(
-          &got, &ok, std::chrono::system_clock::now() + (*cancelled ? std::chrono::hours(1) : look));
+      // Once cancelled, only the read's end is awaited.
+      const auto wait = *cancelled ? std::chrono::milliseconds(std::chrono::hours(1)) : look;
+      const grpc::CompletionQueue::NextStatus next =
+          cq_.AsyncNext(&got, &ok, std::chrono::system_clock::now() + wait);
       if (next == grpc::CompletionQueue::SHUTDOWN) return false;
       if (next == grpc::CompletionQueue::GOT_EVENT) {
         if (!ok || got != &read_tag) return false;

@@ -12,6 +12,7 @@
 #include <numbers>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "tempokey/core/io/file_io.h"
@@ -227,14 +228,16 @@ void AppendCurve(std::string& out, const KeyedClip& keyed, int c, const FileFram
 // {Y, X, Z}, whose Maya order "zxy" also turns Z first; Maya's default "xyz" turned X first
 // and put such a joint's children up to a bone's length away.
 EulerOrder CompletedOrder(const Clip& layout, const JointRotation& rotation) {
-  std::array<bool, 3> listed{};
-  for (int c : rotation.channels) listed[Axis(layout.channels[static_cast<std::size_t>(c)].kind)] = true;
+  std::vector<int> listed;
+  for (int c : rotation.channels) {
+    listed.push_back(Axis(layout.channels[static_cast<std::size_t>(c)].kind));
+  }
   EulerOrder order{};
   std::size_t next = 0;
   for (int axis = 0; axis < 3; ++axis) {
-    if (!listed[static_cast<std::size_t>(axis)]) order[next++] = axis;
+    if (std::find(listed.begin(), listed.end(), axis) == listed.end()) order[next++] = axis;
   }
-  for (int c : rotation.channels) order[next++] = Axis(layout.channels[static_cast<std::size_t>(c)].kind);
+  for (int axis : listed) order[next++] = axis;
   return order;
 }
 

@@ -652,7 +652,8 @@ absl::StatusOr<ReduceResult> ReduceKeys(const Clip& clip, const ReduceOptions& o
   // verification.
   std::optional<reduce_internal::WorldErrorMeter> meter;
   if (!clip.skeleton.empty()) {
-    TEMPOKEY_ASSIGN_OR_RETURN(meter, reduce_internal::WorldErrorMeter::ForValidatedClip(clip, stop));
+    TEMPOKEY_ASSIGN_OR_RETURN(meter,
+                              reduce_internal::WorldErrorMeter::ForValidatedClip(clip, stop));
   }
   int iterations = 0;
   double joint_bound = 0.0;
