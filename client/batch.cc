@@ -195,6 +195,7 @@ BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
     const std::size_t last = file_steps.size() - 1;
     const auto& reduce = std::get<core::ReduceStep>(file_steps[last]);
     gltf.max_rotation_error_degrees = GltfRotationBoundDegrees(reduce);
+    gltf.joint_tolerance = GltfJointTolerance(reduce);
     gltf.source = &*clip;
     if (last > 0) {
       absl::StatusOr<core::PipelineResult> before = process(*clip, remaining.first(last));

@@ -208,6 +208,7 @@ absl::Status WriteOutput(const std::string& path, FileFormat format,
         core::GltfFile file,
         core::FormatGltfKeyed(*gltf.source, *keyed,
                               {.max_rotation_error_degrees = gltf.max_rotation_error_degrees,
+                               .joint_tolerance = gltf.joint_tolerance,
                                .threads = gltf.threads},
                               GltfContainerOf(format)));
     return core::WriteFileAtomically(path, file.bytes);
@@ -228,6 +229,10 @@ absl::Status WriteOutput(const std::string& path, FileFormat format,
 
 double GltfRotationBoundDegrees(const core::ReduceStep& reduce) {
   return core::GltfRotationBoundDegrees(reduce.options);
+}
+
+std::optional<core::JointTolerance> GltfJointTolerance(const core::ReduceStep& reduce) {
+  return core::GltfJointTolerance(reduce.options);
 }
 
 }  // namespace tempokey::client

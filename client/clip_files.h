@@ -54,10 +54,12 @@ bool IsKeyedFormat(FileFormat format);
 bool IsGltfFormat(FileFormat format);
 
 // What a keyed glTF needs besides the curves: the clip that was reduced (its rotations are
-// fitted again in glTF's quaternion semantics, core/io/gltf.h) and the rotation bound.
+// fitted again in glTF's quaternion semantics, core/io/gltf.h) and the bounds of that fit
+// (GltfRotationBoundDegrees() and GltfJointTolerance() of the reduce step).
 struct GltfExportSource {
   const core::Clip* source = nullptr;
   double max_rotation_error_degrees = core::kDefaultMaxRotationErrorDegrees;
+  std::optional<core::JointTolerance> joint_tolerance = std::nullopt;
   // Joints whose rotations are fitted at once (core::GltfKeyedOptions::threads): the same file
   // for any count.
   int threads = 1;
@@ -70,6 +72,9 @@ int LocalCpuCount();
 // the default 0.5 degrees when unset (also under a joint tolerance: the glTF's rotations then
 // stay within 0.5 degrees of the source's, whatever budgets the Euler curves were given).
 double GltfRotationBoundDegrees(const core::ReduceStep& reduce);
+// The joint bound a keyed glTF of `reduce`'s result keeps, as glTF evaluates it: its joint
+// tolerance (core::GltfJointTolerance(): none for other methods or under a key budget).
+std::optional<core::JointTolerance> GltfJointTolerance(const core::ReduceStep& reduce);
 
 // The largest input clip file the CLI reads (BVH or CSV text): a quarter of a gigabyte holds
 // some 25 million samples, more than a server accepts by default (32 Mi samples of doubles).

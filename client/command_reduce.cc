@@ -26,10 +26,11 @@ absl::Status Reduce(CommandContext& context) {
   TEMPOKEY_ASSIGN_OR_RETURN(core::ReduceStep reduce, ReduceStepFromArgs(context.args()));
   TEMPOKEY_ASSIGN_OR_RETURN(core::Clip clip, ReadInputClip(context, inputs[0]));
 
-  // glTF keeps the curves too, its rotations fitted against this clip within the rotation bound,
-  // a joint per CPU at once (seconds a joint on a long or slowed clip).
+  // glTF keeps the curves too, its rotations fitted against this clip within the rotation bound
+  // and the joint bound, a joint per CPU at once (seconds a joint on a long or slowed clip).
   const GltfExportSource gltf{.source = &clip,
                               .max_rotation_error_degrees = GltfRotationBoundDegrees(reduce),
+                              .joint_tolerance = GltfJointTolerance(reduce),
                               .threads = LocalCpuCount()};
   // Sampled outputs are the curves baked back at the source rate. Built whole, not grown: a
   // push_back onto a vector of variants made g++ 12 at -O2 report -Wmaybe-uninitialized on the

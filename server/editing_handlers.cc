@@ -234,7 +234,7 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
   // Runs on a worker. Only this task touches the members until its first StartWrite. The file's
   // bytes exist once formatted: they are kept only if the budget can count them.
   // A keyed glTF is fitted against the clip the curves were reduced from (as the CLI's is): the
-  // job's stored input, when the job is one reduce of it. The same bound as the CLI's.
+  // job's stored input, when the job is one reduce of it. The same bounds as the CLI's.
   absl::Status FindGltfSource(const std::string& job_id, const std::string& owner) {
     TEMPOKEY_ASSIGN_OR_RETURN(const JobSnapshot job, service_->jobs->Get(job_id, owner));
     const std::vector<core::PipelineStep>& steps = job.spec->steps;
@@ -254,7 +254,8 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
     }
     gltf_clip_ = *std::move(clip);
     gltf_source_ = {.clip = gltf_clip_.get(),
-                    .max_rotation_error_degrees = core::GltfRotationBoundDegrees(reduce->options)};
+                    .max_rotation_error_degrees = core::GltfRotationBoundDegrees(reduce->options),
+                    .joint_tolerance = core::GltfJointTolerance(reduce->options)};
     return absl::OkStatus();
   }
 

@@ -97,5 +97,39 @@ TEST_F(CliGltfTest, RetimeAndBatchWriteValidGltf) {
   ExpectValid({Path("slow.glb"), Path("out/walk.gltf")});
 }
 
+// `reduce --joint-tolerance` and a batch's reduce with one write glTFs within the joint bound as
+// three.js places them (both pass it to the glTF's fit, as the server's downloads do): the bound
+// the reduction reports, plus three.js's float32 interpolation.
+TEST_F(CliGltfTest, JointToleranceReductionsWriteGlbWithinTheBound) {
+  const std::string cmu = SharedBvh("cmu/131_01.bvh");
+  const std::string walk = SharedBvh("bandai/dataset-1_walk_active_001.bvh");
+  const std::string in = dir_ + "/in";
+  std::filesystem::create_directories(in);
+  std::filesystem::copy_file(walk, in + "/walk.bvh");
+  const std::string ops = Path("ops.json");
+  ASSERT_TRUE(core::WriteFileAtomically(
+                  ops, R"({"operations": [{"reduce": {"joint-tolerance": "0.5%"}}]})")
+                  .ok());
+
+  const ProcessResult reduce =
+      Tempokey({"reduce", cmu, "-o", Path("cmu.glb"), "--joint-tolerance", "0.5%"});
+  const ProcessResult batch =
+      Tempokey({"batch", in, "-o", Path("out"), "--ops", ops, "--format", "glb"});
+
+  ASSERT_EQ(reduce.exit_code, 0) << reduce.err;
+  ASSERT_EQ(batch.exit_code, 0) << batch.err;
+  EXPECT_THAT(reduce.out, ::testing::HasSubstr("joint bound:     0.1264 (0.500% of height)"));
+  ExpectValid({Path("cmu.glb"), Path("out/walk.glb")});
+  // 0.5 % of the figures' heights: 25.27 (CMU 131_01) and 139.24 (the Bandai walk) file units.
+  const std::pair<std::string, double> checks[] = {{cmu, 0.12637}, {walk, 0.69622}};
+  const std::string files[] = {Path("cmu.glb"), Path("out/walk.glb")};
+  for (std::size_t i = 0; i < 2; ++i) {
+    const std::vector<core::JsonValue> placed =
+        RunNodeScript("world_check.mjs", {checks[i].first, files[i]}, dir_);
+    ASSERT_EQ(placed.size(), 1u);
+    EXPECT_LE(NumberOf(placed[0], "max_world_error"), checks[i].second + 1e-3) << files[i];
+  }
+}
+
 }  // namespace
 }  // namespace tempokey::testing

@@ -70,6 +70,13 @@ double GltfRotationBoundDegrees(const ReduceOptions& options) {
   return options.tolerance.max_rotation_error_degrees.value_or(kDefaultMaxRotationErrorDegrees);
 }
 
+std::optional<JointTolerance> GltfJointTolerance(const ReduceOptions& options) {
+  if (options.method != ReduceMethod::kTolerance || options.tolerance.key_budget) {
+    return std::nullopt;
+  }
+  return options.tolerance.joint_tolerance;
+}
+
 namespace {
 
 absl::StatusOr<std::string> FormatGltf(const std::variant<Clip, KeyedClip>& output,
@@ -88,7 +95,8 @@ absl::StatusOr<std::string> FormatGltf(const std::variant<Clip, KeyedClip>& outp
       GltfFile file,
       FormatGltfKeyed(
           *source.clip, std::get<KeyedClip>(output),
-          GltfKeyedOptions{.max_rotation_error_degrees = source.max_rotation_error_degrees},
+          GltfKeyedOptions{.max_rotation_error_degrees = source.max_rotation_error_degrees,
+                           .joint_tolerance = source.joint_tolerance},
           format.gltf, std::move(stop)));
   return std::move(file.bytes);
 }

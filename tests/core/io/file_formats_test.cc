@@ -105,6 +105,48 @@ TEST(FileFormatsTest, GltfRotationBoundIsTheRotationToleranceOrHalfADegree) {
   EXPECT_EQ(GltfRotationBoundDegrees(ReduceOptions{}), 0.5);
 }
 
+TEST(FileFormatsTest, GltfJointToleranceIsTheToleranceMethodsUnlessAKeyBudgetScalesIt) {
+  const JointTolerance half_percent{.value = 0.5, .percent_of_height = true};
+  ReduceOptions joint;
+  joint.tolerance.joint_tolerance = half_percent;
+  ReduceOptions budget = joint;
+  budget.tolerance.key_budget = 3000;
+  ReduceOptions noise = joint;
+  noise.method = ReduceMethod::kNoise;
+
+  EXPECT_EQ(GltfJointTolerance(joint), half_percent);
+  EXPECT_EQ(GltfRotationBoundDegrees(joint), 0.5);
+  EXPECT_EQ(GltfJointTolerance(ReduceOptions{}), std::nullopt);
+  EXPECT_EQ(GltfJointTolerance(budget), std::nullopt);
+  EXPECT_EQ(GltfJointTolerance(noise), std::nullopt);
+}
+
+// The server's downloads (FormatOutput()) and the CLI (FormatGltfKeyed()) write one file for a
+// joint-bound reduction too.
+TEST(FileFormatsTest, AJointBoundGltfIsTheSameBytesThroughEitherEntry) {
+  ReduceOptions options;
+  options.tolerance.joint_tolerance = JointTolerance{.value = 1.0};
+  const absl::StatusOr<ReduceResult> reduced = ReduceKeys(Bandai(), options);
+  ASSERT_TRUE(reduced.ok()) << reduced.status();
+  const ExportSource source{.clip = &Bandai(),
+                            .max_rotation_error_degrees = GltfRotationBoundDegrees(options),
+                            .joint_tolerance = GltfJointTolerance(options)};
+
+  const absl::StatusOr<std::string> download = FormatOutput(
+      std::variant<Clip, KeyedClip>(reduced->keyed), *FindExportFormat("glb"), {}, source);
+  const absl::StatusOr<GltfFile> cli = FormatGltfKeyed(
+      Bandai(), reduced->keyed,
+      {.max_rotation_error_degrees = GltfRotationBoundDegrees(options),
+       .joint_tolerance = GltfJointTolerance(options), .threads = 2},
+      GltfContainer::kBinary);
+
+  ASSERT_TRUE(download.ok()) << download.status();
+  ASSERT_TRUE(cli.ok()) << cli.status();
+  EXPECT_TRUE(*download == cli->bytes);
+  EXPECT_EQ(cli->stats.joint_bound, 1.0);
+  EXPECT_LE(cli->stats.max_joint_error, 1.0);
+}
+
 TEST(FileFormatsTest, SampledClipHasNoCurvesToWrite) {
   const absl::StatusOr<std::string> text =
       FormatOutput(std::variant<Clip, KeyedClip>(Bandai()), *FindExportFormat("anim"));

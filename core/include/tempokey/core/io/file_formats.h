@@ -42,17 +42,30 @@ struct ExportFormat {
 };
 
 // What a keyed glTF needs besides the curves: the clip they were reduced from (its rotations are
-// fitted again in glTF's quaternion semantics) and the rotation bound of that fit.
+// fitted again in glTF's quaternion semantics) and the bounds of that fit
+// (GltfKeyedOptions: GltfRotationBoundDegrees() and GltfJointTolerance() of the reduction).
 struct ExportSource {
   const Clip* clip = nullptr;
   double max_rotation_error_degrees = GltfKeyedOptions{}.max_rotation_error_degrees;
+  std::optional<JointTolerance> joint_tolerance = std::nullopt;
 };
 
-// The rotation bound a keyed glTF of a reduction with `options` is fitted to: its rotation
-// tolerance, or the default 0.5 degrees when unset (also under a joint tolerance and for the other
-// methods: the glTF's rotations then stay within 0.5 degrees of the source's). The CLI and the
-// server's downloads both use it, so their files are the same bytes.
+// The bounds a keyed glTF of a reduction with `options` is fitted to. The CLI and the server's
+// downloads both use them, so their files are the same bytes.
+//
+// GltfRotationBoundDegrees(): its rotation tolerance, or the default 0.5 degrees when unset (also
+// under a joint tolerance and for the other methods): every glTF rotation stays within it of the
+// source's at every source frame.
+//
+// GltfJointTolerance(): the `tolerance` method's joint tolerance: every joint and end site of the
+// glTF, as glTF evaluates it, stays within it of its source position at every source frame,
+// measured by forward kinematics as the reduction's own joint bound is (gltf.h, "The joint bound
+// in glTF"), the rotation bound above holding too. None for the other methods, which take no
+// joint tolerance, and under a key budget, which replaces the bounds by a scale of them (the
+// reduction then keeps the scaled joint bound, whose keyed translations may be beyond the one
+// given: the glTF keeps the rotation bound alone, as it does without a joint tolerance).
 double GltfRotationBoundDegrees(const ReduceOptions& options);
+std::optional<JointTolerance> GltfJointTolerance(const ReduceOptions& options);
 
 // Every output format of this build, in a stable order (bvh, csv, json, anim, ...).
 std::span<const ExportFormat> ExportFormats();
