@@ -16,6 +16,7 @@
 #include <utility>
 #include <variant>
 
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "proto/clip_convert.h"
@@ -30,6 +31,7 @@
 #include "spdlog/spdlog.h"
 #include "tempokey/core/io/file_formats.h"
 #include "tempokey/core/io/printable_text.h"
+#include "tempokey/core/model/clip.h"
 #include "tempokey/core/model/status.h"
 #include "tempokey/core/retime/retime.h"
 
@@ -58,6 +60,18 @@ grpc::ServerUnaryReactor* AnswerOnPool(ServiceContext* service, grpc::CallbackSe
   absl::Status queued = service->pool->TrySubmit(
       [service, reactor, call, raw_request, raw_response,
        work = std::move(work)](std::stop_token) mutable {
+        // A call its client gave up on while it was queued (cancelled, or its deadline passed)
+        // is not worth the work: a parse would store a clip nobody asked for any more.
+        const bool late = call->deadline() <= std::chrono::system_clock::now();
+        if (late || call->IsCancelled()) {
+          AnswerUnary(*service, reactor, call, *raw_request,
+                      late ? absl::DeadlineExceededError(
+                                 "the call's deadline passed before a worker took it up")
+                           : absl::CancelledError("the call was cancelled before a worker took "
+                                                  "it up"),
+                      Response(), raw_response);
+          return;
+        }
         absl::StatusOr<Response> response = work();
         AnswerUnary(*service, reactor, call, *raw_request, response.status(),
                     response.ok() ? *response : Response(), raw_response);
@@ -357,6 +371,12 @@ grpc::ServerUnaryReactor* MotionService::ParseClipFile(grpc::CallbackServerConte
   absl::StatusOr<std::string> owner =
       OpenUnary(*context_, *call, *raw_request, "ParseClipFile", request.get());
   absl::Status checked = owner.ok() ? CheckFileName(request->file_name()) : owner.status();
+  // The CSV frame time is checked here, not by the CSV reader, so that the refusal names the
+  // field (ignored for a .bvh, as the field says).
+  if (checked.ok() && request->csv_frame_time_seconds() != 0.0 &&
+      absl::EndsWithIgnoreCase(request->file_name(), ".csv")) {
+    checked = core::CheckFrameTime(request->csv_frame_time_seconds(), "csv_frame_time_seconds");
+  }
   if (!checked.ok()) {
     return AnswerUnary(*context_, call, *raw_request, checked, v1::ParseClipFileResponse(),
                        raw_response);

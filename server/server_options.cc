@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <limits>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -259,13 +260,26 @@ absl::Status ValidateServerOptions(const ServerOptions& o) {
   TEMPOKEY_RETURN_IF_ERROR(positive("max_stored_results", o.max_stored_results));
   TEMPOKEY_RETURN_IF_ERROR(positive("max_stored_result_bytes", o.max_stored_result_bytes));
   TEMPOKEY_RETURN_IF_ERROR(positive("max_concurrent_streams", o.max_concurrent_streams));
-  if (o.job_ttl.count() < 0) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("--job_ttl_seconds must be >= 0, got ", o.job_ttl.count()));
-  }
-  if (o.drain_grace.count() < 0) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("--drain_grace_seconds must be >= 0, got ", o.drain_grace.count()));
+  // Durations in seconds end up as clock times in nanoseconds (a TTL, a drain's end), and the
+  // connection age as gRPC's int of milliseconds: values past these bounds overflowed (an age of
+  // 30 days became negative, and the server answered no call).
+  auto seconds_within = [](std::string_view name, std::chrono::seconds value,
+                           std::int64_t most, std::string_view zero) -> absl::Status {
+    if (value.count() >= 0 && value.count() <= most) return absl::OkStatus();
+    return absl::InvalidArgumentError(absl::StrCat("--", core::AsAbsl(name), " must be in [0, ",
+                                                   most, "]", core::AsAbsl(zero), ", got ",
+                                                   value.count()));
+  };
+  TEMPOKEY_RETURN_IF_ERROR(seconds_within("job_ttl_seconds", o.job_ttl, kMaxDurationSeconds, ""));
+  TEMPOKEY_RETURN_IF_ERROR(
+      seconds_within("drain_grace_seconds", o.drain_grace, kMaxDurationSeconds, ""));
+  TEMPOKEY_RETURN_IF_ERROR(seconds_within("max_connection_age_seconds", o.max_connection_age,
+                                          kMaxConnectionAgeSeconds, " (0: never)"));
+  if (o.min_client_ping_interval.count() < 0 ||
+      o.min_client_ping_interval.count() > std::numeric_limits<int>::max()) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "min_client_ping_interval must be in [0, ", std::numeric_limits<int>::max(),
+        "] ms, got ", o.min_client_ping_interval.count()));
   }
   if (!(o.max_job_cost_seconds >= 0.0 && std::isfinite(o.max_job_cost_seconds))) {
     return absl::InvalidArgumentError(absl::StrCat(

@@ -71,8 +71,13 @@ struct ServerOptions {
   // new stage label (one per channel) or percent. At most one hour.
   std::chrono::milliseconds process_progress_interval{100};
   // Connections are closed (GOAWAY) after this long so clients rebalance across replicas;
-  // 0 disables it.
+  // 0 disables it. Calls in flight on a closed connection run to their end (no age grace).
   std::chrono::seconds max_connection_age{0};
+  // Clients may send keepalive pings this often (with or without calls in flight); more often
+  // and gRPC ends the connection after two such pings (GOAWAY "too_many_pings"). gRPC's default
+  // is 5 minutes, which ended a quiet WatchJob of a client keeping its connection alive through
+  // a NAT or load balancer every 30 s. At most INT_MAX milliseconds (gRPC's int).
+  std::chrono::milliseconds min_client_ping_interval{10'000};
   // Prometheus exposition ("127.0.0.1:9464"); empty disables metrics. Plain HTTP: beyond
   // loopback it needs allow_insecure_remote, whatever the gRPC port's TLS. With auth_tokens, a
   // scrape needs "Authorization: Bearer <token>" like every gRPC call.
@@ -137,8 +142,14 @@ bool IsLoopbackAddress(std::string_view address);
 // points at 127.0.0.1 pass (DNS rebinding).
 bool IsLoopbackLiteral(std::string_view host);
 
-// Checks values no server can run with (sizes <= 0, a TLS key without its certificate, a
-// non-loopback address without TLS unless allow_insecure_remote).
+// The largest job TTL and drain grace, in seconds: a year.
+inline constexpr std::int64_t kMaxDurationSeconds = 365 * 24 * 3600;
+// The largest connection age, in seconds: gRPC holds it as an int of milliseconds (24.8 days).
+inline constexpr std::int64_t kMaxConnectionAgeSeconds = 2'147'483;
+
+// Checks values no server can run with (sizes <= 0, durations outside the bounds above, a TLS
+// key without its certificate, a non-loopback address without TLS unless
+// allow_insecure_remote).
 // Errors: kInvalidArgument naming the option and value.
 absl::Status ValidateServerOptions(const ServerOptions& options);
 

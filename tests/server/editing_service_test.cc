@@ -153,6 +153,22 @@ TEST_F(EditingServiceTest, MalformedFileIsRefusedWithTheReadersLocatedMessage) {
   EXPECT_THAT(unnamed, GrpcStatusIs(grpc::INVALID_ARGUMENT, "file_name is empty"));
 }
 
+// The CSV frame time is the request's own field: its refusal names it (it said "frame time").
+TEST_F(EditingServiceTest, ABadCsvFrameTimeIsRefusedNamingItsField) {
+  grpc::ClientContext context;
+  SetDeadline(context);
+  v1::ParseClipFileRequest request;
+  request.set_file_name("walk.csv");
+  request.set_content("Hips.Xrotation\n1\n2\n");
+  request.set_csv_frame_time_seconds(-1);
+  v1::ParseClipFileResponse response;
+
+  const grpc::Status status = stub_->ParseClipFile(&context, request, &response);
+
+  EXPECT_THAT(status, GrpcStatusIs(grpc::INVALID_ARGUMENT,
+                                   "csv_frame_time_seconds must be in [1e-06, 3600] seconds, got -1"));
+}
+
 TEST_F(EditingServiceTest, GetClipReturnsTheStoredClipSampleForSample) {
   const std::string clip_id = ParseCmu();
   grpc::ClientContext context;
@@ -564,6 +580,48 @@ TEST_F(ExportStopTest, AnExportCancelledWhileQueuedIsNotFormatted) {
   EXPECT_EQ(after_bytes.substr(0, 9), "HIERARCHY");
   EXPECT_EQ(Exports("cancelled"), 1.0);
   EXPECT_EQ(Exports("succeeded"), 2.0);
+}
+
+// A parse whose deadline passes while it waits for the worker is not run when the worker comes
+// free: it used to parse and store the file for nobody (three 42 MB files in a probe, pushing
+// other clips out of the store).
+TEST_F(ExportStopTest, AParseWhoseDeadlinePassesWhileQueuedIsNotRunOrStored) {
+  std::unique_ptr<Call> running = Start(glb_);
+  ASSERT_TRUE(hook_->gate.WaitArrivals(1));  // the one worker is held
+  v1::ParseClipFileRequest parse;
+  parse.set_file_name("bow.bvh");
+  parse.set_content(ReadBytes(SharedBvh("bandai/dataset-1_bow_active_001.bvh")));
+  // Long enough for the server to have queued the call before it passes, however loaded.
+  constexpr auto kTimeout = std::chrono::seconds(3);
+  grpc::Status late;
+  std::thread caller([&] {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + kTimeout);
+    v1::ParseClipFileResponse ignored;
+    late = stub_->ParseClipFile(&context, parse, &ignored);
+  });
+  const auto wait_limit = std::chrono::steady_clock::now() + StartGate::kWaitLimit;
+  while (server_->pool().queue_depth() < 1 && std::chrono::steady_clock::now() < wait_limit) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  // The server received the call before it queued it, so its deadline is at most kTimeout after
+  // this moment; the worker is let go only once that has passed.
+  const auto queued_by = std::chrono::system_clock::now();
+  caller.join();
+  ASSERT_EQ(server_->pool().queue_depth(), 1);
+  std::this_thread::sleep_until(queued_by + kTimeout + std::chrono::milliseconds(50));
+  hook_->gate.Open();
+  const auto [running_bytes, running_status] = Finish(*running);
+  // One worker: this parse runs after the late one was taken off the queue.
+  grpc::ClientContext context;
+  SetDeadline(context);
+  v1::ParseClipFileResponse again;
+  const grpc::Status again_status = stub_->ParseClipFile(&context, parse, &again);
+
+  EXPECT_EQ(late.error_code(), grpc::DEADLINE_EXCEEDED);
+  TEMPOKEY_ASSERT_GRPC_OK(running_status);
+  TEMPOKEY_ASSERT_GRPC_OK(again_status);
+  EXPECT_FALSE(again.already_stored());  // the late call stored nothing
 }
 
 // A Process call whose client leaves while it is queued is logged and counted as cancelled when

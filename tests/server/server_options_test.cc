@@ -137,7 +137,17 @@ TEST(ValidateServerOptionsTest, RefusesWhatNoServerCanRunWith) {
       {[](ServerOptions& o) { o.max_stored_results = -5; },
        "--max_stored_results must be > 0, got -5"},
       {[](ServerOptions& o) { o.drain_grace = std::chrono::seconds(-1); },
-       "--drain_grace_seconds must be >= 0, got -1"},
+       "--drain_grace_seconds must be in [0, 31536000], got -1"},
+      {[](ServerOptions& o) { o.job_ttl = std::chrono::seconds(std::int64_t{1} << 40); },
+       "--job_ttl_seconds must be in [0, 31536000], got 1099511627776"},
+      // gRPC's int of milliseconds: 30 days overflowed into a negative age, and every call
+      // failed DEADLINE_EXCEEDED.
+      {[](ServerOptions& o) { o.max_connection_age = std::chrono::seconds(2'592'000); },
+       "--max_connection_age_seconds must be in [0, 2147483] (0: never), got 2592000"},
+      {[](ServerOptions& o) { o.max_connection_age = std::chrono::seconds(-1); },
+       "--max_connection_age_seconds must be in [0, 2147483] (0: never), got -1"},
+      {[](ServerOptions& o) { o.min_client_ping_interval = std::chrono::hours(600); },
+       "min_client_ping_interval must be in [0, 2147483647] ms, got 2160000000"},
       {[](ServerOptions& o) { o.tls_cert_file = "cert.pem"; },
        "--tls_cert and --tls_key must be given together"},
       {[](ServerOptions& o) { o.tls_client_ca_file = "ca.pem"; },
@@ -178,6 +188,11 @@ TEST(ValidateServerOptionsTest, RefusesWhatNoServerCanRunWith) {
     EXPECT_EQ(status.code(), absl::StatusCode::kInvalidArgument) << c.message;
     EXPECT_EQ(status.message(), c.message);
   }
+  ServerOptions longest;
+  longest.job_ttl = std::chrono::seconds(kMaxDurationSeconds);
+  longest.drain_grace = std::chrono::seconds(kMaxDurationSeconds);
+  longest.max_connection_age = std::chrono::seconds(kMaxConnectionAgeSeconds);
+  EXPECT_TRUE(ValidateServerOptions(longest).ok());
   ServerOptions remote;
   remote.address = "0.0.0.0:50051";
   remote.metrics_address = "0.0.0.0:9464";
