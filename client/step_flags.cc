@@ -36,13 +36,16 @@ absl::StatusOr<std::vector<core::TimeMapKey>> ParseTimeMap(std::string_view text
   return keys;
 }
 
-// The speed knots: core's parser; bad syntax is a usage error, anything else (e.g. a build
-// without retiming) a plain failure.
+// The speed knots: core's parser; bad syntax or too many knots is a usage error, anything else
+// (e.g. a build without retiming) a plain failure.
 absl::StatusOr<std::vector<core::SpeedKnot>> ParseSpeed(const std::string& text) {
   absl::StatusOr<std::vector<core::SpeedKnot>> knots = core::ParseSpeedKnots(text);
   if (knots.ok()) return knots;
   absl::Status status = core::Annotate(knots.status(), "--speed");
-  if (status.code() == absl::StatusCode::kInvalidArgument) return AsUsageError(status);
+  if (status.code() == absl::StatusCode::kInvalidArgument ||
+      status.code() == absl::StatusCode::kResourceExhausted) {
+    return AsUsageError(status);
+  }
   return status;
 }
 

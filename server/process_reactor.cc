@@ -143,6 +143,16 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
     }
   }
 
+  // Runs `start_read` (which starts the call's next read) unless the call has finished, under
+  // the lock finishing takes: no read starts after the read-idle timer's FinishNow() (gRPC runs
+  // the reactions a start causes after the current one returns, never inside it).
+  template <typename StartRead>
+  void ReadUnlessFinished(StartRead start_read) {
+    std::lock_guard lock(mu_);
+    if (finished_) return;
+    start_read();
+  }
+
   // As FinishNow(), also stopping a queued or running pipeline.
   void Abort(const absl::Status& status) {
     stop_.request_stop();
@@ -401,9 +411,11 @@ class ProcessReactor final : public ProcessReactorBase {
   }
 
   void Read() {
-    // Only the input phase waits on the client: after the start it may keep its side open.
-    if (read_idle_ != nullptr && !started_) read_idle_->Arm();
-    StartRead(&buffer_);
+    link_->ReadUnlessFinished([this] {
+      // Only the input phase waits on the client: after the start it may keep its side open.
+      if (read_idle_ != nullptr && !started_) read_idle_->Arm();
+      StartRead(&buffer_);
+    });
   }
 
   absl::Status Accept(const v1::ProcessRequest& request) {

@@ -1,6 +1,7 @@
 #include "server/reflection_service.h"
 
 #include <memory>
+#include <mutex>
 #include <set>
 #include <string>
 #include <utility>
@@ -9,7 +10,9 @@
 #include "google/protobuf/descriptor.h"
 #include "google/protobuf/descriptor.pb.h"
 #include "google/protobuf/dynamic_message.h"
+#include "grpc/health/v1/health.pb.h"
 #include "grpcpp/ext/proto_server_reflection_plugin.h"
+#include "server/reactors.h"
 #include "server/status_util.h"
 #include "server/wire_codec.h"
 
@@ -20,6 +23,12 @@ namespace tempokey::server {
 // generated pool; the plugin itself is never installed.
 extern void (*const keep_reflection_linked)();
 void (*const keep_reflection_linked)() = &grpc::reflection::InitProtoReflectionServerBuilderPlugin;
+// The same for grpc.health.v1 (proto/grpc/health/v1/health.proto, in tempokey_proto): without a
+// reference its object is left out of the binary, and the Health service that list_services
+// names could not be described ("symbol not found": grpcurl could not call it).
+extern const google::protobuf::Descriptor* (*const keep_health_linked)();
+const google::protobuf::Descriptor* (*const keep_health_linked)() =
+    &grpc::health::v1::HealthCheckRequest::descriptor;
 
 namespace {
 
@@ -90,32 +99,41 @@ class ReflectionReactor final : public grpc::ServerGenericBidiReactor {
       return;
     }
     if (service_->idle != nullptr) {
-      idle_ = service_->idle->NewTimer([call] { call->TryCancel(); });
+      // DEADLINE_EXCEEDED saying why, as every other stream ends when it idles (a cancel read
+      // "Cancelled on the server side").
+      idle_ = service_->idle->NewTimer([this] {
+        End(ToGrpcStatus(IdleError("ServerReflectionInfo", service_->idle->timeout())));
+      });
     }
     Read();
   }
 
   void OnReadDone(bool ok) override {
     if (idle_ != nullptr) idle_->Disarm();
+    if (Ended()) return;  // the idle timer ended the call; this read was its last
     if (!ok) {
       End(grpc::Status::OK);  // the client half-closed: every request was answered
       return;
     }
+    // ParseMessage(): its item count first, as every request's (reflection may be open to
+    // callers without a token).
     std::unique_ptr<Message> request(factory_.GetPrototype(request_type_)->New());
-    if (!request->ParseFromString(Flatten(in_))) {
-      End(ToGrpcStatus(absl::InvalidArgumentError(absl::StrCat(
-          "ServerReflectionInfo request: ", in_.Length(), " bytes are not a valid ",
-          request_type_->full_name(), " message"))));
+    if (absl::Status parsed = ParseMessage(in_, "ServerReflectionInfo request", request.get());
+        !parsed.ok()) {
+      End(ToGrpcStatus(parsed));
       return;
     }
     std::unique_ptr<Message> response = Answer(*request);
     SerializeMessage(*response, &out_);
+    std::lock_guard lock(end_mutex_);
+    if (ended_) return;  // the idle timer ended the call meanwhile: nothing may start after it
     if (idle_ != nullptr) idle_->Arm();
     StartWrite(&out_);
   }
 
   void OnWriteDone(bool ok) override {
     if (idle_ != nullptr) idle_->Disarm();
+    if (Ended()) return;
     if (!ok) {
       End(ToGrpcStatus(absl::CancelledError("the reflection stream broke")));
       return;
@@ -145,24 +163,28 @@ class ReflectionReactor final : public grpc::ServerGenericBidiReactor {
     return slot_.Claim(*service_, /*allow_while_draining=*/true);
   }
 
+  // Reads the next request, unless the call has ended: checked and started under the lock End()
+  // finishes under, so no read starts after the idle timer's Finish() (gRPC runs the reactions a
+  // start causes after the current one returns, never inside it).
   void Read() {
+    std::lock_guard lock(end_mutex_);
+    if (ended_) return;
     if (idle_ != nullptr) idle_->Arm();
     StartRead(&in_);
   }
 
-  void End(const grpc::Status& status) {
-    slot_.Release();
-    Finish(status);
+  bool Ended() {
+    std::lock_guard lock(end_mutex_);
+    return ended_;
   }
 
-  static std::string Flatten(const grpc::ByteBuffer& buffer) {
-    std::vector<grpc::Slice> slices;
-    std::string bytes;
-    if (!buffer.Dump(&slices).ok()) return bytes;
-    for (const grpc::Slice& s : slices) {
-      bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
-    }
-    return bytes;
+  // Finishes the call once, from a gRPC callback or the idle timer (another thread).
+  void End(const grpc::Status& status) {
+    std::lock_guard lock(end_mutex_);
+    if (ended_) return;
+    ended_ = true;
+    slot_.Release();
+    Finish(status);
   }
 
   std::unique_ptr<Message> Answer(const Message& request) {
@@ -226,6 +248,8 @@ class ReflectionReactor final : public grpc::ServerGenericBidiReactor {
   const Descriptor* response_type_ = nullptr;
   google::protobuf::DynamicMessageFactory factory_;
   std::shared_ptr<IdleReaper::Timer> idle_;
+  std::mutex end_mutex_;
+  bool ended_ = false;
   StreamSlot slot_;
   grpc::ByteBuffer in_;
   grpc::ByteBuffer out_;

@@ -7,7 +7,8 @@
 // The protocol messages are built by reflection from the descriptors libgrpc++_reflection
 // registers (reflection.proto is not compiled again here: two copies abort at start-up). Files
 // are described from the generated descriptor pool, each file with the files it imports, once per
-// stream.
+// stream; grpc.health.v1's file is compiled into tempokey_proto for this (gRPC's health service
+// registers no descriptors of its own).
 #ifndef TEMPOKEY_SERVER_REFLECTION_SERVICE_H_
 #define TEMPOKEY_SERVER_REFLECTION_SERVICE_H_
 

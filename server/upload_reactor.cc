@@ -87,7 +87,13 @@ class UploadReactor final : public grpc::ServerReadReactor<grpc::ByteBuffer> {
     return slot_.Claim(*service_);
   }
 
+  // Reads the next message, unless the call has finished: checked and started under the lock
+  // FinishOnce() finishes under, so no read starts after the idle timer's Finish() (the timer may
+  // fire between a read's completion and the next; gRPC runs the reactions a start causes after
+  // the current one returns, never inside it).
   void Read() {
+    std::lock_guard lock(mu_);
+    if (finished_) return;
     if (idle_ != nullptr) idle_->Arm();
     StartRead(&buffer_);
   }

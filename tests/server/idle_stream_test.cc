@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "gmock/gmock.h"
+#include "grpcpp/generic/generic_stub.h"
 #include "gtest/gtest.h"
 #include "proto/clip_convert.h"
 #include "tests/server/server_test_util.h"
@@ -78,6 +79,30 @@ TEST_F(IdleStreamProcessTest, ProcessThatStopsBeforeItsStartEndsWithDeadlineExce
   EXPECT_THAT(idle, GrpcStatusIs(grpc::StatusCode::DEADLINE_EXCEEDED,
                                  HasSubstr("Process: the client sent nothing for 1 s")));
   TEMPOKEY_ASSERT_GRPC_OK(UploadClip(*stub_, MakeClip(1, 100)).status);
+}
+
+// Reflection ended its idle streams with a cancel ("Cancelled on the server side"), unlike every
+// other stream.
+TEST_F(IdleStreamProcessTest, ReflectionStreamThatSendsNothingEndsWithDeadlineExceeded) {
+  grpc::GenericStub stub(Connect(server_->target()));
+  grpc::ClientContext context;
+  SetDeadline(context);
+  grpc::CompletionQueue queue;
+  std::unique_ptr<grpc::GenericClientAsyncReaderWriter> call = stub.PrepareCall(
+      &context, "/grpc.reflection.v1alpha.ServerReflection/ServerReflectionInfo", &queue);
+  int tag = 0;
+  void* got = nullptr;
+  bool ok = false;
+  call->StartCall(&tag);
+  ASSERT_TRUE(queue.Next(&got, &ok));
+  grpc::Status idle;
+  call->Finish(&idle, &tag);  // nothing is sent: completes once the server ends the call
+  ASSERT_TRUE(queue.Next(&got, &ok));
+
+  EXPECT_THAT(idle, GrpcStatusIs(grpc::StatusCode::DEADLINE_EXCEEDED,
+                                 "ServerReflectionInfo: the client sent nothing for 1 s "
+                                 "(--stream_idle_timeout_seconds); the call was ended"));
+  TEMPOKEY_ASSERT_GRPC_OK(UploadClip(*stub_, MakeClip(1, 100)).status);  // its slot is free
 }
 
 TEST(IdleStreamActiveTest, ActiveUploadsAreNotCutShort) {

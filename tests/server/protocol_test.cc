@@ -229,6 +229,26 @@ TEST_F(ProtocolTest, RequestsOverASizeLimitAreResourceExhausted) {
                            "100000 samples"));
 }
 
+// Reading a message costs about 66 bytes per message inside it: a header of 3 M empty markers
+// (6 MB) took 198 MB to read before any limit looked at it. A header holding more than a million
+// is refused from its tags, and the server goes on serving.
+TEST_F(ProtocolTest, AMessageHoldingOverAMillionItemsIsRefusedBeforeItIsRead) {
+  v1::UploadClipRequest header;
+  header.mutable_header()->set_frame_time_seconds(1.0 / 30);
+  header.mutable_header()->set_frame_count(2);
+  for (int m = 0; m < 1'000'000; ++m) header.mutable_header()->add_markers();
+
+  const UploadOutcome refused = UploadMessages(*stub_, {header});
+  const UploadOutcome after = UploadClip(*stub_, MakeClip(1, 40));
+
+  EXPECT_THAT(refused.status,
+              GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                           "upload message 1: more than 1000000 items inside one "
+                           "tempokey.v1.UploadClipRequest (joints, channels, markers, knots, "
+                           "names, unknown fields...), over the limit"));
+  TEMPOKEY_ASSERT_GRPC_OK(after.status);
+}
+
 TEST(ProcessProtocolTest, ProcessRefusesAMessageAfterItsStart) {
   // The pipeline is held at its start, so the extra message is read before any result exists.
   GatedServer gated;

@@ -17,13 +17,16 @@
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_split.h"
 #include "absl/strings/strip.h"
+#include "core/src/retime/retime_internal.h"
 #include "gmock/gmock.h"
 #include "grpcpp/generic/generic_stub.h"
 #include "gtest/gtest.h"
 #include "proto/clip_convert.h"
 #include "server/job_manager.h"
 #include "server/motion_service.h"
+#include "server/wire_codec.h"
 #include "tempokey/core/io/file_io.h"
+#include "tempokey/core/model/clip.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/process_util.h"
 #include "tests/testing/test_paths.h"
@@ -296,6 +299,21 @@ TEST(ReadmeTest, LimitsTableMatchesWhatTheServerRefuses) {
                      GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
                                   HasSubstr("834 frames x 6 channels, over the limit of 5000")));
        }},
+      // Refused at these values by the core tests (clip, BVH and retime limits) and
+      // wire_codec_test / protocol_test; here the values are the server's.
+      {"frames per clip",
+       [&](auto&, const std::string&, int at) { EXPECT_EQ(at, core::ClipLimits{}.max_frames); }},
+      {"channels per clip",
+       [&](auto&, const std::string&, int at) { EXPECT_EQ(at, core::ClipLimits{}.max_channels); }},
+      {"joints per clip",
+       [&](auto&, const std::string&, int at) { EXPECT_EQ(at, core::ClipLimits{}.max_joints); }},
+      {"speed knots, time-map keys, holds, pins per retime (each)",
+       [&](auto&, const std::string&, int at) {
+         EXPECT_EQ(at, static_cast<int>(core::retime_internal::kMaxWarpItems));
+       }},
+      {"items inside one request message (joints, channels, markers, knots, names, unknown "
+       "fields, ...), counted before it is read",
+       [&](auto&, const std::string&, int at) { EXPECT_EQ(at, server::kMaxMessageItems); }},
       {"jobs per `ListJobs` page",
        [&](auto&, const std::string&, int at) { EXPECT_EQ(at, server::JobManager::kMaxPageSize); }},
       {"bytes per `ListJobs` page",

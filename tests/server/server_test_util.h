@@ -127,38 +127,49 @@ inline std::shared_ptr<grpc::Channel> Connect(const std::string& target) {
   return grpc::CreateChannel(target, grpc::InsecureChannelCredentials());
 }
 
-// grpc.health.v1.Health/Check for `service` (messages encoded by hand: Debian ships no health
-// stubs): the ServingStatus number (1 SERVING, 2 NOT_SERVING) or the call's error.
-inline absl::StatusOr<int> CheckHealth(const std::shared_ptr<grpc::Channel>& channel,
-                                       const std::string& service) {
+// One unary call of `method` ("/package.Service/Method") with the request's bytes, through the
+// generic stub (no generated stubs needed): the response's bytes, or the call's error.
+inline absl::StatusOr<std::string> CallUnaryBytes(const std::shared_ptr<grpc::Channel>& channel,
+                                                  const std::string& method,
+                                                  const std::string& request) {
   grpc::GenericStub stub(channel);
-  std::string request;
-  if (!service.empty()) {  // HealthCheckRequest { string service = 1; } (short names only)
-    request.push_back('\x0a');
-    request.push_back(static_cast<char>(service.size()));
-    request += service;
-  }
   grpc::Slice slice(request);
   grpc::ByteBuffer in(&slice, 1);
   grpc::ByteBuffer out;
   grpc::ClientContext context;
   SetDeadline(context);
   std::promise<grpc::Status> done;
-  stub.UnaryCall(&context, "/grpc.health.v1.Health/Check", grpc::StubOptions(), &in, &out,
+  stub.UnaryCall(&context, method, grpc::StubOptions(), &in, &out,
                  [&done](grpc::Status status) { done.set_value(std::move(status)); });
   const grpc::Status status = done.get_future().get();
   if (!status.ok()) {
     return absl::Status(static_cast<absl::StatusCode>(status.error_code()), status.error_message());
   }
   std::vector<grpc::Slice> slices;
-  if (!out.Dump(&slices).ok()) return absl::InternalError("cannot read the health response");
+  if (!out.Dump(&slices).ok()) return absl::InternalError("cannot read the response");
   std::string bytes;
   for (const grpc::Slice& s : slices) bytes.append(reinterpret_cast<const char*>(s.begin()), s.size());
-  if (bytes.empty()) return 0;  // proto3 default: UNKNOWN
-  if (bytes.size() != 2 || bytes[0] != '\x08') {
+  return bytes;
+}
+
+// grpc.health.v1.Health/Check for `service` (messages encoded by hand: Debian ships no health
+// stubs): the ServingStatus number (1 SERVING, 2 NOT_SERVING) or the call's error.
+inline absl::StatusOr<int> CheckHealth(const std::shared_ptr<grpc::Channel>& channel,
+                                       const std::string& service) {
+  std::string request;
+  if (!service.empty()) {  // HealthCheckRequest { string service = 1; } (short names only)
+    request.push_back('\x0a');
+    request.push_back(static_cast<char>(service.size()));
+    request += service;
+  }
+  const absl::StatusOr<std::string> bytes =
+      CallUnaryBytes(channel, "/grpc.health.v1.Health/Check", request);
+  if (!bytes.ok()) return bytes.status();
+  if (bytes->empty()) return 0;  // proto3 default: UNKNOWN
+  if (bytes->size() != 2 || (*bytes)[0] != '\x08') {
     return absl::InternalError("unexpected health response bytes");
   }
-  return static_cast<int>(bytes[1]);
+  return static_cast<int>((*bytes)[1]);
 }
 
 // ---- calls --------------------------------------------------------------------------------------

@@ -463,8 +463,8 @@ absl::StatusOr<std::vector<SpeedKnot>> ParseSpeedKnots(std::string_view text) {
       return fail(absl::StrCat(AsAbsl(field), ": ", DescribeNumberError(error, token)));
     };
     if (index > retime_internal::kMaxWarpItems) {
-      return absl::InvalidArgumentError(absl::StrCat("too many speed knots: over the limit of ",
-                                                     retime_internal::kMaxWarpItems));
+      return OverLimitError(absl::StrCat("too many speed knots: over the limit of ",
+                                         retime_internal::kMaxWarpItems));
     }
     const std::size_t colon = part.find(':');
     if (part.empty() || colon == std::string_view::npos) {

@@ -86,8 +86,8 @@ absl::StatusOr<PaperSchedule> PlanPaperRegions(double dt, std::int64_t frame_cou
         "time");
   }
   if (warp.speed.size() > kMaxWarpItems) {
-    return absl::InvalidArgumentError(absl::StrCat("too many speed knots: ", warp.speed.size(),
-                                                   ", over the limit of ", kMaxWarpItems));
+    return OverLimitError(absl::StrCat("too many speed knots: ", warp.speed.size(),
+                                       ", over the limit of ", kMaxWarpItems));
   }
   std::vector<SpeedKnot> knots = warp.speed;
   if (warp.domain == WarpDomain::kIdentity) knots = {SpeedKnot{}};

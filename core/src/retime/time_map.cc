@@ -252,7 +252,7 @@ absl::Status TimeMapBuilder::CheckTimingAndOptions() {
                                                          {"pins", options_.pins.size()}};
   for (const auto& [what, count] : counts) {
     if (count > kMaxWarpItems) {
-      return absl::InvalidArgumentError(
+      return OverLimitError(
           absl::StrCat("too many ", what, ": ", count, ", over the limit of ", kMaxWarpItems));
     }
   }

@@ -61,6 +61,21 @@ TEST(RetimeInvalidTest, OutputOverTheFrameCapIsRefused) {
             "frames");
 }
 
+// Counts over a size limit are RESOURCE_EXHAUSTED, as every other limit of the API (frames,
+// channels, labels, joints); they were INVALID_ARGUMENT.
+TEST(RetimeInvalidTest, TooManySpeedKnotsAreOverALimit) {
+  std::vector<SpeedKnot> knots;
+  for (int k = 0; k <= 100000; ++k) knots.push_back(Knot(k * 1e-5, 1.0));
+
+  const absl::Status status = ValidateRetime(EightSecondClip(), OverSource(knots), {});
+  const absl::Status paper =
+      ValidateRetime(EightSecondClip(), OverSource(knots), {.method = RetimeMethod::kPaper});
+
+  EXPECT_EQ(status.code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_EQ(status.message(), "too many speed knots: 100001, over the limit of 100000");
+  EXPECT_EQ(paper.code(), absl::StatusCode::kResourceExhausted);
+}
+
 TEST(RetimeInvalidTest, InvalidClipIsRefusedNamingTheSample) {
   Clip clip = EightSecondClip();
   clip.channels[1].samples[3] = kNaN;

@@ -156,6 +156,8 @@ struct RetimeResult {
 //                     outside [min_speed, max_speed], times decreasing, NaN, both fits set, a fit
 //                     needing a speed outside the range, ...): the message names the knot; the
 //                     output would exceed `limits` (frames, or frames x channels).
+//   kResourceExhausted more than 100 000 speed knots, time-map keys, holds or pins (each), as
+//                     every request over a size limit (OverLimitError()).
 //   kCancelled        `stop` was requested; checked between channels (and joints) and inside
 //                     long channels every kResampleStopCheckTaps kernel taps (resample.h).
 // Progress: `progress` is called after each channel (or joint) with the fraction done.
@@ -197,7 +199,8 @@ absl::StatusOr<RetimeOutputShape> PlanRetimeOutput(double frame_time_seconds,
 // here (finite numbers, a unit): speed ranges and ordering are Retime()'s, whose messages name
 // the knot too.
 // Errors: kInvalidArgument naming the knot ("speed knot 3 '2x:0.5': time needs a unit, s or f",
-// "speed knot 1 '0s:1x': speed: malformed number \"1x\"").
+// "speed knot 1 '0s:1x': speed: malformed number \"1x\""); kResourceExhausted over 100 000
+// knots.
 // Thread-safe.
 absl::StatusOr<std::vector<SpeedKnot>> ParseSpeedKnots(std::string_view text);
 
