@@ -3,6 +3,7 @@
 // tree: tests/export_artifacts/131_01_posed.png).
 #include <filesystem>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "gmock/gmock.h"
@@ -32,6 +33,14 @@ class CliGltfTest : public ServerProcessTest {
       EXPECT_EQ(NumberOf(report, "errors"), 0) << report.Find("file")->text;
       EXPECT_EQ(NumberOf(report, "warnings"), 0) << report.Find("file")->text;
     }
+  }
+
+  // A batch's inputs in the test's folder: in/walk.bvh, a copy of `bvh`, and ops.json holding
+  // `operations` (its JSON text). Call under ASSERT_NO_FATAL_FAILURE.
+  void WriteBatchInputs(const std::string& bvh, std::string_view operations) {
+    std::filesystem::create_directories(Path("in"));
+    std::filesystem::copy_file(bvh, Path("in/walk.bvh"));
+    ASSERT_TRUE(core::WriteFileAtomically(Path("ops.json"), operations).ok());
   }
 };
 
@@ -78,19 +87,14 @@ TEST_F(CliGltfTest, ReducedCmuClipPlaysWithinTheBoundAndOpensInChromium) {
 
 TEST_F(CliGltfTest, RetimeAndBatchWriteValidGltf) {
   const std::string walk = SharedBvh("bandai/dataset-1_walk_active_001.bvh");
-  const std::string in = dir_ + "/in";
-  std::filesystem::create_directories(in);
-  std::filesystem::copy_file(walk, in + "/walk.bvh");
-  const std::string ops = Path("ops.json");
-  ASSERT_TRUE(core::WriteFileAtomically(
-                  ops, R"({"operations": [{"retime": {"speed": "0s:1,2s:0.5", "fps": 30}},)"
-                       R"( {"reduce": {"tolerance": 0.5}}]})")
-                  .ok());
+  ASSERT_NO_FATAL_FAILURE(
+      WriteBatchInputs(walk, R"({"operations": [{"retime": {"speed": "0s:1,2s:0.5", "fps": 30}},)"
+                             R"( {"reduce": {"tolerance": 0.5}}]})"));
 
   const ProcessResult retime = Tempokey({"retime", walk, "-o", Path("slow.glb"), "--speed",
                                          "0s:1,2s:0.5"});
-  const ProcessResult batch =
-      Tempokey({"batch", in, "-o", Path("out"), "--ops", ops, "--format", "gltf"});
+  const ProcessResult batch = Tempokey(
+      {"batch", Path("in"), "-o", Path("out"), "--ops", Path("ops.json"), "--format", "gltf"});
 
   ASSERT_EQ(retime.exit_code, 0) << retime.err;
   ASSERT_EQ(batch.exit_code, 0) << batch.err;
@@ -103,18 +107,13 @@ TEST_F(CliGltfTest, RetimeAndBatchWriteValidGltf) {
 TEST_F(CliGltfTest, JointToleranceReductionsWriteGlbWithinTheBound) {
   const std::string cmu = SharedBvh("cmu/131_01.bvh");
   const std::string walk = SharedBvh("bandai/dataset-1_walk_active_001.bvh");
-  const std::string in = dir_ + "/in";
-  std::filesystem::create_directories(in);
-  std::filesystem::copy_file(walk, in + "/walk.bvh");
-  const std::string ops = Path("ops.json");
-  ASSERT_TRUE(core::WriteFileAtomically(
-                  ops, R"({"operations": [{"reduce": {"joint-tolerance": "0.5%"}}]})")
-                  .ok());
+  ASSERT_NO_FATAL_FAILURE(
+      WriteBatchInputs(walk, R"({"operations": [{"reduce": {"joint-tolerance": "0.5%"}}]})"));
 
   const ProcessResult reduce =
       Tempokey({"reduce", cmu, "-o", Path("cmu.glb"), "--joint-tolerance", "0.5%"});
-  const ProcessResult batch =
-      Tempokey({"batch", in, "-o", Path("out"), "--ops", ops, "--format", "glb"});
+  const ProcessResult batch = Tempokey(
+      {"batch", Path("in"), "-o", Path("out"), "--ops", Path("ops.json"), "--format", "glb"});
 
   ASSERT_EQ(reduce.exit_code, 0) << reduce.err;
   ASSERT_EQ(batch.exit_code, 0) << batch.err;

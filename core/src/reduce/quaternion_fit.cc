@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "core/src/model/hermite_basis.h"
 #include "tempokey/core/model/numbers.h"
 #include "tempokey/core/model/progress.h"
 #include "tempokey/core/model/status.h"
@@ -133,12 +134,7 @@ Quat EvaluateQuaternionCurve(const QuaternionCurve& curve, double time_seconds) 
   const QuaternionKey& b = *next;
   const double td = b.time_seconds - a.time_seconds;
   const double s = (time_seconds - a.time_seconds) / td;
-  const double s2 = s * s;
-  const double s3 = s2 * s;
-  const double h00 = 2 * s3 - 3 * s2 + 1;
-  const double h10 = (s3 - 2 * s2 + s) * td;
-  const double h01 = -2 * s3 + 3 * s2;
-  const double h11 = (s3 - s2) * td;
+  const auto [h00, h10, h01, h11] = HermiteBasis(s, td);
   const Quat p{h00 * a.value.w + h10 * a.out_tangent.w + h01 * b.value.w + h11 * b.in_tangent.w,
                h00 * a.value.x + h10 * a.out_tangent.x + h01 * b.value.x + h11 * b.in_tangent.x,
                h00 * a.value.y + h10 * a.out_tangent.y + h01 * b.value.y + h11 * b.in_tangent.y,
