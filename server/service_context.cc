@@ -5,6 +5,7 @@
 
 #include <string_view>
 
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "tempokey/core/model/status.h"
 
@@ -30,8 +31,10 @@ namespace {
 
 // The owner id of `value` ("Bearer <token>"), or why it is refused.
 absl::StatusOr<std::string> MatchBearer(const ServiceContext& service, std::string_view value) {
+  // The scheme's name is case-insensitive (RFC 9110, 11.1): "bearer x" is "Bearer x".
   constexpr std::string_view kBearer = "Bearer ";
-  if (value.size() <= kBearer.size() || value.substr(0, kBearer.size()) != kBearer) {
+  if (value.size() <= kBearer.size() ||
+      !absl::EqualsIgnoreCase(core::AsAbsl(value.substr(0, kBearer.size())), "bearer ")) {
     return absl::UnauthenticatedError("authorization is not \"Bearer <token>\"");
   }
   const std::string_view token = value.substr(kBearer.size());

@@ -1,6 +1,7 @@
 #include "server/http/http_front_end.h"
 
 #include <civetweb.h>
+#include <sys/socket.h>
 
 #include <algorithm>
 #include <cctype>
@@ -9,8 +10,10 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "grpcpp/support/channel_arguments.h"
 #include "server/http/connection_socket.h"
@@ -102,14 +105,19 @@ void SendText(mg_connection* connection, int code, std::string_view content_type
 }
 
 // An error as the API answers it: the HTTP status of its code and {"code", "status", "message"}.
+// `http_status` replaces the code's status where HTTP has a closer one (413 for a body over the
+// size limit, 505).
 int SendApiError(mg_connection* connection, const absl::Status& status,
-                 std::optional<std::chrono::milliseconds> retry_after = std::nullopt) {
+                 std::optional<std::chrono::milliseconds> retry_after = std::nullopt,
+                 int http_status = 0) {
   std::string extra;
   if (retry_after) {
     // Retry-After is in whole seconds; round up so a client never comes back too early.
     absl::StrAppend(&extra, "Retry-After: ", (retry_after->count() + 999) / 1000, "\r\n");
   }
-  const int code = HttpStatusOf(status.code());
+  const int code = http_status != 0 ? http_status : HttpStatusOf(status.code());
+  // A 401 names the scheme it wants (RFC 9110, 11.6.1).
+  if (code == 401) extra += "WWW-Authenticate: Bearer\r\n";
   SendText(connection, code, "application/json", StatusToJson(status, retry_after) + "\n", extra);
   return code;
 }
@@ -167,6 +175,8 @@ class HttpCallStream final : public JsonBridge::Stream {
         buffer_.erase(0, newline + 1);
       }
       if (line.find_first_not_of(" \t\r") == std::string::npos) continue;  // blank line
+      // ReadUntil() checks what it reads; a line that came with the one before is checked here.
+      if (static_cast<std::int64_t>(line.size()) > max_bytes_) return OverSizeError();
       return std::optional<std::string>(std::move(line));
     }
   }
@@ -201,7 +211,10 @@ class HttpCallStream final : public JsonBridge::Stream {
       mg_send_chunk(connection_, "", 0);
       return 200;
     }
-    if (!outcome.status.ok()) return SendApiError(connection_, outcome.status, outcome.retry_after);
+    if (!outcome.status.ok()) {
+      return SendApiError(connection_, outcome.status, outcome.retry_after,
+                          body_too_large_ ? 413 : 0);
+    }
     if (method_.server_streaming()) {  // a stream that ended with no message: an empty body
       SendText(connection_, 200, "application/x-ndjson", "");
       return 200;
@@ -225,12 +238,15 @@ class HttpCallStream final : public JsonBridge::Stream {
       }
       buffer_.append(block_.data(), static_cast<std::size_t>(got));
       const std::size_t pending = line ? std::min(buffer_.size(), buffer_.find('\n')) : buffer_.size();
-      if (static_cast<std::int64_t>(pending) > max_bytes_) {
-        return absl::ResourceExhaustedError(absl::StrCat(
-            "a request message is over the limit of ", max_bytes_, " bytes of JSON"));
-      }
+      if (static_cast<std::int64_t>(pending) > max_bytes_) return OverSizeError();
     }
     return absl::OkStatus();
+  }
+
+  absl::Status OverSizeError() {
+    body_too_large_ = true;
+    return absl::ResourceExhaustedError(
+        absl::StrCat("a request message is over the limit of ", max_bytes_, " bytes of JSON"));
   }
 
   mg_connection* const connection_;
@@ -245,12 +261,51 @@ class HttpCallStream final : public JsonBridge::Stream {
   bool done_reading_ = false;
   bool sent_single_ = false;
   bool streaming_started_ = false;
+  // A request message over the size limit: 413 Content Too Large (RFC 9110, 15.5.14), not the
+  // 429 of RESOURCE_EXHAUSTED, which clients take as "retry later".
+  bool body_too_large_ = false;
   std::string single_response_;
 };
+
+// Whether the request asks for "100 Continue" before it sends its body (RFC 9110, 10.1.1).
+bool ExpectsContinue(const mg_connection* connection) {
+  return absl::EqualsIgnoreCase(core::AsAbsl(HeaderOf(connection, "Expect")), "100-continue");
+}
+
+// Framing civetweb accepts but a proxy in front may read otherwise, so that a body read by one
+// length here and another there is a second request (RFC 9112: 6.3, 3.2, RFC 6585: 5): two
+// Content-Lengths (civetweb takes the first), Content-Length with Transfer-Encoding, no Host or
+// two, and more header fields than civetweb keeps (it drops the rest, an Origin among them).
+// The status and reason to refuse the request with, or 0.
+std::pair<int, std::string_view> FramingRefusal(const mg_request_info& info) {
+  constexpr int kCivetwebMaxHeaders = 64;  // MG_MAX_HEADERS: the 65th and later are dropped
+  if (info.num_headers >= kCivetwebMaxHeaders) {
+    return {431, "a request may carry at most 63 header fields"};
+  }
+  int lengths = 0;
+  int encodings = 0;
+  int hosts = 0;
+  for (int i = 0; i < info.num_headers; ++i) {
+    const absl::string_view name = info.http_headers[i].name;
+    if (absl::EqualsIgnoreCase(name, "Content-Length")) ++lengths;
+    if (absl::EqualsIgnoreCase(name, "Transfer-Encoding")) ++encodings;
+    if (absl::EqualsIgnoreCase(name, "Host")) ++hosts;
+  }
+  if (lengths > 1) return {400, "a request carries one Content-Length"};
+  if (lengths > 0 && encodings > 0) {
+    return {400, "a request carries Content-Length or Transfer-Encoding, not both"};
+  }
+  const bool http11 = std::string_view(info.http_version) == "1.1";
+  if (hosts > 1 || (hosts == 0 && http11)) return {400, "an HTTP/1.1 request carries one Host"};
+  return {0, {}};
+}
 
 // Reads what is left of a refused call's body and returns `code`: civetweb would read it after
 // the handler returns, out of the SlowBodyGuard's watch; read here, it is read under it.
 int DiscardBody(mg_connection* connection, int code) {
+  // A client that waits for "100 Continue" sends no body after a final answer: nothing to read
+  // (civetweb closes the connection, whose body was not read).
+  if (ExpectsContinue(connection)) return code;
   std::vector<char> block(kReadBlock);  // on the heap: civetweb's threads have small stacks
   while (mg_read(connection, block.data(), block.size()) > 0) {
   }
@@ -321,6 +376,12 @@ absl::StatusOr<std::unique_ptr<HttpFrontEnd>> HttpFrontEnd::Start(const HttpOpti
                             "enable_keep_alive",     "yes",
                             "max_request_size",      "16384",
                             "static_file_cache_control", "no-cache",
+                            // civetweb's defaults ("*") answered every CORS preflight itself,
+                            // from any origin, and put "Access-Control-Allow-Origin: *" on
+                            // static files and errors: no cross-origin access at all.
+                            "access_control_allow_origin",  "",
+                            "access_control_allow_methods", "",
+                            "access_control_allow_headers", "",
                             nullptr};
   mg_callbacks callbacks;
   std::memset(&callbacks, 0, sizeof callbacks);
@@ -369,6 +430,12 @@ std::string HttpFrontEnd::url() const {
 
 int HttpFrontEnd::HandleRequest(mg_connection* connection) {
   const mg_request_info* info = mg_get_request_info(connection);
+  if (const auto [status, reason] = FramingRefusal(*info); status != 0) {
+    // civetweb's error closes the connection: nothing after this head is read as a request.
+    mg_send_http_error(connection, status, "%.*s", static_cast<int>(reason.size()),
+                       reason.data());
+    return status;
+  }
   const std::string_view verb = info->request_method;
   const std::string_view path = info->local_uri != nullptr ? info->local_uri : "";
   if (StartsWith(path, kApiPrefix)) {
@@ -396,6 +463,32 @@ int HttpFrontEnd::HandleRequest(mg_connection* connection) {
             HeaderOf(connection, "Host"), loopback_only_ && server_.options().auth_tokens.empty());
         !allowed.ok()) {
       return DiscardBody(connection, SendApiError(connection, allowed));
+    }
+    if (method->server_streaming() && std::string_view(info->http_version) == "1.0") {
+      // Its answer is chunked NDJSON of unknown length, which HTTP/1.0 cannot carry (RFC 9112,
+      // 6.1: no Transfer-Encoding to a 1.0 request).
+      return DiscardBody(connection, SendApiError(connection,
+                                                  absl::UnimplementedError(absl::StrCat(
+                                                      method->name(), " streams its answer: "
+                                                      "call it with HTTP/1.1")),
+                                                  std::nullopt, 505));
+    }
+    if (const std::string_view expect = HeaderOf(connection, "Expect"); !expect.empty()) {
+      if (!ExpectsContinue(connection)) {
+        mg_send_http_error(connection, 417, "only \"Expect: 100-continue\" is understood");
+        return 417;
+      }
+      // civetweb answers it only for its own file uploads: a client waited a second for it.
+      // Never to HTTP/1.0, which has no interim answers (RFC 9110, 15.2). Written on the socket
+      // itself: through civetweb, any write counts as the answer's start, and the answer's own
+      // head would no longer be sent.
+      if (std::string_view(info->http_version) == "1.1") {
+        constexpr std::string_view kContinue = "HTTP/1.1 100 Continue\r\n\r\n";
+        if (const int socket = FindConnectionSocket(port_, info->remote_addr, info->remote_port);
+            socket >= 0) {
+          ::send(socket, kContinue.data(), kContinue.size(), MSG_NOSIGNAL);
+        }
+      }
     }
     HttpCallStream stream(connection, *method, bridge_.max_message_bytes(), body_watch, port_);
     const JsonBridge::Outcome outcome =

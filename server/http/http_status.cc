@@ -1,35 +1,13 @@
 #include "server/http/http_status.h"
 
 #include <cctype>
-#include <cstdio>
 
 #include "absl/strings/str_cat.h"
 #include "server/server_options.h"
+#include "tempokey/core/io/json.h"
 
 namespace tempokey::server::http {
 namespace {
-
-void AppendJsonString(std::string& out, std::string_view text) {
-  out += '"';
-  for (const char c : text) {
-    switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\n': out += "\\n"; break;
-      case '\r': out += "\\r"; break;
-      case '\t': out += "\\t"; break;
-      default:
-        if (static_cast<unsigned char>(c) < 0x20) {
-          char escaped[8];
-          std::snprintf(escaped, sizeof escaped, "\\u%04x", static_cast<unsigned>(c));
-          out += escaped;
-        } else {
-          out += c;
-        }
-    }
-  }
-  out += '"';
-}
 
 std::string_view CodeName(absl::StatusCode code) {
   switch (code) {
@@ -88,7 +66,9 @@ std::string StatusToJson(const absl::Status& status,
                          std::optional<std::chrono::milliseconds> retry_after) {
   std::string out = absl::StrCat("{\"code\":", static_cast<int>(status.code()), ",\"status\":\"",
                                  std::string(CodeName(status.code())), "\",\"message\":");
-  AppendJsonString(out, std::string_view(status.message().data(), status.message().size()));
+  // core's writer: a byte that does not start valid UTF-8 (a client's, quoted in a message)
+  // becomes U+FFFD, since JSON is UTF-8 (RFC 8259, 8.1).
+  core::AppendJsonString(out, std::string_view(status.message().data(), status.message().size()));
   if (retry_after) absl::StrAppend(&out, ",\"retryAfterMs\":", retry_after->count());
   out += '}';
   return out;

@@ -196,5 +196,21 @@ TEST_F(AccessTest, CallsWithoutAnAcceptedTokenAreUnauthenticated) {
                                   "the bearer token is not accepted"));
 }
 
+// An authentication scheme's name is case-insensitive (RFC 9110, 11.1): "bearer" was refused.
+TEST_F(AccessTest, TheSchemeNameIsCaseInsensitive) {
+  grpc::ClientContext lower;
+  SetDeadline(lower);
+  lower.AddMetadata("authorization", "bearer " + std::string(kAlice));
+  grpc::ClientContext other;
+  SetDeadline(other);
+  other.AddMetadata("authorization", "Basic " + std::string(kAlice));
+  v1::ServerInfo info;
+
+  TEMPOKEY_ASSERT_GRPC_OK(stub_->GetServerInfo(&lower, v1::GetServerInfoRequest(), &info));
+  EXPECT_THAT(stub_->GetServerInfo(&other, v1::GetServerInfoRequest(), &info),
+              GrpcStatusIs(grpc::StatusCode::UNAUTHENTICATED,
+                           "authorization is not \"Bearer <token>\""));
+}
+
 }  // namespace
 }  // namespace tempokey::testing

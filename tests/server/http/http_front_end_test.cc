@@ -23,6 +23,7 @@
 #include "server/http/http_status.h"
 #include "server/http/json_bridge.h"
 #include "server/server.h"
+#include "tempokey/core/io/json.h"
 #include "tempokey/v1/motion_service.pb.h"
 #include "tests/server/http_util.h"
 #include "tests/server/server_test_util.h"
@@ -101,6 +102,12 @@ TEST(HttpStatusTest, ErrorJsonEscapesTheMessageAndCarriesTheRetryHint) {
             R"({"code":3,"status":"INVALID_ARGUMENT","message":"walk.bvh:1:2: got \"x\"\t\\\n"})");
   EXPECT_EQ(StatusToJson(absl::ResourceExhaustedError("full"), std::chrono::milliseconds(250)),
             R"({"code":8,"status":"RESOURCE_EXHAUSTED","message":"full","retryAfterMs":250})");
+  // A client's bytes quoted in a message ({"text":"\xff\xfe"}, a method name "Get%FFInfo"):
+  // JSON is UTF-8, so they are U+FFFD (the body was not JSON a parser would read).
+  const std::string quoted = StatusToJson(absl::InvalidArgumentError("got \"\xff\xfe\" é"));
+  EXPECT_EQ(quoted, "{\"code\":3,\"status\":\"INVALID_ARGUMENT\",\"message\":\"got "
+                    "\\\"\xef\xbf\xbd\xef\xbf\xbd\\\" é\"}");
+  EXPECT_TRUE(core::IsUtf8(quoted));
 }
 
 TEST(HttpStatusTest, BrowserRulesRefuseOtherOriginsRebindingHostsAndFormBodies) {
@@ -237,6 +244,157 @@ TEST(HttpFrontEndTest, ARequestBodyTrickledInIsCutOffAndThePageStillServed) {
 
   EXPECT_EQ((*front_end)->cut_off_bodies(), 2);
   EXPECT_THAT(refusal, ::testing::StartsWith("HTTP/1.1 4"));
+}
+
+// A front end on a fresh server whose messages are at most `max_message_bytes`, with `tokens`.
+struct FrontEnd {
+  std::unique_ptr<Server> server;
+  std::unique_ptr<HttpFrontEnd> http;
+};
+FrontEnd StartFrontEnd(std::int64_t max_message_bytes = 64 << 20,
+                       std::vector<std::string> tokens = {}) {
+  ServerOptions server_options = testing::TestServerOptions();
+  server_options.max_message_bytes = max_message_bytes;
+  server_options.auth_tokens = std::move(tokens);
+  FrontEnd front_end{testing::StartServer(server_options), nullptr};
+  if (front_end.server == nullptr) return front_end;
+  HttpOptions options = Options("127.0.0.1:0");
+  options.web_root = testing::MakeTempDir();
+  std::ofstream(options.web_root + "/index.html") << "<!doctype html>";
+  absl::StatusOr<std::unique_ptr<HttpFrontEnd>> http = HttpFrontEnd::Start(options, *front_end.server);
+  EXPECT_TRUE(http.ok()) << http.status();
+  if (http.ok()) front_end.http = *std::move(http);
+  return front_end;
+}
+
+// Sends `bytes` on a new connection and reads everything until the server closes it.
+std::string Exchange(int port, const std::string& bytes) {
+  const int fd = testing::ConnectLoopback(port);
+  if (fd < 0) return "no connection";
+  ::send(fd, bytes.data(), bytes.size(), MSG_NOSIGNAL);
+  std::string answer = testing::ReadToEnd(fd);
+  ::close(fd);
+  return answer;
+}
+
+// How many HTTP responses `answer` holds.
+int Responses(const std::string& answer) {
+  int count = 0;
+  for (std::size_t at = answer.find("HTTP/1."); at != std::string::npos;
+       at = answer.find("HTTP/1.", at + 1)) {
+    ++count;
+  }
+  return count;
+}
+
+// A probe with an HTTP client of its own found civetweb reading a body as a second request when
+// the framing was ambiguous (request smuggling, behind any proxy that reads it otherwise), and
+// dropping header fields past the 64th, an Origin among them. Each such request is refused and
+// its connection closed: the body smuggled in is never answered.
+TEST(HttpFrontEndTest, AmbiguousFramingIsRefusedAndNothingSmuggledIsAnswered) {
+  FrontEnd front_end = StartFrontEnd();
+  ASSERT_NE(front_end.http, nullptr);
+  const int port = front_end.http->port();
+  const std::string smuggled =
+      "POST /tempokey.v1.MotionService/ParseSpeedKnots HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+      "Content-Type: application/json\r\nContent-Length: 2\r\n\r\n{}";
+  const std::string api = "POST /tempokey.v1.MotionService/GetServerInfo HTTP/1.1\r\n";
+  std::string many = api + "Host: 127.0.0.1\r\nContent-Type: application/json\r\n";
+  for (int i = 0; i < 70; ++i) many += absl::StrCat("X-Filler-", i, ": x\r\n");
+  many += "Origin: http://evil.example\r\nContent-Length: 0\r\n\r\n";
+
+  const std::string two_lengths = Exchange(
+      port, absl::StrCat(api, "Host: 127.0.0.1\r\nContent-Type: application/json\r\n"
+                              "Content-Length: 2\r\nContent-Length: ", 2 + smuggled.size(),
+                         "\r\n\r\n{}", smuggled));
+  const std::string length_and_chunks = Exchange(
+      port, absl::StrCat(api, "Host: 127.0.0.1\r\nContent-Type: application/json\r\n"
+                              "Content-Length: 2\r\nTransfer-Encoding: chunked\r\n\r\n{}",
+                         smuggled));
+  const std::string too_many = Exchange(port, many);
+  const std::string no_host =
+      Exchange(port, "GET / HTTP/1.1\r\nConnection: close\r\n\r\n");
+  const std::string two_hosts = Exchange(
+      port, "GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nHost: evil.example\r\nConnection: close\r\n\r\n");
+
+  EXPECT_THAT(two_lengths, ::testing::StartsWith("HTTP/1.1 400"));
+  EXPECT_THAT(length_and_chunks, ::testing::StartsWith("HTTP/1.1 400"));
+  EXPECT_THAT(too_many, ::testing::StartsWith("HTTP/1.1 431"));
+  EXPECT_THAT(no_host, ::testing::StartsWith("HTTP/1.1 400"));
+  EXPECT_THAT(two_hosts, ::testing::StartsWith("HTTP/1.1 400"));
+  for (const std::string* answer : {&two_lengths, &length_and_chunks, &too_many}) {
+    EXPECT_EQ(Responses(*answer), 1) << *answer;  // the smuggled request got no answer
+  }
+}
+
+// civetweb answered CORS preflights itself for any origin ("Access-Control-Allow-Origin: *") and
+// put that header on static files; it answered "Expect: 100-continue" only for its own uploads,
+// so a client waited a second before sending each body; an HTTP/1.0 client got chunk sizes in
+// its NDJSON; a line over the size limit passed when it came with the line before; a body over
+// it got 429 "Too Many Requests"; a 401 named no scheme.
+TEST(HttpFrontEndTest, CorsExpectHttp10SizeAndAuthAnswersFollowHttp) {
+  FrontEnd front_end = StartFrontEnd(4096);
+  ASSERT_NE(front_end.http, nullptr);
+  const int port = front_end.http->port();
+  const std::string preflight = Exchange(
+      port, "OPTIONS /tempokey.v1.MotionService/GetServerInfo HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+            "Origin: http://evil.example\r\nAccess-Control-Request-Method: POST\r\n"
+            "Connection: close\r\n\r\n");
+  const std::string page =
+      Exchange(port, "GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nConnection: close\r\n\r\n");
+
+  const int waiting = testing::ConnectLoopback(port);
+  ASSERT_GE(waiting, 0);
+  const std::string head =
+      "POST /tempokey.v1.MotionService/GetServerInfo HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+      "Content-Type: application/json\r\nContent-Length: 2\r\nExpect: 100-continue\r\n"
+      "Connection: close\r\n\r\n";
+  ::send(waiting, head.data(), head.size(), MSG_NOSIGNAL);
+  std::string interim;
+  char byte = 0;
+  while (interim.find("\r\n\r\n") == std::string::npos && ::recv(waiting, &byte, 1, 0) == 1) {
+    interim += byte;
+  }
+  ::send(waiting, "{}", 2, MSG_NOSIGNAL);  // the body, once continued
+  const std::string continued = testing::ReadToEnd(waiting);
+  ::close(waiting);
+
+  const std::string old_client = Exchange(
+      port, "POST /tempokey.v1.MotionService/WatchJob HTTP/1.0\r\nHost: 127.0.0.1\r\n"
+            "Content-Type: application/json\r\nContent-Length: 2\r\n\r\n{}");
+  const std::string line = "{\"header\":{\"name\":\"" + std::string(6000, 'a') + "\"}}";
+  const std::string lines = "{}\n" + line + "\n";
+  const std::string second_line_too_long = Exchange(
+      port, absl::StrCat("POST /tempokey.v1.MotionService/UploadClip HTTP/1.1\r\n"
+                         "Host: 127.0.0.1\r\nContent-Type: application/x-ndjson\r\n"
+                         "Content-Length: ", lines.size(), "\r\nConnection: close\r\n\r\n",
+                         lines));
+  const std::string body = "{\"text\":\"" + std::string(6000, ' ') + "\"}";
+  const std::string too_long = Exchange(
+      port, absl::StrCat("POST /tempokey.v1.MotionService/ParseSpeedKnots HTTP/1.1\r\n"
+                         "Host: 127.0.0.1\r\nContent-Type: application/json\r\n"
+                         "Content-Length: ", body.size(), "\r\nConnection: close\r\n\r\n", body));
+  FrontEnd guarded = StartFrontEnd(64 << 20, {"s3cret"});
+  ASSERT_NE(guarded.http, nullptr);
+  const std::string unauthenticated = Exchange(
+      guarded.http->port(),
+      "POST /tempokey.v1.MotionService/GetServerInfo HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+      "Content-Type: application/json\r\nContent-Length: 2\r\nConnection: close\r\n\r\n{}");
+
+  EXPECT_THAT(preflight, ::testing::StartsWith("HTTP/1.1 405"));
+  EXPECT_THAT(page, ::testing::StartsWith("HTTP/1.1 200"));
+  for (const std::string* answer : {&preflight, &page}) {
+    EXPECT_THAT(*answer, ::testing::Not(HasSubstr("Access-Control-Allow")));
+  }
+  EXPECT_EQ(interim, "HTTP/1.1 100 Continue\r\n\r\n");
+  EXPECT_THAT(continued, ::testing::StartsWith("HTTP/1.1 200"));
+  EXPECT_THAT(old_client, ::testing::StartsWith("HTTP/1.0 505"));
+  EXPECT_THAT(old_client, ::testing::Not(HasSubstr("chunked")));
+  EXPECT_THAT(second_line_too_long, ::testing::StartsWith("HTTP/1.1 413"));
+  EXPECT_THAT(second_line_too_long, HasSubstr("over the limit of 4096 bytes of JSON"));
+  EXPECT_THAT(too_long, ::testing::StartsWith("HTTP/1.1 413"));
+  EXPECT_THAT(unauthenticated, ::testing::StartsWith("HTTP/1.1 401"));
+  EXPECT_THAT(unauthenticated, HasSubstr("WWW-Authenticate: Bearer\r\n"));
 }
 
 // A Process call over HTTP: the clip and its start as NDJSON lines, one message each.
