@@ -3,9 +3,10 @@
 #include <signal.h>
 #include <unistd.h>
 
-#include <cstdlib>
-
 #include <algorithm>
+#include <cerrno>
+#include <cstdlib>
+#include <cstring>
 #include <iostream>
 #include <vector>
 
@@ -222,8 +223,16 @@ absl::Status Dispatch(std::span<const std::string> args, const CliIo& io) {
 }  // namespace
 
 int RunCli(std::span<const std::string> args, const CliIo& io) {
-  const absl::Status status = Dispatch(args, io);
+  absl::Status status = Dispatch(args, io);
+  errno = 0;
   io.out.flush();
+  // A result nobody got is a failure: with stdout on a full disk (or /dev/full) every command
+  // exited 0, a batch leaving an empty summary and an upload its id nowhere.
+  if (!io.out && status.ok()) {
+    status = absl::DataLossError(absl::StrCat(
+        "cannot write the result to standard output",
+        errno != 0 ? absl::StrCat(": ", std::strerror(errno)) : std::string()));
+  }
   if (!status.ok()) io.err << ErrorLine(status) << "\n";
   io.err.flush();
   return ExitCodeFor(status);

@@ -6,10 +6,12 @@
 #include <string>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "client/cli_errors.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tempokey/core/io/file_io.h"
+#include "tests/testing/process_util.h"
 #include "tests/testing/test_paths.h"
 
 namespace tempokey::client {
@@ -52,6 +54,19 @@ TEST(CliInfoTest, SummarizesTheCmuClip) {
             "joints:          31\n"
             "channels:        96 (3 position, 93 rotation)\n"
             "rotation orders: ZYX (19 joints), ZXY (12 joints)\n");
+}
+
+// A result nobody got is a failure: with stdout on a full disk every command exited 0 (a batch
+// leaving an empty summary, an upload its id nowhere). /dev/full fails every write with ENOSPC.
+TEST(CliInfoTest, AResultThatCannotBeWrittenToStdoutIsAFailure) {
+  const testing::ProcessResult run = testing::RunProcess(
+      {"/bin/sh", "-c",
+       absl::StrCat("'", testing::TempokeyBinary(), "' info '", SharedBvh("cmu/131_01.bvh"),
+                    "' > /dev/full")},
+      MakeTempDir());
+
+  EXPECT_EQ(run.exit_code, 1);
+  EXPECT_EQ(run.err, "error: cannot write the result to standard output: No space left on device\n");
 }
 
 TEST(CliInfoTest, SummarizesABandaiClip) {

@@ -122,6 +122,24 @@ std::string_view KindOfFile(mode_t mode) {
   return "not a regular file";
 }
 
+// The file `path` names once its symbolic links are followed (at most kMaxLinks of them, as
+// the kernel's ELOOP): a write through a link reaches its target, as a shell's `>` does, and the
+// link stays. A link whose target does not exist yet names that target. Not a link: `path`.
+absl::StatusOr<std::string> FollowLinks(std::string path) {
+  constexpr int kMaxLinks = 40;
+  for (int hop = 0; hop < kMaxLinks; ++hop) {
+    struct stat info {};
+    if (::lstat(path.c_str(), &info) != 0 || !S_ISLNK(info.st_mode)) return path;
+    std::string target(static_cast<std::size_t>(info.st_size) + 1, '\0');
+    const ssize_t length = ::readlink(path.c_str(), target.data(), target.size());
+    if (length < 0) return ErrnoError(errno, path, "cannot read the symbolic link: ");
+    target.resize(static_cast<std::size_t>(length));
+    if (target.empty()) return ErrnoError(ENOENT, path, "cannot read the symbolic link: ");
+    path = target.front() == '/' ? target : absl::StrCat(DirectoryOf(path), "/", target);
+  }
+  return ErrnoError(ELOOP, path, "cannot write: ");
+}
+
 // WriteFileAtomically() into a FIFO or character device: opened without waiting for a reader
 // (a FIFO nobody reads is an error, not a hang), then written in full.
 absl::Status WriteToStream(const std::string& path, std::string_view contents) {
@@ -318,7 +336,8 @@ bool IsAtomicWriteTemporary(std::string_view file_name, std::string_view target_
   });
 }
 
-absl::Status WriteFileAtomically(const std::string& path, std::string_view contents) {
+absl::Status WriteFileAtomically(const std::string& requested, std::string_view contents) {
+  TEMPOKEY_ASSIGN_OR_RETURN(const std::string path, FollowLinks(requested));
   const std::string directory = DirectoryOf(path);
   // What is not a regular file (or a link to one) is not renamed over: that would put a plain
   // file in its place, and its reader (or the device) would never see the bytes. A FIFO or a

@@ -248,6 +248,40 @@ TEST(WriteFileAtomicallyTest, ReplacesExistingFileAndKeepsItsPermissions) {
   EXPECT_EQ(DirectoryEntries(directory), std::vector<std::string>{"out.bvh"});
 }
 
+// A link is written through, as a shell's `>` does: it stays a link and its target gets the
+// bytes (it used to become a plain file, the target left as it was: `-o link-to-input.bvh
+// --overwrite` left the input unchanged). Relative, chained and dangling links; a loop is an
+// error naming it, and writes nothing.
+TEST(WriteFileAtomicallyTest, WritesThroughSymbolicLinks) {
+  namespace fs = std::filesystem;
+  const std::string directory = testing::MakeTempDir();
+  fs::create_directories(directory + "/assets");
+  WritePlain(directory + "/assets/hero.bvh", "old\n");
+  fs::create_symlink("assets/hero.bvh", directory + "/relative.bvh");
+  fs::create_symlink(directory + "/relative.bvh", directory + "/chained.bvh");
+  fs::create_symlink("assets/new.bvh", directory + "/dangling.bvh");
+  fs::create_symlink("loop-b.bvh", directory + "/loop-a.bvh");
+  fs::create_symlink("loop-a.bvh", directory + "/loop-b.bvh");
+
+  const absl::Status through_chain = WriteFileAtomically(directory + "/chained.bvh", "new\n");
+  const absl::Status dangling = WriteFileAtomically(directory + "/dangling.bvh", "created\n");
+  const absl::Status loop = WriteFileAtomically(directory + "/loop-a.bvh", "x\n");
+
+  ASSERT_TRUE(through_chain.ok()) << through_chain;
+  ASSERT_TRUE(dangling.ok()) << dangling;
+  EXPECT_EQ(*ReadFile(directory + "/assets/hero.bvh"), "new\n");
+  EXPECT_EQ(*ReadFile(directory + "/assets/new.bvh"), "created\n");
+  EXPECT_TRUE(fs::is_symlink(directory + "/chained.bvh"));
+  EXPECT_TRUE(fs::is_symlink(directory + "/relative.bvh"));
+  EXPECT_TRUE(fs::is_symlink(directory + "/dangling.bvh"));
+  EXPECT_EQ(std::string(loop.message()).find("too many levels of symbolic links") !=
+                std::string::npos,
+            true)
+      << loop;
+  EXPECT_EQ(DirectoryEntries(directory + "/assets"),
+            (std::vector<std::string>{"hero.bvh", "new.bvh"}));
+}
+
 TEST(WriteFileAtomicallyTest, WritesEmptyContents) {
   const std::string path = testing::MakeTempDir() + "/empty";
 
