@@ -10,6 +10,7 @@
 #include <iostream>
 #include <vector>
 
+#include "absl/strings/ascii.h"
 #include "absl/strings/str_cat.h"
 #include "client/cli_errors.h"
 #include "client/command.h"
@@ -229,9 +230,10 @@ int RunCli(std::span<const std::string> args, const CliIo& io) {
   // A result nobody got is a failure: with stdout on a full disk (or /dev/full) every command
   // exited 0, a batch leaving an empty summary and an upload its id nowhere.
   if (!io.out && status.ok()) {
-    status = absl::DataLossError(absl::StrCat(
-        "cannot write the result to standard output",
-        errno != 0 ? absl::StrCat(": ", std::strerror(errno)) : std::string()));
+    std::string reason = errno != 0 ? std::strerror(errno) : "";
+    if (!reason.empty()) reason[0] = absl::ascii_tolower(static_cast<unsigned char>(reason[0]));
+    status = absl::DataLossError(absl::StrCat("cannot write the result to standard output",
+                                              reason.empty() ? "" : ": ", reason));
   }
   if (!status.ok()) io.err << ErrorLine(status) << "\n";
   io.err.flush();

@@ -190,12 +190,14 @@ class HttpCallStream final : public JsonBridge::Stream {
       streaming_started_ = true;
       mg_response_header_start(connection_, 200);
       mg_response_header_add(connection_, "Content-Type", "application/x-ndjson", -1);
-      mg_response_header_add(connection_, "Transfer-Encoding", "chunked", -1);
+      // HTTP/1.0 has no chunks (RFC 9112, 6.1: no Transfer-Encoding to a 1.0 request; nginx
+      // speaks 1.0 to its upstreams by default): the answer ends where the connection does, as
+      // every connection here ends after its one request.
+      if (!http10_) mg_response_header_add(connection_, "Transfer-Encoding", "chunked", -1);
       mg_response_header_add_lines(connection_, kApiHeaders);
       mg_response_header_send(connection_);
     }
-    const std::string line = absl::StrCat("{\"result\":", core::AsAbsl(json), "}\n");
-    return mg_send_chunk(connection_, line.data(), static_cast<unsigned>(line.size())) > 0;
+    return SendPart(absl::StrCat("{\"result\":", core::AsAbsl(json), "}\n"));
   }
 
   // Sends what the call ended with: its one answer or error, or the end of the NDJSON stream.
@@ -204,11 +206,10 @@ class HttpCallStream final : public JsonBridge::Stream {
     if (outcome.client_gone) return HttpStatusOf(outcome.status.code());
     if (streaming_started_) {
       if (!outcome.status.ok()) {
-        const std::string line =
-            absl::StrCat("{\"error\":", StatusToJson(outcome.status, outcome.retry_after), "}\n");
-        mg_send_chunk(connection_, line.data(), static_cast<unsigned>(line.size()));
+        SendPart(absl::StrCat("{\"error\":", StatusToJson(outcome.status, outcome.retry_after),
+                              "}\n"));
       }
-      mg_send_chunk(connection_, "", 0);
+      if (!http10_) mg_send_chunk(connection_, "", 0);
       return 200;
     }
     if (!outcome.status.ok()) {
@@ -243,6 +244,12 @@ class HttpCallStream final : public JsonBridge::Stream {
     return absl::OkStatus();
   }
 
+  // One NDJSON line of a streamed answer: a chunk, or (HTTP/1.0) the bytes themselves.
+  bool SendPart(const std::string& line) {
+    if (http10_) return mg_write(connection_, line.data(), line.size()) > 0;
+    return mg_send_chunk(connection_, line.data(), static_cast<unsigned>(line.size())) > 0;
+  }
+
   absl::Status OverSizeError() {
     body_too_large_ = true;
     return absl::ResourceExhaustedError(
@@ -261,6 +268,8 @@ class HttpCallStream final : public JsonBridge::Stream {
   bool done_reading_ = false;
   bool sent_single_ = false;
   bool streaming_started_ = false;
+  const bool http10_ =
+      std::string_view(mg_get_request_info(connection_)->http_version) == "1.0";
   // A request message over the size limit: 413 Content Too Large (RFC 9110, 15.5.14), not the
   // 429 of RESOURCE_EXHAUSTED, which clients take as "retry later".
   bool body_too_large_ = false;
@@ -270,6 +279,16 @@ class HttpCallStream final : public JsonBridge::Stream {
 // Whether the request asks for "100 Continue" before it sends its body (RFC 9110, 10.1.1).
 bool ExpectsContinue(const mg_connection* connection) {
   return absl::EqualsIgnoreCase(core::AsAbsl(HeaderOf(connection, "Expect")), "100-continue");
+}
+
+// The value of the first header `name` of `info` (case-insensitive), or null.
+const char* HeaderIn(const mg_request_info& info, std::string_view name) {
+  for (int i = 0; i < info.num_headers; ++i) {
+    if (absl::EqualsIgnoreCase(info.http_headers[i].name, core::AsAbsl(name))) {
+      return info.http_headers[i].value;
+    }
+  }
+  return nullptr;
 }
 
 // Framing civetweb accepts but a proxy in front may read otherwise, so that a body read by one
@@ -296,6 +315,21 @@ std::pair<int, std::string_view> FramingRefusal(const mg_request_info& info) {
     return {400, "a request carries Content-Length or Transfer-Encoding, not both"};
   }
   const bool http11 = std::string_view(info.http_version) == "1.1";
+  // civetweb reads the first Transfer-Encoding only (a "chunked" after an "identity" read the
+  // body as empty) and honours one on HTTP/1.0, where it has no meaning (RFC 9112, 6.1).
+  if (encodings > 0) {
+    const char* encoding = HeaderIn(info, "Transfer-Encoding");
+    if (encodings > 1 || !http11 || encoding == nullptr ||
+        !absl::EqualsIgnoreCase(encoding, "chunked")) {
+      return {400, "a request's Transfer-Encoding is one \"chunked\", on HTTP/1.1"};
+    }
+  }
+  if (lengths == 1) {
+    const std::string_view length = HeaderIn(info, "Content-Length");
+    if (length.empty() || length.find_first_not_of("0123456789") != std::string_view::npos) {
+      return {400, "a request's Content-Length is a decimal number"};
+    }
+  }
   if (hosts > 1 || (hosts == 0 && http11)) return {400, "an HTTP/1.1 request carries one Host"};
   return {0, {}};
 }
@@ -368,12 +402,16 @@ absl::StatusOr<std::unique_ptr<HttpFrontEnd>> HttpFrontEnd::Start(const HttpOpti
   TEMPOKEY_ASSIGN_OR_RETURN(std::string ports, ListeningPort(options.address));
   const std::string threads = std::to_string(options.threads);
   const std::string io_timeout = std::to_string(options.io_timeout.count());
-  const std::string keep_alive = std::to_string(options.keep_alive_timeout.count());
   const char* settings[] = {"listening_ports",       ports.c_str(),
                             "num_threads",           threads.c_str(),
                             "request_timeout_ms",    io_timeout.c_str(),
-                            "keep_alive_timeout_ms", keep_alive.c_str(),
-                            "enable_keep_alive",     "yes",
+                            // One request per connection: civetweb drops header lines after
+                            // a folded or non-ASCII one, and reads only the first of several
+                            // Transfer-Encodings, so a body could be read as a second request
+                            // that a proxy in front never saw (request smuggling, RFC 9112
+                            // 11.2); on a closed connection no second request is read. An idle
+                            // connection no longer holds a thread either.
+                            "enable_keep_alive",     "no",
                             "max_request_size",      "16384",
                             "static_file_cache_control", "no-cache",
                             // civetweb's defaults ("*") answered every CORS preflight itself,
@@ -463,15 +501,6 @@ int HttpFrontEnd::HandleRequest(mg_connection* connection) {
             HeaderOf(connection, "Host"), loopback_only_ && server_.options().auth_tokens.empty());
         !allowed.ok()) {
       return DiscardBody(connection, SendApiError(connection, allowed));
-    }
-    if (method->server_streaming() && std::string_view(info->http_version) == "1.0") {
-      // Its answer is chunked NDJSON of unknown length, which HTTP/1.0 cannot carry (RFC 9112,
-      // 6.1: no Transfer-Encoding to a 1.0 request).
-      return DiscardBody(connection, SendApiError(connection,
-                                                  absl::UnimplementedError(absl::StrCat(
-                                                      method->name(), " streams its answer: "
-                                                      "call it with HTTP/1.1")),
-                                                  std::nullopt, 505));
     }
     if (const std::string_view expect = HeaderOf(connection, "Expect"); !expect.empty()) {
       if (!ExpectsContinue(connection)) {

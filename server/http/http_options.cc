@@ -13,8 +13,7 @@ absl::Status ValidateHttpOptions(const HttpOptions& http, const ServerOptions& s
     return absl::InvalidArgumentError(
         absl::StrCat("--http_threads must be in [1, 256], got ", http.threads));
   }
-  if (http.io_timeout.count() <= 0 || http.keep_alive_timeout.count() <= 0 ||
-      http.body_timeout.count() <= 0) {
+  if (http.io_timeout.count() <= 0 || http.body_timeout.count() <= 0) {
     return absl::InvalidArgumentError("HTTP timeouts must be > 0");
   }
   if (http.web_root.empty()) return absl::InvalidArgumentError("--web_root must not be empty");

@@ -26,8 +26,6 @@ struct HttpOptions {
   // A request body must arrive within this plus its length at 64 KiB/s (SlowBodyGuard): the
   // timeout above is per read, which a byte now and then keeps from ever firing.
   std::chrono::milliseconds body_timeout{30000};
-  // An idle keep-alive connection is closed after this long, freeing its thread.
-  std::chrono::milliseconds keep_alive_timeout{2000};
 };
 
 // Checks `http` against the gRPC server's `server` options: the rule --address follows for a

@@ -66,7 +66,7 @@ TEST(CliInfoTest, AResultThatCannotBeWrittenToStdoutIsAFailure) {
       MakeTempDir());
 
   EXPECT_EQ(run.exit_code, 1);
-  EXPECT_EQ(run.err, "error: cannot write the result to standard output: No space left on device\n");
+  EXPECT_EQ(run.err, "error: cannot write the result to standard output: no space left on device\n");
 }
 
 TEST(CliInfoTest, SummarizesABandaiClip) {

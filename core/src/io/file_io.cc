@@ -123,19 +123,33 @@ std::string_view KindOfFile(mode_t mode) {
 }
 
 // The file `path` names once its symbolic links are followed (at most kMaxLinks of them, as
-// the kernel's ELOOP): a write through a link reaches its target, as a shell's `>` does, and the
-// link stays. A link whose target does not exist yet names that target. Not a link: `path`.
+// the kernel's ELOOP): a write through a link reaches its target and the link stays. A link
+// whose target does not exist yet names that target. Not a link: `path`. As the kernel's
+// fs.protected_symlinks, a link in a sticky world-writable folder (/tmp) is followed only when
+// this process's user or the folder's owner owns it: another user's link planted there must not
+// redirect a write to one of our files.
 absl::StatusOr<std::string> FollowLinks(std::string path) {
   constexpr int kMaxLinks = 40;
   for (int hop = 0; hop < kMaxLinks; ++hop) {
-    struct stat info {};
-    if (::lstat(path.c_str(), &info) != 0 || !S_ISLNK(info.st_mode)) return path;
-    std::string target(static_cast<std::size_t>(info.st_size) + 1, '\0');
-    const ssize_t length = ::readlink(path.c_str(), target.data(), target.size());
-    if (length < 0) return ErrnoError(errno, path, "cannot read the symbolic link: ");
+    struct stat link {};
+    if (::lstat(path.c_str(), &link) != 0 || !S_ISLNK(link.st_mode)) return path;
+    const std::string directory = DirectoryOf(path);
+    if (struct stat folder {}; ::stat(directory.c_str(), &folder) == 0 &&
+                               (folder.st_mode & S_ISVTX) != 0 && (folder.st_mode & S_IWOTH) != 0 &&
+                               link.st_uid != ::geteuid() && link.st_uid != folder.st_uid) {
+      return absl::PermissionDeniedError(absl::StrCat(
+          path, ": a symbolic link another user owns in a shared folder is not followed"));
+    }
+    // /proc's links report a size of 64 whatever their length: read until the buffer had room.
+    std::string target(std::max<std::size_t>(static_cast<std::size_t>(link.st_size), 64) + 1, '\0');
+    ssize_t length = 0;
+    while ((length = ::readlink(path.c_str(), target.data(), target.size())) >= 0 &&
+           static_cast<std::size_t>(length) == target.size()) {
+      target.resize(target.size() * 2);
+    }
+    if (length <= 0) return ErrnoError(length < 0 ? errno : ENOENT, path, "cannot read the link: ");
     target.resize(static_cast<std::size_t>(length));
-    if (target.empty()) return ErrnoError(ENOENT, path, "cannot read the symbolic link: ");
-    path = target.front() == '/' ? target : absl::StrCat(DirectoryOf(path), "/", target);
+    path = target.front() == '/' ? target : absl::StrCat(directory, "/", target);
   }
   return ErrnoError(ELOOP, path, "cannot write: ");
 }
@@ -337,19 +351,22 @@ bool IsAtomicWriteTemporary(std::string_view file_name, std::string_view target_
 }
 
 absl::Status WriteFileAtomically(const std::string& requested, std::string_view contents) {
-  TEMPOKEY_ASSIGN_OR_RETURN(const std::string path, FollowLinks(requested));
-  const std::string directory = DirectoryOf(path);
   // What is not a regular file (or a link to one) is not renamed over: that would put a plain
   // file in its place, and its reader (or the device) would never see the bytes. A FIFO or a
-  // character device (/dev/null, a terminal) takes them as a stream; a block device or a socket
-  // is refused. A directory is left to the rename, which refuses it.
-  if (struct stat target {}; ::stat(path.c_str(), &target) == 0 && !S_ISREG(target.st_mode) &&
-                             !S_ISDIR(target.st_mode)) {
-    if (S_ISFIFO(target.st_mode) || S_ISCHR(target.st_mode)) return WriteToStream(path, contents);
+  // character device (/dev/null, a terminal, /dev/stdout on a pipe) takes them as a stream,
+  // opened by the name given; a block device or a socket is refused. A directory is left to the
+  // rename, which refuses it.
+  if (struct stat target {}; ::stat(requested.c_str(), &target) == 0 &&
+                             !S_ISREG(target.st_mode) && !S_ISDIR(target.st_mode)) {
+    if (S_ISFIFO(target.st_mode) || S_ISCHR(target.st_mode)) {
+      return WriteToStream(requested, contents);
+    }
     return absl::FailedPreconditionError(
-        absl::StrCat(path, ": is ", AsAbsl(KindOfFile(target.st_mode)),
+        absl::StrCat(requested, ": is ", AsAbsl(KindOfFile(target.st_mode)),
                      ", not a regular file; not replaced (write to a regular file)"));
   }
+  TEMPOKEY_ASSIGN_OR_RETURN(const std::string path, FollowLinks(requested));
+  const std::string directory = DirectoryOf(path);
   std::string temp_path;
   int fd = -1;
   for (int attempt = 0; attempt < kTempNameAttempts && fd < 0; ++attempt) {

@@ -13,12 +13,15 @@
 #include <thread>
 #include <vector>
 
+#include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tempokey/core/io/file_io.h"
 #include "tests/testing/test_paths.h"
 
 namespace tempokey::core {
 namespace {
+
+using ::testing::HasSubstr;
 
 std::vector<std::string> DirectoryEntries(const std::string& directory) {
   std::vector<std::string> names;
@@ -274,12 +277,60 @@ TEST(WriteFileAtomicallyTest, WritesThroughSymbolicLinks) {
   EXPECT_TRUE(fs::is_symlink(directory + "/chained.bvh"));
   EXPECT_TRUE(fs::is_symlink(directory + "/relative.bvh"));
   EXPECT_TRUE(fs::is_symlink(directory + "/dangling.bvh"));
-  EXPECT_EQ(std::string(loop.message()).find("too many levels of symbolic links") !=
-                std::string::npos,
-            true)
-      << loop;
+  EXPECT_THAT(std::string(loop.message()), HasSubstr("too many levels of symbolic links"));
   EXPECT_EQ(DirectoryEntries(directory + "/assets"),
             (std::vector<std::string>{"hero.bvh", "new.bvh"}));
+}
+
+// /proc's links report a size of 64 whatever their length (a longer target was cut, the
+// output written to a truncated path with exit 0), and /dev/stdout on a pipe names "pipe:[N]":
+// a stream is written by the name given, a regular file through its whole path.
+TEST(WriteFileAtomicallyTest, ProcLinksAreReadWholeAndStreamsWrittenByTheirName) {
+  namespace fs = std::filesystem;
+  const std::string directory =
+      testing::MakeTempDir() + "/a-folder-whose-name-is-long-enough-to-pass-sixty-four-bytes";
+  fs::create_directories(directory);
+  const std::string file = directory + "/out.bvh";
+  WritePlain(file, "old\n");
+  const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+  ASSERT_GE(fd, 0);
+  int pipe_ends[2] = {-1, -1};
+  ASSERT_EQ(::pipe2(pipe_ends, O_CLOEXEC), 0);
+
+  const absl::Status through_proc =
+      WriteFileAtomically("/proc/self/fd/" + std::to_string(fd), "new\n");
+  const absl::Status into_pipe =
+      WriteFileAtomically("/proc/self/fd/" + std::to_string(pipe_ends[1]), "piped\n");
+  char piped[16] = {0};
+  const ssize_t got = ::read(pipe_ends[0], piped, sizeof piped);
+  ::close(fd);
+  ::close(pipe_ends[0]);
+  ::close(pipe_ends[1]);
+
+  ASSERT_TRUE(through_proc.ok()) << through_proc;
+  EXPECT_EQ(*ReadFile(file), "new\n");
+  EXPECT_EQ(DirectoryEntries(directory), std::vector<std::string>{"out.bvh"});
+  ASSERT_TRUE(into_pipe.ok()) << into_pipe;
+  EXPECT_EQ(std::string(piped, static_cast<std::size_t>(std::max<ssize_t>(got, 0))), "piped\n");
+}
+
+// As the kernel's fs.protected_symlinks: another user's link in a sticky world-writable folder
+// (/tmp) is not followed, or a link planted there would redirect our write to one of our files.
+TEST(WriteFileAtomicallyTest, AnotherUsersLinkInASharedFolderIsNotFollowed) {
+  namespace fs = std::filesystem;
+  const std::string shared = testing::MakeTempDir() + "/shared";
+  fs::create_directories(shared);
+  ASSERT_EQ(::chmod(shared.c_str(), 01777), 0);
+  const std::string victim = testing::MakeTempDir() + "/precious.bvh";
+  WritePlain(victim, "precious\n");
+  const std::string link = shared + "/out.bvh";
+  fs::create_symlink(victim, link);
+  if (::lchown(link.c_str(), 12345, 12345) != 0) GTEST_SKIP() << "needs root to own a link";
+
+  const absl::Status written = WriteFileAtomically(link, "clobbered\n");
+
+  EXPECT_EQ(written.code(), absl::StatusCode::kPermissionDenied) << written;
+  EXPECT_EQ(*ReadFile(victim), "precious\n");
 }
 
 TEST(WriteFileAtomicallyTest, WritesEmptyContents) {

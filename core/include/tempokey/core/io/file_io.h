@@ -47,11 +47,13 @@ absl::StatusOr<std::string> ReadTextFile(const std::string& path,
 // errors, e.g. `path` is a directory ("cannot replace the file: is a directory") or a FIFO no
 // process reads ("out.json: is a FIFO with no reader").
 // A FIFO or a character device (/dev/null, a terminal) is not replaced but written into, as a
-// stream (a reader leaving midway is the writer's SIGPIPE, as for any pipe). A symbolic link is
-// written through, as a shell's `>` does: the file it names (after every link; created if the
-// link dangles) is replaced as above, messages then starting with that file, and the link stays
-// (it used to be replaced by a plain file, its target left as it was). A hard link is detached:
-// the other names keep the old contents, as after any atomic replacement.
+// stream (a reader leaving midway is the writer's SIGPIPE, as for any pipe), by the name given.
+// A symbolic link to a regular file is written through: the file it names (after every link;
+// created if the link dangles) is replaced as above, in its own folder, messages then starting
+// with that file, and the link stays (it used to be replaced by a plain file, its target left as
+// it was). Another user's link in a sticky world-writable folder is not followed
+// (kPermissionDenied), as the kernel's fs.protected_symlinks. A hard link is detached: the other
+// names keep the old contents, as after any atomic replacement.
 // Thread-safe; concurrent writers to one path leave one complete version (the last rename).
 absl::Status WriteFileAtomically(const std::string& path, std::string_view contents);
 
