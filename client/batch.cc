@@ -210,12 +210,22 @@ BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
   if (!result.ok()) return finish(result.status());
   std::error_code ignored;
   fs::create_directories(fs::path(item.output_path).parent_path(), ignored);
-  if (absl::Status written =
-          WriteOutput(item.output_path, item.output_format, result->output, gltf);
+  // An output replacing its own input (--overwrite) is written whole beside it first, and put
+  // in place only once its record is on disk (BatchManifest::ReplaceInPlace()): a run stopped
+  // in between must never take the output for an input.
+  const bool in_place = options.manifest != nullptr &&
+                        IsSameFile(item.input_path, item.output_path) &&
+                        fs::is_regular_file(item.output_path, ignored);
+  const std::string write_path =
+      in_place ? options.manifest->StagingPath(item) : item.output_path;
+  if (absl::Status written = WriteOutput(write_path, item.output_format, result->output, gltf);
       !written.ok()) {
     return finish(written);
   }
   Describe(*result, file);
+  if (in_place) {
+    return finish(options.manifest->ReplaceInPlace(item, write_path, input_id, pipeline, file));
+  }
   if (options.manifest != nullptr) {
     return finish(options.manifest->RecordWritten(item, input_id, pipeline, file));
   }

@@ -1,10 +1,15 @@
 #include "client/batch_manifest.h"
 
 #include <fcntl.h>
+#include <signal.h>
+#include <sys/file.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <set>
@@ -83,6 +88,61 @@ absl::StatusOr<ManifestRecord> ParseRecord(const Place& place, const std::string
 absl::StatusOr<std::pair<std::int64_t, std::string>> FileIdentity(const std::string& path) {
   TEMPOKEY_ASSIGN_OR_RETURN(std::string bytes, core::ReadFile(path));
   return std::make_pair(static_cast<std::int64_t>(bytes.size()), wire::Sha256Id(bytes));
+}
+
+// Takes an exclusive flock on the file at `path` (created if missing). Returns its descriptor,
+// or -1 when the file system has no locks. A holder removes the file before it lets go (so no
+// lock file stays behind), hence the check that the locked file is still the one so named: a
+// process that opened it just before the removal locks a file nobody else will, and retries.
+absl::StatusOr<int> LockFile(const std::string& path, std::string_view manifest_name) {
+  for (int attempt = 0;; ++attempt) {
+    const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
+    if (fd < 0 && errno == ENOENT && attempt < 3) {
+      // The folder was just removed by a run that created it and did nothing (see ~BatchManifest).
+      std::error_code ignored;
+      fs::create_directories(fs::path(path).parent_path(), ignored);
+      continue;
+    }
+    if (fd < 0) {
+      return absl::UnavailableError(
+          absl::StrCat(path, ": cannot create the lock file: ", std::strerror(errno)));
+    }
+    if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
+      const int error = errno;
+      ::close(fd);
+      if (error == EINTR) continue;
+      if (error == EWOULDBLOCK) {
+        return absl::FailedPreconditionError(absl::StrCat(
+            path, ": another tempokey batch is running with this manifest (",
+            AsAbsl(manifest_name), "); wait for it to end, or give this run another -o or --shard"));
+      }
+      return -1;  // no locks here (ENOLCK, EOPNOTSUPP): unlocked, as before locks existed
+    }
+    struct stat held {};
+    struct stat named {};
+    if (::fstat(fd, &held) == 0 && ::stat(path.c_str(), &named) == 0 &&
+        held.st_dev == named.st_dev && held.st_ino == named.st_ino) {
+      return fd;
+    }
+    ::close(fd);
+  }
+}
+
+// The file an in-place output replaces: its path, links followed (as WriteFileAtomically()
+// writes through a link), or as given when it cannot be resolved.
+fs::path ReplacedPath(const BatchItem& item) {
+  std::error_code error;
+  fs::path resolved = fs::canonical(item.output_path, error);
+  return error ? fs::path(item.output_path) : resolved;
+}
+
+// TEMPOKEY_TEST_BATCH_KILL_AFTER_REPLACE (see ReplaceInPlace()): 0 when unset.
+long KillAfterReplaceForTesting() {
+  static const long n = [] {
+    const char* text = std::getenv("TEMPOKEY_TEST_BATCH_KILL_AFTER_REPLACE");
+    return text == nullptr ? 0L : std::strtol(text, nullptr, 10);
+  }();
+  return n;
 }
 
 }  // namespace
@@ -209,37 +269,16 @@ std::string FormatManifest(const std::vector<ManifestRecord>& records,
   return out;
 }
 
-int RemoveLeftoverTemporaries(std::span<const BatchItem> items, const std::string& manifest_path) {
-  // Targets by folder, so each folder is listed once.
-  std::map<fs::path, std::set<std::string>> targets;
-  for (const BatchItem& item : items) {
-    const fs::path output(item.output_path);
-    targets[output.parent_path()].insert(output.filename().string());
-  }
-  targets[fs::path(manifest_path).parent_path()].insert(
-      fs::path(manifest_path).filename().string());
-  int removed = 0;
-  for (const auto& [folder, names] : targets) {
-    std::error_code error;
-    std::vector<fs::path> leftovers;
-    for (const auto& entry : fs::directory_iterator(folder.empty() ? "." : folder, error)) {
-      const std::string name = entry.path().filename().string();
-      const std::size_t mark = name.rfind(".tmp-");
-      if (mark != std::string::npos && names.count(name.substr(0, mark)) > 0 &&
-          core::IsAtomicWriteTemporary(name, name.substr(0, mark))) {
-        leftovers.push_back(entry.path());
-      }
-    }
-    for (const fs::path& leftover : leftovers) removed += fs::remove(leftover, error) ? 1 : 0;
-  }
-  return removed;
-}
-
 absl::StatusOr<std::unique_ptr<BatchManifest>> BatchManifest::Open(
     const std::string& output_dir, const std::optional<BatchShard>& shard, bool force) {
   const std::string own_name = ManifestFileName(shard);
   auto manifest = std::unique_ptr<BatchManifest>(
       new BatchManifest(output_dir, (fs::path(output_dir) / own_name).string(), shard));
+  // Locked before anything is read: a run that read the manifests while another still wrote
+  // them could miss a record of an output written over its input, and process it again.
+  std::error_code made;
+  manifest->created_output_dir_ = fs::create_directories(output_dir, made);
+  TEMPOKEY_ASSIGN_OR_RETURN(manifest->lock_fd_, LockFile(manifest->lock_path_, own_name));
   manifest->saver_ =
       std::jthread([m = manifest.get()](std::stop_token stop) { m->SaveWhenDue(stop); });
   if (force) return manifest;
@@ -282,6 +321,53 @@ absl::StatusOr<std::unique_ptr<BatchManifest>> BatchManifest::Open(
 BatchManifest::~BatchManifest() {
   saver_.request_stop();
   changed_.notify_all();
+  if (saver_.joinable()) saver_.join();
+  if (lock_fd_ >= 0) {
+    // Removed while held (see LockFile()).
+    ::unlink(lock_path_.c_str());
+    ::close(lock_fd_);
+  }
+  // A folder this run created and left empty (a usage error after Open(), every file failed)
+  // goes again, as it did before the lock needed it; remove() takes only an empty folder.
+  std::error_code ignored;
+  if (created_output_dir_) fs::remove(output_dir_, ignored);
+}
+
+int BatchManifest::RemoveLeftoverTemporaries(std::span<const BatchItem> items) {
+  if (lock_fd_ < 0) return 0;  // another run of this manifest may be writing them
+  // Targets by folder, so each folder is listed once.
+  std::map<fs::path, std::set<std::string>> targets;
+  for (const BatchItem& item : items) {
+    const fs::path output(item.output_path);
+    targets[output.parent_path()].insert(output.filename().string());
+  }
+  targets[fs::path(path_).parent_path()].insert(fs::path(path_).filename().string());
+  const std::string staged_prefix = fs::path(stem_).filename().string() + ".staged-";
+  int removed = 0;
+  for (const auto& [folder, names] : targets) {
+    std::error_code error;
+    std::vector<fs::path> leftovers;
+    for (const auto& entry : fs::directory_iterator(folder.empty() ? "." : folder, error)) {
+      const std::string name = entry.path().filename().string();
+      const std::size_t mark = name.rfind(".tmp-");
+      if (name.starts_with(staged_prefix) ||
+          (mark != std::string::npos && names.count(name.substr(0, mark)) > 0 &&
+           core::IsAtomicWriteTemporary(name, name.substr(0, mark)))) {
+        leftovers.push_back(entry.path());
+      }
+    }
+    for (const fs::path& leftover : leftovers) removed += fs::remove(leftover, error) ? 1 : 0;
+  }
+  return removed;
+}
+
+std::string BatchManifest::StagingPath(const BatchItem& item) const {
+  const fs::path output = ReplacedPath(item);
+  const std::string digest = wire::Sha256Id(output.filename().string());
+  const std::string hex = digest.substr(digest.find(':') + 1, 16);
+  return (output.parent_path() /
+          absl::StrCat(fs::path(stem_).filename().string(), ".staged-", hex))
+      .string();
 }
 
 bool BatchManifest::IsRecordedOutput(const std::string& path) const {
@@ -349,22 +435,13 @@ absl::Status BatchManifest::RecordWritten(const BatchItem& item, std::string_vie
     Forget(item);
     return absl::OkStatus();
   }
-  absl::StatusOr<std::pair<std::int64_t, std::string>> identity = FileIdentity(item.output_path);
-  if (!identity.ok()) {
+  absl::StatusOr<ManifestRecord> made =
+      MakeRecord(item, item.output_path, input_id, pipeline, file);
+  if (!made.ok()) {
     Forget(item);
-    return identity.status();
+    return made.status();
   }
-  ManifestRecord record{
-      .output = OutputKey(item),
-      .input = item.name,
-      .input_id = std::string(input_id),
-      .pipeline = std::string(pipeline),
-      .output_bytes = identity->first,
-      .output_id = identity->second,
-      .frames = file.frames,
-      .keys = file.keys,
-      .max_error = file.max_error,
-  };
+  ManifestRecord record = *std::move(made);
   const bool in_place = IsSameFile(item.input_path, item.output_path);
   // The input is gone: until this record is on disk, a re-run could not tell the output from a
   // clip to process again. Appended to the journal at once (a line, not the whole manifest).
@@ -383,6 +460,77 @@ absl::Status BatchManifest::RecordWritten(const BatchItem& item, std::string_vie
       return absl::Status(saved.code(), absl::StrCat(journaled.message(), "; ", saved.message()));
     }
   }
+  Changed();
+  return absl::OkStatus();
+}
+
+absl::StatusOr<ManifestRecord> BatchManifest::MakeRecord(const BatchItem& item,
+                                                         const std::string& path,
+                                                         std::string_view input_id,
+                                                         std::string_view pipeline,
+                                                         const BatchFileResult& file) const {
+  TEMPOKEY_ASSIGN_OR_RETURN(auto identity, FileIdentity(path));
+  return ManifestRecord{
+      .output = OutputKey(item),
+      .input = item.name,
+      .input_id = std::string(input_id),
+      .pipeline = std::string(pipeline),
+      .output_bytes = identity.first,
+      .output_id = identity.second,
+      .frames = file.frames,
+      .keys = file.keys,
+      .max_error = file.max_error,
+  };
+}
+
+absl::Status BatchManifest::ReplaceInPlace(const BatchItem& item, const std::string& staged_path,
+                                           std::string_view input_id, std::string_view pipeline,
+                                           const BatchFileResult& file) {
+  auto fail = [&](absl::Status status) {
+    std::error_code ignored;
+    fs::remove(staged_path, ignored);
+    Forget(item);
+    return status;
+  };
+  // A name JSON cannot hold is not recorded (see RecordWritten()); the command refuses such a
+  // name in place, so this only keeps the engine whole.
+  const bool recordable = core::IsUtf8(item.name) && core::IsUtf8(OutputKey(item));
+  if (recordable) {
+    absl::StatusOr<ManifestRecord> made = MakeRecord(item, staged_path, input_id, pipeline, file);
+    if (!made.ok()) return fail(made.status());
+    const absl::Status journaled = AppendToJournal(FormatJournalLine(*made));
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      own_[made->output] = *std::move(made);
+      ++version_;
+    }
+    if (!journaled.ok()) {
+      // Then the whole manifest, now; if that fails too, the input stays as it is.
+      std::lock_guard<std::mutex> save_lock(save_mutex_);
+      if (absl::Status saved = Save(); !saved.ok()) {
+        return fail(absl::Status(saved.code(),
+                                 absl::StrCat(journaled.message(), "; ", saved.message())));
+      }
+    }
+  }
+  const fs::path replaced = ReplacedPath(item);
+  // The output keeps the input's permission bits, as WriteFileAtomically() keeps them.
+  if (struct stat input {}; ::stat(replaced.c_str(), &input) == 0 && S_ISREG(input.st_mode)) {
+    ::chmod(staged_path.c_str(), input.st_mode & 07777);
+  }
+  if (::rename(staged_path.c_str(), replaced.c_str()) != 0) {
+    return fail(absl::UnavailableError(absl::StrCat(
+        item.output_path, ": cannot replace the file: ", std::strerror(errno))));
+  }
+  // The rename made durable, as WriteFileAtomically() does (a file system refusing it is fine).
+  if (const int dir_fd = ::open(replaced.parent_path().c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+      dir_fd >= 0) {
+    ::fsync(dir_fd);
+    ::close(dir_fd);
+  }
+  static std::atomic<long> replaces{0};
+  if (const long n = KillAfterReplaceForTesting(); n > 0 && ++replaces == n) ::raise(SIGKILL);
+  if (!recordable) Forget(item);
   Changed();
   return absl::OkStatus();
 }

@@ -3,10 +3,23 @@
 // rest (an input that changed, a pipeline that changed, an output missing or altered).
 //
 // File: OUTDIR/.tempokey-batch.json, or OUTDIR/.tempokey-batch.shard-I-of-N.json for --shard I/N,
-// one per shard so concurrent shards never write the same file (no locking, which network file
-// systems do not all honour). A run reads every .tempokey-batch*.json of OUTDIR, so records made
-// by an earlier run with other shards still count. Written atomically (core::WriteFileAtomically),
-// rewritten as files finish: a kill at any moment leaves the previous or the next version.
+// one per shard so concurrent shards never write the same file. A run reads every
+// .tempokey-batch*.json of OUTDIR, so records made by an earlier run with other shards still
+// count. Written atomically (core::WriteFileAtomically), rewritten as files finish: a kill at any
+// moment leaves the previous or the next version.
+//
+// One writer per manifest: a run holds an exclusive flock(2) on OUTDIR/<manifest stem>.lock
+// (".tempokey-batch.lock", ".tempokey-batch.shard-I-of-N.lock") from Open() to its end, and a
+// second run of the same manifest is refused at once. Only the holder removes the leftovers of
+// earlier runs of that manifest. On a file system without locks (flock fails with other than
+// EWOULDBLOCK) the run goes on unlocked and removes no leftovers.
+//
+// In place (--overwrite, an output replacing its own input) the record goes to the journal,
+// durably, before the output replaces the input: the output is written whole to a staging file
+// beside it (ReplaceInPlace()), its record appended, then the staging file renamed over the
+// input. A run stopped at any point (SIGKILL, SIGTERM) leaves either the input untouched, which
+// the next run redoes, or the output in place with its record, which the next run skips: an
+// output is never processed again as an input.
 //
 //   {"format": "tempokey.batch_manifest", "version": 1, "shard": "1/4", "outputs": {
 //     "walk.json": {"input": "walk.bvh", "input_id": "sha256:...", "pipeline": "sha256:...",
@@ -83,11 +96,6 @@ absl::StatusOr<std::vector<ManifestRecord>> ParseManifest(std::string_view text,
 std::string FormatManifest(const std::vector<ManifestRecord>& records,
                            const std::optional<BatchShard>& shard);
 
-// Removes what an interrupted run of the same files left behind: the temporaries of atomic
-// writes ("<file>.tmp-xxxxxxxx") beside each item's output and beside `manifest_path`. Only
-// those names are touched. Returns how many were removed.
-int RemoveLeftoverTemporaries(std::span<const BatchItem> items, const std::string& manifest_path);
-
 // One run's view of the manifests of an output folder. Changes are saved by a thread of its own
 // soon after they happen: at once, unless rewriting the file takes more than a tenth of the time
 // since the last save (large manifests then save less often, so their I/O stays under 10% of
@@ -99,6 +107,10 @@ class BatchManifest {
   // starts this run's own file with the records of its previous version.
   // Errors: kInvalidArgument for a manifest that does not parse ("OUTDIR/.tempokey-batch.json:
   // 3:5: ...; remove it or run with --force"), read errors of the files.
+  // Creates `output_dir` if missing and locks this run's manifest first (see above).
+  // Errors: kFailedPrecondition "OUTDIR/.tempokey-batch.lock: another tempokey batch is running
+  // with this manifest; ..." when another process holds the lock; kUnavailable when the lock
+  // file cannot be created.
   static absl::StatusOr<std::unique_ptr<BatchManifest>> Open(const std::string& output_dir,
                                                              const std::optional<BatchShard>& shard,
                                                              bool force);
@@ -108,6 +120,18 @@ class BatchManifest {
   BatchManifest& operator=(const BatchManifest&) = delete;
 
   const std::string& path() const { return path_; }
+
+  // Removes what an interrupted run of this manifest left behind: the temporaries of atomic
+  // writes ("<file>.tmp-xxxxxxxx") beside each item's output and beside the manifest, and the
+  // staging files of this manifest (StagingPath()) with their temporaries, in the items' output
+  // folders. Nothing else is touched (another shard's files, another manifest's), and nothing at
+  // all unless this run holds the manifest's lock. Returns how many files were removed.
+  int RemoveLeftoverTemporaries(std::span<const BatchItem> items);
+
+  // Where `item`'s output is written whole before ReplaceInPlace() puts it over its input: a
+  // hidden file beside it, "<manifest stem>.staged-<16 hex digits of the output's name>" (never
+  // an input, and its name is this manifest's, for RemoveLeftoverTemporaries()).
+  std::string StagingPath(const BatchItem& item) const;
 
   // Whether `path` is an output some manifest of OUTDIR records (read at Open()): with OUTDIR
   // inside DIR, last run's outputs are not this run's inputs.
@@ -126,13 +150,29 @@ class BatchManifest {
 
   // Records `item`'s output as just written by `file` from input `input_id` through
   // `pipeline`: reads the output back for its size and digest. An output written over its own
-  // input is also appended to the journal at once (its input is gone; a run killed between the
-  // write and this line, a few milliseconds, redoes the file from its output on the next run).
+  // input is also appended to the journal at once; RunBatch() does not write such outputs
+  // itself and calls ReplaceInPlace() instead, which journals before the input is replaced.
   // Not recorded: an output that is no regular file (a FIFO, /dev/null) or whose name is not
   // UTF-8 (JSON cannot hold it). Errors: read errors of the output (the record is then dropped,
   // so a re-run redoes the file); the journal's write error.
   absl::Status RecordWritten(const BatchItem& item, std::string_view input_id,
                              std::string_view pipeline, const BatchFileResult& file);
+
+  // Puts the output staged at `staged_path` (StagingPath(item), written whole) over `item`'s
+  // input, which is its output path (--overwrite): appends the output's record, as
+  // RecordWritten() makes it, to the journal and fsyncs it (or, if that fails, saves the whole
+  // manifest), and only then renames the staged file over the input. So a run stopped at any
+  // point leaves the input untouched (the next run redoes it: the record's output id is not the
+  // file's) or the output in place with its record (the next run skips it). Errors: read errors
+  // of the staged file; the journal's and the manifest's write errors together (the input is
+  // then untouched); the rename's error. On any error the staged file is removed and the record
+  // dropped.
+  // Test hook (tests/client): with TEMPOKEY_TEST_BATCH_KILL_AFTER_REPLACE=N in the environment,
+  // the process kills itself (SIGKILL) right after the N-th rename of the process, as a crash
+  // there would.
+  absl::Status ReplaceInPlace(const BatchItem& item, const std::string& staged_path,
+                              std::string_view input_id, std::string_view pipeline,
+                              const BatchFileResult& file);
 
   // Drops this run's record of `item`'s output (the file failed: whatever output is there was
   // made from another input or pipeline).
@@ -148,11 +188,16 @@ class BatchManifest {
   BatchManifest(std::string output_dir, std::string path, std::optional<BatchShard> shard)
       : output_dir_(std::move(output_dir)),
         path_(std::move(path)),
-        journal_path_(path_.substr(0, path_.size() - std::string_view(".json").size()) +
-                      ".journal"),
+        stem_(path_.substr(0, path_.size() - std::string_view(".json").size())),
+        journal_path_(stem_ + ".journal"),
+        lock_path_(stem_ + ".lock"),
         shard_(std::move(shard)) {}
 
   std::string OutputKey(const BatchItem& item) const;
+  // The record of `item`'s output whose bytes are at `path`.
+  absl::StatusOr<ManifestRecord> MakeRecord(const BatchItem& item, const std::string& path,
+                                            std::string_view input_id, std::string_view pipeline,
+                                            const BatchFileResult& file) const;
   // Tells the saving thread that own_ changed. Called without mutex_ held.
   void Changed();
   // The saving thread: saves each change once due, until `stop`.
@@ -164,11 +209,17 @@ class BatchManifest {
 
   const std::string output_dir_;
   const std::string path_;
+  const std::string stem_;  // path_ without ".json"
   // Records of outputs written over their own inputs, a line each as they are written (a save
   // of the whole manifest per file cost the square of the files); read back by Open(), removed
   // by Finish() once the manifest holds them.
   const std::string journal_path_;
   std::mutex journal_mutex_;
+  // The manifest's lock file and its descriptor, holding the flock; -1 when not locked (a file
+  // system without locks). Removed, then closed, by the destructor.
+  const std::string lock_path_;
+  int lock_fd_ = -1;
+  bool created_output_dir_ = false;  // Open() created output_dir_ (for the lock)
   const std::optional<BatchShard> shard_;
   // Records of every manifest read at Open(), by output key (several when manifests overlap).
   std::multimap<std::string, ManifestRecord> known_;

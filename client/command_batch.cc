@@ -130,7 +130,9 @@ absl::Status Batch(CommandContext& context) {
   }
 
   // The manifests first: with OUTDIR inside DIR, the outputs they record are no inputs (with
-  // OUTDIR = DIR they are: written over their own inputs, --overwrite).
+  // OUTDIR = DIR they are: written over their own inputs, --overwrite). Open() locks this run's
+  // manifest, so a second run of it (same OUTDIR, same shard) stops here, exit 1, before any
+  // work: not 2, a usage error, which fails a whole Kubernetes Job; a retry later may run.
   TEMPOKEY_ASSIGN_OR_RETURN(std::unique_ptr<BatchManifest> manifest,
                             BatchManifest::Open(output_dir, shard, context.args().Has("--force")));
   const bool outputs_beside_inputs = IsSameFile(dirs[0], output_dir);
@@ -166,7 +168,7 @@ absl::Status Batch(CommandContext& context) {
     TEMPOKEY_RETURN_IF_ERROR(CheckSummaryPath(*summary_path, ops_path, items, output_dir));
   }
   TEMPOKEY_ASSIGN_OR_RETURN(const Client* client, context.Connect());
-  RemoveLeftoverTemporaries(items, manifest->path());
+  manifest->RemoveLeftoverTemporaries(items);
   options.manifest = manifest.get();
 
   BatchSummary summary;

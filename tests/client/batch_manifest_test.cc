@@ -376,11 +376,14 @@ TEST_F(BatchManifestTest, UnreadableManifestStopsTheRunWithItsPlaceAndTheWayOut)
 
 TEST_F(BatchManifestTest, LeftoverTemporariesOfTheRunsOwnFilesAreRemovedOnly) {
   const std::vector<BatchItem> items = {Item("walk")};
-  const std::vector<std::string> removed_names = {"walk.json.tmp-ab12cd34",
-                                                  ".tempokey-batch.json.tmp-zzzzzzzz"};
-  const std::vector<std::string> kept_names = {"walk.json.tmp-AB12CD34", "walk.json.tmp-ab12",
-                                               "run.json.tmp-ab12cd34", "walk.json",
-                                               ".tempokey-batch.shard-0-of-2.json.tmp-ab12cd34"};
+  const std::vector<std::string> removed_names = {
+      "walk.json.tmp-ab12cd34", ".tempokey-batch.json.tmp-zzzzzzzz",
+      ".tempokey-batch.staged-0123456789abcdef",
+      ".tempokey-batch.staged-0123456789abcdef.tmp-ab12cd34"};
+  const std::vector<std::string> kept_names = {
+      "walk.json.tmp-AB12CD34", "walk.json.tmp-ab12", "run.json.tmp-ab12cd34", "walk.json",
+      ".tempokey-batch.shard-0-of-2.json.tmp-ab12cd34",
+      ".tempokey-batch.shard-0-of-2.staged-0123456789abcdef"};
   for (const std::string& name : removed_names) {
     ASSERT_TRUE(core::WriteFileAtomically(out_ + "/" + name, "x").ok());
   }
@@ -388,11 +391,38 @@ TEST_F(BatchManifestTest, LeftoverTemporariesOfTheRunsOwnFilesAreRemovedOnly) {
     ASSERT_TRUE(core::WriteFileAtomically(out_ + "/" + name, "x").ok());
   }
 
-  const int removed = RemoveLeftoverTemporaries(items, out_ + "/.tempokey-batch.json");
+  std::unique_ptr<BatchManifest> manifest = Open();
+  const int removed = manifest->RemoveLeftoverTemporaries(items);
 
-  EXPECT_EQ(removed, 2);
+  EXPECT_EQ(removed, 4);
   for (const std::string& name : removed_names) EXPECT_FALSE(fs::exists(out_ + "/" + name)) << name;
   for (const std::string& name : kept_names) EXPECT_TRUE(fs::exists(out_ + "/" + name)) << name;
+}
+
+// One writer per manifest: a second Open() of the same manifest (same folder, same shard) is
+// refused while the first is open, naming the lock; another shard's opens beside it; once the
+// first is gone the manifest opens again and no lock file is left behind.
+TEST_F(BatchManifestTest, SecondOpenOfTheSameManifestIsRefusedWhileTheFirstIsOpen) {
+  std::unique_ptr<BatchManifest> first = Open();
+  ASSERT_NE(first, nullptr);
+
+  absl::StatusOr<std::unique_ptr<BatchManifest>> second = BatchManifest::Open(out_, std::nullopt, false);
+  absl::StatusOr<std::unique_ptr<BatchManifest>> forced = BatchManifest::Open(out_, std::nullopt, true);
+  absl::StatusOr<std::unique_ptr<BatchManifest>> shard =
+      BatchManifest::Open(out_, BatchShard{.index = 0, .count = 2}, false);
+
+  EXPECT_EQ(second.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_THAT(std::string(second.status().message()),
+              ::testing::StartsWith(out_ + "/.tempokey-batch.lock: another tempokey batch is "
+                                           "running with this manifest (.tempokey-batch.json)"));
+  EXPECT_EQ(forced.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_TRUE(shard.ok()) << shard.status();
+  first.reset();
+  shard = absl::UnknownError("closed");
+  EXPECT_FALSE(fs::exists(out_ + "/.tempokey-batch.lock"));
+  EXPECT_FALSE(fs::exists(out_ + "/.tempokey-batch.shard-0-of-2.lock"));
+  std::unique_ptr<BatchManifest> again = Open();
+  EXPECT_NE(again, nullptr);
 }
 
 }  // namespace

@@ -2,7 +2,12 @@
 // child on 127.0.0.1, on folders of real captures. What a re-run skips and redoes, --force, the
 // manifest's input ids against the server's own, shards covering a folder exactly once and
 // staying put when files are added, and `tempokey batch-summary`.
+#include <signal.h>
+#include <sys/wait.h>
+
 #include <algorithm>
+#include <chrono>
+#include <thread>
 #include <filesystem>
 #include <map>
 #include <set>
@@ -335,6 +340,123 @@ TEST_F(BatchResumeTest, ShardAndProgressMistakesAreUsageErrors) {
   EXPECT_EQ(progress.err,
             "error: --progress: expected one of auto, bar, lines, none, got 'dots'\n");
   EXPECT_FALSE(fs::exists(Path("out")));
+}
+
+constexpr char kHalfSpeed[] = R"({"operations": [{"retime": {"speed": "0s:0.5"}}]})";
+
+// Waits (bounded) until `pid` is stopped (SIGSTOP); false if it ended or never stopped.
+bool WaitUntilStopped(pid_t pid) {
+  const auto deadline = std::chrono::steady_clock::now() + kProcessTimeout;
+  while (std::chrono::steady_clock::now() < deadline) {
+    int status = 0;
+    const pid_t changed = waitpid(pid, &status, WNOHANG | WUNTRACED);
+    if (changed == pid) return WIFSTOPPED(status);
+    if (changed < 0) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return false;
+}
+
+// Lets `pid` go on (SIGCONT) each time the write hook stops it, until it ends (bounded); its
+// exit code, nullopt for a signal or a timeout.
+std::optional<int> ContinueUntilExit(pid_t pid) {
+  const auto deadline = std::chrono::steady_clock::now() + kProcessTimeout;
+  kill(pid, SIGCONT);
+  while (std::chrono::steady_clock::now() < deadline) {
+    int status = 0;
+    const pid_t changed = waitpid(pid, &status, WNOHANG | WUNTRACED);
+    if (changed == pid && WIFSTOPPED(status)) kill(pid, SIGCONT);
+    if (changed == pid && WIFEXITED(status)) return WEXITSTATUS(status);
+    if (changed < 0 || (changed == pid && WIFSIGNALED(status))) return std::nullopt;
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  kill(pid, SIGKILL);
+  return std::nullopt;
+}
+
+// The names in `dir` of a batch's staging files and atomic-write temporaries.
+std::vector<std::string> Leftovers(const std::string& dir) {
+  std::vector<std::string> names;
+  for (const std::string& name : FilesIn(dir)) {
+    if (name.find(".staged-") != std::string::npos || name.find(".tmp-") != std::string::npos) {
+      names.push_back(name);
+    }
+  }
+  return names;
+}
+
+// An in-place batch (--overwrite) killed right after an output replaced its input, before
+// anything else was written: the resume finds that file done, redoes none twice, and the folder
+// ends as a clean run leaves it. Before, the record was written after the replace, and the
+// resume took the output for a changed input and retimed it again (twice the frames).
+TEST_F(BatchResumeTest, InPlaceRunKilledRightAfterAReplaceIsResumedWithoutRedoingThatFile) {
+  const std::string ops = Ops(kHalfSpeed);
+  const std::string clean = Folder("clean");
+  ASSERT_EQ(Batch({clean, "-o", clean, "--overwrite", "--ops", ops}).exit_code, 0);
+  const std::string work = Folder("work");
+  const int files = static_cast<int>(QuickSources().size());
+  ASSERT_GE(files, 3);
+
+  // The test hook kills the CLI (SIGKILL) right after its 2nd replace: no race.
+  const ProcessResult killed = RunTempokey(
+      {"--server", server_->target(), "batch", work, "-o", work, "--overwrite", "--ops", ops,
+       "--jobs", "1"},
+      dir_, {"TEMPOKEY_TEST_BATCH_KILL_AFTER_REPLACE=2"});
+  ProcessResult resumed = Batch({work, "-o", work, "--overwrite", "--ops", ops});
+
+  EXPECT_EQ(killed.exit_code, -1) << "killed by the hook\n" << killed.err;
+  ASSERT_EQ(resumed.exit_code, 0) << resumed.err;
+  const Summary summary = ParseSummary(resumed.out);
+  EXPECT_EQ(summary.skipped, 2);
+  EXPECT_EQ(summary.done, files - 2);
+  const std::map<std::string, std::string> expected = Outputs(clean);
+  const std::map<std::string, std::string> outputs = Outputs(work);
+  EXPECT_EQ(outputs.size(), expected.size());
+  for (const auto& [name, bytes] : expected) {
+    EXPECT_TRUE(outputs.count(name) > 0 && outputs.at(name) == bytes)
+        << name << ": not what a clean run writes (retimed twice?)";
+  }
+  EXPECT_THAT(Leftovers(work), ::testing::IsEmpty());
+  EXPECT_FALSE(fs::exists(work + "/.tempokey-batch.journal"));
+}
+
+// Two runs of one manifest into one folder: the second is refused at once with one line and
+// exit 1, and leaves the first's temporary alone (before, its start-up clean-up removed it and
+// the first failed "cannot replace the file"); another shard runs beside the first.
+TEST_F(BatchResumeTest, SecondRunOfTheSameManifestIsRefusedAndAnotherShardRunsBeside) {
+  const std::string in = Folder("in");
+  const std::string ops = Ops(kReduce);
+  const std::string out = Path("out");
+  auto args = [&](const std::string& shard) {
+    return std::vector<std::string>{TempokeyBinary(), "--server", server_->target(), "batch",
+                                    in, "-o", out, "--ops", ops, "--jobs", "1", "--shard", shard,
+                                    "--progress", "none"};
+  };
+  // The test hook stops the first run (SIGSTOP) right after its first temporary file exists.
+  absl::StatusOr<pid_t> first =
+      Spawn(args("0/2"), Path("first.out"), Path("first.err"), {"TEMPOKEY_TEST_STOP_IN_WRITE=1"});
+  ASSERT_TRUE(first.ok()) << first.status();
+  ASSERT_TRUE(WaitUntilStopped(*first)) << ReadOrEmpty(Path("first.err"));
+  const std::vector<std::string> during = Leftovers(out);
+
+  const ProcessResult second = RunProcess(args("0/2"), dir_);
+  const ProcessResult other_shard = RunProcess(args("1/2"), dir_);
+  const std::vector<std::string> after = Leftovers(out);
+  const std::optional<int> first_exit = ContinueUntilExit(*first);
+
+  ASSERT_EQ(during.size(), 1u);
+  EXPECT_EQ(second.exit_code, 1);
+  EXPECT_EQ(second.err, "error: " + out + "/.tempokey-batch.shard-0-of-2.lock: another tempokey "
+                        "batch is running with this manifest (.tempokey-batch.shard-0-of-2.json); "
+                        "wait for it to end, or give this run another -o or --shard\n");
+  EXPECT_EQ(second.out, "");
+  EXPECT_EQ(other_shard.exit_code, 0) << other_shard.err;
+  EXPECT_EQ(after, during);
+  EXPECT_EQ(first_exit, std::optional<int>(0)) << ReadOrEmpty(Path("first.err"));
+  EXPECT_THAT(Leftovers(out), ::testing::IsEmpty());
+  EXPECT_EQ(ParseSummary(ReadOrEmpty(Path("first.out"))).failed, 0);
+  EXPECT_EQ(Outputs(out).size(), QuickSources().size());
+  EXPECT_FALSE(fs::exists(out + "/.tempokey-batch.shard-0-of-2.lock"));
 }
 
 }  // namespace
