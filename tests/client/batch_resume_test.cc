@@ -344,19 +344,6 @@ TEST_F(BatchResumeTest, ShardAndProgressMistakesAreUsageErrors) {
 
 constexpr char kHalfSpeed[] = R"({"operations": [{"retime": {"speed": "0s:0.5"}}]})";
 
-// Waits (bounded) until `pid` is stopped (SIGSTOP); false if it ended or never stopped.
-bool WaitUntilStopped(pid_t pid) {
-  const auto deadline = std::chrono::steady_clock::now() + kProcessTimeout;
-  while (std::chrono::steady_clock::now() < deadline) {
-    int status = 0;
-    const pid_t changed = waitpid(pid, &status, WNOHANG | WUNTRACED);
-    if (changed == pid) return WIFSTOPPED(status);
-    if (changed < 0) return false;
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  return false;
-}
-
 // Lets `pid` go on (SIGCONT) each time the write hook stops it, until it ends (bounded); its
 // exit code, nullopt for a signal or a timeout.
 std::optional<int> ContinueUntilExit(pid_t pid) {

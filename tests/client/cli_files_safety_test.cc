@@ -404,19 +404,6 @@ TEST_F(InputTest, FifoWithAWriterIsReadLikeAFile) {
 
 // ---- a signal during the write ---------------------------------------------------------------------
 
-// Waits (bounded) until `pid` stops or exits; true when it stopped.
-bool WaitUntilStopped(pid_t pid) {
-  const auto deadline = std::chrono::steady_clock::now() + kProcessTimeout;
-  while (std::chrono::steady_clock::now() < deadline) {
-    int status = 0;
-    const pid_t changed = waitpid(pid, &status, WNOHANG | WUNTRACED);
-    if (changed == pid) return WIFSTOPPED(status);
-    if (changed < 0) return false;
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
-  return false;
-}
-
 // Waits (bounded) for `pid` to end; the signal that killed it, 0 for a normal exit, -1 on timeout.
 int WaitForSignalDeath(pid_t pid) {
   const auto deadline = std::chrono::steady_clock::now() + kProcessTimeout;

@@ -100,6 +100,20 @@ inline std::optional<int> WaitFor(pid_t pid, std::chrono::milliseconds timeout) 
   }
 }
 
+// Waits (bounded by kProcessTimeout) until `pid` is stopped (SIGSTOP, as by a test hook);
+// false if it ended or never stopped.
+inline bool WaitUntilStopped(pid_t pid) {
+  const auto deadline = std::chrono::steady_clock::now() + kProcessTimeout;
+  while (std::chrono::steady_clock::now() < deadline) {
+    int status = 0;
+    const pid_t changed = waitpid(pid, &status, WNOHANG | WUNTRACED);
+    if (changed == pid) return WIFSTOPPED(status);
+    if (changed < 0) return false;
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  return false;
+}
+
 inline std::string ReadOrEmpty(const std::string& path) {
   absl::StatusOr<std::string> text = core::ReadFile(path);
   return text.ok() ? *text : std::string();
