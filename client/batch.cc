@@ -216,8 +216,12 @@ BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
   const bool in_place = options.manifest != nullptr &&
                         IsSameFile(item.input_path, item.output_path) &&
                         fs::is_regular_file(item.output_path, ignored);
-  const std::string write_path =
-      in_place ? options.manifest->StagingPath(item) : item.output_path;
+  std::string write_path = item.output_path;
+  if (in_place) {
+    absl::StatusOr<std::string> staged = options.manifest->StagingPath(item);
+    if (!staged.ok()) return finish(staged.status());
+    write_path = *std::move(staged);
+  }
   if (absl::Status written = WriteOutput(write_path, item.output_format, result->output, gltf);
       !written.ok()) {
     return finish(written);

@@ -91,9 +91,11 @@ absl::StatusOr<std::pair<std::int64_t, std::string>> FileIdentity(const std::str
 }
 
 // Takes an exclusive flock on the file at `path` (created if missing). Returns its descriptor,
-// or -1 when the file system has no locks. A holder removes the file before it lets go (so no
-// lock file stays behind), hence the check that the locked file is still the one so named: a
-// process that opened it just before the removal locks a file nobody else will, and retries.
+// or -1 when the file system has no locks (ENOLCK, EOPNOTSUPP, ENOSYS). A holder removes the
+// file before it lets go (so no lock file stays behind), hence the check that the locked file is
+// still the one so named: a process that opened it just before the removal locks a file nobody
+// else will, and retries. (On NFS that check may read a cached name: locking there needs the
+// server's locks, README "Batches".)
 absl::StatusOr<int> LockFile(const std::string& path, std::string_view manifest_name) {
   for (int attempt = 0;; ++attempt) {
     const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0666);
@@ -116,7 +118,12 @@ absl::StatusOr<int> LockFile(const std::string& path, std::string_view manifest_
             path, ": another tempokey batch is running with this manifest (",
             AsAbsl(manifest_name), "); wait for it to end, or give this run another -o or --shard"));
       }
-      return -1;  // no locks here (ENOLCK, EOPNOTSUPP): unlocked, as before locks existed
+      if (error == ENOLCK || error == EOPNOTSUPP || error == ENOSYS) {
+        return -1;  // no locks here: unlocked, as before locks existed (the command warns)
+      }
+      // ESTALE, EIO...: two runs might each think they hold it; better none runs.
+      return absl::UnavailableError(
+          absl::StrCat(path, ": cannot lock: ", std::strerror(error)));
     }
     struct stat held {};
     struct stat named {};
@@ -128,12 +135,11 @@ absl::StatusOr<int> LockFile(const std::string& path, std::string_view manifest_
   }
 }
 
-// The file an in-place output replaces: its path, links followed (as WriteFileAtomically()
-// writes through a link), or as given when it cannot be resolved.
-fs::path ReplacedPath(const BatchItem& item) {
-  std::error_code error;
-  fs::path resolved = fs::canonical(item.output_path, error);
-  return error ? fs::path(item.output_path) : resolved;
+// The file an in-place output replaces: its path, links followed as WriteFileAtomically()
+// follows them (another user's link in a shared sticky folder refused).
+absl::StatusOr<fs::path> ReplacedPath(const BatchItem& item) {
+  TEMPOKEY_ASSIGN_OR_RETURN(std::string resolved, core::FollowLinks(item.output_path));
+  return fs::path(std::move(resolved));
 }
 
 // TEMPOKEY_TEST_BATCH_KILL_AFTER_REPLACE (see ReplaceInPlace()): 0 when unset.
@@ -342,7 +348,15 @@ int BatchManifest::RemoveLeftoverTemporaries(std::span<const BatchItem> items) {
     targets[output.parent_path()].insert(output.filename().string());
   }
   targets[fs::path(path_).parent_path()].insert(fs::path(path_).filename().string());
-  const std::string staged_prefix = fs::path(stem_).filename().string() + ".staged-";
+  // This manifest's staging files, by their exact names (another manifest's differ), beside the
+  // file each replaces (a link's target may be in another folder), and their temporaries.
+  std::set<fs::path> staged;
+  for (const BatchItem& item : items) {
+    const absl::StatusOr<std::string> path = StagingPath(item);
+    if (!path.ok()) continue;
+    staged.insert(*path);
+    targets[fs::path(*path).parent_path()].insert(fs::path(*path).filename().string());
+  }
   int removed = 0;
   for (const auto& [folder, names] : targets) {
     std::error_code error;
@@ -350,7 +364,7 @@ int BatchManifest::RemoveLeftoverTemporaries(std::span<const BatchItem> items) {
     for (const auto& entry : fs::directory_iterator(folder.empty() ? "." : folder, error)) {
       const std::string name = entry.path().filename().string();
       const std::size_t mark = name.rfind(".tmp-");
-      if (name.starts_with(staged_prefix) ||
+      if (staged.count(entry.path()) > 0 ||
           (mark != std::string::npos && names.count(name.substr(0, mark)) > 0 &&
            core::IsAtomicWriteTemporary(name, name.substr(0, mark)))) {
         leftovers.push_back(entry.path());
@@ -361,9 +375,11 @@ int BatchManifest::RemoveLeftoverTemporaries(std::span<const BatchItem> items) {
   return removed;
 }
 
-std::string BatchManifest::StagingPath(const BatchItem& item) const {
-  const fs::path output = ReplacedPath(item);
-  const std::string digest = wire::Sha256Id(output.filename().string());
+absl::StatusOr<std::string> BatchManifest::StagingPath(const BatchItem& item) const {
+  TEMPOKEY_ASSIGN_OR_RETURN(const fs::path output, ReplacedPath(item));
+  // The manifest's own path in the name: two manifests replacing files in one folder (`DIR -r`
+  // and `DIR/sub`, in place) never share a staging file.
+  const std::string digest = wire::Sha256Id(absl::StrCat(stem_, "\n", output.string()));
   const std::string hex = digest.substr(digest.find(':') + 1, 16);
   return (output.parent_path() /
           absl::StrCat(fs::path(stem_).filename().string(), ".staged-", hex))
@@ -513,7 +529,9 @@ absl::Status BatchManifest::ReplaceInPlace(const BatchItem& item, const std::str
       }
     }
   }
-  const fs::path replaced = ReplacedPath(item);
+  const absl::StatusOr<fs::path> resolved = ReplacedPath(item);
+  if (!resolved.ok()) return fail(resolved.status());
+  const fs::path& replaced = *resolved;
   // The output keeps the input's permission bits, as WriteFileAtomically() keeps them.
   if (struct stat input {}; ::stat(replaced.c_str(), &input) == 0 && S_ISREG(input.st_mode)) {
     ::chmod(staged_path.c_str(), input.st_mode & 07777);
@@ -537,10 +555,21 @@ absl::Status BatchManifest::ReplaceInPlace(const BatchItem& item, const std::str
 
 absl::Status BatchManifest::AppendToJournal(const std::string& line) {
   std::lock_guard<std::mutex> lock(journal_mutex_);
+  const bool existed = ::access(journal_path_.c_str(), F_OK) == 0;
   const int fd = ::open(journal_path_.c_str(), O_RDWR | O_APPEND | O_CREAT | O_CLOEXEC, 0666);
   if (fd < 0) {
     return absl::UnavailableError(
         absl::StrCat(journal_path_, ": cannot open: ", std::strerror(errno)));
+  }
+  // A new journal's name made durable too: a power cut could keep a rename over an input (in
+  // another folder) and lose the journal's entry, and the output would be taken as an input.
+  if (!existed) {
+    if (const int dir_fd = ::open(fs::path(journal_path_).parent_path().c_str(),
+                                  O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+        dir_fd >= 0) {
+      ::fsync(dir_fd);
+      ::close(dir_fd);
+    }
   }
   // A line a kill cut short is ended first, so this record starts a line of its own.
   const off_t size = ::lseek(fd, 0, SEEK_END);

@@ -127,11 +127,15 @@ class BatchManifest {
   // folders. Nothing else is touched (another shard's files, another manifest's), and nothing at
   // all unless this run holds the manifest's lock. Returns how many files were removed.
   int RemoveLeftoverTemporaries(std::span<const BatchItem> items);
+  // Whether this run holds the manifest's lock (false where the file system takes none).
+  bool locked() const { return lock_fd_ >= 0; }
 
   // Where `item`'s output is written whole before ReplaceInPlace() puts it over its input: a
-  // hidden file beside it, "<manifest stem>.staged-<16 hex digits of the output's name>" (never
-  // an input, and its name is this manifest's, for RemoveLeftoverTemporaries()).
-  std::string StagingPath(const BatchItem& item) const;
+  // hidden file beside the file it replaces (a link's target, links followed as
+  // core::FollowLinks()), "<manifest stem>.staged-<16 hex digits of this manifest's path and the
+  // output's>" (never an input, and this manifest's alone, for RemoveLeftoverTemporaries()).
+  // Errors: those of core::FollowLinks().
+  absl::StatusOr<std::string> StagingPath(const BatchItem& item) const;
 
   // Whether `path` is an output some manifest of OUTDIR records (read at Open()): with OUTDIR
   // inside DIR, last run's outputs are not this run's inputs.

@@ -168,6 +168,11 @@ absl::Status Batch(CommandContext& context) {
     TEMPOKEY_RETURN_IF_ERROR(CheckSummaryPath(*summary_path, ops_path, items, output_dir));
   }
   TEMPOKEY_ASSIGN_OR_RETURN(const Client* client, context.Connect());
+  if (!manifest->locked()) {
+    context.err() << "warning: " << output_dir
+                  << ": this file system takes no locks: another run of this manifest would not "
+                     "be refused, and leftovers of a killed run are not removed\n";
+  }
   manifest->RemoveLeftoverTemporaries(items);
   options.manifest = manifest.get();
 

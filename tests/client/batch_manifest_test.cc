@@ -376,14 +376,21 @@ TEST_F(BatchManifestTest, UnreadableManifestStopsTheRunWithItsPlaceAndTheWayOut)
 
 TEST_F(BatchManifestTest, LeftoverTemporariesOfTheRunsOwnFilesAreRemovedOnly) {
   const std::vector<BatchItem> items = {Item("walk")};
+  std::unique_ptr<BatchManifest> manifest = Open();
+  ASSERT_NE(manifest, nullptr);
+  const absl::StatusOr<std::string> staged = manifest->StagingPath(items[0]);
+  ASSERT_TRUE(staged.ok()) << staged.status();
+  const std::string own_staged = fs::path(*staged).filename().string();
   const std::vector<std::string> removed_names = {
-      "walk.json.tmp-ab12cd34", ".tempokey-batch.json.tmp-zzzzzzzz",
-      ".tempokey-batch.staged-0123456789abcdef",
-      ".tempokey-batch.staged-0123456789abcdef.tmp-ab12cd34"};
+      "walk.json.tmp-ab12cd34", ".tempokey-batch.json.tmp-zzzzzzzz", own_staged,
+      own_staged + ".tmp-ab12cd34"};
+  // Another manifest's staging files (another shard's, or another folder's manifest replacing
+  // files here) look alike but are not this run's.
   const std::vector<std::string> kept_names = {
       "walk.json.tmp-AB12CD34", "walk.json.tmp-ab12", "run.json.tmp-ab12cd34", "walk.json",
       ".tempokey-batch.shard-0-of-2.json.tmp-ab12cd34",
-      ".tempokey-batch.shard-0-of-2.staged-0123456789abcdef"};
+      ".tempokey-batch.shard-0-of-2.staged-0123456789abcdef",
+      ".tempokey-batch.staged-0123456789abcdef"};
   for (const std::string& name : removed_names) {
     ASSERT_TRUE(core::WriteFileAtomically(out_ + "/" + name, "x").ok());
   }
@@ -391,7 +398,6 @@ TEST_F(BatchManifestTest, LeftoverTemporariesOfTheRunsOwnFilesAreRemovedOnly) {
     ASSERT_TRUE(core::WriteFileAtomically(out_ + "/" + name, "x").ok());
   }
 
-  std::unique_ptr<BatchManifest> manifest = Open();
   const int removed = manifest->RemoveLeftoverTemporaries(items);
 
   EXPECT_EQ(removed, 4);

@@ -122,6 +122,8 @@ std::string_view KindOfFile(mode_t mode) {
   return "not a regular file";
 }
 
+}  // namespace
+
 // The file `path` names once its symbolic links are followed (at most kMaxLinks of them, as
 // the kernel's ELOOP): a write through a link reaches its target and the link stays. A link
 // whose target does not exist yet names that target. Not a link: `path`. As the kernel's
@@ -153,6 +155,8 @@ absl::StatusOr<std::string> FollowLinks(std::string path) {
   }
   return ErrnoError(ELOOP, path, "cannot write: ");
 }
+
+namespace {
 
 // WriteFileAtomically() into a FIFO or character device: opened without waiting for a reader
 // (a FIFO nobody reads is an error, not a hang), then written in full.

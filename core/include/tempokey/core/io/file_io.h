@@ -57,6 +57,13 @@ absl::StatusOr<std::string> ReadTextFile(const std::string& path,
 // Thread-safe; concurrent writers to one path leave one complete version (the last rename).
 absl::Status WriteFileAtomically(const std::string& path, std::string_view contents);
 
+// The file `path` names once its symbolic links are followed, as WriteFileAtomically() writes
+// through them (a dangling link names its target; not a link: `path`). Another user's link in a
+// sticky world-writable folder is not followed, as the kernel's fs.protected_symlinks.
+// Errors: kPermissionDenied such a link; ELOOP's "too many levels of symbolic links" past 40;
+// a link that cannot be read.
+absl::StatusOr<std::string> FollowLinks(std::string path);
+
 // Whether `file_name` is the name of a temporary WriteFileAtomically() makes for a file named
 // `target_name` (both without folders): what a killed writer leaves behind. Thread-safe.
 bool IsAtomicWriteTemporary(std::string_view file_name, std::string_view target_name);
