@@ -106,7 +106,7 @@ void SendText(mg_connection* connection, int code, std::string_view content_type
 
 // An error as the API answers it: the HTTP status of its code and {"code", "status", "message"}.
 // `http_status` replaces the code's status where HTTP has a closer one (413 for a body over the
-// size limit, 505).
+// size limit).
 int SendApiError(mg_connection* connection, const absl::Status& status,
                  std::optional<std::chrono::milliseconds> retry_after = std::nullopt,
                  int http_status = 0) {
@@ -409,8 +409,9 @@ absl::StatusOr<std::unique_ptr<HttpFrontEnd>> HttpFrontEnd::Start(const HttpOpti
                             // a folded or non-ASCII one, and reads only the first of several
                             // Transfer-Encodings, so a body could be read as a second request
                             // that a proxy in front never saw (request smuggling, RFC 9112
-                            // 11.2); on a closed connection no second request is read. An idle
-                            // connection no longer holds a thread either.
+                            // 11.2); on a closed connection no second request is read. (A
+                            // connection that never sends a request still holds a thread until
+                            // the I/O timeout.)
                             "enable_keep_alive",     "no",
                             "max_request_size",      "16384",
                             "static_file_cache_control", "no-cache",
