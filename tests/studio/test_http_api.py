@@ -116,6 +116,15 @@ class HttpApiTest(unittest.TestCase):
                 self.assertEqual(answer["code"], raised.exception.code().value[0])
                 self.assertEqual(answer["message"], raised.exception.details())
 
+    def test_an_error_quoting_bytes_that_are_not_utf8_is_still_json(self):
+        # The message quotes what the client sent; bytes that are not UTF-8 were written raw, and
+        # the body was neither UTF-8 nor JSON to Python's own decoders (RFC 8259, 8.1).
+        status, headers, body = post(self.url, "ParseSpeedKnots", b'{"text":"\xff\xfe"}')
+
+        self.assertEqual(status, 400)  # post() decodes the body as strict UTF-8
+        self.assertEqual(headers["Content-Type"], "application/json")
+        self.assertEqual(json.loads(body)["status"], "INVALID_ARGUMENT")
+
     def test_malformed_file_is_refused_with_its_location(self):
         with open(CMU) as f:
             lines = f.read().split("\n")
