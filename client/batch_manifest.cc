@@ -341,17 +341,15 @@ BatchManifest::~BatchManifest() {
 
 int BatchManifest::RemoveLeftoverTemporaries(std::span<const BatchItem> items) {
   if (lock_fd_ < 0) return 0;  // another run of this manifest may be writing them
-  // Targets by folder, so each folder is listed once.
+  // Targets by folder, so each folder is listed once; with this manifest's staging files, by their
+  // exact names (another manifest's differ), beside the file each replaces (a link's target may
+  // be in another folder), and their temporaries.
   std::map<fs::path, std::set<std::string>> targets;
+  std::set<fs::path> staged;
+  targets[fs::path(path_).parent_path()].insert(fs::path(path_).filename().string());
   for (const BatchItem& item : items) {
     const fs::path output(item.output_path);
     targets[output.parent_path()].insert(output.filename().string());
-  }
-  targets[fs::path(path_).parent_path()].insert(fs::path(path_).filename().string());
-  // This manifest's staging files, by their exact names (another manifest's differ), beside the
-  // file each replaces (a link's target may be in another folder), and their temporaries.
-  std::set<fs::path> staged;
-  for (const BatchItem& item : items) {
     const absl::StatusOr<std::string> path = StagingPath(item);
     if (!path.ok()) continue;
     staged.insert(*path);

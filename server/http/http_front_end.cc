@@ -281,22 +281,13 @@ bool ExpectsContinue(const mg_connection* connection) {
   return absl::EqualsIgnoreCase(core::AsAbsl(HeaderOf(connection, "Expect")), "100-continue");
 }
 
-// The value of the first header `name` of `info` (case-insensitive), or null.
-const char* HeaderIn(const mg_request_info& info, std::string_view name) {
-  for (int i = 0; i < info.num_headers; ++i) {
-    if (absl::EqualsIgnoreCase(info.http_headers[i].name, core::AsAbsl(name))) {
-      return info.http_headers[i].value;
-    }
-  }
-  return nullptr;
-}
-
 // Framing civetweb accepts but a proxy in front may read otherwise, so that a body read by one
 // length here and another there is a second request (RFC 9112: 6.3, 3.2, RFC 6585: 5): two
 // Content-Lengths (civetweb takes the first), Content-Length with Transfer-Encoding, no Host or
 // two, and more header fields than civetweb keeps (it drops the rest, an Origin among them).
 // The status and reason to refuse the request with, or 0.
-std::pair<int, std::string_view> FramingRefusal(const mg_request_info& info) {
+std::pair<int, std::string_view> FramingRefusal(const mg_connection* connection) {
+  const mg_request_info& info = *mg_get_request_info(connection);
   constexpr int kCivetwebMaxHeaders = 64;  // MG_MAX_HEADERS: the 65th and later are dropped
   if (info.num_headers >= kCivetwebMaxHeaders) {
     return {431, "a request may carry at most 63 header fields"};
@@ -318,14 +309,14 @@ std::pair<int, std::string_view> FramingRefusal(const mg_request_info& info) {
   // civetweb reads the first Transfer-Encoding only (a "chunked" after an "identity" read the
   // body as empty) and honours one on HTTP/1.0, where it has no meaning (RFC 9112, 6.1).
   if (encodings > 0) {
-    const char* encoding = HeaderIn(info, "Transfer-Encoding");
-    if (encodings > 1 || !http11 || encoding == nullptr ||
-        !absl::EqualsIgnoreCase(encoding, "chunked")) {
+    if (encodings > 1 || !http11 ||
+        !absl::EqualsIgnoreCase(core::AsAbsl(HeaderOf(connection, "Transfer-Encoding")),
+                                "chunked")) {
       return {400, "a request's Transfer-Encoding is one \"chunked\", on HTTP/1.1"};
     }
   }
   if (lengths == 1) {
-    const std::string_view length = HeaderIn(info, "Content-Length");
+    const std::string_view length = HeaderOf(connection, "Content-Length");
     if (length.empty() || length.find_first_not_of("0123456789") != std::string_view::npos) {
       return {400, "a request's Content-Length is a decimal number"};
     }
@@ -469,7 +460,7 @@ std::string HttpFrontEnd::url() const {
 
 int HttpFrontEnd::HandleRequest(mg_connection* connection) {
   const mg_request_info* info = mg_get_request_info(connection);
-  if (const auto [status, reason] = FramingRefusal(*info); status != 0) {
+  if (const auto [status, reason] = FramingRefusal(connection); status != 0) {
     // civetweb's error closes the connection: nothing after this head is read as a request.
     mg_send_http_error(connection, status, "%.*s", static_cast<int>(reason.size()),
                        reason.data());

@@ -49,21 +49,26 @@ inline std::string ReadToEnd(int fd) {
   return response;
 }
 
-// GET `path` from 127.0.0.1:`port` with the extra header lines `headers` ("Name: value\r\n"
-// each); the whole response, headers included.
-inline std::optional<std::string> HttpGet(int port, const std::string& path,
-                                          const std::string& headers = "") {
+// Sends `bytes` on a new connection to 127.0.0.1:`port` and reads everything until the peer
+// closes it (or the hang guard fires); nullopt when it cannot connect or send.
+inline std::optional<std::string> Exchange(int port, const std::string& bytes) {
   const int fd = ConnectLoopback(port);
   if (fd < 0) return std::nullopt;
-  const std::string request = "GET " + path + " HTTP/1.1\r\nHost: 127.0.0.1\r\n" + headers +
-                              "Connection: close\r\n\r\n";
-  if (::send(fd, request.data(), request.size(), 0) != static_cast<ssize_t>(request.size())) {
+  if (::send(fd, bytes.data(), bytes.size(), MSG_NOSIGNAL) != static_cast<ssize_t>(bytes.size())) {
     ::close(fd);
     return std::nullopt;
   }
   std::string response = ReadToEnd(fd);
   ::close(fd);
   return response;
+}
+
+// GET `path` from 127.0.0.1:`port` with the extra header lines `headers` ("Name: value\r\n"
+// each); the whole response, headers included.
+inline std::optional<std::string> HttpGet(int port, const std::string& path,
+                                          const std::string& headers = "") {
+  return Exchange(port, "GET " + path + " HTTP/1.1\r\nHost: 127.0.0.1\r\n" + headers +
+                            "Connection: close\r\n\r\n");
 }
 
 // Sample lines of a Prometheus text exposition: "name{labels}" -> value.

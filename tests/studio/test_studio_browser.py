@@ -533,6 +533,15 @@ class StudioBrowserTest(unittest.TestCase):
         self.el("editor").send_keys(Keys.ARROW_UP)
         self.wait_for_knots(lambda knots: knots == [(0.0, 1.01), (2.0, 0.5)], "an edit of the good curve")
 
+    def expect_knot_refused(self, field, value, said, time, speed):
+        """Types `value` into `field`: the second knot's message says `said`, and both fields
+        show the knot as it was (`time`, `speed`)."""
+        self.type_over(field, value, Keys.TAB)
+        wait_for(lambda: said in self.shown("knot-error"), "the message about " + said)
+        self.assertIn("knot 2", self.shown("knot-error"))
+        self.assertEqual(self.el("knot-time").get_attribute("value"), time)
+        self.assertEqual(self.el("knot-speed").get_attribute("value"), speed)
+
     def test_8b_knot_fields_refuse_what_the_editor_cannot_take(self):
         self.type_over("speed-text", "0s:1,2s:0.5")
         self.wait_for_knots(lambda knots: knots == [(0.0, 1.0), (2.0, 0.5)], "the typed curve")
@@ -542,11 +551,7 @@ class StudioBrowserTest(unittest.TestCase):
                                    ("knot-speed", "", "speed a blank"), ("knot-time", "", "time a blank"),
                                    ("knot-time", "-1", 'time "-1"')]:
             with self.subTest(field=field, value=value):
-                self.type_over(field, value, Keys.TAB)
-                wait_for(lambda: said in self.shown("knot-error"), "the message about " + said)
-                self.assertIn("knot 2", self.shown("knot-error"))
-                self.assertEqual(self.el("knot-time").get_attribute("value"), "2")
-                self.assertEqual(self.el("knot-speed").get_attribute("value"), "0.5")
+                self.expect_knot_refused(field, value, said, "2", "0.5")
         self.type_over("knot-speed", "0.75", Keys.TAB)
         self.wait_for_knots(lambda knots: knots == [(0.0, 1.0), (2.0, 0.75)], "the typed speed")
         self.assertEqual(self.shown("knot-error"), "")
@@ -555,11 +560,7 @@ class StudioBrowserTest(unittest.TestCase):
         for field, value, said in [("knot-speed", "500", "speed 500 is outside the limits [0.01, 100]"),
                                    ("knot-time", "10", "time 10s is after the end of the timeline")]:
             with self.subTest(field=field, value=value):
-                self.type_over(field, value, Keys.TAB)
-                wait_for(lambda: said in self.shown("knot-error"), "the message about " + said)
-                self.assertIn("knot 2", self.shown("knot-error"))
-                self.assertEqual(self.el("knot-time").get_attribute("value"), "2")
-                self.assertEqual(self.el("knot-speed").get_attribute("value"), "0.75")
+                self.expect_knot_refused(field, value, said, "2", "0.75")
         # Nor past a neighbour: the first knot cannot go after the second.
         self.el("editor").send_keys(Keys.TAB)
         wait_for(lambda: self.el("knot-time").get_attribute("value") == "0", "the first knot selected")

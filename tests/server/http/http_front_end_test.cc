@@ -285,12 +285,7 @@ FrontEnd StartFrontEnd(std::int64_t max_message_bytes = 64 << 20,
 
 // Sends `bytes` on a new connection and reads everything until the server closes it.
 std::string Exchange(int port, const std::string& bytes) {
-  const int fd = testing::ConnectLoopback(port);
-  if (fd < 0) return "no connection";
-  ::send(fd, bytes.data(), bytes.size(), MSG_NOSIGNAL);
-  std::string answer = testing::ReadToEnd(fd);
-  ::close(fd);
-  return answer;
+  return testing::Exchange(port, bytes).value_or("no connection");
 }
 
 // How many HTTP responses `answer` holds.
