@@ -197,21 +197,28 @@ int LocalCpuCount() {
   return std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
 }
 
+absl::StatusOr<core::GltfStats> WriteKeyedGltf(const std::string& path, FileFormat format,
+                                               const core::KeyedClip& keyed,
+                                               const GltfExportSource& gltf) {
+  if (gltf.source == nullptr) {
+    return absl::InternalError(absl::StrCat(path, ": a keyed glTF needs the source clip"));
+  }
+  TEMPOKEY_ASSIGN_OR_RETURN(
+      core::GltfFile file,
+      core::FormatGltfKeyed(*gltf.source, keyed,
+                            {.max_rotation_error_degrees = gltf.max_rotation_error_degrees,
+                             .joint_tolerance = gltf.joint_tolerance,
+                             .threads = gltf.threads},
+                            GltfContainerOf(format)));
+  TEMPOKEY_RETURN_IF_ERROR(core::WriteFileAtomically(path, file.bytes));
+  return file.stats;
+}
+
 absl::Status WriteOutput(const std::string& path, FileFormat format,
                          const std::variant<core::Clip, core::KeyedClip>& output,
                          const GltfExportSource& gltf) {
   if (const auto* keyed = std::get_if<core::KeyedClip>(&output); keyed && IsGltfFormat(format)) {
-    if (gltf.source == nullptr) {
-      return absl::InternalError(absl::StrCat(path, ": a keyed glTF needs the source clip"));
-    }
-    TEMPOKEY_ASSIGN_OR_RETURN(
-        core::GltfFile file,
-        core::FormatGltfKeyed(*gltf.source, *keyed,
-                              {.max_rotation_error_degrees = gltf.max_rotation_error_degrees,
-                               .joint_tolerance = gltf.joint_tolerance,
-                               .threads = gltf.threads},
-                              GltfContainerOf(format)));
-    return core::WriteFileAtomically(path, file.bytes);
+    return WriteKeyedGltf(path, format, *keyed, gltf).status();
   }
   if (const auto* clip = std::get_if<core::Clip>(&output)) {
     if (IsKeyedFormat(format)) {

@@ -13,6 +13,7 @@
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
+#include "tempokey/core/io/gltf.h"
 #include "tempokey/core/model/clip.h"
 #include "tempokey/core/model/keyed_clip.h"
 #include "tempokey/core/pipeline/pipeline.h"
@@ -126,6 +127,14 @@ absl::Status WriteClipFile(const std::string& path, FileFormat format, const cor
 // errors naming the path.
 absl::Status WriteKeyedClipFile(const std::string& path, FileFormat format,
                                 const core::KeyedClip& keyed);
+
+// Writes a keyed clip as .gltf or .glb (`format` one of them), its rotations fitted against
+// `gltf.source` (core::FormatGltfKeyed()), and returns what the file holds: its keys and, under a
+// joint bound, its largest joint error as glTF plays it.
+// Errors: kInternal without `gltf.source`; those of core::FormatGltfKeyed() and the write.
+absl::StatusOr<core::GltfStats> WriteKeyedGltf(const std::string& path, FileFormat format,
+                                               const core::KeyedClip& keyed,
+                                               const GltfExportSource& gltf);
 
 // Writes whichever `output` holds, checking that it suits `format`; a keyed result as glTF
 // needs `gltf.source`.

@@ -195,4 +195,23 @@ std::string FormatWorldErrorReport(const core::WorldErrorReport& world) {
   return out;
 }
 
+std::string FormatGltfStats(const core::GltfStats& stats, const core::WorldErrorReport* world) {
+  std::string out = SummaryLine(
+      "gltf keys", absl::StrCat(stats.rotation_keys, " rotation (",
+                                Percent(stats.rotation_keys, stats.rotation_samples), " of ",
+                                stats.rotation_samples, " joint frames), ", stats.translation_keys,
+                                " translation"));
+  if (stats.joint_bound > 0.0) {
+    const std::string percent =
+        world != nullptr && world->figure_height > 0.0
+            ? absl::StrFormat(" (%.3f%% of height)", world->Percent(stats.max_joint_error))
+            : std::string();
+    absl::StrAppend(&out, SummaryLine("gltf joint max",
+                                      absl::StrFormat("%.4f%s, bound %.4g, as glTF plays the file",
+                                                      stats.max_joint_error, percent,
+                                                      stats.joint_bound)));
+  }
+  return out;
+}
+
 }  // namespace tempokey::client

@@ -1,5 +1,8 @@
 // `tempokey reduce IN -o OUT ...`: key reduction on the server; keyed exports (.json, .anim) or
 // curves baked back to samples at the source rate (.bvh, .csv).
+#include <optional>
+#include <variant>
+
 #include "absl/strings/str_cat.h"
 #include "client/cli_errors.h"
 #include "client/clip_files.h"
@@ -42,11 +45,22 @@ absl::Status Reduce(CommandContext& context) {
   TEMPOKEY_ASSIGN_OR_RETURN(std::optional<core::PipelineResult> result,
                             ExecutePipeline(context, clip, steps, mode));
   if (!result) return absl::OkStatus();  // detached
-  TEMPOKEY_RETURN_IF_ERROR(WriteOutput(output, format, result->output, gltf));
-  if (!result->reports.empty()) {
-    if (const auto* report = std::get_if<core::ReductionReport>(&result->reports.front())) {
-      context.out() << FormatReductionReport(*report, clip);
-    }
+  // A keyed glTF's rotations are other curves than the report's: what the file holds is said too.
+  std::optional<core::GltfStats> gltf_stats;
+  const auto* keyed = std::get_if<core::KeyedClip>(&result->output);
+  if (keyed != nullptr && IsGltfFormat(format)) {
+    TEMPOKEY_ASSIGN_OR_RETURN(gltf_stats, WriteKeyedGltf(output, format, *keyed, gltf));
+  } else {
+    TEMPOKEY_RETURN_IF_ERROR(WriteOutput(output, format, result->output, gltf));
+  }
+  const core::ReductionReport* report =
+      result->reports.empty() ? nullptr
+                              : std::get_if<core::ReductionReport>(&result->reports.front());
+  if (report != nullptr) context.out() << FormatReductionReport(*report, clip);
+  if (gltf_stats) {
+    const core::WorldErrorReport* world =
+        report != nullptr && report->world ? &*report->world : nullptr;
+    context.out() << FormatGltfStats(*gltf_stats, world);
   }
   context.out() << SummaryLine("wrote", output);
   return absl::OkStatus();
@@ -64,8 +78,9 @@ const Command& ReduceCommand() {
           "channel on the server and writes OUT atomically by extension: .json (keyed curves,\n"
           "README schema), .anim (Maya) or .gltf / .glb (glTF 2.0 CUBICSPLINE; rotations fitted\n"
           "as quaternions within --tolerance degrees of IN, and within --joint-tolerance when\n"
-          "given, as glTF plays the file) keep the keys; .bvh or .csv bake\n"
-          "the curves back to samples at the source rate (a filtered clip). Prints the quality\n"
+          "given, as glTF plays the file, that bound alone without --tolerance) keep the keys;\n"
+          ".bvh or .csv bake the curves back to samples at the source rate (a filtered clip).\n"
+          "A glTF's own keys and joint error follow the report. Prints the quality\n"
           "report: keys kept, RMS and max error (degrees for rotations, file units for\n"
           "positions) and the worst channel and frame, then the joints' world-position error\n"
           "through the skeleton (max with its joint and frame, RMS; file units and % of the\n"

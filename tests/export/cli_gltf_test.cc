@@ -127,7 +127,15 @@ TEST_F(CliGltfTest, JointToleranceReductionsWriteGlbWithinTheBound) {
         RunNodeScript("world_check.mjs", {checks[i].first, files[i]}, dir_);
     ASSERT_EQ(placed.size(), 1u);
     EXPECT_LE(NumberOf(placed[0], "max_world_error"), checks[i].second + 1e-3) << files[i];
+    if (i == 0) {
+      // What the CLI says of the file is what three.js finds in it (printed to 4 decimals).
+      const std::size_t at = reduce.out.find("gltf joint max:  ");
+      ASSERT_NE(at, std::string::npos) << reduce.out;
+      const double said = std::stod(reduce.out.substr(at + 17));
+      EXPECT_NEAR(said, NumberOf(placed[0], "max_world_error"), 1e-4) << reduce.out;
+    }
   }
+  EXPECT_THAT(reduce.out, ::testing::HasSubstr(" joint frames), "));
 }
 
 }  // namespace

@@ -10,6 +10,7 @@
 
 #include "gtest/gtest.h"
 #include "tempokey/core/io/bvh.h"
+#include "tempokey/core/io/file_formats.h"
 #include "tempokey/core/io/file_io.h"
 #include "tempokey/core/reduce/reduce.h"
 #include "tests/export/export_tools.h"
@@ -238,8 +239,12 @@ TEST(GltfExportTest, ThreeJsPlacesEveryPointOfAJointBoundKeyedGltfWithinTheBound
     options.tolerance.joint_tolerance = JointTolerance{.value = 0.5, .percent_of_height = true};
     absl::StatusOr<ReduceResult> reduced = ReduceKeys(*source, options);
     ASSERT_TRUE(reduced.ok()) << reduced.status();
+    // The bounds the CLI and the server's downloads take: the joint bound alone, no rotation
+    // bound of its own (GltfRotationBoundDegrees()).
     absl::StatusOr<GltfFile> file = FormatGltfKeyed(
-        *source, reduced->keyed, {.joint_tolerance = options.tolerance.joint_tolerance},
+        *source, reduced->keyed,
+        {.max_rotation_error_degrees = GltfRotationBoundDegrees(options),
+         .joint_tolerance = GltfJointTolerance(options)},
         GltfContainer::kBinary);
     ASSERT_TRUE(file.ok()) << file.status();
     const std::string out = absl::StrCat(dir, "/", Stem(path), "_joint_bound_keyed.glb");

@@ -67,7 +67,10 @@ const ExportFormat* FindExportFormat(std::string_view name) {
 }
 
 double GltfRotationBoundDegrees(const ReduceOptions& options) {
-  return options.tolerance.max_rotation_error_degrees.value_or(kDefaultMaxRotationErrorDegrees);
+  if (options.tolerance.max_rotation_error_degrees) {
+    return *options.tolerance.max_rotation_error_degrees;
+  }
+  return GltfJointTolerance(options) ? kNoRotationBoundDegrees : kDefaultMaxRotationErrorDegrees;
 }
 
 std::optional<JointTolerance> GltfJointTolerance(const ReduceOptions& options) {

@@ -105,6 +105,21 @@ TEST(FileFormatsTest, GltfRotationBoundIsTheRotationToleranceOrHalfADegree) {
   EXPECT_EQ(GltfRotationBoundDegrees(ReduceOptions{}), 0.5);
 }
 
+// As the reduction's rotation channels: a joint bound alone chooses their bounds, and a rotation
+// tolerance given still applies beside it.
+TEST(FileFormatsTest, UnderAJointBoundAloneGlTfRotationsHaveNoBoundOfTheirOwn) {
+  ReduceOptions joint;
+  joint.tolerance.joint_tolerance = JointTolerance{.value = 0.5, .percent_of_height = true};
+  ReduceOptions joint_and_rotation = joint;
+  joint_and_rotation.tolerance.max_rotation_error_degrees = 0.3;
+  ReduceOptions joint_under_budget = joint;
+  joint_under_budget.tolerance.key_budget = 3000;
+
+  EXPECT_EQ(GltfRotationBoundDegrees(joint), kNoRotationBoundDegrees);
+  EXPECT_EQ(GltfRotationBoundDegrees(joint_and_rotation), 0.3);
+  EXPECT_EQ(GltfRotationBoundDegrees(joint_under_budget), 0.5);
+}
+
 TEST(FileFormatsTest, GltfJointToleranceIsTheToleranceMethodsUnlessAKeyBudgetScalesIt) {
   const JointTolerance half_percent{.value = 0.5, .percent_of_height = true};
   ReduceOptions joint;
@@ -115,7 +130,6 @@ TEST(FileFormatsTest, GltfJointToleranceIsTheToleranceMethodsUnlessAKeyBudgetSca
   noise.method = ReduceMethod::kNoise;
 
   EXPECT_EQ(GltfJointTolerance(joint), half_percent);
-  EXPECT_EQ(GltfRotationBoundDegrees(joint), 0.5);
   EXPECT_EQ(GltfJointTolerance(ReduceOptions{}), std::nullopt);
   EXPECT_EQ(GltfJointTolerance(budget), std::nullopt);
   EXPECT_EQ(GltfJointTolerance(noise), std::nullopt);

@@ -53,14 +53,15 @@ struct ExportSource {
 // The bounds a keyed glTF of a reduction with `options` is fitted to. The CLI and the server's
 // downloads both use them, so their files are the same bytes.
 //
-// GltfRotationBoundDegrees(): its rotation tolerance, or the default 0.5 degrees when unset (also
-// under a joint tolerance and for the other methods): every glTF rotation stays within it of the
-// source's at every source frame.
+// GltfRotationBoundDegrees(): its rotation tolerance: every glTF rotation stays within it of the
+// source's at every source frame. Unset: kNoRotationBoundDegrees (none) under the joint tolerance
+// below, as the reduction lets the joint bound alone choose the bound of a rotation channel whose
+// tolerance is not given (reduce.h); the default 0.5 degrees otherwise.
 //
 // GltfJointTolerance(): the `tolerance` method's joint tolerance: every joint and end site of the
 // glTF, as glTF evaluates it, stays within it of its source position at every source frame,
 // measured by forward kinematics as the reduction's own joint bound is (gltf.h, "The joint bound
-// in glTF"), the rotation bound above holding too. None for the other methods, which take no
+// in glTF"), a rotation bound given holding too. None for the other methods, which take no
 // joint tolerance, and under a key budget, which replaces the bounds by a scale of them (the
 // reduction then keeps the scaled joint bound, whose keyed translations may be beyond the one
 // given: the glTF keeps the rotation bound alone, as it does without a joint tolerance).

@@ -105,7 +105,8 @@ absl::StatusOr<GltfFile> FormatGltfSampled(const Clip& clip, GltfContainer conta
 
 struct GltfKeyedOptions {
   // Largest angle between a glTF rotation and the source rotation at any source frame, degrees,
-  // finite and > 0: use the reduction's rotation tolerance.
+  // finite and > 0: use the reduction's rotation tolerance (GltfRotationBoundDegrees(),
+  // file_formats.h). kNoRotationBoundDegrees: none (a joint bound alone then bounds them).
   double max_rotation_error_degrees = 0.5;
   // A world-space bound (joint_bound.h; a percentage is of the source's figure height, as the
   // reduction resolves it): every joint and end site of the file, as glTF evaluates it, within it
@@ -117,6 +118,9 @@ struct GltfKeyedOptions {
   // the fits' working memory (about 128 bytes a frame each) stays within about 1 GiB.
   int threads = 1;
 };
+
+// The largest angle between two rotations: as a rotation bound, no bound at all.
+inline constexpr double kNoRotationBoundDegrees = 180.0;
 
 // Refits of the rotations under a joint bound before the rotations moving a point still over it
 // take a key at every frame (the joint bound above).
