@@ -15,6 +15,7 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "absl/strings/str_replace.h"
 #include "absl/strings/str_format.h"
 #include "client/batch_manifest.h"
 #include "client/cli_errors.h"
@@ -116,6 +117,16 @@ class CallWindow {
   int successes_ = 0;  // calls in a row that succeeded since the limit last changed
 };
 
+// A write error of an output staged beside the file it replaces (in place) names that file,
+// with the staging file's name after it, rather than the hidden staging file alone.
+absl::Status NameTheReplacedFile(const absl::Status& error, const std::string& staged,
+                                 const std::string& output) {
+  const std::string named = absl::StrCat(
+      output, " (written first as ", fs::path(staged).filename().string(), ")");
+  return absl::Status(error.code(),
+                      absl::StrReplaceAll(error.message(), {{staged, named}}));
+}
+
 // Frames, keys and the last reduction's max error of a finished pipeline.
 // A keyed output always comes from a reduction, whose report counts its keys.
 void Describe(const core::PipelineResult& result, BatchFileResult& file) {
@@ -170,7 +181,9 @@ BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
   }
   auto process = [&](const core::Clip& input, std::span<const core::PipelineStep> part)
       -> absl::StatusOr<core::PipelineResult> {
-    while (true) {
+    // Each call has its own --attempts (a keyed glTF after other steps makes two calls);
+    // `attempts` counts every call made.
+    for (int tries = 1;; ++tries) {
       ++file.attempts;
       window.Enter();
       absl::StatusOr<core::PipelineResult> result = client.Process(input, part);
@@ -181,7 +194,7 @@ BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
                        : CallWindow::Outcome::kOther);
       if (result.ok()) return result;
       const std::optional<std::chrono::milliseconds> delay =
-          RetryDelay(result.status(), file.attempts, options, random);
+          RetryDelay(result.status(), tries, options, random);
       if (!delay) return ServerError(result.status());
       std::this_thread::sleep_for(*delay);
     }
@@ -224,7 +237,7 @@ BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
   }
   if (absl::Status written = WriteOutput(write_path, item.output_format, result->output, gltf);
       !written.ok()) {
-    return finish(written);
+    return finish(in_place ? NameTheReplacedFile(written, write_path, item.output_path) : written);
   }
   Describe(*result, file);
   if (in_place) {

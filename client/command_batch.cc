@@ -7,9 +7,11 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <initializer_list>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
+#include "absl/strings/str_join.h"
 #include "client/batch.h"
 #include "client/batch_manifest.h"
 #include "client/batch_shard.h"
@@ -93,6 +95,32 @@ absl::StatusOr<std::optional<FileFormat>> FormatFromFlags(const ParsedArgs& args
   TEMPOKEY_ASSIGN_OR_RETURN(std::string_view name, ParseChoice("--format", *text, kFormats));
   return kFormatsByName[std::find(std::begin(kFormats), std::end(kFormats), name) -
                         std::begin(kFormats)];
+}
+
+// The files of `summary` that failed, as one error ("2 of 9 files failed; first: ..."): the
+// first failure's code; OK when none failed.
+absl::Status FailedFiles(const BatchSummary& summary) {
+  const int failed = summary.failed_count();
+  if (failed == 0) return absl::OkStatus();
+  const auto first = std::find_if(summary.files.begin(), summary.files.end(),
+                                  [](const BatchFileResult& f) { return !f.status.ok(); });
+  return absl::Status(first->status.code(),
+                      absl::StrCat(failed, " of ", summary.files.size(),
+                                   " files failed; first: ", first->status.message()));
+}
+
+// The errors among `statuses` as one: the first one's code, their messages in order joined by
+// "; and ". OK when all are.
+absl::Status JoinErrors(std::initializer_list<absl::Status> statuses) {
+  absl::StatusCode code = absl::StatusCode::kOk;
+  std::vector<absl::string_view> messages;
+  for (const absl::Status& status : statuses) {
+    if (status.ok()) continue;
+    if (code == absl::StatusCode::kOk) code = status.code();
+    messages.push_back(status.message());
+  }
+  if (code == absl::StatusCode::kOk) return absl::OkStatus();
+  return absl::Status(code, absl::StrJoin(messages, "; and "));
 }
 
 // Refuses a --summary that would replace the pipeline, an input, an output, or a manifest or
@@ -188,15 +216,11 @@ absl::Status Batch(CommandContext& context) {
   const absl::Status recorded = manifest->Finish(items);
   const std::string json = FormatBatchSummaryJson(summary);
   context.out() << json;
-  if (summary_path) TEMPOKEY_RETURN_IF_ERROR(core::WriteFileAtomically(*summary_path, json));
-  TEMPOKEY_RETURN_IF_ERROR(recorded);
-  const int failed = summary.failed_count();
-  if (failed == 0) return absl::OkStatus();
-  const auto first = std::find_if(summary.files.begin(), summary.files.end(),
-                                  [](const BatchFileResult& f) { return !f.status.ok(); });
-  return absl::Status(first->status.code(),
-                      absl::StrCat(failed, " of ", summary.files.size(),
-                                   " files failed; first: ", first->status.message()));
+  const absl::Status summarized =
+      summary_path ? core::WriteFileAtomically(*summary_path, json) : absl::OkStatus();
+  // One line for everything that went wrong: a manifest or summary that cannot be written does
+  // not hide the files that failed, nor they it.
+  return JoinErrors({summarized, recorded, FailedFiles(summary)});
 }
 
 }  // namespace

@@ -407,6 +407,37 @@ TEST_F(BatchResumeTest, InPlaceRunKilledRightAfterAReplaceIsResumedWithoutRedoin
   EXPECT_FALSE(fs::exists(work + "/.tempokey-batch.journal"));
 }
 
+// An in-place output is written beside its input first, as a hidden staging file; when that
+// write fails, the error named the staging file alone ("/w/.tempokey-batch.staged-4a08...:
+// cannot write: file too large"), a file the user never asked for. It now names the file it
+// would have replaced, and the input is left whole. The write fails for real: the CLI runs under
+// a file-size limit (RLIMIT_FSIZE, SIGXFSZ ignored: EFBIG) above the manifest's size and below
+// any output's (half speed doubles a clip's frames).
+TEST_F(BatchResumeTest, AnInPlaceOutputThatCannotBeWrittenIsNamedByTheFileItWouldReplace) {
+  const std::string work = Folder("work");
+  const std::map<std::string, std::string> inputs = Outputs(work);
+  std::size_t smallest = std::string::npos;
+  for (const auto& [name, bytes] : inputs) smallest = std::min(smallest, bytes.size());
+  const std::vector<std::string> argv = {
+      "/bin/sh", "-c", "trap '' XFSZ; exec prlimit --fsize=\"$0\" \"$@\"",
+      absl::StrCat(smallest), TempokeyBinary(), "--server", server_->target(), "batch", work,
+      "-o", work, "--overwrite", "--ops", Ops(kHalfSpeed), "--jobs", "1", "--progress", "none"};
+
+  const ProcessResult limited = RunProcess(argv, dir_);
+
+  EXPECT_EQ(limited.exit_code, 1) << limited.err;
+  const Summary summary = ParseSummary(limited.out);
+  EXPECT_EQ(summary.failed, static_cast<int>(inputs.size())) << limited.out;
+  for (const auto& [input, entry] : summary.by_input) {
+    EXPECT_THAT(entry.error, StartsWith(absl::StrCat(work, "/", input,
+                                                     " (written first as .tempokey-batch.staged-")))
+        << entry.error;
+    EXPECT_THAT(entry.error, HasSubstr("): cannot write: file too large"));
+  }
+  EXPECT_EQ(Outputs(work), inputs);
+  EXPECT_THAT(Leftovers(work), ::testing::IsEmpty());
+}
+
 // Two runs of one manifest into one folder: the second is refused at once with one line and
 // exit 1, and leaves the first's temporary alone (before, its start-up clean-up removed it and
 // the first failed "cannot replace the file"); another shard runs beside the first.

@@ -154,6 +154,29 @@ TEST_F(BatchTest, KeyedPipelineBakedWhenASampledFormatIsAsked) {
   EXPECT_EQ(baked->frame_time_seconds, input->frame_time_seconds);
 }
 
+// A manifest that cannot be saved at the end (here its path is a folder) was the run's only
+// error line: the files that failed went unmentioned. Both are said now, in one line, and the
+// summary on stdout still lists every file.
+TEST_F(BatchTest, AManifestThatCannotBeSavedDoesNotHideTheFilesThatFailed) {
+  const std::string in = FolderOf("in", {SharedBvh("bandai/dataset-1_walk_active_001.bvh")});
+  const std::string whole = core::ReadFile(SharedBvh("bandai/dataset-1_bow_active_001.bvh")).value();
+  ASSERT_TRUE(core::WriteFileAtomically(in + "/broken.bvh", whole.substr(0, 3000)).ok());
+  const std::string out = Path("out");
+  std::filesystem::create_directories(out + "/.tempokey-batch.json/in-the-way");
+
+  ProcessResult run = Batch({in, "-o", out, "--ops", PipelineFile(kRetimeThenReduce)});
+
+  EXPECT_NE(run.exit_code, 0);
+  EXPECT_THAT(LastLine(run.err), IsOneErrorLine());
+  EXPECT_THAT(LastLine(run.err),
+              StartsWith("error: " + out + "/.tempokey-batch.json: cannot replace the file: "));
+  EXPECT_THAT(LastLine(run.err),
+              HasSubstr("; and 1 of 2 files failed; first: " + in + "/broken.bvh:96:24: "));
+  const Summary summary = ParseSummary(run.out);
+  EXPECT_EQ(summary.succeeded, 1);
+  EXPECT_EQ(summary.failed, 1);
+}
+
 TEST_F(BatchTest, AFailedFileIsReportedAndTheOthersAreStillWritten) {
   const std::string in = FolderOf("in", {SharedBvh("bandai/dataset-1_walk_active_001.bvh")});
   const std::string whole = core::ReadFile(SharedBvh("bandai/dataset-1_bow_active_001.bvh")).value();
