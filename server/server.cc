@@ -341,6 +341,8 @@ std::string Server::target() const { return absl::StrCat("127.0.0.1:", port_); }
 
 const ServerOptions& Server::options() const { return context_->options; }
 
+absl::Status Server::CheckBearer(const char* header) const { return context_->CheckBearer(header); }
+
 const std::vector<std::string>& Server::operations() const { return context_->operations; }
 
 std::shared_ptr<grpc::Channel> Server::InProcessChannel(const grpc::ChannelArguments& args) {

@@ -57,6 +57,10 @@ class Server {
   // "127.0.0.1:<port>" style target for clients on this machine.
   std::string target() const;
   const ServerOptions& options() const;
+  // The bearer-token check of every call, for an HTTP "Authorization" header value (null when
+  // the request has none): OK when it names one of options().auth_tokens, or none are set.
+  // Errors: kUnauthenticated.
+  absl::Status CheckBearer(const char* header) const;
   const std::vector<std::string>& operations() const;
   JobManager& jobs() { return *jobs_; }
   // Streaming calls open now (uploads, watches, results, Process); tests check nothing leaks.

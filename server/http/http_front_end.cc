@@ -122,6 +122,13 @@ int SendApiError(mg_connection* connection, const absl::Status& status,
   return code;
 }
 
+// A request message over `max_bytes` of JSON; answered 413 Content Too Large (RFC 9110,
+// 15.5.14), not the 429 of RESOURCE_EXHAUSTED, which clients take as "retry later".
+absl::Status MessageOverLimit(std::int64_t max_bytes) {
+  return absl::ResourceExhaustedError(
+      absl::StrCat("a request message is over the limit of ", max_bytes, " bytes of JSON"));
+}
+
 // The request body of one call: the whole body as one message, or one message per line for
 // client-streaming methods; and the answer: one JSON object, or NDJSON lines
 // {"result": ...} / {"error": ...} for server-streaming methods.
@@ -252,8 +259,7 @@ class HttpCallStream final : public JsonBridge::Stream {
 
   absl::Status OverSizeError() {
     body_too_large_ = true;
-    return absl::ResourceExhaustedError(
-        absl::StrCat("a request message is over the limit of ", max_bytes_, " bytes of JSON"));
+    return MessageOverLimit(max_bytes_);
   }
 
   mg_connection* const connection_;
@@ -327,10 +333,20 @@ std::pair<int, std::string_view> FramingRefusal(const mg_connection* connection)
 
 // Reads what is left of a refused call's body and returns `code`: civetweb would read it after
 // the handler returns, out of the SlowBodyGuard's watch; read here, it is read under it.
-int DiscardBody(mg_connection* connection, int code) {
-  // A client that waits for "100 Continue" sends no body after a final answer: nothing to read
-  // (civetweb closes the connection, whose body was not read).
-  if (ExpectsContinue(connection)) return code;
+// `local_port` is the front end's (FindConnectionSocket()).
+int DiscardBody(mg_connection* connection, int local_port, int code) {
+  // A client that waits for "100 Continue" sends no body after a final answer: nothing to read.
+  // civetweb, which reads the rest of a body after the handler, would wait for it until its I/O
+  // timeout (30 s, holding one of its threads): the connection's reading side is shut, so that
+  // it sees the end at once and closes the connection.
+  if (ExpectsContinue(connection)) {
+    const mg_request_info& info = *mg_get_request_info(connection);
+    if (const int socket = FindConnectionSocket(local_port, info.remote_addr, info.remote_port);
+        socket >= 0) {
+      ::shutdown(socket, SHUT_RD);
+    }
+    return code;
+  }
   std::vector<char> block(kReadBlock);  // on the heap: civetweb's threads have small stacks
   while (mg_read(connection, block.data(), block.size()) > 0) {
   }
@@ -480,24 +496,37 @@ int HttpFrontEnd::HandleRequest(mg_connection* connection) {
       SendText(connection, 405, "application/json",
                StatusToJson(absl::InvalidArgumentError("API calls are POST requests")) + "\n",
                "Allow: POST\r\n");
-      return DiscardBody(connection, 405);
+      return DiscardBody(connection, port_, 405);
     }
     const google::protobuf::MethodDescriptor* method = JsonBridge::FindMethod(path);
     if (method == nullptr) {
       const absl::Status unknown = absl::UnimplementedError(
           absl::StrCat("no method ", core::AsAbsl(path.substr(1)), " in this server"));
-      return DiscardBody(connection, SendApiError(connection, unknown));
+      return DiscardBody(connection, port_, SendApiError(connection, unknown));
     }
     if (absl::Status allowed = CheckApiRequest(
             HeaderOf(connection, "Content-Type"), HeaderOf(connection, "Origin"),
             HeaderOf(connection, "Host"), loopback_only_ && server_.options().auth_tokens.empty());
         !allowed.ok()) {
-      return DiscardBody(connection, SendApiError(connection, allowed));
+      return DiscardBody(connection, port_, SendApiError(connection, allowed));
     }
     if (const std::string_view expect = HeaderOf(connection, "Expect"); !expect.empty()) {
       if (!ExpectsContinue(connection)) {
         mg_send_http_error(connection, 417, "only \"Expect: 100-continue\" is understood");
         return 417;
+      }
+      // What can be refused without the body is refused before it is asked for (RFC 9110,
+      // 10.1.1: a final answer instead of 100), so that a client that waits sends nothing for
+      // nothing: a missing or wrong token, and a declared length over the limit of a call
+      // whose body is one message.
+      if (absl::Status access = server_.CheckBearer(mg_get_header(connection, "Authorization"));
+          !access.ok()) {
+        return DiscardBody(connection, port_, SendApiError(connection, access));
+      }
+      if (!method->client_streaming() && info->content_length > bridge_.max_message_bytes()) {
+        return DiscardBody(connection, port_,
+                           SendApiError(connection, MessageOverLimit(bridge_.max_message_bytes()),
+                                        std::nullopt, 413));
       }
       // civetweb answers it only for its own file uploads: a client waited a second for it.
       // Never to HTTP/1.0, which has no interim answers (RFC 9110, 15.2). Written on the socket

@@ -10,6 +10,7 @@
 #include <fstream>
 #include <memory>
 #include <optional>
+#include <utility>
 #include <string>
 #include <thread>
 #include <vector>
@@ -267,8 +268,10 @@ struct FrontEnd {
   std::unique_ptr<Server> server;
   std::unique_ptr<HttpFrontEnd> http;
 };
+// `timeouts`, when given, replaces the front end's socket and body timeouts.
 FrontEnd StartFrontEnd(std::int64_t max_message_bytes = 64 << 20,
-                       std::vector<std::string> tokens = {}) {
+                       std::vector<std::string> tokens = {},
+                       std::optional<std::chrono::milliseconds> timeouts = std::nullopt) {
   ServerOptions server_options = testing::TestServerOptions();
   server_options.max_message_bytes = max_message_bytes;
   server_options.auth_tokens = std::move(tokens);
@@ -276,6 +279,7 @@ FrontEnd StartFrontEnd(std::int64_t max_message_bytes = 64 << 20,
   if (front_end.server == nullptr) return front_end;
   HttpOptions options = Options("127.0.0.1:0");
   options.web_root = testing::MakeTempDir();
+  if (timeouts) options.io_timeout = options.body_timeout = *timeouts;
   std::ofstream(options.web_root + "/index.html") << "<!doctype html>";
   absl::StatusOr<std::unique_ptr<HttpFrontEnd>> http = HttpFrontEnd::Start(options, *front_end.server);
   EXPECT_TRUE(http.ok()) << http.status();
@@ -429,6 +433,77 @@ TEST(HttpFrontEndTest, CorsExpectHttp10SizeAndAuthAnswersFollowHttp) {
   EXPECT_THAT(unauthenticated, HasSubstr("WWW-Authenticate: Bearer\r\n"));
 }
 
+
+// The answer on a new connection to `port` to `bytes`, and whether the server then closed the
+// connection (false: the client's 60 s hang guard ended the wait).
+std::pair<std::string, bool> ExchangeUntilClosed(int port, const std::string& bytes) {
+  const int fd = testing::ConnectLoopback(port);
+  if (fd < 0) return {"no connection", false};
+  ::send(fd, bytes.data(), bytes.size(), MSG_NOSIGNAL);
+  std::string answer;
+  char block[4096];
+  ssize_t got = 0;
+  while ((got = ::recv(fd, block, sizeof block, 0)) > 0) answer.append(block, static_cast<std::size_t>(got));
+  ::close(fd);
+  return {answer, got == 0};
+}
+
+// A client that sends "Expect: 100-continue" waits with its body until asked for it. The
+// front end asked for it before looking at the token or the declared length, so a client
+// without a token, or with a body over the limit, sent it all only to be refused. Now it gets
+// the final answer instead of "100 Continue" (RFC 9110, 10.1.1) and sends nothing; a streamed
+// upload, whose limit is per line, is still asked for its body whatever its length. And the
+// connection of a refusal whose body was never asked for is closed at once: civetweb waited for
+// that body until its socket timeout (30 s), holding one of its threads; here the timeouts are
+// 10 minutes, so a wait would outlast the client's 60 s hang guard.
+TEST(HttpFrontEndTest, AnExpectingClientThatWouldBeRefusedGetsTheRefusalInsteadOfContinue) {
+  FrontEnd guarded = StartFrontEnd(4096, {"s3cret"}, std::chrono::minutes(10));
+  ASSERT_NE(guarded.http, nullptr);
+  const int port = guarded.http->port();
+  // The head alone: the body would follow a 100 Continue, which these must never get.
+  auto head = [](const std::string& method, const std::string& type, std::size_t length,
+                 const std::string& token) {
+    return absl::StrCat("POST /tempokey.v1.MotionService/", method, " HTTP/1.1\r\n",
+                        "Host: 127.0.0.1\r\nContent-Type: ", type, "\r\nContent-Length: ",
+                        length, "\r\nExpect: 100-continue\r\n", token,
+                        "Connection: close\r\n\r\n");
+  };
+  const std::string with_token = "Authorization: Bearer s3cret\r\n";
+  const auto [no_token, no_token_closed] =
+      ExchangeUntilClosed(port, head("GetServerInfo", "application/json", 2, ""));
+  const auto [wrong_token, wrong_token_closed] = ExchangeUntilClosed(
+      port, head("GetServerInfo", "application/json", 2, "Authorization: Bearer guess\r\n"));
+  const auto [too_long, too_long_closed] =
+      ExchangeUntilClosed(port, head("ParseSpeedKnots", "application/json", 5000, with_token));
+  const auto [no_method, no_method_closed] =
+      ExchangeUntilClosed(port, head("NoSuchMethod", "application/json", 2, with_token));
+
+  const int uploading = testing::ConnectLoopback(port);
+  ASSERT_GE(uploading, 0);
+  const std::string upload_head = head("UploadClip", "application/x-ndjson", 5000, with_token);
+  ::send(uploading, upload_head.data(), upload_head.size(), MSG_NOSIGNAL);
+  std::string interim;
+  char byte = 0;
+  while (interim.find("\r\n\r\n") == std::string::npos && ::recv(uploading, &byte, 1, 0) == 1) {
+    interim += byte;
+  }
+  ::close(uploading);
+
+  for (const std::string* answer : {&no_token, &wrong_token}) {
+    EXPECT_THAT(*answer, ::testing::StartsWith("HTTP/1.1 401")) << *answer;
+    EXPECT_THAT(*answer, HasSubstr("WWW-Authenticate: Bearer\r\n"));
+  }
+  EXPECT_THAT(no_token, HasSubstr("missing \\\"Authorization: Bearer <token>\\\" header"));
+  EXPECT_THAT(wrong_token, HasSubstr("the bearer token is not accepted"));
+  EXPECT_THAT(too_long, ::testing::StartsWith("HTTP/1.1 413"));
+  EXPECT_THAT(too_long, HasSubstr("over the limit of 4096 bytes of JSON"));
+  EXPECT_THAT(no_method, ::testing::StartsWith("HTTP/1.1 501"));
+  EXPECT_TRUE(no_token_closed);
+  EXPECT_TRUE(wrong_token_closed);
+  EXPECT_TRUE(too_long_closed);
+  EXPECT_TRUE(no_method_closed);
+  EXPECT_EQ(interim, "HTTP/1.1 100 Continue\r\n\r\n");
+}
 
 // A Process call writes nothing while its pipeline runs, so a client that left used to be
 // noticed only at the end: the work ran on for nobody (10 s in the probe that found it). Now
