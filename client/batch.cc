@@ -365,6 +365,16 @@ int BatchSummary::failed_count() const {
                                         [](const BatchFileResult& f) { return !f.status.ok(); }));
 }
 
+absl::Status BatchSummary::FailedFiles() const {
+  const int failed = failed_count();
+  if (failed == 0) return absl::OkStatus();
+  const auto first = std::find_if(files.begin(), files.end(),
+                                  [](const BatchFileResult& f) { return !f.status.ok(); });
+  return absl::Status(first->status.code(),
+                      absl::StrCat(failed, " of ", files.size(), " files failed; first: ",
+                                   first->status.message()));
+}
+
 int BatchSummary::skipped_count() const {
   return static_cast<int>(std::count_if(files.begin(), files.end(), [](const BatchFileResult& f) {
     return f.status.ok() && f.skipped;

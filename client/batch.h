@@ -97,6 +97,9 @@ struct BatchSummary {
   int failed_count() const;
   int skipped_count() const;
   int done_count() const;  // processed and written by this run
+  // The files that failed, as one error ("2 of 9 files failed; first: ..."), with the first
+  // failure's code; OK when none failed.
+  absl::Status FailedFiles() const;
 };
 
 // Called once per finished file (from worker threads, one call at a time).

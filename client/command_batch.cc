@@ -97,18 +97,6 @@ absl::StatusOr<std::optional<FileFormat>> FormatFromFlags(const ParsedArgs& args
                         std::begin(kFormats)];
 }
 
-// The files of `summary` that failed, as one error ("2 of 9 files failed; first: ..."): the
-// first failure's code; OK when none failed.
-absl::Status FailedFiles(const BatchSummary& summary) {
-  const int failed = summary.failed_count();
-  if (failed == 0) return absl::OkStatus();
-  const auto first = std::find_if(summary.files.begin(), summary.files.end(),
-                                  [](const BatchFileResult& f) { return !f.status.ok(); });
-  return absl::Status(first->status.code(),
-                      absl::StrCat(failed, " of ", summary.files.size(),
-                                   " files failed; first: ", first->status.message()));
-}
-
 // The errors among `statuses` as one: the first one's code, their messages in order joined by
 // "; and ". OK when all are.
 absl::Status JoinErrors(std::initializer_list<absl::Status> statuses) {
@@ -220,7 +208,7 @@ absl::Status Batch(CommandContext& context) {
       summary_path ? core::WriteFileAtomically(*summary_path, json) : absl::OkStatus();
   // One line for everything that went wrong: a manifest or summary that cannot be written does
   // not hide the files that failed, nor they it.
-  return JoinErrors({summarized, recorded, FailedFiles(summary)});
+  return JoinErrors({summarized, recorded, summary.FailedFiles()});
 }
 
 }  // namespace

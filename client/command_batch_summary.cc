@@ -63,13 +63,7 @@ absl::Status BatchSummaryMerge(CommandContext& context) {
         " missing: the run is incomplete (run ", missing == 1 ? "it" : "them",
         " with batch --shard)"));
   }
-  const int failed = merged.failed_count();
-  if (failed == 0) return absl::OkStatus();
-  const auto first = std::find_if(merged.files.begin(), merged.files.end(),
-                                  [](const BatchFileResult& f) { return !f.status.ok(); });
-  return absl::Status(first->status.code(),
-                      absl::StrCat(failed, " of ", merged.files.size(),
-                                   " files failed; first: ", first->status.message()));
+  return merged.FailedFiles();
 }
 
 }  // namespace
