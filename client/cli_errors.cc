@@ -35,8 +35,17 @@ int ExitCodeFor(const absl::Status& status) {
 
 absl::Status ServerError(const absl::Status& status) {
   if (status.ok()) return status;
+  // gRPC's text when the call's own deadline (--timeout) passed on this side; the server's
+  // deadline errors (an idle stream, a queued job) carry messages of their own.
+  constexpr std::string_view kClientDeadline = "Deadline Exceeded";
+  const std::string_view message =
+      status.code() == absl::StatusCode::kDeadlineExceeded &&
+              core::AsStd(status.message()) == kClientDeadline
+          ? "no answer within --timeout (default 60 s, retries included); give a longer "
+            "--timeout, or 0 for none"
+          : core::AsStd(status.message());
   return absl::Status(status.code(), absl::StrCat("server: ", absl::StatusCodeToString(status.code()),
-                                                  ": ", status.message()));
+                                                  ": ", core::AsAbsl(message)));
 }
 
 std::string ErrorLine(const absl::Status& status) {

@@ -41,7 +41,8 @@ absl::Status AsUsageError(const absl::Status& status);
 int ExitCodeFor(const absl::Status& status);
 
 // A status from a server call, its message prefixed "server: <CODE>: " (code kept), so the
-// user can tell the server's refusals from local ones.
+// user can tell the server's refusals from local ones. gRPC's own text for the client's deadline
+// ("Deadline Exceeded") becomes one that names --timeout.
 absl::Status ServerError(const absl::Status& status);
 
 // "error: <message>", the message made core::PrintableText() (line breaks as spaces): an error

@@ -18,6 +18,7 @@ import os
 import queue
 import re
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -581,6 +582,57 @@ class SmallMessageLimitTest(unittest.TestCase):
                     client.server_info()
 
         self.assertEqual(caught.exception.code, grpc.StatusCode.UNAVAILABLE)
+
+
+class SilentPeer:
+    """A loopback listener that accepts connections and never says a word: a server that hangs
+    before its first answer, for the `with` block it is used in."""
+
+    def __enter__(self):
+        self._listener = socket.socket()
+        self._listener.bind(("127.0.0.1", 0))
+        self._listener.listen(16)
+        self._held = []
+        threading.Thread(target=self._accept, daemon=True).start()
+        self.address = "127.0.0.1:%d" % self._listener.getsockname()[1]
+        return self
+
+    def _accept(self):
+        try:
+            while True:
+                self._held.append(self._listener.accept()[0])
+        except OSError:  # closed by __exit__
+            pass
+
+    def __exit__(self, *exc):
+        self._listener.close()
+        for connection in self._held:
+            connection.close()
+
+
+class ClientDeadlineTest(unittest.TestCase):
+    """gRPC reports a deadline that passed on the client's side as "Deadline Exceeded", which
+    names neither the timeout nor how to change it; the package and the CLI name it."""
+
+    def test_the_packages_deadline_error_names_the_timeout(self):
+        with SilentPeer() as peer:
+            with tk.connect(peer.address, timeout=0.3) as client:
+                with self.assertRaises(tk.TempokeyError) as caught:
+                    client.server_info()
+
+        self.assertEqual(caught.exception.code, grpc.StatusCode.DEADLINE_EXCEEDED)
+        self.assertEqual(caught.exception.details,
+                         "no answer within the client's timeout of 0.3 s (retries included); "
+                         "connect() with a longer timeout, or timeout=None for none")
+
+    def test_the_clis_deadline_error_names_its_timeout_flag(self):
+        with SilentPeer() as peer:
+            run = run_cli("--server", peer.address, "--timeout", "0.3", "server-info")
+
+        self.assertEqual(run.returncode, 1, run.stderr)
+        self.assertEqual(run.stderr, "error: server: DEADLINE_EXCEEDED: no answer within --timeout "
+                                     "(default 60 s, retries included); give a longer --timeout, "
+                                     "or 0 for none\n")
 
 
 class WorldErrorTest(ServerTestCase):

@@ -267,7 +267,7 @@ class Client:
         try:
             return method(request, timeout=self._timeout, metadata=self._metadata)
         except grpc.RpcError as error:
-            raise from_rpc_error(error) from None
+            raise from_rpc_error(error, self._timeout) from None
 
     def _with_retries(self, attempt: "_Attempt[_T]") -> _T:
         """Runs attempt(timeout, received) until it succeeds or fails with another code than
@@ -281,7 +281,7 @@ class Client:
             try:
                 return attempt(self._remaining(deadline), received)
             except grpc.RpcError as error:
-                failure = from_rpc_error(error)
+                failure = from_rpc_error(error, self._timeout)
             if (failure.code != grpc.StatusCode.UNAVAILABLE or received
                     or number == self._max_attempts):
                 raise failure

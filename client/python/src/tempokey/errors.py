@@ -1,5 +1,6 @@
 """Errors of the tempokey client: a failed call is a TempokeyError carrying the gRPC status code
-and the server's message unchanged. Arguments are checked before anything is sent: a value of
+and the server's message unchanged (a deadline that passed on the client's side, which gRPC
+reports as "Deadline Exceeded", names the timeout instead). Arguments are checked before anything is sent: a value of
 the wrong type (None or a str for a clip, a str or bool for a number) is a TypeError and what
 cannot be encoded at all (2.7 frames, an infinite timeout) a ValueError, both naming the
 parameter. Files: tempokey.bvh.BvhError (a ValueError, "<file>:<line>:<column>: ...") and
@@ -20,7 +21,8 @@ class TempokeyError(Exception):
 
     Attributes:
       code: grpc.StatusCode, e.g. grpc.StatusCode.INVALID_ARGUMENT.
-      details: the server's message ("operation 1 (retime): ...").
+      details: the server's message ("operation 1 (retime): ..."), or for the client's own
+        deadline "no answer within the client's timeout of 60 s (retries included); ...".
       retry_after_seconds: the server's hint of when to try again (a full queue), or None.
     """
 
@@ -44,10 +46,21 @@ def retry_after_seconds(call: Any) -> Optional[float]:
     return None
 
 
-def from_rpc_error(error: grpc.RpcError) -> TempokeyError:
-    """The one place gRPC errors become TempokeyError: same code, same message."""
+# gRPC's own text when a call's deadline passed on the client's side; the server's deadline
+# errors (an idle stream, a queued job) carry messages of their own.
+_CLIENT_DEADLINE_TEXT = "Deadline Exceeded"
+
+
+def from_rpc_error(error: grpc.RpcError, timeout: Optional[float] = None) -> TempokeyError:
+    """The one place gRPC errors become TempokeyError: same code, same message; but for the
+    client's own deadline (`timeout`, the seconds connect() was given), whose gRPC text names
+    nothing, a message that names it."""
     code = error.code() if hasattr(error, "code") else grpc.StatusCode.UNKNOWN
     details = error.details() if hasattr(error, "details") else str(error)
+    if (code == grpc.StatusCode.DEADLINE_EXCEEDED and details == _CLIENT_DEADLINE_TEXT
+            and timeout is not None):
+        details = ("no answer within the client's timeout of %g s (retries included); "
+                   "connect() with a longer timeout, or timeout=None for none" % timeout)
     return TempokeyError(code, details or "", retry_after_seconds(error))
 
 
