@@ -3,7 +3,8 @@
 # This is the only place packages are listed; README, .ci/run and the Dockerfile all call it.
 # Idempotent: packages already present are skipped, apt is not touched when nothing is missing.
 #
-#   deploy/install-deps.sh            build + test dependencies (default), tests/export's npm ci
+#   deploy/install-deps.sh            build + test dependencies (default), npm ci in tests/export
+#                                     and tests/deploy
 #   deploy/install-deps.sh --build    build dependencies only (the image's build stage)
 #   deploy/install-deps.sh --runtime  only the shared libraries tempokey-server and tempokey need
 #   deploy/install-deps.sh --image    tools that build and smoke-test the container image with no
@@ -30,7 +31,10 @@ build_packages=(
 )
 # Export checks (ctest -L export): a real browser for the glTF page, and tools that are not ours
 # under node: the Khronos glTF validator and three.js, pinned in tests/export/package-lock.json
-# and installed with `npm ci`. A machine without node gets Debian's nodejs and npm.
+# and installed with `npm ci`. Deploy checks (ctest -L deploy): the Kubernetes API's schemas
+# (kubernetes-models), which Debian lacks (its kubectl 1.20 predates the Job fields the manifests
+# use and needs a cluster), pinned in tests/deploy/package-lock.json, installed the same way.
+# A machine without node gets Debian's nodejs and npm.
 test_packages=(chromium)
 node_packages=(nodejs npm)
 runtime_packages=(
@@ -64,15 +68,18 @@ if [[ -z "${1:-}" ]] && ! command -v node > /dev/null; then
   packages+=("${node_packages[@]}")
 fi
 
-# npm ci in tests/export when its packages are missing or older than the lock file.
-install_export_packages() {
-  local dir
-  dir="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)/tests/export"
-  if [[ ! -f "$dir/node_modules/.package-lock.json" ||
-        "$dir/package-lock.json" -nt "$dir/node_modules/.package-lock.json" ]]; then
-    echo "install-deps: npm ci in tests/export"
-    (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error)
-  fi
+# npm ci in each test folder with a lock file (tests/export, tests/deploy) when its packages are
+# missing or older than the lock file.
+install_npm_packages() {
+  local root dir
+  root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+  for dir in tests/export tests/deploy; do
+    if [[ ! -f "$root/$dir/node_modules/.package-lock.json" ||
+          "$root/$dir/package-lock.json" -nt "$root/$dir/node_modules/.package-lock.json" ]]; then
+      echo "install-deps: npm ci in $dir"
+      (cd "$root/$dir" && npm ci --no-audit --no-fund --loglevel=error)
+    fi
+  done
 }
 
 missing=()
@@ -92,5 +99,5 @@ else
   echo "install-deps: done"
 fi
 if [[ -z "${1:-}" ]]; then
-  install_export_packages
+  install_npm_packages
 fi
