@@ -82,6 +82,27 @@ install_npm_packages() {
   done
 }
 
+# promtool, Prometheus's own checker of a metrics exposition (ctest -L server,
+# MetricsEndpointTest), taken out of Debian's prometheus package into tests/server/tools/
+# without installing that package, which would add the Prometheus daemon and its service.
+install_promtool() {
+  local root target work
+  root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+  target="$root/tests/server/tools/promtool"
+  [[ -x "$target" ]] && return 0
+  echo "install-deps: promtool from Debian's prometheus package into tests/server/tools"
+  work="$(mktemp -d)"
+  # apt-get download needs the package lists; a machine that had every package may never have
+  # fetched them.
+  if ! (cd "$work" && apt-get download -qq prometheus 2>/dev/null); then
+    apt-get update -qq
+    (cd "$work" && apt-get download -qq prometheus)
+  fi
+  dpkg-deb -x "$work"/prometheus_*.deb "$work/root"
+  install -D -m 0755 "$work/root/usr/bin/promtool" "$target"
+  rm -rf "$work"
+}
+
 missing=()
 for p in "${packages[@]}"; do
   if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
@@ -100,4 +121,5 @@ else
 fi
 if [[ -z "${1:-}" ]]; then
   install_npm_packages
+  install_promtool
 fi

@@ -121,6 +121,54 @@ TEST(MetricsEndpointTest, SlowClientsHoldingHalfARequestDoNotBlockScrapesAndAreD
   }
 }
 
+// The exposition as Prometheus itself reads it: `promtool check metrics` (Prometheus's own
+// parser and linter, taken from Debian's prometheus package by deploy/install-deps.sh) after
+// the server has uploaded, retimed, reduced and refused through the real CLI, so that the
+// histograms, labelled counters and gauges are all filled. Nothing else here reads the format
+// but our own ParseSamples(). The same checker, given one counter named against Prometheus's
+// conventions, reports it: its silence on the server's is a verdict.
+TEST(MetricsEndpointTest, TheExpositionPassesPrometheusOwnChecker) {
+  const std::string promtool = SourceDir() + "/tests/server/tools/promtool";
+  ASSERT_EQ(::access(promtool.c_str(), X_OK), 0)
+      << promtool << " is missing: deploy/install-deps.sh puts it there";
+  const std::string dir = MakeTempDir();
+  MetricsServer server = StartMetricsServer(dir);
+  ASSERT_NE(server.process, nullptr);
+  const std::string walk = SharedBvh("bandai/dataset-1_walk_active_001.bvh");
+  const std::string target = server.process->target();
+  ASSERT_EQ(RunTempokey({"--server", target, "upload", walk}, dir).exit_code, 0);
+  ASSERT_EQ(RunTempokey({"--server", target, "retime", walk, "-o", dir + "/slow.bvh", "--speed",
+                         "0s:0.5"}, dir).exit_code, 0);
+  ASSERT_EQ(RunTempokey({"--server", target, "reduce", walk, "-o", dir + "/walk.json"}, dir)
+                .exit_code, 0);
+  ASSERT_EQ(RunTempokey({"--server", target, "reduce", walk, "-o", dir + "/no.json",
+                         "--tolerance", "-1"}, dir).exit_code, 1);
+
+  const std::optional<std::string> scrape = HttpGet(server.metrics_port, "/metrics");
+
+  ASSERT_TRUE(scrape.has_value());
+  ASSERT_THAT(*scrape, StartsWith("HTTP/1.1 200"));
+  const std::string body = scrape->substr(scrape->find("\r\n\r\n") + 4);
+  EXPECT_THAT(body, HasSubstr("# TYPE tempokey_job_latency_seconds histogram"));
+  ASSERT_TRUE(core::WriteFileAtomically(dir + "/server.prom", body).ok());
+  ASSERT_TRUE(core::WriteFileAtomically(
+      dir + "/misnamed.prom",
+      body + "# HELP tempokey_misnamed_bytes A counter without _total.\n"
+             "# TYPE tempokey_misnamed_bytes counter\ntempokey_misnamed_bytes 1\n").ok());
+  auto check = [&](const std::string& file) {
+    return RunProcess({"/bin/sh", "-c", "exec \"$0\" check metrics < \"$1\"", promtool, file},
+                      dir);
+  };
+  const ProcessResult ours = check(dir + "/server.prom");
+  const ProcessResult misnamed = check(dir + "/misnamed.prom");
+
+  EXPECT_EQ(ours.exit_code, 0) << ours.out << ours.err;
+  EXPECT_EQ(ours.out + ours.err, "");
+  EXPECT_NE(misnamed.exit_code, 0);
+  EXPECT_THAT(misnamed.out + misnamed.err,
+              HasSubstr("tempokey_misnamed_bytes counter metrics should have \"_total\" suffix"));
+}
+
 TEST(MetricsEndpointTest, NonLoopbackMetricsAddressNeedsAllowInsecureRemote) {
   const std::string dir = MakeTempDir();
   const ProcessResult refused = RunProcess(
