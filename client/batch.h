@@ -63,7 +63,7 @@ std::vector<core::PipelineStep> StepsForFormat(std::span<const core::PipelineSte
 
 struct BatchOptions {
   int jobs = 4;                          // files in flight at once, >= 1
-  int max_attempts = 5;                  // per file, for UNAVAILABLE and a full queue
+  int max_attempts = 5;                  // per Process call, for UNAVAILABLE and a full queue
   double initial_backoff_seconds = 0.2;  // doubled per attempt, up to max_backoff_seconds,
   double max_backoff_seconds = 2.0;      // or the server's retry-after hint when it gave one
   std::optional<double> csv_frame_time_seconds;

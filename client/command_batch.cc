@@ -42,7 +42,7 @@ constexpr FlagSpec kBatchFlags[] = {
     {"--format", "", "NAME", "output format: bvh, csv, json, anim, gltf or glb (default: .json "
                              "for keyed results, the input's own otherwise)"},
     {"--summary", "", "FILE", "also write the JSON summary to FILE (atomically)"},
-    {"--attempts", "", "N", "tries per file when a server is unavailable or full (default 5)"},
+    {"--attempts", "", "N", "tries per server call when a server is unavailable or full (default 5)"},
     {"--recursive", "-r", "", "also process the sub-folders of DIR, mirrored under OUTDIR"},
     kInputFpsFlag,
     {"--shard", "", "I/N", "take only share I of N (0 <= I < N) of the files, by a hash of their "

@@ -282,9 +282,12 @@ class HttpCallStream final : public JsonBridge::Stream {
   std::string single_response_;
 };
 
-// Whether the request asks for "100 Continue" before it sends its body (RFC 9110, 10.1.1).
+// Whether the request asks for "100 Continue" before it sends its body (RFC 9110, 10.1.1): on
+// HTTP/1.1 only, since a server MUST ignore that expectation in an HTTP/1.0 request (10.1.1),
+// which has no interim answers (15.2).
 bool ExpectsContinue(const mg_connection* connection) {
-  return absl::EqualsIgnoreCase(core::AsAbsl(HeaderOf(connection, "Expect")), "100-continue");
+  return absl::EqualsIgnoreCase(core::AsAbsl(HeaderOf(connection, "Expect")), "100-continue") &&
+         std::string_view(mg_get_request_info(connection)->http_version) == "1.1";
 }
 
 // Framing civetweb accepts but a proxy in front may read otherwise, so that a body read by one
@@ -335,15 +338,17 @@ std::pair<int, std::string_view> FramingRefusal(const mg_connection* connection)
 // the handler returns, out of the SlowBodyGuard's watch; read here, it is read under it.
 // `local_port` is the front end's (FindConnectionSocket()).
 int DiscardBody(mg_connection* connection, int local_port, int code) {
-  // A client that waits for "100 Continue" sends no body after a final answer: nothing to read.
-  // civetweb, which reads the rest of a body after the handler, would wait for it until its I/O
-  // timeout (30 s, holding one of its threads): the connection's reading side is shut, so that
-  // it sees the end at once and closes the connection.
+  // A client that waits for "100 Continue" sends no body after a final answer, and civetweb,
+  // which reads the rest of a body after the handler, waited for it until its I/O timeout (30 s,
+  // holding one of its threads). The answer is ended here instead (its FIN after it): a client
+  // that waited sees the end and closes, which ends civetweb's read at once; one that sent its
+  // body anyway, as RFC 9110 10.1.1 allows, has it read and gets the answer whole (shutting the
+  // reading side instead answered its body with a reset, and it lost the answer).
   if (ExpectsContinue(connection)) {
     const mg_request_info& info = *mg_get_request_info(connection);
     if (const int socket = FindConnectionSocket(local_port, info.remote_addr, info.remote_port);
         socket >= 0) {
-      ::shutdown(socket, SHUT_RD);
+      ::shutdown(socket, SHUT_WR);
     }
     return code;
   }
@@ -510,29 +515,28 @@ int HttpFrontEnd::HandleRequest(mg_connection* connection) {
         !allowed.ok()) {
       return DiscardBody(connection, port_, SendApiError(connection, allowed));
     }
+    // What can be refused without the body is refused before it is read (or, from a client
+    // that waits for "100 Continue", before it is asked for: RFC 9110 10.1.1, a final answer
+    // instead of 100): a missing or wrong token, and a declared length over the limit of a
+    // call whose body is one message.
+    if (absl::Status access = server_.CheckBearer(mg_get_header(connection, "Authorization"));
+        !access.ok()) {
+      return DiscardBody(connection, port_, SendApiError(connection, access));
+    }
+    if (!method->client_streaming() && info->content_length > bridge_.max_message_bytes()) {
+      return DiscardBody(connection, port_,
+                         SendApiError(connection, MessageOverLimit(bridge_.max_message_bytes()),
+                                      std::nullopt, 413));
+    }
     if (const std::string_view expect = HeaderOf(connection, "Expect"); !expect.empty()) {
-      if (!ExpectsContinue(connection)) {
+      if (!absl::EqualsIgnoreCase(core::AsAbsl(expect), "100-continue")) {
         mg_send_http_error(connection, 417, "only \"Expect: 100-continue\" is understood");
         return 417;
       }
-      // What can be refused without the body is refused before it is asked for (RFC 9110,
-      // 10.1.1: a final answer instead of 100), so that a client that waits sends nothing for
-      // nothing: a missing or wrong token, and a declared length over the limit of a call
-      // whose body is one message.
-      if (absl::Status access = server_.CheckBearer(mg_get_header(connection, "Authorization"));
-          !access.ok()) {
-        return DiscardBody(connection, port_, SendApiError(connection, access));
-      }
-      if (!method->client_streaming() && info->content_length > bridge_.max_message_bytes()) {
-        return DiscardBody(connection, port_,
-                           SendApiError(connection, MessageOverLimit(bridge_.max_message_bytes()),
-                                        std::nullopt, 413));
-      }
       // civetweb answers it only for its own file uploads: a client waited a second for it.
-      // Never to HTTP/1.0, which has no interim answers (RFC 9110, 15.2). Written on the socket
-      // itself: through civetweb, any write counts as the answer's start, and the answer's own
-      // head would no longer be sent.
-      if (std::string_view(info->http_version) == "1.1") {
+      // Written on the socket itself: through civetweb, any write counts as the answer's start,
+      // and the answer's own head would no longer be sent.
+      if (ExpectsContinue(connection)) {
         constexpr std::string_view kContinue = "HTTP/1.1 100 Continue\r\n\r\n";
         if (const int socket = FindConnectionSocket(port_, info->remote_addr, info->remote_port);
             socket >= 0) {

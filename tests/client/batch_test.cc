@@ -166,7 +166,7 @@ TEST_F(BatchTest, AManifestThatCannotBeSavedDoesNotHideTheFilesThatFailed) {
 
   ProcessResult run = Batch({in, "-o", out, "--ops", PipelineFile(kRetimeThenReduce)});
 
-  EXPECT_NE(run.exit_code, 0);
+  EXPECT_EQ(run.exit_code, 1);
   EXPECT_THAT(LastLine(run.err), IsOneErrorLine());
   EXPECT_THAT(LastLine(run.err),
               StartsWith("error: " + out + "/.tempokey-batch.json: cannot replace the file: "));

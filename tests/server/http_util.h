@@ -37,15 +37,16 @@ inline int ConnectLoopback(int port) {
   return fd;
 }
 
-// Everything the peer sends until it closes the connection (or the hang guard fires).
-inline std::string ReadToEnd(int fd) {
+// Everything the peer sends until it closes the connection (or the hang guard fires, or the
+// connection is reset); `closed_by_peer`, when given, says whether it ended with the peer's close.
+inline std::string ReadToEnd(int fd, bool* closed_by_peer = nullptr) {
   std::string response;
   char buffer[8192];
-  for (;;) {
-    const ssize_t n = ::recv(fd, buffer, sizeof buffer, 0);
-    if (n <= 0) break;
+  ssize_t n = 0;
+  while ((n = ::recv(fd, buffer, sizeof buffer, 0)) > 0) {
     response.append(buffer, static_cast<std::size_t>(n));
   }
+  if (closed_by_peer != nullptr) *closed_by_peer = n == 0;
   return response;
 }
 

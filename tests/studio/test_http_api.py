@@ -240,7 +240,9 @@ class HttpApiServerFlagsTest(unittest.TestCase):
             self.assertEqual(server.exit_code, 0)
 
         self.assertEqual((missing[0], json.loads(missing[2])["status"]), (401, "UNAUTHENTICATED"))
-        self.assertEqual(json.loads(missing[2])["message"], 'missing "authorization: Bearer <token>" metadata')
+        # An HTTP client is told of the HTTP header it lacks (checked before the body is read),
+        # not of gRPC metadata.
+        self.assertEqual(json.loads(missing[2])["message"], 'missing "Authorization: Bearer <token>" header')
         self.assertEqual((wrong[0], json.loads(wrong[2])["message"]), (401, "the bearer token is not accepted"))
         self.assertEqual(right[0], 200)
         self.assertEqual(page_status, 200)

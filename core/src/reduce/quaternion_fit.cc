@@ -173,9 +173,14 @@ absl::StatusOr<QuaternionCurve> FitQuaternionCurve(std::span<const Quat> rotatio
                                                            components[2], components[3]};
   const double safe_bound =
       0.5 * std::sin(0.5 * max_angle_degrees * std::numbers::pi / 180.0);
+  double last_bound = -1.0;
   for (double scale : kBoundScales) {
     TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
     const double bound = std::min(scale * safe_bound, 0.5);
+    // A large angle (a joint bound alone allows up to 180 degrees) clamps several rungs to the
+    // same bound: their fit would be the one just measured and refused.
+    if (bound == last_bound) continue;
+    last_bound = bound;
     const std::array<double, 4> bounds = {bound, bound, bound, bound};
     absl::StatusOr<SplineFit> fit = FitWithinTolerance(channels, bounds, {}, stop);
     if (!fit.ok()) return fit.status();
