@@ -17,6 +17,7 @@
 #include "absl/strings/str_join.h"
 #include "proto/arena_message.h"
 #include "proto/jobs_convert.h"
+#include "proto/loopback.h"
 #include "proto/operations_convert.h"
 #include "proto/scratch_arena.h"
 #include "grpcpp/client_context.h"
@@ -107,6 +108,14 @@ absl::Status ValidateClientOptions(const ClientOptions& options) {
   if (options.tls.cert_chain_pem.empty() != options.tls.private_key_pem.empty()) {
     return absl::InvalidArgumentError(
         "a client certificate needs its private key and a key its certificate");
+  }
+  if (!options.bearer_token.empty() && !options.tls.enabled && !options.allow_plaintext_token &&
+      !wire::IsLoopbackTarget(options.target)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "refusing to send the bearer token in cleartext to ", options.target,
+        ", which is not on this machine: connect with TLS (the CLI's --tls or --ca), or allow it "
+        "(--allow-plaintext-token) only where the network itself is trusted, as in a service "
+        "mesh that encrypts it"));
   }
   if (!options.tls.enabled && (!options.tls.root_ca_pem.empty() ||
                                !options.tls.cert_chain_pem.empty() ||

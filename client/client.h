@@ -69,14 +69,19 @@ struct ClientOptions {
   double keepalive_time_seconds = 300.0;
   double keepalive_timeout_seconds = 20.0;
   TlsOptions tls;
-  // Sent as "authorization: Bearer <token>" on every call when not empty.
+  // Sent as "authorization: Bearer <token>" on every call when not empty: over TLS, or to a
+  // target on this machine (wire::IsLoopbackTarget()), unless allow_plaintext_token says the
+  // network itself is trusted (a service mesh whose sidecars encrypt it).
   std::string bearer_token;
+  bool allow_plaintext_token = false;
   // Bytes of samples per message when sending clips (>= 8).
   std::int64_t slice_bytes = wire::kDefaultSliceBytes;
 };
 
 // Checks `options` for values no channel can use (empty target, a client certificate without its
-// key, non-positive sizes, attempts outside 1..10, unknown load-balancing policy).
+// key, non-positive sizes, attempts outside 1..10, unknown load-balancing policy), and a bearer
+// token that would travel in cleartext off this machine (RFC 6750 5.3: bearer tokens only over
+// TLS).
 // Errors: kInvalidArgument naming the option.
 absl::Status ValidateClientOptions(const ClientOptions& options);
 

@@ -29,7 +29,10 @@ constexpr FlagSpec kGlobalFlags[] = {
     {"--key", "", "FILE", "PEM private key of --cert"},
     {"--tls-server-name", "", "NAME", "name expected in the server's certificate (implies --tls)"},
     {"--token-file", "", "FILE",
-     "bearer token for every call (default: $TEMPOKEY_TOKEN)"},
+     "bearer token for every call (default: $TEMPOKEY_TOKEN); sent only over TLS or to this "
+     "machine"},
+    {"--allow-plaintext-token", "", "",
+     "send the token without TLS to another machine (a network that encrypts it itself)"},
 };
 
 // A token file holds the token and maybe a trailing newline.
@@ -94,6 +97,7 @@ absl::StatusOr<ClientOptions> ClientOptionsFromFlags(const ParsedArgs& args) {
   } else if (const char* env = std::getenv("TEMPOKEY_TOKEN"); env != nullptr && *env != '\0') {
     options.bearer_token = TrimWhitespace(env);
   }
+  options.allow_plaintext_token = args.Has("--allow-plaintext-token");
   return options;
 }
 

@@ -19,6 +19,7 @@
 #include "absl/strings/ascii.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "proto/loopback.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::server {
@@ -117,19 +118,6 @@ absl::StatusOr<std::vector<std::string>> ReadTokenFile(const std::string& path) 
 
 namespace {
 
-bool IsLoopbackSockaddr(const sockaddr* address) {
-  if (address->sa_family == AF_INET) {
-    const auto* v4 = reinterpret_cast<const sockaddr_in*>(address);
-    return (ntohl(v4->sin_addr.s_addr) >> 24) == 127;
-  }
-  if (address->sa_family == AF_INET6) {
-    const in6_addr& v6 = reinterpret_cast<const sockaddr_in6*>(address)->sin6_addr;
-    if (IN6_IS_ADDR_LOOPBACK(&v6)) return true;
-    return IN6_IS_ADDR_V4MAPPED(&v6) && v6.s6_addr[12] == 127;  // ::ffff:127.x.y.z
-  }
-  return false;
-}
-
 std::string DescribeSockaddr(const sockaddr* address) {
   char text[INET6_ADDRSTRLEN] = "?";
   if (address->sa_family == AF_INET) {
@@ -141,19 +129,6 @@ std::string DescribeSockaddr(const sockaddr* address) {
   return text;
 }
 
-// The host part of "host:port", "[v6]:port" or a bare host.
-std::string HostOf(std::string_view address) {
-  if (!address.empty() && address.front() == '[') {
-    const std::size_t close = address.find(']');
-    return std::string(address.substr(1, close == std::string_view::npos ? address.npos : close - 1));
-  }
-  const std::size_t colon = address.rfind(':');
-  if (colon != std::string_view::npos && address.find(':') == colon) {
-    return std::string(address.substr(0, colon));  // "host:port"; a bare IPv6 address has several
-  }
-  return std::string(address);
-}
-
 }  // namespace
 
 absl::Status CheckLoopbackAddress(std::string_view address) {
@@ -161,7 +136,7 @@ absl::Status CheckLoopbackAddress(std::string_view address) {
     return absl::OkStatus();
   }
   // Names are case-insensitive (DNS, /etc/hosts); lower-case them so the resolver sees one form.
-  const std::string host = absl::AsciiStrToLower(HostOf(address));
+  const std::string host = absl::AsciiStrToLower(wire::HostOf(address));
   if (host.empty()) {
     return absl::InvalidArgumentError(absl::StrCat(
         "\"", core::AsAbsl(address), "\" has no host: it listens on every interface"));
@@ -176,7 +151,7 @@ absl::Status CheckLoopbackAddress(std::string_view address) {
   }
   absl::Status verdict = absl::OkStatus();
   for (const addrinfo* a = found; a != nullptr && verdict.ok(); a = a->ai_next) {
-    if (!IsLoopbackSockaddr(a->ai_addr)) {
+    if (!wire::IsLoopbackSockaddr(a->ai_addr)) {
       const std::string resolved = DescribeSockaddr(a->ai_addr);
       verdict = absl::InvalidArgumentError(
           resolved == host ? absl::StrCat(host, " is not a loopback address")
@@ -189,25 +164,6 @@ absl::Status CheckLoopbackAddress(std::string_view address) {
 }
 
 bool IsLoopbackAddress(std::string_view address) { return CheckLoopbackAddress(address).ok(); }
-
-bool IsLoopbackLiteral(std::string_view host) {
-  if (host.size() >= 2 && host.front() == '[' && host.back() == ']') {
-    host = host.substr(1, host.size() - 2);
-  }
-  const std::string name = absl::AsciiStrToLower(std::string(host));
-  if (name == "localhost") return true;
-  sockaddr_in v4{};
-  if (inet_pton(AF_INET, name.c_str(), &v4.sin_addr) == 1) {
-    v4.sin_family = AF_INET;
-    return IsLoopbackSockaddr(reinterpret_cast<const sockaddr*>(&v4));
-  }
-  sockaddr_in6 v6{};
-  if (inet_pton(AF_INET6, name.c_str(), &v6.sin6_addr) == 1) {
-    v6.sin6_family = AF_INET6;
-    return IsLoopbackSockaddr(reinterpret_cast<const sockaddr*>(&v6));
-  }
-  return false;
-}
 
 std::int64_t MemoryLimitFrom(std::string_view v2_memory_max, std::string_view v1_limit_in_bytes,
                              std::int64_t physical_bytes) {

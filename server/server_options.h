@@ -136,12 +136,6 @@ absl::StatusOr<std::vector<std::string>> ReadTokenFile(const std::string& path);
 absl::Status CheckLoopbackAddress(std::string_view address);
 bool IsLoopbackAddress(std::string_view address);
 
-// True when `host` (no port; "[::1]" brackets allowed) is itself a loopback name, without asking
-// a resolver: "localhost" in any case, or an IPv4 / IPv6 literal in the loopback ranges above.
-// For names a peer sends (an HTTP Host header): resolving them would let a name that an attacker
-// points at 127.0.0.1 pass (DNS rebinding).
-bool IsLoopbackLiteral(std::string_view host);
-
 // The largest job TTL and drain grace, in seconds: a year.
 inline constexpr std::int64_t kMaxDurationSeconds = 365 * 24 * 3600;
 // The largest connection age, in seconds: gRPC holds it as an int of milliseconds (24.8 days).

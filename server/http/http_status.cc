@@ -3,6 +3,7 @@
 #include <cctype>
 
 #include "absl/strings/str_cat.h"
+#include "proto/loopback.h"
 #include "server/server_options.h"
 #include "tempokey/core/io/json.h"
 
@@ -93,7 +94,7 @@ absl::Status CheckApiRequest(std::string_view content_type, std::string_view ori
   }
   if (loopback_host_only) {
     const std::string_view name = HostOf(host);
-    if (!IsLoopbackLiteral(name)) {
+    if (!wire::IsLoopbackLiteral(name)) {
       return absl::PermissionDeniedError(absl::StrCat(
           "Host \"", std::string(host.substr(0, 128)),
           "\" is not a loopback name; this server only answers requests to its loopback address"));

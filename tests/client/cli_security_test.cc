@@ -151,5 +151,27 @@ TEST_F(CliSecurityTest, BearerTokenComesFromAFileOrTheEnvironment) {
   EXPECT_EQ(from_env.exit_code, 0) << from_env.err;
 }
 
+// A token goes to another machine only over TLS: refused before any connection, one line, exit 2
+// (192.0.2.2 is TEST-NET-1, never reached).
+TEST_F(CliSecurityTest, ATokenIsNotSentInCleartextToAnotherMachine) {
+  ASSERT_TRUE(core::WriteFileAtomically(Path("token"), "s3cret\n").ok());
+
+  const ProcessResult refused = RunTempokey(
+      {"--server", "192.0.2.2:50051", "--token-file", Path("token"), "server-info"}, dir_);
+  const ProcessResult from_env =
+      RunTempokey({"--server", "dns:///tempokey.example:50051", "server-info"}, dir_,
+                  {"TEMPOKEY_TOKEN=s3cret"});
+
+  EXPECT_EQ(refused.exit_code, 2);
+  EXPECT_EQ(refused.err,
+            "error: refusing to send the bearer token in cleartext to 192.0.2.2:50051, which is "
+            "not on this machine: connect with TLS (the CLI's --tls or --ca), or allow it "
+            "(--allow-plaintext-token) only where the network itself is trusted, as in a service "
+            "mesh that encrypts it\n");
+  EXPECT_EQ(from_env.exit_code, 2);
+  EXPECT_THAT(from_env.err, StartsWith("error: refusing to send the bearer token in cleartext to "
+                                       "dns:///tempokey.example:50051"));
+}
+
 }  // namespace
 }  // namespace tempokey::testing

@@ -420,5 +420,33 @@ TEST(ClientOptionsTest, RefusesOptionsNoChannelCanUse) {
   EXPECT_TRUE(ValidateClientOptions(ClientOptions()).ok());
 }
 
+// The token probe of this sitting's TLS review: a fake plaintext server on another machine's
+// address recorded "authorization: Bearer ..." from the CLI and the package alike. RFC 6750 5.3:
+// a client MUST use TLS with bearer tokens; only this machine, TLS, or an explicit allowance
+// (a network that encrypts it itself) may carry one now.
+TEST(ClientOptionsTest, ABearerTokenTravelsInCleartextOnlyOnThisMachineOrWhenAllowed) {
+  auto with_token = [](const std::string& target, bool tls, bool allow) {
+    return With([&](ClientOptions& o) {
+      o.target = target;
+      o.bearer_token = "s3cret";
+      o.tls.enabled = tls;
+      o.allow_plaintext_token = allow;
+    });
+  };
+
+  EXPECT_EQ(ValidateClientOptions(with_token("192.0.2.2:50051", false, false)).message(),
+            "refusing to send the bearer token in cleartext to 192.0.2.2:50051, which is not on "
+            "this machine: connect with TLS (the CLI's --tls or --ca), or allow it "
+            "(--allow-plaintext-token) only where the network itself is trusted, as in a service "
+            "mesh that encrypts it");
+  EXPECT_EQ(ValidateClientOptions(with_token("dns:///tempokey.svc:50051", false, false)).code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_TRUE(ValidateClientOptions(with_token("192.0.2.2:50051", true, false)).ok());
+  EXPECT_TRUE(ValidateClientOptions(with_token("192.0.2.2:50051", false, true)).ok());
+  EXPECT_TRUE(ValidateClientOptions(with_token("127.0.0.1:50051", false, false)).ok());
+  EXPECT_TRUE(ValidateClientOptions(with_token("unix:/run/tempokey.sock", false, false)).ok());
+  EXPECT_TRUE(ValidateClientOptions(With([](ClientOptions& o) { o.target = "192.0.2.2:1"; })).ok());
+}
+
 }  // namespace
 }  // namespace tempokey::client

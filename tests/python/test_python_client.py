@@ -610,6 +610,43 @@ class SilentPeer:
             connection.close()
 
 
+class TokenTransportTest(unittest.TestCase):
+    """RFC 6750 5.3: bearer tokens travel over TLS only. A fake plaintext server on another
+    machine's address recorded the package's token; now only this machine, TLS or an explicit
+    allowance (a network that encrypts it itself) carry one. No connection is made here: the
+    refusal comes first, and a client is created without connecting."""
+
+    # The same table as the C++ client's (tests/proto/loopback_test.cc).
+    LOCAL = ["127.0.0.1:50051", "localhost:50051", "LOCALHOST", "[::1]:50051", "::1",
+             "dns:///localhost:50051", "dns:localhost:50051", "dns://8.8.8.8/127.0.0.1:50051",
+             "ipv4:127.0.0.1:50051,127.0.0.2:50052", "ipv6:[::1]:50051",
+             "unix:/run/tempokey.sock", "unix:///run/tempokey.sock", "unix-abstract:tempokey",
+             "UNIX:/run/tempokey.sock"]
+    REMOTE = ["10.0.0.1:50051", "tempokey.example.com:50051", "dns:///tempokey.svc:50051",
+              "ipv4:127.0.0.1:50051,10.0.0.2:50051", "ipv4:", "ipv6:[2001:db8::1]:50051",
+              "dns://127.0.0.1/example.com:50051", "dns://127.0.0.1", "xds:///tempokey",
+              "vsock:3:50051", "127.attacker.invalid:50051", ":50051", ""]
+
+    def test_loopback_targets_are_those_the_cpp_client_takes(self):
+        self.assertEqual([t for t in self.LOCAL if not tk.is_loopback_target(t)], [])
+        self.assertEqual([t for t in self.REMOTE if tk.is_loopback_target(t)], [])
+
+    def test_a_token_is_not_sent_in_cleartext_to_another_machine(self):
+        with self.assertRaises(ValueError) as caught:
+            tk.connect("192.0.2.2:50051", token="s3cret")
+
+        self.assertEqual(str(caught.exception),
+                         "refusing to send the token in cleartext to 192.0.2.2:50051, which is not "
+                         "on this machine: connect with tls=True, or pass "
+                         "allow_plaintext_token=True only where the network itself is trusted, as "
+                         "in a service mesh that encrypts it")
+        for client in (tk.connect("192.0.2.2:50051", token="s3cret", allow_plaintext_token=True),
+                       tk.connect("192.0.2.2:50051", token="s3cret", tls=True),
+                       tk.connect("127.0.0.1:50051", token="s3cret"),
+                       tk.connect("192.0.2.2:50051")):
+            client.close()
+
+
 class ClientDeadlineTest(unittest.TestCase):
     """gRPC reports a deadline that passed on the client's side as "Deadline Exceeded", which
     names neither the timeout nor how to change it; the package and the CLI name it."""

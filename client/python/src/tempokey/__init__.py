@@ -32,7 +32,7 @@ except ImportError as error:  # pragma: no cover - an uninstalled source tree
 
 from tempokey.bvh import BvhClip, BvhError, BvhFileError, BvhJoint, parse_bvh, read_bvh
 from tempokey.client import (DEFAULT_MAX_RECEIVE_BYTES, HEALTH_STATES, MOTION_SERVICE, Client,
-                             connect)
+                             connect, is_loopback_target)
 from tempokey.clips import (CHANNEL_KIND_NAMES, CHANNEL_KINDS, DEFAULT_SLICE_BYTES, ChannelSpec,
                             JointSpec, MarkerSpec, channel_label, make_clip, sample_batches,
                             sample_slices)
@@ -58,6 +58,7 @@ __all__ = [
     "MOTION_SERVICE", "MarkerSpec", "PipelineResult", "REDUCE_OPTIONS", "RETRY_AFTER_METADATA_KEY",
     "RateLike", "ReduceOption", "SpeedLike", "TempokeyError", "TimeLike", "bake_operation",
     "channel_label", "clip_from_bvh", "clip_pb2", "connect", "convert_operation", "frame_rate",
+    "is_loopback_target",
     "keyed_clip_to_dict", "make_clip", "motion_service_pb2", "motion_service_pb2_grpc",
     "operations_pb2", "parse_bvh", "parse_joint_tolerance", "parse_speed", "read_bvh", "read_bvh_clip", "reduce_operation",
     "retime_operation", "sample_batches", "sample_slices", "speed_knot", "time_point",

@@ -21,6 +21,7 @@ does. Thread-safety: a Client may be shared by threads (gRPC channels are thread
 server info it caches is read-only once fetched.
 """
 
+import ipaddress
 import json
 import random
 import time
@@ -39,7 +40,8 @@ from tempokey.v1 import motion_service_pb2
 from tempokey.v1 import motion_service_pb2_grpc
 from tempokey.v1 import operations_pb2
 
-__all__ = ["Client", "DEFAULT_MAX_RECEIVE_BYTES", "HEALTH_STATES", "MOTION_SERVICE", "connect"]
+__all__ = ["Client", "DEFAULT_MAX_RECEIVE_BYTES", "HEALTH_STATES", "MOTION_SERVICE", "connect",
+           "is_loopback_target"]
 
 MOTION_SERVICE = "tempokey.v1.MotionService"
 HEALTH_CHECK_METHOD = "/grpc.health.v1.Health/Check"
@@ -522,6 +524,54 @@ def _check_token(token: Any) -> None:
                          "tokens, so this one could never match)")
 
 
+def _is_loopback_host(host: str) -> bool:
+    """Whether `host` (no port; brackets allowed) is itself a loopback name, without asking a
+    resolver: "localhost", or an address in 127.0.0.0/8, ::1 or ::ffff:127.0.0.0/104."""
+    if len(host) >= 2 and host[0] == "[" and host[-1] == "]":
+        host = host[1:-1]
+    if host.lower() == "localhost":
+        return True
+    try:
+        address = ipaddress.ip_address(host)
+    except ValueError:
+        return False
+    mapped = getattr(address, "ipv4_mapped", None)
+    return (mapped or address).is_loopback
+
+
+def _host_of(address: str) -> str:
+    """The host of "host:port", "[v6]:port" or a bare host (a bare IPv6 address is its own)."""
+    if address.startswith("["):
+        return address[1:address.find("]")] if "]" in address else address[1:]
+    return address.rsplit(":", 1)[0] if address.count(":") == 1 else address
+
+
+def is_loopback_target(target: str) -> bool:
+    """Whether every address of a gRPC target stays on this machine: a unix-domain socket, or
+    hosts that are all loopback literals, in the forms of gRPC's name syntax (doc/naming.md:
+    "dns:[//authority/]host[:port]", "ipv4:"/"ipv6:" lists, a bare "host[:port]"); as the C++
+    client's wire::IsLoopbackTarget()."""
+    lower = target.lower()
+    if lower.startswith(("unix:", "unix-abstract:")):
+        return True
+    for scheme in ("ipv4:", "ipv6:"):
+        if lower.startswith(scheme):
+            addresses = target[len(scheme):]
+            return bool(addresses) and all(_is_loopback_host(_host_of(a))
+                                           for a in addresses.split(","))
+    if lower.startswith("dns:"):
+        target = target[4:]
+        if target.startswith("//"):
+            slash = target.find("/", 2)
+            if slash < 0:
+                return False
+            target = target[slash + 1:]
+    elif target[max(target.find(":"), 0):].startswith("://"):
+        return False  # another scheme with an authority: xds:///name, ...
+    host = _host_of(target)
+    return bool(host) and _is_loopback_host(host)
+
+
 def _new_request_id() -> str:
     """A fresh random idempotency key (UUID v4 text)."""
     return str(uuid.uuid4())
@@ -532,7 +582,8 @@ def connect(target: str, timeout: Optional[float] = 60.0, token: Optional[str] =
             certificate_chain: Optional[bytes] = None, private_key: Optional[bytes] = None,
             target_name_override: Optional[str] = None, max_attempts: int = 4,
             max_receive_message_bytes: int = DEFAULT_MAX_RECEIVE_BYTES,
-            slice_bytes: int = DEFAULT_SLICE_BYTES) -> Client:
+            slice_bytes: int = DEFAULT_SLICE_BYTES,
+            allow_plaintext_token: bool = False) -> Client:
     """Creates a client of `target` (no connection is made until the first call).
 
     Args:
@@ -540,7 +591,10 @@ def connect(target: str, timeout: Optional[float] = 60.0, token: Optional[str] =
         (calls are spread round-robin over the addresses).
       timeout: deadline of each method call in seconds (> 0, at most a year), covering its
         retries; None for none.
-      token: sent as "authorization: Bearer <token>" on every call.
+      token: sent as "authorization: Bearer <token>" on every call: over TLS, or to a target on
+        this machine (is_loopback_target()), unless allow_plaintext_token says the network
+        itself is trusted (a service mesh whose sidecars encrypt it); RFC 6750 5.3 allows bearer
+        tokens over TLS only.
       tls: use TLS; root_certificates (PEM bytes, None: system roots), certificate_chain and
         private_key (PEM bytes, both or neither) for mutual TLS, target_name_override to accept
         a certificate issued for another name (test certificates).
@@ -550,8 +604,9 @@ def connect(target: str, timeout: Optional[float] = 60.0, token: Optional[str] =
 
     Raises: TypeError for an argument of the wrong type (a str timeout, a float size);
     ValueError for an empty target, a timeout that is not a finite number of seconds in
-    (0, a year], a token that is not visible ASCII, TLS settings without tls, a certificate
-    without its key, or a non-positive size.
+    (0, a year], a token that is not visible ASCII, a token without tls to a target off this
+    machine (unless allow_plaintext_token), TLS settings without tls, a certificate without its
+    key, or a non-positive size.
     """
     if not _arguments.text(target, "target"):
         raise ValueError("the server target is empty")
@@ -559,6 +614,12 @@ def connect(target: str, timeout: Optional[float] = 60.0, token: Optional[str] =
     if token is not None:
         _check_token(token)
     _arguments.boolean(tls, "tls")
+    _arguments.boolean(allow_plaintext_token, "allow_plaintext_token")
+    if token and not tls and not allow_plaintext_token and not is_loopback_target(target):
+        raise ValueError("refusing to send the token in cleartext to %s, which is not on this "
+                         "machine: connect with tls=True, or pass allow_plaintext_token=True "
+                         "only where the network itself is trusted, as in a service mesh that "
+                         "encrypts it" % target)
     if _arguments.integer(max_attempts, "max_attempts") < 1:
         raise ValueError("max_attempts must be >= 1, got %d" % max_attempts)
     _arguments.integer(max_receive_message_bytes, "max_receive_message_bytes", _arguments.INT32)
