@@ -1,9 +1,5 @@
 #include "server/server.h"
 
-#include <openssl/err.h>
-#include <openssl/pem.h>
-#include <openssl/x509.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -30,6 +26,7 @@
 #include "server/reactors.h"
 #include "server/reflection_service.h"
 #include "server/service_context.h"
+#include "server/tls_credentials.h"
 #include "spdlog/spdlog.h"
 #include "tempokey/core/io/file_io.h"
 #include "tempokey/core/io/printable_text.h"
@@ -43,63 +40,6 @@ namespace {
 constexpr std::chrono::seconds kShutdownCallDeadline{2};
 // After the grace period, cancelled jobs get this long to notice (they check between channels).
 constexpr std::chrono::seconds kCancelSettleTime{10};
-
-absl::StatusOr<std::string> ReadPem(std::string_view flag, const std::string& path) {
-  absl::StatusOr<std::string> pem = core::ReadFile(path, 1 << 20);
-  if (!pem.ok()) {
-    return absl::InvalidArgumentError(absl::StrCat("--", core::AsAbsl(flag), " ", path, ": ",
-                                                   pem.status().message()));
-  }
-  return pem;
-}
-
-// The first certificate of `cert_pem` and the key of `key_pem` parse, and the key is the
-// certificate's (gRPC would only fail the bind, with no reason given).
-absl::Status CheckKeyPair(const ServerOptions& o, const std::string& cert_pem,
-                          const std::string& key_pem) {
-  auto bio_of = [](const std::string& pem) {
-    return std::unique_ptr<BIO, decltype(&BIO_free)>(
-        BIO_new_mem_buf(pem.data(), static_cast<int>(pem.size())), &BIO_free);
-  };
-  auto cert_bio = bio_of(cert_pem);
-  std::unique_ptr<X509, decltype(&X509_free)> cert(
-      PEM_read_bio_X509(cert_bio.get(), nullptr, nullptr, nullptr), &X509_free);
-  auto key_bio = bio_of(key_pem);
-  std::unique_ptr<EVP_PKEY, decltype(&EVP_PKEY_free)> key(
-      PEM_read_bio_PrivateKey(key_bio.get(), nullptr, nullptr, nullptr), &EVP_PKEY_free);
-  const bool matches = cert != nullptr && key != nullptr && X509_check_private_key(cert.get(), key.get()) == 1;
-  ERR_clear_error();
-  if (cert == nullptr) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("--tls_cert ", o.tls_cert_file, ": holds no PEM certificate"));
-  }
-  if (key == nullptr) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "--tls_key ", o.tls_key_file, ": holds no PEM private key (or it is encrypted)"));
-  }
-  if (!matches) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "--tls_key ", o.tls_key_file, " is not the private key of the certificate in --tls_cert ",
-        o.tls_cert_file));
-  }
-  return absl::OkStatus();
-}
-
-absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> BuildCredentials(const ServerOptions& o) {
-  if (o.tls_cert_file.empty()) return grpc::InsecureServerCredentials();
-  grpc::SslServerCredentialsOptions ssl(o.tls_client_ca_file.empty()
-                                            ? GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE
-                                            : GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY);
-  grpc::SslServerCredentialsOptions::PemKeyCertPair pair;
-  TEMPOKEY_ASSIGN_OR_RETURN(pair.cert_chain, ReadPem("tls_cert", o.tls_cert_file));
-  TEMPOKEY_ASSIGN_OR_RETURN(pair.private_key, ReadPem("tls_key", o.tls_key_file));
-  TEMPOKEY_RETURN_IF_ERROR(CheckKeyPair(o, pair.cert_chain, pair.private_key));
-  ssl.pem_key_cert_pairs.push_back(std::move(pair));
-  if (!o.tls_client_ca_file.empty()) {
-    TEMPOKEY_ASSIGN_OR_RETURN(ssl.pem_root_certs, ReadPem("tls_client_ca", o.tls_client_ca_file));
-  }
-  return grpc::SslServerCredentials(ssl);
-}
 
 // libgrpc++_reflection installs gRPC's own reflection service in every server it is linked into
 // (a static initializer registers its plugin), and that service cannot check a token. This

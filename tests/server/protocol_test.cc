@@ -5,6 +5,8 @@
 // no more often than the server's interval; a TLS key that is not its
 // certificate's stops the server at start-up with that said; a full queue's retry hint follows
 // how long the running job has run.
+#include <sys/stat.h>
+
 #include <chrono>
 #include <memory>
 #include <mutex>
@@ -452,6 +454,76 @@ TEST(TlsStartupTest, KeyOfAnotherCertificateIsNamedAtStartUp) {
   EXPECT_THAT(mismatched.err, ::testing::Not(HasSubstr("address in use")));
   EXPECT_EQ(garbage.exit_code, 1);
   EXPECT_THAT(garbage.err, HasSubstr("--tls_cert " + dir + "/not.pem: holds no PEM certificate"));
+}
+
+// An encrypted key made the server print "Enter PEM pass phrase:" and wait on its stdin for ever
+// (OpenSSL's default callback), and with the passphrase typed, gRPC refused the key and the
+// server blamed the address ("address in use or invalid?"). Its stdin here is a FIFO the server
+// itself holds open for writing, so a read would wait for ever and the 60 s limit would end it.
+TEST(TlsStartupTest, AnEncryptedKeyIsRefusedWithoutAskingForAPassphrase) {
+  const std::string dir = MakeTempDir();
+  ASSERT_TRUE(MakeSelfSigned(dir, "a"));
+  ASSERT_EQ(RunProcess({"/usr/bin/openssl", "pkey", "-in", dir + "/a.key", "-aes256", "-passout",
+                        "pass:secret", "-out", dir + "/encrypted.key"},
+                       dir).exit_code,
+            0);
+  ASSERT_EQ(::mkfifo((dir + "/stdin").c_str(), 0600), 0);
+
+  const ProcessResult run = RunProcess(
+      {"/bin/sh", "-c", "exec 3<>\"$0\"; exec \"$@\" < \"$0\"", dir + "/stdin", ServerBinary(),
+       "--address=127.0.0.1:0", "--tls_cert=" + dir + "/a.pem",
+       "--tls_key=" + dir + "/encrypted.key"},
+      dir, {}, std::chrono::seconds(60));
+
+  EXPECT_EQ(run.exit_code, 1) << run.err;
+  EXPECT_THAT(run.err, HasSubstr("cannot start: --tls_key " + dir +
+                                 "/encrypted.key: the key is encrypted, and gRPC takes an "
+                                 "unencrypted PEM key"));
+  EXPECT_THAT(run.out + run.err, ::testing::Not(HasSubstr("pass phrase")));
+}
+
+// An empty --tls_client_ca started a server that refused every client; a file of garbage (or a
+// key) failed the bind as "address in use or invalid?".
+TEST(TlsStartupTest, AClientCaFileWithoutACertificateIsNamedAtStartUp) {
+  const std::string dir = MakeTempDir();
+  ASSERT_TRUE(MakeSelfSigned(dir, "a"));
+  ASSERT_TRUE(core::WriteFileAtomically(dir + "/empty.pem", "").ok());
+
+  std::vector<ProcessResult> runs;
+  for (const std::string& ca : {dir + "/empty.pem", dir + "/a.key"}) {
+    runs.push_back(RunProcess({ServerBinary(), "--address=127.0.0.1:0",
+                               "--tls_cert=" + dir + "/a.pem", "--tls_key=" + dir + "/a.key",
+                               "--tls_client_ca=" + ca},
+                              dir, {}, std::chrono::seconds(60)));
+  }
+
+  ASSERT_EQ(runs.size(), 2u);
+  for (const ProcessResult& run : runs) {
+    EXPECT_EQ(run.exit_code, 1) << run.err;
+    EXPECT_THAT(run.err, HasSubstr(": holds no PEM certificate (the CAs whose client "
+                                   "certificates are accepted)"));
+    EXPECT_THAT(run.err, ::testing::Not(HasSubstr("address in use")));
+  }
+  EXPECT_THAT(runs[0].err, HasSubstr("--tls_client_ca " + dir + "/empty.pem: "));
+}
+
+// A certificate whose extended key usage lacks serverAuth is refused by every standard client
+// (RFC 5280 4.2.1.12); the server says so at start-up, and still starts.
+TEST(TlsStartupTest, ACertificateNoClientAcceptsIsWarnedOfAtStartUp) {
+  const std::string dir = MakeTempDir();
+  ASSERT_EQ(RunProcess({"/usr/bin/openssl", "req", "-x509", "-newkey", "ec", "-pkeyopt",
+                        "ec_paramgen_curve:prime256v1", "-nodes", "-keyout", dir + "/c.key",
+                        "-out", dir + "/c.pem", "-days", "2", "-subj", "/CN=localhost",
+                        "-addext", "extendedKeyUsage=clientAuth"},
+                       dir).exit_code,
+            0);
+
+  absl::StatusOr<std::unique_ptr<ServerProcess>> server = ServerProcess::Start(
+      dir, {"--tls_cert", dir + "/c.pem", "--tls_key", dir + "/c.key"});
+
+  ASSERT_TRUE(server.ok()) << server.status();
+  EXPECT_THAT((*server)->log(), HasSubstr("--tls_cert " + dir + "/c.pem: its extended key usage "
+                                          "lacks serverAuth; clients will refuse it"));
 }
 
 }  // namespace
