@@ -86,6 +86,8 @@ absl::StatusOr<ClientOptions> ClientOptionsFromFlags(const ParsedArgs& args) {
     TEMPOKEY_ASSIGN_OR_RETURN(tls.private_key_pem, core::ReadTextFile(*args.Value("--key"), kMaxPemBytes));
   }
   if (std::optional<std::string> name = args.Value("--tls-server-name")) {
+    // Empty, gRPC would check the target's own name instead, silently.
+    if (name->empty()) return UsageError("--tls-server-name: expected a host name, got ''");
     tls.target_name_override = *name;
   }
   if (std::optional<std::string> token_file = args.Value("--token-file")) {

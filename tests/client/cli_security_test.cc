@@ -120,6 +120,14 @@ TEST_F(CliSecurityTest, MutualTlsServerNeedsTheClientCertificate) {
   EXPECT_THAT(certified.out, StartsWith("clip id:         sha256:"));
 }
 
+TEST_F(CliSecurityTest, AnEmptyTlsServerNameIsAUsageError) {
+  const ProcessResult run = RunTempokey(
+      {"--server", "127.0.0.1:1", "--tls-server-name", "", "health"}, dir_);
+
+  EXPECT_EQ(run.exit_code, 2);
+  EXPECT_EQ(run.err, "error: --tls-server-name: expected a host name, got ''\n");
+}
+
 TEST_F(CliSecurityTest, MissingCaFileIsOneLineNamingIt) {
   StartServer({});
 
