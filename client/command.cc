@@ -11,6 +11,7 @@
 #include "client/cli_errors.h"
 #include "client/clip_files.h"
 #include "client/clip_summary.h"
+#include "proto/pem_check.h"
 #include "tempokey/core/io/file_io.h"
 #include "tempokey/core/model/status.h"
 
@@ -78,12 +79,21 @@ absl::StatusOr<ClientOptions> ClientOptionsFromFlags(const ParsedArgs& args) {
   if (args.Has("--cert") != args.Has("--key")) {
     return UsageError("--cert and --key go together (mutual TLS needs both)");
   }
+  // The files are checked here: gRPC takes a bad one as a channel with "empty address list",
+  // which the CLI could only report as the server's UNAVAILABLE.
   if (std::optional<std::string> ca = args.Value("--ca")) {
     TEMPOKEY_ASSIGN_OR_RETURN(tls.root_ca_pem, core::ReadTextFile(*ca, kMaxPemBytes));
+    TEMPOKEY_RETURN_IF_ERROR(
+        wire::CheckPemCertificates(absl::StrCat("--ca ", *ca), tls.root_ca_pem));
   }
   if (std::optional<std::string> cert = args.Value("--cert")) {
+    const std::string key = *args.Value("--key");
     TEMPOKEY_ASSIGN_OR_RETURN(tls.cert_chain_pem, core::ReadTextFile(*cert, kMaxPemBytes));
-    TEMPOKEY_ASSIGN_OR_RETURN(tls.private_key_pem, core::ReadTextFile(*args.Value("--key"), kMaxPemBytes));
+    TEMPOKEY_ASSIGN_OR_RETURN(tls.private_key_pem, core::ReadTextFile(key, kMaxPemBytes));
+    TEMPOKEY_RETURN_IF_ERROR(wire::CheckPemKeyPair(absl::StrCat("--cert ", *cert),
+                                                   tls.cert_chain_pem,
+                                                   absl::StrCat("--key ", key),
+                                                   tls.private_key_pem));
   }
   if (std::optional<std::string> name = args.Value("--tls-server-name")) {
     // Empty, gRPC would check the target's own name instead, silently.

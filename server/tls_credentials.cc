@@ -11,6 +11,7 @@
 #include <string_view>
 
 #include "absl/strings/str_cat.h"
+#include "proto/pem_check.h"
 #include "spdlog/spdlog.h"
 #include "tempokey/core/io/file_io.h"
 #include "tempokey/core/model/status.h"
@@ -34,29 +35,6 @@ absl::StatusOr<std::string> ReadPem(std::string_view flag, const std::string& pa
   return pem;
 }
 
-// OpenSSL's default passphrase callback prompts on the terminal or stdin: a server started by a
-// supervisor with an encrypted key would wait there for ever. No passphrase, ever.
-int NoPassphrase(char*, int, int, void*) { return 0; }
-
-// An encrypted PEM key: PKCS#8 "ENCRYPTED PRIVATE KEY", or a traditional key with
-// "Proc-Type: 4,ENCRYPTED".
-bool IsEncryptedPemKey(const std::string& pem) {
-  return pem.find("-----BEGIN ENCRYPTED PRIVATE KEY-----") != std::string::npos ||
-         pem.find("Proc-Type: 4,ENCRYPTED") != std::string::npos;
-}
-
-// The certificates of `pem`, in order (none when it holds none).
-int CountCertificates(const std::string& pem) {
-  Bio bio = BioOf(pem);
-  int count = 0;
-  while (Certificate cert{PEM_read_bio_X509(bio.get(), nullptr, NoPassphrase, nullptr),
-                          &X509_free}) {
-    ++count;
-  }
-  ERR_clear_error();
-  return count;
-}
-
 // Warns of what makes every standard client refuse the server's certificate (RFC 5280: its
 // validity period, 4.1.2.5; an extended key usage without serverAuth, 4.2.1.12).
 void WarnAboutServerCertificate(const std::string& path, X509* cert) {
@@ -73,39 +51,18 @@ void WarnAboutServerCertificate(const std::string& path, X509* cert) {
   }
 }
 
-// The first certificate of `cert_pem` and the key of `key_pem` parse, and the key is the
-// certificate's.
+// The certificate and key parse and belong together (wire::CheckPemKeyPair()); then what would
+// make clients refuse the certificate is warned of.
 absl::Status CheckKeyPair(const ServerOptions& o, const std::string& cert_pem,
                           const std::string& key_pem) {
-  Bio cert_bio = BioOf(cert_pem);
-  Certificate cert(PEM_read_bio_X509(cert_bio.get(), nullptr, NoPassphrase, nullptr),
-                   &X509_free);
-  Bio key_bio = BioOf(key_pem);
-  std::unique_ptr<EVP_PKEY, decltype(&EVP_PKEY_free)> key(
-      PEM_read_bio_PrivateKey(key_bio.get(), nullptr, NoPassphrase, nullptr), &EVP_PKEY_free);
-  const bool matches =
-      cert != nullptr && key != nullptr && X509_check_private_key(cert.get(), key.get()) == 1;
+  TEMPOKEY_RETURN_IF_ERROR(wire::CheckPemKeyPair(absl::StrCat("--tls_cert ", o.tls_cert_file),
+                                                 cert_pem,
+                                                 absl::StrCat("--tls_key ", o.tls_key_file),
+                                                 key_pem));
+  Bio bio = BioOf(cert_pem);
+  const Certificate cert(PEM_read_bio_X509(bio.get(), nullptr, nullptr, nullptr), &X509_free);
   ERR_clear_error();
-  if (cert == nullptr) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("--tls_cert ", o.tls_cert_file, ": holds no PEM certificate"));
-  }
-  if (key == nullptr && IsEncryptedPemKey(key_pem)) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "--tls_key ", o.tls_key_file, ": the key is encrypted, and gRPC takes an unencrypted PEM "
-        "key (decrypt it, e.g. openssl pkey -in KEY -out PLAIN.pem, and let only the server read "
-        "it)"));
-  }
-  if (key == nullptr) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("--tls_key ", o.tls_key_file, ": holds no PEM private key"));
-  }
-  if (!matches) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "--tls_key ", o.tls_key_file, " is not the private key of the certificate in --tls_cert ",
-        o.tls_cert_file));
-  }
-  WarnAboutServerCertificate(o.tls_cert_file, cert.get());
+  if (cert != nullptr) WarnAboutServerCertificate(o.tls_cert_file, cert.get());
   return absl::OkStatus();
 }
 
@@ -123,12 +80,9 @@ absl::StatusOr<std::shared_ptr<grpc::ServerCredentials>> BuildCredentials(const 
   ssl.pem_key_cert_pairs.push_back(std::move(pair));
   if (!o.tls_client_ca_file.empty()) {
     TEMPOKEY_ASSIGN_OR_RETURN(ssl.pem_root_certs, ReadPem("tls_client_ca", o.tls_client_ca_file));
-    // An empty or unreadable CA file made gRPC refuse every client, or fail the bind.
-    if (CountCertificates(ssl.pem_root_certs) == 0) {
-      return absl::InvalidArgumentError(absl::StrCat(
-          "--tls_client_ca ", o.tls_client_ca_file,
-          ": holds no PEM certificate (the CAs whose client certificates are accepted)"));
-    }
+    // An empty CA file made gRPC refuse every client, and garbage failed the bind.
+    TEMPOKEY_RETURN_IF_ERROR(wire::CheckPemCertificates(
+        absl::StrCat("--tls_client_ca ", o.tls_client_ca_file), ssl.pem_root_certs));
   }
   return grpc::SslServerCredentials(ssl);
 }

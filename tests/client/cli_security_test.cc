@@ -120,6 +120,27 @@ TEST_F(CliSecurityTest, MutualTlsServerNeedsTheClientCertificate) {
   EXPECT_THAT(certified.out, StartsWith("clip id:         sha256:"));
 }
 
+// A key given as --ca, or another certificate's key as --key, ended as "error: server:
+// UNAVAILABLE: empty address list:" (gRPC's channel without credentials), blaming the server and
+// naming no file. The files are checked before any channel is made.
+TEST_F(CliSecurityTest, TlsFilesThatCannotWorkAreNamedBeforeAnyConnection) {
+  ASSERT_TRUE(MakeCertificates(dir_));
+
+  const ProcessResult key_as_ca =
+      RunTempokey({"--server", "127.0.0.1:1", "--ca", Path("ca.key"), "health"}, dir_);
+  const ProcessResult other_key = RunTempokey(
+      {"--server", "127.0.0.1:1", "--ca", Path("ca.pem"), "--cert", Path("client.pem"), "--key",
+       Path("server.key"), "health"},
+      dir_);
+
+  EXPECT_EQ(key_as_ca.exit_code, 1);
+  EXPECT_EQ(key_as_ca.err, "error: --ca " + Path("ca.key") + ": holds no PEM certificate\n");
+  EXPECT_EQ(other_key.exit_code, 1);
+  EXPECT_EQ(other_key.err, "error: --key " + Path("server.key") +
+                               " is not the private key of the certificate in --cert " +
+                               Path("client.pem") + "\n");
+}
+
 TEST_F(CliSecurityTest, AnEmptyTlsServerNameIsAUsageError) {
   const ProcessResult run = RunTempokey(
       {"--server", "127.0.0.1:1", "--tls-server-name", "", "health"}, dir_);
