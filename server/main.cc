@@ -19,6 +19,7 @@
 #include "absl/flags/parse.h"
 #include "absl/flags/usage.h"
 #include "absl/strings/str_cat.h"
+#include "server/grpc_log.h"
 #include "server/http/http_front_end.h"
 #include "server/memory_budget.h"
 #include "server/server.h"
@@ -111,6 +112,7 @@ int Run(int argc, char** argv) {
   std::vector<char*> positional = absl::ParseCommandLine(argc, argv);
   spdlog::set_default_logger(spdlog::stderr_logger_mt("tempokey"));
   spdlog::set_level(spdlog::level::from_str(absl::GetFlag(FLAGS_log_level)));
+  tempokey::server::RouteGrpcLogToSpdlog();
   if (positional.size() > 1) {
     spdlog::error("unexpected argument \"{}\" (flags only; see --help)", positional[1]);
     return 2;

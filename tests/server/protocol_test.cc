@@ -16,13 +16,17 @@
 #include <utility>
 #include <vector>
 
+#include "absl/strings/match.h"
+#include "absl/strings/str_split.h"
 #include "gmock/gmock.h"
 #include "grpcpp/generic/generic_stub.h"
 #include "gtest/gtest.h"
 #include "proto/clip_convert.h"
 #include "proto/retry_hint.h"
+#include "server/grpc_log.h"
 #include "server/job_manager.h"
 #include "server/status_util.h"
+#include "tests/server/http_util.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/process_util.h"
 #include "tempokey/core/io/file_io.h"
@@ -523,6 +527,45 @@ TEST(TlsStartupTest, ACertificateNoClientAcceptsIsWarnedOfAtStartUp) {
   ASSERT_TRUE(server.ok()) << server.status();
   EXPECT_THAT((*server)->log(), HasSubstr("--tls_cert " + dir + "/c.pem: its extended key usage "
                                           "lacks serverAuth; clients will refuse it"));
+}
+
+// gRPC wrote each failed TLS handshake as its own raw "E1201 ..." line on stderr, at any
+// --log_level and without limit: any peer could fill the log. Now its lines are the server's
+// warnings ("grpc: ..."), at most kGrpcLinesPerWindow a window, and --log_level off silences
+// them. Each peer below waits for the server to close its connection, so the server has handled
+// its handshake before it is stopped and its log read.
+TEST(GrpcLogTest, FailedHandshakesAreTheServersWarningsAndLimited) {
+  const std::string dir = MakeTempDir();
+  ASSERT_TRUE(MakeSelfSigned(dir, "a"));
+  auto fail_handshakes = [&](const std::vector<std::string>& flags, int count) {
+    std::vector<std::string> all = {"--tls_cert", dir + "/a.pem", "--tls_key", dir + "/a.key"};
+    all.insert(all.end(), flags.begin(), flags.end());
+    absl::StatusOr<std::unique_ptr<ServerProcess>> server = ServerProcess::Start(dir, all);
+    EXPECT_TRUE(server.ok()) << server.status();
+    if (!server.ok()) return std::string();
+    for (int i = 0; i < count; ++i) {
+      const int fd = ConnectLoopback((*server)->port());
+      if (fd < 0) continue;
+      const std::string garbage(200, 'G');
+      ::send(fd, garbage.data(), garbage.size(), MSG_NOSIGNAL);
+      ReadToEnd(fd);
+      ::close(fd);
+    }
+    (*server)->Stop();
+    return (*server)->log();
+  };
+
+  const std::string warned = fail_handshakes({}, 3 * server::kGrpcLinesPerWindow);
+  const std::string silent = fail_handshakes({"--log_level", "off"}, 5);
+
+  int grpc_lines = 0;
+  for (const absl::string_view line : absl::StrSplit(warned, '\n', absl::SkipEmpty())) {
+    EXPECT_THAT(std::string(line), ::testing::StartsWith("[")) << "not the server's format";
+    if (absl::StrContains(line, "] [warning] grpc: ")) ++grpc_lines;
+  }
+  EXPECT_GE(grpc_lines, 1) << warned;
+  EXPECT_LE(grpc_lines, server::kGrpcLinesPerWindow) << warned;
+  EXPECT_EQ(silent, "");
 }
 
 }  // namespace
