@@ -4,10 +4,12 @@
 #include <openssl/err.h>
 #include <openssl/pem.h>
 #include <openssl/x509.h>
+#include <openssl/x509v3.h>
 
 #include <memory>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 #include "tempokey/core/model/status.h"
@@ -78,6 +80,26 @@ absl::Status CheckPemKeyPair(std::string_view cert_what, const std::string& cert
                                                    core::AsAbsl(cert_what)));
   }
   return absl::OkStatus();
+}
+
+std::vector<std::string> ServerCertificateProblems(const std::string& cert_pem) {
+  Bio bio = BioOf(cert_pem);
+  const Certificate cert(PEM_read_bio_X509(bio.get(), nullptr, NoPassphrase, nullptr),
+                         &X509_free);
+  ERR_clear_error();
+  std::vector<std::string> problems;
+  if (cert == nullptr) return problems;
+  if (X509_cmp_current_time(X509_get0_notAfter(cert.get())) < 0) {
+    problems.push_back("the certificate has expired");
+  }
+  if (X509_cmp_current_time(X509_get0_notBefore(cert.get())) > 0) {
+    problems.push_back("the certificate is not valid yet");
+  }
+  if ((X509_get_extension_flags(cert.get()) & EXFLAG_XKUSAGE) != 0 &&
+      (X509_get_extended_key_usage(cert.get()) & XKU_SSL_SERVER) == 0) {
+    problems.push_back("its extended key usage lacks serverAuth");
+  }
+  return problems;
 }
 
 }  // namespace tempokey::wire

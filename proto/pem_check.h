@@ -6,6 +6,7 @@
 
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "absl/status/status.h"
 
@@ -22,6 +23,12 @@ absl::Status CheckPemCertificates(std::string_view what, const std::string& pem)
 // key", "<key_what> is not the private key of the certificate in <cert_what>".
 absl::Status CheckPemKeyPair(std::string_view cert_what, const std::string& cert_pem,
                              std::string_view key_what, const std::string& key_pem);
+
+// What makes every standard client refuse the first certificate of `cert_pem` as a server's
+// (RFC 5280: its validity period, 4.1.2.5; an extended key usage without serverAuth, 4.2.1.12):
+// "the certificate has expired", "the certificate is not valid yet", "its extended key usage
+// lacks serverAuth". Empty when none applies, or when it does not parse.
+std::vector<std::string> ServerCertificateProblems(const std::string& cert_pem);
 
 }  // namespace tempokey::wire
 

@@ -1,11 +1,6 @@
 // The server's TLS credentials (tls_credentials.h).
 #include "server/tls_credentials.h"
 
-#include <openssl/err.h>
-#include <openssl/pem.h>
-#include <openssl/x509.h>
-#include <openssl/x509v3.h>
-
 #include <memory>
 #include <string>
 #include <string_view>
@@ -19,13 +14,6 @@
 namespace tempokey::server {
 namespace {
 
-using Bio = std::unique_ptr<BIO, decltype(&BIO_free)>;
-using Certificate = std::unique_ptr<X509, decltype(&X509_free)>;
-
-Bio BioOf(const std::string& pem) {
-  return Bio(BIO_new_mem_buf(pem.data(), static_cast<int>(pem.size())), &BIO_free);
-}
-
 absl::StatusOr<std::string> ReadPem(std::string_view flag, const std::string& path) {
   absl::StatusOr<std::string> pem = core::ReadFile(path, 1 << 20);
   if (!pem.ok()) {
@@ -33,22 +21,6 @@ absl::StatusOr<std::string> ReadPem(std::string_view flag, const std::string& pa
                                                    pem.status().message()));
   }
   return pem;
-}
-
-// Warns of what makes every standard client refuse the server's certificate (RFC 5280: its
-// validity period, 4.1.2.5; an extended key usage without serverAuth, 4.2.1.12).
-void WarnAboutServerCertificate(const std::string& path, X509* cert) {
-  if (X509_cmp_current_time(X509_get0_notAfter(cert)) < 0) {
-    spdlog::warn("--tls_cert {}: the certificate has expired; clients will refuse it", path);
-  }
-  if (X509_cmp_current_time(X509_get0_notBefore(cert)) > 0) {
-    spdlog::warn("--tls_cert {}: the certificate is not valid yet; clients will refuse it", path);
-  }
-  if ((X509_get_extension_flags(cert) & EXFLAG_XKUSAGE) != 0 &&
-      (X509_get_extended_key_usage(cert) & XKU_SSL_SERVER) == 0) {
-    spdlog::warn("--tls_cert {}: its extended key usage lacks serverAuth; clients will refuse "
-                 "it", path);
-  }
 }
 
 // The certificate and key parse and belong together (wire::CheckPemKeyPair()); then what would
@@ -59,10 +31,9 @@ absl::Status CheckKeyPair(const ServerOptions& o, const std::string& cert_pem,
                                                  cert_pem,
                                                  absl::StrCat("--tls_key ", o.tls_key_file),
                                                  key_pem));
-  Bio bio = BioOf(cert_pem);
-  const Certificate cert(PEM_read_bio_X509(bio.get(), nullptr, nullptr, nullptr), &X509_free);
-  ERR_clear_error();
-  if (cert != nullptr) WarnAboutServerCertificate(o.tls_cert_file, cert.get());
+  for (const std::string& problem : wire::ServerCertificateProblems(cert_pem)) {
+    spdlog::warn("--tls_cert {}: {}; clients will refuse it", o.tls_cert_file, problem);
+  }
   return absl::OkStatus();
 }
 
