@@ -12,6 +12,7 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <utility>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_split.h"
@@ -50,18 +51,35 @@ inline std::string ReadToEnd(int fd, bool* closed_by_peer = nullptr) {
   return response;
 }
 
+// How an exchange on a new connection ended: the bytes read, whether it connected, whether every
+// byte sent was taken (false: the peer reset the connection while they went), and whether the
+// answer ended with the peer's close (false: a reset, or the 60 s hang guard).
+struct ExchangeEnding {
+  std::string answer;
+  bool connected = false;
+  bool all_sent = false;
+  bool closed = false;
+};
+
+// Sends `bytes` on a new connection to 127.0.0.1:`port`, then reads until the peer closes it.
+inline ExchangeEnding ExchangeWithEnding(int port, const std::string& bytes) {
+  ExchangeEnding ending;
+  const int fd = ConnectLoopback(port);
+  if (fd < 0) return ending;
+  ending.connected = true;
+  ending.all_sent =
+      ::send(fd, bytes.data(), bytes.size(), MSG_NOSIGNAL) == static_cast<ssize_t>(bytes.size());
+  ending.answer = ReadToEnd(fd, &ending.closed);
+  ::close(fd);
+  return ending;
+}
+
 // Sends `bytes` on a new connection to 127.0.0.1:`port` and reads everything until the peer
 // closes it (or the hang guard fires); nullopt when it cannot connect or send.
 inline std::optional<std::string> Exchange(int port, const std::string& bytes) {
-  const int fd = ConnectLoopback(port);
-  if (fd < 0) return std::nullopt;
-  if (::send(fd, bytes.data(), bytes.size(), MSG_NOSIGNAL) != static_cast<ssize_t>(bytes.size())) {
-    ::close(fd);
-    return std::nullopt;
-  }
-  std::string response = ReadToEnd(fd);
-  ::close(fd);
-  return response;
+  ExchangeEnding ending = ExchangeWithEnding(port, bytes);
+  if (!ending.all_sent) return std::nullopt;
+  return std::move(ending.answer);
 }
 
 // GET `path` from 127.0.0.1:`port` with the extra header lines `headers` ("Name: value\r\n"

@@ -434,25 +434,6 @@ TEST(HttpFrontEndTest, CorsExpectHttp10SizeAndAuthAnswersFollowHttp) {
 }
 
 
-// The answer on a new connection to `port` to `bytes`: the bytes read, whether every byte
-// sent was taken (false: the server reset the connection while they went), and whether the
-// answer ended with the server's close (false: a reset, or the client's 60 s hang guard).
-struct Ending {
-  std::string answer;
-  bool all_sent = false;
-  bool closed = false;
-};
-Ending ExchangeUntilClosed(int port, const std::string& bytes) {
-  const int fd = testing::ConnectLoopback(port);
-  if (fd < 0) return {"no connection"};
-  Ending ending;
-  ending.all_sent =
-      ::send(fd, bytes.data(), bytes.size(), MSG_NOSIGNAL) == static_cast<ssize_t>(bytes.size());
-  ending.answer = testing::ReadToEnd(fd, &ending.closed);
-  ::close(fd);
-  return ending;
-}
-
 // A client that sends "Expect: 100-continue" waits with its body until asked for it. The
 // front end asked for it before looking at the token or the declared length, so a client
 // without a token, or with a body over the limit, sent it all only to be refused. Now it gets
@@ -477,20 +458,21 @@ TEST(HttpFrontEndTest, AnExpectingClientThatWouldBeRefusedGetsTheRefusalInsteadO
                         "Connection: close\r\n\r\n");
   };
   const std::string with_token = "Authorization: Bearer s3cret\r\n";
-  const Ending no_token =
-      ExchangeUntilClosed(port, head("GetServerInfo", "application/json", 2, ""));
-  const Ending wrong_token = ExchangeUntilClosed(
+  const testing::ExchangeEnding no_token =
+      testing::ExchangeWithEnding(port, head("GetServerInfo", "application/json", 2, ""));
+  const testing::ExchangeEnding wrong_token = testing::ExchangeWithEnding(
       port, head("GetServerInfo", "application/json", 2, "Authorization: Bearer guess\r\n"));
-  const Ending too_long =
-      ExchangeUntilClosed(port, head("ParseSpeedKnots", "application/json", 5000, with_token));
-  const Ending no_method =
-      ExchangeUntilClosed(port, head("NoSuchMethod", "application/json", 2, with_token));
+  const testing::ExchangeEnding too_long = testing::ExchangeWithEnding(
+      port, head("ParseSpeedKnots", "application/json", 5000, with_token));
+  const testing::ExchangeEnding no_method =
+      testing::ExchangeWithEnding(port, head("NoSuchMethod", "application/json", 2, with_token));
   constexpr std::size_t kBody = 16 << 20;
-  const Ending impatient = ExchangeUntilClosed(
+  const testing::ExchangeEnding impatient = testing::ExchangeWithEnding(
       port, head("GetServerInfo", "application/json", kBody, "") + std::string(kBody, ' '));
   std::string old_head = head("GetServerInfo", "application/json", kBody, "");
   old_head.replace(old_head.find("HTTP/1.1"), 8, "HTTP/1.0");
-  const Ending old_client = ExchangeUntilClosed(port, old_head + std::string(kBody, ' '));
+  const testing::ExchangeEnding old_client =
+      testing::ExchangeWithEnding(port, old_head + std::string(kBody, ' '));
 
   const int uploading = testing::ConnectLoopback(port);
   ASSERT_GE(uploading, 0);
@@ -503,7 +485,7 @@ TEST(HttpFrontEndTest, AnExpectingClientThatWouldBeRefusedGetsTheRefusalInsteadO
   }
   ::close(uploading);
 
-  for (const Ending* ending : {&no_token, &wrong_token, &impatient}) {
+  for (const testing::ExchangeEnding* ending : {&no_token, &wrong_token, &impatient}) {
     EXPECT_THAT(ending->answer, ::testing::StartsWith("HTTP/1.1 401")) << ending->answer;
     EXPECT_THAT(ending->answer, HasSubstr("WWW-Authenticate: Bearer\r\n"));
   }
@@ -514,8 +496,8 @@ TEST(HttpFrontEndTest, AnExpectingClientThatWouldBeRefusedGetsTheRefusalInsteadO
   EXPECT_THAT(no_method.answer, ::testing::StartsWith("HTTP/1.1 501"));
   EXPECT_THAT(old_client.answer, ::testing::StartsWith("HTTP/1.0 401"));
   EXPECT_THAT(old_client.answer, ::testing::Not(HasSubstr("100 Continue")));
-  for (const Ending* ending : {&no_token, &wrong_token, &too_long, &no_method, &impatient,
-                               &old_client}) {
+  for (const testing::ExchangeEnding* ending :
+       {&no_token, &wrong_token, &too_long, &no_method, &impatient, &old_client}) {
     EXPECT_TRUE(ending->closed) << ending->answer;
   }
   EXPECT_TRUE(impatient.all_sent) << "the body sent without waiting was reset";
