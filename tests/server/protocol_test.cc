@@ -533,16 +533,20 @@ TEST(TlsStartupTest, ACertificateNoClientAcceptsIsWarnedOfAtStartUp) {
 // --log_level and without limit: any peer could fill the log. Now its lines are the server's
 // warnings ("grpc: ..."), at most kGrpcLinesPerWindow a window, and --log_level off silences
 // them. Each peer below waits for the server to close its connection, so the server has handled
-// its handshake before it is stopped and its log read.
+// its handshake before it is stopped and its log read. On a machine slow enough that the peers
+// span several windows, each window may show its share and a count of the rest: the bound grows
+// with the windows the peers took, so no load makes it fail (unlimited, it would be 60 lines).
 TEST(GrpcLogTest, FailedHandshakesAreTheServersWarningsAndLimited) {
   const std::string dir = MakeTempDir();
   ASSERT_TRUE(MakeSelfSigned(dir, "a"));
+  std::chrono::steady_clock::duration took{};
   auto fail_handshakes = [&](const std::vector<std::string>& flags, int count) {
     std::vector<std::string> all = {"--tls_cert", dir + "/a.pem", "--tls_key", dir + "/a.key"};
     all.insert(all.end(), flags.begin(), flags.end());
     absl::StatusOr<std::unique_ptr<ServerProcess>> server = ServerProcess::Start(dir, all);
     EXPECT_TRUE(server.ok()) << server.status();
     if (!server.ok()) return std::string();
+    const auto start = std::chrono::steady_clock::now();
     for (int i = 0; i < count; ++i) {
       const int fd = ConnectLoopback((*server)->port());
       if (fd < 0) continue;
@@ -552,10 +556,13 @@ TEST(GrpcLogTest, FailedHandshakesAreTheServersWarningsAndLimited) {
       ::close(fd);
     }
     (*server)->Stop();
+    took = std::chrono::steady_clock::now() - start;
     return (*server)->log();
   };
 
   const std::string warned = fail_handshakes({}, 3 * server::kGrpcLinesPerWindow);
+  // The windows the peers and the stop may have spanned, each its lines and one count line.
+  const auto windows = 2 + took / server::kGrpcLogWindow;
   const std::string silent = fail_handshakes({"--log_level", "off"}, 5);
 
   int grpc_lines = 0;
@@ -564,7 +571,8 @@ TEST(GrpcLogTest, FailedHandshakesAreTheServersWarningsAndLimited) {
     if (absl::StrContains(line, "] [warning] grpc: ")) ++grpc_lines;
   }
   EXPECT_GE(grpc_lines, 1) << warned;
-  EXPECT_LE(grpc_lines, server::kGrpcLinesPerWindow) << warned;
+  // 42 when the peers take under 10 s, as they do in well under a second: unlimited, 60.
+  EXPECT_LE(grpc_lines, windows * (server::kGrpcLinesPerWindow + 1)) << warned;
   EXPECT_EQ(silent, "");
 }
 
