@@ -7,7 +7,9 @@
 #include <pthread.h>
 #include <signal.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
@@ -31,7 +33,9 @@
 
 ABSL_FLAG(std::string, address, "127.0.0.1:50051",
           "Address to listen on; port 0 picks a free port (see --port_file).");
-ABSL_FLAG(std::string, port_file, "", "Write the bound port to this file once serving.");
+ABSL_FLAG(std::string, port_file, "",
+          "Write the bound port to this file once serving (not with a unix: socket --address, "
+          "which has no port).");
 ABSL_FLAG(int, workers, 0,
           "Worker threads running pipelines; 0: the CPUs this process may use (affinity and "
           "cgroup quota).");
@@ -43,6 +47,9 @@ ABSL_FLAG(int64_t, memory_budget_bytes, 0,
 ABSL_FLAG(double, stream_idle_timeout_seconds, 30,
           "End a streaming call whose client sends nothing (or takes no message) for this long; "
           "0: never.");
+ABSL_FLAG(double, handshake_timeout_seconds, 20,
+          "Close a connection that has not finished its TLS handshake and HTTP/2 opening within "
+          "this long (gRPC's own default: 120). In (0, 3600].");
 ABSL_FLAG(int64_t, process_progress_interval_ms, 100,
           "A Process call streams its first progress message at once, then at most one per "
           "this many milliseconds, the latest sent when the interval ends; 0: every new stage "
@@ -134,6 +141,13 @@ int Run(int argc, char** argv) {
   }
   options.stream_idle_timeout =
       std::chrono::milliseconds(static_cast<std::int64_t>(idle_seconds * 1000.0));
+  const double handshake_seconds = absl::GetFlag(FLAGS_handshake_timeout_seconds);
+  if (!(handshake_seconds > 0.0 && handshake_seconds <= 3600.0)) {
+    spdlog::error("--handshake_timeout_seconds must be in (0, 3600], got {}", handshake_seconds);
+    return 2;
+  }
+  options.handshake_timeout =
+      std::chrono::milliseconds(std::max<std::int64_t>(1, std::llround(handshake_seconds * 1000.0)));
   options.process_progress_interval =
       std::chrono::milliseconds(absl::GetFlag(FLAGS_process_progress_interval_ms));
   options.max_message_bytes = absl::GetFlag(FLAGS_max_message_bytes);
@@ -160,6 +174,14 @@ int Run(int argc, char** argv) {
       return 2;
     }
     options.auth_tokens = *std::move(tokens);
+  }
+  if (tempokey::server::IsUnixSocketAddress(options.address) &&
+      !absl::GetFlag(FLAGS_port_file).empty()) {
+    spdlog::error("--port_file: {} is a unix socket, which has no port; the socket is the "
+                  "address itself, and \"tempokey-server listening on {}\" on stdout says "
+                  "when it serves",
+                  options.address, options.address);
+    return 2;
   }
   if (absl::Status valid = tempokey::server::ValidateServerOptions(options); !valid.ok()) {
     spdlog::error("{}", tempokey::core::AsStd(valid.message()));
@@ -188,12 +210,14 @@ int Run(int argc, char** argv) {
   auto announce = spdlog::stdout_logger_mt("announce");
   announce->set_pattern("%v");
   announce->set_level(spdlog::level::info);  // the announcement is not subject to --log_level
-  // Announces "<what> on host:port" on stdout and in the log.
+  // Announces "<what> on host:port" (or on the unix socket's address) on stdout and in the log.
   auto announce_port = [&](std::string_view what, const std::string& address, int port) {
-    const std::string host = address.substr(0, address.rfind(':'));
-    announce->info("tempokey-server {} on {}:{}", what, host, port);
+    const std::string where = tempokey::server::IsUnixSocketAddress(address)
+                                  ? address
+                                  : absl::StrCat(address.substr(0, address.rfind(':')), ":", port);
+    announce->info("tempokey-server {} on {}", what, where);
     announce->flush();
-    spdlog::info("{} on {}:{}", what, host, port);
+    spdlog::info("{} on {}", what, where);
   };
   // Writes `port` to `port_file` (if given).
   auto write_port = [](int port, const std::string& port_file, std::string_view flag) {

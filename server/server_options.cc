@@ -131,10 +131,12 @@ std::string DescribeSockaddr(const sockaddr* address) {
 
 }  // namespace
 
+bool IsUnixSocketAddress(std::string_view address) {
+  return address.starts_with("unix:") || address.starts_with("unix-abstract:");
+}
+
 absl::Status CheckLoopbackAddress(std::string_view address) {
-  if (address.rfind("unix:", 0) == 0 || address.rfind("unix-abstract:", 0) == 0) {
-    return absl::OkStatus();
-  }
+  if (IsUnixSocketAddress(address)) return absl::OkStatus();
   // Names are case-insensitive (DNS, /etc/hosts); lower-case them so the resolver sees one form.
   const std::string host = absl::AsciiStrToLower(wire::HostOf(address));
   if (host.empty()) {
@@ -236,6 +238,11 @@ absl::Status ValidateServerOptions(const ServerOptions& o) {
     return absl::InvalidArgumentError(absl::StrCat(
         "min_client_ping_interval must be in [0, ", std::numeric_limits<int>::max(),
         "] ms, got ", o.min_client_ping_interval.count()));
+  }
+  if (o.handshake_timeout.count() <= 0 || o.handshake_timeout.count() > kMaxHandshakeTimeoutMs) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "--handshake_timeout_seconds must be in (0, ", kMaxHandshakeTimeoutMs / 1000, "], got ",
+        static_cast<double>(o.handshake_timeout.count()) / 1000.0));
   }
   if (!(o.max_job_cost_seconds >= 0.0 && std::isfinite(o.max_job_cost_seconds))) {
     return absl::InvalidArgumentError(absl::StrCat(

@@ -78,6 +78,11 @@ struct ServerOptions {
   // is 5 minutes, which ended a quiet WatchJob of a client keeping its connection alive through
   // a NAT or load balancer every 30 s. At most INT_MAX milliseconds (gRPC's int).
   std::chrono::milliseconds min_client_ping_interval{10'000};
+  // A connection that has not finished its TLS handshake and sent HTTP/2's opening SETTINGS
+  // within this long is closed. gRPC's default is 120 s: 200 connections that opened and sent
+  // nothing (or half a TLS hello) each held a socket and a handshake for two minutes. Real
+  // clients finish in a few round trips. In (0, kMaxHandshakeTimeoutMs].
+  std::chrono::milliseconds handshake_timeout{20'000};
   // Prometheus exposition ("127.0.0.1:9464"); empty disables metrics. Plain HTTP: beyond
   // loopback it needs allow_insecure_remote, whatever the gRPC port's TLS. With auth_tokens, a
   // scrape needs "Authorization: Bearer <token>" like every gRPC call.
@@ -126,6 +131,10 @@ std::int64_t DefaultMemoryBudget();
 // Errors: kNotFound / kUnavailable reading the file; kInvalidArgument when it holds no token.
 absl::StatusOr<std::vector<std::string>> ReadTokenFile(const std::string& path);
 
+// True for gRPC's unix-domain socket addresses ("unix:PATH", "unix:///PATH",
+// "unix-abstract:NAME"): they have no port.
+bool IsUnixSocketAddress(std::string_view address);
+
 // OK when every address the host of `address` ("host:port", "[v6]:port", "unix:...") resolves
 // to is a loopback address (127.0.0.0/8, ::1, ::ffff:127.0.0.0/104), or for unix-domain
 // sockets. Names are resolved (getaddrinfo), so "LOCALHOST" and "[::ffff:127.0.0.1]" are
@@ -140,6 +149,8 @@ bool IsLoopbackAddress(std::string_view address);
 inline constexpr std::int64_t kMaxDurationSeconds = 365 * 24 * 3600;
 // The largest connection age, in seconds: gRPC holds it as an int of milliseconds (24.8 days).
 inline constexpr std::int64_t kMaxConnectionAgeSeconds = 2'147'483;
+// The longest handshake timeout, in milliseconds: an hour.
+inline constexpr std::int64_t kMaxHandshakeTimeoutMs = 3'600'000;
 
 // Checks values no server can run with (sizes <= 0, durations outside the bounds above, a TLS
 // key without its certificate, a non-loopback address without TLS unless

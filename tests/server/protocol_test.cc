@@ -7,6 +7,7 @@
 // how long the running job has run.
 #include <sys/stat.h>
 
+#include <cerrno>
 #include <chrono>
 #include <memory>
 #include <mutex>
@@ -574,6 +575,65 @@ TEST(GrpcLogTest, FailedHandshakesAreTheServersWarningsAndLimited) {
   // 42 when the peers take under 10 s, as they do in well under a second: unlimited, 60.
   EXPECT_LE(grpc_lines, windows * (server::kGrpcLinesPerWindow + 1)) << warned;
   EXPECT_EQ(silent, "");
+}
+
+// Whether the peer ended the connection on `fd` (a FIN or a reset) before the socket's 60 s
+// receive guard; false when the guard fired with the connection still open.
+bool PeerEndsConnection(int fd) {
+  char buffer[4096];
+  while (true) {
+    const ssize_t n = ::recv(fd, buffer, sizeof buffer, 0);
+    if (n == 0) return true;
+    if (n < 0) return errno == ECONNRESET;
+  }
+}
+
+// gRPC's own handshake timeout is 120 s: connections that opened and sent nothing, or half a
+// TLS hello, each held a socket and a handshake that long (200 of them in a probe). The server
+// closes them at --handshake_timeout_seconds; here 1 s, against the tests' 60 s guard, so only a
+// server that keeps them longer than a minute fails, however loaded the machine.
+TEST(HandshakeTimeoutTest, AConnectionThatNeverFinishesItsHandshakeIsClosed) {
+  const std::string dir = MakeTempDir();
+  ASSERT_TRUE(MakeSelfSigned(dir, "a"));
+  absl::StatusOr<std::unique_ptr<ServerProcess>> plain =
+      ServerProcess::Start(dir, {"--handshake_timeout_seconds", "1"});
+  absl::StatusOr<std::unique_ptr<ServerProcess>> tls = ServerProcess::Start(
+      dir, {"--handshake_timeout_seconds", "1", "--tls_cert", dir + "/a.pem", "--tls_key",
+            dir + "/a.key"});
+  ASSERT_TRUE(plain.ok()) << plain.status();
+  ASSERT_TRUE(tls.ok()) << tls.status();
+
+  // Nothing at all, and the first 9 bytes of a TLS 1.2 ClientHello record (RFC 8446 5.1: a
+  // handshake record of 512 bytes, its message header announcing 508).
+  const int silent = ConnectLoopback((*plain)->port());
+  const int half_hello = ConnectLoopback((*tls)->port());
+  ASSERT_GE(silent, 0);
+  ASSERT_GE(half_hello, 0);
+  const std::string hello_start("\x16\x03\x01\x02\x00\x01\x00\x01\xfc", 9);
+  ASSERT_EQ(::send(half_hello, hello_start.data(), hello_start.size(), MSG_NOSIGNAL), 9);
+
+  EXPECT_TRUE(PeerEndsConnection(silent));
+  EXPECT_TRUE(PeerEndsConnection(half_hello));
+  ::close(silent);
+  ::close(half_hello);
+  // Both still serve calls that do handshake.
+  const absl::StatusOr<int> live = CheckHealth(Connect((*plain)->target()), "");
+  ASSERT_TRUE(live.ok()) << live.status();
+  EXPECT_EQ(*live, 1);
+  EXPECT_EQ((*plain)->Stop(), 0) << (*plain)->log();
+  EXPECT_EQ((*tls)->Stop(), 0) << (*tls)->log();
+}
+
+TEST(HandshakeTimeoutTest, ATimeoutOutsideItsRangeIsAUsageError) {
+  for (const char* value : {"0", "-1", "3601", "nan"}) {
+    const ProcessResult run =
+        RunProcess({ServerBinary(), "--address=127.0.0.1:0",
+                    std::string("--handshake_timeout_seconds=") + value},
+                   MakeTempDir(), {}, std::chrono::seconds(60));
+    EXPECT_EQ(run.exit_code, 2) << value << run.err;
+    EXPECT_THAT(run.err, HasSubstr("--handshake_timeout_seconds must be in (0, 3600], got "))
+        << value;
+  }
 }
 
 }  // namespace

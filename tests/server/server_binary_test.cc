@@ -8,6 +8,7 @@
 #include <string>
 #include <vector>
 
+#include "absl/strings/match.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tests/server/server_test_util.h"
@@ -198,6 +199,43 @@ TEST(ServerBinaryTest, SigintAlsoDrainsAndExitsZero) {
 
   EXPECT_EQ(code, 0) << server->log();
   EXPECT_THAT(server->log(), HasSubstr("received SIGINT, draining"));
+}
+
+// A unix socket has no port: the server announced "listening on unix:1" and wrote 1 into
+// --port_file. It now announces the socket's address, and refuses a port file for it.
+TEST(ServerBinaryTest, AUnixSocketIsAnnouncedByItsAddressAndHasNoPortFile) {
+  const std::string dir = MakeTempDir();
+  const std::string socket = "unix:" + dir + "/tempokey.sock";
+
+  const ProcessResult refused = RunServer({"--address", socket, "--port_file", dir + "/port"});
+  EXPECT_EQ(refused.exit_code, 2);
+  EXPECT_THAT(refused.err, HasSubstr("--port_file: " + socket +
+                                     " is a unix socket, which has no port; the socket is the "
+                                     "address itself, and \"tempokey-server listening on " +
+                                     socket + "\" on stdout says when it serves"));
+  EXPECT_EQ(ReadOrEmpty(dir + "/port"), "");
+
+  absl::StatusOr<pid_t> pid = Spawn({ServerBinary(), "--address", socket,
+                                     "--drain_grace_seconds", "2"},
+                                    dir + "/server.out", dir + "/server.err");
+  ASSERT_TRUE(pid.ok()) << pid.status();
+  const std::string announced = "tempokey-server listening on " + socket + "\n";
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  std::optional<int> early_exit;
+  while (!absl::StrContains(ReadOrEmpty(dir + "/server.out"), announced) &&
+         std::chrono::steady_clock::now() < deadline && !early_exit) {
+    early_exit = WaitFor(*pid, std::chrono::milliseconds(10));
+  }
+  ASSERT_FALSE(early_exit) << ReadOrEmpty(dir + "/server.err");
+  EXPECT_EQ(ReadOrEmpty(dir + "/server.out"), announced);
+  const absl::StatusOr<int> live = CheckHealth(Connect(socket), "");
+  kill(*pid, SIGTERM);
+  const std::optional<int> code = WaitFor(*pid, std::chrono::seconds(60));
+  if (!code) kill(*pid, SIGKILL);
+
+  ASSERT_TRUE(live.ok()) << live.status();
+  EXPECT_EQ(*live, 1);
+  EXPECT_EQ(code, 0) << ReadOrEmpty(dir + "/server.err");
 }
 
 }  // namespace
