@@ -7,6 +7,9 @@ crash, a hang, unbounded memory or a silent wrong answer; the CLI's behaviour is
     same file, the message is the CLI's, word for word.
   - Arguments are checked before anything reaches gRPC: a TypeError or ValueError naming the
     parameter, not UNKNOWN "Exception iterating requests!" or an instant DEADLINE_EXCEEDED.
+  - connect()'s TLS PEM bytes are checked before a channel is made, with the CLI's messages
+    naming the argument, where grpcio failed every call with UNAVAILABLE "empty address list"
+    or aborted the process; the certificates are made by the openssl command-line tool.
   - example_pipeline.py refuses to write its output over its input, as the CLI does.
 
 Run by CTest (label `python`) like test_python_client.py, whose environment and server fixture
@@ -29,12 +32,15 @@ import grpc
 import tempokey as tk
 
 from test_python_client import (CALL_TIMEOUT_SECONDS, CLI_BINARY, CMU_BVH, EXAMPLE, PYTHON,
-                                SUBPROCESS_TIMEOUT_SECONDS, ModuleServer)
+                                SUBPROCESS_TIMEOUT_SECONDS, ModuleServer, RunningServer)
 
 # A FIFO test's silence limit: short, since the writer under test never writes.
 SHORT_IDLE_SECONDS = 0.2
 # Bound on waiting for a FIFO writer thread to finish once the reader is done.
 WRITER_JOIN_SECONDS = 60
+
+# The openssl command-line tool (deploy/install-deps.sh), which makes the TLS tests' PEM files.
+OPENSSL = "/usr/bin/openssl"
 
 SMALL_BVH = ("HIERARCHY\nROOT Hips\n{\n\tOFFSET 0 0 0\n\tCHANNELS 1 Xposition\n}\nMOTION\n"
              "Frames: 2\nFrame Time: 0.1\n1\n2\n")
@@ -375,6 +381,160 @@ class ClientArgumentTest(unittest.TestCase):
                     tk.connect(_server.address, token=token)
         with self.assertRaisesRegex(TypeError, r"^token must be a str"):
             tk.connect(_server.address, token=b"abc")
+
+
+def make_certificates(folder):
+    """Made by the openssl tool in `folder`, as tests/client/cli_security_test.cc makes them: a CA
+    (ca.pem, ca.key), a server certificate for localhost and 127.0.0.1 (server.pem, server.key)
+    and a client certificate (client.pem, client.key) signed by it; client.key encrypted with
+    the passphrase "x" as PKCS#8 (encrypted.key) and in OpenSSL's traditional form with a
+    Proc-Type header (encrypted-traditional.key); an RSA key (rsa.key)."""
+    def run(*args):
+        subprocess.run([OPENSSL] + list(args), cwd=folder, check=True, capture_output=True,
+                       stdin=subprocess.DEVNULL, timeout=SUBPROCESS_TIMEOUT_SECONDS)
+
+    with open(os.path.join(folder, "server.ext"), "w", encoding="ascii") as stream:
+        stream.write("subjectAltName=DNS:localhost,IP:127.0.0.1\n")
+    with open(os.path.join(folder, "client.ext"), "w", encoding="ascii") as stream:
+        stream.write("extendedKeyUsage=clientAuth\n")
+    ec = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"]
+    run("req", "-x509", *ec, "-keyout", "ca.key", "-out", "ca.pem", "-days", "2", "-subj",
+        "/CN=tempokey python test CA")
+    for serial, name in enumerate(["server", "client"], start=1):
+        run("req", *ec, "-keyout", name + ".key", "-out", name + ".csr", "-subj", "/CN=" + name)
+        run("x509", "-req", "-in", name + ".csr", "-CA", "ca.pem", "-CAkey", "ca.key",
+            "-set_serial", str(serial), "-days", "2", "-out", name + ".pem", "-extfile",
+            name + ".ext")
+    run("pkey", "-in", "client.key", "-aes256", "-passout", "pass:x", "-out", "encrypted.key")
+    run("pkey", "-in", "client.key", "-traditional", "-aes256", "-passout", "pass:x", "-out",
+        "encrypted-traditional.key")
+    run("genpkey", "-algorithm", "RSA", "-pkeyopt", "rsa_keygen_bits:2048", "-out", "rsa.key")
+
+
+class TlsPemTest(unittest.TestCase):
+    """connect()'s root_certificates, certificate_chain and private_key, checked before a channel
+    is made. grpcio 1.51 (Debian 12) took them all: garbage, a key or empty bytes as
+    root_certificates, another certificate's key or an encrypted key gave a client whose every
+    call failed with UNAVAILABLE "empty address list: ", and empty bytes as certificate_chain
+    or private_key aborted the process (an assertion in ssl_credentials.cc)."""
+
+    @classmethod
+    def setUpClass(cls):
+        if not os.access(OPENSSL, os.X_OK):
+            raise AssertionError("needs %s (deploy/install-deps.sh)" % OPENSSL)
+        cls._folder = tempfile.TemporaryDirectory()
+        make_certificates(cls._folder.name)
+
+    @classmethod
+    def tearDownClass(cls):
+        cls._folder.cleanup()
+
+    def path(self, name):
+        return os.path.join(self._folder.name, name)
+
+    def pem(self, name):
+        with open(self.path(name), "rb") as stream:
+            return stream.read()
+
+    def assertRefused(self, message, **pem):
+        with self.assertRaises(ValueError) as caught:
+            tk.connect("127.0.0.1:1", tls=True, **pem)
+        self.assertEqual(str(caught.exception), message)
+
+    def test_roots_without_a_pem_certificate_are_refused_naming_root_certificates(self):
+        broken = self.pem("ca.pem").replace(b"\n", b"\n!", 2)  # its base64 made invalid
+        cases = {"garbage": os.urandom(300), "a private key": self.pem("ca.key"), "empty": b"",
+                 "a certificate that does not parse": broken}
+
+        for case, roots in cases.items():
+            with self.subTest(case=case):
+                self.assertRefused("root_certificates: holds no PEM certificate",
+                                   root_certificates=roots)
+
+    def test_an_encrypted_key_is_refused_as_encrypted_without_asking_a_passphrase(self):
+        # The key is the certificate's own: only its encryption is wrong.
+        for key in ("encrypted.key", "encrypted-traditional.key"):
+            with self.subTest(key=key):
+                self.assertRefused(
+                    "private_key: the key is encrypted, and gRPC takes an unencrypted PEM key "
+                    "(decrypt it, e.g. openssl pkey -in KEY -out PLAIN.pem, and let only its "
+                    "user read it)",
+                    root_certificates=self.pem("ca.pem"),
+                    certificate_chain=self.pem("client.pem"), private_key=self.pem(key))
+
+    def test_another_certificates_key_is_refused_naming_both_arguments(self):
+        # Another EC key, and a key of another type (OpenSSL reports each its own way).
+        for key in ("server.key", "rsa.key"):
+            with self.subTest(key=key):
+                self.assertRefused("private_key is not the private key of the certificate in "
+                                   "certificate_chain", root_certificates=self.pem("ca.pem"),
+                                   certificate_chain=self.pem("client.pem"),
+                                   private_key=self.pem(key))
+
+    def test_a_chain_or_key_without_pem_is_refused_naming_it(self):
+        cases = [("a key as certificate_chain", self.pem("client.key"), self.pem("client.key"),
+                  "certificate_chain: holds no PEM certificate"),
+                 ("a certificate as private_key", self.pem("client.pem"), self.pem("client.pem"),
+                  "private_key: holds no PEM private key"),
+                 ("garbage as private_key", self.pem("client.pem"), os.urandom(300),
+                  "private_key: holds no PEM private key")]
+
+        for case, chain, key, message in cases:
+            with self.subTest(case=case):
+                self.assertRefused(message, certificate_chain=chain, private_key=key)
+
+    def test_empty_chain_or_key_is_refused_where_grpcio_aborted_the_process(self):
+        # In a child: without the check, grpcio's assertion kills the process (SIGABRT).
+        code = ("import sys, tempokey\n"
+                "chain, key = (open(p, 'rb').read() for p in sys.argv[1:3])\n"
+                "try:\n"
+                "    tempokey.connect('127.0.0.1:1', tls=True, certificate_chain=chain,\n"
+                "                     private_key=key).close()\n"
+                "except ValueError as error:\n"
+                "    sys.exit(str(error))\n")
+        empty = self.path("empty.pem")
+        open(empty, "wb").close()
+        cases = [(empty, self.path("client.key"), "certificate_chain: holds no PEM certificate"),
+                 (self.path("client.pem"), empty, "private_key: holds no PEM private key"),
+                 (empty, empty, "certificate_chain: holds no PEM certificate")]
+
+        for chain, key, message in cases:
+            with self.subTest(chain=os.path.basename(chain), key=os.path.basename(key)):
+                run = subprocess.run([PYTHON, "-c", code, chain, key], capture_output=True,
+                                     text=True, stdin=subprocess.DEVNULL,
+                                     timeout=SUBPROCESS_TIMEOUT_SECONDS)
+
+                self.assertEqual((run.returncode, run.stderr), (1, message + "\n"))
+
+    def test_pem_that_is_not_bytes_is_a_type_error_naming_the_argument(self):
+        with self.assertRaisesRegex(TypeError, r"^root_certificates must be bytes \(PEM, as read "
+                                               r"with open\(path, \"rb\"\)\), got str "
+                                               r"'-----BEGIN CERTIFICATE-----"):
+            tk.connect("127.0.0.1:1", tls=True, root_certificates=self.pem("ca.pem").decode())
+        with self.assertRaisesRegex(TypeError, r"^private_key must be bytes .* got bytearray"):
+            tk.connect("127.0.0.1:1", tls=True, certificate_chain=self.pem("client.pem"),
+                       private_key=bytearray(self.pem("client.key")))
+        with self.assertRaisesRegex(TypeError, r"^certificate_chain must be bytes .* got int 5$"):
+            tk.connect("127.0.0.1:1", tls=True, certificate_chain=5, private_key=b"")
+
+    def test_a_good_ca_and_client_pair_reach_a_mutual_tls_server(self):
+        # A bundle's comment line may hold UTF-8 (curl's cacert.pem names issuers so).
+        bundle = "# Issuer: CN=F\u0151tan\u00fas\u00edtv\u00e1ny\n".encode() + self.pem("ca.pem")
+
+        server = RunningServer("--tls_cert", self.path("server.pem"), "--tls_key",
+                               self.path("server.key"), "--tls_client_ca", self.path("ca.pem"))
+        health = []
+
+        with server:
+            for roots in (self.pem("ca.pem"), bundle):
+                with tk.connect(server.address, timeout=CALL_TIMEOUT_SECONDS, tls=True,
+                                root_certificates=roots, certificate_chain=self.pem("client.pem"),
+                                private_key=self.pem("client.key")) as client:
+                    health.append(client.health(tk.MOTION_SERVICE))
+            status, log = server.stop(), server.log()
+
+        self.assertEqual(health, ["SERVING", "SERVING"])
+        self.assertEqual(status, 0, log)
 
 
 class BuilderArgumentTest(unittest.TestCase):

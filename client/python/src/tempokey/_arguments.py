@@ -95,6 +95,15 @@ def text(value: Any, name: str) -> str:
     return value
 
 
+def pem_bytes(value: Any, name: str) -> Optional[bytes]:
+    """`value` if it is None or bytes: PEM text as read from a file opened with "rb" (grpcio
+    takes bytes only, and a str is not encoded on the caller's behalf)."""
+    if value is not None and not isinstance(value, bytes):
+        raise TypeError("%s must be bytes (PEM, as read with open(path, \"rb\")), got %s %s"
+                        % (name, _type_name(value), shown(value)))
+    return value
+
+
 def timeout(value: Any, name: str = "timeout") -> Optional[float]:
     """A deadline in seconds: None (no deadline) or a finite number in (0, MAX_TIMEOUT_SECONDS]."""
     if value is None:

@@ -30,7 +30,7 @@ from typing import Any, Callable, Iterator, List, Mapping, Optional, Sequence, T
 
 import grpc
 
-from tempokey import _arguments
+from tempokey import _arguments, _pem
 from tempokey.clips import (BYTES_PER_SAMPLE, DEFAULT_SLICE_BYTES, channel_label, sample_batches,
                             sample_slices)
 from tempokey.errors import TempokeyError, from_rpc_error, malformed_result
@@ -602,11 +602,14 @@ def connect(target: str, timeout: Optional[float] = 60.0, token: Optional[str] =
       max_receive_message_bytes: largest message accepted from the server.
       slice_bytes: bytes of samples per sent message (further held to half the server's limit).
 
-    Raises: TypeError for an argument of the wrong type (a str timeout, a float size);
-    ValueError for an empty target, a timeout that is not a finite number of seconds in
-    (0, a year], a token that is not visible ASCII, a token without tls to a target off this
-    machine (unless allow_plaintext_token), TLS settings without tls, a certificate without its
-    key, or a non-positive size.
+    Raises: TypeError for an argument of the wrong type (a str timeout, a float size, PEM that
+    is not bytes); ValueError for an empty target, a timeout that is not a finite number of
+    seconds in (0, a year], a token that is not visible ASCII, a token without tls to a target
+    off this machine (unless allow_plaintext_token), TLS settings without tls, a certificate
+    without its key, a non-positive size, or TLS PEM that cannot work, checked before any
+    channel is made and named: "root_certificates: holds no PEM certificate", "private_key: the
+    key is encrypted, ...", "private_key: holds no PEM private key", "private_key is not the
+    private key of the certificate in certificate_chain".
     """
     if not _arguments.text(target, "target"):
         raise ValueError("the server target is empty")
@@ -624,6 +627,9 @@ def connect(target: str, timeout: Optional[float] = 60.0, token: Optional[str] =
         raise ValueError("max_attempts must be >= 1, got %d" % max_attempts)
     _arguments.integer(max_receive_message_bytes, "max_receive_message_bytes", _arguments.INT32)
     _arguments.integer(slice_bytes, "slice_bytes")
+    for name, pem in (("root_certificates", root_certificates),
+                      ("certificate_chain", certificate_chain), ("private_key", private_key)):
+        _arguments.pem_bytes(pem, name)
     if (certificate_chain is None) != (private_key is None):
         raise ValueError("a client certificate needs its private key and a key its certificate")
     if not tls and (root_certificates or certificate_chain or target_name_override):
@@ -635,6 +641,10 @@ def connect(target: str, timeout: Optional[float] = 60.0, token: Optional[str] =
                ("grpc.enable_retries", 1 if max_attempts > 1 else 0),
                ("grpc.primary_user_agent", "tempokey-client-python")]
     if tls:
+        if root_certificates is not None:
+            _pem.check_certificates("root_certificates", root_certificates)
+        if certificate_chain is not None:
+            _pem.check_key_pair("certificate_chain", certificate_chain, "private_key", private_key)
         if target_name_override:
             options.append(("grpc.ssl_target_name_override", target_name_override))
         credentials = grpc.ssl_channel_credentials(root_certificates=root_certificates,
