@@ -75,15 +75,52 @@ def wait_for(predicate, what, deadline=DEADLINE_SECONDS):
 
 
 def read_bvh(path):
-    """(root offset, frame time, rows) of a BVH file: a plain reading of the text."""
+    """(frame time, rows) of a BVH file: a plain reading of the text."""
     with open(path) as f:
         text = f.read()
-    head, motion = text.split("MOTION", 1)
-    offset = [float(v) for v in re.search(r"ROOT\s+\S+\s*\{\s*OFFSET\s+(\S+)\s+(\S+)\s+(\S+)", head).groups()]
+    motion = text.split("MOTION", 1)[1]
     lines = [line for line in motion.strip().splitlines() if line.strip()]
     frame_time = float(lines[1].split(":")[1])
     rows = [[float(v) for v in line.split()] for line in lines[2:]]
-    return offset, frame_time, rows
+    return frame_time, rows
+
+
+def bvh_local_translations(path, frame):
+    """Each joint's and end site's (parent index, local translation) at `frame` of a BVH file, in
+    the file's order: the OFFSET, each position channel replacing it on its axis (README "File
+    formats"), as Blender's BVH import reads them."""
+    with open(path) as f:
+        head, motion = f.read().split("MOTION", 1)
+    row = [float(v) for v in [line for line in motion.strip().splitlines() if line.strip()][2 + frame].split()]
+    words = head.split()
+    nodes, stack, column, at = [], [], 0, 0
+    while at < len(words):
+        word = words[at]
+        if word in ("ROOT", "JOINT") or word == "End":
+            nodes.append([stack[-1] if stack else -1, None, []])
+            stack.append(len(nodes) - 1)
+            at += 3  # name (or "Site") and "{"
+        elif word == "OFFSET":
+            nodes[stack[-1]][1] = [float(v) for v in words[at + 1:at + 4]]
+            at += 4
+        elif word == "CHANNELS":
+            count = int(words[at + 1])
+            nodes[stack[-1]][2] = [(name, column + i) for i, name in enumerate(words[at + 2:at + 2 + count])]
+            column += count
+            at += 2 + count
+        elif word == "}":
+            stack.pop()
+            at += 1
+        else:
+            at += 1
+    result = []
+    for parent, offset, channels in nodes:
+        translation = list(offset)
+        for name, c in channels:
+            if name.endswith("position"):
+                translation["XYZ".index(name[0])] = row[c]
+        result.append((parent, translation))
+    return result
 
 
 def api_call(server, method, request):
@@ -340,7 +377,7 @@ class StudioBrowserTest(unittest.TestCase):
                  and self.data("retime-status", "command") == command, "the retimed result")
         cli_bvh = os.path.join(self.work.name, "cli-retimed.bvh")
         self.run_cli(command, cli_bvh)
-        offset, frame_time, rows = read_bvh(cli_bvh)
+        frame_time, rows = read_bvh(cli_bvh)
         c, frames = self.grid
         self.assertEqual(len(rows), frames)
 
@@ -353,7 +390,7 @@ class StudioBrowserTest(unittest.TestCase):
         self.assertGreater(j, 60)
 
         shown = [float(v) for v in self.data("preview", "result-root").split(",")]
-        expected = [rows[j][k] + offset[k] for k in range(3)]
+        expected = rows[j][:3]  # the root's position channels, replacing its OFFSET
         for a, b in zip(shown, expected):
             self.assertTrue(close(a, b, FLOAT32_REL), (j, shown, expected))
         tau = float(self.data("preview", "source-seconds"))
@@ -432,7 +469,7 @@ class StudioBrowserTest(unittest.TestCase):
         out = self.run_cli(command, os.path.join(self.work.name, "cli-output-domain.bvh"))
         frames = int(re.search(r"output frames:\s+(\d+)", out).group(1))
         self.assertEqual(int(self.el("frame-count").text), frames)
-        _, _, rows = read_bvh(os.path.join(self.work.name, "cli-output-domain.bvh"))
+        _, rows = read_bvh(os.path.join(self.work.name, "cli-output-domain.bvh"))
         self.assertEqual(len(rows), frames)
 
     def test_5c_joint_and_noise_methods_keep_the_clis_keys_and_show_world_error(self):
@@ -489,7 +526,7 @@ class StudioBrowserTest(unittest.TestCase):
         self.driver.save_screenshot(os.path.join(ARTEFACTS, "studio-page.png"))
 
     def test_7_a_dropped_csv_opens_at_the_rate_given(self):
-        _, _, rows = read_bvh(CMU)
+        _, rows = read_bvh(CMU)
         text = "Hips.Xposition,Hips.Yposition,Hips.Zrotation\n" + "".join(
             "%r,%r,%r\n" % (row[0], row[1], row[3]) for row in rows[:120])
         field = self.el("csv-fps")
@@ -813,6 +850,28 @@ class StudioBrowserTest(unittest.TestCase):
         self.el("editor").send_keys(Keys.ARROW_DOWN)
         wait_for(lambda: self.data("retime-status", "state") == "done", "a result shown again")
         self.assertEqual(self.shown("message"), "")
+
+    def test_8l_a_figure_whose_joints_have_position_channels_keeps_its_bone_lengths(self):
+        # three.js's BVHLoader adds a joint's OFFSET to its position channels; the Bandai captures
+        # hold each joint's offset in six channels, so their figures were drawn with every bone
+        # twice as long. Each bone of both figures must be as long as the joint's translation
+        # (whatever its rotations, a joint sits that far from its parent).
+        bandai = sorted(n for n in os.listdir(os.path.join(SHARED_DIR, "data", "bvh", "bandai"))
+                        if n.endswith(".bvh"))[0]
+        path = os.path.join(SHARED_DIR, "data", "bvh", "bandai", bandai)
+        self.open_clip(path)
+        self.assertEqual(self.data("preview", "output-frame"), "0")
+        nodes = bvh_local_translations(path, 0)
+        for figure in ("source-points", "result-points"):
+            points = [[float(v) for v in p.split(",")] for p in self.data("preview", figure).split(";")]
+            self.assertEqual(len(points), len(nodes), figure)
+            for i, (parent, translation) in enumerate(nodes):
+                if parent < 0:
+                    continue
+                length = sum(t * t for t in translation) ** 0.5
+                shown = sum((a - b) ** 2 for a, b in zip(points[i], points[parent])) ** 0.5
+                self.assertLessEqual(abs(shown - length), 1e-3 * max(1.0, length), (figure, i, shown, length))
+        self.screenshot("preview-section", "studio-preview-bandai.png")
 
     # ---- long jobs: a server whose one worker is busy, so the page's jobs wait in its queue ------
     def make_server_busy(self, busy):

@@ -375,8 +375,11 @@ function applyPlan(plan, op, editTime) {
   $('filtered').textContent = String(r.filteredSampleCount);
   if (document.activeElement !== $('speed-text')) {
     // The text is the knots' own again: an error about text typed before is gone everywhere
-    // (under the text, its red outline, the banner).
+    // (under the text, its red outline, the banner), and a reading of that text still on its
+    // way (the blur after Enter applies it again) is void: its answer, coming after this one,
+    // showed its error again under the knots' own text.
     $('speed-text').value = plan.speedText;
+    ++speedTextSeq;
     showSpeedTextError('');
   }
   $('retime-command').textContent = retimeCommand(plan.speedText);

@@ -11,10 +11,50 @@ import {OrbitControls} from '/three/examples/jsm/controls/OrbitControls.js';
 const SOURCE_COLOUR = 0x64748b;
 const RESULT_COLOUR = 0xea580c;
 
+// For each ROOT and JOINT of the BVH `text`, in the file's order, which axes (0 x, 1 y, 2 z) its
+// position channels hold.
+function positionAxesOfJoints(text) {
+  const joints = [];
+  const hierarchy = text.split(/\bMOTION\b/)[0];
+  for (const line of hierarchy.split(/\r\n|\r|\n/)) {
+    const words = line.trim().split(/\s+/);
+    if (words[0] === 'ROOT' || words[0] === 'JOINT') joints.push([]);
+    if (words[0] === 'CHANNELS' && joints.length > 0) {
+      for (const name of words.slice(2)) {
+        const axis = ['Xposition', 'Yposition', 'Zposition'].indexOf(name);
+        if (axis >= 0) joints[joints.length - 1].push(axis);
+      }
+    }
+  }
+  return joints;
+}
+
+// BVHLoader adds each joint's OFFSET to its position channels (three.js r111's BVHLoader.js,
+// Debian's libjs-three: "the animation system animates the position property, so we have to add
+// the joint offset to all values"). tempokey reads a position channel as replacing the OFFSET on
+// its axis (README "File formats"), as Blender's BVH import does and as the Bandai captures need:
+// each of their joints has six channels holding its offset, so with the offset added every bone
+// was drawn twice as long. Takes the offset back out of the axes that have a channel.
+function replaceOffsetsByPositionChannels(parsed, text) {
+  const axesOfJoints = positionAxesOfJoints(text);
+  const joints = parsed.skeleton.bones.filter((bone) => bone.name !== 'ENDSITE');
+  for (const track of parsed.clip.tracks) {
+    const [, boneName, property] = /^\.bones\[(.*)\]\.(position|quaternion)$/.exec(track.name) || [];
+    if (property !== 'position') continue;
+    const index = joints.findIndex((bone) => bone.name === boneName);
+    if (index < 0 || index >= axesOfJoints.length) continue;
+    const offset = joints[index].position.toArray();  // BVHLoader's rest position: the OFFSET
+    for (const axis of axesOfJoints[index]) {
+      for (let i = axis; i < track.values.length; i += 3) track.values[i] -= offset[axis];
+    }
+  }
+}
+
 // A skeleton parsed by BVHLoader, with a pose setter.
 class Figure {
   constructor(text, colour, scene) {
     const parsed = new BVHLoader().parse(text);
+    replaceOffsetsByPositionChannels(parsed, text);
     this.bones = parsed.skeleton.bones;
     this.root = this.bones[0];
     this.group = new THREE.Group();
@@ -128,7 +168,7 @@ export class Preview {
       this.scene.remove(this.grid);
       this.grid = null;
     }
-    for (const name of ['outputFrame', 'sourceSeconds', 'resultRoot', 'sourceRoot']) delete this.container.dataset[name];
+    for (const name of ['outputFrame', 'sourceSeconds', 'resultRoot', 'sourceRoot', 'sourcePoints', 'resultPoints']) delete this.container.dataset[name];
     this.render();
   }
 
@@ -197,6 +237,11 @@ export class Preview {
     this.container.dataset.resultRoot = this.result ? [root.x, root.y, root.z].join(',') : '';
     this.container.dataset.sourceRoot = [this.source.root.position.x, this.source.root.position.y,
       this.source.root.position.z].join(',');
+    // Every bone's place in the scene (joints and end sites in the file's order), for checks.
+    this.scene.updateMatrixWorld(true);
+    const points = (figure) => figure.bones.map((bone) => bone.getWorldPosition(new THREE.Vector3()).toArray().join(',')).join(';');
+    this.container.dataset.sourcePoints = points(this.source);
+    this.container.dataset.resultPoints = this.result ? points(this.result) : '';
     this.onFrame(this.frame, sourceSeconds);
   }
 
