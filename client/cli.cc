@@ -11,9 +11,11 @@
 #include <vector>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/cord.h"
 #include "absl/strings/str_cat.h"
 #include "client/cli_errors.h"
 #include "client/command.h"
+#include "client/tls_diagnosis.h"
 #include "grpc/support/log.h"
 #include "tempokey/core/io/file_io.h"
 #include "tempokey/core/model/status.h"
@@ -22,6 +24,7 @@ namespace tempokey::client {
 namespace {
 
 using core::AsAbsl;
+using core::AsStd;
 
 constexpr FlagSpec kHelpFlag{"--help", "-h", "", "show this help and exit"};
 constexpr FlagSpec kVersionFlag{"--version", "", "", "print the version and exit"};
@@ -166,6 +169,25 @@ bool WantsHelp(const std::vector<std::string>& rest) {
   return false;
 }
 
+// A command that failed UNAVAILABLE after making its client, with gRPC's text alone ("Socket
+// closed", "certificate verify failed"), gets the reason a probe of the server finds
+// (tls_diagnosis.h) appended to the same message: still one error line, same code.
+absl::Status WithConnectionDiagnosis(const CommandContext& context, absl::Status status) {
+  if (status.code() != absl::StatusCode::kUnavailable || context.client() == nullptr) {
+    return status;
+  }
+  const TlsFlagFiles files{.ca = context.args().Value("--ca").value_or(""),
+                           .cert = context.args().Value("--cert").value_or("")};
+  const std::string explanation =
+      DiagnoseConnectionFailure(context.client()->options(), files, AsStd(status.message()));
+  if (explanation.empty()) return status;
+  absl::Status explained(status.code(), absl::StrCat(status.message(), "; ", explanation));
+  status.ForEachPayload([&](absl::string_view url, const absl::Cord& payload) {
+    explained.SetPayload(url, payload);
+  });
+  return explained;
+}
+
 absl::Status Dispatch(std::span<const std::string> args, const CliIo& io) {
   TEMPOKEY_ASSIGN_OR_RETURN(Invocation invocation, SplitInvocation(args));
   if (invocation.version) {
@@ -218,7 +240,7 @@ absl::Status Dispatch(std::span<const std::string> args, const CliIo& io) {
   flags.insert(flags.end(), GlobalFlags().begin(), GlobalFlags().end());
   TEMPOKEY_ASSIGN_OR_RETURN(ParsedArgs parsed, ParseArgs(invocation.rest, flags, command->name));
   CommandContext context(io, *command, std::move(parsed));
-  return command->run(context);
+  return WithConnectionDiagnosis(context, command->run(context));
 }
 
 }  // namespace

@@ -67,6 +67,9 @@ class CommandContext {
   // A client for the global flags' server (created once, reused).
   absl::StatusOr<const Client*> Connect();
 
+  // The client Connect() created, or null before (or when its options were refused).
+  const Client* client() const { return client_.get(); }
+
  private:
   const CliIo& io_;
   const Command& command_;

@@ -3,10 +3,13 @@
 // deploy/install-deps.sh) in the test's temporary directory.
 #include <sys/stat.h>
 
+#include <chrono>
 #include <memory>
 #include <string>
 #include <vector>
 
+#include "client/client.h"
+#include "client/tls_diagnosis.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tempokey/core/io/file_io.h"
@@ -16,6 +19,7 @@
 namespace tempokey::testing {
 namespace {
 
+using ::testing::EndsWith;
 using ::testing::StartsWith;
 
 constexpr char kOpenssl[] = "/usr/bin/openssl";
@@ -56,6 +60,67 @@ constexpr char kOpenssl[] = "/usr/bin/openssl";
   return ::testing::AssertionSuccess();
 }
 
+// Runs each openssl command in `dir`.
+::testing::AssertionResult RunOpenssl(const std::string& dir,
+                                      const std::vector<std::vector<std::string>>& commands) {
+  for (std::vector<std::string> command : commands) {
+    command.insert(command.begin(), kOpenssl);
+    ProcessResult run = RunProcess(command, dir);
+    if (run.exit_code != 0) {
+      return ::testing::AssertionFailure() << "openssl " << command[1] << " failed: " << run.err;
+    }
+  }
+  return ::testing::AssertionSuccess();
+}
+
+// A certificate for localhost / 127.0.0.1, `name`.pem + `name`.key in `dir`, valid from `start` to
+// `end` (openssl's YYYYMMDDHHMMSSZ), signed by the CA `issuer` (ca for ca.pem + ca.key, as
+// MakeCertificates() leaves them) or, with an empty `issuer`, by itself. Fixed dates make the
+// explanations exact; `openssl ca` is the tool of OpenSSL 3.0 that takes them.
+::testing::AssertionResult MakeCertificateWithDates(const std::string& dir, const std::string& name,
+                                                    const std::string& issuer,
+                                                    const std::string& start,
+                                                    const std::string& end) {
+  const std::string config = "[ca]\ndefault_ca = test_ca\n[test_ca]\ndatabase = " + dir +
+                             "/index.txt\nnew_certs_dir = " + dir + "\nserial = " + dir +
+                             "/serial\ndefault_md = sha256\npolicy = any_name\nunique_subject = "
+                             "no\n[any_name]\ncommonName = supplied\n";
+  if (!core::WriteFileAtomically(dir + "/ca.cnf", config).ok() ||
+      !core::WriteFileAtomically(dir + "/index.txt", "").ok() ||
+      !core::WriteFileAtomically(dir + "/serial", "1000\n").ok() ||
+      !core::WriteFileAtomically(dir + "/" + name + ".ext",
+                                 "subjectAltName=DNS:localhost,IP:127.0.0.1\n")
+           .ok()) {
+    return ::testing::AssertionFailure() << "cannot write the openssl ca files";
+  }
+  std::vector<std::string> sign = {"ca", "-batch", "-notext", "-config", dir + "/ca.cnf", "-in",
+                                   dir + "/" + name + ".csr", "-out", dir + "/" + name + ".pem",
+                                   "-startdate", start, "-enddate", end, "-extfile",
+                                   dir + "/" + name + ".ext"};
+  if (issuer.empty()) {
+    sign.insert(sign.end(), {"-selfsign", "-keyfile", dir + "/" + name + ".key"});
+  } else {
+    sign.insert(sign.end(), {"-cert", dir + "/" + issuer + ".pem", "-keyfile",
+                             dir + "/" + issuer + ".key"});
+  }
+  return RunOpenssl(dir, {{"req", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1",
+                           "-nodes", "-keyout", dir + "/" + name + ".key", "-out",
+                           dir + "/" + name + ".csr", "-subj", "/CN=localhost"},
+                          sign});
+}
+
+// A second CA, "CN=other CA" (other-ca.pem + other-ca.key), and a client certificate it signed
+// for the key of MakeCertificates()'s client (stranger.pem, with client.key).
+::testing::AssertionResult MakeOtherCaAndItsClient(const std::string& dir) {
+  return RunOpenssl(
+      dir, {{"req", "-x509", "-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes",
+             "-keyout", dir + "/other-ca.key", "-out", dir + "/other-ca.pem", "-days", "2", "-subj",
+             "/CN=other CA"},
+            {"x509", "-req", "-in", dir + "/client.csr", "-CA", dir + "/other-ca.pem", "-CAkey",
+             dir + "/other-ca.key", "-set_serial", "3", "-days", "2", "-out",
+             dir + "/stranger.pem", "-extfile", dir + "/client.ext"}});
+}
+
 class CliSecurityTest : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -76,6 +141,21 @@ class CliSecurityTest : public ::testing::Test {
   }
 
   std::string Path(const std::string& name) const { return dir_ + "/" + name; }
+
+  // A failed `tempokey health` with `flags` must print gRPC's UNAVAILABLE text and then, on the
+  // same and only line, "; <explanation>".
+  void ExpectUnavailableExplainedAs(const std::vector<std::string>& flags,
+                                    const std::string& explanation) {
+    std::vector<std::string> args = flags;
+    args.push_back("health");
+
+    const ProcessResult run = Tempokey(args);
+
+    EXPECT_EQ(run.exit_code, 1);
+    EXPECT_THAT(run.err, IsOneErrorLine());
+    EXPECT_THAT(run.err, StartsWith("error: server: UNAVAILABLE: "));
+    EXPECT_THAT(run.err, EndsWith("; " + explanation + "\n"));
+  }
 
   std::string dir_;
   std::unique_ptr<ServerProcess> server_;
@@ -118,6 +198,111 @@ TEST_F(CliSecurityTest, MutualTlsServerNeedsTheClientCertificate) {
   EXPECT_THAT(anonymous.err, StartsWith("error: server: UNAVAILABLE: "));
   EXPECT_EQ(certified.exit_code, 0) << certified.err;
   EXPECT_THAT(certified.out, StartsWith("clip id:         sha256:"));
+}
+
+// gRPC says only "certificate verify failed": the explanation names the certificate, its issuer,
+// its dates, the --ca file and OpenSSL's reason.
+TEST_F(CliSecurityTest, ACaThatDidNotSignTheServerCertificateIsExplainedWithBoth) {
+  ASSERT_TRUE(MakeCertificates(dir_));
+  ASSERT_TRUE(MakeCertificateWithDates(dir_, "self", "", "20200101000000Z", "20991231235959Z"));
+  StartServer({"--tls_cert", Path("self.pem"), "--tls_key", Path("self.key")});
+
+  ExpectUnavailableExplainedAs(
+      {"--ca", Path("ca.pem")},
+      "the server's certificate (CN=localhost, issued by CN=localhost, valid 2020-01-01 to "
+      "2099-12-31) is not signed by a CA in --ca " +
+          Path("ca.pem") + " (OpenSSL: self-signed certificate)");
+}
+
+TEST_F(CliSecurityTest, AnExpiredServerCertificateIsExplainedWithItsEndDate) {
+  ASSERT_TRUE(MakeCertificates(dir_));
+  ASSERT_TRUE(MakeCertificateWithDates(dir_, "expired", "ca", "20200101000000Z", "20200201000000Z"));
+  StartServer({"--tls_cert", Path("expired.pem"), "--tls_key", Path("expired.key")});
+
+  ExpectUnavailableExplainedAs({"--ca", Path("ca.pem")},
+                               "the server's certificate (CN=localhost, issued by CN=tempokey test "
+                               "CA) expired on 2020-02-01 00:00 UTC");
+}
+
+// gRPC says "wrong version number".
+TEST_F(CliSecurityTest, TlsToAPlaintextServerIsExplainedAsTheServerNotSpeakingTls) {
+  StartServer({});
+
+  ExpectUnavailableExplainedAs(
+      {"--tls"}, "the server does not speak TLS: connect without --tls, --ca, --cert and --key");
+}
+
+// gRPC says "Socket closed".
+TEST_F(CliSecurityTest, PlaintextToATlsServerIsExplainedAsTheServerSpeakingTls) {
+  ASSERT_TRUE(MakeCertificates(dir_));
+  StartServer({"--tls_cert", Path("server.pem"), "--tls_key", Path("server.key")});
+
+  ExpectUnavailableExplainedAs({}, "the server speaks TLS: connect with --tls (and --ca FILE if a "
+                                   "private CA signed its certificate)");
+}
+
+// gRPC says "Socket closed": the server sends no alert.
+TEST_F(CliSecurityTest, MutualTlsWithoutAClientCertificateIsExplainedAsRequiringOne) {
+  ASSERT_TRUE(MakeCertificates(dir_));
+  StartServer({"--tls_cert", Path("server.pem"), "--tls_key", Path("server.key"), "--tls_client_ca",
+               Path("ca.pem")});
+
+  ExpectUnavailableExplainedAs(
+      {"--ca", Path("ca.pem")},
+      "the server requires a client certificate (mutual TLS): pass --cert FILE and --key FILE");
+}
+
+// gRPC says "Socket closed": with TLS 1.3 the client's handshake completes before the server
+// refuses its certificate.
+TEST_F(CliSecurityTest, MutualTlsWithACertificateOfAnotherCaIsExplainedAsRefusedNamingTheCa) {
+  ASSERT_TRUE(MakeCertificates(dir_));
+  ASSERT_TRUE(MakeOtherCaAndItsClient(dir_));
+  StartServer({"--tls_cert", Path("server.pem"), "--tls_key", Path("server.key"), "--tls_client_ca",
+               Path("ca.pem")});
+
+  ExpectUnavailableExplainedAs(
+      {"--ca", Path("ca.pem"), "--cert", Path("stranger.pem"), "--key", Path("client.key")},
+      "the server closed the connection after the handshake: it does not accept the client "
+      "certificate in --cert " +
+          Path("stranger.pem") + " (it asks for certificates from: CN=tempokey test CA)");
+}
+
+// gRPC says "Peer name other.example is not in peer certificate"; the names it holds follow.
+TEST_F(CliSecurityTest, AServerNameTheCertificateLacksIsExplainedWithTheNamesItHolds) {
+  ASSERT_TRUE(MakeCertificates(dir_));
+  StartServer({"--tls_cert", Path("server.pem"), "--tls_key", Path("server.key")});
+
+  ExpectUnavailableExplainedAs({"--ca", Path("ca.pem"), "--tls-server-name", "other.example"},
+                               "the server's certificate (CN=localhost, issued by CN=tempokey test "
+                               "CA) holds the names localhost, 127.0.0.1, not other.example: "
+                               "connect by a name it holds, or give the one it was issued for "
+                               "with --tls-server-name NAME");
+}
+
+// The probe tells a refused client certificate by the server closing the connection after the
+// handshake: one it accepts must not read as refused (the server then sends HTTP/2 SETTINGS).
+TEST_F(CliSecurityTest, TheProbeFindsAnAcceptedClientCertificateAccepted) {
+  ASSERT_TRUE(MakeCertificates(dir_));
+  StartServer({"--tls_cert", Path("server.pem"), "--tls_key", Path("server.key"), "--tls_client_ca",
+               Path("ca.pem")});
+  const absl::StatusOr<std::string> ca = core::ReadFile(Path("ca.pem"));
+  const absl::StatusOr<std::string> cert = core::ReadFile(Path("client.pem"));
+  const absl::StatusOr<std::string> key = core::ReadFile(Path("client.key"));
+  ASSERT_TRUE(ca.ok() && cert.ok() && key.ok());
+  client::ClientOptions options;
+  options.tls = {.enabled = true, .root_ca_pem = *ca, .cert_chain_pem = *cert,
+                 .private_key_pem = *key, .target_name_override = ""};
+
+  const client::TlsProbeFindings findings =
+      client::ProbeTls({.host = "127.0.0.1", .port = server_->port()}, options,
+                       std::chrono::seconds(10));
+
+  EXPECT_EQ(findings.handshake, client::TlsProbeFindings::Handshake::kCompleted);
+  EXPECT_EQ(findings.verification, client::TlsProbeFindings::Verification::kOk);
+  EXPECT_TRUE(findings.name_matches);
+  EXPECT_TRUE(findings.client_certificate_requested);
+  EXPECT_EQ(findings.after_handshake, client::TlsProbeFindings::AfterHandshake::kAccepted);
+  EXPECT_EQ(client::ExplainTlsProbe(findings, options.tls, {}), "");
 }
 
 // A key given as --ca, or another certificate's key as --key, ended as "error: server:
