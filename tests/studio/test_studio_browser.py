@@ -873,6 +873,31 @@ class StudioBrowserTest(unittest.TestCase):
                 self.assertLessEqual(abs(shown - length), 1e-3 * max(1.0, length), (figure, i, shown, length))
         self.screenshot("preview-section", "studio-preview-bandai.png")
 
+    def test_8m_a_clip_of_several_root_joints_is_shown(self):
+        # A CSV's joints come back as roots, one ROOT each in the BVH the page reads; three.js's
+        # BVHLoader reads one ROOT ("MOTION expected"), so the page showed "no keyframes in
+        # track named .bones[Hips].position" and no figure. The roots now hang under one added
+        # root without channels: its point, then the joints'.
+        text = "Hips.Xposition,Hips.Zrotation,Spine.Xrotation\n" + "".join(
+            "%d,%d,%d\n" % (i, 2 * i, 3 * i) for i in range(48))
+        self.driver.execute_script(
+            "const transfer = new DataTransfer();"
+            "transfer.items.add(new File([arguments[0]], 'roots.csv', {type: 'text/csv'}));"
+            "window.dispatchEvent(new DragEvent('drop', {dataTransfer: transfer, bubbles: true, cancelable: true}));",
+            text)
+        wait_for(lambda: self.el("clip-info").text.startswith("roots.csv:"), "the dropped clip")
+        wait_for(lambda: self.data("retime-status", "state") in ("done", "failed"), "the retime of roots.csv")
+
+        self.assertEqual(self.data("retime-status", "state"), "done", self.el("retime-status").text)
+        self.assertEqual(self.shown("message"), "")
+        for figure in ("source-points", "result-points"):
+            points = [[float(v) for v in p.split(",")] for p in self.data("preview", figure).split(";")]
+            self.assertEqual(len(points), 3, figure)
+        # Frame 0: Hips at x = 0 (its Xposition replaces its zero offset), every point at the origin
+        # of its figure.
+        source = [[float(v) for v in p.split(",")] for p in self.data("preview", "source-points").split(";")]
+        self.assertEqual(source, [[0.0, 0.0, 0.0]] * 3)
+
     # ---- long jobs: a server whose one worker is busy, so the page's jobs wait in its queue ------
     def make_server_busy(self, busy):
         """Keeps the one worker of `busy` busy with the paper's reduction of a noise channel with

@@ -50,9 +50,21 @@ function replaceOffsetsByPositionChannels(parsed, text) {
   }
 }
 
+// BVHLoader reads one ROOT (three.js r111: "MOTION expected" after it, then a track without
+// keyframes throws); tempokey writes one ROOT per root joint, as a CSV's joints come back (every
+// one a root). Several roots become the joints of one added root without channels.
+function withOneRoot(text) {
+  if ((text.match(/^\s*ROOT\s/gm) || []).length < 2) return text;
+  return text
+    .replace(/^(\s*)ROOT(\s)/gm, '$1JOINT$2')
+    .replace(/^(\s*HIERARCHY\s*?)$/m, '$1\nROOT tempokey_roots\n{\nOFFSET 0 0 0\nCHANNELS 0')
+    .replace(/^(\s*MOTION\s*?)$/m, '}\n$1');
+}
+
 // A skeleton parsed by BVHLoader, with a pose setter.
 class Figure {
-  constructor(text, colour, scene) {
+  constructor(bvhText, colour, scene) {
+    const text = withOneRoot(bvhText);
     const parsed = new BVHLoader().parse(text);
     replaceOffsetsByPositionChannels(parsed, text);
     this.bones = parsed.skeleton.bones;
