@@ -898,6 +898,67 @@ class StudioBrowserTest(unittest.TestCase):
         source = [[float(v) for v in p.split(",")] for p in self.data("preview", "source-points").split(";")]
         self.assertEqual(source, [[0.0, 0.0, 0.0]] * 3)
 
+    def test_8n_undo_and_redo_step_through_the_knot_edits(self):
+        # Runs on the clip 8m opened (its one knot, 0s:1). Each edit waits for the server's plan,
+        # whose answer writes the knots' text.
+        wait_for(lambda: self.body("planPending") == "false", "no plan pending")
+        start = self.el("speed-text").get_attribute("value")
+        seconds = float(re.search(r"([0-9.]+) s,", self.el("clip-info").text).group(1))
+        canvas = self.el("editor")
+
+        def chain():
+            return ActionChains(self.driver)
+
+        def text_after(actions):
+            before = self.plan_seq()
+            actions.perform()
+            self.settled_plan(before)
+            return self.el("speed-text").get_attribute("value")
+
+        def undo():
+            return chain().key_down(Keys.CONTROL).send_keys("z").key_up(Keys.CONTROL)
+
+        def redo_shift():
+            return (chain().key_down(Keys.CONTROL).key_down(Keys.SHIFT).send_keys("z")
+                    .key_up(Keys.SHIFT).key_up(Keys.CONTROL))
+
+        def redo_y():
+            return chain().key_down(Keys.CONTROL).send_keys("y").key_up(Keys.CONTROL)
+
+        # Three edits: a drag of the knot in three moves, a step (S), Arrow Up.
+        x0, y0 = self.editor_point(0, 1, seconds)
+        _, y1 = self.editor_point(0, 2, seconds)
+        third = (y1 - y0) // 3
+        dragged = text_after(chain().move_to_element_with_offset(canvas, x0, y0).click_and_hold()
+                             .move_by_offset(0, third).move_by_offset(0, third)
+                             .move_by_offset(0, y1 - y0 - 2 * third).release())
+        stepped = text_after(chain().send_keys("s"))
+        raised = text_after(chain().send_keys(Keys.ARROW_UP))
+        self.assertEqual(len({start, dragged, stepped, raised}), 4, (start, dragged, stepped, raised))
+
+        self.assertEqual(text_after(undo()), stepped)
+        self.assertEqual(text_after(undo()), dragged)
+        self.assertEqual(text_after(undo()), start)  # the whole drag at once
+        undo().perform()  # nothing left to undo: changes nothing
+        self.assertEqual(text_after(redo_shift()), dragged)
+        self.assertEqual(text_after(redo_y()), stepped)
+        # A new edit after an undo ends what redo could bring back: Ctrl+Y then changes nothing,
+        # and undo returns to the state before that edit.
+        lowered = text_after(chain().send_keys(Keys.ARROW_DOWN))
+        self.assertNotIn(lowered, (stepped, raised))
+        redo_y().perform()
+        self.assertEqual(text_after(undo()), stepped)
+        # Knots set from typed --speed text are one edit too.
+        before = self.plan_seq()
+        self.type_over("speed-text", "0s:1,1s:2")
+        self.settled_plan(before)
+        typed = self.el("speed-text").get_attribute("value")
+        self.assertNotEqual(typed, stepped)
+        x_empty, y_empty = self.editor_point(seconds * 0.75, 10, seconds)
+        chain().move_to_element_with_offset(canvas, x_empty, y_empty).click().perform()  # focus only
+        self.assertEqual(text_after(undo()), stepped)
+        self.assertEqual(text_after(redo_y()), typed)
+
     # ---- long jobs: a server whose one worker is busy, so the page's jobs wait in its queue ------
     def make_server_busy(self, busy):
         """Keeps the one worker of `busy` busy with the paper's reduction of a noise channel with

@@ -203,6 +203,7 @@ function showClip({clip, samples}) {
   $('domain').value = 'source';
   editor.setTimeline(clip.duration, clip.frameTime);
   editor.setKnots([{t: 0, unit: 's', v: 1}]);
+  editor.forgetHistory();
   renderHolds();
   fillChannels();
   showChannel();
@@ -655,7 +656,7 @@ async function applySpeedText() {
     return;
   }
   showSpeedTextError('');
-  editor.setKnots(knots, Math.min(editor.selected, knots.length - 1));
+  editor.setKnots(knots, Math.min(editor.selected, knots.length - 1), {undoable: true});
   state.lastEdit = performance.now();
   showSelectedKnot();
   requestPlan();
@@ -684,6 +685,7 @@ function switchDomain() {
   }
   editor.setHolds(toOutput ? [] : state.holds.map((h) => ({atSeconds: h.at, duration: h.duration})));
   editor.setKnots(knots, editor.selected);
+  editor.forgetHistory();  // the edits before were in the other domain's times
   state.lastEdit = performance.now();
   requestPlan();
 }

@@ -5,9 +5,15 @@
 //
 // Mouse: double-click (or Ctrl+click) adds a knot, drag moves one, a click selects. Keyboard (editor focused):
 // Delete removes the selected knot, arrows move it (a frame / 0.01; Shift: ten times), S
-// doubles it into a step, Tab selects the next. Times snap to 0.01 s (or whole frames for knots
+// doubles it into a step, Tab selects the next; Ctrl+Z (Cmd+Z) undoes the last edit of the
+// knots, Ctrl+Shift+Z or Ctrl+Y redoes it. Times snap to 0.01 s (or whole frames for knots
 // given in frames) and speeds to 0.01, unless Shift is held while dragging. Speeds are held
 // within the limits [min, max]; knots cannot pass their neighbours.
+//
+// Undo steps through the knots as each edit left them: a drag is one edit however many moves
+// it takes, a key press or an added knot is one, knots set from typed text are one (setKnots
+// with undoable), an edit that changes nothing is none. A new edit ends what redo could bring
+// back; forgetHistory() starts afresh (a new clip, knots moved to the other time domain).
 //
 // The editor only edits knots; what they mean (durations, the time map) is the server's
 // answer, drawn by the caller through setPlan().
@@ -16,6 +22,13 @@ const PAD = {left: 48, right: 14, top: 14, bottom: 28};
 const HIT_RADIUS = 8;
 const VIEW_MIN = 0.05;
 const VIEW_MAX = 20;
+const HISTORY_LIMIT = 500;  // edits undo can go back
+
+// Whether two knot lists are the same knots (times, units, speeds).
+function sameKnots(a, b) {
+  return a.length === b.length &&
+      a.every((k, i) => k.t === b[i].t && k.unit === b[i].unit && k.v === b[i].v);
+}
 
 export class VelocityEditor {
   constructor(canvas, {onChange, onSelect}) {
@@ -31,6 +44,8 @@ export class VelocityEditor {
     this.maxSpeed = 100;
     this.drag = null;
     this.markers = [];        // extra vertical markers [{t, label}]
+    this.past = [];           // snapshots before each edit, the latest last
+    this.future = [];         // snapshots undone, the next to redo last
     canvas.tabIndex = 0;
     canvas.addEventListener('pointerdown', (e) => this.pointerDown(e));
     canvas.addEventListener('pointermove', (e) => this.pointerMove(e));
@@ -53,8 +68,12 @@ export class VelocityEditor {
     this.maxSpeed = maxSpeed;
     this.draw();
   }
-  setKnots(knots, selected = 0) {
+  // `undoable`: the knots replace the editor's as one edit (typed --speed text); otherwise as a
+  // new start that undo does not reach behind when paired with forgetHistory().
+  setKnots(knots, selected = 0, {undoable = false} = {}) {
+    const before = this.snapshot();
     this.knots = knots.map((k) => ({...k}));
+    if (undoable) this.record(before);
     this.selected = Math.min(selected, this.knots.length - 1);
     this.draw();
   }
@@ -73,9 +92,43 @@ export class VelocityEditor {
   setSelected(time, speed) {
     const k = this.selectedKnot();
     if (!k) return;
+    const before = this.snapshot();
     k.t = time;
     k.v = speed;
+    this.record(before);
     this.changed();
+  }
+
+  // ---- history -------------------------------------------------------------------------------
+  snapshot() {
+    return {knots: this.knots.map((k) => ({...k})), selected: this.selected};
+  }
+  // Keeps `before` as the state undo returns to, unless the knots are as they were.
+  record(before) {
+    if (sameKnots(before.knots, this.knots)) return false;
+    this.past.push(before);
+    if (this.past.length > HISTORY_LIMIT) this.past.shift();
+    this.future = [];
+    return true;
+  }
+  undo() {
+    return this.travel(this.past, this.future);
+  }
+  redo() {
+    return this.travel(this.future, this.past);
+  }
+  travel(from, to) {
+    if (from.length === 0) return false;
+    to.push(this.snapshot());
+    const {knots, selected} = from.pop();
+    this.knots = knots;
+    this.selected = Math.min(selected, knots.length - 1);
+    this.changed();
+    return true;
+  }
+  forgetHistory() {
+    this.past = [];
+    this.future = [];
   }
   // Why `knots` (typed, e.g. as --speed text) cannot be this editor's, or '': every knot must be
   // one the mouse and keys could make, a finite time from 0 not before the previous knot's and a
@@ -194,7 +247,7 @@ export class VelocityEditor {
       return;
     }
     this.selected = i;
-    this.drag = {index: i, moved: false};
+    this.drag = {index: i, moved: false, before: this.snapshot(), recorded: false};
     this.canvas.setPointerCapture(e.pointerId);
     this.onSelect(i);
     this.draw();
@@ -214,6 +267,7 @@ export class VelocityEditor {
     if (k.unit === 'f' && !e.shiftKey) k.t = Math.round(k.t);
     k.v = this.clampSpeed(speed);
     this.drag.moved = true;
+    if (!this.drag.recorded) this.drag.recorded = this.record(this.drag.before);
     this.changed();
   }
   pointerUp(e) {
@@ -237,14 +291,24 @@ export class VelocityEditor {
     const knot = {t: seconds, unit: 's', v: this.clampSpeed(speed)};
     let at = this.knots.findIndex((k) => this.seconds(k) > seconds);
     if (at < 0) at = this.knots.length;
+    const before = this.snapshot();
     this.knots.splice(at, 0, knot);
     this.selected = at;
+    this.record(before);
     this.changed();
   }
   keyDown(e) {
     const k = this.selectedKnot();
     if (!k) return;
+    const key = e.key.toLowerCase();
+    if ((e.ctrlKey || e.metaKey) && (key === 'z' || key === 'y')) {
+      e.preventDefault();
+      if (key === 'z' && !e.shiftKey) this.undo();
+      else this.redo();
+      return;
+    }
     const big = e.shiftKey ? 10 : 1;
+    const before = this.snapshot();
     let handled = true;
     switch (e.key) {
       case 'Delete':
@@ -283,6 +347,7 @@ export class VelocityEditor {
     }
     if (handled) {
       e.preventDefault();
+      this.record(before);
       this.changed();
     }
   }
