@@ -374,13 +374,11 @@ function applyPlan(plan, op, editTime) {
   $('fit-factor').textContent = r.fitFactor.toFixed(6);
   $('max-ratio').textContent = r.maxDecimationRatio.toFixed(3);
   $('filtered').textContent = String(r.filteredSampleCount);
-  if (document.activeElement !== $('speed-text')) {
+  if (document.activeElement !== $('speed-text') && speedTextReading === null) {
     // The text is the knots' own again: an error about text typed before is gone everywhere
-    // (under the text, its red outline, the banner), and a reading of that text still on its
-    // way (the blur after Enter applies it again) is void: its answer, coming after this one,
-    // showed its error again under the knots' own text.
+    // (under the text, its red outline, the banner). Not while typed text is being read: its
+    // answer applies it (or names its error) next, and the text is still the user's.
     $('speed-text').value = plan.speedText;
-    ++speedTextSeq;
     showSpeedTextError('');
   }
   $('retime-command').textContent = retimeCommand(plan.speedText);
@@ -632,13 +630,21 @@ function knotLabel(k) {
 // editor's own constraints (its speed limits, times in order), which the parser does not check.
 // The error shows under the text and in the banner alike.
 let speedTextSeq = 0;
+// The typed text being read by the server, or null.
+let speedTextReading = null;
+// The typed text whose error is shown, or null.
+let speedTextRefused = null;
 
 async function applySpeedText() {
   const text = $('speed-text').value;
   // Enter and the blur after it both fire: the knots' own text, with no error shown, is not
   // applied again (it would undo newer knots); after an error any text is applied.
   if (state.plan && text === state.plan.speedText && $('speed-text-error').hidden) return;
+  // Text whose error is shown is not read again (the blur after Enter would, and its answer
+  // could come after a plan's that had put the knots' own text back).
+  if (text === speedTextRefused && !$('speed-text-error').hidden) return;
   const seq = ++speedTextSeq;
+  speedTextReading = text;
   let knots;
   try {
     const parsed = await api.call('ParseSpeedKnots', {text});
@@ -646,13 +652,17 @@ async function applySpeedText() {
       ? {t: k.time.frames, unit: 'f', v: k.speed}
       : {t: k.time.seconds, unit: 's', v: k.speed}));
   } catch (error) {
-    if (seq === speedTextSeq && !api.isStopped(error)) showSpeedTextError(describe(error));
+    if (seq === speedTextSeq) {
+      speedTextReading = null;
+      if (!api.isStopped(error)) showSpeedTextError(describe(error), text);
+    }
     return;
   }
   if (seq !== speedTextSeq) return;  // a newer text was typed meanwhile
+  speedTextReading = null;
   const problem = editor.problemWith(knots);
   if (problem) {
-    showSpeedTextError(problem);
+    showSpeedTextError(problem, text);
     return;
   }
   showSpeedTextError('');
@@ -662,7 +672,9 @@ async function applySpeedText() {
   requestPlan();
 }
 
-function showSpeedTextError(text) {
+// Shows `text` as the error of the typed text `refused` ('' clears it).
+function showSpeedTextError(text, refused = null) {
+  speedTextRefused = text ? refused : null;
   $('speed-text-error').textContent = text;
   $('speed-text-error').hidden = !text;
   $('speed-text').classList.toggle('invalid', !!text);

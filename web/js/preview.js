@@ -11,22 +11,28 @@ import {OrbitControls} from '/three/examples/jsm/controls/OrbitControls.js';
 const SOURCE_COLOUR = 0x64748b;
 const RESULT_COLOUR = 0xea580c;
 
-// For each ROOT and JOINT of the BVH `text`, in the file's order, which axes (0 x, 1 y, 2 z) its
-// position channels hold.
-function positionAxesOfJoints(text) {
-  const joints = [];
-  const hierarchy = text.split(/\bMOTION\b/)[0];
-  for (const line of hierarchy.split(/\r\n|\r|\n/)) {
+// The nodes of a BVH `text`'s hierarchy (the lines before its MOTION line) in the file's order,
+// which is the order of BVHLoader's bones: {kind: 'joint' (ROOT or JOINT) or 'end' (End Site),
+// name, offset: [x, y, z], axes: the axes (0 x, 1 y, 2 z) its position channels hold}.
+function hierarchyOf(text) {
+  const nodes = [];
+  let node = null;
+  for (const line of text.split(/\r\n|\r|\n/)) {
     const words = line.trim().split(/\s+/);
-    if (words[0] === 'ROOT' || words[0] === 'JOINT') joints.push([]);
-    if (words[0] === 'CHANNELS' && joints.length > 0) {
+    if (words[0] === 'MOTION' && words.length === 1) break;
+    if (words[0] === 'ROOT' || words[0] === 'JOINT' || words[0] === 'End') {
+      node = {kind: words[0] === 'End' ? 'end' : 'joint', name: words[1] || '', offset: [0, 0, 0], axes: []};
+      nodes.push(node);
+    } else if (words[0] === 'OFFSET' && node) {
+      node.offset = words.slice(1, 4).map(Number);
+    } else if (words[0] === 'CHANNELS' && node) {
       for (const name of words.slice(2)) {
         const axis = ['Xposition', 'Yposition', 'Zposition'].indexOf(name);
-        if (axis >= 0) joints[joints.length - 1].push(axis);
+        if (axis >= 0) node.axes.push(axis);
       }
     }
   }
-  return joints;
+  return nodes;
 }
 
 // BVHLoader adds each joint's OFFSET to its position channels (three.js r111's BVHLoader.js,
@@ -34,31 +40,38 @@ function positionAxesOfJoints(text) {
 // the joint offset to all values"). tempokey reads a position channel as replacing the OFFSET on
 // its axis (README "File formats"), as Blender's BVH import does and as the Bandai captures need:
 // each of their joints has six channels holding its offset, so with the offset added every bone
-// was drawn twice as long. Takes the offset back out of the axes that have a channel.
-function replaceOffsetsByPositionChannels(parsed, text) {
-  const axesOfJoints = positionAxesOfJoints(text);
-  const joints = parsed.skeleton.bones.filter((bone) => bone.name !== 'ENDSITE');
-  for (const track of parsed.clip.tracks) {
-    const [, boneName, property] = /^\.bones\[(.*)\]\.(position|quaternion)$/.exec(track.name) || [];
-    if (property !== 'position') continue;
-    const index = joints.findIndex((bone) => bone.name === boneName);
-    if (index < 0 || index >= axesOfJoints.length) continue;
-    const offset = joints[index].position.toArray();  // BVHLoader's rest position: the OFFSET
-    for (const axis of axesOfJoints[index]) {
-      for (let i = axis; i < track.values.length; i += 3) track.values[i] -= offset[axis];
+// was drawn twice as long. Takes the offset back out of the axes that have a channel. BVHLoader
+// makes a position track, then a quaternion track, for each ROOT and JOINT in the file's order:
+// `joints` are those nodes, in that order.
+function replaceOffsetsByPositionChannels(tracks, joints) {
+  joints.forEach((joint, j) => {
+    const track = tracks[2 * j];
+    if (!track) return;
+    for (const axis of joint.axes) {
+      for (let i = axis; i < track.values.length; i += 3) track.values[i] -= joint.offset[axis];
     }
-  }
+  });
 }
 
 // BVHLoader reads one ROOT (three.js r111: "MOTION expected" after it, then a track without
 // keyframes throws); tempokey writes one ROOT per root joint, as a CSV's joints come back (every
-// one a root). Several roots become the joints of one added root without channels.
+// one a root). Several roots become the joints of one added root without channels, named apart
+// from every joint.
 function withOneRoot(text) {
-  if ((text.match(/^\s*ROOT\s/gm) || []).length < 2) return text;
-  return text
-    .replace(/^(\s*)ROOT(\s)/gm, '$1JOINT$2')
-    .replace(/^(\s*HIERARCHY\s*?)$/m, '$1\nROOT tempokey_roots\n{\nOFFSET 0 0 0\nCHANNELS 0')
-    .replace(/^(\s*MOTION\s*?)$/m, '}\n$1');
+  const lines = text.split(/\r\n|\r|\n/);
+  const motion = lines.findIndex((line) => line.trim() === 'MOTION');
+  const hierarchy = motion < 0 ? lines : lines.slice(0, motion);
+  const roots = hierarchy.filter((line) => /^\s*ROOT\s/.test(line)).length;
+  if (roots < 2 || motion < 0) return text;
+  const names = new Set(hierarchy.map((line) => line.trim().split(/\s+/)[1]));
+  let name = 'tempokey_roots';
+  while (names.has(name)) name += '_';
+  const start = lines.findIndex((line) => line.trim() === 'HIERARCHY');
+  return [
+    ...lines.slice(0, start + 1), `ROOT ${name}`, '{', 'OFFSET 0 0 0', 'CHANNELS 0',
+    ...lines.slice(start + 1, motion).map((line) => line.replace(/^(\s*)ROOT(\s)/, '$1JOINT$2')),
+    '}', ...lines.slice(motion),
+  ].join('\n');
 }
 
 // A skeleton parsed by BVHLoader, with a pose setter.
@@ -66,7 +79,9 @@ class Figure {
   constructor(bvhText, colour, scene) {
     const text = withOneRoot(bvhText);
     const parsed = new BVHLoader().parse(text);
-    replaceOffsetsByPositionChannels(parsed, text);
+    const nodes = hierarchyOf(text);
+    const joints = nodes.filter((node) => node.kind === 'joint');
+    replaceOffsetsByPositionChannels(parsed.clip.tracks, joints);
     this.bones = parsed.skeleton.bones;
     this.root = this.bones[0];
     this.group = new THREE.Group();
@@ -76,12 +91,15 @@ class Figure {
     this.helper.material.color.setHex(colour);
     this.helper.material.linewidth = 2;
     scene.add(this.helper);
-    // BVHLoader names tracks ".bones[<joint>].position" and ".bones[<joint>].quaternion".
-    this.tracks = parsed.clip.tracks.map((track) => {
-      const [, boneName, property] = /^\.bones\[(.*)\]\.(position|quaternion)$/.exec(track.name) || [];
-      const bone = this.bones.find((b) => b.name === boneName);
-      return {bone, property, track, interpolant: track.createInterpolant()};
-    });
+    // A position and a quaternion track per ROOT and JOINT, in the file's order (not by name:
+    // a joint may be named like BVHLoader's end sites, "ENDSITE").
+    const jointBones = this.bones.filter((_, i) => nodes[i] && nodes[i].kind === 'joint');
+    this.tracks = parsed.clip.tracks.map((track, t) => ({
+      bone: jointBones[Math.floor(t / 2)],
+      property: t % 2 === 0 ? 'position' : 'quaternion',
+      track,
+      interpolant: track.createInterpolant(),
+    }));
     this.times = parsed.clip.tracks[0].times;  // Float32Array of i * frame time
     this.frameCount = this.times.length;
     const geometry = new THREE.SphereBufferGeometry(1, 8, 6);
