@@ -12,6 +12,7 @@
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/cord.h"
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "client/cli_errors.h"
 #include "client/command.h"
@@ -173,7 +174,10 @@ bool WantsHelp(const std::vector<std::string>& rest) {
 // closed", "certificate verify failed"), gets the reason a probe of the server finds
 // (tls_diagnosis.h) appended to the same message: still one error line, same code.
 absl::Status WithConnectionDiagnosis(const CommandContext& context, absl::Status status) {
-  if (status.code() != absl::StatusCode::kUnavailable || context.client() == nullptr) {
+  // Only a server call's own failure (ServerError()'s words): a local file's UNAVAILABLE is not
+  // the connection's.
+  if (status.code() != absl::StatusCode::kUnavailable || context.client() == nullptr ||
+      !absl::StartsWith(status.message(), "server: UNAVAILABLE: ")) {
     return status;
   }
   const TlsFlagFiles files{.ca = context.args().Value("--ca").value_or(""),

@@ -7,7 +7,6 @@
 #include <pthread.h>
 #include <signal.h>
 
-#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -49,7 +48,7 @@ ABSL_FLAG(double, stream_idle_timeout_seconds, 30,
           "0: never.");
 ABSL_FLAG(double, handshake_timeout_seconds, 20,
           "Close a connection that has not finished its TLS handshake and HTTP/2 opening within "
-          "this long (gRPC's own default: 120). In (0, 3600].");
+          "this long (gRPC's own default: 120). In [0.1, 3600]: shorter, real TLS clients fail.");
 ABSL_FLAG(int64_t, process_progress_interval_ms, 100,
           "A Process call streams its first progress message at once, then at most one per "
           "this many milliseconds, the latest sent when the interval ends; 0: every new stage "
@@ -142,12 +141,12 @@ int Run(int argc, char** argv) {
   options.stream_idle_timeout =
       std::chrono::milliseconds(static_cast<std::int64_t>(idle_seconds * 1000.0));
   const double handshake_seconds = absl::GetFlag(FLAGS_handshake_timeout_seconds);
-  if (!(handshake_seconds > 0.0 && handshake_seconds <= 3600.0)) {
-    spdlog::error("--handshake_timeout_seconds must be in (0, 3600], got {}", handshake_seconds);
+  if (!(handshake_seconds >= 0.1 && handshake_seconds <= 3600.0)) {
+    spdlog::error("--handshake_timeout_seconds must be in [0.1, 3600], got {}", handshake_seconds);
     return 2;
   }
   options.handshake_timeout =
-      std::chrono::milliseconds(std::max<std::int64_t>(1, std::llround(handshake_seconds * 1000.0)));
+      std::chrono::milliseconds(std::llround(handshake_seconds * 1000.0));
   options.process_progress_interval =
       std::chrono::milliseconds(absl::GetFlag(FLAGS_process_progress_interval_ms));
   options.max_message_bytes = absl::GetFlag(FLAGS_max_message_bytes);

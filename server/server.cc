@@ -127,6 +127,7 @@ std::vector<std::string> ProbeOperations() {
 
 absl::StatusOr<std::unique_ptr<Server>> Server::Start(ServerOptions options) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateServerOptions(options));
+  TEMPOKEY_RETURN_IF_ERROR(CheckUnixSocketFree(options.address));
   // TLS files are checked before anything starts, so a bad pair is reported as such.
   TEMPOKEY_ASSIGN_OR_RETURN(std::shared_ptr<grpc::ServerCredentials> credentials,
                             BuildCredentials(options));

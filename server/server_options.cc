@@ -5,6 +5,7 @@
 #include <netinet/in.h>
 #include <sched.h>
 #include <sys/socket.h>
+#include <sys/un.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -135,6 +136,24 @@ bool IsUnixSocketAddress(std::string_view address) {
   return address.starts_with("unix:") || address.starts_with("unix-abstract:");
 }
 
+absl::Status CheckUnixSocketFree(std::string_view address) {
+  if (!address.starts_with("unix:")) return absl::OkStatus();
+  std::string_view path = address.substr(5);
+  if (path.starts_with("//")) path.remove_prefix(2);  // unix:///abs: an empty authority
+  sockaddr_un socket_address{};
+  socket_address.sun_family = AF_UNIX;
+  if (path.empty() || path.size() >= sizeof socket_address.sun_path) return absl::OkStatus();
+  path.copy(socket_address.sun_path, path.size());
+  const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) return absl::OkStatus();
+  const bool answered = ::connect(fd, reinterpret_cast<const sockaddr*>(&socket_address),
+                                  sizeof socket_address) == 0;
+  ::close(fd);
+  if (!answered) return absl::OkStatus();
+  return absl::UnavailableError(absl::StrCat("cannot listen on ", core::AsAbsl(address),
+                                             ": another server is listening on this socket"));
+}
+
 absl::Status CheckLoopbackAddress(std::string_view address) {
   if (IsUnixSocketAddress(address)) return absl::OkStatus();
   // Names are case-insensitive (DNS, /etc/hosts); lower-case them so the resolver sees one form.
@@ -239,9 +258,10 @@ absl::Status ValidateServerOptions(const ServerOptions& o) {
         "min_client_ping_interval must be in [0, ", std::numeric_limits<int>::max(),
         "] ms, got ", o.min_client_ping_interval.count()));
   }
-  if (o.handshake_timeout.count() <= 0 || o.handshake_timeout.count() > kMaxHandshakeTimeoutMs) {
+  if (o.handshake_timeout.count() < kMinHandshakeTimeoutMs ||
+      o.handshake_timeout.count() > kMaxHandshakeTimeoutMs) {
     return absl::InvalidArgumentError(absl::StrCat(
-        "--handshake_timeout_seconds must be in (0, ", kMaxHandshakeTimeoutMs / 1000, "], got ",
+        "--handshake_timeout_seconds must be in [0.1, ", kMaxHandshakeTimeoutMs / 1000, "], got ",
         static_cast<double>(o.handshake_timeout.count()) / 1000.0));
   }
   if (!(o.max_job_cost_seconds >= 0.0 && std::isfinite(o.max_job_cost_seconds))) {

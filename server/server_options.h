@@ -81,7 +81,7 @@ struct ServerOptions {
   // A connection that has not finished its TLS handshake and sent HTTP/2's opening SETTINGS
   // within this long is closed. gRPC's default is 120 s: 200 connections that opened and sent
   // nothing (or half a TLS hello) each held a socket and a handshake for two minutes. Real
-  // clients finish in a few round trips. In (0, kMaxHandshakeTimeoutMs].
+  // clients finish in a few round trips. In [kMinHandshakeTimeoutMs, kMaxHandshakeTimeoutMs].
   std::chrono::milliseconds handshake_timeout{20'000};
   // Prometheus exposition ("127.0.0.1:9464"); empty disables metrics. Plain HTTP: beyond
   // loopback it needs allow_insecure_remote, whatever the gRPC port's TLS. With auth_tokens, a
@@ -135,6 +135,13 @@ absl::StatusOr<std::vector<std::string>> ReadTokenFile(const std::string& path);
 // "unix-abstract:NAME"): they have no port.
 bool IsUnixSocketAddress(std::string_view address);
 
+// OK unless `address` is a unix-domain socket path ("unix:PATH", "unix:///PATH") that a process
+// accepts connections on: gRPC removes the file before it binds, so a second server on the path
+// started and took it over silently, the first left running unreachable. A file nobody listens on
+// (left by a server that ended) is free. Errors: kUnavailable "cannot listen on ADDRESS: another
+// server is listening on this socket".
+absl::Status CheckUnixSocketFree(std::string_view address);
+
 // OK when every address the host of `address` ("host:port", "[v6]:port", "unix:...") resolves
 // to is a loopback address (127.0.0.0/8, ::1, ::ffff:127.0.0.0/104), or for unix-domain
 // sockets. Names are resolved (getaddrinfo), so "LOCALHOST" and "[::ffff:127.0.0.1]" are
@@ -149,7 +156,9 @@ bool IsLoopbackAddress(std::string_view address);
 inline constexpr std::int64_t kMaxDurationSeconds = 365 * 24 * 3600;
 // The largest connection age, in seconds: gRPC holds it as an int of milliseconds (24.8 days).
 inline constexpr std::int64_t kMaxConnectionAgeSeconds = 2'147'483;
-// The longest handshake timeout, in milliseconds: an hour.
+// The handshake timeout's range, in milliseconds: a tenth of a second (below, even a TLS client on
+// this machine may not finish) to an hour.
+inline constexpr std::int64_t kMinHandshakeTimeoutMs = 100;
 inline constexpr std::int64_t kMaxHandshakeTimeoutMs = 3'600'000;
 
 // Checks values no server can run with (sizes <= 0, durations outside the bounds above, a TLS

@@ -55,6 +55,10 @@ TEST(TlsDiagnosisTest, OnlyMessagesThatMayComeFromTlsSetUpCallForAProbe) {
       "connect to remote host: Connection refused"));
   EXPECT_FALSE(MayBeTransportSecurityFailure("job 42 is still RUNNING: the server ended the "
                                              "watch early"));
+  // Words alone are no sign: a local file's error whose path holds them.
+  EXPECT_FALSE(MayBeTransportSecurityFailure(
+      "/tmp/tls-handshake-certificate/out.bvh: cannot create a temporary file: file name too "
+      "long"));
 }
 
 // 2026-12-01 00:00 UTC and 2026-12-03 00:00 UTC.

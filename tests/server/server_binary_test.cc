@@ -228,11 +228,17 @@ TEST(ServerBinaryTest, AUnixSocketIsAnnouncedByItsAddressAndHasNoPortFile) {
   }
   ASSERT_FALSE(early_exit) << ReadOrEmpty(dir + "/server.err");
   EXPECT_EQ(ReadOrEmpty(dir + "/server.out"), announced);
+  // gRPC removes a socket file before it binds: a second server on the path took it over and the
+  // first ran on unreachable. The second is refused now, and the first still answers.
+  const ProcessResult second = RunServer({"--address", socket});
   const absl::StatusOr<int> live = CheckHealth(Connect(socket), "");
   kill(*pid, SIGTERM);
   const std::optional<int> code = WaitFor(*pid, std::chrono::seconds(60));
   if (!code) kill(*pid, SIGKILL);
 
+  EXPECT_EQ(second.exit_code, 1);
+  EXPECT_THAT(second.err, HasSubstr("cannot start: cannot listen on " + socket +
+                                    ": another server is listening on this socket"));
   ASSERT_TRUE(live.ok()) << live.status();
   EXPECT_EQ(*live, 1);
   EXPECT_EQ(code, 0) << ReadOrEmpty(dir + "/server.err");
