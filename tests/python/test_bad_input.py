@@ -506,6 +506,40 @@ class TlsPemTest(unittest.TestCase):
 
                 self.assertEqual((run.returncode, run.stderr), (1, message + "\n"))
 
+    def test_a_checked_key_reaches_no_file_and_leaves_no_descriptor_open(self):
+        # On Linux the key pair is read from memory: a temporary folder is not even made. Where
+        # memfd_create is missing, the private folder is made and gone when connect() returns.
+        from unittest import mock
+        from tempokey import _pem
+
+        def descriptors():
+            return sorted(os.listdir("/proc/self/fd"))
+
+        def connect():
+            tk.connect("127.0.0.1:1", tls=True, root_certificates=self.pem("ca.pem"),
+                       certificate_chain=self.pem("client.pem"),
+                       private_key=self.pem("client.key")).close()
+
+        made = []
+        real_mkdtemp = tempfile.mkdtemp
+
+        def recording_mkdtemp(*args, **kwargs):
+            made.append(real_mkdtemp(*args, **kwargs))
+            return made[-1]
+
+        before = descriptors()
+        with mock.patch.object(tempfile, "mkdtemp", side_effect=recording_mkdtemp):
+            connect()
+        self.assertEqual(made, [])
+        self.assertEqual(descriptors(), before)
+
+        with mock.patch.object(tempfile, "mkdtemp", side_effect=recording_mkdtemp), \
+                mock.patch.object(_pem.os, "memfd_create", side_effect=OSError("none here")):
+            connect()
+        self.assertEqual(len(made), 1)
+        self.assertFalse(os.path.exists(made[0]), made[0])
+        self.assertEqual(descriptors(), before)
+
     def test_pem_that_is_not_bytes_is_a_type_error_naming_the_argument(self):
         with self.assertRaisesRegex(TypeError, r"^root_certificates must be bytes \(PEM, as read "
                                                r"with open\(path, \"rb\"\)\), got str "

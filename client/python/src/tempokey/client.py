@@ -16,9 +16,12 @@ channel covering every frame) or one KeyedClip (one KeyedCurve per channel), wit
 
 Errors: a failed call raises TempokeyError with the gRPC status code and the server's message
 exactly as sent, e.g. ``INVALID_ARGUMENT: operation 1 (retime): speed knot 2 (2s:-1): speed must
-be > 0``. Only UNAVAILABLE is retried (the server is draining or unreachable), as the C++ client
-does. Thread-safety: a Client may be shared by threads (gRPC channels are thread-safe); the
-server info it caches is read-only once fetched.
+be > 0``; when gRPC's UNAVAILABLE text only says "Socket closed" or "certificate verify failed",
+the client probes the server's TLS and appends why, e.g. ``...; the server does not speak TLS:
+connect without tls=True, ...`` (TCP connections and TLS handshakes, never a request or the
+token, within the timeout and 10 s). Only UNAVAILABLE is retried (the server is draining or
+unreachable), as the C++ client does. Thread-safety: a Client may be shared by threads (gRPC
+channels are thread-safe); the server info it caches is read-only once fetched.
 """
 
 import ipaddress
@@ -30,7 +33,7 @@ from typing import Any, Callable, Iterator, List, Mapping, Optional, Sequence, T
 
 import grpc
 
-from tempokey import _arguments, _pem
+from tempokey import _arguments, _pem, _tls_diagnosis
 from tempokey.clips import (BYTES_PER_SAMPLE, DEFAULT_SLICE_BYTES, channel_label, sample_batches,
                             sample_slices)
 from tempokey.errors import TempokeyError, from_rpc_error, malformed_result
@@ -245,6 +248,9 @@ class Client:
         self._max_attempts = max_attempts
         self._slice_bytes = slice_bytes
         self._server_info = None
+        # How connect() made the channel, for explaining a failed connection; None for a Client
+        # made from a channel directly.
+        self._channel_settings: Optional[_tls_diagnosis.ChannelSettings] = None
 
     def close(self) -> None:
         """Closes the channel; calls in flight are cancelled."""
@@ -265,11 +271,23 @@ class Client:
     def _remaining(deadline: Optional[float]) -> Optional[float]:
         return None if deadline is None else max(0.0, deadline - time.monotonic())
 
+    def _explained(self, failure: TempokeyError) -> TempokeyError:
+        """`failure` as raised: an UNAVAILABLE whose gRPC text may come from TLS set-up gets what
+        a probe of the server found appended after "; " (_tls_diagnosis), as the CLI does."""
+        if failure.code != grpc.StatusCode.UNAVAILABLE or self._channel_settings is None:
+            return failure
+        explanation = _tls_diagnosis.diagnose(self._channel_settings, failure.details,
+                                              self._timeout)
+        if not explanation:
+            return failure
+        return TempokeyError(failure.code, "%s; %s" % (failure.details, explanation),
+                             failure.retry_after_seconds)
+
     def _unary(self, method: Callable[..., _T], request: Any) -> _T:
         try:
             return method(request, timeout=self._timeout, metadata=self._metadata)
         except grpc.RpcError as error:
-            raise from_rpc_error(error, self._timeout) from None
+            raise self._explained(from_rpc_error(error, self._timeout)) from None
 
     def _with_retries(self, attempt: "_Attempt[_T]") -> _T:
         """Runs attempt(timeout, received) until it succeeds or fails with another code than
@@ -286,10 +304,10 @@ class Client:
                 failure = from_rpc_error(error, self._timeout)
             if (failure.code != grpc.StatusCode.UNAVAILABLE or received
                     or number == self._max_attempts):
-                raise failure
+                raise self._explained(failure)
             pause = random.uniform(0.0, backoff)
             if deadline is not None and time.monotonic() + pause >= deadline:
-                raise failure
+                raise self._explained(failure)
             time.sleep(pause)
             backoff = min(backoff * 2.0, 1.0)
         raise AssertionError("unreachable")
@@ -653,5 +671,8 @@ def connect(target: str, timeout: Optional[float] = 60.0, token: Optional[str] =
         channel = grpc.secure_channel(target, credentials, options=options)
     else:
         channel = grpc.insecure_channel(target, options=options)
-    return Client(channel, timeout=timeout, token=token, max_attempts=max_attempts,
-                  slice_bytes=slice_bytes)
+    client = Client(channel, timeout=timeout, token=token, max_attempts=max_attempts,
+                    slice_bytes=slice_bytes)
+    client._channel_settings = _tls_diagnosis.ChannelSettings(
+        target, tls, root_certificates, certificate_chain, private_key, target_name_override)
+    return client

@@ -1,9 +1,10 @@
 """Errors of the tempokey client: a failed call is a TempokeyError carrying the gRPC status code
 and the server's message unchanged (a deadline that passed on the client's side, which gRPC
-reports as "Deadline Exceeded", names the timeout instead). Arguments are checked before anything is sent: a value of
-the wrong type (None or a str for a clip, a str or bool for a number) is a TypeError and what
-cannot be encoded at all (2.7 frames, an infinite timeout) a ValueError, both naming the
-parameter. Files: tempokey.bvh.BvhError (a ValueError, "<file>:<line>:<column>: ...") and
+reports as "Deadline Exceeded", names the timeout instead; an UNAVAILABLE from a failed TLS
+set-up gets "; " and why, found by probing the server). Arguments are checked before anything is
+sent: a value of the wrong type (None or a str for a clip, a str or bool for a number) is a
+TypeError and what cannot be encoded at all (2.7 frames, an infinite timeout) a ValueError, both
+naming the parameter. Files: tempokey.bvh.BvhError (a ValueError, "<file>:<line>:<column>: ...") and
 tempokey.bvh.BvhFileError (an OSError, "<file>: ...")."""
 
 from typing import Any, Optional
@@ -22,7 +23,9 @@ class TempokeyError(Exception):
     Attributes:
       code: grpc.StatusCode, e.g. grpc.StatusCode.INVALID_ARGUMENT.
       details: the server's message ("operation 1 (retime): ..."), or for the client's own
-        deadline "no answer within the client's timeout of 60 s (retries included); ...".
+        deadline "no answer within the client's timeout of 60 s (retries included); ...", or
+        for an UNAVAILABLE from TLS set-up gRPC's text and what a probe of the server found
+        ("...: Socket closed; the server speaks TLS: connect with tls=True ...").
       retry_after_seconds: the server's hint of when to try again (a full queue), or None.
     """
 
