@@ -988,6 +988,87 @@ class StudioBrowserTest(unittest.TestCase):
         Select(self.el("filter")).select_by_visible_text("tent")
         self.settled_plan(before)
 
+    def test_8p_holds_are_edits_undo_and_redo_reach_and_bad_fields_are_refused(self):
+        # Runs on the clip 8m opened, without holds. Each edit waits for the server's plan, whose
+        # answer writes the retime command: its --hold words are the holds the page sends.
+        wait_for(lambda: self.body("planPending") == "false", "no plan pending")
+        seconds = float(re.search(r"([0-9.]+) s,", self.el("clip-info").text).group(1))
+        early, late = round(seconds * 0.2, 2), round(seconds * 0.6, 2)
+
+        def chain():
+            return ActionChains(self.driver)
+
+        def holds_after(action):
+            before = self.plan_seq()
+            action()
+            self.settled_plan(before)
+            sent = re.findall(r"--hold (\S+)", self.el("retime-command").text)
+            listed = [item.text.rstrip("×").strip()
+                      for item in self.driver.find_elements(By.CSS_SELECTOR, "#holds > span")]
+            self.assertEqual(listed, sent)  # the list beside the fields shows what is sent
+            return sent
+
+        def add(at, duration):
+            def action():
+                self.type_over("hold-at", str(at), Keys.TAB)
+                self.type_over("hold-duration", str(duration), Keys.TAB)
+                self.el("add-hold").click()
+            return action
+
+        def keys(key, shift=False):  # sent to what has the focus: the page, not a field
+            def action():
+                actions = chain().key_down(Keys.CONTROL)
+                if shift:
+                    actions = actions.key_down(Keys.SHIFT)
+                actions = actions.send_keys(key)
+                if shift:
+                    actions = actions.key_up(Keys.SHIFT)
+                actions.key_up(Keys.CONTROL).perform()
+            return action
+
+        one = ["%ss:0.25" % late]
+        both = ["%ss:0.5" % early, "%ss:0.25" % late]
+        self.assertEqual(holds_after(add(late, 0.25)), one)
+        self.assertEqual(holds_after(add(early, 0.5)), both)  # kept in source-time order
+        # With the focus on the button just clicked, Ctrl+Z reaches the editor's history.
+        self.assertEqual(holds_after(keys("z")), one)
+        self.assertEqual(holds_after(keys("y")), both)
+        # Removing a hold is an edit too.
+        def remove_early():
+            self.driver.find_elements(By.CSS_SELECTOR, "#holds button")[0].click()
+
+        self.assertEqual(holds_after(remove_early), one)
+        self.assertEqual(holds_after(keys("z")), both)
+        self.assertEqual(holds_after(keys("z", shift=True)), one)
+        self.assertEqual(holds_after(keys("z")), both)
+        # Knot edits and hold edits are one history: a knot raised, then undone step by step.
+        knots_before = self.el("speed-text").get_attribute("value")
+        holds_after(self.speed_up_first_knot)
+        self.assertNotEqual(self.el("speed-text").get_attribute("value"), knots_before)
+        self.assertEqual(holds_after(keys("z")), both)
+        self.assertEqual(self.el("speed-text").get_attribute("value"), knots_before)
+        self.assertEqual(holds_after(keys("z")), one)
+        self.assertEqual(holds_after(keys("z")), [])
+
+        # Fields a hold cannot take are refused with a message, and no hold is added.
+        past_end = str(round(seconds + 1, 2))
+        for at, duration, said in [("", "0.5", "time a blank is not a number of seconds from 0"),
+                                   ("-1", "0.5", 'time "-1" is not a number of seconds from 0'),
+                                   (past_end, "0.5", "time %ss is after the end of the clip"
+                                    % past_end),
+                                   ("0", "0", 'duration "0" is not a number of seconds above 0'),
+                                   ("0", "", "duration a blank is not a number of seconds above 0")]:
+            with self.subTest(at=at, duration=duration):
+                self.type_over("hold-at", at, Keys.TAB)
+                self.type_over("hold-duration", duration, Keys.TAB)
+                self.el("add-hold").click()
+                wait_for(lambda: said in self.shown("hold-error"), "the hold's refusal")
+                self.assertTrue(self.shown("hold-error").startswith("hold: "))
+                self.assertTrue(self.shown("hold-error").endswith("; no hold added"))
+        self.assertEqual(holds_after(add(early, 0.5)), both[:1])  # the early one alone
+        self.assertEqual(self.shown("hold-error"), "")
+        self.assertEqual(holds_after(keys("z")), [])
+
     # ---- long jobs: a server whose one worker is busy, so the page's jobs wait in its queue ------
     def make_server_busy(self, busy):
         """Keeps the one worker of `busy` busy with the paper's reduction of a noise channel with

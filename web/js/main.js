@@ -19,7 +19,6 @@ const state = {
   planRefused: false,   // the settings since that plan are refused (by the server or the page)
   planSeq: 0,
   lastEdit: 0,
-  holds: [],            // [{at, duration}] seconds
   retimeJob: null,      // {jobId, speedText}
   reduced: null,        // {jobId, curves, report, settings}
 };
@@ -81,11 +80,17 @@ function commandLine(words) {
 }
 
 // ---- views ---------------------------------------------------------------------------------
+// The knots as the last change left them: a change of the holds alone leaves an error about
+// typed --speed text standing.
+let knotsSeen = '';
 const editor = new VelocityEditor($('editor'), {
   onChange: () => {
     state.lastEdit = performance.now();
+    const knots = JSON.stringify(editor.knots);
     // The knots moved on: an error about text typed before them no longer applies.
-    if (!$('speed-text-error').hidden) showSpeedTextError('');
+    if (knots !== knotsSeen && !$('speed-text-error').hidden) showSpeedTextError('');
+    knotsSeen = knots;
+    renderHolds();  // an undo or a redo may have changed them
     requestPlan();
   },
   onSelect: () => showSelectedKnot(),
@@ -192,7 +197,6 @@ function showClip({clip, samples}) {
   forgetResults();
   state.clip = clip;
   state.samples = samples.channels;
-  state.holds = [];
   state.plan = null;
   const header = clip.header;
   const fps = 1 / clip.frameTime;
@@ -203,7 +207,11 @@ function showClip({clip, samples}) {
   $('domain').value = 'source';
   editor.setTimeline(clip.duration, clip.frameTime);
   editor.setKnots([{t: 0, unit: 's', v: 1}]);
+  editor.setHolds([]);
+  editor.showHolds(true);
   editor.forgetHistory();
+  knotsSeen = JSON.stringify(editor.knots);
+  showHoldError('');
   renderHolds();
   fillChannels();
   showChannel();
@@ -250,7 +258,7 @@ function retimeOperation() {
   const knots = editor.knots.map((k) => ({time: k.unit === 'f' ? {frames: k.t} : {seconds: k.t}, speed: k.v}));
   const op = {};
   op[domain() === 'source' ? 'speedOverSource' : 'speedOverOutput'] = knots;
-  op.holds = state.holds.map((h) => ({at: {seconds: h.at}, durationSeconds: h.duration}));
+  op.holds = editor.holds.map((h) => ({at: {seconds: h.atSeconds}, durationSeconds: h.duration}));
   op.reverse = $('reverse').checked;
   op.disableFitToGrid = !$('fit-to-grid').checked;
   const fitFrames = $('fit-frames').value;
@@ -286,7 +294,7 @@ function retimeCommand(speedText) {
   const words = fileWords('retime', '-retimed', '.bvh');
   words.push('--speed', speedText);
   if (domain() === 'output') words.push('--speed-over', 'output');
-  for (const h of state.holds) words.push('--hold', `${h.at}s:${h.duration}`);
+  for (const h of editor.holds) words.push('--hold', `${h.atSeconds}s:${h.duration}`);
   if ($('fps').value) {
     const [n, d] = $('fps').value.split('/');
     words.push('--fps', d === '1' ? n : n + '/' + d);
@@ -695,31 +703,53 @@ function switchDomain() {
   } else {
     editor.setTimeline(state.clip.duration, state.clip.frameTime);
   }
-  editor.setHolds(toOutput ? [] : state.holds.map((h) => ({atSeconds: h.at, duration: h.duration})));
+  editor.showHolds(!toOutput);
   editor.setKnots(knots, editor.selected);
   editor.forgetHistory();  // the edits before were in the other domain's times
+  knotsSeen = JSON.stringify(editor.knots);
   state.lastEdit = performance.now();
   requestPlan();
 }
 
+// The editor's holds as a list, each with its remove button (an edit undo reaches).
 function renderHolds() {
   const list = $('holds');
   list.textContent = '';
-  state.holds.forEach((h, i) => {
+  editor.holds.forEach((h, i) => {
     const item = document.createElement('span');
-    item.textContent = `${h.at}s:${h.duration}`;
+    item.textContent = `${h.atSeconds}s:${h.duration}`;
     const remove = document.createElement('button');
     remove.textContent = '×';
     remove.title = 'remove this hold';
-    remove.addEventListener('click', () => {
-      state.holds.splice(i, 1);
-      renderHolds();
-      settingsChanged();
-    });
+    remove.addEventListener('click', () => editor.removeHold(i));
     item.appendChild(remove);
     list.appendChild(item);
   });
-  editor.setHolds(domain() === 'source' ? state.holds.map((h) => ({atSeconds: h.at, duration: h.duration})) : []);
+}
+
+// A hold from its typed fields: a source time within the clip and a duration above 0, or the
+// fields are refused with a message (never dropped without a word, never clamped).
+function addHoldFromFields() {
+  if (!state.clip) return;
+  const typed = (id) => ($(id).value.trim() === '' ? 'a blank' : `"${$(id).value}"`);
+  const at = $('hold-at').value.trim() === '' ? NaN : Number($('hold-at').value);
+  const duration = $('hold-duration').value.trim() === '' ? NaN : Number($('hold-duration').value);
+  const end = +state.clip.duration.toPrecision(12);
+  let problem = '';
+  if (!Number.isFinite(at) || at < 0) {
+    problem = `time ${typed('hold-at')} is not a number of seconds from 0`;
+  } else if (at > state.clip.duration) {
+    problem = `time ${at}s is after the end of the clip (${end}s)`;
+  } else if (!Number.isFinite(duration) || duration <= 0) {
+    problem = `duration ${typed('hold-duration')} is not a number of seconds above 0`;
+  }
+  showHoldError(problem ? `hold: ${problem}; no hold added` : '');
+  if (!problem) editor.addHold(at, duration);
+}
+
+function showHoldError(text) {
+  $('hold-error').textContent = text;
+  $('hold-error').hidden = !text;
 }
 
 // ---- preview transport ---------------------------------------------------------------------------
@@ -1020,14 +1050,21 @@ $('domain').addEventListener('change', switchDomain);
 for (const id of ['min-speed', 'max-speed', 'fps', 'fit-to-grid', 'fit-frames', 'reverse', 'filter', 'retime-method']) {
   $(id).addEventListener('change', settingsChanged);
 }
-$('add-hold').addEventListener('click', () => {
-  const at = Number($('hold-at').value);
-  const duration = Number($('hold-duration').value);
-  if (!Number.isFinite(at) || !(duration > 0)) return;
-  state.holds.push({at, duration});
-  state.holds.sort((a, b) => a.at - b.at);
-  renderHolds();
-  settingsChanged();
+$('add-hold').addEventListener('click', addHoldFromFields);
+// Ctrl+Z / Ctrl+Shift+Z / Ctrl+Y reach the editor's history from anywhere on the page but a text
+// field (whose own undo they are) and the editor itself (which takes them): after a click on
+// "add hold" or a hold's ×, the undo is at hand.
+document.addEventListener('keydown', (e) => {
+  const key = e.key.toLowerCase();
+  if (!(e.ctrlKey || e.metaKey) || (key !== 'z' && key !== 'y')) return;
+  const target = e.target;
+  if (target === $('editor') || ['INPUT', 'TEXTAREA', 'SELECT'].includes(target.tagName) ||
+      target.isContentEditable) {
+    return;
+  }
+  e.preventDefault();
+  if (key === 'z' && !e.shiftKey) editor.undo();
+  else editor.redo();
 });
 $('play').addEventListener('click', togglePlay);
 $('step-back').addEventListener('click', () => preview.step(-1));

@@ -10,13 +10,17 @@
 // given in frames) and speeds to 0.01, unless Shift is held while dragging. Speeds are held
 // within the limits [min, max]; knots cannot pass their neighbours.
 //
-// Undo steps through the knots as each edit left them: a drag is one edit however many moves
-// it takes, a key press or an added knot is one, knots set from typed text are one (setKnots
-// with undoable), an edit that changes nothing is none. A new edit ends what redo could bring
-// back; forgetHistory() starts afresh (a new clip, knots moved to the other time domain).
+// The editor also keeps the holds (freeze frames, by source time: addHold(), removeHold()),
+// drawn where they are while the knots are over source time.
 //
-// The editor only edits knots; what they mean (durations, the time map) is the server's
-// answer, drawn by the caller through setPlan().
+// Undo steps through the speed function as each edit left it, knots and holds together: a drag
+// is one edit however many moves it takes, a key press, an added knot, an added or removed hold
+// is one, knots set from typed text are one (setKnots with undoable), an edit that changes
+// nothing is none. A new edit ends what redo could bring back; forgetHistory() starts afresh (a
+// new clip, knots moved to the other time domain).
+//
+// The editor only edits knots and holds; what they mean (durations, the time map) is the
+// server's answer, drawn by the caller through setPlan().
 
 const PAD = {left: 48, right: 14, top: 14, bottom: 28};
 const HIT_RADIUS = 8;
@@ -30,13 +34,20 @@ function sameKnots(a, b) {
       a.every((k, i) => k.t === b[i].t && k.unit === b[i].unit && k.v === b[i].v);
 }
 
+// Whether two hold lists are the same holds (source times, durations).
+function sameHolds(a, b) {
+  return a.length === b.length &&
+      a.every((h, i) => h.atSeconds === b[i].atSeconds && h.duration === b[i].duration);
+}
+
 export class VelocityEditor {
   constructor(canvas, {onChange, onSelect}) {
     this.canvas = canvas;
     this.onChange = onChange;
     this.onSelect = onSelect;
     this.knots = [{t: 0, unit: 's', v: 1}];
-    this.holds = [];
+    this.holds = [];          // [{atSeconds, duration}] by source time, in order
+    this.holdsShown = true;   // while the knots are over source time
     this.selected = 0;
     this.duration = 1;        // x extent, seconds
     this.frameTime = 1 / 30;  // of the knots' timeline, for frame units and arrow steps
@@ -77,9 +88,32 @@ export class VelocityEditor {
     this.selected = Math.min(selected, this.knots.length - 1);
     this.draw();
   }
+  // The holds as a new start (a new clip), not an edit undo reaches.
   setHolds(holds) {
-    this.holds = holds;
+    this.holds = holds.map((h) => ({...h}));
     this.draw();
+  }
+  // Holds are drawn at their source times: not over output time.
+  showHolds(shown) {
+    this.holdsShown = shown;
+    this.draw();
+  }
+  // A hold of `duration` seconds at source time `atSeconds`, after any at the same time: an edit.
+  addHold(atSeconds, duration) {
+    const before = this.snapshot();
+    let at = this.holds.findIndex((h) => h.atSeconds > atSeconds);
+    if (at < 0) at = this.holds.length;
+    this.holds.splice(at, 0, {atSeconds, duration});
+    this.record(before);
+    this.changed();
+  }
+  // Removes the hold at `index` of this.holds: an edit.
+  removeHold(index) {
+    if (index < 0 || index >= this.holds.length) return;
+    const before = this.snapshot();
+    this.holds.splice(index, 1);
+    this.record(before);
+    this.changed();
   }
   seconds(k) {
     return k.unit === 'f' ? k.t * this.frameTime : k.t;
@@ -101,11 +135,12 @@ export class VelocityEditor {
 
   // ---- history -------------------------------------------------------------------------------
   snapshot() {
-    return {knots: this.knots.map((k) => ({...k})), selected: this.selected};
+    return {knots: this.knots.map((k) => ({...k})), holds: this.holds.map((h) => ({...h})),
+            selected: this.selected};
   }
-  // Keeps `before` as the state undo returns to, unless the knots are as they were.
+  // Keeps `before` as the state undo returns to, unless the knots and holds are as they were.
   record(before) {
-    if (sameKnots(before.knots, this.knots)) return false;
+    if (sameKnots(before.knots, this.knots) && sameHolds(before.holds, this.holds)) return false;
     this.past.push(before);
     if (this.past.length > HISTORY_LIMIT) this.past.shift();
     this.future = [];
@@ -120,8 +155,9 @@ export class VelocityEditor {
   travel(from, to) {
     if (from.length === 0) return false;
     to.push(this.snapshot());
-    const {knots, selected} = from.pop();
+    const {knots, holds, selected} = from.pop();
     this.knots = knots;
+    this.holds = holds;
     this.selected = Math.min(selected, knots.length - 1);
     this.changed();
     return true;
@@ -410,7 +446,7 @@ export class VelocityEditor {
     g.strokeRect(x0, yTop, x1 - x0, yBottom - yTop);
 
     // Holds (freeze frames) at their source times.
-    for (const hold of this.holds) {
+    for (const hold of this.holdsShown ? this.holds : []) {
       const x = this.x(hold.atSeconds);
       g.fillStyle = 'rgba(234, 145, 30, 0.25)';
       g.fillRect(x - 3, yTop, 6, yBottom - yTop);
