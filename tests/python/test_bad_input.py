@@ -411,12 +411,9 @@ def make_certificates(folder):
     run("genpkey", "-algorithm", "RSA", "-pkeyopt", "rsa_keygen_bits:2048", "-out", "rsa.key")
 
 
-class TlsPemTest(unittest.TestCase):
-    """connect()'s root_certificates, certificate_chain and private_key, checked before a channel
-    is made. grpcio 1.51 (Debian 12) took them all: garbage, a key or empty bytes as
-    root_certificates, another certificate's key or an encrypted key gave a client whose every
-    call failed with UNAVAILABLE "empty address list: ", and empty bytes as certificate_chain
-    or private_key aborted the process (an assertion in ssl_credentials.cc)."""
+class CertificateTestCase(unittest.TestCase):
+    """Tests with make_certificates()' files (and what make_more_certificates() adds) in a
+    folder of their class's own, removed after them."""
 
     @classmethod
     def setUpClass(cls):
@@ -424,6 +421,11 @@ class TlsPemTest(unittest.TestCase):
             raise AssertionError("needs %s (deploy/install-deps.sh)" % OPENSSL)
         cls._folder = tempfile.TemporaryDirectory()
         make_certificates(cls._folder.name)
+        cls.make_more_certificates(cls._folder.name)
+
+    @classmethod
+    def make_more_certificates(cls, folder):
+        """Makes a subclass's further PEM files in `folder`."""
 
     @classmethod
     def tearDownClass(cls):
@@ -435,6 +437,14 @@ class TlsPemTest(unittest.TestCase):
     def pem(self, name):
         with open(self.path(name), "rb") as stream:
             return stream.read()
+
+
+class TlsPemTest(CertificateTestCase):
+    """connect()'s root_certificates, certificate_chain and private_key, checked before a channel
+    is made. grpcio 1.51 (Debian 12) took them all: garbage, a key or empty bytes as
+    root_certificates, another certificate's key or an encrypted key gave a client whose every
+    call failed with UNAVAILABLE "empty address list: ", and empty bytes as certificate_chain
+    or private_key aborted the process (an assertion in ssl_credentials.cc)."""
 
     def assertRefused(self, message, **pem):
         with self.assertRaises(ValueError) as caught:

@@ -10,7 +10,6 @@ exact. Run by CTest (label `python`) like test_python_client.py, whose environme
 
 import os
 import subprocess
-import tempfile
 import unittest
 
 import grpc
@@ -18,7 +17,7 @@ import grpc
 import tempokey as tk
 from tempokey import _tls_diagnosis
 
-from test_bad_input import OPENSSL, make_certificates
+from test_bad_input import OPENSSL, CertificateTestCase
 from test_python_client import CALL_TIMEOUT_SECONDS, SUBPROCESS_TIMEOUT_SECONDS, RunningServer
 
 # gRPC's error text is its own; the tests pin what follows it.
@@ -62,31 +61,16 @@ def make_other_ca_and_its_client(folder):
                 "-extfile", "client.ext")
 
 
-class TlsDiagnosisTest(unittest.TestCase):
-    """connect()'s clients against servers they cannot talk to."""
+class TlsDiagnosisTest(CertificateTestCase):
+    """connect()'s clients against servers they cannot talk to (make_certificates()' ca, server
+    with CN=server, client; and those made below)."""
 
     @classmethod
-    def setUpClass(cls):
-        if not os.access(OPENSSL, os.X_OK):
-            raise AssertionError("needs %s (deploy/install-deps.sh)" % OPENSSL)
-        cls._folder = tempfile.TemporaryDirectory()
-        folder = cls._folder.name
-        make_certificates(folder)  # ca, server (CN=server), client
+    def make_more_certificates(cls, folder):
         make_other_ca_and_its_client(folder)
         make_dated_certificate(folder, "self-signed", None, "20200101000000Z", "20991231235959Z")
         make_dated_certificate(folder, "long-lived", "ca", "20200101000000Z", "20991231235959Z")
         make_dated_certificate(folder, "expired", "ca", "20200101000000Z", "20200201000000Z")
-
-    @classmethod
-    def tearDownClass(cls):
-        cls._folder.cleanup()
-
-    def path(self, name):
-        return os.path.join(self._folder.name, name)
-
-    def pem(self, name):
-        with open(self.path(name), "rb") as stream:
-            return stream.read()
 
     def tls_server(self, certificate="server", *flags):
         return RunningServer("--tls_cert", self.path(certificate + ".pem"), "--tls_key",
