@@ -990,15 +990,17 @@ class StudioBrowserTest(unittest.TestCase):
 
     def test_8p_holds_are_edits_undo_and_redo_reach_and_bad_fields_are_refused(self):
         # Runs on the clip 8m opened, without holds. Each edit waits for the server's plan, whose
-        # answer writes the retime command: its --hold words are the holds the page sends.
+        # answer writes the retime command (its --hold words are the holds the page sent) and
+        # the output duration, which each set of holds must give back whenever it returns.
         wait_for(lambda: self.body("planPending") == "false", "no plan pending")
         seconds = float(re.search(r"([0-9.]+) s,", self.el("clip-info").text).group(1))
         early, late = round(seconds * 0.2, 2), round(seconds * 0.6, 2)
+        durations = {}
 
         def chain():
             return ActionChains(self.driver)
 
-        def holds_after(action):
+        def holds_after(action, same_duration_as_before=True):
             before = self.plan_seq()
             action()
             self.settled_plan(before)
@@ -1006,6 +1008,9 @@ class StudioBrowserTest(unittest.TestCase):
             listed = [item.text.rstrip("×").strip()
                       for item in self.driver.find_elements(By.CSS_SELECTOR, "#holds > span")]
             self.assertEqual(listed, sent)  # the list beside the fields shows what is sent
+            if same_duration_as_before:
+                duration = float(self.el("duration").get_attribute("data-seconds"))
+                self.assertEqual(durations.setdefault(tuple(sent), duration), duration, sent)
             return sent
 
         def add(at, duration):
@@ -1015,7 +1020,7 @@ class StudioBrowserTest(unittest.TestCase):
                 self.el("add-hold").click()
             return action
 
-        def keys(key, shift=False):  # sent to what has the focus: the page, not a field
+        def keys(key, shift=False):  # sent to what has the focus
             def action():
                 actions = chain().key_down(Keys.CONTROL)
                 if shift:
@@ -1026,24 +1031,41 @@ class StudioBrowserTest(unittest.TestCase):
                 actions.key_up(Keys.CONTROL).perform()
             return action
 
+        def remove_first():
+            self.driver.find_elements(By.CSS_SELECTOR, "#holds button")[0].click()
+
+        def select_filter(name):
+            return lambda: Select(self.el("filter")).select_by_visible_text(name)
+
         one = ["%ss:0.25" % late]
         both = ["%ss:0.5" % early, "%ss:0.25" % late]
+        self.assertEqual(holds_after(select_filter("linear")), [])  # the duration without holds
         self.assertEqual(holds_after(add(late, 0.25)), one)
         self.assertEqual(holds_after(add(early, 0.5)), both)  # kept in source-time order
+        # The server's duration grows with each hold: the holds reach it.
+        self.assertLess(durations[()], durations[tuple(one)])
+        self.assertLess(durations[tuple(one)], durations[tuple(both)])
         # With the focus on the button just clicked, Ctrl+Z reaches the editor's history.
         self.assertEqual(holds_after(keys("z")), one)
         self.assertEqual(holds_after(keys("y")), both)
         # Removing a hold is an edit too.
-        def remove_early():
-            self.driver.find_elements(By.CSS_SELECTOR, "#holds button")[0].click()
-
-        self.assertEqual(holds_after(remove_early), one)
+        self.assertEqual(holds_after(remove_first), one)
         self.assertEqual(holds_after(keys("z")), both)
         self.assertEqual(holds_after(keys("z", shift=True)), one)
         self.assertEqual(holds_after(keys("z")), both)
+        # In a field text is typed into, Ctrl+Z is the field's own: the holds stay (the next
+        # plan, asked for by another setting, shows them).
+        self.el("hold-duration").click()
+        keys("z")()
+        self.assertEqual(holds_after(select_filter("tent")), both)
+        # On a checkbox it is the editor's.
+        self.assertEqual(holds_after(lambda: self.el("reverse").click(), False), both)
+        self.assertEqual(holds_after(keys("z"), False), one)
+        self.assertEqual(holds_after(keys("y"), False), both)
+        self.assertEqual(holds_after(lambda: self.el("reverse").click()), both)
         # Knot edits and hold edits are one history: a knot raised, then undone step by step.
         knots_before = self.el("speed-text").get_attribute("value")
-        holds_after(self.speed_up_first_knot)
+        holds_after(self.speed_up_first_knot, False)
         self.assertNotEqual(self.el("speed-text").get_attribute("value"), knots_before)
         self.assertEqual(holds_after(keys("z")), both)
         self.assertEqual(self.el("speed-text").get_attribute("value"), knots_before)
@@ -1054,6 +1076,7 @@ class StudioBrowserTest(unittest.TestCase):
         past_end = str(round(seconds + 1, 2))
         for at, duration, said in [("", "0.5", "time a blank is not a number of seconds from 0"),
                                    ("-1", "0.5", 'time "-1" is not a number of seconds from 0'),
+                                   ("1e", "0.5", "time: what is typed is not a number"),
                                    (past_end, "0.5", "time %ss is after the end of the clip"
                                     % past_end),
                                    ("0", "0", 'duration "0" is not a number of seconds above 0'),
@@ -1067,7 +1090,12 @@ class StudioBrowserTest(unittest.TestCase):
                 self.assertTrue(self.shown("hold-error").endswith("; no hold added"))
         self.assertEqual(holds_after(add(early, 0.5)), both[:1])  # the early one alone
         self.assertEqual(self.shown("hold-error"), "")
-        self.assertEqual(holds_after(keys("z")), [])
+        # Over output time the holds are still sent, and back over source time still listed.
+        self.assertEqual(holds_after(lambda: Select(self.el("domain")).select_by_value("output"),
+                                     False), both[:1])
+        self.assertEqual(holds_after(lambda: Select(self.el("domain")).select_by_value("source"),
+                                     False), both[:1])
+        self.assertEqual(holds_after(remove_first, False), [])
 
     # ---- long jobs: a server whose one worker is busy, so the page's jobs wait in its queue ------
     def make_server_busy(self, busy):

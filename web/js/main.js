@@ -80,16 +80,13 @@ function commandLine(words) {
 }
 
 // ---- views ---------------------------------------------------------------------------------
-// The knots as the last change left them: a change of the holds alone leaves an error about
-// typed --speed text standing.
-let knotsSeen = '';
 const editor = new VelocityEditor($('editor'), {
   onChange: () => {
     state.lastEdit = performance.now();
-    const knots = JSON.stringify(editor.knots);
-    // The knots moved on: an error about text typed before them no longer applies.
-    if (knots !== knotsSeen && !$('speed-text-error').hidden) showSpeedTextError('');
-    knotsSeen = knots;
+    // The speed function moved on: an error about text typed, or hold fields filled, before
+    // it no longer applies.
+    if (!$('speed-text-error').hidden) showSpeedTextError('');
+    showHoldError('');
     renderHolds();  // an undo or a redo may have changed them
     requestPlan();
   },
@@ -210,7 +207,6 @@ function showClip({clip, samples}) {
   editor.setHolds([]);
   editor.showHolds(true);
   editor.forgetHistory();
-  knotsSeen = JSON.stringify(editor.knots);
   showHoldError('');
   renderHolds();
   fillChannels();
@@ -346,6 +342,12 @@ let planWanted = false;
 
 function requestPlan() {
   if (!state.clip) return;
+  // Limits the page refuses are not sent (an empty field would reach the server as its
+  // default): every edit while they stand is refused with them.
+  if (speedLimits().problem) {
+    refuseRetime('the speed limits are refused');
+    return;
+  }
   planWanted = true;
   if (!planInFlight) runPlan();
 }
@@ -706,7 +708,7 @@ function switchDomain() {
   editor.showHolds(!toOutput);
   editor.setKnots(knots, editor.selected);
   editor.forgetHistory();  // the edits before were in the other domain's times
-  knotsSeen = JSON.stringify(editor.knots);
+  showHoldError('');
   state.lastEdit = performance.now();
   requestPlan();
 }
@@ -736,10 +738,16 @@ function addHoldFromFields() {
   const duration = $('hold-duration').value.trim() === '' ? NaN : Number($('hold-duration').value);
   const end = +state.clip.duration.toPrecision(12);
   let problem = '';
-  if (!Number.isFinite(at) || at < 0) {
+  // A number field's value is '' both when it is blank and when what is typed is no number
+  // ("1e", "--1": validity.badInput, whose text the page cannot read).
+  if ($('hold-at').validity.badInput) {
+    problem = 'time: what is typed is not a number';
+  } else if (!Number.isFinite(at) || at < 0) {
     problem = `time ${typed('hold-at')} is not a number of seconds from 0`;
   } else if (at > state.clip.duration) {
     problem = `time ${at}s is after the end of the clip (${end}s)`;
+  } else if ($('hold-duration').validity.badInput) {
+    problem = 'duration: what is typed is not a number';
   } else if (!Number.isFinite(duration) || duration <= 0) {
     problem = `duration ${typed('hold-duration')} is not a number of seconds above 0`;
   }
@@ -1051,17 +1059,18 @@ for (const id of ['min-speed', 'max-speed', 'fps', 'fit-to-grid', 'fit-frames', 
   $(id).addEventListener('change', settingsChanged);
 }
 $('add-hold').addEventListener('click', addHoldFromFields);
-// Ctrl+Z / Ctrl+Shift+Z / Ctrl+Y reach the editor's history from anywhere on the page but a text
-// field (whose own undo they are) and the editor itself (which takes them): after a click on
-// "add hold" or a hold's ×, the undo is at hand.
+// Ctrl+Z / Ctrl+Shift+Z / Ctrl+Y reach the editor's history from anywhere on the page but a field
+// text is typed into (whose own undo they are) and the editor itself (which takes them): after a
+// click on "add hold", a hold's ×, a checkbox or a list, the undo is at hand.
+const TEXT_INPUT_TYPES = new Set(['text', 'number', 'password', 'search', 'email', 'url', 'tel']);
 document.addEventListener('keydown', (e) => {
   const key = e.key.toLowerCase();
-  if (!(e.ctrlKey || e.metaKey) || (key !== 'z' && key !== 'y')) return;
+  // Alt with Ctrl is AltGr on many keyboards: a character being typed, not a shortcut.
+  if (!(e.ctrlKey || e.metaKey) || e.altKey || e.defaultPrevented || (key !== 'z' && key !== 'y')) return;
   const target = e.target;
-  if (target === $('editor') || ['INPUT', 'TEXTAREA', 'SELECT'].includes(target.tagName) ||
-      target.isContentEditable) {
-    return;
-  }
+  const typedInto = target.tagName === 'TEXTAREA' || target.isContentEditable ||
+      (target.tagName === 'INPUT' && TEXT_INPUT_TYPES.has(target.type));
+  if (target === $('editor') || typedInto) return;
   e.preventDefault();
   if (key === 'z' && !e.shiftKey) editor.undo();
   else editor.redo();

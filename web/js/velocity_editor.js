@@ -156,9 +156,10 @@ export class VelocityEditor {
     if (from.length === 0) return false;
     to.push(this.snapshot());
     const {knots, holds, selected} = from.pop();
+    // An edit of the holds alone leaves the selection where the user has put it since.
+    if (!sameKnots(knots, this.knots)) this.selected = Math.min(selected, knots.length - 1);
     this.knots = knots;
     this.holds = holds;
-    this.selected = Math.min(selected, knots.length - 1);
     this.changed();
     return true;
   }
