@@ -328,12 +328,11 @@ function settingsChanged() {
   $('max-speed').classList.toggle('invalid', invalid);
   if (invalid) {
     showMessage(`speed limits: ${limits.problem} (the knots are kept)`);
-    refuseRetime('the speed limits are refused');
-    return;
+  } else {
+    clearMessageOf('speed limits');
+    editor.setLimits(limits.min, limits.max);
   }
-  clearMessageOf('speed limits');
-  editor.setLimits(limits.min, limits.max);
-  requestPlan();
+  requestPlan();  // refused while the limits are
 }
 
 // ---- live plan (PlanRetime): the latest edit wins, one request in flight -------------------------
@@ -342,8 +341,8 @@ let planWanted = false;
 
 function requestPlan() {
   if (!state.clip) return;
-  // Limits the page refuses are not sent (an empty field would reach the server as its
-  // default): every edit while they stand is refused with them.
+  // Limits the page refuses are not sent (a limit of 0 would reach the server, which reads 0
+  // as its default): every edit while they stand is refused with them.
   if (speedLimits().problem) {
     refuseRetime('the speed limits are refused');
     return;
@@ -601,15 +600,22 @@ function showSelectedKnot() {
   $('knot-speed').value = String(k.v);
 }
 
+// A typed field's number (NaN when blank) and its text as an error message quotes it.
+function typedNumber(id) {
+  return $(id).value.trim() === '' ? NaN : Number($(id).value);
+}
+function typed(id) {
+  return $(id).value.trim() === '' ? 'a blank' : `"${$(id).value}"`;
+}
+
 // The typed time and speed of the selected knot. A value the editor cannot take (blank, not a
 // number, a speed not above 0 or beyond the limits, a time past a neighbour's or the timeline's
 // end) is refused with a message, in the words of the --speed text's errors, and the field shows
 // the knot again: nothing typed is clamped silently.
 function applyKnotFields() {
   const index = editor.selected;
-  const time = $('knot-time').value.trim() === '' ? NaN : Number($('knot-time').value);
-  const speed = $('knot-speed').value.trim() === '' ? NaN : Number($('knot-speed').value);
-  const typed = (id) => ($(id).value.trim() === '' ? 'a blank' : `"${$(id).value}"`);
+  const time = typedNumber('knot-time');
+  const speed = typedNumber('knot-speed');
   let problem = '';
   if (!Number.isFinite(time) || time < 0) {
     problem = `time ${typed('knot-time')} is not a number of ${editor.selectedKnot().unit === 'f' ? 'frames' : 'seconds'} from 0`;
@@ -733,9 +739,8 @@ function renderHolds() {
 // fields are refused with a message (never dropped without a word, never clamped).
 function addHoldFromFields() {
   if (!state.clip) return;
-  const typed = (id) => ($(id).value.trim() === '' ? 'a blank' : `"${$(id).value}"`);
-  const at = $('hold-at').value.trim() === '' ? NaN : Number($('hold-at').value);
-  const duration = $('hold-duration').value.trim() === '' ? NaN : Number($('hold-duration').value);
+  const at = typedNumber('hold-at');
+  const duration = typedNumber('hold-duration');
   const end = +state.clip.duration.toPrecision(12);
   let problem = '';
   // A number field's value is '' both when it is blank and when what is typed is no number
@@ -1064,16 +1069,12 @@ $('add-hold').addEventListener('click', addHoldFromFields);
 // click on "add hold", a hold's ×, a checkbox or a list, the undo is at hand.
 const TEXT_INPUT_TYPES = new Set(['text', 'number', 'password', 'search', 'email', 'url', 'tel']);
 document.addEventListener('keydown', (e) => {
-  const key = e.key.toLowerCase();
   // Alt with Ctrl is AltGr on many keyboards: a character being typed, not a shortcut.
-  if (!(e.ctrlKey || e.metaKey) || e.altKey || e.defaultPrevented || (key !== 'z' && key !== 'y')) return;
+  if (e.altKey || e.defaultPrevented) return;
   const target = e.target;
   const typedInto = target.tagName === 'TEXTAREA' || target.isContentEditable ||
       (target.tagName === 'INPUT' && TEXT_INPUT_TYPES.has(target.type));
-  if (target === $('editor') || typedInto) return;
-  e.preventDefault();
-  if (key === 'z' && !e.shiftKey) editor.undo();
-  else editor.redo();
+  if (target !== $('editor') && !typedInto) editor.takeHistoryKey(e);
 });
 $('play').addEventListener('click', togglePlay);
 $('step-back').addEventListener('click', () => preview.step(-1));

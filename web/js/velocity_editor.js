@@ -163,6 +163,15 @@ export class VelocityEditor {
     this.changed();
     return true;
   }
+  // Ctrl+Z (Cmd+Z) undoes, Ctrl+Shift+Z or Ctrl+Y redoes: whether `e` is one of them, taken.
+  takeHistoryKey(e) {
+    const key = e.key.toLowerCase();
+    if (!(e.ctrlKey || e.metaKey) || (key !== 'z' && key !== 'y')) return false;
+    e.preventDefault();
+    if (key === 'z' && !e.shiftKey) this.undo();
+    else this.redo();
+    return true;
+  }
   forgetHistory() {
     this.past = [];
     this.future = [];
@@ -337,13 +346,7 @@ export class VelocityEditor {
   keyDown(e) {
     const k = this.selectedKnot();
     if (!k) return;
-    const key = e.key.toLowerCase();
-    if ((e.ctrlKey || e.metaKey) && (key === 'z' || key === 'y')) {
-      e.preventDefault();
-      if (key === 'z' && !e.shiftKey) this.undo();
-      else this.redo();
-      return;
-    }
+    if (this.takeHistoryKey(e)) return;
     const big = e.shiftKey ? 10 : 1;
     const before = this.snapshot();
     let handled = true;

@@ -371,21 +371,20 @@ def _certificates(pem: bytes) -> Optional[str]:
     return b"\n".join(blocks).decode("ascii") if blocks else None
 
 
-def _context(settings: ChannelSettings, verify: bool, check_name: bool = False) -> ssl.SSLContext:
+def _context(settings: ChannelSettings, verify: bool) -> ssl.SSLContext:
     """A client context as grpcio's: ALPN "h2" (a gRPC server closes the connection of a peer
     without it, grpc_ssl_check_alpn() in src/core/lib/security/security_connector/ssl_utils.cc,
     which would read as a refused client certificate). Without `verify`: no verification and the
     client's certificate, to complete the handshake whatever the server's certificate is; with
-    it: the client's roots, and the name when `check_name`."""
+    it: the client's roots, the name unchecked (check_hostname, which the caller may set)."""
     context = ssl.SSLContext(ssl.PROTOCOL_TLS_CLIENT)
     context.set_alpn_protocols(["h2"])
+    context.check_hostname = False
     if not verify:
-        context.check_hostname = False
         context.verify_mode = ssl.CERT_NONE
         if settings.certificate_chain and settings.private_key:
             _pem.load_cert_chain(context, settings.certificate_chain, settings.private_key)
         return context
-    context.check_hostname = check_name
     roots = (_certificates(settings.root_certificates) if settings.root_certificates
              else _default_roots())
     if roots:
@@ -451,13 +450,13 @@ def _verify(endpoints: list, settings: ChannelSettings, findings: Findings,
     """The server's certificate against the client's roots, then against the expected name, in
     handshakes of their own: OpenSSL checks the name before the dates, and an expired
     certificate is to be named expired whatever its names."""
-    error = _verification_error(_context(settings, verify=True), endpoints,
-                                findings.expected_name, deadline)
+    context = _context(settings, verify=True)  # its roots read once for both handshakes
+    error = _verification_error(context, endpoints, findings.expected_name, deadline)
     if error is not None:
         findings.verify_code, findings.verify_message = error.verify_code, error.verify_message
         return
-    error = _verification_error(_context(settings, verify=True, check_name=True), endpoints,
-                                findings.expected_name, deadline)
+    context.check_hostname = True
+    error = _verification_error(context, endpoints, findings.expected_name, deadline)
     findings.name_matches = error is None or error.verify_code not in _NAME_MISMATCH
 
 
