@@ -586,7 +586,11 @@ class StudioBrowserTest(unittest.TestCase):
         wait_for(lambda: self.el("knot-time").get_attribute("value") == "2", "the second knot selected")
         for field, value, said in [("knot-speed", "0", 'speed "0"'), ("knot-speed", "-1", 'speed "-1"'),
                                    ("knot-speed", "", "speed a blank"), ("knot-time", "", "time a blank"),
-                                   ("knot-time", "-1", 'time "-1"')]:
+                                   ("knot-time", "-1", 'time "-1"'),
+                                   # Text that is no number reads as '' from a number field, as
+                                   # a blank does: it is named for what it is, not "a blank".
+                                   ("knot-time", "1e", "time: what is typed is not a number"),
+                                   ("knot-speed", "--1", "speed: what is typed is not a number")]:
             with self.subTest(field=field, value=value):
                 self.expect_knot_refused(field, value, said, "2", "0.5")
         self.type_over("knot-speed", "0.75", Keys.TAB)

@@ -608,6 +608,16 @@ function typed(id) {
   return $(id).value.trim() === '' ? 'a blank' : `"${$(id).value}"`;
 }
 
+// Why number field `id` (named `name` in the message) cannot be used, or '' when its number
+// passes `usable`: `wanted` says what it should be. A number field's value is '' both when it is
+// blank and when what is typed is no number ("1e", "--1": validity.badInput, whose text the page
+// cannot read), so the two are told apart here, never both called a blank.
+function numberFieldProblem(id, name, usable, wanted) {
+  if ($(id).validity.badInput) return `${name}: what is typed is not a number`;
+  const value = typedNumber(id);
+  return Number.isFinite(value) && usable(value) ? '' : `${name} ${typed(id)} is not ${wanted}`;
+}
+
 // The typed time and speed of the selected knot. A value the editor cannot take (blank, not a
 // number, a speed not above 0 or beyond the limits, a time past a neighbour's or the timeline's
 // end) is refused with a message, in the words of the --speed text's errors, and the field shows
@@ -616,14 +626,11 @@ function applyKnotFields() {
   const index = editor.selected;
   const time = typedNumber('knot-time');
   const speed = typedNumber('knot-speed');
-  let problem = '';
-  if (!Number.isFinite(time) || time < 0) {
-    problem = `time ${typed('knot-time')} is not a number of ${editor.selectedKnot().unit === 'f' ? 'frames' : 'seconds'} from 0`;
-  } else if (!Number.isFinite(speed) || speed <= 0) {
-    problem = `speed ${typed('knot-speed')} is not a number above 0`;
-  } else {
-    problem = editor.fieldProblem(time, speed);
-  }
+  const unit = editor.selectedKnot().unit === 'f' ? 'frames' : 'seconds';
+  const problem =
+    numberFieldProblem('knot-time', 'time', (t) => t >= 0, `a number of ${unit} from 0`) ||
+    numberFieldProblem('knot-speed', 'speed', (v) => v > 0, 'a number above 0') ||
+    editor.fieldProblem(time, speed);
   if (problem) {
     showKnotError(`knot ${index + 1}: ${problem}; kept at ${knotLabel(editor.selectedKnot())}`);
     showSelectedKnot();
@@ -742,20 +749,10 @@ function addHoldFromFields() {
   const at = typedNumber('hold-at');
   const duration = typedNumber('hold-duration');
   const end = +state.clip.duration.toPrecision(12);
-  let problem = '';
-  // A number field's value is '' both when it is blank and when what is typed is no number
-  // ("1e", "--1": validity.badInput, whose text the page cannot read).
-  if ($('hold-at').validity.badInput) {
-    problem = 'time: what is typed is not a number';
-  } else if (!Number.isFinite(at) || at < 0) {
-    problem = `time ${typed('hold-at')} is not a number of seconds from 0`;
-  } else if (at > state.clip.duration) {
-    problem = `time ${at}s is after the end of the clip (${end}s)`;
-  } else if ($('hold-duration').validity.badInput) {
-    problem = 'duration: what is typed is not a number';
-  } else if (!Number.isFinite(duration) || duration <= 0) {
-    problem = `duration ${typed('hold-duration')} is not a number of seconds above 0`;
-  }
+  const problem =
+    numberFieldProblem('hold-at', 'time', (t) => t >= 0, 'a number of seconds from 0') ||
+    (at > state.clip.duration ? `time ${at}s is after the end of the clip (${end}s)` : '') ||
+    numberFieldProblem('hold-duration', 'duration', (d) => d > 0, 'a number of seconds above 0');
   showHoldError(problem ? `hold: ${problem}; no hold added` : '');
   if (!problem) editor.addHold(at, duration);
 }
