@@ -16,6 +16,7 @@
 #include "absl/strings/str_format.h"
 #include "absl/strings/str_join.h"
 #include "proto/arena_message.h"
+#include "proto/bearer_token.h"
 #include "proto/jobs_convert.h"
 #include "proto/loopback.h"
 #include "proto/operations_convert.h"
@@ -109,6 +110,8 @@ absl::Status ValidateClientOptions(const ClientOptions& options) {
     return absl::InvalidArgumentError(
         "a client certificate needs its private key and a key its certificate");
   }
+  // gRPC aborts the whole process on a call whose metadata is no valid header value.
+  TEMPOKEY_RETURN_IF_ERROR(wire::CheckBearerToken(options.bearer_token));
   if (!options.bearer_token.empty() && !options.tls.enabled && !options.allow_plaintext_token &&
       !wire::IsLoopbackTarget(options.target)) {
     return absl::InvalidArgumentError(absl::StrCat(

@@ -114,7 +114,9 @@ class Client {
   static absl::StatusOr<std::unique_ptr<Client>> Connect(const ClientOptions& options);
 
   // Uses an existing channel, e.g. an in-process one; `options` supply deadlines, retries, token
-  // and slice size (target, TLS and channel arguments are the channel's own).
+  // and slice size (target, TLS and channel arguments are the channel's own). Its token must
+  // pass wire::CheckBearerToken() (ValidateClientOptions() checks it): gRPC aborts the process
+  // on a call whose metadata is no valid header value.
   Client(std::shared_ptr<grpc::Channel> channel, ClientOptions options);
 
   const ClientOptions& options() const { return options_; }

@@ -11,6 +11,7 @@
 #include "client/cli_errors.h"
 #include "client/clip_files.h"
 #include "client/clip_summary.h"
+#include "proto/bearer_token.h"
 #include "proto/pem_check.h"
 #include "tempokey/core/io/file_io.h"
 #include "tempokey/core/model/status.h"
@@ -36,12 +37,31 @@ constexpr FlagSpec kGlobalFlags[] = {
      "send the token without TLS to another machine (a network that encrypts it itself)"},
 };
 
-// A token file holds the token and maybe a trailing newline.
 std::string TrimWhitespace(std::string text) {
   const auto not_space = [](unsigned char c) { return !std::isspace(c); };
   text.erase(text.begin(), std::find_if(text.begin(), text.end(), not_space));
   text.erase(std::find_if(text.rbegin(), text.rend(), not_space).base(), text.end());
   return text;
+}
+
+// The token in `text`, read from `source` (a token file, or $TEMPOKEY_TOKEN): the text without
+// a UTF-8 byte order mark (editors write one) and whitespace around it, one line of printable
+// ASCII (wire::CheckBearerToken()), or why not, named by its source. A server's --auth_token_file
+// lists several tokens, one a line: given to the client, it is refused by its line count, where
+// a token holding line breaks made gRPC abort the process without a word.
+absl::StatusOr<std::string> TokenFrom(std::string text, std::string_view source) {
+  constexpr std::string_view kByteOrderMark = "\xEF\xBB\xBF";
+  if (std::string_view(text).starts_with(kByteOrderMark)) text.erase(0, kByteOrderMark.size());
+  std::string token = TrimWhitespace(std::move(text));
+  if (const auto lines = std::count(token.begin(), token.end(), '\n'); lines > 0) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        core::AsAbsl(source), ": holds ", lines + 1, " lines; the client sends one token (a server's "
+        "--auth_token_file lists several: give the client a file with its own alone)"));
+  }
+  if (absl::Status valid = wire::CheckBearerToken(token); !valid.ok()) {
+    return absl::InvalidArgumentError(absl::StrCat(core::AsAbsl(source), ": ", valid.message()));
+  }
+  return token;
 }
 
 constexpr std::int64_t kMaxPemBytes = 1 << 20;
@@ -101,13 +121,13 @@ absl::StatusOr<ClientOptions> ClientOptionsFromFlags(const ParsedArgs& args) {
     tls.target_name_override = *name;
   }
   if (std::optional<std::string> token_file = args.Value("--token-file")) {
-    TEMPOKEY_ASSIGN_OR_RETURN(std::string token, core::ReadTextFile(*token_file, kMaxPemBytes));
-    options.bearer_token = TrimWhitespace(std::move(token));
+    TEMPOKEY_ASSIGN_OR_RETURN(std::string text, core::ReadTextFile(*token_file, kMaxPemBytes));
+    TEMPOKEY_ASSIGN_OR_RETURN(options.bearer_token, TokenFrom(std::move(text), *token_file));
     if (options.bearer_token.empty()) {
       return absl::InvalidArgumentError(absl::StrCat(*token_file, ": the token file is empty"));
     }
   } else if (const char* env = std::getenv("TEMPOKEY_TOKEN"); env != nullptr && *env != '\0') {
-    options.bearer_token = TrimWhitespace(env);
+    TEMPOKEY_ASSIGN_OR_RETURN(options.bearer_token, TokenFrom(env, "$TEMPOKEY_TOKEN"));
   }
   options.allow_plaintext_token = args.Has("--allow-plaintext-token");
   return options;

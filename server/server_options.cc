@@ -20,6 +20,7 @@
 #include "absl/strings/ascii.h"
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "proto/bearer_token.h"
 #include "proto/loopback.h"
 #include "tempokey/core/model/status.h"
 
@@ -104,11 +105,19 @@ absl::StatusOr<std::vector<std::string>> ReadTokenFile(const std::string& path) 
   buffer << in.rdbuf();
   const std::string text = buffer.str();
   std::vector<std::string> tokens;
-  std::istringstream lines(text);
+  // A UTF-8 byte order mark (editors write one) is no part of the first line's token.
+  constexpr std::string_view kByteOrderMark = "\xEF\xBB\xBF";
+  std::istringstream lines(std::string_view(text).starts_with(kByteOrderMark)
+                               ? text.substr(kByteOrderMark.size())
+                               : text);
   std::string line;
-  while (std::getline(lines, line)) {
+  for (int number = 1; std::getline(lines, line); ++number) {
     std::string token = Trim(line);
     if (token.empty() || token[0] == '#') continue;
+    // No client could send it (wire::CheckBearerToken()): refused here rather than never matched.
+    if (absl::Status valid = wire::CheckBearerToken(token); !valid.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat(path, ":", number, ": ", valid.message()));
+    }
     tokens.push_back(std::move(token));
   }
   if (tokens.empty()) {
@@ -278,6 +287,9 @@ absl::Status ValidateServerOptions(const ServerOptions& o) {
   }
   for (const std::string& token : o.auth_tokens) {
     if (token.empty()) return absl::InvalidArgumentError("an auth token is empty");
+    if (absl::Status valid = wire::CheckBearerToken(token); !valid.ok()) {
+      return absl::InvalidArgumentError(absl::StrCat("an auth token: ", valid.message()));
+    }
   }
   if (o.memory_budget_bytes < 0) {
     return absl::InvalidArgumentError(absl::StrCat(

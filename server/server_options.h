@@ -127,8 +127,9 @@ std::int64_t MemoryLimitFrom(std::string_view v2_memory_max, std::string_view v1
 std::int64_t DefaultMemoryBudget();
 
 // Reads bearer tokens from `path`: one per line, blank lines and lines starting with '#'
-// ignored, surrounding whitespace trimmed.
-// Errors: kNotFound / kUnavailable reading the file; kInvalidArgument when it holds no token.
+// ignored, surrounding whitespace (and a leading UTF-8 byte order mark) trimmed.
+// Errors: kNotFound / kUnavailable reading the file; kInvalidArgument when it holds no token, or
+// a token no client could send (wire::CheckBearerToken(), "path:line: ...").
 absl::StatusOr<std::vector<std::string>> ReadTokenFile(const std::string& path);
 
 // True for gRPC's unix-domain socket addresses ("unix:PATH", "unix:///PATH",

@@ -3,6 +3,7 @@
 // deploy/install-deps.sh) in the test's temporary directory.
 #include <sys/stat.h>
 
+#include <algorithm>
 #include <chrono>
 #include <memory>
 #include <string>
@@ -363,6 +364,44 @@ TEST_F(CliSecurityTest, BearerTokenComesFromAFileOrTheEnvironment) {
   EXPECT_EQ(from_file.exit_code, 0) << from_file.err;
   EXPECT_THAT(from_file.out, StartsWith("clip id:         sha256:"));
   EXPECT_EQ(from_env.exit_code, 0) << from_env.err;
+}
+
+// A token that cannot travel in an HTTP/2 header is refused in one line naming where it came from
+// and the byte at fault (never the token: it is a secret), exit 1 as for any input the CLI
+// cannot use; gRPC aborted the process on such
+// metadata, exit 134 and not a word. A byte order mark and a CRLF ending, as editors write them,
+// are no part of the token.
+TEST_F(CliSecurityTest, ATokenThatCannotTravelInAHeaderIsOneLineNotACrash) {
+  ASSERT_TRUE(core::WriteFileAtomically(Path("tokens.txt"), "# accepted\ns3cret\n").ok());
+  ASSERT_TRUE(core::WriteFileAtomically(Path("bom"), "\xEF\xBB\xBFs3cret\r\n").ok());
+  ASSERT_TRUE(core::WriteFileAtomically(Path("accent"), "s3cr\xC3\xA9t\n").ok());
+  StartServer({"--auth_token_file", Path("tokens.txt")});
+
+  ProcessResult bom = Tempokey({"--token-file", Path("bom"), "health"});
+  ProcessResult server_file = Tempokey({"--token-file", Path("tokens.txt"), "health"});
+  ProcessResult accent = Tempokey({"--token-file", Path("accent"), "health"});
+  ProcessResult tab = Tempokey({"health"}, {"TEMPOKEY_TOKEN=s3\tcret"});
+  ProcessResult control = Tempokey({"health"}, {"TEMPOKEY_TOKEN=s3\x01" "cret"});
+
+  EXPECT_EQ(bom.exit_code, 0) << bom.err;
+  EXPECT_EQ(server_file.exit_code, 1);
+  EXPECT_EQ(server_file.err,
+            "error: " + Path("tokens.txt") +
+                ": holds 2 lines; the client sends one token (a server's --auth_token_file lists "
+                "several: give the client a file with its own alone)\n");
+  EXPECT_EQ(accent.exit_code, 1);
+  EXPECT_EQ(accent.err, "error: " + Path("accent") +
+                            ": the token holds byte 0xc3 (not ASCII) at byte 5; a bearer token is "
+                            "one line of printable ASCII (it travels in an HTTP header)\n");
+  EXPECT_EQ(tab.exit_code, 1);
+  EXPECT_THAT(tab.err, StartsWith("error: $TEMPOKEY_TOKEN: the token holds a tab at byte 3; "));
+  EXPECT_EQ(control.exit_code, 1);
+  EXPECT_THAT(control.err,
+              StartsWith("error: $TEMPOKEY_TOKEN: the token holds control character 0x01 at "));
+  for (const ProcessResult* run : {&server_file, &accent, &tab, &control}) {
+    EXPECT_EQ(std::count(run->err.begin(), run->err.end(), '\n'), 1) << run->err;
+    EXPECT_EQ(run->err.find("s3"), std::string::npos) << "the token shown: " << run->err;
+  }
 }
 
 // A token goes to another machine only over TLS: refused before any connection, one line, exit 2

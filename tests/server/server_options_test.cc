@@ -113,6 +113,23 @@ TEST(ReadTokenFileTest, SkipsCommentsAndBlankLinesAndTrims) {
   EXPECT_EQ(missing.status().code(), absl::StatusCode::kNotFound);
 }
 
+// A token no client could send (wire::CheckBearerToken()) stops the server at its start with the
+// file's line, rather than sitting in the list never matched; a byte order mark is no token's.
+TEST(ReadTokenFileTest, ABomIsSkippedAndATokenNoHeaderCanCarryIsRefusedByItsLine) {
+  const std::string dir = testing::MakeTempDir();
+  ASSERT_TRUE(core::WriteFileAtomically(dir + "/bom", "\xEF\xBB\xBF" "first\r\nsecond\n").ok());
+  ASSERT_TRUE(core::WriteFileAtomically(dir + "/latin", "# tokens\nfine\ncaf\xE9\n").ok());
+
+  const absl::StatusOr<std::vector<std::string>> bom = ReadTokenFile(dir + "/bom");
+  const absl::StatusOr<std::vector<std::string>> latin = ReadTokenFile(dir + "/latin");
+
+  ASSERT_TRUE(bom.ok()) << bom.status();
+  EXPECT_EQ(*bom, (std::vector<std::string>{"first", "second"}));
+  EXPECT_EQ(latin.status().message(),
+            dir + "/latin:3: the token holds byte 0xe9 (not ASCII) at byte 4; a bearer token is "
+                  "one line of printable ASCII (it travels in an HTTP header)");
+}
+
 TEST(ValidateServerOptionsTest, RefusesWhatNoServerCanRunWith) {
   struct Case {
     void (*edit)(ServerOptions&);
@@ -141,6 +158,9 @@ TEST(ValidateServerOptionsTest, RefusesWhatNoServerCanRunWith) {
       {[](ServerOptions& o) { o.tls_client_ca_file = "ca.pem"; },
        "--tls_client_ca needs --tls_cert and --tls_key (mutual TLS is TLS first)"},
       {[](ServerOptions& o) { o.auth_tokens = {"ok", ""}; }, "an auth token is empty"},
+      {[](ServerOptions& o) { o.auth_tokens = {"ok", "two\nlines"}; },
+       "an auth token: the token holds a line break at byte 4; a bearer token is one line of "
+       "printable ASCII (it travels in an HTTP header)"},
       {[](ServerOptions& o) { o.address = "0.0.0.0:50051"; },
        "refusing to listen on non-loopback address 0.0.0.0:50051 without TLS (0.0.0.0 is not a "
        "loopback address): give --tls_cert and --tls_key, or --allow_insecure_remote"},
