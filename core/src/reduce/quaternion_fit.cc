@@ -171,8 +171,11 @@ absl::StatusOr<QuaternionCurve> FitQuaternionCurve(std::span<const Quat> rotatio
   }
   const std::array<std::span<const double>, 4> channels = {components[0], components[1],
                                                            components[2], components[3]};
-  const double safe_bound =
-      0.5 * std::sin(0.5 * max_angle_degrees * std::numbers::pi / 180.0);
+  // No two rotations are more than 180 degrees apart, so any larger bound is 180: taken as given,
+  // sin(angle / 2) turns down past it and goes negative past 360 (a bound of 359 degrees asked
+  // for ten times the keys of 180, one of 400 failed as "the bound must be > 0").
+  const double angle = std::min(max_angle_degrees, 180.0);
+  const double safe_bound = 0.5 * std::sin(0.5 * angle * std::numbers::pi / 180.0);
   double last_bound = -1.0;
   for (double scale : kBoundScales) {
     TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));

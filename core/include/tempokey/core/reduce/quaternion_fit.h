@@ -49,8 +49,9 @@ Quat EvaluateQuaternionCurve(const QuaternionCurve& curve, double time_seconds);
 
 // Fits `rotations` (one per source frame, frame i at i * frame_time_seconds) with the fewest keys
 // this fit finds such that EvaluateQuaternionCurve() at every source frame is within
-// `max_angle_degrees` of the source rotation (angle of the rotation between them). Values,
-// tangents and times of the result are already rounded to float32.
+// `max_angle_degrees` of the source rotation (angle of the rotation between them; a bound of 180
+// or more allows any rotation, and gives the fit of 180). Values, tangents and times of the
+// result are already rounded to float32.
 //
 // Errors: kInvalidArgument for no rotations, a non-finite or zero quaternion, a frame time or
 // bound that is not finite and > 0, or a frame time too small for float32 key times to stay
