@@ -257,6 +257,42 @@ void AppendRotateOrders(std::string& out, const Clip& layout) {
   }
 }
 
+// Why `name` cannot be one word of a .anim line, or nullptr. The format splits its lines into
+// words at whitespace, ends a statement at ';', opens and closes sections with braces, and takes
+// '//' and '#' as comment marks (the format's description, "Anim File Format", Maya help); a name
+// holding any of them makes the line something else, which Maya refuses or misreads.
+const char* AnimWordProblem(std::string_view name) {
+  if (name.empty()) return "is empty";
+  for (char c : name) {
+    const auto byte = static_cast<unsigned char>(c);
+    if (c == ' ' || c == '\t') return "contains whitespace, where a .anim line splits into words";
+    if (byte < 0x20 || byte == 0x7f) return "contains a control character";
+    if (c == ';') return "contains ';', which ends a .anim statement";
+    if (c == '{' || c == '}') return "contains a brace, which opens or closes a .anim section";
+    if (c == '#') return "contains '#', which starts a .anim comment";
+  }
+  if (name.find("//") != std::string_view::npos) return "contains '//', which starts a .anim comment";
+  return nullptr;
+}
+
+// Every name the file writes as a word (joints' names as nodes; a scalar channel's name as its
+// node and attribute) can be read back as that word.
+absl::Status CheckAnimNames(const Clip& layout) {
+  for (std::size_t c = 0; c < layout.channels.size(); ++c) {
+    const Channel& channel = layout.channels[c];
+    const bool joint = channel.joint >= 0;
+    const std::string name =
+        joint ? layout.skeleton.joints[channel.joint].name : ChannelName(layout, static_cast<int>(c));
+    if (const char* problem = AnimWordProblem(name)) {
+      const std::int64_t index = joint ? channel.joint : static_cast<std::int64_t>(c);
+      return absl::InvalidArgumentError(absl::StrCat(
+          "cannot write .anim: ", joint ? "joint " : "channel ", index,
+          " name ", QuoteForMessage(name), " ", problem, "; rename it, or write .json"));
+    }
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 MayaRotateOrder MayaRotateOrderOf(const std::array<int, 3>& order) {
@@ -271,6 +307,7 @@ MayaRotateOrder MayaRotateOrderOf(const std::array<int, 3>& order) {
 
 absl::StatusOr<std::string> FormatMayaAnim(const KeyedClip& keyed) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateKeyedClip(keyed));
+  TEMPOKEY_RETURN_IF_ERROR(CheckAnimNames(keyed.layout));
   const Clip& layout = keyed.layout;
   const TimeUnit& unit = TimeUnitFor(layout.frame_rate());
   const FileFrames frames(layout.frame_time_seconds, unit);

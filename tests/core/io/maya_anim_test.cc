@@ -9,12 +9,15 @@
 #include <map>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
+#include "absl/strings/str_cat.h"
 #include "gmock/gmock.h"
 #include "gtest/gtest.h"
 #include "tempokey/core/io/bvh.h"
 #include "tempokey/core/model/kinematics.h"
+#include "tempokey/core/model/numbers.h"
 #include "tempokey/core/reduce/reduce.h"
 #include "tests/testing/maya_anim_eval.h"
 #include "tests/testing/test_paths.h"
@@ -163,6 +166,39 @@ TEST(MayaAnimTest, UnweightedKeysAreWrittenNonWeightedWithAnglesPerFrame) {
   EXPECT_THAT(*text, HasSubstr("    30 30 fixed fixed 1 0 0 45 1 45 1;\n"));
   const MayaAnimFile file = Parse(*text);
   EXPECT_NEAR(Eval(file.curves[0], 12.0), 12.0, kRoundTrip);
+}
+
+// A name is one word of a .anim line: one that holds the format's separators or comment marks is
+// refused, naming it and why (it was written as it was, exit 0, into a file Maya cannot read:
+// "anim left foot contact left foot contact left foot contact 0 0 0;"). Namespaced names stay.
+TEST(MayaAnimTest, NamesThatCannotBeOneWordOfALineAreRefusedNamingThem) {
+  Key a;
+  Key b;
+  b.time_seconds = 1.0;
+  for (const auto& [name, problem] : std::vector<std::pair<std::string, std::string>>{
+           {"left foot contact", "contains whitespace, where a .anim line splits into words"},
+           {"Hips;evil", "contains ';', which ends a .anim statement"},
+           {"arm{1}", "contains a brace, which opens or closes a .anim section"},
+           {"take#2", "contains '#', which starts a .anim comment"},
+           {"a//b", "contains '//', which starts a .anim comment"},
+           {"tab\there", "contains whitespace, where a .anim line splits into words"},
+           {"bell\x07", "contains a control character"}}) {
+    KeyedClip keyed = ScalarKeyed({a, b}, 31);
+    keyed.layout.channels[0].name = name;
+
+    const absl::StatusOr<std::string> text = FormatMayaAnim(keyed);
+
+    EXPECT_EQ(text.status().code(), absl::StatusCode::kInvalidArgument) << name;
+    EXPECT_EQ(text.status().message(),
+              absl::StrCat("cannot write .anim: channel 0 name ", QuoteForMessage(name), " ",
+                           problem, "; rename it, or write .json"));
+  }
+  KeyedClip namespaced = ScalarKeyed({a, b}, 31);
+  namespaced.layout.channels[0].name = "rig:blend_L.weight";
+  const absl::StatusOr<std::string> text = FormatMayaAnim(namespaced);
+  ASSERT_TRUE(text.ok()) << text.status();
+  EXPECT_THAT(*text, HasSubstr("anim rig:blend_L.weight rig:blend_L.weight rig:blend_L.weight 0 0 0;\n"));
+  EXPECT_EQ(Parse(*text).curves.size(), 1u);
 }
 
 TEST(MayaAnimTest, WeightedKeysAreHandleLengthsInFramesAndValues) {

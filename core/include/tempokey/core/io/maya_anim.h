@@ -82,7 +82,9 @@
 namespace tempokey::core {
 
 // The Maya .anim text of `keyed` (conventions above).
-// Errors: kInvalidArgument from ValidateKeyedClip(). Thread-safe.
+// Errors: kInvalidArgument from ValidateKeyedClip(), or for a joint's or scalar channel's name
+// that cannot be one word of a .anim line (empty, or holding whitespace, a control character,
+// ';', a brace, '#' or '//': the format's separators and comment marks). Thread-safe.
 absl::StatusOr<std::string> FormatMayaAnim(const KeyedClip& keyed);
 
 // FormatMayaAnim() then WriteFileAtomically().
