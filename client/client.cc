@@ -82,6 +82,8 @@ struct Attempt {
 
 absl::Status ValidateClientOptions(const ClientOptions& options) {
   if (options.target.empty()) return absl::InvalidArgumentError("the server target is empty");
+  TEMPOKEY_RETURN_IF_ERROR(core::Annotate(wire::CheckTargetPorts(options.target),
+                                          absl::StrCat("server ", options.target)));
   if (!std::isfinite(options.timeout_seconds)) {
     return absl::InvalidArgumentError("the timeout must be a finite number of seconds");
   }

@@ -1,10 +1,13 @@
-// Loopback addresses, as the server's bind checks and the clients' token check see them. Pure
-// string and socket-address logic, shared by the server and the client library.
+// Loopback addresses, as the server's bind checks and the clients' token check see them, and the
+// ports of addresses and targets. Pure string and socket-address logic, shared by the server and
+// the client library.
 #ifndef TEMPOKEY_PROTO_LOOPBACK_H_
 #define TEMPOKEY_PROTO_LOOPBACK_H_
 
 #include <string>
 #include <string_view>
+
+#include "absl/status/status.h"
 
 struct sockaddr;
 
@@ -30,6 +33,13 @@ bool IsLoopbackLiteral(std::string_view host);
 // "ipv6:" address lists, and a bare "host[:port]", which is dns). Any other scheme (xds, vsock)
 // is not known to stay here.
 bool IsLoopbackTarget(std::string_view target);
+
+// OK unless an address of `target` (the forms above; a server's listening address "host:port"
+// too) has a port of digits that is no TCP port: gRPC takes such a port modulo 65536, so
+// 127.0.0.1:99999 reached 127.0.0.1:34463 and a server asked for :70000 listened on 4464.
+// InvalidArgument "port 99999 is not a TCP port (0 to 65535)". Other schemes' targets are their
+// resolvers' to read.
+absl::Status CheckTargetPorts(std::string_view target);
 
 }  // namespace tempokey::wire
 

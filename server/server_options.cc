@@ -15,6 +15,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <utility>
 
 #include "absl/status/statusor.h"
 #include "absl/strings/ascii.h"
@@ -234,6 +235,11 @@ absl::Status ValidateServerOptions(const ServerOptions& o) {
         absl::StrCat("--", core::AsAbsl(name), " must be > 0, got ", value));
   };
   if (o.address.empty()) return absl::InvalidArgumentError("--address must not be empty");
+  for (const auto& [flag, address] : {std::pair<const char*, const std::string&>{"--address", o.address},
+                                      {"--metrics_address", o.metrics_address}}) {
+    TEMPOKEY_RETURN_IF_ERROR(
+        core::Annotate(wire::CheckTargetPorts(address), absl::StrCat(flag, " ", address)));
+  }
   TEMPOKEY_RETURN_IF_ERROR(positive("queue_capacity", o.queue_capacity));
   TEMPOKEY_RETURN_IF_ERROR(positive("max_message_bytes", o.max_message_bytes));
   if (o.max_message_bytes > (std::int64_t{1} << 31) - 1) {

@@ -16,6 +16,7 @@
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "grpcpp/support/channel_arguments.h"
+#include "proto/loopback.h"
 #include "server/http/connection_socket.h"
 #include "server/http/http_status.h"
 #include "spdlog/spdlog.h"
@@ -388,6 +389,8 @@ absl::StatusOr<std::string> ListeningPort(const std::string& address) {
     return absl::InvalidArgumentError(
         absl::StrCat("--http_address ", address, ": port \"", port, "\" is not a number"));
   }
+  TEMPOKEY_RETURN_IF_ERROR(core::Annotate(wire::CheckTargetPorts(address),
+                                          absl::StrCat("--http_address ", address)));
   return absl::StrCat(host, ":", port);
 }
 

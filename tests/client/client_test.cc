@@ -406,6 +406,11 @@ ClientOptions With(Change change) {
 TEST(ClientOptionsTest, RefusesOptionsNoChannelCanUse) {
   EXPECT_EQ(ValidateClientOptions(With([](auto& o) { o.target = ""; })).message(),
             "the server target is empty");
+  EXPECT_EQ(ValidateClientOptions(With([](auto& o) { o.target = "127.0.0.1:99999"; })).message(),
+            "server 127.0.0.1:99999: port 99999 is not a TCP port (0 to 65535)");
+  EXPECT_EQ(ValidateClientOptions(With([](auto& o) { o.bearer_token = "two\nlines"; })).message(),
+            "the token holds a line break at byte 4; a bearer token is one line of printable "
+            "ASCII (it travels in an HTTP header)");
   EXPECT_EQ(ValidateClientOptions(With([](auto& o) { o.max_attempts = 0; })).message(),
             "attempts must be in 1..10, got 0");
   EXPECT_EQ(ValidateClientOptions(With([](auto& o) { o.load_balancing_policy = "random"; })).message(),

@@ -647,6 +647,31 @@ class TokenTransportTest(unittest.TestCase):
             client.close()
 
 
+class TargetPortTest(unittest.TestCase):
+    """gRPC takes a port modulo 65536: 127.0.0.1:99999 reached 127.0.0.1:34463, a server of
+    someone else's perhaps. A port of digits past 65535 is refused before any channel is made,
+    in every form of target, as the C++ client refuses it (tests/proto/loopback_test.cc)."""
+
+    def test_a_port_past_65535_is_refused_in_every_form_of_target(self):
+        for target, port in [("127.0.0.1:65536", "65536"), ("127.0.0.1:99999", "99999"),
+                             ("[::1]:70000", "70000"), ("dns:///localhost:100000", "100000"),
+                             ("dns://8.8.8.8/host:65536", "65536"),
+                             ("ipv4:127.0.0.1:1,127.0.0.2:65537", "65537"),
+                             ("ipv6:[::1]:1,[::1]:99999", "99999")]:
+            with self.subTest(target=target):
+                with self.assertRaises(ValueError) as caught:
+                    tk.connect(target)
+                self.assertEqual(str(caught.exception),
+                                 "target %s: port %s is not a TCP port (0 to 65535)"
+                                 % (target, port))
+        for target in ["127.0.0.1:65535", "127.0.0.1:0", "localhost", "[::1]:443", "::1",
+                       "dns:///localhost:50051", "ipv4:127.0.0.1:1,127.0.0.2:2",
+                       "unix:/run/tempokey.sock:99999", "xds:///tempokey:99999",
+                       "example.com:https"]:
+            with self.subTest(target=target):
+                tk.connect(target).close()
+
+
 class ClientDeadlineTest(unittest.TestCase):
     """gRPC reports a deadline that passed on the client's side as "Deadline Exceeded", which
     names neither the timeout nor how to change it; the package and the CLI name it."""

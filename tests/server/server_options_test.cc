@@ -158,6 +158,10 @@ TEST(ValidateServerOptionsTest, RefusesWhatNoServerCanRunWith) {
       {[](ServerOptions& o) { o.tls_client_ca_file = "ca.pem"; },
        "--tls_client_ca needs --tls_cert and --tls_key (mutual TLS is TLS first)"},
       {[](ServerOptions& o) { o.auth_tokens = {"ok", ""}; }, "an auth token is empty"},
+      {[](ServerOptions& o) { o.address = "127.0.0.1:70000"; },
+       "--address 127.0.0.1:70000: port 70000 is not a TCP port (0 to 65535)"},
+      {[](ServerOptions& o) { o.metrics_address = "127.0.0.1:65536"; },
+       "--metrics_address 127.0.0.1:65536: port 65536 is not a TCP port (0 to 65535)"},
       {[](ServerOptions& o) { o.auth_tokens = {"ok", "two\nlines"}; },
        "an auth token: the token holds a line break at byte 4; a bearer token is one line of "
        "printable ASCII (it travels in an HTTP header)"},

@@ -590,6 +590,42 @@ def is_loopback_target(target: str) -> bool:
     return bool(host) and _is_loopback_host(host)
 
 
+def _port_of(address: str) -> str:
+    """The port of "host:port" or "[v6]:port"; "" when the address names none."""
+    if address.startswith("["):
+        close = address.find("]")
+        rest = address[close + 1:] if close >= 0 else ""
+        return rest[1:] if rest.startswith(":") else ""
+    return address.rsplit(":", 1)[1] if address.count(":") == 1 else ""
+
+
+def _check_target_ports(target: str) -> None:
+    """Refuses a target whose port of digits is no TCP port, as the C++ client's
+    wire::CheckTargetPorts(): gRPC takes a port modulo 65536, so 127.0.0.1:99999 reached
+    127.0.0.1:34463. Other schemes' targets are their resolvers' to read."""
+    lower = target.lower()
+    if lower.startswith(("unix:", "unix-abstract:")):
+        return
+    addresses = [target]
+    if lower.startswith(("ipv4:", "ipv6:")):
+        addresses = target[5:].split(",")
+    elif lower.startswith("dns:"):
+        rest = target[4:]
+        if rest.startswith("//"):
+            slash = rest.find("/", 2)
+            if slash < 0:
+                return
+            rest = rest[slash + 1:]
+        addresses = [rest]
+    elif target[max(target.find(":"), 0):].startswith("://"):
+        return
+    for address in addresses:
+        port = _port_of(address)
+        if port.isascii() and port.isdigit() and int(port) > 65535:
+            raise ValueError("target %s: port %s is not a TCP port (0 to 65535)"
+                             % (target, port))
+
+
 def _new_request_id() -> str:
     """A fresh random idempotency key (UUID v4 text)."""
     return str(uuid.uuid4())
@@ -631,6 +667,7 @@ def connect(target: str, timeout: Optional[float] = 60.0, token: Optional[str] =
     """
     if not _arguments.text(target, "target"):
         raise ValueError("the server target is empty")
+    _check_target_ports(target)
     timeout = _arguments.timeout(timeout)
     if token is not None:
         _check_token(token)
