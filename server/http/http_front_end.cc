@@ -1,10 +1,12 @@
 #include "server/http/http_front_end.h"
 
 #include <civetweb.h>
+#include <poll.h>
 #include <sys/socket.h>
 
 #include <algorithm>
 #include <cctype>
+#include <chrono>
 #include <cstring>
 #include <filesystem>
 #include <optional>
@@ -239,12 +241,29 @@ class HttpCallStream final : public JsonBridge::Stream {
     block_.resize(kReadBlock);
     while (!done_reading_ && !(line && buffer_.find('\n') != std::string::npos)) {
       const int got = mg_read(connection_, block_.data(), block_.size());
-      if (got < 0) return absl::CancelledError("the HTTP request body could not be read");
+      if (got < 0) {
+        // civetweb's chunk parser and its I/O errors say no more: a client that left cancelled
+        // its call; one still there sent a body that cannot be read.
+        if (ClientGone()) return absl::CancelledError("the HTTP request body could not be read");
+        return absl::InvalidArgumentError(
+            "the HTTP request body could not be read: its chunked framing is malformed, or it "
+            "stopped arriving; nothing was done");
+      }
       if (got == 0) {
+        // civetweb's mg_read() also gives 0 when its I/O timeout passes: a body short of its
+        // Content-Length is incomplete and is not acted on (RFC 9112, 8). Taken as whole, the
+        // part that came was run as the call: a job submitted from a body cut short.
+        const long long declared = mg_get_request_info(connection_)->content_length;
+        if (declared >= 0 && received_ < declared) {
+          return absl::InvalidArgumentError(absl::StrCat(
+              "the HTTP request body ended after ", received_, " of the ", declared,
+              " bytes its Content-Length declares; nothing was done"));
+        }
         done_reading_ = true;
         body_watch_.End();
         break;
       }
+      received_ += got;
       buffer_.append(block_.data(), static_cast<std::size_t>(got));
       const std::size_t pending = line ? std::min(buffer_.size(), buffer_.find('\n')) : buffer_.size();
       if (static_cast<std::int64_t>(pending) > max_bytes_) return OverSizeError();
@@ -272,6 +291,7 @@ class HttpCallStream final : public JsonBridge::Stream {
   int socket_ = -1;  // civetweb's, open while the handler runs
   std::string buffer_;
   std::vector<char> block_;
+  long long received_ = 0;  // bytes of the body read so far
   bool done_reading_ = false;
   bool sent_single_ = false;
   bool streaming_started_ = false;
@@ -335,27 +355,38 @@ std::pair<int, std::string_view> FramingRefusal(const mg_connection* connection)
   return {0, {}};
 }
 
-// Reads what is left of a refused call's body and returns `code`: civetweb would read it after
-// the handler returns, out of the SlowBodyGuard's watch; read here, it is read under it.
-// `local_port` is the front end's (FindConnectionSocket()).
+// How long a refused call's body is still read and dropped after its answer, so that a client
+// that sends it anyway (RFC 9110 10.1.1 allows it) reads the whole answer rather than a reset,
+// which closing a socket with unread data sends: a lingering close, as nginx's (lingering_time
+// and lingering_timeout, https://nginx.org/en/docs/http/ngx_http_core_module.html#lingering_close),
+// here bounded by a total and by a pause with nothing received.
+constexpr std::chrono::milliseconds kLingerTotal{2000};
+constexpr std::chrono::milliseconds kLingerPause{500};
+
+// Ends a refused call's connection after its answer and returns `code`. The answer is ended on
+// the socket itself (its FIN after it): a client that waits for "100 Continue" sends no body
+// after a final answer, sees the end and closes. What a client sends anyway is read and dropped
+// for at most kLingerTotal, until a pause of kLingerPause; then the reading side is shut, so that
+// civetweb, which reads the rest of a body after the handler, finds its end at once. Before, the
+// rest of a declared body was read to its end: 16 requests declaring 99999999999 bytes and
+// sending 2 held all 16 threads for 90 s, through their 413s. `local_port` is the front end's
+// (FindConnectionSocket()).
 int DiscardBody(mg_connection* connection, int local_port, int code) {
-  // A client that waits for "100 Continue" sends no body after a final answer, and civetweb,
-  // which reads the rest of a body after the handler, waited for it until its I/O timeout (30 s,
-  // holding one of its threads). The answer is ended here instead (its FIN after it): a client
-  // that waited sees the end and closes, which ends civetweb's read at once; one that sent its
-  // body anyway, as RFC 9110 10.1.1 allows, has it read and gets the answer whole (shutting the
-  // reading side instead answered its body with a reset, and it lost the answer).
-  if (ExpectsContinue(connection)) {
-    const mg_request_info& info = *mg_get_request_info(connection);
-    if (const int socket = FindConnectionSocket(local_port, info.remote_addr, info.remote_port);
-        socket >= 0) {
-      ::shutdown(socket, SHUT_WR);
-    }
-    return code;
-  }
+  const mg_request_info& info = *mg_get_request_info(connection);
+  const int socket = FindConnectionSocket(local_port, info.remote_addr, info.remote_port);
+  if (socket < 0) return code;  // gone already
+  ::shutdown(socket, SHUT_WR);
+  const auto deadline = std::chrono::steady_clock::now() + kLingerTotal;
   std::vector<char> block(kReadBlock);  // on the heap: civetweb's threads have small stacks
-  while (mg_read(connection, block.data(), block.size()) > 0) {
+  for (;;) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
+        deadline - std::chrono::steady_clock::now());
+    if (left.count() <= 0) break;
+    pollfd readable{socket, POLLIN, 0};
+    if (::poll(&readable, 1, static_cast<int>(std::min(left, kLingerPause).count())) <= 0) break;
+    if (::recv(socket, block.data(), block.size(), MSG_DONTWAIT) <= 0) break;
   }
+  ::shutdown(socket, SHUT_RD);
   return code;
 }
 

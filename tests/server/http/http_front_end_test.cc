@@ -227,8 +227,9 @@ TEST(HttpFrontEndTest, ARequestBodyTrickledInIsCutOffAndThePageStillServed) {
   ASSERT_TRUE(page.has_value());
   EXPECT_THAT(*page, ::testing::StartsWith("HTTP/1.1 404"));  // an empty web root, served
 
-  // A call refused at once (a form's content type) is answered, and the rest of its body is
-  // read under the same watch: civetweb would read it after the handler, unwatched.
+  // A call refused at once (a form's content type) is answered, and what its client goes on
+  // sending is read only for a short linger (DiscardBody()), not to its declared length: the
+  // connection ends while the client still sends, with no cut of the guard's.
   const int refused = testing::ConnectLoopback(port);
   ASSERT_GE(refused, 0);
   const std::string form =
@@ -236,15 +237,101 @@ TEST(HttpFrontEndTest, ARequestBodyTrickledInIsCutOffAndThePageStillServed) {
       "Content-Type: text/plain\r\nContent-Length: 100000\r\n\r\n";
   ASSERT_EQ(::send(refused, form.data(), form.size(), MSG_NOSIGNAL),
             static_cast<ssize_t>(form.size()));
-  for (int sent = 0; sent < 6000 && (*front_end)->cut_off_bodies() < 2; ++sent) {
-    if (::send(refused, " ", 1, MSG_NOSIGNAL) != 1) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  std::string refusal;
+  bool refused_ended = false;
+  for (int sent = 0; sent < 6000 && !refused_ended; ++sent) {
+    if (::send(refused, " ", 1, MSG_NOSIGNAL) != 1) refused_ended = true;
+    pollfd ready{.fd = refused, .events = POLLIN, .revents = 0};
+    while (::poll(&ready, 1, 10) > 0) {
+      char buffer[4096];
+      const ssize_t n = ::recv(refused, buffer, sizeof buffer, 0);
+      if (n <= 0) {
+        refused_ended = true;
+        break;
+      }
+      refusal.append(buffer, static_cast<std::size_t>(n));
+    }
   }
-  const std::string refusal = testing::ReadToEnd(refused);
   ::close(refused);
 
-  EXPECT_EQ((*front_end)->cut_off_bodies(), 2);
+  EXPECT_TRUE(refused_ended);
+  EXPECT_EQ((*front_end)->cut_off_bodies(), 1);
   EXPECT_THAT(refusal, ::testing::StartsWith("HTTP/1.1 4"));
+}
+
+// A probe with a client of its own (2026-12-02) found a refused call holding a thread for as long
+// as its client kept the connection: 16 requests declaring 99999999999 bytes and sending 2 had
+// their 413s at once, but their bodies were read to their declared ends, and the front end
+// answered nothing else for 90 s. Here civetweb's own read timeout is 600 s, so only the linger
+// after the answer can end such a call: the refusal ends with the server's close, and the one
+// thread answers the next request while the refused client still holds its connection.
+TEST(HttpFrontEndTest, ARefusedCallWhoseBodyNeverComesHoldsNoThread) {
+  std::unique_ptr<Server> server = testing::StartServer(testing::TestServerOptions());
+  ASSERT_NE(server, nullptr);
+  HttpOptions options = Options("127.0.0.1:0");
+  options.web_root = testing::MakeTempDir();
+  options.threads = 1;
+  options.io_timeout = std::chrono::milliseconds(600000);
+  options.body_timeout = std::chrono::milliseconds(600000);
+  absl::StatusOr<std::unique_ptr<HttpFrontEnd>> front_end = HttpFrontEnd::Start(options, *server);
+  ASSERT_TRUE(front_end.ok()) << front_end.status();
+  const int port = (*front_end)->port();
+
+  const int holder = testing::ConnectLoopback(port);
+  ASSERT_GE(holder, 0);
+  const std::string request =
+      "POST /tempokey.v1.MotionService/GetServerInfo HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+      "Content-Type: application/json\r\nContent-Length: 99999999999\r\n\r\n{}";
+  ASSERT_EQ(::send(holder, request.data(), request.size(), MSG_NOSIGNAL),
+            static_cast<ssize_t>(request.size()));
+  bool closed_by_server = false;
+  const std::string refusal = testing::ReadToEnd(holder, &closed_by_server);
+  const std::optional<std::string> page = testing::HttpGet(port, "/");
+  ::close(holder);
+
+  EXPECT_THAT(refusal, ::testing::StartsWith("HTTP/1.1 413"));
+  EXPECT_THAT(refusal, HasSubstr("a request message is over the limit of"));
+  EXPECT_TRUE(closed_by_server);  // not the test's 60 s hang guard
+  ASSERT_TRUE(page.has_value());
+  EXPECT_THAT(*page, ::testing::StartsWith("HTTP/1.1 404"));
+}
+
+// RFC 9112 8: a body short of its Content-Length is incomplete and is not acted on. civetweb's
+// read gives 0 when its I/O timeout passes, and the part that had come was run as the whole
+// call (a probe's SubmitJob of 347 bytes declared as 4 000 000 was queued and ran). A chunked
+// body whose framing is malformed is the client's error (400), not a cancellation (499).
+TEST(HttpFrontEndTest, AnIncompleteOrMalformedBodyIsRefusedNotRun) {
+  std::unique_ptr<Server> server = testing::StartServer(testing::TestServerOptions());
+  ASSERT_NE(server, nullptr);
+  HttpOptions options = Options("127.0.0.1:0");
+  options.web_root = testing::MakeTempDir();
+  options.io_timeout = std::chrono::milliseconds(1000);     // civetweb's read gives up first
+  options.body_timeout = std::chrono::milliseconds(600000);  // the guard never cuts here
+  absl::StatusOr<std::unique_ptr<HttpFrontEnd>> front_end = HttpFrontEnd::Start(options, *server);
+  ASSERT_TRUE(front_end.ok()) << front_end.status();
+  const int port = (*front_end)->port();
+
+  const int fd = testing::ConnectLoopback(port);
+  ASSERT_GE(fd, 0);
+  const std::string short_body =
+      "POST /tempokey.v1.MotionService/GetServerInfo HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+      "Content-Type: application/json\r\nContent-Length: 1000\r\n\r\n{}";
+  ASSERT_EQ(::send(fd, short_body.data(), short_body.size(), MSG_NOSIGNAL),
+            static_cast<ssize_t>(short_body.size()));
+  const std::string incomplete = testing::ReadToEnd(fd);  // the connection stays open meanwhile
+  ::close(fd);
+  const std::string malformed = testing::Exchange(
+      port,
+      "POST /tempokey.v1.MotionService/GetServerInfo HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+      "Content-Type: application/json\r\nTransfer-Encoding: chunked\r\n\r\nZZ\r\n{}\r\n0\r\n\r\n")
+      .value_or("no connection");
+
+  EXPECT_THAT(incomplete, ::testing::StartsWith("HTTP/1.1 400"));
+  EXPECT_THAT(incomplete, HasSubstr("the HTTP request body ended after 2 of the 1000 bytes its "
+                                    "Content-Length declares; nothing was done"));
+  EXPECT_THAT(incomplete, ::testing::Not(HasSubstr("\"version\"")));  // no ServerInfo
+  EXPECT_THAT(malformed, ::testing::StartsWith("HTTP/1.1 400"));
+  EXPECT_THAT(malformed, HasSubstr("its chunked framing is malformed"));
 }
 
 // A Process call over HTTP: the clip and its start as NDJSON lines, one message each.
