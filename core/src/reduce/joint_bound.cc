@@ -17,6 +17,8 @@ namespace tempokey::core {
 namespace {
 
 constexpr double kInfinity = std::numeric_limits<double>::infinity();
+// The largest joint bound, in file units or in percent of the figure's height.
+constexpr double kMaxJointTolerance = 1e9;
 constexpr double kRadiansPerDegree = std::numbers::pi / 180.0;
 // Guaranteed budgets aim this hair inside the bound, so that rounding in forward kinematics and
 // in the fit's own margin can never carry a point over it.
@@ -51,6 +53,13 @@ absl::Status ValidateJointTolerance(const JointTolerance& tolerance) {
     return absl::InvalidArgumentError(
         absl::StrCat("tolerance.joint_tolerance must be finite and > 0, got ",
                      DescribeDouble(tolerance.value), tolerance.percent_of_height ? "%" : ""));
+  }
+  // As every other error bound (reduce.cc: kMaxErrorBound): past it every channel fits with two
+  // keys, and a bound of 1.7e308 (of a height, or a clip's reach) came back as infinity.
+  if (tolerance.value > kMaxJointTolerance) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "tolerance.joint_tolerance must be at most ", kMaxJointTolerance, ", got ",
+        DescribeDouble(tolerance.value), tolerance.percent_of_height ? "%" : ""));
   }
   return absl::OkStatus();
 }

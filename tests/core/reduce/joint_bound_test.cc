@@ -259,6 +259,19 @@ TEST(JointBoundTest, RefusesWhatItCannotMeasure) {
             "joint and end site at one height at the first frame)");
   EXPECT_EQ(ValidateReduceOptions(negative).message(),
             "tolerance.joint_tolerance must be finite and > 0, got -1");
+  // An absurd bound is refused as every other bound is past 1e9; 1.7e308% of a height came back
+  // as an infinite bound in the report.
+  ReduceOptions huge = percent;
+  huge.tolerance.joint_tolerance->value = 1.7e308;
+  ReduceOptions huge_units = joint;
+  huge_units.tolerance.joint_tolerance->value = 1e300;
+  ReduceOptions largest = joint;
+  largest.tolerance.joint_tolerance->value = 1e9;
+  EXPECT_EQ(ValidateReduceOptions(huge).message(),
+            "tolerance.joint_tolerance must be at most 1e+09, got 1.7e+308%");
+  EXPECT_EQ(ValidateReduceOptions(huge_units).message(),
+            "tolerance.joint_tolerance must be at most 1e+09, got 1e+300");
+  EXPECT_TRUE(ValidateReduceOptions(largest).ok());
 }
 
 // World positions are doubles: a bound near their rounding at the clip's reach cannot be held,
