@@ -34,6 +34,10 @@ std::string ErrnoText(int error) {
   return text;
 }
 
+// The status code of a failed file operation. UNAVAILABLE is kept for what may pass if tried
+// again: the clients take it as a server's outage (a batch retries it, the CLI probes the
+// connection's TLS), so a path that is a folder, a name too long or a loop of links is not it
+// (a batch's summary reported those as "UNAVAILABLE", the code of an unreachable server).
 absl::StatusCode ErrnoCode(int error) {
   switch (error) {
     case ENOENT:
@@ -46,9 +50,34 @@ absl::StatusCode ErrnoCode(int error) {
     case ENOSPC:
     case EDQUOT:
     case EFBIG:
+    case EMFILE:
+    case ENFILE:
+    case ENOMEM:
       return absl::StatusCode::kResourceExhausted;
-    default:
+    case EISDIR:
+    case ENAMETOOLONG:
+    case ELOOP:
+    case EEXIST:
+    case ENOTEMPTY:
+    case EXDEV:
+    case ETXTBSY:
+    case EMLINK:
+    case ESPIPE:
+      return absl::StatusCode::kFailedPrecondition;
+    case EINVAL:
+      return absl::StatusCode::kInvalidArgument;
+    case ENXIO:  // a FIFO with no reader yet
+    case EAGAIN:
+    case EBUSY:
+    case EINTR:
+    case ESTALE:
+    case ENOLCK:
+    case ETIMEDOUT:
       return absl::StatusCode::kUnavailable;
+    case EIO:
+      return absl::StatusCode::kDataLoss;
+    default:
+      return absl::StatusCode::kUnknown;
   }
 }
 

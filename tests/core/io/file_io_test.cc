@@ -375,9 +375,25 @@ TEST(WriteFileAtomicallyTest, TargetThatIsADirectoryFailsAndRemovesTheTemporary)
 
   absl::Status written = WriteFileAtomically(path, "data");
 
-  EXPECT_FALSE(written.ok());
+  // Not UNAVAILABLE, which the clients take as a server's outage (a batch retried it).
+  EXPECT_EQ(written.code(), absl::StatusCode::kFailedPrecondition);
   EXPECT_EQ(std::string(written.message()), path + ": cannot replace the file: is a directory");
   EXPECT_EQ(DirectoryEntries(parent), std::vector<std::string>{"taken"});
+}
+
+// A batch's summary named these "UNAVAILABLE", the code of an unreachable server, which a CI
+// script keyed on the code would take for an outage: each now has the code of what it is.
+TEST(WriteFileAtomicallyTest, LocalFailuresHaveCodesOfTheirOwnNotAnOutages) {
+  const std::string parent = testing::MakeTempDir();
+  ASSERT_EQ(::symlink("loop.bvh", (parent + "/loop.bvh").c_str()), 0);
+
+  const absl::Status too_long = WriteFileAtomically(parent + "/" + std::string(300, 'a'), "x");
+  const absl::Status loop = ReadFile(parent + "/loop.bvh", 1 << 20).status();
+
+  EXPECT_EQ(too_long.code(), absl::StatusCode::kFailedPrecondition) << too_long;
+  EXPECT_THAT(std::string(too_long.message()), ::testing::HasSubstr("file name too long"));
+  EXPECT_EQ(loop.code(), absl::StatusCode::kFailedPrecondition) << loop;
+  EXPECT_THAT(std::string(loop.message()), ::testing::HasSubstr("too many levels of symbolic links"));
 }
 
 // A FIFO is not renamed over (its reader would never see the bytes, and the FIFO would be gone):
