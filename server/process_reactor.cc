@@ -84,8 +84,20 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
         stop_.get_token(), service_->clip_limits);
     DropInput();  // the input is no longer needed while the result streams out
     const auto ended = std::chrono::steady_clock::now();
-    Record(OutcomeOf(result.status()), started,
-           std::chrono::duration<double, std::milli>(ended - started).count(), result.status());
+    // A pipeline stopped by the call's own end (a message after the start, the client's cancel)
+    // is logged and counted with that end's reason, not as a cancellation of its own.
+    absl::Status recorded = result.status();
+    if (!result.ok() && result.status().code() == absl::StatusCode::kCancelled &&
+        !pool_stop.stop_requested()) {
+      std::lock_guard lock(mu_);
+      if (finished_) {
+        recorded = finished_status_;
+      } else if (end_status_) {
+        recorded = *end_status_;
+      }
+    }
+    Record(OutcomeOf(recorded), started,
+           std::chrono::duration<double, std::milli>(ended - started).count(), recorded);
     if (!result.ok() && result.status().code() == absl::StatusCode::kCancelled &&
         pool_stop.stop_requested()) {
       // Stopped by the server's drain deadline, not by its client: UNAVAILABLE, which clients
@@ -252,7 +264,10 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
     result_ready_ = true;
     pending_progress_.reset();
     if (!result.ok()) {
-      end_status_ = result.status();
+      // An end already pending (an abort while a progress message was being written) is what
+      // the call ends with: the pipeline's "cancelled" is only its echo, and reached the client
+      // as CANCELLED, which says the client cancelled.
+      if (!end_status_) end_status_ = result.status();
     } else {
       slicer_.emplace(std::move(shared), slice_bytes_, batch_parts_);
     }

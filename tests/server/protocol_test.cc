@@ -9,8 +9,10 @@
 
 #include <cerrno>
 #include <chrono>
+#include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <thread>
@@ -257,8 +259,11 @@ TEST_F(ProtocolTest, AMessageHoldingOverAMillionItemsIsRefusedBeforeItIsRead) {
 }
 
 TEST(ProcessProtocolTest, ProcessRefusesAMessageAfterItsStart) {
-  // The pipeline is held at its start, so the extra message is read before any result exists.
-  GatedServer gated;
+  // The pipeline is held at its start, so the extra message is read before any result exists
+  // and while the pipeline runs.
+  server::ServerOptions options = TestServerOptions();
+  options.metrics_address = "127.0.0.1:0";
+  GatedServer gated(options);
   ASSERT_NE(gated.server, nullptr);
   grpc::ClientContext context;
   SetDeadline(context);
@@ -269,6 +274,8 @@ TEST(ProcessProtocolTest, ProcessRefusesAMessageAfterItsStart) {
   v1::ProcessRequest start;
   *start.mutable_start()->mutable_operations() = WrapOperations();
   ASSERT_TRUE(process->Write(start));
+  // Running: its worker holds it at the gate (an abort of a call still queued never runs it).
+  ASSERT_TRUE(gated.gate->WaitArrivals(1));
   // A second clip header after the start: the call takes one clip and one start.
   process->Write(ProcessClipRequests(MakeClip(1, 40))[0]);
   process->WritesDone();
@@ -282,6 +289,22 @@ TEST(ProcessProtocolTest, ProcessRefusesAMessageAfterItsStart) {
   EXPECT_THAT(status, GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT,
                                    "Process message 9 arrived after ProcessStart; a Process call "
                                    "takes one clip and one start, then the client only reads"));
+  // The pipeline, stopped by that refusal, is counted as the call ended: failed, not cancelled
+  // (a probe found "outcome=cancelled" logged for calls its client saw refused). Its count comes
+  // once the worker has run it past the gate.
+  const std::string failed = R"(tempokey_jobs_total{kind="process",outcome="failed"})";
+  const std::string cancelled = R"(tempokey_jobs_total{kind="process",outcome="cancelled"})";
+  std::map<std::string, double> samples;
+  const auto deadline = std::chrono::steady_clock::now() + StartGate::kWaitLimit;
+  do {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    const std::optional<std::string> scrape = HttpGet(gated.server->metrics_port(), "/metrics");
+    ASSERT_TRUE(scrape.has_value());
+    samples = ParseSamples(*scrape);
+  } while (Sample(samples, failed) + Sample(samples, cancelled) < 1 &&
+           std::chrono::steady_clock::now() < deadline);
+  EXPECT_EQ(Sample(samples, failed), 1.0);
+  EXPECT_EQ(Sample(samples, cancelled), 0.0);
 }
 
 TEST(ProcessProtocolTest, AProcessCallStreamsOnlyItsFirstProgressWhileTheIntervalLasts) {
