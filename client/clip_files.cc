@@ -77,8 +77,19 @@ absl::StatusOr<FileFormat> FormatForPath(std::string_view flag, const std::strin
   for (FileFormat format : allowed) names.emplace_back(ExtensionOf(format));
   const std::string what = extension.empty() ? std::string("no extension")
                                              : absl::StrCat("unknown format '", extension, "'");
+  // A device or FIFO (/dev/null, /dev/stdout) has no extension of its own: a name that links to
+  // it gives the format.
+  std::error_code error;
+  const std::filesystem::file_status status = std::filesystem::status(path, error);
+  const bool stream = !error && (std::filesystem::is_character_file(status) ||
+                                 std::filesystem::is_fifo(status));
+  const std::string hint =
+      stream && extension.empty()
+          ? absl::StrCat("; a device or FIFO takes the format of a link's name to it: ln -s ",
+                         path, " out", names.front())
+          : "";
   return UsageError(absl::StrCat(AsAbsl(flag), flag.empty() ? "" : " ", path, ": ", what,
-                                 " (expected ", absl::StrJoin(names, ", "), ")"));
+                                 " (expected ", absl::StrJoin(names, ", "), ")", hint));
 }
 
 absl::StatusOr<core::Clip> ReadClipFile(const std::string& path,

@@ -327,6 +327,25 @@ TEST_F(OverwriteTest, AnOutputFifoIsWrittenIntoAndNeverReplaced) {
   EXPECT_TRUE(S_ISFIFO(info.st_mode));
 }
 
+// A device has no extension to choose the format by: /dev/null is refused naming the link that
+// gives it one, and through that link it takes the result as a stream and stays the device.
+TEST_F(OverwriteTest, ADeviceTakesTheFormatOfALinksNameToIt) {
+  const std::string link = Path("discard.bvh");
+  ASSERT_EQ(::symlink("/dev/null", link.c_str()), 0);
+
+  const ProcessResult bare = Retime("/dev/null");
+  const ProcessResult linked = Retime(link);
+
+  EXPECT_EQ(bare.exit_code, 2);
+  EXPECT_EQ(bare.err,
+            "error: -o /dev/null: no extension (expected .bvh, .csv, .gltf, .glb); a device or FIFO "
+            "takes the format of a link's name to it: ln -s /dev/null out.bvh\n");
+  EXPECT_EQ(linked.exit_code, 0) << linked.err;
+  struct stat info {};
+  ASSERT_EQ(::stat("/dev/null", &info), 0);
+  EXPECT_TRUE(S_ISCHR(info.st_mode));
+}
+
 // ---- inputs read with bounded memory -------------------------------------------------------------
 
 class InputTest : public ::testing::Test {
