@@ -177,20 +177,30 @@ std::string FormatReductionReport(const core::ReductionReport& report, const cor
   return out;
 }
 
+namespace {
+
+// " (0.123% of height)", or nothing for a figure of height 0 (every point at one height at the
+// first frame), which no distance is a share of: it printed "0.000% of height".
+std::string OfHeight(const core::WorldErrorReport& world, double distance) {
+  if (!(world.figure_height > 0.0)) return "";
+  return absl::StrFormat(" (%.3f%% of height)", world.Percent(distance));
+}
+
+}  // namespace
+
 std::string FormatWorldErrorReport(const core::WorldErrorReport& world) {
   std::string out = absl::StrCat(
       SummaryLine("figure height", absl::StrFormat("%.4g (first frame)", world.figure_height)),
       SummaryLine("joint max error",
-                  absl::StrFormat("%.4f (%.3f%% of height) at %s, frame %d", world.max_error,
-                                  world.max_error_percent(), world.worst_point_name,
+                  absl::StrFormat("%.4f%s at %s, frame %d", world.max_error,
+                                  OfHeight(world, world.max_error), world.worst_point_name,
                                   world.worst_frame)),
-      SummaryLine("joint rms error", absl::StrFormat("%.4f (%.3f%% of height)", world.rms_error,
-                                                     world.rms_error_percent())));
+      SummaryLine("joint rms error",
+                  absl::StrFormat("%.4f%s", world.rms_error, OfHeight(world, world.rms_error))));
   if (world.joint_tolerance > 0.0) {
     absl::StrAppend(&out, SummaryLine("joint bound",
-                                      absl::StrFormat("%.4g (%.3f%% of height)",
-                                                      world.joint_tolerance,
-                                                      world.Percent(world.joint_tolerance))));
+                                      absl::StrFormat("%.4g%s", world.joint_tolerance,
+                                                      OfHeight(world, world.joint_tolerance))));
   }
   return out;
 }
@@ -203,9 +213,7 @@ std::string FormatGltfStats(const core::GltfStats& stats, const core::WorldError
                                 " translation"));
   if (stats.joint_bound > 0.0) {
     const std::string percent =
-        world != nullptr && world->figure_height > 0.0
-            ? absl::StrFormat(" (%.3f%% of height)", world->Percent(stats.max_joint_error))
-            : std::string();
+        world != nullptr ? OfHeight(*world, stats.max_joint_error) : std::string();
     absl::StrAppend(&out, SummaryLine("gltf joint max",
                                       absl::StrFormat("%.4f%s, bound %.4g, as glTF plays the file",
                                                       stats.max_joint_error, percent,

@@ -1,5 +1,6 @@
 #include "client/clip_summary.h"
 
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -93,6 +94,29 @@ TEST(FormatReductionReportTest, NamesTheWorstChannelAndFrame) {
             "rms error:       0.1235\n"
             "max error:       0.5000\n"
             "worst:           channel 4 (Knee.Xrotation) at frame 17\n");
+}
+
+// A figure of height 0 (every point at one height at the first frame) has no share of a height to
+// give: the distances stand alone, where they read "0.000% of height".
+TEST(FormatWorldErrorReportTest, GivesShareOfTheHeightOnlyForAFigureThatHasOne) {
+  core::WorldErrorReport world;
+  world.figure_height = 200.0;
+  world.max_error = 1.0;
+  world.rms_error = 0.5;
+  world.joint_tolerance = 2.0;
+  world.worst_point_name = "Hand_L";
+  world.worst_frame = 7;
+  core::WorldErrorReport flat = world;
+  flat.figure_height = 0.0;
+
+  const std::string tall = FormatWorldErrorReport(world);
+  const std::string none = FormatWorldErrorReport(flat);
+
+  EXPECT_NE(tall.find("1.0000 (0.500% of height) at Hand_L, frame 7\n"), std::string::npos) << tall;
+  EXPECT_NE(tall.find("2 (1.000% of height)\n"), std::string::npos) << tall;
+  EXPECT_EQ(none.find("% of height"), std::string::npos) << none;
+  EXPECT_NE(none.find("1.0000 at Hand_L, frame 7\n"), std::string::npos) << none;
+  EXPECT_NE(none.find("0.5000\n"), std::string::npos) << none;
 }
 
 TEST(FormatRetimeReportTest, ListsTheReport) {
