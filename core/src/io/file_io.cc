@@ -370,14 +370,34 @@ void RemovePendingTempFiles() {
 
 void SetTempFileCreatedHookForTesting(void (*hook)()) { g_temp_created_hook.store(hook); }
 
+namespace {
+
+constexpr std::string_view kTempMark = ".tmp-";
+// The longest file name Linux file systems take (NAME_MAX).
+constexpr std::size_t kMaxFileName = 255;
+
+// The part of a target's file name its temporaries start with: the whole name, or for a name
+// within 13 bytes of kMaxFileName its first bytes, cut before a UTF-8 character rather than
+// inside one, so that "<that>.tmp-xxxxxxxx" is a name the file system takes (names of 243 to 255
+// bytes were refused: "cannot create a temporary file: file name too long").
+std::string_view TempStem(std::string_view target_name) {
+  constexpr std::size_t kMaxStem = kMaxFileName - kTempMark.size() - kTempSuffixLength;
+  if (target_name.size() <= kMaxStem) return target_name;
+  std::size_t cut = kMaxStem;
+  while (cut > 0 && (static_cast<unsigned char>(target_name[cut]) & 0xC0) == 0x80) --cut;
+  return target_name.substr(0, cut);
+}
+
+}  // namespace
+
 bool IsAtomicWriteTemporary(std::string_view file_name, std::string_view target_name) {
-  constexpr std::string_view kMark = ".tmp-";
-  if (file_name.size() != target_name.size() + kMark.size() + kTempSuffixLength ||
+  target_name = TempStem(target_name);
+  if (file_name.size() != target_name.size() + kTempMark.size() + kTempSuffixLength ||
       !file_name.starts_with(target_name) ||
-      file_name.substr(target_name.size(), kMark.size()) != kMark) {
+      file_name.substr(target_name.size(), kTempMark.size()) != kTempMark) {
     return false;
   }
-  const std::string_view suffix = file_name.substr(target_name.size() + kMark.size());
+  const std::string_view suffix = file_name.substr(target_name.size() + kTempMark.size());
   return std::all_of(suffix.begin(), suffix.end(), [](char c) {
     return (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9');
   });
@@ -403,7 +423,10 @@ absl::Status WriteFileAtomically(const std::string& requested, std::string_view 
   std::string temp_path;
   int fd = -1;
   for (int attempt = 0; attempt < kTempNameAttempts && fd < 0; ++attempt) {
-    temp_path = absl::StrCat(path, ".tmp-", RandomSuffix());
+    const std::size_t name_start = path.rfind('/') + 1;  // npos + 1 == 0: no folder
+    temp_path = absl::StrCat(AsAbsl(std::string_view(path).substr(0, name_start)),
+                             AsAbsl(TempStem(std::string_view(path).substr(name_start))),
+                             AsAbsl(kTempMark), RandomSuffix());
     // 0666 lets the umask decide, as for any newly created file.
     fd = ::open(temp_path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);
     if (fd < 0 && errno != EEXIST) {

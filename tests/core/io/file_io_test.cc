@@ -477,6 +477,26 @@ TEST(WriteFileAtomicallyTest, PathWithoutDirectoryWritesInTheWorkingDirectory) {
   EXPECT_EQ(DirectoryEntries(directory), std::vector<std::string>{"bare.txt"});
 }
 
+// A name of 243 to 255 bytes is a file name Linux takes, but "<name>.tmp-xxxxxxxx" was not: the
+// write failed with "file name too long". Its temporary starts with as much of the name as fits,
+// cut before a UTF-8 character, and is still known as that name's temporary.
+TEST(WriteFileAtomicallyTest, ANameUpToTheLongestTheFileSystemTakesIsWritten) {
+  const std::string parent = testing::MakeTempDir();
+  const std::string longest = std::string(250, 'a') + ".bvh";        // 254 bytes
+  const std::string accented = std::string(241, 'b') + "\xC3\xA9.bvh";  // 247 bytes, é at 242
+
+  const absl::Status written = WriteFileAtomically(parent + "/" + longest, "one");
+  const absl::Status written_accented = WriteFileAtomically(parent + "/" + accented, "two");
+
+  ASSERT_TRUE(written.ok()) << written;
+  ASSERT_TRUE(written_accented.ok()) << written_accented;
+  EXPECT_EQ(DirectoryEntries(parent), (std::vector<std::string>{longest, accented}));
+  EXPECT_TRUE(IsAtomicWriteTemporary(std::string(242, 'a') + ".tmp-ab12cd34", longest));
+  EXPECT_FALSE(IsAtomicWriteTemporary(longest + ".tmp-ab12cd34", longest));
+  // The é would be cut in two at byte 242: the stem stops before it.
+  EXPECT_TRUE(IsAtomicWriteTemporary(std::string(241, 'b') + ".tmp-ab12cd34", accented));
+}
+
 TEST(IsAtomicWriteTemporaryTest, MatchesOnlyTheTemporaryNamesOfTheTarget) {
   EXPECT_TRUE(IsAtomicWriteTemporary("walk.json.tmp-ab12cd34", "walk.json"));
   EXPECT_TRUE(IsAtomicWriteTemporary(".m.json.tmp-zzzzzzzz", ".m.json"));

@@ -36,9 +36,9 @@ absl::StatusOr<std::string> ReadFile(const std::string& path,
 absl::StatusOr<std::string> ReadTextFile(const std::string& path,
                                          std::int64_t max_bytes = std::int64_t{1} << 30);
 
-// Writes `contents` to a temporary file beside `path` ("<path>.tmp-<8 random characters>",
-// created exclusively, permissions from the umask or kept from the file it replaces), fsyncs
-// it and renames it over `path`, so readers see the old file or the whole new one, never half
+// Writes `contents` to a temporary file beside `path` ("<path>.tmp-<8 random characters>", the
+// file name cut short to fit 255 bytes, created exclusively, permissions from the umask or kept
+// from the file it replaces), fsyncs it and renames it over `path`, so readers see the old file or the whole new one, never half
 // of it. The temporary is removed on any failure; the target is then untouched.
 // Errors (messages start with `path`): kNotFound the directory does not exist;
 // kPermissionDenied it is not writable; kResourceExhausted the disk is full;
