@@ -461,9 +461,17 @@ absl::Status TimeMapBuilder::BuildTimeMapKeys() {
     }
   }
   if (x.front() > kEndSnapFrames || x.back() < x_end() - kEndSnapFrames) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "time-map keys cover source ", FormatNumber(x.front() * dt_s()), "s..",
-        FormatNumber(x.back() * dt_s()), "s, the clip spans ", SourceSpan()));
+    const std::string covered = absl::StrCat(FormatNumber(x.front() * dt_s()), "s..",
+                                             FormatNumber(x.back() * dt_s()), "s");
+    // Ends a hair short print as the clip's own span in seconds: the frames say by how much.
+    const std::string frames =
+        covered == SourceSpan()
+            ? absl::StrFormat(" (source frames %.12g..%.12g of 0..%.12g: the keys must reach "
+                              "both ends within %g frames)",
+                              x.front(), x.back(), x_end(), kEndSnapFrames)
+            : "";
+    return absl::InvalidArgumentError(absl::StrCat("time-map keys cover source ", covered,
+                                                   ", the clip spans ", SourceSpan(), frames));
   }
   for (std::size_t k = 0; k + 1 < keys.size(); ++k) {
     const std::string label = absl::StrCat("time-map keys ", k + 1, "..", k + 2);

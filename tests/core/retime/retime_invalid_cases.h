@@ -108,6 +108,10 @@ inline std::vector<BadRetime> BadRetimes() {
        "output rate 1e+06 Hz is over the limit of 100000 Hz"},
       {"KeysNotCoveringTheClip", Keys({Key(0, 0), Key(2, 4)}), {},
        "time-map keys cover source 0s..4s, the clip spans 0s..8s"},
+      // A hair short prints as the clip's span in seconds: the frames say what is missing.
+      {"KeysEndingAHairShortOfTheClip", Keys({Key(0, 0), Key(2, 8 - 1e-7)}), {},
+       "time-map keys cover source 0s..8s, the clip spans 0s..8s (source frames 0..239.999997 of "
+       "0..240: the keys must reach both ends within 1e-09 frames)"},
       {"KeysOutputNotIncreasing", Keys({Key(0, 0), Key(2, 2), Key(2, 3), Key(5, 8)}), {},
        "time-map key 3 (2s -> 3s): output time must increase, the previous key is at 2s"},
       {"KeysSourceDecreasing", Keys({Key(0, 0), Key(2, 4), Key(3, 3), Key(9, 8)}), {},
