@@ -264,7 +264,8 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
     if (!clip.ok()) {
       return absl::FailedPreconditionError(absl::StrCat(
           "a keyed ", core::AsAbsl(format_->name), " file is fitted against the reduced clip ",
-          job.spec->clip_id, ", which this server no longer holds; upload it again"));
+          job.spec->clip_id, ", which this server does not hold (it came inline with the job, "
+          "or has left the clip store since): upload it (UploadClip) and export again"));
     }
     gltf_clip_ = *std::move(clip);
     gltf_source_ = {.clip = gltf_clip_.get(),

@@ -345,6 +345,41 @@ TEST_F(EditingServiceTest, ExportedFilesAreTheBytesTheCliWritesForTheSameResult)
   }
 }
 
+// A keyed glTF is fitted against the job's input clip. A job whose clip came inline was never
+// stored: the refusal says so, where it said the server "no longer holds" a clip it never had,
+// and the upload it asks for is what makes the export work.
+TEST_F(EditingServiceTest, AKeyedGltfOfAJobWhoseClipCameInlineAsksForTheUploadThatMakesItWork) {
+  const core::Clip clip = *core::ReadBvhFile(SharedBvh("bandai/dataset-1_bow_active_001.bvh"));
+  v1::SubmitJobRequest submit;
+  *submit.mutable_inline_clip() = wire::ClipToProto(clip);
+  *submit.add_operations() = wire::PipelineStepToProto(core::ReduceStep{});
+  const JobOutcome submitted = Submit(*stub_, submit);
+  TEMPOKEY_ASSERT_GRPC_OK(submitted.status);
+  ASSERT_EQ(WaitForJob(*stub_, submitted.job.job_id()).state(), v1::JOB_STATE_SUCCEEDED);
+  v1::ExportFileRequest request;
+  request.set_job_id(submitted.job.job_id());
+  request.set_format("glb");
+
+  grpc::Status refused;
+  Export(request, &refused);
+  grpc::Status uploaded;
+  const std::string clip_id =
+      Parse(clip.name + ".bvh", ReadBytes(SharedBvh("bandai/dataset-1_bow_active_001.bvh")),
+            &uploaded)
+          .clip_id();
+  grpc::Status exported;
+  const std::string glb = Export(request, &exported);
+
+  EXPECT_THAT(refused, GrpcStatusIs(grpc::FAILED_PRECONDITION,
+                                    HasSubstr("which this server does not hold (it came inline "
+                                              "with the job, or has left the clip store since): "
+                                              "upload it (UploadClip) and export again")));
+  TEMPOKEY_ASSERT_GRPC_OK(uploaded);
+  EXPECT_EQ(clip_id, submitted.job.clip_id());  // the same content, the same id
+  TEMPOKEY_ASSERT_GRPC_OK(exported);
+  EXPECT_EQ(glb.substr(0, 4), "glTF");
+}
+
 TEST_F(EditingServiceTest, ExportRefusesUnknownFormatsAndCurvesOfASampledClip) {
   const std::string clip_id = ParseCmu();
   v1::ExportFileRequest gif;
