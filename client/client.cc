@@ -452,6 +452,38 @@ absl::StatusOr<v1::Job> Client::WatchJob(const std::string& job_id,
   return last;
 }
 
+absl::StatusOr<std::string> Client::ExportJobFile(const std::string& job_id,
+                                                  const std::string& format,
+                                                  std::int64_t max_bytes) const {
+  const CallScope scope = BeginCall();
+  v1::ExportFileRequest request;
+  request.set_job_id(job_id);
+  request.set_format(format);
+  std::string bytes;
+  TEMPOKEY_RETURN_IF_ERROR(RetryWhileUnavailable(options_, scope.deadline, [&]() -> Attempt {
+    bytes.clear();
+    grpc::ClientContext context;
+    PrepareContext(scope, context);
+    std::unique_ptr<grpc::ClientReader<v1::FileChunk>> reader = stub_->ExportFile(&context, request);
+    bool received = false;
+    v1::FileChunk chunk;
+    while (reader->Read(&chunk)) {
+      received = true;
+      if (static_cast<std::int64_t>(bytes.size() + chunk.data().size()) > max_bytes) {
+        context.TryCancel();
+        reader->Finish();
+        std::string().swap(bytes);
+        return Attempt{absl::ResourceExhaustedError(absl::StrCat(
+                           "the exported ", format, " file is over ", max_bytes, " bytes")),
+                       true};
+      }
+      bytes += chunk.data();
+    }
+    return Attempt{WithRetryHint(FromGrpcStatus(reader->Finish()), context), received};
+  }));
+  return bytes;
+}
+
 absl::StatusOr<core::PipelineResult> Client::GetJobResult(const std::string& job_id) const {
   const CallScope scope = BeginCall();
   v1::GetJobResultRequest request;

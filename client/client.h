@@ -163,6 +163,13 @@ class Client {
   // parts do not make a valid clip; any call error.
   absl::StatusOr<core::PipelineResult> GetJobResult(const std::string& job_id) const;
 
+  // The file the server formats from a succeeded job's result (ExportFile; `format` an
+  // ExportFormat name: "glb", "bvh", ...), its chunks joined; at most `max_bytes` (more is
+  // refused, kResourceExhausted, without keeping them). A keyed glTF is fitted against the job's
+  // stored input clip, as the CLI fits its own; a sampled format bakes the curves.
+  absl::StatusOr<std::string> ExportJobFile(const std::string& job_id, const std::string& format,
+                                            std::int64_t max_bytes) const;
+
   // Runs `steps` on `clip` in one stateless call: streams the clip in, reports progress to
   // `progress` (if set; called on this thread), and returns the result. Retried whole on
   // UNAVAILABLE while no response has arrived.

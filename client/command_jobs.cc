@@ -10,6 +10,7 @@
 #include "client/command.h"
 #include "google/protobuf/util/time_util.h"
 #include "proto/operations_convert.h"
+#include "tempokey/core/io/file_io.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::client {
@@ -18,6 +19,9 @@ namespace {
 using core::AsAbsl;
 
 constexpr std::string_view kJobArgument[] = {"JOB"};
+// The largest file `jobs result` takes from the server's export: a BVH of the default clip
+// limit (32 Mi samples) is about 640 MB of text.
+constexpr std::int64_t kMaxExportedFileBytes = std::int64_t{2} << 30;
 constexpr std::string_view kStates[] = {"queued", "running", "succeeded", "failed", "cancelled"};
 
 constexpr FlagSpec kListFlags[] = {
@@ -179,12 +183,21 @@ absl::Status Result(CommandContext& context) {
   absl::StatusOr<core::PipelineResult> result = client->GetJobResult(ids[0]);
   if (!result.ok()) return ServerError(result.status());
   const bool keyed = std::holds_alternative<core::KeyedClip>(result->output);
-  if (keyed != IsKeyedFormat(format)) {
-    return UsageError(absl::StrCat("-o ", output, ": job ", ids[0], " produced ",
-                                   keyed ? "keyed curves: write .json or .anim"
-                                         : "a sampled clip: write .bvh or .csv"));
+  if (!keyed && IsKeyedFormat(format)) {
+    return UsageError(absl::StrCat("-o ", output, ": job ", ids[0],
+                                   " produced a sampled clip, which has no curves: write .bvh, "
+                                   ".csv, .gltf or .glb"));
   }
-  TEMPOKEY_RETURN_IF_ERROR(WriteOutput(output, format, result->output));
+  if (keyed && !IsKeyedFormat(format)) {
+    // Curves as glTF are fitted against the job's input clip, and as samples baked: the server
+    // holds both, and formats the file as `reduce --job` writes it.
+    const absl::StatusOr<std::string> bytes = client->ExportJobFile(
+        ids[0], std::string(ExtensionOf(format).substr(1)), kMaxExportedFileBytes);
+    if (!bytes.ok()) return ServerError(bytes.status());
+    TEMPOKEY_RETURN_IF_ERROR(core::WriteFileAtomically(output, *bytes));
+  } else {
+    TEMPOKEY_RETURN_IF_ERROR(WriteOutput(output, format, result->output));
+  }
   const core::Clip& layout = keyed ? std::get<core::KeyedClip>(result->output).layout
                                    : std::get<core::Clip>(result->output);
   for (const core::StepReport& report : result->reports) {
@@ -264,8 +277,10 @@ const Command& JobsResultCommand() {
       .synopsis = "JOB -o OUT",
       .summary = "fetch a succeeded job's result",
       .description =
-          "Fetches the result of JOB and writes OUT atomically: .bvh or .csv for a sampled clip,\n"
-          ".json or .anim for keyed curves. Prints the job's reports.\n",
+          "Fetches the result of JOB and writes OUT atomically: .bvh, .csv, .gltf or .glb for a\n"
+          "sampled clip; .json or .anim for keyed curves, or .gltf, .glb, .bvh or .csv as the\n"
+          "server formats them (glTF fitted against the job's stored input clip, samples baked),\n"
+          "as reduce --job writes them. Prints the job's reports.\n",
       .flags = kResultFlags,
       .run = Result,
   };

@@ -223,8 +223,37 @@ TEST_F(CliEndToEndTest, JobsResultRefusesAFormatThatDoesNotFitTheResult) {
 
   EXPECT_EQ(run.exit_code, 2);
   EXPECT_EQ(run.err, "error: -o " + Path("x.json") + ": job " + job +
-                         " produced a sampled clip: write .bvh or .csv\n");
+                         " produced a sampled clip, which has no curves: write .bvh, .csv, .gltf "
+                         "or .glb\n");
   EXPECT_FALSE(FileExists(Path("x.json")));
+}
+
+// A reduce job's curves are fetched in every format `reduce --job` writes: .glb and .bvh as the
+// server formats them (the glTF fitted against the job's stored clip, the samples baked), the
+// same bytes as the reduce command's own files. They were refused ("write .json or .anim").
+TEST_F(CliEndToEndTest, JobsResultOfAReduceWritesEveryFormatTheReduceCommandWrites) {
+  ProcessResult submit = Tempokey({"reduce", BandaiClip(), "-o", Path("x.json"), "--detach"});
+  ASSERT_EQ(submit.exit_code, 0) << submit.err;
+  const std::string job = Field(submit.out, "job");
+  ASSERT_EQ(Tempokey({"jobs", "watch", job}).exit_code, 0);
+
+  ProcessResult glb = Tempokey({"jobs", "result", job, "-o", Path("fetched.glb")});
+  ProcessResult bvh = Tempokey({"jobs", "result", job, "-o", Path("fetched.bvh")});
+  ProcessResult json = Tempokey({"jobs", "result", job, "-o", Path("fetched.json")});
+  ProcessResult own_glb = Tempokey({"reduce", BandaiClip(), "-o", Path("own.glb"), "--job"});
+  ProcessResult own_bvh = Tempokey({"reduce", BandaiClip(), "-o", Path("own.bvh"), "--job"});
+
+  for (const ProcessResult* run : {&glb, &bvh, &json, &own_glb, &own_bvh}) {
+    EXPECT_EQ(run->exit_code, 0) << run->err;
+  }
+  EXPECT_EQ(Field(glb.out, "wrote"), Path("fetched.glb"));
+  const auto bytes = [&](const std::string& name) {
+    return core::ReadFile(Path(name)).value_or("unreadable " + name);
+  };
+  EXPECT_EQ(bytes("fetched.glb").substr(0, 4), "glTF");
+  EXPECT_TRUE(bytes("fetched.glb") == bytes("own.glb"));
+  EXPECT_TRUE(bytes("fetched.bvh") == bytes("own.bvh"));
+  EXPECT_GT(bytes("fetched.json").size(), 1000u);
 }
 
 TEST_F(CliEndToEndTest, JobsCancelOfAFinishedJobKeepsItsState) {
