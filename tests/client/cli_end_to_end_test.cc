@@ -68,6 +68,17 @@ class CliEndToEndTest : public ServerProcessTest {
     args.insert(args.begin(), {"--server", server_->target()});
     return RunTempokey(args, dir_);
   }
+
+  // The id of the job `args` (a command with --detach) submits, once `jobs watch` saw it end
+  // well; "" (and a failure recorded) otherwise.
+  std::string FinishedJob(const std::vector<std::string>& args) {
+    const ProcessResult submit = Tempokey(args);
+    EXPECT_EQ(submit.exit_code, 0) << submit.err;
+    const std::string job = Field(submit.out, "job");
+    const ProcessResult watch = Tempokey({"jobs", "watch", job});
+    EXPECT_EQ(watch.exit_code, 0) << watch.err;
+    return submit.exit_code == 0 && watch.exit_code == 0 ? job : "";
+  }
 };
 
 const std::string& CmuClip() {
@@ -214,10 +225,8 @@ TEST_F(CliEndToEndTest, DetachedRunCanBeFollowedFetchedListedAndDeletedWithJobsC
 }
 
 TEST_F(CliEndToEndTest, JobsResultRefusesAFormatThatDoesNotFitTheResult) {
-  ProcessResult submit = Tempokey({"run", BandaiClip(), "-o", Path("x.bvh"), "--detach"});
-  ASSERT_EQ(submit.exit_code, 0) << submit.err;
-  const std::string job = Field(submit.out, "job");
-  ASSERT_EQ(Tempokey({"jobs", "watch", job}).exit_code, 0);
+  const std::string job = FinishedJob({"run", BandaiClip(), "-o", Path("x.bvh"), "--detach"});
+  ASSERT_NE(job, "");
 
   ProcessResult run = Tempokey({"jobs", "result", job, "-o", Path("x.json")});
 
@@ -232,10 +241,8 @@ TEST_F(CliEndToEndTest, JobsResultRefusesAFormatThatDoesNotFitTheResult) {
 // server formats them (the glTF fitted against the job's stored clip, the samples baked), the
 // same bytes as the reduce command's own files. They were refused ("write .json or .anim").
 TEST_F(CliEndToEndTest, JobsResultOfAReduceWritesEveryFormatTheReduceCommandWrites) {
-  ProcessResult submit = Tempokey({"reduce", BandaiClip(), "-o", Path("x.json"), "--detach"});
-  ASSERT_EQ(submit.exit_code, 0) << submit.err;
-  const std::string job = Field(submit.out, "job");
-  ASSERT_EQ(Tempokey({"jobs", "watch", job}).exit_code, 0);
+  const std::string job = FinishedJob({"reduce", BandaiClip(), "-o", Path("x.json"), "--detach"});
+  ASSERT_NE(job, "");
 
   ProcessResult glb = Tempokey({"jobs", "result", job, "-o", Path("fetched.glb")});
   ProcessResult bvh = Tempokey({"jobs", "result", job, "-o", Path("fetched.bvh")});

@@ -259,81 +259,6 @@ TEST(HttpFrontEndTest, ARequestBodyTrickledInIsCutOffAndThePageStillServed) {
   EXPECT_THAT(refusal, ::testing::StartsWith("HTTP/1.1 4"));
 }
 
-// A probe with a client of its own (2026-12-02) found a refused call holding a thread for as long
-// as its client kept the connection: 16 requests declaring 99999999999 bytes and sending 2 had
-// their 413s at once, but their bodies were read to their declared ends, and the front end
-// answered nothing else for 90 s. Here civetweb's own read timeout is 600 s, so only the linger
-// after the answer can end such a call: the refusal ends with the server's close, and the one
-// thread answers the next request while the refused client still holds its connection.
-TEST(HttpFrontEndTest, ARefusedCallWhoseBodyNeverComesHoldsNoThread) {
-  std::unique_ptr<Server> server = testing::StartServer(testing::TestServerOptions());
-  ASSERT_NE(server, nullptr);
-  HttpOptions options = Options("127.0.0.1:0");
-  options.web_root = testing::MakeTempDir();
-  options.threads = 1;
-  options.io_timeout = std::chrono::milliseconds(600000);
-  options.body_timeout = std::chrono::milliseconds(600000);
-  absl::StatusOr<std::unique_ptr<HttpFrontEnd>> front_end = HttpFrontEnd::Start(options, *server);
-  ASSERT_TRUE(front_end.ok()) << front_end.status();
-  const int port = (*front_end)->port();
-
-  const int holder = testing::ConnectLoopback(port);
-  ASSERT_GE(holder, 0);
-  const std::string request =
-      "POST /tempokey.v1.MotionService/GetServerInfo HTTP/1.1\r\nHost: 127.0.0.1\r\n"
-      "Content-Type: application/json\r\nContent-Length: 99999999999\r\n\r\n{}";
-  ASSERT_EQ(::send(holder, request.data(), request.size(), MSG_NOSIGNAL),
-            static_cast<ssize_t>(request.size()));
-  bool closed_by_server = false;
-  const std::string refusal = testing::ReadToEnd(holder, &closed_by_server);
-  const std::optional<std::string> page = testing::HttpGet(port, "/");
-  ::close(holder);
-
-  EXPECT_THAT(refusal, ::testing::StartsWith("HTTP/1.1 413"));
-  EXPECT_THAT(refusal, HasSubstr("a request message is over the limit of"));
-  EXPECT_TRUE(closed_by_server);  // not the test's 60 s hang guard
-  ASSERT_TRUE(page.has_value());
-  EXPECT_THAT(*page, ::testing::StartsWith("HTTP/1.1 404"));
-}
-
-// RFC 9112 8: a body short of its Content-Length is incomplete and is not acted on. civetweb's
-// read gives 0 when its I/O timeout passes, and the part that had come was run as the whole
-// call (a probe's SubmitJob of 347 bytes declared as 4 000 000 was queued and ran). A chunked
-// body whose framing is malformed is the client's error (400), not a cancellation (499).
-TEST(HttpFrontEndTest, AnIncompleteOrMalformedBodyIsRefusedNotRun) {
-  std::unique_ptr<Server> server = testing::StartServer(testing::TestServerOptions());
-  ASSERT_NE(server, nullptr);
-  HttpOptions options = Options("127.0.0.1:0");
-  options.web_root = testing::MakeTempDir();
-  options.io_timeout = std::chrono::milliseconds(1000);     // civetweb's read gives up first
-  options.body_timeout = std::chrono::milliseconds(600000);  // the guard never cuts here
-  absl::StatusOr<std::unique_ptr<HttpFrontEnd>> front_end = HttpFrontEnd::Start(options, *server);
-  ASSERT_TRUE(front_end.ok()) << front_end.status();
-  const int port = (*front_end)->port();
-
-  const int fd = testing::ConnectLoopback(port);
-  ASSERT_GE(fd, 0);
-  const std::string short_body =
-      "POST /tempokey.v1.MotionService/GetServerInfo HTTP/1.1\r\nHost: 127.0.0.1\r\n"
-      "Content-Type: application/json\r\nContent-Length: 1000\r\n\r\n{}";
-  ASSERT_EQ(::send(fd, short_body.data(), short_body.size(), MSG_NOSIGNAL),
-            static_cast<ssize_t>(short_body.size()));
-  const std::string incomplete = testing::ReadToEnd(fd);  // the connection stays open meanwhile
-  ::close(fd);
-  const std::string malformed = testing::Exchange(
-      port,
-      "POST /tempokey.v1.MotionService/GetServerInfo HTTP/1.1\r\nHost: 127.0.0.1\r\n"
-      "Content-Type: application/json\r\nTransfer-Encoding: chunked\r\n\r\nZZ\r\n{}\r\n0\r\n\r\n")
-      .value_or("no connection");
-
-  EXPECT_THAT(incomplete, ::testing::StartsWith("HTTP/1.1 400"));
-  EXPECT_THAT(incomplete, HasSubstr("the HTTP request body ended after 2 of the 1000 bytes its "
-                                    "Content-Length declares; nothing was done"));
-  EXPECT_THAT(incomplete, ::testing::Not(HasSubstr("\"version\"")));  // no ServerInfo
-  EXPECT_THAT(malformed, ::testing::StartsWith("HTTP/1.1 400"));
-  EXPECT_THAT(malformed, HasSubstr("its chunked framing is malformed"));
-}
-
 // A Process call over HTTP: the clip and its start as NDJSON lines, one message each.
 std::string ProcessRequestOverHttp(const core::Clip& clip) {
   std::vector<v1::ProcessRequest> requests = testing::ProcessClipRequests(clip);
@@ -355,10 +280,12 @@ struct FrontEnd {
   std::unique_ptr<Server> server;
   std::unique_ptr<HttpFrontEnd> http;
 };
-// `timeouts`, when given, replaces the front end's socket and body timeouts.
+// `timeouts`, when given, replaces the front end's socket and body timeouts; `edit`, when given,
+// changes its options last.
 FrontEnd StartFrontEnd(std::int64_t max_message_bytes = 64 << 20,
                        std::vector<std::string> tokens = {},
-                       std::optional<std::chrono::milliseconds> timeouts = std::nullopt) {
+                       std::optional<std::chrono::milliseconds> timeouts = std::nullopt,
+                       void (*edit)(HttpOptions&) = nullptr) {
   ServerOptions server_options = testing::TestServerOptions();
   server_options.max_message_bytes = max_message_bytes;
   server_options.auth_tokens = std::move(tokens);
@@ -367,6 +294,7 @@ FrontEnd StartFrontEnd(std::int64_t max_message_bytes = 64 << 20,
   HttpOptions options = Options("127.0.0.1:0");
   options.web_root = testing::MakeTempDir();
   if (timeouts) options.io_timeout = options.body_timeout = *timeouts;
+  if (edit != nullptr) edit(options);
   std::ofstream(options.web_root + "/index.html") << "<!doctype html>";
   absl::StatusOr<std::unique_ptr<HttpFrontEnd>> http = HttpFrontEnd::Start(options, *front_end.server);
   EXPECT_TRUE(http.ok()) << http.status();
@@ -387,6 +315,76 @@ int Responses(const std::string& answer) {
     ++count;
   }
   return count;
+}
+
+// A GetServerInfo call declaring `declared_length` bytes of body and sending only "{}", on a
+// connection kept open meanwhile: its answer, read until the server closes the connection
+// (`closed_by_server`: false when the test's 60 s hang guard ended the read instead).
+std::string AnswerToAShortBody(int port, const std::string& declared_length,
+                               bool* closed_by_server = nullptr) {
+  const int fd = testing::ConnectLoopback(port);
+  if (fd < 0) return "no connection";
+  const std::string request =
+      "POST /tempokey.v1.MotionService/GetServerInfo HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+      "Content-Type: application/json\r\nContent-Length: " + declared_length + "\r\n\r\n{}";
+  std::string answer = "not sent";
+  if (::send(fd, request.data(), request.size(), MSG_NOSIGNAL) ==
+      static_cast<ssize_t>(request.size())) {
+    answer = testing::ReadToEnd(fd, closed_by_server);
+  }
+  ::close(fd);
+  return answer;
+}
+
+// A probe with a client of its own (2026-12-02) found a refused call holding a thread for as long
+// as its client kept the connection: 16 requests declaring 99999999999 bytes and sending 2 had
+// their 413s at once, but their bodies were read to their declared ends, and the front end
+// answered nothing else for 90 s. Here civetweb's own read timeout is 600 s, so only the linger
+// after the answer can end such a call: the refusal ends with the server's close, and the one
+// thread answers the next request while the refused client still holds its connection.
+TEST(HttpFrontEndTest, ARefusedCallWhoseBodyNeverComesHoldsNoThread) {
+  const FrontEnd front_end = StartFrontEnd(64 << 20, {}, std::nullopt, [](HttpOptions& options) {
+    options.threads = 1;
+    options.io_timeout = options.body_timeout = std::chrono::milliseconds(600000);
+  });
+  ASSERT_NE(front_end.http, nullptr);
+  const int port = front_end.http->port();
+
+  bool closed_by_server = false;
+  const std::string refusal = AnswerToAShortBody(port, "99999999999", &closed_by_server);
+  const std::optional<std::string> page = testing::HttpGet(port, "/");
+
+  EXPECT_THAT(refusal, ::testing::StartsWith("HTTP/1.1 413"));
+  EXPECT_THAT(refusal, HasSubstr("a request message is over the limit of"));
+  EXPECT_TRUE(closed_by_server);  // not the test's 60 s hang guard
+  ASSERT_TRUE(page.has_value());
+  EXPECT_THAT(*page, ::testing::StartsWith("HTTP/1.1 200"));  // the page, served
+}
+
+// RFC 9112 8: a body short of its Content-Length is incomplete and is not acted on. civetweb's
+// read gives 0 when its I/O timeout passes, and the part that had come was run as the whole
+// call (a probe's SubmitJob of 347 bytes declared as 4 000 000 was queued and ran). A chunked
+// body whose framing is malformed is the client's error (400), not a cancellation (499).
+TEST(HttpFrontEndTest, AnIncompleteOrMalformedBodyIsRefusedNotRun) {
+  const FrontEnd front_end = StartFrontEnd(64 << 20, {}, std::nullopt, [](HttpOptions& options) {
+    options.io_timeout = std::chrono::milliseconds(1000);     // civetweb's read gives up first
+    options.body_timeout = std::chrono::milliseconds(600000);  // the guard never cuts here
+  });
+  ASSERT_NE(front_end.http, nullptr);
+  const int port = front_end.http->port();
+
+  const std::string incomplete = AnswerToAShortBody(port, "1000");
+  const std::string malformed = Exchange(
+      port,
+      "POST /tempokey.v1.MotionService/GetServerInfo HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+      "Content-Type: application/json\r\nTransfer-Encoding: chunked\r\n\r\nZZ\r\n{}\r\n0\r\n\r\n");
+
+  EXPECT_THAT(incomplete, ::testing::StartsWith("HTTP/1.1 400"));
+  EXPECT_THAT(incomplete, HasSubstr("the HTTP request body ended after 2 of the 1000 bytes its "
+                                    "Content-Length declares; nothing was done"));
+  EXPECT_THAT(incomplete, ::testing::Not(HasSubstr("\"version\"")));  // no ServerInfo
+  EXPECT_THAT(malformed, ::testing::StartsWith("HTTP/1.1 400"));
+  EXPECT_THAT(malformed, HasSubstr("its chunked framing is malformed"));
 }
 
 // A probe with an HTTP client of its own found civetweb reading a body as a second request when
