@@ -7,9 +7,12 @@
 #include <chrono>
 #include <cmath>
 #include <condition_variable>
+#include <csignal>
+#include <cstdlib>
 #include <filesystem>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <random>
 #include <system_error>
 #include <thread>
@@ -21,6 +24,7 @@
 #include "client/cli_errors.h"
 #include "proto/clip_digest.h"
 #include "proto/retry_hint.h"
+#include "tempokey/core/io/file_io.h"
 #include "tempokey/core/io/json.h"
 #include "tempokey/core/model/numbers.h"
 #include "tempokey/core/model/status.h"
@@ -45,6 +49,16 @@ bool IsHidden(const fs::path& relative) {
     if (part.string().rfind('.', 0) == 0) return true;
   }
   return false;
+}
+
+// A test hook: SIGINT raised right after the N-th output staged beside its input is written,
+// before it replaces the input (TEMPOKEY_TEST_BATCH_INTERRUPT_AFTER_STAGING=N; 0 or unset: never).
+long InterruptAfterStagingForTesting() {
+  static const long n = [] {
+    const char* text = std::getenv("TEMPOKEY_TEST_BATCH_INTERRUPT_AFTER_STAGING");
+    return text == nullptr ? 0L : std::strtol(text, nullptr, 10);
+  }();
+  return n;
 }
 
 double SecondsSince(Clock::time_point start) {
@@ -230,10 +244,14 @@ BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
                         IsSameFile(item.input_path, item.output_path) &&
                         fs::is_regular_file(item.output_path, ignored);
   std::string write_path = item.output_path;
+  // The staged output is removed by the signal handlers too until it has replaced the input (a
+  // run interrupted in between left it beside the inputs until the next run).
+  std::optional<core::PendingFile> staged_file;
   if (in_place) {
     absl::StatusOr<std::string> staged = options.manifest->StagingPath(item);
     if (!staged.ok()) return finish(staged.status());
     write_path = *std::move(staged);
+    staged_file.emplace(write_path);
   }
   if (absl::Status written = WriteOutput(write_path, item.output_format, result->output, gltf);
       !written.ok()) {
@@ -241,6 +259,10 @@ BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
   }
   Describe(*result, file);
   if (in_place) {
+    static std::atomic<long> staged_outputs{0};
+    if (const long n = InterruptAfterStagingForTesting(); n > 0 && ++staged_outputs == n) {
+      ::raise(SIGINT);
+    }
     return finish(options.manifest->ReplaceInPlace(item, write_path, input_id, pipeline, file));
   }
   if (options.manifest != nullptr) {

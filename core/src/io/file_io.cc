@@ -368,6 +368,10 @@ void RemovePendingTempFiles() {
   }
 }
 
+PendingFile::PendingFile(const std::string& path) : slot_(RegisterTemp(path)) {}
+
+PendingFile::~PendingFile() { UnregisterTemp(slot_); }
+
 void SetTempFileCreatedHookForTesting(void (*hook)()) { g_temp_created_hook.store(hook); }
 
 namespace {

@@ -75,6 +75,22 @@ bool IsAtomicWriteTemporary(std::string_view file_name, std::string_view target_
 inline constexpr int kTrackedTempFiles = 64;
 void RemovePendingTempFiles();
 
+// A whole file that is only a step on the way while this is held (a batch's output staged beside
+// the input it replaces next): RemovePendingTempFiles() removes it too, so a run interrupted
+// between its write and its rename leaves it nowhere. Takes one of the kTrackedTempFiles slots
+// (none free: not tracked, as a temporary would not be). Not copyable; frees its slot when
+// destroyed.
+class PendingFile {
+ public:
+  explicit PendingFile(const std::string& path);
+  ~PendingFile();
+  PendingFile(const PendingFile&) = delete;
+  PendingFile& operator=(const PendingFile&) = delete;
+
+ private:
+  int slot_;
+};
+
 // Test hook: called on the writing thread right after WriteFileAtomically() created (and
 // registered) its temporary file, before any byte is written. Set once, before any write.
 void SetTempFileCreatedHookForTesting(void (*hook)());
