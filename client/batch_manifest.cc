@@ -344,16 +344,21 @@ int BatchManifest::RemoveLeftoverTemporaries(std::span<const BatchItem> items) {
   // Targets by folder, so each folder is listed once; with this manifest's staging files, by their
   // exact names (another manifest's differ), beside the file each replaces (a link's target may
   // be in another folder), and their temporaries.
+  // A target is listed by what its temporaries' names start with: its name, cut short for a long
+  // one (core::AtomicWriteTemporaryStem()).
   std::map<fs::path, std::set<std::string>> targets;
   std::set<fs::path> staged;
-  targets[fs::path(path_).parent_path()].insert(fs::path(path_).filename().string());
+  auto add_target = [&](const fs::path& file) {
+    targets[file.parent_path()].insert(
+        std::string(core::AtomicWriteTemporaryStem(file.filename().string())));
+  };
+  add_target(fs::path(path_));
   for (const BatchItem& item : items) {
-    const fs::path output(item.output_path);
-    targets[output.parent_path()].insert(output.filename().string());
+    add_target(fs::path(item.output_path));
     const absl::StatusOr<std::string> path = StagingPath(item);
     if (!path.ok()) continue;
     staged.insert(*path);
-    targets[fs::path(*path).parent_path()].insert(fs::path(*path).filename().string());
+    add_target(fs::path(*path));
   }
   int removed = 0;
   for (const auto& [folder, names] : targets) {

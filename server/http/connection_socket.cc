@@ -62,6 +62,12 @@ int FindConnectionSocket(int local_port, const std::string& remote_address, int 
   return ambiguous ? -1 : found;
 }
 
+void AbortConnection(int socket) {
+  sockaddr unspecified{};
+  unspecified.sa_family = AF_UNSPEC;
+  ::connect(socket, &unspecified, sizeof unspecified);
+}
+
 bool PeerHasLeft(int socket) {
   // POLLRDHUP: the peer's FIN (a browser tab closed, fetch() aborted, curl stopped); POLLHUP and
   // POLLERR, reported whatever is asked: a reset or both sides shut. POLLIN is not asked, so a

@@ -19,6 +19,14 @@ int FindConnectionSocket(int local_port, const std::string& remote_address, int 
 // failed (a shutdown, a reset). Data waiting to be read is not a departure. Does not block.
 bool PeerHasLeft(int socket);
 
+// Ends the connection of `socket` at once, keeping the descriptor (its owner, civetweb, still
+// closes it): connect() to AF_UNSPEC, which on Linux resets a TCP connection (tcp_disconnect()).
+// A shutdown is not enough: on Linux data keeps arriving on a socket shut both ways, and
+// civetweb, which reads what is left of a request's body after its handler, read it for as long
+// as the peer sent it. Reads of the socket then fail; what the peer has received already (an
+// answer and its FIN) stays readable on its side. Thread-safe, async-signal-safe.
+void AbortConnection(int socket);
+
 }  // namespace tempokey::server::http
 
 #endif  // TEMPOKEY_SERVER_HTTP_CONNECTION_SOCKET_H_

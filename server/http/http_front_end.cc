@@ -191,6 +191,9 @@ class HttpCallStream final : public JsonBridge::Stream {
     }
   }
 
+  // Whether the body was read to its end.
+  bool read_to_end() const { return done_reading_; }
+
   bool WriteResponse(std::string_view json) override {
     if (!method_.server_streaming()) {
       single_response_ = std::string(json);
@@ -356,28 +359,38 @@ std::pair<int, std::string_view> FramingRefusal(const mg_connection* connection)
 }
 
 // How long a refused call's body is still read and dropped after its answer, so that a client
-// that sends it anyway (RFC 9110 10.1.1 allows it) reads the whole answer rather than a reset,
-// which closing a socket with unread data sends: a lingering close, as nginx's (lingering_time
-// and lingering_timeout, https://nginx.org/en/docs/http/ngx_http_core_module.html#lingering_close),
-// here bounded by a total and by a pause with nothing received.
-constexpr std::chrono::milliseconds kLingerTotal{2000};
-constexpr std::chrono::milliseconds kLingerPause{500};
+// that sends it anyway (RFC 9110 10.1.1 allows it; most HTTP libraries send the whole body before
+// they read) reads the whole answer rather than a reset, which closing a socket with unread data
+// sends: a lingering close, as nginx's (lingering_time 30 s, lingering_timeout 5 s:
+// https://nginx.org/en/docs/http/ngx_http_core_module.html#lingering_close). A body that keeps
+// coming is read for up to kLingerTotal (the SlowBodyGuard still watches its pace); one that
+// stops is left after kLingerPause with nothing received.
+constexpr std::chrono::milliseconds kLingerTotal{30000};
+constexpr std::chrono::milliseconds kLingerPause{2000};
 
 // Ends a refused call's connection after its answer and returns `code`. The answer is ended on
 // the socket itself (its FIN after it): a client that waits for "100 Continue" sends no body
 // after a final answer, sees the end and closes. What a client sends anyway is read and dropped
-// for at most kLingerTotal, until a pause of kLingerPause; then the reading side is shut, so that
-// civetweb, which reads the rest of a body after the handler, finds its end at once. Before, the
-// rest of a declared body was read to its end: 16 requests declaring 99999999999 bytes and
-// sending 2 held all 16 threads for 90 s, through their 413s. `local_port` is the front end's
-// (FindConnectionSocket()).
+// as above; then the connection is aborted (AbortConnection()), so that civetweb, which reads the
+// rest of a body after the handler (unwatched), finds its end at once, and nothing more is taken.
+// Before, the rest of a declared body was read to its end: 16 requests declaring 99999999999
+// bytes and sending 2 held all 16 threads for 90 s, through their 413s. `local_port` is the front
+// end's (FindConnectionSocket()).
 int DiscardBody(mg_connection* connection, int local_port, int code) {
   const mg_request_info& info = *mg_get_request_info(connection);
-  const int socket = FindConnectionSocket(local_port, info.remote_addr, info.remote_port);
-  if (socket < 0) return code;  // gone already
-  ::shutdown(socket, SHUT_WR);
   const auto deadline = std::chrono::steady_clock::now() + kLingerTotal;
   std::vector<char> block(kReadBlock);  // on the heap: civetweb's threads have small stacks
+  const int socket = FindConnectionSocket(local_port, info.remote_addr, info.remote_port);
+  if (socket < 0) {
+    // Aborted already (the guard's cut), or not to be told apart (descriptors exhausted, an
+    // ambiguous match): civetweb's reads, each up to its I/O timeout, under the guard's watch,
+    // until the deadline.
+    while (std::chrono::steady_clock::now() < deadline &&
+           mg_read(connection, block.data(), block.size()) > 0) {
+    }
+    return code;
+  }
+  ::shutdown(socket, SHUT_WR);
   for (;;) {
     const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(
         deadline - std::chrono::steady_clock::now());
@@ -386,7 +399,7 @@ int DiscardBody(mg_connection* connection, int local_port, int code) {
     if (::poll(&readable, 1, static_cast<int>(std::min(left, kLingerPause).count())) <= 0) break;
     if (::recv(socket, block.data(), block.size(), MSG_DONTWAIT) <= 0) break;
   }
-  ::shutdown(socket, SHUT_RD);
+  AbortConnection(socket);
   return code;
 }
 
@@ -586,7 +599,12 @@ int HttpFrontEnd::HandleRequest(mg_connection* connection) {
       spdlog::info("http: the client of {} ({}:{}) went away; the call was cancelled",
                    method->name(), info->remote_addr, info->remote_port);
     }
-    return stream.Finish(outcome);
+    const int code = stream.Finish(outcome);
+    // Refused while its body was being read (cut short, over the size limit, malformed): the
+    // rest of the body is dropped as for a refusal before it (civetweb would read it after the
+    // handler, unwatched, up to its declared end).
+    if (!outcome.status.ok() && !stream.read_to_end()) return DiscardBody(connection, port_, code);
+    return code;
   }
   if (verb != "GET" && verb != "HEAD") {
     SendText(connection, 405, "text/plain; charset=utf-8", "method not allowed\n",

@@ -103,8 +103,9 @@ void SlowBodyGuard::Run() {
         std::lock_guard<std::mutex> count_lock(mutex_);
         ++cut_off_;
       }
-      // Shut down, not closed: the descriptor stays civetweb's, so it is not reused under it.
-      ::shutdown(socket, SHUT_RDWR);
+      // Aborted, not closed: the descriptor stays civetweb's, so it is not reused under it. A
+      // shutdown left the socket taking what the peer went on sending (AbortConnection()).
+      AbortConnection(socket);
     }
     lock.lock();
     cutting_ = 0;

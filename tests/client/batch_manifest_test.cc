@@ -405,6 +405,25 @@ TEST_F(BatchManifestTest, LeftoverTemporariesOfTheRunsOwnFilesAreRemovedOnly) {
   for (const std::string& name : kept_names) EXPECT_TRUE(fs::exists(out_ + "/" + name)) << name;
 }
 
+// An output name of 250 bytes has temporaries named by its first 242 (the longest name is 255):
+// a killed run's are still found as its own, and removed.
+TEST_F(BatchManifestTest, LeftoverTemporariesOfALongOutputNameAreFoundByItsStem) {
+  const std::string stem(245, 'w');  // "<245 w>.json": 250 bytes
+  const std::vector<BatchItem> items = {Item(stem)};
+  std::unique_ptr<BatchManifest> manifest = Open();
+  ASSERT_NE(manifest, nullptr);
+  const std::string leftover = std::string(242, 'w') + ".tmp-ab12cd34";
+  const std::string other = std::string(241, 'w') + ".tmp-ab12cd34";
+  ASSERT_TRUE(core::WriteFileAtomically(out_ + "/" + leftover, "x").ok());
+  ASSERT_TRUE(core::WriteFileAtomically(out_ + "/" + other, "x").ok());
+
+  const int removed = manifest->RemoveLeftoverTemporaries(items);
+
+  EXPECT_EQ(removed, 1);
+  EXPECT_FALSE(fs::exists(out_ + "/" + leftover));
+  EXPECT_TRUE(fs::exists(out_ + "/" + other));
+}
+
 // One writer per manifest: a second Open() of the same manifest (same folder, same shard) is
 // refused while the first is open, naming the lock; another shard's opens beside it; once the
 // first is gone the manifest opens again and no lock file is left behind.

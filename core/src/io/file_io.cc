@@ -34,11 +34,13 @@ std::string ErrnoText(int error) {
   return text;
 }
 
-// The status code of a failed file operation. UNAVAILABLE is kept for what may pass if tried
-// again: the clients take it as a server's outage (a batch retries it, the CLI probes the
-// connection's TLS), so a path that is a folder, a name too long or a loop of links is not it
-// (a batch's summary reported those as "UNAVAILABLE", the code of an unreachable server).
-absl::StatusCode ErrnoCode(int error) {
+// The status code of a failed file operation (the FileErrorCode() of file_io.h's comments).
+// UNAVAILABLE is kept for a state of the file that may pass (a lock, a FIFO's reader, an
+// interrupted call): the clients take it as a server's outage (a batch retries it, the CLI probes
+// the connection's TLS), so a path that is a folder, a name too long or a loop of links is not
+// it (a batch's summary reported those as "UNAVAILABLE", the code of an unreachable server);
+// RESOURCE_EXHAUSTED is the machine's room (disk, descriptors, memory).
+absl::StatusCode FileErrorCode(int error) {
   switch (error) {
     case ENOENT:
     case ENOTDIR:
@@ -82,7 +84,7 @@ absl::StatusCode ErrnoCode(int error) {
 }
 
 absl::Status ErrnoError(int error, std::string_view path, std::string_view what) {
-  return absl::Status(ErrnoCode(error),
+  return absl::Status(FileErrorCode(error),
                       absl::StrCat(AsAbsl(path), ": ", AsAbsl(what), ErrnoText(error)));
 }
 
@@ -393,6 +395,10 @@ std::string_view TempStem(std::string_view target_name) {
 }
 
 }  // namespace
+
+std::string_view AtomicWriteTemporaryStem(std::string_view target_name) {
+  return TempStem(target_name);
+}
 
 bool IsAtomicWriteTemporary(std::string_view file_name, std::string_view target_name) {
   target_name = TempStem(target_name);

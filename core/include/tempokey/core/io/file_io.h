@@ -22,7 +22,9 @@ inline constexpr int kStreamIdleTimeoutMs = 10'000;
 // ("walk.bvh: is a directory, not a file"), a device or socket ("/dev/zero: is a character
 // device, not a file") or larger than `max_bytes` ("walk.bvh: file is 3000000000 bytes, over
 // the limit of 1073741824"); kDeadlineExceeded a silent FIFO ("in.bvh: is a FIFO and nothing
-// arrived for 10 s (no writer?)"); kPermissionDenied unreadable; kUnavailable other I/O errors.
+// arrived for 10 s (no writer?)"); kPermissionDenied unreadable; others by their errno
+// (FileErrorCode() in file_io.cc: kFailedPrecondition a name too long or a loop of links,
+// kUnavailable what may pass if tried again, kDataLoss an I/O error, kUnknown the rest).
 // Thread-safe.
 absl::StatusOr<std::string> ReadFile(const std::string& path,
                                      std::int64_t max_bytes = std::int64_t{1} << 30);
@@ -38,14 +40,15 @@ absl::StatusOr<std::string> ReadTextFile(const std::string& path,
 
 // Writes `contents` to a temporary file beside `path` ("<path>.tmp-<8 random characters>", the
 // file name cut short to fit 255 bytes, created exclusively, permissions from the umask or kept
-// from the file it replaces), fsyncs it and renames it over `path`, so readers see the old file or the whole new one, never half
-// of it. The temporary is removed on any failure; the target is then untouched.
+// from the file it replaces), fsyncs it and renames it over `path`, so readers see the old file
+// or the whole new one, never half of it. The temporary is removed on any failure; the target is
+// then untouched.
 // Errors (messages start with `path`): kNotFound the directory does not exist;
 // kPermissionDenied it is not writable; kResourceExhausted the disk is full;
 // kFailedPrecondition `path` is (or links to) a block device or a socket ("sda: is a block
-// device, not a regular file; not replaced ..."), which is left as it is; kUnavailable other I/O
-// errors, e.g. `path` is a directory ("cannot replace the file: is a directory") or a FIFO no
-// process reads ("out.json: is a FIFO with no reader").
+// device, not a regular file; not replaced ..."), which is left as it is, or a directory
+// ("cannot replace the file: is a directory"), or a name too long; kUnavailable a FIFO no
+// process reads ("out.json: is a FIFO with no reader"); others by their errno as ReadFile().
 // A FIFO or a character device (/dev/null, a terminal) is not replaced but written into, as a
 // stream (a reader leaving midway is the writer's SIGPIPE, as for any pipe), by the name given.
 // A symbolic link to a regular file is written through: the file it names (after every link;
@@ -67,6 +70,11 @@ absl::StatusOr<std::string> FollowLinks(std::string path);
 // Whether `file_name` is the name of a temporary WriteFileAtomically() makes for a file named
 // `target_name` (both without folders): what a killed writer leaves behind. Thread-safe.
 bool IsAtomicWriteTemporary(std::string_view file_name, std::string_view target_name);
+
+// What the names of the temporaries WriteFileAtomically() makes for a file named `target_name`
+// start with, before ".tmp-": the name itself, or for a name within 13 bytes of the 255 a file
+// name may have, its first bytes (cut before a UTF-8 character). A view into `target_name`.
+std::string_view AtomicWriteTemporaryStem(std::string_view target_name);
 // Removes every temporary file WriteFileAtomically() has created and not yet renamed or removed,
 // in this process. Async-signal-safe (it only reads lock-free slots and calls unlink()): a
 // program's SIGINT / SIGTERM handler calls it so an interrupted write leaves no "*.tmp-*" file.
