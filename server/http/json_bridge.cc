@@ -16,6 +16,7 @@
 #include "grpcpp/impl/codegen/proto_utils.h"
 #include "grpcpp/support/byte_buffer.h"
 #include "proto/retry_hint.h"
+#include "server/http/json_names.h"
 
 namespace tempokey::server::http {
 namespace {
@@ -174,7 +175,10 @@ JsonBridge::Outcome JsonBridge::Call(const pb::MethodDescriptor& method,
     } else {
       request->Clear();
       pb::util::Status parsed = pb::util::JsonStringToMessage(**json, request.get(), parse_options);
-      if (!parsed.ok()) {
+      if (absl::Status names = CheckNoRepeatedNames(**json); parsed.ok() && !names.ok()) {
+        bad = absl::InvalidArgumentError(
+            absl::StrCat("request message ", index, ": ", names.message()));
+      } else if (!parsed.ok()) {
         bad = absl::InvalidArgumentError(
             absl::StrCat("request message ", index, " is not a ", method.input_type()->full_name(),
                          " in JSON: ", std::string(parsed.message())));

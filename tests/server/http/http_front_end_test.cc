@@ -23,6 +23,7 @@
 #include "server/http/http_options.h"
 #include "server/http/http_status.h"
 #include "server/http/json_bridge.h"
+#include "server/http/json_names.h"
 #include "server/server.h"
 #include "tempokey/core/io/json.h"
 #include "tempokey/v1/motion_service.pb.h"
@@ -181,6 +182,37 @@ TEST(JsonBridgeTest, CallsTheServersOwnHandlersWithJsonMessages) {
   EXPECT_EQ(c.status.code(), absl::StatusCode::kInvalidArgument);
   EXPECT_THAT(std::string(c.status.message()),
               HasSubstr("request message 1 is not a tempokey.v1.GetJobRequest in JSON"));
+}
+
+// protobuf's JSON parser takes the last of a repeated name without a word: a probe's
+// {"jobId":"a","jobId":"b"} looked up "b", and {"text":"0s:1","text":"0s:2"} read "0s:2". A name
+// given twice in one object is refused, decoded ("\u0061" is "a"); the same name in two objects,
+// or as a value, is not a repeat.
+TEST(JsonBridgeTest, AMemberNamedTwiceInOneObjectIsRefused) {
+  std::unique_ptr<Server> server = testing::StartServer(testing::TestServerOptions());
+  ASSERT_NE(server, nullptr);
+  JsonBridge bridge(server->InProcessChannel(), 1 << 20);
+  const google::protobuf::MethodDescriptor& get_job =
+      *JsonBridge::FindMethod("/tempokey.v1.MotionService/GetJob");
+  MemoryStream twice({R"({"jobId":"job-a","jobId":"job-b"})"});
+  MemoryStream escaped({R"({"jobId":"job-a","\u006aobId":"job-b"})"});
+
+  const JsonBridge::Outcome a = bridge.Call(get_job, "", twice);
+  const JsonBridge::Outcome b = bridge.Call(get_job, "", escaped);
+
+  EXPECT_EQ(a.status.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(std::string(a.status.message()),
+            "request message 1: member \"jobId\" is named twice in one object (at byte 18); a "
+            "JSON request names each field once");
+  EXPECT_EQ(b.status.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_THAT(std::string(b.status.message()), HasSubstr("member \"jobId\" is named twice"));
+  for (const char* json :
+       {R"({"a":{"x":1},"b":{"x":2}})", R"({"a":"a","b":["a","a"],"c":{"a":{"a":1}}})",
+        R"({"a":"x\"y","b":1})", R"([{"a":1},{"a":2}])", "not json", R"({"a":)"}) {
+    EXPECT_TRUE(CheckNoRepeatedNames(json).ok()) << json;
+  }
+  EXPECT_FALSE(CheckNoRepeatedNames(R"({"a":1,"b":{"c":1,"c":2}})").ok());
+  EXPECT_FALSE(CheckNoRepeatedNames(R"({"\ud83d\ude00":1,"\ud83d\ude00":2})").ok());
 }
 
 // civetweb's timeout is per read, and mg_read() waits for the whole block it asked for: a client
