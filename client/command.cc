@@ -49,10 +49,8 @@ std::string TrimWhitespace(std::string text) {
 // ASCII (wire::CheckBearerToken()), or why not, named by its source. A server's --auth_token_file
 // lists several tokens, one a line: given to the client, it is refused by its line count, where
 // a token holding line breaks made gRPC abort the process without a word.
-absl::StatusOr<std::string> TokenFrom(std::string text, std::string_view source) {
-  constexpr std::string_view kByteOrderMark = "\xEF\xBB\xBF";
-  if (std::string_view(text).starts_with(kByteOrderMark)) text.erase(0, kByteOrderMark.size());
-  std::string token = TrimWhitespace(std::move(text));
+absl::StatusOr<std::string> TokenFrom(std::string_view text, std::string_view source) {
+  std::string token = TrimWhitespace(std::string(wire::TokenFileText(text)));
   if (const auto lines = std::count(token.begin(), token.end(), '\n'); lines > 0) {
     return absl::InvalidArgumentError(absl::StrCat(
         core::AsAbsl(source), ": holds ", lines + 1, " lines; the client sends one token (a server's "
@@ -122,7 +120,7 @@ absl::StatusOr<ClientOptions> ClientOptionsFromFlags(const ParsedArgs& args) {
   }
   if (std::optional<std::string> token_file = args.Value("--token-file")) {
     TEMPOKEY_ASSIGN_OR_RETURN(std::string text, core::ReadTextFile(*token_file, kMaxPemBytes));
-    TEMPOKEY_ASSIGN_OR_RETURN(options.bearer_token, TokenFrom(std::move(text), *token_file));
+    TEMPOKEY_ASSIGN_OR_RETURN(options.bearer_token, TokenFrom(text, *token_file));
     if (options.bearer_token.empty()) {
       return absl::InvalidArgumentError(absl::StrCat(*token_file, ": the token file is empty"));
     }

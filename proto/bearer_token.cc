@@ -36,4 +36,9 @@ absl::Status CheckBearerToken(std::string_view token) {
   return absl::OkStatus();
 }
 
+std::string_view TokenFileText(std::string_view text) {
+  constexpr std::string_view kByteOrderMark = "\xEF\xBB\xBF";
+  return text.starts_with(kByteOrderMark) ? text.substr(kByteOrderMark.size()) : text;
+}
+
 }  // namespace tempokey::wire

@@ -17,6 +17,10 @@ namespace tempokey::wire {
 // (it is a secret). Empty is OK here: callers decide whether no token is allowed.
 absl::Status CheckBearerToken(std::string_view token);
 
+// The text of a token file without a UTF-8 byte order mark at its start (editors write one; it
+// is no part of the first token). A view into `text`.
+std::string_view TokenFileText(std::string_view text);
+
 }  // namespace tempokey::wire
 
 #endif  // TEMPOKEY_PROTO_BEARER_TOKEN_H_

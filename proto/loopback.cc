@@ -6,11 +6,13 @@
 #include <sys/socket.h>
 
 #include <algorithm>
+#include <cstdint>
 #include <string>
 #include <string_view>
 #include <vector>
 
 #include "absl/strings/ascii.h"
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_split.h"
 #include "tempokey/core/model/status.h"
@@ -49,38 +51,52 @@ absl::Status CheckPort(std::string_view address) {
   if (port.empty() || port.find_first_not_of("0123456789") != std::string_view::npos) {
     return absl::OkStatus();
   }
-  const std::string_view significant =
-      port.substr(std::min(port.find_first_not_of('0'), port.size()));
-  if (significant.size() <= 5) {
-    int value = 0;
-    for (char c : significant) value = value * 10 + (c - '0');
-    if (value <= 65535) return absl::OkStatus();
-  }
+  std::uint32_t value = 0;  // digits past 2^32 do not parse: not a port either
+  if (absl::SimpleAtoi(core::AsAbsl(port), &value) && value <= 65535) return absl::OkStatus();
   return absl::InvalidArgumentError(absl::StrCat(
       "port ", core::AsAbsl(port), " is not a TCP port (0 to 65535)"));
+}
+
+// What a gRPC channel target names, in gRPC's name syntax (doc/naming.md): a unix-domain socket,
+// a list of addresses ("ipv4:", "ipv6:"; "dns:[//authority/]host[:port]" and a bare
+// "host[:port]" are one), or something else (another scheme: xds:///name, vsock:...; a dns
+// authority without a name).
+struct TargetAddresses {
+  enum class Kind { kUnixSocket, kAddresses, kOther } kind = Kind::kOther;
+  std::vector<std::string_view> addresses;  // kAddresses: each "host[:port]", views of the target
+};
+
+TargetAddresses AddressesOf(std::string_view target) {
+  using Kind = TargetAddresses::Kind;
+  if (Consume(target, "unix:") || Consume(target, "unix-abstract:")) return {Kind::kUnixSocket, {}};
+  if (Consume(target, "ipv4:") || Consume(target, "ipv6:")) {
+    TargetAddresses list{Kind::kAddresses, {}};
+    if (target.empty()) return list;
+    for (const absl::string_view address : absl::StrSplit(core::AsAbsl(target), ',')) {
+      list.addresses.emplace_back(address.data(), address.size());
+    }
+    return list;
+  }
+  if (Consume(target, "dns:")) {
+    if (Consume(target, "//")) {  // an authority (the DNS server to ask), then the name
+      const std::size_t slash = target.find('/');
+      if (slash == std::string_view::npos) return {};
+      target.remove_prefix(slash + 1);
+    }
+  } else if (const std::size_t colon = target.find(':');
+             colon != std::string_view::npos && target.substr(colon).starts_with("://")) {
+    return {};
+  }
+  return {Kind::kAddresses, {target}};
 }
 
 }  // namespace
 
 absl::Status CheckTargetPorts(std::string_view target) {
-  if (Consume(target, "unix:") || Consume(target, "unix-abstract:")) return absl::OkStatus();
-  if (Consume(target, "ipv4:") || Consume(target, "ipv6:")) {
-    for (const absl::string_view address : absl::StrSplit(core::AsAbsl(target), ',')) {
-      TEMPOKEY_RETURN_IF_ERROR(CheckPort(std::string_view(address.data(), address.size())));
-    }
-    return absl::OkStatus();
+  for (std::string_view address : AddressesOf(target).addresses) {
+    TEMPOKEY_RETURN_IF_ERROR(CheckPort(address));
   }
-  if (Consume(target, "dns:")) {
-    if (Consume(target, "//")) {  // an authority (the DNS server to ask), then the name
-      const std::size_t slash = target.find('/');
-      if (slash == std::string_view::npos) return absl::OkStatus();
-      target.remove_prefix(slash + 1);
-    }
-  } else if (const std::size_t colon = target.find(':');
-             colon != std::string_view::npos && target.substr(colon).starts_with("://")) {
-    return absl::OkStatus();  // another scheme's syntax (xds:///name, ...): its own resolver's
-  }
-  return CheckPort(target);
+  return absl::OkStatus();
 }
 
 bool IsLoopbackSockaddr(const sockaddr* address) {
@@ -128,28 +144,13 @@ bool IsLoopbackLiteral(std::string_view host) {
 }
 
 bool IsLoopbackTarget(std::string_view target) {
-  if (Consume(target, "unix:") || Consume(target, "unix-abstract:")) return true;
-  if (Consume(target, "ipv4:") || Consume(target, "ipv6:")) {
-    if (target.empty()) return false;
-    for (const absl::string_view address : absl::StrSplit(core::AsAbsl(target), ',')) {
-      if (!IsLoopbackLiteral(HostOf(std::string_view(address.data(), address.size())))) {
-        return false;
-      }
-    }
-    return true;
-  }
-  if (Consume(target, "dns:")) {
-    if (Consume(target, "//")) {  // an authority (the DNS server to ask), then the name
-      const std::size_t slash = target.find('/');
-      if (slash == std::string_view::npos) return false;
-      target.remove_prefix(slash + 1);
-    }
-  } else if (const std::size_t colon = target.find(':');
-             colon != std::string_view::npos && target.substr(colon).starts_with("://")) {
-    return false;  // another scheme with an authority: xds:///name, ...
-  }
-  const std::string host = HostOf(target);
-  return !host.empty() && IsLoopbackLiteral(host);
+  const TargetAddresses named = AddressesOf(target);
+  if (named.kind == TargetAddresses::Kind::kUnixSocket) return true;
+  return named.kind == TargetAddresses::Kind::kAddresses && !named.addresses.empty() &&
+         std::all_of(named.addresses.begin(), named.addresses.end(), [](std::string_view address) {
+           const std::string host = HostOf(address);
+           return !host.empty() && IsLoopbackLiteral(host);
+         });
 }
 
 }  // namespace tempokey::wire

@@ -106,11 +106,7 @@ absl::StatusOr<std::vector<std::string>> ReadTokenFile(const std::string& path) 
   buffer << in.rdbuf();
   const std::string text = buffer.str();
   std::vector<std::string> tokens;
-  // A UTF-8 byte order mark (editors write one) is no part of the first line's token.
-  constexpr std::string_view kByteOrderMark = "\xEF\xBB\xBF";
-  std::istringstream lines(std::string_view(text).starts_with(kByteOrderMark)
-                               ? text.substr(kByteOrderMark.size())
-                               : text);
+  std::istringstream lines{std::string(wire::TokenFileText(text))};
   std::string line;
   for (int number = 1; std::getline(lines, line); ++number) {
     std::string token = Trim(line);

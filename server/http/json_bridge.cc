@@ -175,13 +175,13 @@ JsonBridge::Outcome JsonBridge::Call(const pb::MethodDescriptor& method,
     } else {
       request->Clear();
       pb::util::Status parsed = pb::util::JsonStringToMessage(**json, request.get(), parse_options);
-      if (absl::Status names = CheckNoRepeatedNames(**json); parsed.ok() && !names.ok()) {
-        bad = absl::InvalidArgumentError(
-            absl::StrCat("request message ", index, ": ", names.message()));
-      } else if (!parsed.ok()) {
+      if (!parsed.ok()) {
         bad = absl::InvalidArgumentError(
             absl::StrCat("request message ", index, " is not a ", method.input_type()->full_name(),
                          " in JSON: ", std::string(parsed.message())));
+      } else if (absl::Status names = CheckNoRepeatedNames(**json); !names.ok()) {
+        bad = absl::InvalidArgumentError(
+            absl::StrCat("request message ", index, ": ", names.message()));
       }
     }
     if (!bad.ok()) {

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "tempokey/core/io/json.h"
 #include "tempokey/core/io/printable_text.h"
 
 namespace tempokey::server::http {
@@ -28,27 +29,13 @@ int HexValue(char c) {
   return -1;
 }
 
-void AppendUtf8(std::string& out, std::uint32_t code) {
-  if (code < 0x80) {
-    out += static_cast<char>(code);
-  } else if (code < 0x800) {
-    out += static_cast<char>(0xC0 | (code >> 6));
-    out += static_cast<char>(0x80 | (code & 0x3F));
-  } else if (code < 0x10000) {
-    out += static_cast<char>(0xE0 | (code >> 12));
-    out += static_cast<char>(0x80 | ((code >> 6) & 0x3F));
-    out += static_cast<char>(0x80 | (code & 0x3F));
-  } else {
-    out += static_cast<char>(0xF0 | (code >> 18));
-    out += static_cast<char>(0x80 | ((code >> 12) & 0x3F));
-    out += static_cast<char>(0x80 | ((code >> 6) & 0x3F));
-    out += static_cast<char>(0x80 | (code & 0x3F));
-  }
-}
-
-// The string starting at json[*at] (its opening quote), decoded; *at left after its closing
-// quote. False when it does not end or an escape is malformed (left to the parser).
+// The string starting at json[*at] (its opening quote), decoded into `decoded` unless it is null
+// (a value: only names are compared); *at left after its closing quote. False when it does not
+// end or an escape is malformed (left to the parser).
 bool ReadString(std::string_view json, std::size_t* at, std::string* decoded) {
+  auto put = [decoded](char c) {
+    if (decoded != nullptr) *decoded += c;
+  };
   std::size_t i = *at + 1;
   while (i < json.size()) {
     const char c = json[i];
@@ -57,7 +44,7 @@ bool ReadString(std::string_view json, std::size_t* at, std::string* decoded) {
       return true;
     }
     if (c != '\\') {
-      *decoded += c;
+      put(c);
       ++i;
       continue;
     }
@@ -65,14 +52,14 @@ bool ReadString(std::string_view json, std::size_t* at, std::string* decoded) {
     const char e = json[i + 1];
     i += 2;
     switch (e) {
-      case '"': *decoded += '"'; break;
-      case '\\': *decoded += '\\'; break;
-      case '/': *decoded += '/'; break;
-      case 'b': *decoded += '\b'; break;
-      case 'f': *decoded += '\f'; break;
-      case 'n': *decoded += '\n'; break;
-      case 'r': *decoded += '\r'; break;
-      case 't': *decoded += '\t'; break;
+      case '"': put('"'); break;
+      case '\\': put('\\'); break;
+      case '/': put('/'); break;
+      case 'b': put('\b'); break;
+      case 'f': put('\f'); break;
+      case 'n': put('\n'); break;
+      case 'r': put('\r'); break;
+      case 't': put('\t'); break;
       case 'u': {
         std::uint32_t code = 0;
         for (int k = 0; k < 4; ++k) {
@@ -94,7 +81,7 @@ bool ReadString(std::string_view json, std::size_t* at, std::string* decoded) {
             i += 6;
           }
         }
-        AppendUtf8(*decoded, code);
+        if (decoded != nullptr) core::AppendUtf8(*decoded, code);
         break;
       }
       default:
@@ -113,9 +100,10 @@ absl::Status CheckNoRepeatedNames(std::string_view json) {
     const char c = json[i];
     if (c == '"') {
       const std::size_t start = i;
+      const bool name = !open.empty() && open.back().object && open.back().expect_name;
       std::string decoded;
-      if (!ReadString(json, &i, &decoded)) return absl::OkStatus();
-      if (!open.empty() && open.back().object && open.back().expect_name) {
+      if (!ReadString(json, &i, name ? &decoded : nullptr)) return absl::OkStatus();
+      if (name) {
         open.back().expect_name = false;
         if (!open.back().names.insert(decoded).second) {
           return absl::InvalidArgumentError(absl::StrCat(

@@ -382,11 +382,13 @@ constexpr std::string_view kTempMark = ".tmp-";
 // The longest file name Linux file systems take (NAME_MAX).
 constexpr std::size_t kMaxFileName = 255;
 
+}  // namespace
+
 // The part of a target's file name its temporaries start with: the whole name, or for a name
 // within 13 bytes of kMaxFileName its first bytes, cut before a UTF-8 character rather than
 // inside one, so that "<that>.tmp-xxxxxxxx" is a name the file system takes (names of 243 to 255
 // bytes were refused: "cannot create a temporary file: file name too long").
-std::string_view TempStem(std::string_view target_name) {
+std::string_view AtomicWriteTemporaryStem(std::string_view target_name) {
   constexpr std::size_t kMaxStem = kMaxFileName - kTempMark.size() - kTempSuffixLength;
   if (target_name.size() <= kMaxStem) return target_name;
   std::size_t cut = kMaxStem;
@@ -394,14 +396,8 @@ std::string_view TempStem(std::string_view target_name) {
   return target_name.substr(0, cut);
 }
 
-}  // namespace
-
-std::string_view AtomicWriteTemporaryStem(std::string_view target_name) {
-  return TempStem(target_name);
-}
-
 bool IsAtomicWriteTemporary(std::string_view file_name, std::string_view target_name) {
-  target_name = TempStem(target_name);
+  target_name = AtomicWriteTemporaryStem(target_name);
   if (file_name.size() != target_name.size() + kTempMark.size() + kTempSuffixLength ||
       !file_name.starts_with(target_name) ||
       file_name.substr(target_name.size(), kTempMark.size()) != kTempMark) {
@@ -435,7 +431,7 @@ absl::Status WriteFileAtomically(const std::string& requested, std::string_view 
   for (int attempt = 0; attempt < kTempNameAttempts && fd < 0; ++attempt) {
     const std::size_t name_start = path.rfind('/') + 1;  // npos + 1 == 0: no folder
     temp_path = absl::StrCat(AsAbsl(std::string_view(path).substr(0, name_start)),
-                             AsAbsl(TempStem(std::string_view(path).substr(name_start))),
+                             AsAbsl(AtomicWriteTemporaryStem(std::string_view(path).substr(name_start))),
                              AsAbsl(kTempMark), RandomSuffix());
     // 0666 lets the umask decide, as for any newly created file.
     fd = ::open(temp_path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666);

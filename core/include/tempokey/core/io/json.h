@@ -58,6 +58,9 @@ bool IsUtf8(std::string_view text);
 // the C1 controls U+0080 to U+009F as \u0080 to \u009f, so the text cannot act on a terminal).
 void AppendJsonString(std::string& out, std::string_view text);
 
+// Appends code point `code` (at most U+10FFFF, not a surrogate) to `out` as UTF-8.
+void AppendUtf8(std::string& out, char32_t code);
+
 }  // namespace tempokey::core
 
 #endif  // TEMPOKEY_CORE_IO_JSON_H_
