@@ -1,6 +1,7 @@
 // `tempokey batch`: one pipeline over every clip file of a folder, several files at once, each
 // through a stateless Process call (so a load balancer or a round-robin target spreads them), with
-// whole-file retries when a server goes away or its queue is full, and a summary a CI stage can
+// whole-file retries when a server goes away or refuses a file for the moment (its queue full, no
+// stream slot, its memory budget in use: a retry hint), and a summary a CI stage can
 // read. The engine lives here, apart from the command's flags and terminal output.
 #ifndef TEMPOKEY_CLIENT_BATCH_H_
 #define TEMPOKEY_CLIENT_BATCH_H_

@@ -6,6 +6,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "proto/retry_hint.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::server {
@@ -63,7 +64,7 @@ MemoryBudget::Reservation::~Reservation() { Release(); }
 absl::Status MemoryBudget::Reservation::Grow(std::int64_t more) {
   if (more <= 0) return absl::OkStatus();
   if (budget_ == nullptr) return absl::OkStatus();  // an unbudgeted holder (tests, clients)
-  TEMPOKEY_RETURN_IF_ERROR(budget_->Claim(use_, what_, more));
+  TEMPOKEY_RETURN_IF_ERROR(budget_->Claim(use_, what_, more, bytes_));
   bytes_ += more;
   return absl::OkStatus();
 }
@@ -131,7 +132,8 @@ bool MemoryBudget::TryClaimLocked(MemoryUse use, std::int64_t more) {
   return true;
 }
 
-absl::Status MemoryBudget::Claim(MemoryUse use, std::string_view what, std::int64_t more) {
+absl::Status MemoryBudget::Claim(MemoryUse use, std::string_view what, std::int64_t more,
+                                 std::int64_t held) {
   {
     std::lock_guard lock(mu_);
     if (TryClaimLocked(use, more)) return absl::OkStatus();
@@ -148,10 +150,24 @@ absl::Status MemoryBudget::Claim(MemoryUse use, std::string_view what, std::int6
   }
   std::lock_guard lock(mu_);
   if (TryClaimLocked(use, more)) return absl::OkStatus();
-  return absl::ResourceExhaustedError(absl::StrCat(
-      "the server's memory budget (--memory_budget_bytes=", capacity_, ") cannot take ",
-      core::AsAbsl(what), " of ", more, " more bytes: ", std::max<std::int64_t>(0, capacity_ - used_),
-      " bytes free; retry later or send less"));
+  return RefusalLocked(what, more, held);
+}
+
+absl::Status MemoryBudget::RefusalLocked(std::string_view what, std::int64_t more,
+                                         std::int64_t held) const {
+  const std::string head =
+      absl::StrCat("the server's memory budget (--memory_budget_bytes=", capacity_,
+                   ") cannot take ", core::AsAbsl(what), " of ", more, " more bytes: ");
+  // With what the reservation holds, more than the whole budget: no one giving memory back makes
+  // room, so no retry hint (an HTTP client gets 413, not the 429 that says "retry later").
+  if (more > capacity_ - held) {
+    return absl::ResourceExhaustedError(absl::StrCat(
+        head, held + more, " bytes in all, more than the whole budget; send less"));
+  }
+  absl::Status refused = absl::ResourceExhaustedError(absl::StrCat(
+      head, std::max<std::int64_t>(0, capacity_ - used_), " bytes free; retry later or send less"));
+  wire::SetRetryAfter(refused, kMemoryRetryAfter);
+  return refused;
 }
 
 bool MemoryBudget::TrimDueLocked(std::int64_t bytes) {

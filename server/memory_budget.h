@@ -2,13 +2,16 @@
 // or assembled for Process, stored clips, queued and running jobs (operations and inputs), results
 // stored or in flight. Memory is reserved before it is allocated, from bytes that have arrived,
 // never from sizes a request merely declares; a reservation that does not fit (after the caches
-// were asked to give memory back) is refused with RESOURCE_EXHAUSTED naming the budget.
+// were asked to give memory back) is refused with RESOURCE_EXHAUSTED naming the budget, with a
+// retry hint when the budget could take it once others give memory back, without one when it
+// is more than the whole budget (retrying cannot help).
 //
 // No gRPC in here, so it is unit-tested under ThreadSanitizer with the job manager.
 #ifndef TEMPOKEY_SERVER_MEMORY_BUDGET_H_
 #define TEMPOKEY_SERVER_MEMORY_BUDGET_H_
 
 #include <array>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <functional>
@@ -48,6 +51,10 @@ inline constexpr int kServingTrimThresholdBytes = 8 << 20;
 // Errors: kUnavailable naming the setting the allocator refused (AddressSanitizer's refuses
 // both); its defaults then stay.
 absl::Status TuneAllocatorForServing();
+
+// The retry hint of a refusal the budget may take later: memory comes back as calls end and jobs
+// finish, which the budget cannot foresee, so a fixed second (clients add their own random share).
+inline constexpr std::chrono::milliseconds kMemoryRetryAfter{1000};
 
 class MemoryBudget {
  public:
@@ -112,7 +119,10 @@ class MemoryBudget {
   // A reservation of `bytes` (>= 0) for `use`; `what` (a string literal) names it in the error.
   // When it does not fit, the reclaimers are asked for the difference, in order, until it does.
   // Errors: kResourceExhausted "the server's memory budget (--memory_budget_bytes=N) cannot take
-  // a job's result of 5242880 bytes: 1048576 bytes free; retry later or send less".
+  // a job's result of 5242880 more bytes: 1048576 bytes free; retry later or send less", with
+  // the retry hint kMemoryRetryAfter (proto/retry_hint.h); kResourceExhausted "... N bytes in all,
+  // more than the whole budget; send less" without a hint when the reservation would hold more
+  // than the whole budget.
   absl::StatusOr<Reservation> Reserve(std::int64_t bytes, MemoryUse use, std::string_view what);
 
   // Memory freed outside any reservation (a large request parsed and dropped, a large response
@@ -132,7 +142,10 @@ class MemoryBudget {
   void WaitForTrim() const;
 
  private:
-  absl::Status Claim(MemoryUse use, std::string_view what, std::int64_t more);
+  // `held`: what the claiming reservation holds already (the refusal's kind depends on it).
+  absl::Status Claim(MemoryUse use, std::string_view what, std::int64_t more, std::int64_t held);
+  absl::Status RefusalLocked(std::string_view what, std::int64_t more, std::int64_t held) const
+      ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
   bool TryClaimLocked(MemoryUse use, std::int64_t more) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
   void Return(MemoryUse use, std::int64_t bytes);
   // Counts `bytes` given back; true when a trim is due (see kTrimThresholdBytes), which starts

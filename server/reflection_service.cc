@@ -95,7 +95,7 @@ class ReflectionReactor final : public grpc::ServerGenericBidiReactor {
       : service_(service), services_(services), call_(call) {
     const absl::Status admitted = Admit();
     if (!admitted.ok()) {
-      End(ToGrpcStatus(admitted));
+      End(ToGrpcStatus(admitted, call_));
       return;
     }
     if (service_->idle != nullptr) {

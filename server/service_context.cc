@@ -7,6 +7,7 @@
 
 #include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
+#include "proto/retry_hint.h"
 #include "tempokey/core/model/status.h"
 
 namespace tempokey::server {
@@ -93,9 +94,11 @@ void ServiceContext::CloseStream() { open_streams.fetch_sub(1, std::memory_order
 absl::Status ServiceContext::AdmitStream(bool allow_while_draining) {
   if (!allow_while_draining && draining.load()) return absl::UnavailableError("the server is shutting down");
   if (!TryOpenStream()) {
-    return absl::ResourceExhaustedError(
+    absl::Status refused = absl::ResourceExhaustedError(
         absl::StrCat("too many streaming calls open (limit ", options.max_concurrent_streams,
                      "); retry later"));
+    wire::SetRetryAfter(refused, kStreamRetryAfter);
+    return refused;
   }
   return absl::OkStatus();
 }

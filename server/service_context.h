@@ -4,6 +4,7 @@
 #define TEMPOKEY_SERVER_SERVICE_CONTEXT_H_
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -22,6 +23,11 @@
 #include "tempokey/core/model/clip.h"
 
 namespace tempokey::server {
+
+// The retry hint of a streaming call refused for want of a stream slot: a slot frees when another
+// call ends, which the server cannot foresee, so a fixed second (clients add their own random
+// share).
+inline constexpr std::chrono::milliseconds kStreamRetryAfter{1000};
 
 // Owned by Server, outlives every call. Thread-safe.
 struct ServiceContext {
@@ -56,8 +62,8 @@ struct ServiceContext {
   bool TryOpenStream();
   void CloseStream();
   // kUnavailable while draining (unless `allow_while_draining`: result downloads still work
-  // during the grace period), kResourceExhausted with no stream left; on OK the caller owns a
-  // stream slot (CloseStream() when the call ends).
+  // during the grace period), kResourceExhausted with no stream left (with the retry hint
+  // kStreamRetryAfter); on OK the caller owns a stream slot (CloseStream() when the call ends).
   absl::Status AdmitStream(bool allow_while_draining = false);
 
   void BytesIn(std::int64_t bytes) const {

@@ -53,7 +53,7 @@ class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
  public:
   WatchReactor(ServiceContext* service, grpc::CallbackServerContext* call,
                const grpc::ByteBuffer* raw_request)
-      : service_(service), link_(std::make_shared<WatchLink>(this)) {
+      : service_(service), call_(call), link_(std::make_shared<WatchLink>(this)) {
     std::string owner;
     absl::Status admitted = [&]() -> absl::Status {
       TEMPOKEY_ASSIGN_OR_RETURN(owner, service_->Authenticate(*call));
@@ -90,10 +90,12 @@ class WatchReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
   }
 
   ServiceContext* service() const { return service_; }
+  grpc::CallbackServerContext* call() const { return call_; }
   StreamSlot& slot() { return slot_; }
 
  private:
   ServiceContext* const service_;
+  grpc::CallbackServerContext* const call_;
   std::string job_id_;
   const std::shared_ptr<WatchLink> link_;
   std::shared_ptr<IdleReaper::Timer> idle_;
@@ -160,7 +162,8 @@ void WatchLink::FinishLocked(const absl::Status& status) {
   WatchReactor* reactor = reactor_;
   reactor_ = nullptr;
   reactor->slot().Release();
-  reactor->Finish(ToGrpcStatus(status));
+  // With the call's context, so that a refusal's retry hint (no stream slot) reaches the client.
+  reactor->Finish(ToGrpcStatus(status, reactor->call()));
 }
 
 }  // namespace

@@ -107,26 +107,24 @@ void SendText(mg_connection* connection, int code, std::string_view content_type
   }
 }
 
-// An error as the API answers it: the HTTP status of its code and {"code", "status", "message"}.
-// `http_status` replaces the code's status where HTTP has a closer one (413 for a body over the
-// size limit).
+// An error as the API answers it: the HTTP status of its code (HttpStatusOf(): a
+// RESOURCE_EXHAUSTED is 429 with a retry hint, 413 without) and {"code", "status", "message"}.
 int SendApiError(mg_connection* connection, const absl::Status& status,
-                 std::optional<std::chrono::milliseconds> retry_after = std::nullopt,
-                 int http_status = 0) {
+                 std::optional<std::chrono::milliseconds> retry_after = std::nullopt) {
   std::string extra;
   if (retry_after) {
     // Retry-After is in whole seconds; round up so a client never comes back too early.
     absl::StrAppend(&extra, "Retry-After: ", (retry_after->count() + 999) / 1000, "\r\n");
   }
-  const int code = http_status != 0 ? http_status : HttpStatusOf(status.code());
+  const int code = HttpStatusOf(status.code(), retry_after.has_value());
   // A 401 names the scheme it wants (RFC 9110, 11.6.1).
   if (code == 401) extra += "WWW-Authenticate: Bearer\r\n";
   SendText(connection, code, "application/json", StatusToJson(status, retry_after) + "\n", extra);
   return code;
 }
 
-// A request message over `max_bytes` of JSON; answered 413 Content Too Large (RFC 9110,
-// 15.5.14), not the 429 of RESOURCE_EXHAUSTED, which clients take as "retry later".
+// A request message over `max_bytes` of JSON: RESOURCE_EXHAUSTED without a retry hint, answered
+// 413 Content Too Large (RFC 9110, 15.5.14), not the 429 that clients take as "retry later".
 absl::Status MessageOverLimit(std::int64_t max_bytes) {
   return absl::ResourceExhaustedError(
       absl::StrCat("a request message is over the limit of ", max_bytes, " bytes of JSON"));
@@ -216,7 +214,9 @@ class HttpCallStream final : public JsonBridge::Stream {
   // Sends what the call ended with: its one answer or error, or the end of the NDJSON stream.
   int Finish(const JsonBridge::Outcome& outcome) {
     // Nobody to tell (and civetweb does not know 499, the status logs give such calls).
-    if (outcome.client_gone) return HttpStatusOf(outcome.status.code());
+    if (outcome.client_gone) {
+      return HttpStatusOf(outcome.status.code(), outcome.retry_after.has_value());
+    }
     if (streaming_started_) {
       if (!outcome.status.ok()) {
         SendPart(absl::StrCat("{\"error\":", StatusToJson(outcome.status, outcome.retry_after),
@@ -226,8 +226,7 @@ class HttpCallStream final : public JsonBridge::Stream {
       return 200;
     }
     if (!outcome.status.ok()) {
-      return SendApiError(connection_, outcome.status, outcome.retry_after,
-                          body_too_large_ ? 413 : 0);
+      return SendApiError(connection_, outcome.status, outcome.retry_after);
     }
     if (method_.server_streaming()) {  // a stream that ended with no message: an empty body
       SendText(connection_, 200, "application/x-ndjson", "");
@@ -280,10 +279,7 @@ class HttpCallStream final : public JsonBridge::Stream {
     return mg_send_chunk(connection_, line.data(), static_cast<unsigned>(line.size())) > 0;
   }
 
-  absl::Status OverSizeError() {
-    body_too_large_ = true;
-    return MessageOverLimit(max_bytes_);
-  }
+  absl::Status OverSizeError() { return MessageOverLimit(max_bytes_); }
 
   mg_connection* const connection_;
   const google::protobuf::MethodDescriptor& method_;
@@ -300,9 +296,6 @@ class HttpCallStream final : public JsonBridge::Stream {
   bool streaming_started_ = false;
   const bool http10_ =
       std::string_view(mg_get_request_info(connection_)->http_version) == "1.0";
-  // A request message over the size limit: 413 Content Too Large (RFC 9110, 15.5.14), not the
-  // 429 of RESOURCE_EXHAUSTED, which clients take as "retry later".
-  bool body_too_large_ = false;
   std::string single_response_;
 };
 
@@ -572,8 +565,7 @@ int HttpFrontEnd::HandleRequest(mg_connection* connection) {
     }
     if (!method->client_streaming() && info->content_length > bridge_.max_message_bytes()) {
       return DiscardBody(connection, port_,
-                         SendApiError(connection, MessageOverLimit(bridge_.max_message_bytes()),
-                                      std::nullopt, 413));
+                         SendApiError(connection, MessageOverLimit(bridge_.max_message_bytes())));
     }
     if (const std::string_view expect = HeaderOf(connection, "Expect"); !expect.empty()) {
       if (!absl::EqualsIgnoreCase(core::AsAbsl(expect), "100-continue")) {

@@ -43,7 +43,7 @@ std::string_view HostOf(std::string_view host_header) {
 
 }  // namespace
 
-int HttpStatusOf(absl::StatusCode code) {
+int HttpStatusOf(absl::StatusCode code, bool retry_hint) {
   switch (code) {
     case absl::StatusCode::kOk: return 200;
     case absl::StatusCode::kInvalidArgument:
@@ -54,7 +54,11 @@ int HttpStatusOf(absl::StatusCode code) {
     case absl::StatusCode::kNotFound: return 404;
     case absl::StatusCode::kAlreadyExists:
     case absl::StatusCode::kAborted: return 409;
-    case absl::StatusCode::kResourceExhausted: return 429;
+    // With a retry hint the refusal is the server's state (a full queue, no stream slot, the
+    // memory budget in use): 429 Too Many Requests, which says "retry later" (RFC 6585, 4).
+    // Without one the request itself is over a limit, which retrying cannot help: 413 Content
+    // Too Large, "larger than the server is willing or able to process" (RFC 9110, 15.5.14).
+    case absl::StatusCode::kResourceExhausted: return retry_hint ? 429 : 413;
     case absl::StatusCode::kCancelled: return 499;
     case absl::StatusCode::kUnimplemented: return 501;
     case absl::StatusCode::kUnavailable: return 503;

@@ -14,9 +14,11 @@
 namespace tempokey::server::http {
 
 // OK 200, INVALID_ARGUMENT / FAILED_PRECONDITION / OUT_OF_RANGE 400, UNAUTHENTICATED 401,
-// PERMISSION_DENIED 403, NOT_FOUND 404, ALREADY_EXISTS / ABORTED 409, RESOURCE_EXHAUSTED 429,
+// PERMISSION_DENIED 403, NOT_FOUND 404, ALREADY_EXISTS / ABORTED 409, RESOURCE_EXHAUSTED 429
+// when the server gave a retry hint (`retry_hint`: a full queue, no stream slot, the memory
+// budget in use) and 413 without one (a request over a limit: retrying cannot help),
 // CANCELLED 499, UNIMPLEMENTED 501, UNAVAILABLE 503, DEADLINE_EXCEEDED 504, others 500.
-int HttpStatusOf(absl::StatusCode code);
+int HttpStatusOf(absl::StatusCode code, bool retry_hint);
 
 // {"code":3,"status":"INVALID_ARGUMENT","message":"..."} plus "retryAfterMs" when a hint is
 // given. The message is escaped for JSON.

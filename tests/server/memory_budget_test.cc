@@ -7,11 +7,13 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "gmock/gmock.h"
+#include "proto/retry_hint.h"
 #include "gtest/gtest.h"
 
 namespace tempokey::server {
@@ -33,6 +35,8 @@ TEST(MemoryBudgetTest, ReservationsCountUntilReleasedAndRefuseBeyondTheBudget) {
   EXPECT_EQ(b.status().message(),
             "the server's memory budget (--memory_budget_bytes=1000) cannot take a job of 500 "
             "more bytes: 400 bytes free; retry later or send less");
+  // It fits once others give memory back: the refusal carries the retry hint.
+  EXPECT_EQ(wire::GetRetryAfter(b.status()), kMemoryRetryAfter);
   EXPECT_EQ(used_while_a, 600);
   ASSERT_TRUE(c.ok()) << c.status();
   EXPECT_EQ(budget.used(), 500);
@@ -51,6 +55,32 @@ TEST(MemoryBudgetTest, GrowingReservationStopsAtTheBudgetAndKeepsWhatItHad) {
   EXPECT_EQ(second.code(), absl::StatusCode::kResourceExhausted);
   EXPECT_EQ(upload.bytes(), 60);
   EXPECT_EQ(budget.used(), 60);
+}
+
+// A reservation that would hold more than the whole budget never fits, however much is given
+// back: its refusal says so and carries no retry hint (HTTP answers it 413, not 429).
+TEST(MemoryBudgetTest, MoreThanTheWholeBudgetIsRefusedWithoutARetryHint) {
+  MemoryBudget budget(100);
+  MemoryBudget::Reservation upload = *budget.Reserve(60, MemoryUse::kUpload, "an upload");
+
+  const absl::Status grown_past = upload.Grow(41);
+  const absl::Status grown_to = upload.Grow(40);
+  const absl::StatusOr<MemoryBudget::Reservation> alone =
+      budget.Reserve(101, MemoryUse::kJob, "a job");
+  const absl::StatusOr<MemoryBudget::Reservation> busy = budget.Reserve(1, MemoryUse::kJob, "a job");
+
+  EXPECT_EQ(grown_past.code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_EQ(grown_past.message(),
+            "the server's memory budget (--memory_budget_bytes=100) cannot take an upload of 41 "
+            "more bytes: 101 bytes in all, more than the whole budget; send less");
+  EXPECT_EQ(wire::GetRetryAfter(grown_past), std::nullopt);
+  EXPECT_TRUE(grown_to.ok()) << grown_to;
+  EXPECT_EQ(alone.status().code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_THAT(std::string(alone.status().message()),
+              HasSubstr("101 bytes in all, more than the whole budget; send less"));
+  EXPECT_EQ(wire::GetRetryAfter(alone.status()), std::nullopt);
+  // The budget full of the upload: a byte fits once it is given back.
+  EXPECT_EQ(wire::GetRetryAfter(busy.status()), kMemoryRetryAfter);
 }
 
 TEST(MemoryBudgetTest, ReclaimersAreAskedForWhatIsMissingInOrder) {

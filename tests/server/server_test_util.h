@@ -26,6 +26,7 @@
 #include "grpcpp/security/credentials.h"
 #include "gtest/gtest.h"
 #include "proto/clip_convert.h"
+#include "proto/retry_hint.h"
 #include "server/server.h"
 #include "tempokey/core/model/clip.h"
 #include "tempokey/core/pipeline/pipeline.h"
@@ -174,9 +175,18 @@ inline absl::StatusOr<int> CheckHealth(const std::shared_ptr<grpc::Channel>& cha
 
 // ---- calls --------------------------------------------------------------------------------------
 
+// The server's retry hint on a finished call (trailing metadata wire::kRetryAfterMetadataKey), or
+// "" for none.
+inline std::string RetryAfterOf(const grpc::ClientContext& context) {
+  const auto& trailers = context.GetServerTrailingMetadata();
+  const auto hint = trailers.find(wire::kRetryAfterMetadataKey);
+  return hint == trailers.end() ? "" : std::string(hint->second.data(), hint->second.size());
+}
+
 struct UploadOutcome {
   grpc::Status status;
   v1::UploadClipResponse response;
+  std::string retry_after_ms;  // RetryAfterOf() the call
 };
 
 // Streams `requests` as one UploadClip call.
@@ -191,6 +201,7 @@ inline UploadOutcome UploadMessages(v1::MotionService::Stub& stub,
   }
   writer->WritesDone();
   outcome.status = writer->Finish();
+  outcome.retry_after_ms = RetryAfterOf(context);
   return outcome;
 }
 
@@ -305,6 +316,7 @@ inline JobOutcome GetJob(v1::MotionService::Stub& stub, const std::string& job_i
 struct WatchOutcome {
   grpc::Status status;
   std::vector<v1::Job> updates;
+  std::string retry_after_ms;  // RetryAfterOf() the call
 };
 
 // Reads a whole WatchJob stream; `on_update` (optional) sees each update as it arrives.
@@ -324,6 +336,7 @@ inline WatchOutcome WatchJob(v1::MotionService::Stub& stub, const std::string& j
     if (on_update) on_update(job);
   }
   outcome.status = reader->Finish();
+  outcome.retry_after_ms = RetryAfterOf(context);
   return outcome;
 }
 

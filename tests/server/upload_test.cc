@@ -8,6 +8,7 @@
 #include "gtest/gtest.h"
 #include "proto/clip_digest.h"
 #include "server/server.h"
+#include "server/service_context.h"
 #include "tempokey/core/io/bvh.h"
 #include "tests/server/server_test_util.h"
 #include "tests/testing/test_paths.h"
@@ -289,10 +290,12 @@ TEST(UploadLimitTest, OversizedMessageIsRefusedAndTheServerKeepsServing) {
 
   EXPECT_THAT(big.status, GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
                                        HasSubstr("larger than max")));
+  // Sent again, the same message is refused again: no retry hint says otherwise.
+  EXPECT_EQ(big.retry_after_ms, "");
   TEMPOKEY_ASSERT_GRPC_OK(sliced.status);
 }
 
-TEST(UploadLimitTest, StreamsBeyondTheLimitAreRefused) {
+TEST(UploadLimitTest, StreamsBeyondTheLimitAreRefusedWithARetryHint) {
   server::ServerOptions options = TestServerOptions();
   options.max_concurrent_streams = 1;
   std::unique_ptr<server::Server> server = StartServer(options);
@@ -317,11 +320,18 @@ TEST(UploadLimitTest, StreamsBeyondTheLimitAreRefused) {
     refused = UploadClip(*stub, MakeClip(1, 10));
     if (!refused.status.ok()) break;
   }
+  const WatchOutcome watch = WatchJob(*stub, "job-any");
   open->WritesDone();
   const grpc::Status first = open->Finish();
 
   EXPECT_THAT(refused.status, GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
                                            HasSubstr("too many streaming calls open (limit 1)")));
+  // A slot frees when another call ends: the refusal says to retry, and when.
+  EXPECT_EQ(refused.retry_after_ms, std::to_string(server::kStreamRetryAfter.count()));
+  // A server-streaming call too (its refusal is finished by another path).
+  EXPECT_THAT(watch.status, GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                                         HasSubstr("too many streaming calls open (limit 1)")));
+  EXPECT_EQ(watch.retry_after_ms, std::to_string(server::kStreamRetryAfter.count()));
   EXPECT_THAT(first, GrpcStatusIs(grpc::StatusCode::INVALID_ARGUMENT, HasSubstr("never arrived")));
 }
 

@@ -14,6 +14,7 @@ import os
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 import unittest
 import urllib.error
@@ -116,6 +117,26 @@ class HttpApiTest(unittest.TestCase):
                 self.assertEqual(answer["status"], code)
                 self.assertEqual(answer["code"], raised.exception.code().value[0])
                 self.assertEqual(answer["message"], raised.exception.details())
+
+    def test_a_field_over_its_limit_is_413_without_retry_after(self):
+        # A request over a limit is refused again however late it comes back: 413 Content Too
+        # Large (RFC 9110, 15.5.14), not the 429 that tells a client to come back (RFC 6585, 4).
+        # Over gRPC both are RESOURCE_EXHAUSTED; the server's retry hint tells them apart.
+        request = {"clipId": self.clip_id,
+                   "operations": [{"retime": {"speedOverSource": [{"time": {"seconds": 0}, "speed": 0.5}]}}],
+                   "labels": {"k%d" % i: "v" for i in range(65)}}
+        status, headers, body = post(self.url, "SubmitJob", json.dumps(request))
+        with self.assertRaises(grpc.RpcError) as raised:
+            self.stub.SubmitJob(json_format.ParseDict(request, motion_service_pb2.SubmitJobRequest()),
+                                timeout=CALL_TIMEOUT_SECONDS)
+        grpc_trailers = dict(raised.exception.trailing_metadata() or ())
+
+        self.assertEqual(status, 413, body)
+        self.assertIsNone(headers.get("Retry-After"))
+        self.assertEqual(json.loads(body), {"code": 8, "status": "RESOURCE_EXHAUSTED",
+                                            "message": "labels has 65 entries, over the limit of 64"})
+        self.assertEqual(raised.exception.code(), grpc.StatusCode.RESOURCE_EXHAUSTED)
+        self.assertNotIn("retry-after-ms", grpc_trailers)
 
     def test_an_error_quoting_bytes_that_are_not_utf8_is_still_json(self):
         # The message quotes what the client sent; bytes that are not UTF-8 were written raw, and
@@ -286,6 +307,37 @@ class HttpApiServerFlagsTest(unittest.TestCase):
 
         self.assertEqual(status, 413)  # Content Too Large: retrying cannot help (429 says it can)
         self.assertEqual(json.loads(body)["message"], "a request message is over the limit of 65536 bytes of JSON")
+
+    def test_a_busy_server_answers_429_with_retry_after(self):
+        # 429 "Too Many Requests" tells a client to come back (RFC 6585, 4), and Retry-After when.
+        # The only stream slot held by a gRPC upload that has not ended: an HTTP upload is told
+        # to come back, and when. (Its first tries may come before the server counts the held
+        # stream: they are taken, and answered, until one finds the slot taken.)
+        with StudioServer("--max_concurrent_streams", "1") as server:
+            channel = grpc.insecure_channel(server.grpc_target)
+            release = threading.Event()
+
+            def held_upload():  # the call starts, and sends nothing until released
+                release.wait(CALL_TIMEOUT_SECONDS)
+                yield from ()
+
+            held = motion_service_pb2_grpc.MotionServiceStub(channel).UploadClip.future(
+                held_upload(), timeout=CALL_TIMEOUT_SECONDS)
+            busy = None
+            deadline = time.monotonic() + CALL_TIMEOUT_SECONDS
+            while busy is None and time.monotonic() < deadline:
+                answer = post(server.http_url, "UploadClip", "{}", content_type="application/x-ndjson")
+                if answer[0] == 429:
+                    busy = answer
+            release.set()
+            held.exception()  # the held call ends (refused: it sent no header)
+            channel.close()
+
+        self.assertIsNotNone(busy, "no upload was refused while the only stream slot was held")
+        self.assertEqual(busy[1].get("Retry-After"), "1")
+        self.assertEqual(json.loads(busy[2]), {"code": 8, "status": "RESOURCE_EXHAUSTED",
+                                               "message": "too many streaming calls open (limit 1); retry later",
+                                               "retryAfterMs": 1000})
 
     def test_non_loopback_http_address_without_tls_is_refused_like_address(self):
         server = env_path("TEMPOKEY_SERVER")

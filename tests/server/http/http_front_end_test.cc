@@ -85,18 +85,20 @@ TEST(HttpOptionsTest, DefaultWebRootIsTheFolderBesideTheBinaryThatHoldsThePage) 
 }
 
 TEST(HttpStatusTest, GrpcCodesMapToTheDocumentedHttpStatuses) {
-  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kOk), 200);
-  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kInvalidArgument), 400);
-  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kFailedPrecondition), 400);
-  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kUnauthenticated), 401);
-  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kPermissionDenied), 403);
-  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kNotFound), 404);
-  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kResourceExhausted), 429);
-  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kCancelled), 499);
-  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kInternal), 500);
-  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kUnimplemented), 501);
-  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kUnavailable), 503);
-  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kDeadlineExceeded), 504);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kOk, false), 200);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kInvalidArgument, false), 400);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kFailedPrecondition, false), 400);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kUnauthenticated, false), 401);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kPermissionDenied, false), 403);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kNotFound, false), 404);
+  // RESOURCE_EXHAUSTED: "retry later" only when the server said when (its retry hint).
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kResourceExhausted, true), 429);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kResourceExhausted, false), 413);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kCancelled, false), 499);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kInternal, false), 500);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kUnimplemented, false), 501);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kUnavailable, false), 503);
+  EXPECT_EQ(HttpStatusOf(absl::StatusCode::kDeadlineExceeded, false), 504);
 }
 
 TEST(HttpStatusTest, ErrorJsonEscapesTheMessageAndCarriesTheRetryHint) {

@@ -426,8 +426,9 @@ class Client:
         Returns the job (job_id, state QUEUED...).
         Raises: ValueError unless exactly one of clip_id and clip is given; TypeError for an
         argument of the wrong type (see process); TempokeyError NOT_FOUND unknown clip,
-        INVALID_ARGUMENT bad pipeline, RESOURCE_EXHAUSTED queue full (see
-        retry_after_seconds), UNIMPLEMENTED an operation the server lacks."""
+        INVALID_ARGUMENT bad pipeline, RESOURCE_EXHAUSTED a full queue or another refusal for
+        the moment (with retry_after_seconds) or a request over a limit (without),
+        UNIMPLEMENTED an operation the server lacks."""
         operations = _check_operations(operations)
         if (clip_id is None) == (clip is None):
             raise ValueError("give exactly one of clip_id and clip")

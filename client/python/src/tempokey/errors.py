@@ -13,7 +13,9 @@ import grpc
 
 __all__ = ["RETRY_AFTER_METADATA_KEY", "TempokeyError"]
 
-# Trailing metadata of a RESOURCE_EXHAUSTED from a full queue: whole milliseconds to wait.
+# Trailing metadata of a RESOURCE_EXHAUSTED that may pass later (a full queue, no stream slot, the
+# memory budget in use): whole milliseconds to wait. A RESOURCE_EXHAUSTED without it is a request
+# over a limit, refused again however late it comes back.
 RETRY_AFTER_METADATA_KEY = "retry-after-ms"
 
 
@@ -26,7 +28,8 @@ class TempokeyError(Exception):
         deadline "no answer within the client's timeout of 60 s (retries included); ...", or
         for an UNAVAILABLE from TLS set-up gRPC's text and what a probe of the server found
         ("...: Socket closed; the server speaks TLS: connect with tls=True ...").
-      retry_after_seconds: the server's hint of when to try again (a full queue), or None.
+      retry_after_seconds: the server's hint of when to try again (a full queue, no stream slot,
+        the memory budget in use), or None: then retrying the same request cannot help.
     """
 
     def __init__(self, code: grpc.StatusCode, details: str,
