@@ -22,6 +22,7 @@
 #include "absl/strings/str_format.h"
 #include "client/batch_manifest.h"
 #include "client/cli_errors.h"
+#include "client/test_hook.h"
 #include "proto/clip_digest.h"
 #include "proto/retry_hint.h"
 #include "tempokey/core/io/file_io.h"
@@ -54,10 +55,7 @@ bool IsHidden(const fs::path& relative) {
 // A test hook: SIGINT raised right after the N-th output staged beside its input is written,
 // before it replaces the input (TEMPOKEY_TEST_BATCH_INTERRUPT_AFTER_STAGING=N; 0 or unset: never).
 long InterruptAfterStagingForTesting() {
-  static const long n = [] {
-    const char* text = std::getenv("TEMPOKEY_TEST_BATCH_INTERRUPT_AFTER_STAGING");
-    return text == nullptr ? 0L : std::strtol(text, nullptr, 10);
-  }();
+  static const long n = TestHookCount("TEMPOKEY_TEST_BATCH_INTERRUPT_AFTER_STAGING");
   return n;
 }
 

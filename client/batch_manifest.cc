@@ -19,6 +19,7 @@
 #include "absl/strings/str_format.h"
 #include "client/clip_files.h"
 #include "client/json_members.h"
+#include "client/test_hook.h"
 #include "google/protobuf/io/coded_stream.h"
 #include "google/protobuf/io/zero_copy_stream_impl_lite.h"
 #include "proto/clip_digest.h"
@@ -144,10 +145,7 @@ absl::StatusOr<fs::path> ReplacedPath(const BatchItem& item) {
 
 // TEMPOKEY_TEST_BATCH_KILL_AFTER_REPLACE (see ReplaceInPlace()): 0 when unset.
 long KillAfterReplaceForTesting() {
-  static const long n = [] {
-    const char* text = std::getenv("TEMPOKEY_TEST_BATCH_KILL_AFTER_REPLACE");
-    return text == nullptr ? 0L : std::strtol(text, nullptr, 10);
-  }();
+  static const long n = TestHookCount("TEMPOKEY_TEST_BATCH_KILL_AFTER_REPLACE");
   return n;
 }
 
