@@ -85,16 +85,17 @@ std::optional<std::chrono::milliseconds> RetryDelay(const absl::Status& status, 
   return std::chrono::milliseconds(static_cast<std::int64_t>(1000.0 * jitter(random)));
 }
 
-// The batch's calls in flight, at most `size` (--jobs), fewer once a server's queue was full:
-// a call refused with RESOURCE_EXHAUSTED while n of the batch's calls were in flight shows that
-// the servers take at most n - 1 of them, so the batch keeps at most that many in flight (never
-// fewer than one). Its refused files then wait for one of its own calls to end rather than
-// spend their attempts on a queue the batch itself keeps full. The room comes back one call at
-// a time, after 4 x the limit calls in a row succeed (the queue may have been full of another
-// client's work, or of one small server's among several).
+// The batch's calls in flight, at most `size` (--jobs), fewer once a server was busy: a call
+// refused for the moment (RESOURCE_EXHAUSTED with a retry hint: its queue full, no stream slot,
+// its memory budget in use) while n of the batch's calls were in flight shows that the servers
+// take at most n - 1 of them, so the batch keeps at most that many in flight (never fewer than
+// one). Its refused files then wait for one of its own calls to end rather than spend their
+// attempts on a server the batch itself keeps busy. The room comes back one call at a time,
+// after 4 x the limit calls in a row succeed (the server may have been busy with another
+// client's work, or one small server among several).
 class CallWindow {
  public:
-  enum class Outcome { kOk, kQueueFull, kOther };
+  enum class Outcome { kOk, kBusy, kOther };
 
   explicit CallWindow(int size) : size_(std::max(1, size)), limit_(size_) {}
 
@@ -108,7 +109,7 @@ class CallWindow {
   void Leave(Outcome outcome) {
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      if (outcome == Outcome::kQueueFull) {
+      if (outcome == Outcome::kBusy) {
         limit_ = std::max(1, std::min(limit_, in_flight_ - 1));
         successes_ = 0;
       } else if (outcome == Outcome::kOk && limit_ < size_ && ++successes_ >= 4 * limit_) {
@@ -202,7 +203,7 @@ BatchFileResult ProcessFile(const Client& client, const BatchItem& item,
       window.Leave(result.ok() ? CallWindow::Outcome::kOk
                    : result.status().code() == absl::StatusCode::kResourceExhausted &&
                            wire::GetRetryAfter(result.status()).has_value()
-                       ? CallWindow::Outcome::kQueueFull
+                       ? CallWindow::Outcome::kBusy
                        : CallWindow::Outcome::kOther);
       if (result.ok()) return result;
       const std::optional<std::chrono::milliseconds> delay =

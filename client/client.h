@@ -132,13 +132,16 @@ class Client {
   // Streams `clip` (header, then slices of options().slice_bytes) and returns the server's answer
   // with the clip's content id. Retried whole on UNAVAILABLE (uploads are idempotent).
   // Errors: kInvalidArgument when `clip` fails core::ValidateClip() (checked before sending) or
-  // the server refuses it; kResourceExhausted over the server's limits; any call error.
+  // the server refuses it; kResourceExhausted over the server's limits, or refused for the
+  // moment (no stream slot, its memory budget in use) with a retry hint (wire::GetRetryAfter());
+  // any call error.
   absl::StatusOr<v1::UploadClipResponse> UploadClip(const core::Clip& clip) const;
 
   // Queues `steps` on the uploaded clip `clip_id` / on `clip` sent inline.
   // Errors: kNotFound unknown clip id; kInvalidArgument bad pipeline; kResourceExhausted queue
-  // full, carrying the server's hint of when to try again (wire::GetRetryAfter()); kUnimplemented
-  // an operation the server lacks; any call error.
+  // full or memory budget in use, carrying the server's hint of when to try again
+  // (wire::GetRetryAfter()), or over a limit without one; kUnimplemented an operation the server
+  // lacks; any call error.
   absl::StatusOr<v1::Job> SubmitJob(const std::string& clip_id,
                                     std::span<const core::PipelineStep> steps,
                                     const SubmitOptions& submit = {}) const;

@@ -118,7 +118,9 @@ absl::StatusOr<ResultStream> OpenStoredClip(ServiceContext& service, const std::
   TEMPOKEY_RETURN_IF_ERROR(claim_slot());
   TEMPOKEY_ASSIGN_OR_RETURN(MemoryBudget::Reservation memory,
                             ReserveMemory(service, MemoryUse::kResult, "a clip read back"));
-  TEMPOKEY_RETURN_IF_ERROR(memory.Grow(ClipBytes(*clip)));
+  const std::int64_t clip_bytes = ClipBytes(*clip);
+  memory.Pin(clip_bytes);  // the stored clip, held while copied
+  TEMPOKEY_RETURN_IF_ERROR(memory.Grow(clip_bytes));
   core::PipelineResult result;
   result.output = *clip;
   return ResultStream{ShareWithReservation(std::move(result), std::move(memory)),
@@ -194,6 +196,8 @@ class ExportReactor final : public grpc::ServerWriteReactor<grpc::ByteBuffer> {
     TEMPOKEY_RETURN_IF_ERROR(slot_.Claim(*service_, /*allow_while_draining=*/true));
     TEMPOKEY_ASSIGN_OR_RETURN(memory_,
                               ReserveMemory(*service_, MemoryUse::kResult, "an exported file"));
+    // The source, held while the file is formatted.
+    memory_.Pin(clip != nullptr ? ClipBytes(*clip) : PipelineResultBytes(*result));
     const auto queued_at = std::chrono::steady_clock::now();
     absl::Status queued = service_->pool->TrySubmit(
         [this, result = std::move(result), clip = std::move(clip),

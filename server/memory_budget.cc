@@ -46,7 +46,8 @@ MemoryBudget::Reservation::Reservation(Reservation&& other) noexcept
     : budget_(std::exchange(other.budget_, nullptr)),
       use_(other.use_),
       what_(other.what_),
-      bytes_(std::exchange(other.bytes_, 0)) {}
+      bytes_(std::exchange(other.bytes_, 0)),
+      pinned_(std::exchange(other.pinned_, 0)) {}
 
 MemoryBudget::Reservation& MemoryBudget::Reservation::operator=(Reservation&& other) noexcept {
   if (this != &other) {
@@ -55,6 +56,7 @@ MemoryBudget::Reservation& MemoryBudget::Reservation::operator=(Reservation&& ot
     use_ = other.use_;
     what_ = other.what_;
     bytes_ = std::exchange(other.bytes_, 0);
+    pinned_ = std::exchange(other.pinned_, 0);
   }
   return *this;
 }
@@ -64,7 +66,7 @@ MemoryBudget::Reservation::~Reservation() { Release(); }
 absl::Status MemoryBudget::Reservation::Grow(std::int64_t more) {
   if (more <= 0) return absl::OkStatus();
   if (budget_ == nullptr) return absl::OkStatus();  // an unbudgeted holder (tests, clients)
-  TEMPOKEY_RETURN_IF_ERROR(budget_->Claim(use_, what_, more, bytes_));
+  TEMPOKEY_RETURN_IF_ERROR(budget_->Claim(use_, what_, more, bytes_ + pinned_));
   bytes_ += more;
   return absl::OkStatus();
 }
@@ -136,6 +138,10 @@ absl::Status MemoryBudget::Claim(MemoryUse use, std::string_view what, std::int6
                                  std::int64_t held) {
   {
     std::lock_guard lock(mu_);
+    // Beside what the claimant holds and pins, more than the whole budget: nothing the caches
+    // give back makes room, so they are not asked (a stored clip being read back, or a job's
+    // result being exported, is not evicted for a claim that fails anyway).
+    if (more > capacity_ - held) return RefusalLocked(what, more, held);
     if (TryClaimLocked(use, more)) return absl::OkStatus();
   }
   // Caches give memory back (outside the lock: releasing takes it), then one more try.
@@ -158,8 +164,8 @@ absl::Status MemoryBudget::RefusalLocked(std::string_view what, std::int64_t mor
   const std::string head =
       absl::StrCat("the server's memory budget (--memory_budget_bytes=", capacity_,
                    ") cannot take ", core::AsAbsl(what), " of ", more, " more bytes: ");
-  // With what the reservation holds, more than the whole budget: no one giving memory back makes
-  // room, so no retry hint (an HTTP client gets 413, not the 429 that says "retry later").
+  // With what the claimant holds and pins, more than the whole budget: no one giving memory back
+  // makes room, so no retry hint (an HTTP client gets 413, not the 429 that says "retry later").
   if (more > capacity_ - held) {
     return absl::ResourceExhaustedError(absl::StrCat(
         head, held + more, " bytes in all, more than the whole budget; send less"));

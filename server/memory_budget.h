@@ -104,6 +104,11 @@ class MemoryBudget {
     void Release() { ShrinkTo(0); }
     // Counts what it holds under `use` from now on (metrics), e.g. an upload once stored.
     void ChangeUse(MemoryUse use);
+    // Names `bytes` of the budget that its holder keeps alive beside it (the stored clip or job
+    // result it copies), which no reclaimer can give back while it grows: a growth that, with
+    // them and what it holds, is more than the whole budget never fits (its refusal has no retry
+    // hint).
+    void Pin(std::int64_t bytes) { pinned_ = bytes; }
 
    private:
     friend class MemoryBudget;
@@ -114,6 +119,7 @@ class MemoryBudget {
     MemoryUse use_ = MemoryUse::kUpload;
     std::string_view what_;  // a literal: "an upload", "a job's result", ...
     std::int64_t bytes_ = 0;
+    std::int64_t pinned_ = 0;  // Pin()
   };
 
   // A reservation of `bytes` (>= 0) for `use`; `what` (a string literal) names it in the error.
@@ -142,7 +148,8 @@ class MemoryBudget {
   void WaitForTrim() const;
 
  private:
-  // `held`: what the claiming reservation holds already (the refusal's kind depends on it).
+  // `held`: what the claiming reservation holds already and what it pins (a claim that does not
+  // fit beside them is refused at once, without asking the reclaimers, and without a hint).
   absl::Status Claim(MemoryUse use, std::string_view what, std::int64_t more, std::int64_t held);
   absl::Status RefusalLocked(std::string_view what, std::int64_t more, std::int64_t held) const
       ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);

@@ -83,6 +83,32 @@ TEST(MemoryBudgetTest, MoreThanTheWholeBudgetIsRefusedWithoutARetryHint) {
   EXPECT_EQ(wire::GetRetryAfter(busy.status()), kMemoryRetryAfter);
 }
 
+// A copy of a stored clip needs the clip and the copy at once: beside what its holder pins, a
+// growth past the whole budget never fits, is refused at once (no cache is emptied for it) and
+// carries no retry hint; one that fits beside the pin is taken.
+TEST(MemoryBudgetTest, AGrowthThatCannotFitBesideWhatItsHolderPinsIsRefusedAtOnceWithoutAHint) {
+  MemoryBudget budget(100);
+  int reclaims = 0;
+  budget.AddReclaimer([&](std::int64_t) { ++reclaims; });
+  MemoryBudget::Reservation stored = *budget.Reserve(60, MemoryUse::kStoredClip, "a clip");
+  MemoryBudget::Reservation copy = *budget.Reserve(0, MemoryUse::kResult, "a clip read back");
+  MemoryBudget::Reservation part = *budget.Reserve(0, MemoryUse::kResult, "a clip read back");
+  copy.Pin(60);
+  part.Pin(60);
+
+  const absl::Status whole = copy.Grow(60);
+  const absl::Status some = part.Grow(30);
+
+  EXPECT_EQ(whole.code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_EQ(whole.message(),
+            "the server's memory budget (--memory_budget_bytes=100) cannot take a clip read back "
+            "of 60 more bytes: 120 bytes in all, more than the whole budget; send less");
+  EXPECT_EQ(wire::GetRetryAfter(whole), std::nullopt);
+  EXPECT_EQ(reclaims, 0);
+  EXPECT_TRUE(some.ok()) << some;
+  EXPECT_EQ(budget.used(), 90);
+}
+
 TEST(MemoryBudgetTest, ReclaimersAreAskedForWhatIsMissingInOrder) {
   MemoryBudget budget(1000);
   // Two caches holding reservations they give up when asked.

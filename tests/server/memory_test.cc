@@ -173,6 +173,8 @@ TEST(MemoryBudgetServerTest, UploadLargerThanTheBudgetIsRefusedNamingIt) {
               GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
                            HasSubstr("the server's memory budget (--memory_budget_bytes=16000000) "
                                      "cannot take an upload of")));
+  // However late it comes back, it does not fit: no retry hint says it might.
+  EXPECT_EQ(big.retry_after_ms, "");
   TEMPOKEY_ASSERT_GRPC_OK(fits.status);
 }
 
@@ -289,6 +291,26 @@ TEST_F(MemoryBudgetInProcessTest, AReadClipsCopyIsGivenBackBeforeItsStatus) {
   EXPECT_EQ(copy_after_status, 0);
 }
 
+// Reading a stored clip back copies it while it stays stored: with the copy, more than the whole
+// budget never fits, so the refusal has no retry hint (the page's "Download" over HTTP gets 413,
+// not a 429 that would say "retry later" forever).
+TEST_F(MemoryBudgetInProcessTest, AClipTooLargeToCopyBesideItselfIsRefusedWithoutARetryHint) {
+  Start(8 * kMiB);
+  const UploadOutcome stored = UploadClip(*stub_, ClipOfMiB(5));
+  ASSERT_TRUE(stored.status.ok()) << stored.status.error_message();
+  grpc::ClientContext context;
+  SetDeadline(context);
+  v1::GetClipRequest request;
+  request.set_clip_id(stored.response.clip_id());
+  auto reader = stub_->GetClip(&context, request);
+  const auto [parts, status] = ReadToEnd<v1::ResultPart>(*reader);
+
+  EXPECT_THAT(status, GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                                   HasSubstr("more than the whole budget; send less")));
+  EXPECT_EQ(RetryAfterOf(context), "");
+  EXPECT_EQ(parts, 0);
+}
+
 TEST_F(MemoryBudgetInProcessTest, AProcessCallRefusedBeforeItsStartGivesItsClipBackFirst) {
   Start(32 * kMiB);
   grpc::ClientContext context;
@@ -364,6 +386,40 @@ TEST_F(MemoryBudgetInProcessTest, InlineClipsProcessCallsAndResultsCountToo) {
   EXPECT_THAT(stretched_done.error_message(), HasSubstr("cannot take a job's result of"));
   EXPECT_THAT(process_status, GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
                                            HasSubstr("cannot take a Process clip of")));
+}
+
+// A refusal that fits once others give memory back carries the retry hint, also through the
+// layers that name the field it came from (the inline clip's annotation once dropped it: HTTP
+// then answered 413 "too large" for a request that passes a moment later).
+TEST_F(MemoryBudgetInProcessTest, AnInlineClipRefusedWhileTheBudgetIsInUseCarriesARetryHint) {
+  Start(8 * kMiB);
+  // An upload that has sent its samples but not ended holds their memory (not a cache: it is
+  // not given back on demand).
+  grpc::ClientContext open_context;
+  SetDeadline(open_context);
+  v1::UploadClipResponse open_response;
+  auto open = stub_->UploadClip(&open_context, &open_response);
+  for (const v1::UploadClipRequest& request : UploadRequests(ClipOfMiB(3), wire::kDefaultSliceBytes)) {
+    ASSERT_TRUE(open->Write(request));
+  }
+  const auto deadline = std::chrono::steady_clock::now() + kCallDeadline;
+  while (server_->budget().used(server::MemoryUse::kUpload) < 3 * kMiB &&
+         std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  }
+  const std::int64_t held = server_->budget().used(server::MemoryUse::kUpload);
+  v1::SubmitJobRequest inline_request;
+  *inline_request.mutable_inline_clip() = wire::ClipToProto(ClipOfMiB(5));
+  *inline_request.mutable_operations() = WrapOperations();
+
+  const JobOutcome busy = Submit(*stub_, inline_request);
+  open->WritesDone();
+  TEMPOKEY_ASSERT_GRPC_OK(open->Finish());
+
+  ASSERT_GE(held, 3 * kMiB);
+  EXPECT_THAT(busy.status, GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                                        HasSubstr("inline_clip: the server's memory budget")));
+  EXPECT_EQ(busy.retry_after_ms, std::to_string(server::kMemoryRetryAfter.count()));
 }
 
 // ---- stored jobs, ListJobs pages, memory after deletes --------------------------------------------

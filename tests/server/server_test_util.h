@@ -284,6 +284,7 @@ inline ProcessOutcome RunProcess(
 struct JobOutcome {
   grpc::Status status;
   v1::Job job;
+  std::string retry_after_ms;  // RetryAfterOf() the call
 };
 
 inline JobOutcome Submit(v1::MotionService::Stub& stub, const v1::SubmitJobRequest& request) {
@@ -291,6 +292,7 @@ inline JobOutcome Submit(v1::MotionService::Stub& stub, const v1::SubmitJobReque
   SetDeadline(context);
   JobOutcome outcome;
   outcome.status = stub.SubmitJob(&context, request, &outcome.job);
+  outcome.retry_after_ms = RetryAfterOf(context);
   return outcome;
 }
 

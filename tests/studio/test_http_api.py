@@ -311,29 +311,41 @@ class HttpApiServerFlagsTest(unittest.TestCase):
     def test_a_busy_server_answers_429_with_retry_after(self):
         # 429 "Too Many Requests" tells a client to come back (RFC 6585, 4), and Retry-After when.
         # The only stream slot held by a gRPC upload that has not ended: an HTTP upload is told
-        # to come back, and when. (Its first tries may come before the server counts the held
-        # stream: they are taken, and answered, until one finds the slot taken.)
+        # to come back, and when. The slot is known to be held (a gRPC WatchJob refused for it)
+        # before the HTTP call is made; a held call that lost the slot to a probe is started again.
         with StudioServer("--max_concurrent_streams", "1") as server:
             channel = grpc.insecure_channel(server.grpc_target)
+            grpc.channel_ready_future(channel).result(timeout=CALL_TIMEOUT_SECONDS)
+            stub = motion_service_pb2_grpc.MotionServiceStub(channel)
             release = threading.Event()
 
             def held_upload():  # the call starts, and sends nothing until released
                 release.wait(CALL_TIMEOUT_SECONDS)
                 yield from ()
 
-            held = motion_service_pb2_grpc.MotionServiceStub(channel).UploadClip.future(
-                held_upload(), timeout=CALL_TIMEOUT_SECONDS)
-            busy = None
+            def slot_taken():
+                try:
+                    for _ in stub.WatchJob(motion_service_pb2.WatchJobRequest(job_id="job-none"),
+                                           timeout=CALL_TIMEOUT_SECONDS):
+                        pass
+                except grpc.RpcError as error:
+                    return error.code() == grpc.StatusCode.RESOURCE_EXHAUSTED
+                return False
+
+            held = None
             deadline = time.monotonic() + CALL_TIMEOUT_SECONDS
-            while busy is None and time.monotonic() < deadline:
-                answer = post(server.http_url, "UploadClip", "{}", content_type="application/x-ndjson")
-                if answer[0] == 429:
-                    busy = answer
+            taken = False
+            while not taken and time.monotonic() < deadline:
+                if held is None or held.done():
+                    held = stub.UploadClip.future(held_upload(), timeout=CALL_TIMEOUT_SECONDS)
+                taken = slot_taken()
+            busy = post(server.http_url, "UploadClip", "{}", content_type="application/x-ndjson")
             release.set()
             held.exception()  # the held call ends (refused: it sent no header)
             channel.close()
 
-        self.assertIsNotNone(busy, "no upload was refused while the only stream slot was held")
+        self.assertTrue(taken, "the held upload never took the only stream slot")
+        self.assertEqual(busy[0], 429, busy[2])
         self.assertEqual(busy[1].get("Retry-After"), "1")
         self.assertEqual(json.loads(busy[2]), {"code": 8, "status": "RESOURCE_EXHAUSTED",
                                                "message": "too many streaming calls open (limit 1); retry later",

@@ -360,7 +360,8 @@ class Client:
         costs nothing), counts and already_stored. Retried whole on UNAVAILABLE.
         Raises: TypeError unless `clip` is a tempokey.v1.Clip; TempokeyError INVALID_ARGUMENT
         (the message names channel, frame and value), RESOURCE_EXHAUSTED over the server's
-        limits; call errors."""
+        limits, or refused for the moment (no stream slot, the memory budget in use) with
+        retry_after_seconds; call errors."""
         _check_clip(clip)
         slice_bytes = self._effective_slice_bytes()
 

@@ -41,7 +41,8 @@ inline absl::Status OverLimitError(std::string_view message) {
   return absl::ResourceExhaustedError(AsAbsl(message));
 }
 
-// Prefixes the message of a non-OK status with `context` ("context: message"), keeping the code.
+// Prefixes the message of a non-OK status with `context` ("context: message"), keeping the code
+// and the payloads.
 absl::Status Annotate(const absl::Status& status, std::string_view context);
 
 }  // namespace tempokey::core
