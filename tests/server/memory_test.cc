@@ -272,16 +272,27 @@ std::pair<std::int64_t, grpc::Status> ReadToEnd(Reader& reader) {
   return {messages, reader.Finish()};
 }
 
+// A whole GetClip stream of `clip_id`: its parts, status and retry hint.
+struct ClipReadBack {
+  std::int64_t parts = 0;
+  grpc::Status status;
+  std::string retry_after_ms;
+};
+ClipReadBack ReadClipBack(v1::MotionService::Stub& stub, const std::string& clip_id) {
+  grpc::ClientContext context;
+  SetDeadline(context);
+  v1::GetClipRequest request;
+  request.set_clip_id(clip_id);
+  auto reader = stub.GetClip(&context, request);
+  auto [parts, status] = ReadToEnd<v1::ResultPart>(*reader);
+  return {parts, std::move(status), RetryAfterOf(context)};
+}
+
 TEST_F(MemoryBudgetInProcessTest, AReadClipsCopyIsGivenBackBeforeItsStatus) {
   Start(32 * kMiB);
   const UploadOutcome stored = UploadClip(*stub_, ClipOfMiB(4));
   ASSERT_TRUE(stored.status.ok());
-  grpc::ClientContext context;
-  SetDeadline(context);
-  v1::GetClipRequest request;
-  request.set_clip_id(stored.response.clip_id());
-  auto reader = stub_->GetClip(&context, request);
-  const auto [parts, status] = ReadToEnd<v1::ResultPart>(*reader);
+  const auto [parts, status, hint] = ReadClipBack(*stub_, stored.response.clip_id());
   // GetClip streams a copy counted as a result; it goes back before the status, not once gRPC
   // gets round to destroying the call.
   const std::int64_t copy_after_status = server_->budget().used(server::MemoryUse::kResult);
@@ -298,17 +309,13 @@ TEST_F(MemoryBudgetInProcessTest, AClipTooLargeToCopyBesideItselfIsRefusedWithou
   Start(8 * kMiB);
   const UploadOutcome stored = UploadClip(*stub_, ClipOfMiB(5));
   ASSERT_TRUE(stored.status.ok()) << stored.status.error_message();
-  grpc::ClientContext context;
-  SetDeadline(context);
-  v1::GetClipRequest request;
-  request.set_clip_id(stored.response.clip_id());
-  auto reader = stub_->GetClip(&context, request);
-  const auto [parts, status] = ReadToEnd<v1::ResultPart>(*reader);
 
-  EXPECT_THAT(status, GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
-                                   HasSubstr("more than the whole budget; send less")));
-  EXPECT_EQ(RetryAfterOf(context), "");
-  EXPECT_EQ(parts, 0);
+  const ClipReadBack read = ReadClipBack(*stub_, stored.response.clip_id());
+
+  EXPECT_THAT(read.status, GrpcStatusIs(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                                        HasSubstr("more than the whole budget; send less")));
+  EXPECT_EQ(read.retry_after_ms, "");
+  EXPECT_EQ(read.parts, 0);
 }
 
 TEST_F(MemoryBudgetInProcessTest, AProcessCallRefusedBeforeItsStartGivesItsClipBackFirst) {
