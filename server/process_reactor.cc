@@ -132,6 +132,9 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
     if (!ok) {
       stop_.request_stop();
       FinishLocked(absl::CancelledError("the Process stream broke"));
+    } else if (cancelled_) {
+      // The write got through before the cancel (gRPC may report it so after OnCancel()).
+      FinishLocked(absl::CancelledError("the Process call was cancelled"));
     } else if (end_status_) {
       FinishLocked(*end_status_);
     } else {
@@ -142,6 +145,8 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
   void OnCancel() {
     stop_.request_stop();
     std::lock_guard lock(mu_);
+    // With a write in flight, its OnWriteDone() finishes the call.
+    cancelled_ = true;
     if (!finished_ && !writing_) FinishLocked(absl::CancelledError("the Process call was cancelled"));
   }
 
@@ -329,6 +334,7 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
   bool finished_ ABSL_GUARDED_BY(mu_) = false;
   absl::Status finished_status_ ABSL_GUARDED_BY(mu_);  // what the call ended with
   bool writing_ ABSL_GUARDED_BY(mu_) = false;
+  bool cancelled_ ABSL_GUARDED_BY(mu_) = false;  // OnCancel() came while a write was in flight
   bool result_ready_ ABSL_GUARDED_BY(mu_) = false;
   ProgressThrottle throttle_ ABSL_GUARDED_BY(mu_){service_->options.process_progress_interval};
   bool flush_armed_ ABSL_GUARDED_BY(mu_) = false;
