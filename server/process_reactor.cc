@@ -132,11 +132,12 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
     if (!ok) {
       stop_.request_stop();
       FinishLocked(absl::CancelledError("the Process stream broke"));
-    } else if (cancelled_) {
-      // The write got through before the cancel (gRPC may report it so after OnCancel()).
-      FinishLocked(absl::CancelledError("the Process call was cancelled"));
     } else if (end_status_) {
-      FinishLocked(*end_status_);
+      FinishLocked(*end_status_);  // an abort's failure stays a failure, cancel or not
+    } else if (cancelled_) {
+      // The write got through before the cancel (gRPC may report it so after OnCancel()):
+      // otherwise the call would wait for the pipeline to notice its stop.
+      FinishLocked(absl::CancelledError("the Process call was cancelled"));
     } else {
       WriteNextLocked();
     }
@@ -334,7 +335,8 @@ class ProcessLink final : public std::enable_shared_from_this<ProcessLink> {
   bool finished_ ABSL_GUARDED_BY(mu_) = false;
   absl::Status finished_status_ ABSL_GUARDED_BY(mu_);  // what the call ended with
   bool writing_ ABSL_GUARDED_BY(mu_) = false;
-  bool cancelled_ ABSL_GUARDED_BY(mu_) = false;  // OnCancel() came while a write was in flight
+  // OnCancel() has run; a write in flight then ends the call in OnWriteDone().
+  bool cancelled_ ABSL_GUARDED_BY(mu_) = false;
   bool result_ready_ ABSL_GUARDED_BY(mu_) = false;
   ProgressThrottle throttle_ ABSL_GUARDED_BY(mu_){service_->options.process_progress_interval};
   bool flush_armed_ ABSL_GUARDED_BY(mu_) = false;

@@ -41,7 +41,8 @@ class WatchLink final : public JobWatcher {
   WatchReactor* reactor_ ABSL_GUARDED_BY(mu_);  // valid until finished_
   bool finished_ ABSL_GUARDED_BY(mu_) = false;
   bool writing_ ABSL_GUARDED_BY(mu_) = false;
-  bool cancelled_ ABSL_GUARDED_BY(mu_) = false;  // OnCancel() came while a write was in flight
+  // OnCancel() has run; a write in flight then ends the call in OnWriteDone().
+  bool cancelled_ ABSL_GUARDED_BY(mu_) = false;
   bool terminal_queued_ ABSL_GUARDED_BY(mu_) = false;  // the last snapshot is sent or pending
   std::int64_t newest_version_ ABSL_GUARDED_BY(mu_) = 0;
   std::optional<JobSnapshot> pending_ ABSL_GUARDED_BY(mu_);
@@ -130,8 +131,8 @@ void WatchLink::OnWriteDone(bool ok) {
   if (!ok) {
     FinishLocked(absl::CancelledError("the watch stream broke"));
   } else if (cancelled_) {
-    // The write got through before the cancel: nothing else would end the call until the job's
-    // next update, and its stream slot would stay taken.
+    // The write got through before the cancel: nothing else may be pending to end the call, which
+    // would then hold its stream slot until the job's next update.
     FinishLocked(absl::CancelledError("the watch was cancelled"));
   } else if (pending_) {
     WriteNextLocked();
@@ -144,9 +145,9 @@ void WatchLink::OnWriteDone(bool ok) {
 
 void WatchLink::OnCancel() {
   std::lock_guard lock(mu_);
-  // With a write in flight, its OnWriteDone() finishes the call: gRPC may report that write as
-  // done (ok) after the cancel, so the cancel is remembered (seen under AddressSanitizer on a
-  // loaded machine: JobsGatedTest.ClientCancellingAWatchReleasesServerState, 2 runs in 300).
+  // With a write in flight, its OnWriteDone() finishes the call. gRPC orders no reactions but
+  // OnDone (grpcpp/support/server_callback.h: "Reactions may be invoked concurrently"), so that
+  // write may be reported done (ok) after the cancel: the cancel is remembered.
   cancelled_ = true;
   if (!finished_ && !writing_) FinishLocked(absl::CancelledError("the watch was cancelled"));
 }
