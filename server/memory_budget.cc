@@ -136,12 +136,16 @@ bool MemoryBudget::TryClaimLocked(MemoryUse use, std::int64_t more) {
 
 absl::Status MemoryBudget::Claim(MemoryUse use, std::string_view what, std::int64_t more,
                                  std::int64_t held) {
+  // Beside what the claimant holds and pins, more than the whole budget: nothing the caches give
+  // back makes room, so they are not asked (a stored clip being read back, or a job's result being
+  // exported, is not evicted for a claim that fails anyway), and the refusal has no retry hint (an
+  // HTTP client gets 413, not the 429 that says "retry later").
+  if (more > capacity_ - held) {
+    return absl::ResourceExhaustedError(absl::StrCat(
+        RefusalHead(what, more), held + more, " bytes in all, more than the whole budget; send less"));
+  }
   {
     std::lock_guard lock(mu_);
-    // Beside what the claimant holds and pins, more than the whole budget: nothing the caches
-    // give back makes room, so they are not asked (a stored clip being read back, or a job's
-    // result being exported, is not evicted for a claim that fails anyway).
-    if (more > capacity_ - held) return RefusalLocked(what, more, held);
     if (TryClaimLocked(use, more)) return absl::OkStatus();
   }
   // Caches give memory back (outside the lock: releasing takes it), then one more try.
@@ -156,24 +160,17 @@ absl::Status MemoryBudget::Claim(MemoryUse use, std::string_view what, std::int6
   }
   std::lock_guard lock(mu_);
   if (TryClaimLocked(use, more)) return absl::OkStatus();
-  return RefusalLocked(what, more, held);
-}
-
-absl::Status MemoryBudget::RefusalLocked(std::string_view what, std::int64_t more,
-                                         std::int64_t held) const {
-  const std::string head =
-      absl::StrCat("the server's memory budget (--memory_budget_bytes=", capacity_,
-                   ") cannot take ", core::AsAbsl(what), " of ", more, " more bytes: ");
-  // With what the claimant holds and pins, more than the whole budget: no one giving memory back
-  // makes room, so no retry hint (an HTTP client gets 413, not the 429 that says "retry later").
-  if (more > capacity_ - held) {
-    return absl::ResourceExhaustedError(absl::StrCat(
-        head, held + more, " bytes in all, more than the whole budget; send less"));
-  }
-  absl::Status refused = absl::ResourceExhaustedError(absl::StrCat(
-      head, std::max<std::int64_t>(0, capacity_ - used_), " bytes free; retry later or send less"));
+  // It fits once others give memory back.
+  absl::Status refused = absl::ResourceExhaustedError(
+      absl::StrCat(RefusalHead(what, more), std::max<std::int64_t>(0, capacity_ - used_),
+                   " bytes free; retry later or send less"));
   wire::SetRetryAfter(refused, kMemoryRetryAfter);
   return refused;
+}
+
+std::string MemoryBudget::RefusalHead(std::string_view what, std::int64_t more) const {
+  return absl::StrCat("the server's memory budget (--memory_budget_bytes=", capacity_,
+                      ") cannot take ", core::AsAbsl(what), " of ", more, " more bytes: ");
 }
 
 bool MemoryBudget::TrimDueLocked(std::int64_t bytes) {

@@ -17,6 +17,7 @@
 #include <functional>
 #include <memory>
 #include <mutex>
+#include <string>
 #include <string_view>
 #include <thread>
 #include <vector>
@@ -151,8 +152,8 @@ class MemoryBudget {
   // `held`: what the claiming reservation holds already and what it pins (a claim that does not
   // fit beside them is refused at once, without asking the reclaimers, and without a hint).
   absl::Status Claim(MemoryUse use, std::string_view what, std::int64_t more, std::int64_t held);
-  absl::Status RefusalLocked(std::string_view what, std::int64_t more, std::int64_t held) const
-      ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
+  // "the server's memory budget (...) cannot take <what> of <more> more bytes: ", a refusal's start.
+  std::string RefusalHead(std::string_view what, std::int64_t more) const;
   bool TryClaimLocked(MemoryUse use, std::int64_t more) ABSL_EXCLUSIVE_LOCKS_REQUIRED(mu_);
   void Return(MemoryUse use, std::int64_t bytes);
   // Counts `bytes` given back; true when a trim is due (see kTrimThresholdBytes), which starts
