@@ -10,6 +10,7 @@
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "core/src/reduce/cubic_certificate.h"
 #include "core/src/simd/block_scan.h"
 #include "core/src/simd/instruction_set.h"
 #include "core/src/simd/vectors.h"
@@ -1507,6 +1508,18 @@ class Fitter {
       const std::int64_t after_limit =
           can_slide ? std::max(kMaxMergedSegmentFrames, fit.frames[i + 2] - fit.frames[i + 1])
                     : 0;
+      // Every trial's merged segment, and so the curve of its Lawson rounds, is one cubic over
+      // the frames from the last accepted key to the key after the removed one slid as far back
+      // as it may go, and each of those frames is measured: when no cubic comes within the bound
+      // there, no trial can fit and none is made; the key stays, as it would after them.
+      // (Shared clips: 5.6 % of Bandai's candidates and 13 % of CMU's, whose trials all miss.)
+      const std::int64_t common_end =
+          can_slide ? std::max(fit.frames[i + 1] - options_.slide_frames, merge_start + 1)
+                    : fit.frames[i + 1];
+      if (common_end - merge_start >= 4 && NoCurveCanMerge(merge_start, common_end)) {
+        push(i);
+        continue;
+      }
       // Samples of work of one trial (a fit and a measure of the window's frames, every channel):
       // a candidate may take up to slide_frames + 1 trials, each counted for the stop token.
       const std::int64_t trial_work = (base.frames[base.count - 1] - base.frames[0] + 1) *
@@ -1576,6 +1589,17 @@ class Fitter {
     }
     push(count - 1);
     fit = std::move(out);
+  }
+
+  // Whether some channel's samples over frames [a, e] (e - a >= 4) are proved beyond the reach
+  // of any cubic within its bound (cubic_certificate.h). Out of line: inlined into the removal
+  // loop it cost that loop more than its own instructions (callgrind, Bandai: 9.3 M against
+  // 6.0 M).
+  [[gnu::noinline]] bool NoCurveCanMerge(std::int64_t a, std::int64_t e) const {
+    for (std::size_t c = 0; c < channels_.size(); ++c) {
+      if (reduce_internal::NoCubicWithin(channels_[c].data(), a, e, bounds_[c])) return true;
+    }
+    return false;
   }
 
   // ---- 3. verification ---------------------------------------------------------------------------
