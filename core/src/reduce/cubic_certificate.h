@@ -18,12 +18,16 @@
 
 namespace tempokey::core::reduce_internal {
 
-// A proof is trusted only where it clears the bound by this factor, and where the samples it
-// reads are within kCertificateReach bounds of zero: then the few roundings of a fit's evaluation
-// of its curve (about 1e-16 of the curve's terms) stay far below the margin, and a curve the fit
-// would accept is within the bound of an exact cubic with room to spare.
-inline constexpr double kCertificateMargin = 1.001;
+// A proof is trusted only where it clears the bound by this factor, where the samples it reads
+// are within kCertificateReach bounds of zero, and where the bound is far above the smallest
+// doubles (below, the margin and the products round away). A fit evaluates its curve through
+// rounded basis columns; a curve it accepts is then within the bound of an exact cubic, plus
+// roundings of its terms. Those terms can be much larger than the samples (a stretch of 4
+// frames inside a segment of 2 000, samples far beyond it): about 1e-4 bounds in the most
+// extreme case estimated, a tenth of the margin, and far less on any real clip.
+inline constexpr double kCertificateMargin = 1.01;
 inline constexpr double kCertificateReach = 1e6;
+inline constexpr double kCertificateSmallestBound = 1e-250;
 
 // The i-th of the five frames spread over a stretch of `length` frames (offsets from its first):
 // 0 and `length` included, distinct for length >= 4.
@@ -79,7 +83,7 @@ inline bool NoCubicWithin(const double* s, std::int64_t a, std::int64_t e, doubl
     difference += w[j] * sample;
     largest = std::max(largest, std::abs(sample));
   }
-  return largest <= kCertificateReach * bound &&
+  return bound >= kCertificateSmallestBound && largest <= kCertificateReach * bound &&
          std::abs(difference) > kCertificateMargin * bound;
 }
 

@@ -1,7 +1,8 @@
 // NoCubicWithin() (core/src/reduce/cubic_certificate.h), the proof the tolerance fit's removal
 // uses to skip trials: it never claims a stretch that some cubic does come within the bound of
-// (samples built as a cubic plus less than the bound), and it claims a lone spike exactly when
-// the spike's closed-form minimax error over the five frames exceeds the bound.
+// (samples built as a cubic plus less than the bound, also in the worst signs at its five frames),
+// and it claims a lone spike exactly when the spike's closed-form minimax error over the five
+// frames exceeds the bound by the margin.
 #include "core/src/reduce/cubic_certificate.h"
 
 #include <cmath>
@@ -51,21 +52,53 @@ TEST(CubicCertificateTest, NeverClaimsAStretchThatACubicComesWithinTheBoundOf) {
   EXPECT_EQ(checked, 4 * 9 * 200);
 }
 
-TEST(CubicCertificateTest, ClaimsALoneSpikeExactlyWhenItsMinimaxErrorExceedsTheBound) {
+TEST(CubicCertificateTest, NeverClaimsACubicWithNoiseJustUnderTheBoundInTheWorstSigns) {
+  // Noise of 0.999 bounds alternating in sign at the five frames: the divided difference's
+  // largest possible value for a stretch some cubic is within the bound of.
+  std::mt19937_64 rng(7);
+  const double bound = 0.5;
+  for (double scale : {1.0, 180.0, 1e4}) {
+    for (std::int64_t length : {4, 6, 13, 64, 255, 256, 1000, 4096}) {
+      for (int round = 0; round < 50; ++round) {
+        std::vector<double> s = CubicWithNoise(rng, length + 1, scale, 0.0);
+        for (int j = 0; j < 5; ++j) {
+          const double sign = j % 2 == 0 ? 1.0 : -1.0;
+          s[static_cast<std::size_t>(SpreadFrame(j, length))] += sign * 0.999 * bound;
+        }
+        ASSERT_FALSE(NoCubicWithin(s.data(), 0, length, bound))
+            << "scale " << scale << ", length " << length << ", round " << round;
+      }
+    }
+  }
+}
+
+TEST(CubicCertificateTest, ClaimsALoneSpikeExactlyWhenItsMinimaxErrorExceedsTheMarginedBound) {
   // Eight frames: the five frames are 0, 2, 4, 6, 8, the divided difference's weights
   // (1, -4, 6, -4, 1) / 16. A spike h at frame 4 on zeros is 6h/16 from the best cubic on those
-  // frames (the error alternates +-6h/16 there), so a proof exists iff 6h/16 > the bound.
+  // frames (the error alternates +-6h/16 there), so a proof exists iff 6h/16 > the bound; the
+  // certificate claims it once 6h/16 exceeds the bound times its margin of 1.01 (h > 1.3467).
   const double bound = 0.5;
-  for (double h : {0.5, 1.3, 1.33, 1.334, 1.336, 1.4, 2.0, 20.0}) {
+  for (double h : {0.5, 1.3, 1.334, 1.346, 1.348, 1.4, 2.0, 20.0}) {
     std::vector<double> s(9, 0.0);
     s[4] = h;
-    const bool expected = 6.0 * h / 16.0 > kCertificateMargin * bound;
+    const bool expected = h > 1.3467;
     EXPECT_EQ(NoCubicWithin(s.data(), 0, 8, bound), expected) << "spike " << h;
   }
 }
 
+TEST(CubicCertificateTest, ClaimsNothingForABoundAmongTheSmallestDoubles) {
+  // A spike a hundred times the bound, for a bound where the margin itself would round away.
+  const double bound = 1e-300;
+  std::vector<double> s(9, 0.0);
+  s[4] = 100.0 * bound;
+  EXPECT_FALSE(NoCubicWithin(s.data(), 0, 8, bound));
+  // The same shape at an ordinary bound is claimed.
+  s[4] = 100.0;
+  EXPECT_TRUE(NoCubicWithin(s.data(), 0, 8, 1.0));
+}
+
 TEST(CubicCertificateTest, ClaimsNothingForSamplesBeyondItsReach) {
-  // A spike far over the bound, on samples so large that rounding could matter: no claim.
+  // A spike far over the bound, on samples beyond the certificate's reach: no claim.
   std::vector<double> s(9, 2.0 * kCertificateReach);
   s[4] += 1e3;
   EXPECT_FALSE(NoCubicWithin(s.data(), 0, 8, 1.0));

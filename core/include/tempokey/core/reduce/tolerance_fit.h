@@ -23,9 +23,10 @@
 //      that lengthens the segment after the slid key): a trial's work grows with its window, so
 //      without a limit a smooth stretch merged key by key costs the square of its length (one
 //      calm channel of 1 M frames took 132 s, 0.25 s with the limit: cost_bench).
-//      A key whose merged segment no cubic can follow within the bound (proved by a fourth
-//      divided difference: core/src/reduce/cubic_certificate.h) stays without any trial, as it
-//      would after them.
+//      A key stays without any trial, as it would after them, where no cubic can follow the
+//      frames every trial's merged segment covers (from the key before to the next key slid as
+//      far back as it may go) within the bound, proved by a fourth divided difference
+//      (core/src/reduce/cubic_certificate.h).
 //   3. Verification of every frame; a region that cannot be fitted (only possible with keys on
 //      consecutive frames) is keyed at every frame with the samples' values.
 // Channels fitted together (a joint's, or a whole clip's: pose-aligned keys) share key frames and
