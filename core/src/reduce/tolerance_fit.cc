@@ -1175,14 +1175,20 @@ class Fitter {
   // the segments between them, for channel c of `run`; stops early once it exceeds `limit`.
   // `worst_key` (optional) receives the window position of the worst key frame or the start of
   // the worst segment.
+  // The keys first, then segment `merged` (a removal window's merged segment, free_first: the one
+  // most trials miss in), then the others in order. Below `limit` the maximum is the same in any
+  // order; above it only "over" matters, and the removal reads `worst_key` only as before or after
+  // the key that slides, which the merged segment's place cannot change: segments before it and
+  // it both lie before, and ties go to the earlier in either order (the same keys: the identity
+  // pins of reduce_identity_test; callgrind ReduceKeys, Bandai 773.7 -> 767.9 M, CMU 146.2 ->
+  // 144.9 M).
   // Out of line: inlined into the removal loop, with the rest of that loop around it, GCC kept
   // its running maximum in memory, a store and a load per key (paired runs of spec8_bench
   // --only=tolerance: Bandai 83.4-85.4 -> 81.5-82.1 ms per M samples out of line; CMU within its
   // spread). Also tried, and no faster: FitWindow() out of line as well; the keys' maximum taken
   // as a tree (Bandai 88-90).
   [[gnu::noinline]] double WindowRatio(std::size_t c, const KeyRun& run, int key_first,
-                                       int key_last,
-                                       double limit = std::numeric_limits<double>::infinity(),
+                                       int key_last, int merged, double limit,
                                        int* worst_key = nullptr) {
     const std::span<const double> s = channels_[c];
     const double error_limit = limit * bounds_[c];
@@ -1195,12 +1201,16 @@ class Fitter {
         where = i;
       }
     }
-    for (int j = key_first; j < key_last && worst <= error_limit; ++j) {
+    auto measure = [&](int j) __attribute__((always_inline)) {
       const double e = SegmentMax(s, run, j, error_limit);
       if (e > worst) {
         worst = e;
         where = j;
       }
+    };
+    if (worst <= error_limit) measure(merged);
+    for (int j = key_first; j < key_last && worst <= error_limit; ++j) {
+      if (j != merged) measure(j);
     }
     if (worst_key != nullptr) *worst_key = where;
     return worst / bounds_[c];
@@ -1347,7 +1357,7 @@ class Fitter {
       KeyRun run = w.Run(c);
       Solve(channels_[c], run, w.free_first, w.free_last);
       int where = 0;
-      const double ratio = WindowRatio(c, run, 0, w.count - 1, limit, &where);
+      const double ratio = WindowRatio(c, run, 0, w.count - 1, w.free_first, limit, &where);
       if (ratio > worst) {
         worst = ratio;
         if (worst_key != nullptr) *worst_key = where;
@@ -1368,7 +1378,8 @@ class Fitter {
       KeyRun run = w.Run(c);
       // Only whether each ratio is over 1 matters: the scans may stop there. A lone channel is
       // over (its window missed the bound: the caller's trial).
-      double ratio = channels_.size() == 1 ? kOver : WindowRatio(c, run, 0, w.count - 1, 1.0);
+      double ratio =
+          channels_.size() == 1 ? kOver : WindowRatio(c, run, 0, w.count - 1, w.free_first, 1.0);
       lawson_.assign(static_cast<std::size_t>(span), 1.0);
       for (int round = 0; round < options_.lawson_iterations && ratio > 1.0; ++round) {
         // A round reweights, refits and measures the window's frames: up to 100 rounds on a
@@ -1378,7 +1389,7 @@ class Fitter {
         const double scale = static_cast<double>(span) / total;
         for (double& weight : lawson_) weight *= scale;
         Solve(s, run, w.free_first, w.free_last, lawson_.data(), origin);
-        ratio = WindowRatio(c, run, 0, w.count - 1, 1.0);
+        ratio = WindowRatio(c, run, 0, w.count - 1, w.free_first, 1.0);
       }
       if (ratio > 1.0) return false;
     }
