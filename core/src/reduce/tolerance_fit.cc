@@ -85,14 +85,8 @@ class BasisColumn {
   std::size_t capacity_ = 0;
 };
 
-// Segments up to this many frames long also keep their basis frame by frame (BasisColumns::row).
-constexpr std::int64_t kRowLength = 8;
-
 struct BasisColumns {
   std::array<BasisColumn, 4> column;
-  // For a length up to kRowLength, row[4 k + r] = column[r][k]: the same values (copied), laid
-  // out so that one frame's four coefficients load together.
-  std::array<double, 4 * (kRowLength + 1)> row;
 
   void Fill(std::int64_t length);
 };
@@ -128,12 +122,36 @@ TEMPOKEY_CLONES_AVX void FillColumns(std::int64_t length, double* c0, double* c1
 void BasisColumns::Fill(std::int64_t length) {
   for (BasisColumn& c : column) c.Resize(static_cast<std::size_t>(length) + 1);
   FillColumns(length, column[0].data(), column[1].data(), column[2].data(), column[3].data());
-  if (length <= kRowLength) {
-    for (std::int64_t k = 0; k <= length; ++k) {
-      for (int r = 0; r < 4; ++r) row[static_cast<std::size_t>(4 * k + r)] = column[r][k];
+}
+
+// The basis of the segments up to kRowLength frames long, frame by frame: rows(length)[4 k + r]
+// is column r at frame k, the same values as BasisColumns holds (FillColumns() computes both),
+// laid out so that one frame's four coefficients load together. One table for the process (3 KB,
+// made before main() runs), not per thread: the thread tables' static TLS sits in every thread's
+// stack allocation (see GramCache).
+constexpr std::int64_t kRowLength = 8;
+
+class BasisRows {
+ public:
+  BasisRows() {
+    for (std::int64_t length = 1; length <= kRowLength; ++length) {
+      std::array<std::array<double, kRowLength + 1>, 4> c;
+      FillColumns(length, c[0].data(), c[1].data(), c[2].data(), c[3].data());
+      for (std::int64_t k = 0; k <= length; ++k) {
+        for (int r = 0; r < 4; ++r) Row(length, k)[r] = c[r][static_cast<std::size_t>(k)];
+      }
     }
   }
-}
+  const double* rows(std::int64_t length) const { return table_[Index(length)].data(); }
+
+ private:
+  static std::size_t Index(std::int64_t length) { return static_cast<std::size_t>(length); }
+  double* Row(std::int64_t length, std::int64_t k) {
+    return table_[Index(length)].data() + 4 * k;
+  }
+  std::array<std::array<double, 4 * (kRowLength + 1)>, kRowLength + 1> table_{};
+};
+const BasisRows kBasisRows;
 
 // Where a fit gets its basis columns: segments up to kTabledLength frames long from a table
 // computed once per thread (about 1 MB) and fetched once per fit; longer ones up to
@@ -358,20 +376,21 @@ TEMPOKEY_CLONES_AVX void WeightedSumsEnd(const double* data, const double* w,
 // Segments this short (at most kShortInterior interior frames) reach at most one of the kernels'
 // 4-frame blocks: their sums are computed inline below without a call, with the kernels'
 // operations in the kernels' order (each lane from 0, the lanes summed pairwise, then the scalar
-// tail from 0), so the same bits.
+// tail from 0), so the same bits. (Their largest errors, from 4 interior frames, are one call:
+// OverlappingBlocksMaxError().)
 constexpr std::int64_t kShortInterior = 7;
 
 // DataMoments() of a short segment (n - 1 <= kShortInterior): the moments `kEnds` needs, two at
 // a time (the start key's pair, columns 0 and 1, and the end key's, 2 and 3) from the basis
-// rows, each lane the kernel's operations on its column in the kernel's order (callgrind, Bandai:
-// 759.2 -> 746.7 M instructions against a column at a time).
+// rows (kBasisRows), each lane the kernel's operations on its column in the kernel's order
+// (callgrind, Bandai: 759.2 -> 746.7 M instructions against a column at a time).
 template <FreeEnds kEnds>
-inline void ShortDataMoments(const double* data, const BasisColumns& basis, std::int64_t n,
-                             double* moments) {
+inline void ShortDataMoments(const double* data, std::int64_t n, double* moments) {
   static_assert(kShortInterior + 1 <= kRowLength);
   using V2 = double __attribute__((vector_size(16)));
+  const double* rows = kBasisRows.rows(n);
   auto pair_of = [&](int half) __attribute__((always_inline)) {
-    const double* row = basis.row.data() + 2 * half;
+    const double* row = rows + 2 * half;
     auto term = [&](std::int64_t k) __attribute__((always_inline)) {
       return V2{data[k], data[k]} * simd::Load<V2>(row + 4 * k);
     };
@@ -454,7 +473,7 @@ inline double ShortScaleByResiduals(const double* data, const BasisColumns& basi
 
 // The largest |curve - data| over the interior frames of a segment with 4 to 7 of them: two
 // blocks of four frames, the first from frame 1 and the second ending at frame n - 1, which
-// overlap when there are fewer than 8 (a maximum does not mind a frame seen twice). Each lane
+// overlap (a maximum does not mind a frame seen twice). Each lane
 // computes a frame's error as ShortMaxError() does, so the same maximum. In its own function
 // for the AVX clone: inline in the fitter, whose code is built for the baseline, the blocks
 // cost more than the scalar loop (callgrind, Bandai: 767.9 -> 788.6 M instructions against
@@ -884,7 +903,7 @@ class Fitter {
     const bool short_segment = length - 1 <= kShortInterior;
     if (segment_weights == nullptr) {
       if (short_segment) {
-        ShortDataMoments<kEnds>(data, basis, length, moment);
+        ShortDataMoments<kEnds>(data, length, moment);
       } else if (kEnds == FreeEnds::kBoth) {
         DataMoments(data, basis, length, moment);
       } else if (kEnds == FreeEnds::kStartOnly) {
@@ -1215,20 +1234,14 @@ class Fitter {
   // the segments between them, for channel c of `run`; stops early once it exceeds `limit`.
   // `worst_key` (optional) receives the window position of the worst key frame or the start of
   // the worst segment.
-  // The keys first, then segment `merged` (a removal window's merged segment, free_first: the one
-  // most trials miss in), then the others in order. Below `limit` the maximum is the same in any
-  // order; above it only "over" matters, and the removal reads `worst_key` only as before or after
-  // the key that slides, which the merged segment's place cannot change: segments before it and
-  // it both lie before, and ties go to the earlier in either order (the same keys: the identity
-  // pins of reduce_identity_test; callgrind ReduceKeys, Bandai 773.7 -> 767.9 M, CMU 146.2 ->
-  // 144.9 M).
   // Out of line: inlined into the removal loop, with the rest of that loop around it, GCC kept
   // its running maximum in memory, a store and a load per key (paired runs of spec8_bench
   // --only=tolerance: Bandai 83.4-85.4 -> 81.5-82.1 ms per M samples out of line; CMU within its
   // spread). Also tried, and no faster: FitWindow() out of line as well; the keys' maximum taken
   // as a tree (Bandai 88-90).
   [[gnu::noinline]] double WindowRatio(std::size_t c, const KeyRun& run, int key_first,
-                                       int key_last, int merged, double limit,
+                                       int key_last,
+                                       double limit = std::numeric_limits<double>::infinity(),
                                        int* worst_key = nullptr) {
     const std::span<const double> s = channels_[c];
     const double error_limit = limit * bounds_[c];
@@ -1241,16 +1254,12 @@ class Fitter {
         where = i;
       }
     }
-    auto measure = [&](int j) __attribute__((always_inline)) {
+    for (int j = key_first; j < key_last && worst <= error_limit; ++j) {
       const double e = SegmentMax(s, run, j, error_limit);
       if (e > worst) {
         worst = e;
         where = j;
       }
-    };
-    if (worst <= error_limit) measure(merged);
-    for (int j = key_first; j < key_last && worst <= error_limit; ++j) {
-      if (j != merged) measure(j);
     }
     if (worst_key != nullptr) *worst_key = where;
     return worst / bounds_[c];
@@ -1397,7 +1406,7 @@ class Fitter {
       KeyRun run = w.Run(c);
       Solve(channels_[c], run, w.free_first, w.free_last);
       int where = 0;
-      const double ratio = WindowRatio(c, run, 0, w.count - 1, w.free_first, limit, &where);
+      const double ratio = WindowRatio(c, run, 0, w.count - 1, limit, &where);
       if (ratio > worst) {
         worst = ratio;
         if (worst_key != nullptr) *worst_key = where;
@@ -1418,8 +1427,7 @@ class Fitter {
       KeyRun run = w.Run(c);
       // Only whether each ratio is over 1 matters: the scans may stop there. A lone channel is
       // over (its window missed the bound: the caller's trial).
-      double ratio =
-          channels_.size() == 1 ? kOver : WindowRatio(c, run, 0, w.count - 1, w.free_first, 1.0);
+      double ratio = channels_.size() == 1 ? kOver : WindowRatio(c, run, 0, w.count - 1, 1.0);
       lawson_.assign(static_cast<std::size_t>(span), 1.0);
       for (int round = 0; round < options_.lawson_iterations && ratio > 1.0; ++round) {
         // A round reweights, refits and measures the window's frames: up to 100 rounds on a
@@ -1429,7 +1437,7 @@ class Fitter {
         const double scale = static_cast<double>(span) / total;
         for (double& weight : lawson_) weight *= scale;
         Solve(s, run, w.free_first, w.free_last, lawson_.data(), origin);
-        ratio = WindowRatio(c, run, 0, w.count - 1, w.free_first, 1.0);
+        ratio = WindowRatio(c, run, 0, w.count - 1, 1.0);
       }
       if (ratio > 1.0) return false;
     }
