@@ -471,25 +471,32 @@ inline double ShortScaleByResiduals(const double* data, const BasisColumns& basi
   return total;
 }
 
+// |curve - data| at the four frames from `at`, the curve's coefficients broadcast in `x`: each
+// lane the scalar formula's operations, (c0 x0 + c1 x1) + (c2 x2 + c3 x3), so the same bits.
+[[gnu::always_inline]] inline simd::V4 BlockError(const double* data, const BasisColumns& basis,
+                                                  std::int64_t at,
+                                                  const std::array<simd::V4, 4>& x) {
+  const simd::V4 y = ((simd::Load(basis.column[0].data() + at) * x[0] +
+                       simd::Load(basis.column[1].data() + at) * x[1]) +
+                      (simd::Load(basis.column[2].data() + at) * x[2] +
+                       simd::Load(basis.column[3].data() + at) * x[3]));
+  return simd::Abs(y - simd::Load(data + at));
+}
+
 // The largest |curve - data| over the interior frames of a segment with 4 to 7 of them: two
 // blocks of four frames, the first from frame 1 and the second ending at frame n - 1, which
-// overlap (a maximum does not mind a frame seen twice). Each lane
-// computes a frame's error as ShortMaxError() does, so the same maximum. In its own function
+// overlap (a maximum does not mind a frame seen twice), each lane a frame's error as
+// ShortMaxError() computes it, so the same maximum. In its own function
 // for the AVX clone: inline in the fitter, whose code is built for the baseline, the blocks
 // cost more than the scalar loop (callgrind, Bandai: 767.9 -> 788.6 M instructions against
 // 759.2 M out of line).
 TEMPOKEY_CLONES_AVX double OverlappingBlocksMaxError(const double* data, const BasisColumns& basis,
                                                      std::int64_t n, const double* x) {
   using simd::V4;
-  auto block_error = [&](std::int64_t at) __attribute__((always_inline)) {
-    const V4 y = ((simd::Load(basis.column[0].data() + at) * simd::Broadcast(x[0]) +
-                   simd::Load(basis.column[1].data() + at) * simd::Broadcast(x[1])) +
-                  (simd::Load(basis.column[2].data() + at) * simd::Broadcast(x[2]) +
-                   simd::Load(basis.column[3].data() + at) * simd::Broadcast(x[3])));
-    return simd::Abs(y - simd::Load(data + at));
-  };
-  const V4 e0 = block_error(1);
-  const V4 e1 = block_error(n - 4);
+  const std::array<V4, 4> xv = {simd::Broadcast(x[0]), simd::Broadcast(x[1]),
+                                simd::Broadcast(x[2]), simd::Broadcast(x[3])};
+  const V4 e0 = BlockError(data, basis, 1, xv);
+  const V4 e1 = BlockError(data, basis, n - 4, xv);
   V4 worst = simd::Broadcast(0.0);
   worst = e0 > worst ? e0 : worst;
   worst = e1 > worst ? e1 : worst;
@@ -517,15 +524,11 @@ inline double ShortMaxError(const double* data, const BasisColumns& basis, std::
 TEMPOKEY_CLONES_AVX double MaxError(const double* data, const BasisColumns& basis,
                                     std::int64_t n, const double* x, double limit) {
   using simd::V4;
-  const V4 x0 = simd::Broadcast(x[0]), x1 = simd::Broadcast(x[1]);
-  const V4 x2 = simd::Broadcast(x[2]), x3 = simd::Broadcast(x[3]);
+  const std::array<V4, 4> xv = {simd::Broadcast(x[0]), simd::Broadcast(x[1]),
+                                simd::Broadcast(x[2]), simd::Broadcast(x[3])};
   const V4 limit_v = simd::Broadcast(limit);
   auto block_error = [&](std::int64_t at) __attribute__((always_inline)) {
-    const V4 y = ((simd::Load(basis.column[0].data() + at) * x0 +
-                   simd::Load(basis.column[1].data() + at) * x1) +
-                  (simd::Load(basis.column[2].data() + at) * x2 +
-                   simd::Load(basis.column[3].data() + at) * x3));
-    return simd::Abs(y - simd::Load(data + at));
+    return BlockError(data, basis, at, xv);
   };
   V4 worst = simd::Broadcast(0.0);
   std::int64_t k = 1;
