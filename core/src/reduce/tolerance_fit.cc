@@ -389,21 +389,33 @@ inline void ShortDataMoments(const double* data, std::int64_t n, double* moments
   static_assert(kShortInterior + 1 <= kRowLength);
   using V2 = double __attribute__((vector_size(16)));
   const double* rows = kBasisRows.rows(n);
+  // Branch-free: which frames the block and the tail take varies from call to call, and a
+  // mispredicted branch costs more than the few products spent on frames that add +-0
+  // (Bandai: 746.7 -> 780.4 M instructions under callgrind, 0.83 M fewer mispredictions in
+  // cachegrind's model of 7.80 M, about 3 % less time in paired runs; CMU within its spread).
+  const auto has_block = static_cast<std::int64_t>(n >= 5);
+  const std::int64_t tail_first = 1 + 4 * has_block;
+  const double block_scale = static_cast<double>(has_block);
   auto pair_of = [&](int half) __attribute__((always_inline)) {
     const double* row = rows + 2 * half;
+    // Frame k's term, or +-0 past the segment's interior (data[0] times 0: the samples are
+    // finite). Reads stay within the segment's frames 0..n and the table's rows (k <= 7).
     auto term = [&](std::int64_t k) __attribute__((always_inline)) {
-      return V2{data[k], data[k]} * simd::Load<V2>(row + 4 * k);
+      const auto inside = static_cast<std::int64_t>(k < n);
+      const double d = data[k * inside] * static_cast<double>(inside);
+      return V2{d, d} * simd::Load<V2>(row + 4 * k);
     };
-    std::int64_t k = 1;
-    // (Without a block, the kernel's empty lanes sum to +0.)
-    V2 block = {0.0, 0.0};
-    if (k + 4 <= n) {
-      const V2 zero = {0.0, 0.0};
-      block = ((zero + term(1)) + (zero + term(2))) + ((zero + term(3)) + (zero + term(4)));
-      k = 5;
-    }
-    V2 tail = {0.0, 0.0};
-    for (; k < n; ++k) tail += term(k);
+    const V2 zero = {0.0, 0.0};
+    // Without a block the kernel's empty lanes sum to +0; here +-0, which adds to the tail as
+    // +0 does (the tail is never -0).
+    const V2 block =
+        (((zero + term(1)) + (zero + term(2))) + ((zero + term(3)) + (zero + term(4)))) *
+        V2{block_scale, block_scale};
+    // The tail from +0: never -0, so the +-0 terms past the interior leave it as it is.
+    V2 tail = zero;
+    tail += term(tail_first);
+    tail += term(tail_first + 1);
+    tail += term(tail_first + 2);
     simd::Store(moments + 2 * half, block + tail);
   };
   if (NeedsMoment(kEnds, 0)) pair_of(0);
