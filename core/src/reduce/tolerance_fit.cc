@@ -387,6 +387,8 @@ constexpr std::int64_t kShortInterior = 7;
 template <FreeEnds kEnds>
 inline void ShortDataMoments(const double* data, std::int64_t n, double* moments) {
   static_assert(kShortInterior + 1 <= kRowLength);
+  // One block of four frames and a tail of three cover every short segment's interior.
+  static_assert(kShortInterior == 4 + 3);
   using V2 = double __attribute__((vector_size(16)));
   const double* rows = kBasisRows.rows(n);
   // Branch-free: which frames the block and the tail take varies from call to call, and a
@@ -395,27 +397,23 @@ inline void ShortDataMoments(const double* data, std::int64_t n, double* moments
   // cachegrind's model of 7.80 M, about 3 % less time in paired runs; CMU within its spread).
   const auto has_block = static_cast<std::int64_t>(n >= 5);
   const std::int64_t tail_first = 1 + 4 * has_block;
-  const double block_scale = static_cast<double>(has_block);
   auto pair_of = [&](int half) __attribute__((always_inline)) {
     const double* row = rows + 2 * half;
-    // Frame k's term, or +-0 past the segment's interior (data[0] times 0: the samples are
-    // finite). Reads stay within the segment's frames 0..n and the table's rows (k <= 7).
-    auto term = [&](std::int64_t k) __attribute__((always_inline)) {
-      const auto inside = static_cast<std::int64_t>(k < n);
-      const double d = data[k * inside] * static_cast<double>(inside);
+    // Frame k's term when `taken`, else +-0: frame 0's sample (finite) times 0. Reads stay
+    // within the segment's frames 0..n - 1 and the table's rows (k <= 7).
+    auto term = [&](std::int64_t k, std::int64_t taken) __attribute__((always_inline)) {
+      const double d = data[k * taken] * static_cast<double>(taken);
       return V2{d, d} * simd::Load<V2>(row + 4 * k);
     };
     const V2 zero = {0.0, 0.0};
-    // Without a block the kernel's empty lanes sum to +0; here +-0, which adds to the tail as
-    // +0 does (the tail is never -0).
-    const V2 block =
-        (((zero + term(1)) + (zero + term(2))) + ((zero + term(3)) + (zero + term(4)))) *
-        V2{block_scale, block_scale};
+    // Without a block (frames 1..4 not taken) it sums to +0, as the kernel's empty lanes do.
+    const V2 block = ((zero + term(1, has_block)) + (zero + term(2, has_block))) +
+                     ((zero + term(3, has_block)) + (zero + term(4, has_block)));
     // The tail from +0: never -0, so the +-0 terms past the interior leave it as it is.
     V2 tail = zero;
-    tail += term(tail_first);
-    tail += term(tail_first + 1);
-    tail += term(tail_first + 2);
+    for (std::int64_t k = tail_first; k < tail_first + 3; ++k) {
+      tail += term(k, static_cast<std::int64_t>(k < n));
+    }
     simd::Store(moments + 2 * half, block + tail);
   };
   if (NeedsMoment(kEnds, 0)) pair_of(0);
