@@ -393,7 +393,7 @@ inline void ShortDataMoments(const double* data, std::int64_t n, double* moments
   const double* rows = kBasisRows.rows(n);
   // Branch-free: which frames the block and the tail take varies from call to call, and a
   // mispredicted branch costs more than the few products spent on frames that add +-0
-  // (Bandai: 746.7 -> 780.4 M instructions under callgrind, 0.83 M fewer mispredictions in
+  // (Bandai: 746.7 -> 775.8 M instructions under callgrind, 0.77 M fewer mispredictions in
   // cachegrind's model of 7.80 M, about 3 % less time in paired runs; CMU within its spread).
   const auto has_block = static_cast<std::int64_t>(n >= 5);
   const std::int64_t tail_first = 1 + 4 * has_block;
