@@ -32,9 +32,13 @@ void ExpectFindsFirst(std::size_t from, std::size_t n, const std::vector<std::si
   ASSERT_GE(found, from);
   // Nothing flagged is skipped ...
   EXPECT_LE(found, first);
+  if (found == n) return;  // ... so nothing is flagged at all
   // ... and the scan stops at the flagged block, or leaves less than a block to the caller.
   EXPECT_TRUE(found + kScanBlock > n || (first >= found && first < found + kScanBlock));
   EXPECT_EQ((found - from) % kScanBlock, 0u);
+  // A flag among the samples after the last whole block is what leaves them to the caller,
+  // unless they are all there is.
+  if (n - from >= kScanBlock && found + kScanBlock > n) EXPECT_LT(first, n);
 }
 
 TEST(BlockScanTest, FindsTheBlockOfTheFirstFlaggedSampleAtEveryPosition) {
@@ -42,6 +46,21 @@ TEST(BlockScanTest, FindsTheBlockOfTheFirstFlaggedSampleAtEveryPosition) {
     ExpectFindsFirst(0, n, {});
     for (std::size_t at = 0; at < n; ++at) ExpectFindsFirst(0, n, {at});
   }
+}
+
+TEST(BlockScanTest, ReadsPastTheLastWholeBlockWhenNothingThereIsFlagged) {
+  // 183 samples, a short clip's channel: five whole blocks, then 23 samples tested as the block
+  // that ends at the last one, never left to the caller's loop.
+  for (std::size_t from = 0; from <= 3; ++from) {
+    std::vector<double> samples(183, 0.0);
+    EXPECT_EQ(FirstFlaggedBlock(samples.data(), from, samples.size(), Negative), samples.size());
+    samples[182] = -1.0;
+    EXPECT_EQ(FirstFlaggedBlock(samples.data(), from, samples.size(), Negative),
+              from + 5 * kScanBlock);
+  }
+  // Fewer samples than a block: all left to the caller, as before.
+  const std::vector<double> few(kScanBlock - 1, 0.0);
+  EXPECT_EQ(FirstFlaggedBlock(few.data(), 0, few.size(), Negative), 0u);
 }
 
 TEST(BlockScanTest, StartsAtItsFirstSampleAndStopsAtTheEarlierOfTwoFlags) {
