@@ -20,3 +20,7 @@ for t in "${targets[@]}"; do
   # The run-time kernels capped at AVX2 as well (core/src/simd/instruction_set.h).
   TEMPOKEY_MAX_ISA=avx2 "$dir/tests/$t" --gtest_brief=1
 done
+# The error-bounded fit has a baseline build beside its AVX2 one (core/CMakeLists.txt), and only
+# the baseline build holds AVX clones: run it too.
+echo "-- tolerance_fit_test (-O0, baseline)"
+TEMPOKEY_MAX_ISA=baseline "$dir/tests/tolerance_fit_test" --gtest_brief=1

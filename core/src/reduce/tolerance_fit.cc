@@ -7,6 +7,7 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <type_traits>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -20,7 +21,53 @@
 // The kernels below use simd::V4 values; helpers that return them are always inlined (simd.h).
 #pragma GCC diagnostic ignored "-Wpsabi"
 
+// This file is built twice (core/CMakeLists.txt): for the baseline, and with
+// TEMPOKEY_TOLERANCE_FIT_BUILD_AVX2 defined for AVX2, each build's fitter in a namespace of its
+// own. FitWithinTolerance(), in the baseline build, runs the AVX2 build's on a processor with AVX2
+// (simd::RunningInstructionSet(), so TEMPOKEY_MAX_ISA=baseline runs the other). Both perform the
+// same operations on the same values (no contraction into fused multiply-adds:
+// -ffp-contract=off; the compiler never reorders a floating-point sum), so they give the same
+// bits; the wider build takes the four-frame blocks inlined in the fitter (the short segments'
+// moments, the solves' 2 x 2 blocks) in one instruction where the baseline takes two (callgrind
+// of ReduceKeys(), Bandai 775.5 -> 738.0 M instructions, CMU 144.5 -> 139.5 M; paired runs of
+// spec8_bench --only=tolerance 5-8 % faster on Bandai, about 4 % on CMU).
+// What a processor without AVX2 might run stays out of the AVX2 build's instructions:
+// - only this file's own code is built for AVX2 (the pragma after the includes), not the
+//   libraries' inline functions and templates it uses, of which the linker keeps one copy for
+//   the whole program;
+// - it holds nothing made before main(): the short segments' basis rows are the baseline
+//   build's (kBasisRowTable, the same bits);
+// - its kernels are plain functions, called directly (every processor that runs them has AVX,
+//   so they need no AVX clone).
+// tests/core/reduce/tolerance_fit_avx2_isolation.py holds the built object file to that, and
+// the tests named baseline.* run the baseline build on this machine.
+#if defined(TEMPOKEY_TOLERANCE_FIT_BUILD_AVX2)
+#define TEMPOKEY_TOLERANCE_FIT_BUILD tolerance_fit_avx2
+#undef TEMPOKEY_CLONES_AVX
+#define TEMPOKEY_CLONES_AVX
+#pragma GCC target("avx2")
+#else
+#define TEMPOKEY_TOLERANCE_FIT_BUILD tolerance_fit_baseline
+#endif
+
 namespace tempokey::core {
+// The AVX2 build's fit, when it is built (TEMPOKEY_TOLERANCE_FIT_AVX2).
+namespace tolerance_fit_avx2 {
+absl::StatusOr<SplineFit> Fit(std::span<const std::span<const double>> channels,
+                              std::span<const double> max_errors,
+                              const ToleranceFitOptions& options, std::stop_token stop);
+}  // namespace tolerance_fit_avx2
+
+// The basis of the segments up to 8 frames long, frame by frame: kBasisRowTable[length][4 k + r]
+// is column r at frame k, the same values as BasisColumns holds (FillColumns() computes both),
+// laid out so that one frame's four coefficients load together. One table for the process (3 KB,
+// made before main() runs by the baseline build, and read by both), not per thread: the thread
+// tables' static TLS sits in every thread's stack allocation (see GramCache).
+namespace tolerance_fit_baseline {
+extern const std::array<std::array<double, 4 * 9>, 9> kBasisRowTable;
+}  // namespace tolerance_fit_baseline
+
+namespace TEMPOKEY_TOLERANCE_FIT_BUILD {
 namespace {
 
 // Fits aim a hair inside the bound, so that evaluating the same curve another way (keyed curves
@@ -124,34 +171,16 @@ void BasisColumns::Fill(std::int64_t length) {
   FillColumns(length, column[0].data(), column[1].data(), column[2].data(), column[3].data());
 }
 
-// The basis of the segments up to kRowLength frames long, frame by frame: rows(length)[4 k + r]
-// is column r at frame k, the same values as BasisColumns holds (FillColumns() computes both),
-// laid out so that one frame's four coefficients load together. One table for the process (3 KB,
-// made before main() runs), not per thread: the thread tables' static TLS sits in every thread's
-// stack allocation (see GramCache).
+// The longest segment in tolerance_fit_baseline::kBasisRowTable.
 constexpr std::int64_t kRowLength = 8;
+using BasisRowTable = std::array<std::array<double, 4 * (kRowLength + 1)>, kRowLength + 1>;
+static_assert(std::is_same_v<BasisRowTable, std::remove_const_t<decltype(
+                                                tolerance_fit_baseline::kBasisRowTable)>>);
 
-class BasisRows {
- public:
-  BasisRows() {
-    for (std::int64_t length = 1; length <= kRowLength; ++length) {
-      std::array<std::array<double, kRowLength + 1>, 4> c;
-      FillColumns(length, c[0].data(), c[1].data(), c[2].data(), c[3].data());
-      for (std::int64_t k = 0; k <= length; ++k) {
-        for (int r = 0; r < 4; ++r) Row(length, k)[r] = c[r][static_cast<std::size_t>(k)];
-      }
-    }
-  }
-  const double* rows(std::int64_t length) const { return table_[Index(length)].data(); }
-
- private:
-  static std::size_t Index(std::int64_t length) { return static_cast<std::size_t>(length); }
-  double* Row(std::int64_t length, std::int64_t k) {
-    return table_[Index(length)].data() + 4 * k;
-  }
-  std::array<std::array<double, 4 * (kRowLength + 1)>, kRowLength + 1> table_{};
-};
-const BasisRows kBasisRows;
+// The rows of segments of `length` frames (at most kRowLength).
+inline const double* BasisRows(std::int64_t length) {
+  return tolerance_fit_baseline::kBasisRowTable[static_cast<std::size_t>(length)].data();
+}
 
 // Where a fit gets its basis columns: segments up to kTabledLength frames long from a table
 // computed once per thread (about 1 MB) and fetched once per fit; longer ones up to
@@ -389,7 +418,7 @@ constexpr std::int64_t kShortInterior = 7;
 
 // DataMoments() of a short segment (n - 1 <= kShortInterior): the moments `kEnds` needs, two at
 // a time (the start key's pair, columns 0 and 1, and the end key's, 2 and 3) from the basis
-// rows (kBasisRows), each lane the kernel's operations on its column in the kernel's order
+// rows (BasisRows()), each lane the kernel's operations on its column in the kernel's order
 // (callgrind, Bandai: 759.2 -> 746.7 M instructions against a column at a time).
 template <FreeEnds kEnds>
 inline void ShortDataMoments(const double* data, std::int64_t n, double* moments) {
@@ -397,7 +426,7 @@ inline void ShortDataMoments(const double* data, std::int64_t n, double* moments
   // One block of four frames and a tail of three cover every short segment's interior.
   static_assert(kShortInterior == 4 + 3);
   using V2 = double __attribute__((vector_size(16)));
-  const double* rows = kBasisRows.rows(n);
+  const double* rows = BasisRows(n);
   // Branch-free: which frames the block and the tail take varies from call to call, and a
   // mispredicted branch costs more than the few products spent on frames that add +-0
   // (Bandai: 746.7 -> 775.8 M instructions under callgrind, 0.77 M fewer mispredictions in
@@ -1766,6 +1795,47 @@ class Fitter {
   std::array<double, 16> weighted_gram_;
 };
 
+}  // namespace
+
+// This build's fit of valid inputs (FitWithinTolerance() checks them).
+absl::StatusOr<SplineFit> Fit(std::span<const std::span<const double>> channels,
+                              std::span<const double> max_errors,
+                              const ToleranceFitOptions& options, std::stop_token stop) {
+  return Fitter(channels, max_errors, options).Run(stop);
+}
+
+}  // namespace TEMPOKEY_TOLERANCE_FIT_BUILD
+
+#if !defined(TEMPOKEY_TOLERANCE_FIT_BUILD_AVX2)
+namespace tolerance_fit_baseline {
+namespace {
+
+BasisRowTable MakeBasisRowTable() {
+  BasisRowTable table{};
+  for (std::int64_t length = 1; length <= kRowLength; ++length) {
+    std::array<std::array<double, kRowLength + 1>, 4> c;
+    FillColumns(length, c[0].data(), c[1].data(), c[2].data(), c[3].data());
+    for (std::int64_t k = 0; k <= length; ++k) {
+      for (int r = 0; r < 4; ++r) {
+        table[static_cast<std::size_t>(length)][static_cast<std::size_t>(4 * k + r)] =
+            c[static_cast<std::size_t>(r)][static_cast<std::size_t>(k)];
+      }
+    }
+  }
+  return table;
+}
+
+}  // namespace
+
+const BasisRowTable kBasisRowTable = MakeBasisRowTable();
+
+}  // namespace tolerance_fit_baseline
+
+namespace {
+
+using tolerance_fit_baseline::Coefficients;
+using tolerance_fit_baseline::SegmentValue;
+
 // The index of the first of `samples` that is not finite, or samples.size(): in vector blocks
 // (simd/block_scan.h), as every sample of every fitted channel is read here first.
 TEMPOKEY_CLONES_AVX2 std::size_t FirstNonFinite(std::span<const double> samples) {
@@ -1837,7 +1907,12 @@ absl::StatusOr<SplineFit> FitWithinTolerance(std::span<const std::span<const dou
                                              std::stop_token stop) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateInputs(channels, max_errors, options));
   TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
-  return Fitter(channels, max_errors, options).Run(stop);
+#if defined(TEMPOKEY_TOLERANCE_FIT_AVX2)
+  if (simd::RunningInstructionSet() >= simd::InstructionSet::kAvx2) {
+    return tolerance_fit_avx2::Fit(channels, max_errors, options, std::move(stop));
+  }
+#endif
+  return tolerance_fit_baseline::Fit(channels, max_errors, options, std::move(stop));
 }
 
 std::vector<double> EvaluateSplineFit(const SplineFit& fit, std::size_t channel) {
@@ -1861,5 +1936,6 @@ std::vector<double> EvaluateSplineFit(const SplineFit& fit, std::size_t channel)
   out[last] = v.back();
   return out;
 }
+#endif  // !defined(TEMPOKEY_TOLERANCE_FIT_BUILD_AVX2)
 
 }  // namespace tempokey::core
