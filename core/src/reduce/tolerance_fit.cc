@@ -39,12 +39,15 @@
 //   build's (kBasisRowTable, the same bits);
 // - its kernels are plain functions, called directly (every processor that runs them has AVX,
 //   so they need no AVX clone).
-// tests/core/reduce/tolerance_fit_avx2_isolation.py holds the built object file to that, and
-// the tests named baseline.* run the baseline build on this machine.
+// tests/core/reduce/tolerance_fit_avx2_isolation.py holds the built object file to that (every
+// function outside the build, and all that its static initializers reach), and the tests named
+// baseline.* run the baseline build on this machine.
 #if defined(TEMPOKEY_TOLERANCE_FIT_BUILD_AVX2)
 #define TEMPOKEY_TOLERANCE_FIT_BUILD tolerance_fit_avx2
 #undef TEMPOKEY_CLONES_AVX
 #define TEMPOKEY_CLONES_AVX
+#undef TEMPOKEY_CLONES_AVX2
+#define TEMPOKEY_CLONES_AVX2
 #pragma GCC target("avx2")
 #else
 #define TEMPOKEY_TOLERANCE_FIT_BUILD tolerance_fit_baseline
@@ -239,11 +242,12 @@ class BasisSource {
   };
 
   // Both on the heap, as GramCache's and FitScratch's: a thread_local object sits in every
-  // thread's static TLS block, which glibc carves from the thread's stack. Held in place (24 and
-  // 1.6 KB) they took 26 KB of the 100 KB stacks of civetweb's workers as Debian builds it, and
-  // twice that with a second build of this file: a refused HTTP request's error page then ran
-  // the worker off its stack (HttpFrontEndTest.AmbiguousFramingIsRefusedAndNothingSmuggledIs-
-  // Answered; tests/server/http/worker_stack_test.cc holds the server's whole TLS to 16 KB).
+  // thread's static TLS block, which glibc carves from the thread's stack. Held in place (24.7
+  // and 1.7 KB) they took 26 KB of the 100 KB stacks of civetweb's workers as Debian builds it,
+  // and twice that with a second build of this file: a refused HTTP request's error page then
+  // ran the worker off its stack (HttpFrontEndTest.AmbiguousFramingIsRefusedAndNothingSmuggledIs-
+  // Answered; tests/server/http/worker_stack_test.cc holds the server executable's own TLS to
+  // 16 KB).
   static Tables& ThreadTables() {
     thread_local const std::unique_ptr<Tables> tables = std::make_unique<Tables>();
     return *tables;

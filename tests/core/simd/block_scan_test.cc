@@ -38,7 +38,9 @@ void ExpectFindsFirst(std::size_t from, std::size_t n, const std::vector<std::si
   EXPECT_EQ((found - from) % kScanBlock, 0u);
   // A flag among the samples after the last whole block is what leaves them to the caller,
   // unless they are all there is.
-  if (n - from >= kScanBlock && found + kScanBlock > n) EXPECT_LT(first, n);
+  if (n - from >= kScanBlock && found + kScanBlock > n) {
+    EXPECT_LT(first, n);
+  }
 }
 
 TEST(BlockScanTest, FindsTheBlockOfTheFirstFlaggedSampleAtEveryPosition) {
@@ -61,6 +63,31 @@ TEST(BlockScanTest, ReadsPastTheLastWholeBlockWhenNothingThereIsFlagged) {
   // Fewer samples than a block: all left to the caller, as before.
   const std::vector<double> few(kScanBlock - 1, 0.0);
   EXPECT_EQ(FirstFlaggedBlock(few.data(), 0, few.size(), Negative), 0u);
+}
+
+TEST(BlockScanTest, ReadsOnlyVectorsWithinItsSamplesAndTheOneBeforeThem) {
+  // The seam and unwrap scans read the sample before each vector (p - 1) from `from` = 1: every
+  // vector tested must start at or after `from` and end by n, for every length, the overlapping
+  // last block included (a rule keyed on n alone would read data[-1] at n = 32, from = 1).
+  for (std::size_t from = 0; from <= 3; ++from) {
+    for (std::size_t n = from; n <= 3 * kScanBlock + 5; ++n) {
+      std::vector<double> samples(n, 0.0);
+      // Flagged only before `from`: never to be seen.
+      if (from > 0) samples[from - 1] = -1.0;
+      const double* data = samples.data();
+      bool in_bounds = true;
+      const auto recorded = [&](const double* p) {
+        const auto at = static_cast<std::size_t>(p - data);
+        in_bounds = in_bounds && at >= from && at + kScanLanes <= n;
+        return Negative(p);
+      };
+      const std::size_t found = FirstFlaggedBlock(data, from, n, recorded);
+      EXPECT_TRUE(in_bounds) << "from " << from << ", n " << n;
+      // Nothing flagged from `from` on: the whole scan, or all but its short tail.
+      EXPECT_TRUE(found == n || (found == from && n - from < kScanBlock))
+          << "from " << from << ", n " << n << ": " << found;
+    }
+  }
 }
 
 TEST(BlockScanTest, StartsAtItsFirstSampleAndStopsAtTheEarlierOfTwoFlags) {
