@@ -1,6 +1,9 @@
 // SIGTERM racing a stream of submits on the real tempokey-server binary: every submit is either
-// accepted (and then completes) or refused with UNAVAILABLE, the one code clients retry; none
-// ends CANCELLED, whatever the interleaving of the signal and the calls.
+// accepted (and then completes) or refused with UNAVAILABLE, the code of a draining server, or
+// with RESOURCE_EXHAUSTED when the job queue is full, which a client retries as its hint says;
+// none ends CANCELLED, whatever the interleaving of the signal and the calls. (The queue fills
+// when the server is slow to take the signal: on a loaded CI machine 64 jobs came in between the
+// signal and the drain, and the test, which had counted that refusal as a failure, flipped.)
 #include <signal.h>
 
 #include <atomic>
@@ -23,12 +26,17 @@ namespace tempokey::testing {
 namespace {
 
 constexpr int kClients = 4;
+constexpr int kSmallQueueRound = 3;
 
 class DrainRaceTest : public ::testing::TestWithParam<int> {};
 
 TEST_P(DrainRaceTest, SubmitsRacingSigtermAreAcceptedOrUnavailableNeverCancelled) {
+  // The last round with a queue of two jobs, which four clients keep full: its refusals are
+  // retried through the race.
+  std::vector<std::string> flags = {"--workers=1", "--drain_grace_seconds=30"};
+  if (GetParam() == kSmallQueueRound) flags.push_back("--queue_capacity=2");
   absl::StatusOr<std::unique_ptr<ServerProcess>> server =
-      ServerProcess::Start(MakeTempDir(), {"--workers=1", "--drain_grace_seconds=30"});
+      ServerProcess::Start(MakeTempDir(), flags);
   ASSERT_TRUE(server.ok()) << server.status();
   v1::SubmitJobRequest request;
   *request.mutable_inline_clip() = wire::ClipToProto(MakeClip(1, 20));
@@ -60,8 +68,13 @@ TEST_P(DrainRaceTest, SubmitsRacingSigtermAreAcceptedOrUnavailableNeverCancelled
         if (status.ok() && accepted.fetch_add(1) == 20 && !signalled.exchange(true)) {
           (*server)->Signal(SIGTERM);
         }
-        // Refusals while draining keep the client going; once the server is gone (or any other
-        // code), the race is over for this client.
+        // A full queue is retried, as its hint asks (it empties, or the drain refuses); refusals
+        // while draining keep the client going; once the server is gone (or any other code), the
+        // race is over for this client.
+        if (status.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED &&
+            status.error_message().find("job queue is full") != std::string::npos) {
+          continue;
+        }
         if (!status.ok() && (signalled.load() || status.error_code() != grpc::StatusCode::UNAVAILABLE) &&
             status.error_message().find("shutting down") == std::string::npos) {
           break;
@@ -74,19 +87,24 @@ TEST_P(DrainRaceTest, SubmitsRacingSigtermAreAcceptedOrUnavailableNeverCancelled
 
   RecordProperty("accepted", codes[grpc::StatusCode::OK]);
   RecordProperty("unavailable", codes[grpc::StatusCode::UNAVAILABLE]);
+  // (Looked up, not indexed: an inserted zero would read as a refusal below.)
+  const auto full = codes.find(grpc::StatusCode::RESOURCE_EXHAUSTED);
+  RecordProperty("queue_full", full == codes.end() ? 0 : full->second);
 
   EXPECT_TRUE(signalled.load());
   EXPECT_EQ(exit_code, 0) << (*server)->log();
-  // Every client ended on a refusal, and every refusal was UNAVAILABLE.
+  // Every client ended on a refusal, and every refusal was UNAVAILABLE or a full queue.
   EXPECT_GE(codes[grpc::StatusCode::UNAVAILABLE], kClients);
   for (const auto& [code, count] : codes) {
-    EXPECT_TRUE(code == grpc::StatusCode::OK || code == grpc::StatusCode::UNAVAILABLE)
+    EXPECT_TRUE(code == grpc::StatusCode::OK || code == grpc::StatusCode::UNAVAILABLE ||
+                (code == grpc::StatusCode::RESOURCE_EXHAUSTED &&
+                 messages[code].find("job queue is full") != std::string::npos))
         << count << " submits ended with code " << code << ": " << messages[code];
   }
 }
 
 // A few rounds: each is one race of the signal against four streams of submits.
-INSTANTIATE_TEST_SUITE_P(Rounds, DrainRaceTest, ::testing::Range(0, 3));
+INSTANTIATE_TEST_SUITE_P(Rounds, DrainRaceTest, ::testing::Range(0, kSmallQueueRound + 1));
 
 }  // namespace
 }  // namespace tempokey::testing
