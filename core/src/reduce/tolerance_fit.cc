@@ -7,7 +7,6 @@
 #include <cmath>
 #include <limits>
 #include <memory>
-#include <type_traits>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
@@ -65,9 +64,12 @@ absl::StatusOr<SplineFit> Fit(std::span<const std::span<const double>> channels,
 // is column r at frame k, the same values as BasisColumns holds (FillColumns() computes both),
 // laid out so that one frame's four coefficients load together. One table for the process (3 KB,
 // made before main() runs by the baseline build, and read by both), not per thread: the thread
-// tables' static TLS sits in every thread's stack allocation (see GramCache).
+// tables' static TLS sits in every thread's stack allocation (see ThreadHeapObject()).
 namespace tolerance_fit_baseline {
-extern const std::array<std::array<double, 4 * 9>, 9> kBasisRowTable;
+inline constexpr std::int64_t kBasisRowLength = 8;  // the longest segment in the table
+using BasisRowTable =
+    std::array<std::array<double, 4 * (kBasisRowLength + 1)>, kBasisRowLength + 1>;
+extern const BasisRowTable kBasisRowTable;
 }  // namespace tolerance_fit_baseline
 
 namespace TEMPOKEY_TOLERANCE_FIT_BUILD {
@@ -174,15 +176,25 @@ void BasisColumns::Fill(std::int64_t length) {
   FillColumns(length, column[0].data(), column[1].data(), column[2].data(), column[3].data());
 }
 
-// The longest segment in tolerance_fit_baseline::kBasisRowTable.
-constexpr std::int64_t kRowLength = 8;
-using BasisRowTable = std::array<std::array<double, 4 * (kRowLength + 1)>, kRowLength + 1>;
-static_assert(std::is_same_v<BasisRowTable, std::remove_const_t<decltype(
-                                                tolerance_fit_baseline::kBasisRowTable)>>);
+constexpr std::int64_t kRowLength = tolerance_fit_baseline::kBasisRowLength;
+using tolerance_fit_baseline::BasisRowTable;
 
 // The rows of segments of `length` frames (at most kRowLength).
 inline const double* BasisRows(std::int64_t length) {
   return tolerance_fit_baseline::kBasisRowTable[static_cast<std::size_t>(length)].data();
+}
+
+// This thread's T, made on its first use. On the heap: a thread_local object itself sits in every
+// thread's static TLS block, which glibc carves from the thread's stack, whether or not the
+// thread ever fits. Held in place, the basis tables (24.7 and 1.7 KB) took 26 KB of the 100 KB
+// stacks of civetweb's workers as Debian builds it, and twice that with a second build of this
+// file: a refused HTTP request's error page then ran the worker off its stack
+// (HttpFrontEndTest.AmbiguousFramingIsRefusedAndNothingSmuggledIsAnswered;
+// tests/server/http/worker_stack_test.cc holds the server executable's own TLS to 16 KB).
+template <class T>
+T& ThreadHeapObject() {
+  thread_local const std::unique_ptr<T> object = std::make_unique<T>();
+  return *object;
 }
 
 // Where a fit gets its basis columns: segments up to kTabledLength frames long from a table
@@ -241,23 +253,9 @@ class BasisSource {
     }
   };
 
-  // Both on the heap, as GramCache's and FitScratch's: a thread_local object sits in every
-  // thread's static TLS block, which glibc carves from the thread's stack. Held in place (24.7
-  // and 1.7 KB) they took 26 KB of the 100 KB stacks of civetweb's workers as Debian builds it,
-  // and twice that with a second build of this file: a refused HTTP request's error page then
-  // ran the worker off its stack (HttpFrontEndTest.AmbiguousFramingIsRefusedAndNothingSmuggledIs-
-  // Answered; tests/server/http/worker_stack_test.cc holds the server executable's own TLS to
-  // 16 KB).
-  static Tables& ThreadTables() {
-    thread_local const std::unique_ptr<Tables> tables = std::make_unique<Tables>();
-    return *tables;
-  }
+  static Tables& ThreadTables() { return ThreadHeapObject<Tables>(); }
 
-  static RecentLengths<16>& ThreadLongEntries() {
-    thread_local const std::unique_ptr<RecentLengths<16>> entries =
-        std::make_unique<RecentLengths<16>>();
-    return *entries;
-  }
+  static RecentLengths<16>& ThreadLongEntries() { return ThreadHeapObject<RecentLengths<16>>(); }
 
   Tables& tables_;
   RecentLengths<4> long_;
@@ -743,13 +741,9 @@ struct KeyRun {
 // per thread, shared by every fit the thread runs, changes no result.
 class GramCache {
  public:
-  static GramCache& ForThread() {
-    // On the heap: a 70 KB thread_local object would sit in every thread's static TLS block, and
-    // a library that starts threads with small stacks (CivetWeb's metrics threads) would then
-    // fail to start them.
-    thread_local const std::unique_ptr<GramCache> cache = std::make_unique<GramCache>();
-    return *cache;
-  }
+  // On the heap (ThreadHeapObject()): held in place, its 70 KB kept a library that starts
+  // threads with small stacks (CivetWeb's metrics threads) from starting them.
+  static GramCache& ForThread() { return ThreadHeapObject<GramCache>(); }
 
   const std::array<double, 16>& Get(std::int64_t length) {
     Entry& entry = entries_[static_cast<std::size_t>(length) % entries_.size()];
@@ -808,11 +802,7 @@ class ScratchLease {
   FitScratch& scratch() { return *scratch_; }
 
  private:
-  static FitScratch& ForThread() {
-    // On the heap, as GramCache's: a thread_local object sits in every thread's static TLS block.
-    thread_local const std::unique_ptr<FitScratch> scratch = std::make_unique<FitScratch>();
-    return *scratch;
-  }
+  static FitScratch& ForThread() { return ThreadHeapObject<FitScratch>(); }
 
   template <class T>
   static void Trim(std::vector<T>& v) {

@@ -7,6 +7,7 @@
 #include <elf.h>
 
 #include <cstdint>
+#include <cstdio>
 #include <fstream>
 #include <string>
 
@@ -36,10 +37,29 @@ std::int64_t StaticTlsBytes(const std::string& path) {
   return 0;
 }
 
+// The same size as binutils' readelf reports it (the TLS line's MemSiz), -1 without one.
+std::int64_t ReadelfTlsBytes(const std::string& path) {
+  FILE* pipe = ::popen(("readelf -lW '" + path + "' 2>/dev/null").c_str(), "r");
+  if (pipe == nullptr) return -1;
+  std::int64_t bytes = -1;
+  char line[512];
+  while (std::fgets(line, sizeof line, pipe) != nullptr) {
+    unsigned long long offset = 0, vaddr = 0, paddr = 0, filesz = 0, memsz = 0;
+    if (std::sscanf(line, " TLS %llx %llx %llx %llx %llx", &offset, &vaddr, &paddr, &filesz,
+                    &memsz) == 5) {
+      bytes = static_cast<std::int64_t>(memsz);
+    }
+  }
+  ::pclose(pipe);
+  return bytes;
+}
+
 TEST(WorkerStackTest, TheServerKeepsItsThreadLocalStorageSmallBesideCivetwebs100KbStacks) {
   const std::string server = testing::BinaryDir() + "/server/tempokey-server";
   const std::int64_t tls = StaticTlsBytes(server);
   ASSERT_GE(tls, 0) << server << " is not a 64-bit ELF file";
+  // Read as a tool we did not write reads it.
+  EXPECT_EQ(tls, ReadelfTlsBytes(server));
   // 2.9 KB today (a random engine's state the largest part); 16 KB leaves a handler about 84 KB
   // (the shared libraries add their own TLS, libc's about 0.1 KB).
   EXPECT_LE(tls, 16 * 1024) << server << " holds " << tls
