@@ -185,6 +185,9 @@ int Run(const std::string& filter) {
       {"retime/100kframes/knots100k+pins100k", &pinned_clip, {LongWarp(pinned_clip, true, false)}},
       {"reduce+bake/cmu/paper", &*cmu, {Paper(8, 0.01), BakeStep{FrameRate{1000, 1}}}},
       {"convert/cmu", &*cmu, {ConvertStep{true}}},
+      {"convert/cmu/euler_filter",
+       &*cmu,
+       {ConvertStep{.wrap_rotations = true, .euler_filter = true}}},
   };
   std::printf("%-40s %12s %12s %8s\n", "workload", "predicted s", "measured s", "ratio");
   for (const Workload& w : workloads) {

@@ -45,8 +45,10 @@ constexpr double kEvaluateSecondsPerSample = 60e-9;
 // A reduction's world error: one joint or end site placed by forward kinematics at one frame,
 // for the source and again for the fitted curves (about 25 ns each measured, rounded up).
 constexpr double kPlaceSecondsPerPoint = 40e-9;
-// Convert: a copy and a remainder per sample.
-constexpr double kConvertSecondsPerSample = 15e-9;
+// Convert: a copy of each sample and its wrap (WrapDegrees(), about 1 ns) or the Euler filter's
+// pass; the copy's new pages dominate where a first write to a page costs some 10 us (a process's
+// first convert of CMU 131_01 in cost_bench: 19-21 ns a sample on the machine of 2026-12-03).
+constexpr double kConvertSecondsPerSample = 25e-9;
 
 // The x-combinations of a segment and DP state pairs per segment (hermite_dp.h).
 constexpr double kPaperCombinations = 81.0;

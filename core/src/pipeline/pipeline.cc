@@ -2,11 +2,11 @@
 
 #include "tempokey/core/model/euler_filter.h"
 
-#include <cmath>
 #include <string>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
+#include "tempokey/core/model/rotation.h"
 #include "tempokey/core/model/status.h"
 #include "tempokey/core/pipeline/cost.h"
 
@@ -34,12 +34,7 @@ std::string StepContext(std::size_t index, const PipelineStep& step) {
 Clip WrapRotations(Clip clip, const std::stop_token& stop) {
   for (Channel& channel : clip.channels) {
     if (stop.stop_requested()) break;
-    if (!IsRotation(channel.kind)) continue;
-    for (double& v : channel.samples) {
-      double w = std::remainder(v, 360.0);  // [-180, 180]
-      if (w == -180.0) w = 180.0;
-      v = w;
-    }
+    if (IsRotation(channel.kind)) WrapDegrees(channel.samples);
   }
   return clip;
 }

@@ -1,6 +1,9 @@
 #include "tempokey/core/model/rotation.h"
 
+#include <bit>
 #include <cmath>
+#include <cstdint>
+#include <limits>
 #include <numbers>
 #include <random>
 #include <vector>
@@ -229,6 +232,80 @@ TEST(RotationTest, UnwrapDegreesRemovesSeamsAndKeepsTheFirstSample) {
   UnwrapDegrees(angles);
 
   EXPECT_EQ(angles, (std::vector<double>{170.0, 179.0, 181.0, 190.0, 175.0}));
+}
+
+// What WrapDegrees() promises, written out with the C library's IEEE remainder.
+double RemainderWrap(double v) {
+  const double w = std::remainder(v, 360.0);
+  return w == -180.0 ? 180.0 : w;
+}
+
+// The bits of WrapDegrees(values) against RemainderWrap() value by value (NaN as any NaN).
+void ExpectWrapsLikeRemainder(std::vector<double> values) {
+  const std::vector<double> input = values;
+  WrapDegrees(values);
+  for (std::size_t i = 0; i < input.size(); ++i) {
+    const double expected = RemainderWrap(input[i]);
+    if (std::isnan(expected)) {
+      EXPECT_TRUE(std::isnan(values[i])) << "input " << input[i];
+    } else {
+      EXPECT_EQ(std::bit_cast<std::uint64_t>(values[i]), std::bit_cast<std::uint64_t>(expected))
+          << std::hexfloat << "input " << input[i] << ": " << values[i] << " against "
+          << expected;
+    }
+  }
+}
+
+TEST(RotationTest, WrapDegreesTakesMinus180As180AndKeepsAZerosSign) {
+  std::vector<double> angles = {-180.0, 540.0, 180.0, -720.0, 720.0, -0.0, 190.0, -190.0};
+
+  WrapDegrees(angles);
+
+  EXPECT_EQ(angles, (std::vector<double>{180.0, 180.0, 180.0, 0.0, 0.0, 0.0, -170.0, 170.0}));
+  EXPECT_TRUE(std::signbit(angles[3]));   // -720: a zero with v's sign, as remainder gives
+  EXPECT_FALSE(std::signbit(angles[4]));
+  EXPECT_TRUE(std::signbit(angles[5]));
+}
+
+TEST(RotationTest, WrapDegreesGivesTheBitsOfRemainderNearEveryHalfTurnAndAtEveryScale) {
+  // Half turns and their neighbours a few ulps away, where v / 360 rounds next to a half and
+  // the quotient may land one turn off; up to the largest samples a clip may hold (1e9) and on
+  // to where the exact way ends (2^51).
+  std::vector<double> values;
+  for (double k : {1.0, 2.0, 3.0, 5.0, 7.0, 1001.0, 4097.0, 5555555.0, 5555556.0, 0x1p40,
+                   0x1p40 + 1.0, 0x1p43 - 1.0, 0x1p43}) {
+    for (double sign : {1.0, -1.0}) {
+      double v = sign * 180.0 * k;
+      for (int step = 0; step < 4; ++step) v = std::nextafter(v, 0.0);
+      for (int step = 0; step < 9; ++step) {
+        values.push_back(v);
+        v = std::nextafter(v, sign * std::numeric_limits<double>::infinity());
+      }
+    }
+  }
+  std::mt19937_64 random(20261203);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  std::uniform_int_distribution<int> exponent(-1074, 50);
+  for (double scale : {400.0, 1e4, 1e9}) {
+    for (int i = 0; i < 20000; ++i) values.push_back(scale * unit(random));
+  }
+  for (int i = 0; i < 20000; ++i) values.push_back(std::ldexp(unit(random), exponent(random)));
+  for (double v : {0.0, -0.0, 0x1p-1074, -0x1p-1074, 1e-310, 127.99999999999999, 128.0,
+                   0x1.fffffffffffffp50, -0x1.fffffffffffffp50}) {
+    values.push_back(v);
+  }
+  // Every value within the exact way's range: the vector loop over the whole array (an odd
+  // length, so its scalar end runs too).
+  values.push_back(1.0);
+  ExpectWrapsLikeRemainder(values);
+  // The same values beside ones past it, and infinities and NaN: sample by sample, the larger
+  // through std::remainder.
+  for (double v : {0x1p51, -0x1p51, 1e300, -1e300, std::numeric_limits<double>::infinity(),
+                   -std::numeric_limits<double>::infinity(),
+                   std::numeric_limits<double>::quiet_NaN()}) {
+    values.push_back(v);
+  }
+  ExpectWrapsLikeRemainder(values);
 }
 
 TEST(RotationTest, ParseEulerOrderAcceptsDistinctAxesOnly) {

@@ -23,6 +23,11 @@ namespace tempokey::core {
 // most 180 degrees. The first sample is unchanged.
 void UnwrapDegrees(std::span<double> degrees);
 
+// Wraps angles in degrees in place into (-180, 180]: each becomes the angle of that range a whole
+// number of turns away, exactly: the bits of std::remainder(v, 360) with -180 taken as 180 (a
+// zero keeps v's sign). NaN and infinities become NaN, as std::remainder makes them.
+void WrapDegrees(std::span<double> degrees);
+
 // A quaternion w + xi + yj + zk. Rotations use unit quaternions; q and -q are the same rotation.
 struct Quat {
   double w = 1.0;
