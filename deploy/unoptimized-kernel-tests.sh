@@ -9,7 +9,8 @@ cd "$(dirname "${BASH_SOURCE[0]}")/.."
 jobs="${TEMPOKEY_JOBS:-$(nproc)}"
 dir="${TEMPOKEY_O0_BUILD_DIR:-build-O0}"
 targets=(vector_trig_test rotation_batch_test resample_rotation_test noise_fit_test
-         tolerance_fit_test hermite_dp_test kinematics_test world_points_test keyed_clip_test)
+         tolerance_fit_test hermite_dp_test kinematics_test world_points_test keyed_clip_test
+         rotation_test)
 
 printf '\n== unoptimized vector kernels (Debug, -O0, AVX clones in)\n'
 cmake -S . -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=Debug -DTEMPOKEY_BUILD_BENCH=OFF >/dev/null

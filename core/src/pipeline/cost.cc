@@ -45,10 +45,12 @@ constexpr double kEvaluateSecondsPerSample = 60e-9;
 // A reduction's world error: one joint or end site placed by forward kinematics at one frame,
 // for the source and again for the fitted curves (about 25 ns each measured, rounded up).
 constexpr double kPlaceSecondsPerPoint = 40e-9;
-// Convert: a copy of each sample and its wrap (WrapDegrees(), about 1 ns) or the Euler filter's
-// pass; the copy's new pages dominate where a first write to a page costs some 10 us (a process's
-// first convert of CMU 131_01 in cost_bench: 19-21 ns a sample on the machine of 2026-12-03).
+// Convert: a copy of each sample and its wrap (WrapDegrees(), about 1 ns); the copy's new pages
+// dominate where a first write to a page costs some 10 us (a process's first convert of CMU
+// 131_01 in cost_bench: 19-21 ns a sample on the machine of 2026-12-03). The Euler filter's pass
+// adds about 5 ns a sample (the same convert with it: 23-28 ns, first in its process).
 constexpr double kConvertSecondsPerSample = 25e-9;
+constexpr double kEulerFilterSecondsPerSample = 10e-9;
 
 // The x-combinations of a segment and DP state pairs per segment (hermite_dp.h).
 constexpr double kPaperCombinations = 81.0;
@@ -324,7 +326,8 @@ absl::StatusOr<PipelineCost> EstimatePipelineCost(const Clip& clip,
             [&](const ConvertStep& s) -> absl::StatusOr<StepCost> {
               if (s.wrap_rotations) next.data = nullptr;
               StepCost c;
-              c.seconds = shape.samples() * kConvertSecondsPerSample;
+              c.seconds = shape.samples() * (kConvertSecondsPerSample +
+                                             (s.euler_filter ? kEulerFilterSecondsPerSample : 0.0));
               c.work = absl::StrCat("convert: ", Plural(shape.channels, "channel", "channels"),
                                     " x ", shape.frames, " frames");
               return c;

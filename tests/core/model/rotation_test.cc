@@ -299,13 +299,35 @@ TEST(RotationTest, WrapDegreesGivesTheBitsOfRemainderNearEveryHalfTurnAndAtEvery
   values.push_back(1.0);
   ExpectWrapsLikeRemainder(values);
   // The same values beside ones past it, and infinities and NaN: sample by sample, the larger
-  // through std::remainder.
-  for (double v : {0x1p51, -0x1p51, 1e300, -1e300, std::numeric_limits<double>::infinity(),
+  // through std::remainder. 2^60 and 1e20 are where the four operations would go wrong (-256 for
+  // 136, 0 for -80), and 2^51 + 172 where remainder gives -180, so the fallback and its
+  // -180 -> 180 are pinned.
+  for (double v : {0x1p51, -0x1p51, 0x1p60, 1e20, 0x1.0000000000158p+51, 1e300, -1e300,
+                   std::numeric_limits<double>::infinity(),
                    -std::numeric_limits<double>::infinity(),
                    std::numeric_limits<double>::quiet_NaN()}) {
     values.push_back(v);
   }
   ExpectWrapsLikeRemainder(values);
+  std::vector<double> beyond = {0x1p60, 1e20, 0x1.0000000000158p+51};
+  WrapDegrees(beyond);
+  EXPECT_EQ(beyond, (std::vector<double>{136.0, -80.0, 180.0}));
+}
+
+TEST(RotationTest, WrapDegreesMendsAQuotientRoundedOneTurnOff) {
+  // 1980 less an ulp: v / 360 rounds to 5.5 and on to 6, one turn past the nearest (5).
+  std::vector<double> angles = {0x1.eefffffffffffp+10, -0x1.eefffffffffffp+10};
+
+  WrapDegrees(angles);
+
+  EXPECT_EQ(angles, (std::vector<double>{180.0 - 0x1p-42, -(180.0 - 0x1p-42)}));
+}
+
+TEST(RotationTest, WrapDegreesTakesEmptyAndShortArrays) {
+  ExpectWrapsLikeRemainder({});
+  ExpectWrapsLikeRemainder({190.0});
+  ExpectWrapsLikeRemainder({190.0, -540.0});
+  ExpectWrapsLikeRemainder({190.0, -540.0, std::numeric_limits<double>::quiet_NaN()});
 }
 
 TEST(RotationTest, ParseEulerOrderAcceptsDistinctAxesOnly) {
