@@ -18,6 +18,7 @@
 #include "client/client.h"
 #include "gtest/gtest.h"
 #include "proto/retry_hint.h"
+#include "tempokey/core/model/euler_filter.h"
 #include "tempokey/core/pipeline/pipeline.h"
 #include "tests/server/test_clips.h"
 #include "tests/testing/process_util.h"
@@ -32,8 +33,12 @@ constexpr int kQueueCapacity = 64;
 // Accepted jobs a client keeps in flight before it collects its oldest: 32 x 4 = 128 outstanding
 // jobs, twice what the queue and two workers hold, so the queue does fill.
 constexpr std::size_t kWindow = 4;
-// 64 wrap passes over 33 channels x 400 frames (106 kB inline): milliseconds of real work a job.
-constexpr int kPasses = 64;
+// A job is milliseconds of real work (about 11 ms here), so that the clients' 128 outstanding
+// jobs outrun the two workers and the queue fills: 63 Euler filter passes and a wrap over 33
+// channels x 800 frames (211 kB inline). Wrap passes alone (std::remainder, 12 ns a sample) were
+// that slow until the wrap ran in vectors (WrapDegrees(), 1 ns): then the queue never filled.
+constexpr int kFilterPasses = 63;
+constexpr std::int64_t kFrames = 800;
 // The server holds at most 64 queued + 2 running jobs and the clients' 128 unfetched results,
 // each well under 1 MB, besides its own ~30 MB; 512 MiB bounds it with a wide margin while still
 // catching anything that keeps every clip or result of the flood (2 000 x 0.2 MB and more).
@@ -42,10 +47,22 @@ constexpr std::int64_t kPeakRssBoundKiB = 512 * 1024 + kSanitizerRssAllowanceKiB
 // The longest a refused client waits before its next submit, whatever the hint says.
 constexpr std::chrono::milliseconds kMaxBackoff{20};
 
-core::Clip ClipOfSubmit(int index) { return MakeClip(10, 400, 0.001 * index); }
+core::Clip ClipOfSubmit(int index) { return MakeClip(10, kFrames, 0.001 * index); }
 
 std::vector<core::PipelineStep> FloodSteps() {
-  return std::vector<core::PipelineStep>(kPasses, core::ConvertStep{.wrap_rotations = true});
+  std::vector<core::PipelineStep> steps(kFilterPasses, core::ConvertStep{.euler_filter = true});
+  steps.push_back(core::ConvertStep{.wrap_rotations = true});
+  return steps;
+}
+
+// What FloodSteps() make of submit `index`'s clip: the Euler filter leaves a filtered clip as it
+// is (every submit's clip, checked when this test was written), so one pass stands for 63; the
+// wrap is the independent one of test_clips.h. A submit whose clip the filter changed again would
+// fail its check, not pass unchecked.
+core::Clip ExpectedResult(int index) {
+  core::Clip clip = ClipOfSubmit(index);
+  if (!core::ApplyEulerFilter(clip).ok()) return {};
+  return WrappedCopy(std::move(clip));
 }
 
 struct Tally {
@@ -75,7 +92,7 @@ void Collect(const client::Client& client, int index, const std::string& job_id,
                                           result.ok() ? "keyed" : result.status().ToString()));
     return;
   }
-  const core::Clip expected = WrappedCopy(ClipOfSubmit(index));
+  const core::Clip expected = ExpectedResult(index);
   const core::Clip& got = std::get<core::Clip>(result->output);
   bool same = got.frame_count == expected.frame_count &&
               got.channels.size() == expected.channels.size();

@@ -129,7 +129,8 @@ TEST(ServerBinaryTest, SigtermWithAClientConnectedDrainsAndExitsZero) {
       StartInfoServer({"--workers=1", "--drain_grace_seconds=300"});
   ASSERT_NE(server, nullptr);
   auto stub = v1::MotionService::NewStub(Connect(server->target()));
-  // 2.6 M samples through 64 wrap passes: seconds of real work, so SIGTERM lands mid-job.
+  // 2.6 M samples through 64 wrap passes: a fifth of a second of real work or more (1 ns a
+  // sample and pass in vectors), so SIGTERM, sent as the job starts, lands mid-job.
   UploadOutcome upload = UploadClip(*stub, MakeClip(130, 6700));
   TEMPOKEY_ASSERT_GRPC_OK(upload.status);
   JobOutcome submitted = Submit(*stub, SubmitRequest(upload.response.clip_id(), WrapOperations(64)));
