@@ -5,6 +5,7 @@
 //
 //   reduce_quality_bench [paper|tolerance|both] [max_iterations | max_error_degrees]
 //   reduce_quality_bench world
+//   reduce_quality_bench fewest [max_error_degrees ...]
 //
 // `paper` counts every rotation channel (constant ones keep two keys). `tolerance` excludes
 // constant channels, as SPEC 8's key-count targets do (CMU <= 5 %, Bandai <= 15 % at 0.5°).
@@ -13,9 +14,14 @@
 // joint within 1 cm with no more keys): keys %, worst joint error, RMS rotation error, at bounds
 // from 4 cm to 0.25 cm (Bandai) and from 3 % to 0.25 % of the height (CMU), so that a change to
 // the fit shows its keys at every bound, not only at the one the target names.
+// `fewest` sets the `tolerance` method's keys beside the fewest any curve with keys on frames and
+// cubic pieces could keep (bench/cubic_minimax.h; SPEC 8's key-count targets), per clip and per
+// set, at each bound given (default 0.1, 0.25, 0.5 and 1 degree); it fails when a channel's
+// keys are fewer than that, which neither the fit nor the bound may allow.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -23,7 +29,9 @@
 #include <string>
 #include <vector>
 
+#include "bench/cubic_minimax.h"
 #include "tempokey/core/io/bvh.h"
+#include "tempokey/core/model/rotation.h"
 #include "tempokey/core/reduce/reduce.h"
 
 namespace tempokey::core {
@@ -194,6 +202,99 @@ bool PrintJointBoundTable(const char* set, const std::vector<WorldSetting>& sett
   return true;
 }
 
+// ---- the fewest keys possible (SPEC 8's key counts) ---------------------------------------------
+
+struct KeyFloor {
+  std::int64_t samples = 0;
+  std::int64_t keys = 0;      // the tolerance method's, default search
+  std::int64_t searched = 0;  // the tolerance method's, the fewest-keys search
+  std::int64_t fewest = 0;    // no curve with cubic pieces between keys on frames has fewer
+  std::int64_t undecided = 0;
+
+  void Add(const KeyFloor& other) {
+    samples += other.samples;
+    keys += other.keys;
+    searched += other.searched;
+    fewest += other.fewest;
+    undecided += other.undecided;
+  }
+  void Print(const std::string& name) const {
+    const double n = static_cast<double>(samples);
+    std::printf("%-46s %9lld %8.3f %8.3f %8.3f %7.3f %7.3f %9lld\n", name.c_str(),
+                static_cast<long long>(samples), 100.0 * static_cast<double>(keys) / n,
+                100.0 * static_cast<double>(searched) / n,
+                100.0 * static_cast<double>(fewest) / n,
+                static_cast<double>(keys) / static_cast<double>(fewest),
+                static_cast<double>(searched) / static_cast<double>(fewest),
+                static_cast<long long>(undecided));
+  }
+};
+
+// One clip's rotation channels without constant ones at `bound` degrees: false (with a message)
+// when a channel keeps fewer keys than the floor.
+bool AddFloor(const std::string& path, double bound, KeyFloor& floor) {
+  absl::StatusOr<Clip> clip = ReadBvhFile(path);
+  if (!clip.ok()) {
+    std::fprintf(stderr, "%s\n", std::string(clip.status().message()).c_str());
+    return false;
+  }
+  ReduceOptions options;
+  options.tolerance.max_rotation_error_degrees = bound;
+  absl::StatusOr<ReduceResult> result = ReduceKeys(*clip, options);
+  options.tolerance.fewest_keys = true;
+  absl::StatusOr<ReduceResult> searched = ReduceKeys(*clip, options);
+  for (const absl::StatusOr<ReduceResult>* r : {&result, &searched}) {
+    if (!r->ok()) {
+      std::fprintf(stderr, "%s\n", std::string(r->status().message()).c_str());
+      return false;
+    }
+  }
+  const tempokey::bench::CubicMinimax minimax;
+  for (std::size_t i = 0; i < result->report.channels.size(); ++i) {
+    const ChannelReduction& channel = result->report.channels[i];
+    const Channel& source = clip->channels[channel.channel_index];
+    if (!IsRotation(source.kind) || IsConstantChannel(source)) continue;
+    std::vector<double> samples = source.samples;
+    UnwrapDegrees(samples);  // as the fit reads them
+    const std::int64_t fewest = minimax.FewestKeys(samples, bound, &floor.undecided);
+    const std::int64_t search = searched->report.channels[i].key_count;
+    if (channel.key_count < fewest || search < fewest) {
+      std::fprintf(stderr, "%s %s: %lld and %lld keys at %g degrees, below the floor of %lld\n",
+                   path.c_str(), ChannelLabel(*clip, channel.channel_index).c_str(),
+                   static_cast<long long>(channel.key_count), static_cast<long long>(search),
+                   bound, static_cast<long long>(fewest));
+      return false;
+    }
+    floor.samples += channel.sample_count;
+    floor.keys += channel.key_count;
+    floor.searched += search;
+    floor.fewest += fewest;
+  }
+  return true;
+}
+
+bool PrintKeyFloors(const std::vector<double>& bounds) {
+  const std::string root = std::string(TEMPOKEY_SHARED_DIR) + "/data/bvh/";
+  for (double bound : bounds) {
+    std::printf("tolerance keys (default and fewest-keys search) against the floor, %g deg, "
+                "rotation channels without constant ones\n", bound);
+    std::printf("%-46s %9s %8s %8s %8s %7s %7s %9s\n", "clip", "samples", "keys %", "search %",
+                "floor %", "ratio", "search", "undecided");
+    for (const char* set : {"cmu", "bandai"}) {
+      KeyFloor total;
+      for (const std::string& file : BvhFiles(root + set)) {
+        KeyFloor clip;
+        if (!AddFloor(file, bound, clip)) return false;
+        clip.Print(std::string(set) + "/" + std::filesystem::path(file).filename().string());
+        total.Add(clip);
+      }
+      total.Print(std::string(set) + ", all");
+    }
+    std::printf("\n");
+  }
+  return true;
+}
+
 }  // namespace
 }  // namespace tempokey::core
 
@@ -220,6 +321,12 @@ int main(int argc, char** argv) {
             options.tolerance.max_rotation_error_degrees.value_or(kDefaultMaxRotationErrorDegrees)) +
         " deg";
     if (!PrintTable(options, title.c_str(), true)) return 1;
+  }
+  if (which == "fewest") {
+    std::vector<double> bounds;
+    for (int i = 2; i < argc; ++i) bounds.push_back(std::atof(argv[i]));
+    if (bounds.empty()) bounds = {0.1, 0.25, 0.5, 1.0};
+    return PrintKeyFloors(bounds) ? 0 : 1;
   }
   if (which == "world") {
     if (!PrintWorldReports()) return 1;

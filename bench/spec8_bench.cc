@@ -21,7 +21,11 @@
 //             shared clip through a real tempokey-server with 1, then 2 workers, 4 clients calling
 //             Process: clips per hour, input samples per second, and the speed-up.
 //
-//   spec8_bench [--only=retime,tolerance,noise,world,paper,pipeline] [--seconds=S]
+//   fewest    `tolerance` with the fewest-keys search (--fewest-keys): keys of the rotation
+//             channels without constant ones (SPEC 8's key counts), ms per million samples.
+//             Peer: the default search, in the same run.
+//
+//   spec8_bench [--only=retime,tolerance,fewest,noise,world,paper,pipeline] [--seconds=S]
 //               [--server_binary=PATH] [--rounds=N] [--once] [--clips=SUBSTRING]
 //
 // --once makes every measured call once, without repeats, and --clips keeps only the clips whose
@@ -73,7 +77,8 @@ namespace {
 using core::Clip;
 
 struct Flags {
-  std::set<std::string> only = {"retime", "tolerance", "noise", "world", "paper", "pipeline"};
+  std::set<std::string> only = {"retime", "tolerance", "fewest", "noise",
+                                "world",  "paper",     "pipeline"};
   double seconds = 0.1;
   int rounds = 4;  // pipeline: passes over the shared clips per worker count
   std::string server_binary;
@@ -376,6 +381,43 @@ void SplineAnchor(const Clip& clip, double budget, SetTotals& totals) {
   totals.samples += clip.sample_count();
 }
 
+// `tolerance` with the fewest-keys search (--fewest-keys): SPEC 8's key counts, and the time
+// they take, beside the default search's in the same run.
+void RunFewest(const std::vector<SharedClip>& clips, const Flags& flags) {
+  core::ReduceOptions options;
+  options.tolerance.fewest_keys = true;
+  for (bool cmu : {true, false}) {
+    SetTotals fewest, usual;
+    for (const SharedClip& shared : clips) {
+      if (shared.cmu != cmu) continue;
+      std::fprintf(stderr, "fewest %s\n", shared.name.c_str());
+      core::ReduceResult result;
+      const double fewest_seconds = ReduceSeconds(shared.clip, options, flags.seconds, &result);
+      AddReduction(shared.clip, result, fewest_seconds, fewest);
+      const double usual_seconds = ReduceSeconds(shared.clip, {}, flags.seconds, &result);
+      AddReduction(shared.clip, result, usual_seconds, usual);
+    }
+    const std::string set = cmu ? "CMU" : "Bandai";
+    Print({.id = "fewest.keys." + set,
+           .figure = "tolerance --fewest-keys 0.5 deg, " + set +
+                     ", keys of non-constant rotation channels",
+           .target = cmu ? "<= 4" : "<= 12",
+           .value = fewest.KeyPercent(),
+           .unit = "% of samples",
+           .higher_is_better = false,
+           .peer = "tolerance, default search",
+           .peer_value = usual.KeyPercent()});
+    Print({.id = "fewest.speed." + set,
+           .figure = "tolerance --fewest-keys 0.5 deg, " + set + ", all channels",
+           .target = "-",
+           .value = fewest.MsPerMillion(),
+           .unit = "ms per M samples",
+           .higher_is_better = false,
+           .peer = "tolerance, default search",
+           .peer_value = usual.MsPerMillion()});
+  }
+}
+
 void RunTolerance(const std::vector<SharedClip>& clips, const Flags& flags) {
   for (bool cmu : {true, false}) {
     SetTotals ours, greedy;
@@ -605,6 +647,7 @@ int main(int argc, char** argv) {
   std::erase_if(clips, [&](const SharedClip& c) { return c.name.find(flags.clips) == std::string::npos; });
   if (flags.only.count("retime")) RunRetime(clips, flags);
   if (flags.only.count("tolerance")) RunTolerance(clips, flags);
+  if (flags.only.count("fewest")) RunFewest(clips, flags);
   if (flags.only.count("world")) RunWorld(clips, flags);
   if (flags.only.count("noise")) RunNoise(clips, flags);
   if (flags.only.count("paper")) RunPaper(clips, flags);

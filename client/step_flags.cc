@@ -149,7 +149,8 @@ constexpr std::string_view kAlignments[] = {"none", "joint", "clip"};
 
 constexpr std::string_view kToleranceOnly[] = {"--tolerance",      "--position-tolerance",
                                                "--scalar-tolerance", "--key-budget",
-                                               "--pose-align",       "--joint-tolerance"};
+                                               "--pose-align",       "--joint-tolerance",
+                                               "--fewest-keys"};
 constexpr std::string_view kPaperOnly[] = {"--step-x",     "--step-y",     "--step-tangent-x",
                                            "--step-tangent-y", "--accuracy", "--iterations",
                                            "--smoothing-sigma", "--min-key-spacing"};
@@ -253,6 +254,7 @@ absl::StatusOr<core::ReduceOptions> ReduceOptionsFromArgs(const ParsedArgs& args
   if (std::optional<std::string> v = args.Value("--key-budget")) {
     TEMPOKEY_ASSIGN_OR_RETURN(tolerance.key_budget, ParseInt64("--key-budget", *v));
   }
+  tolerance.fewest_keys = args.Has("--fewest-keys");
   if (std::optional<std::string> v = args.Value("--pose-align")) {
     TEMPOKEY_ASSIGN_OR_RETURN(std::string_view name, ParseChoice("--pose-align", *v, kAlignments));
     tolerance.pose_alignment = name == "none"    ? core::PoseAlignment::kNone

@@ -229,6 +229,7 @@ absl::StatusOr<core::ReduceStep> ReduceFromProto(int op, const v1::ReduceOperati
   if (t.has_max_position_error()) o.tolerance.max_position_error = t.max_position_error();
   if (t.has_max_scalar_error()) o.tolerance.max_scalar_error = t.max_scalar_error();
   if (t.has_key_budget()) o.tolerance.key_budget = t.key_budget();
+  o.tolerance.fewest_keys = t.fewest_keys();
   switch (t.joint_tolerance_case()) {
     case v1::ToleranceParams::kMaxJointError:
       o.tolerance.joint_tolerance = core::JointTolerance{.value = t.max_joint_error()};
@@ -373,6 +374,7 @@ v1::ReduceOperation ReduceToProto(const core::ReduceStep& step) {
         t->set_max_joint_error(joint->value);
       }
     }
+    t->set_fewest_keys(o.tolerance.fewest_keys);
     if (o.tolerance.key_budget) {
       t->set_key_budget(static_cast<std::int32_t>(std::min<std::int64_t>(
           *o.tolerance.key_budget, std::numeric_limits<std::int32_t>::max())));

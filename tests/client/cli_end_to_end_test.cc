@@ -529,6 +529,31 @@ TEST_F(CliEndToEndTest, ReduceByDefaultStaysWithinTheBoundWithFewKeys) {
   EXPECT_LT(ReportedKeys(run.out), 146 * 132 / 10);
 }
 
+// --fewest-keys: the same bounds, kept at every frame (measured again from the file written), with
+// fewer keys than the default search on a real capture.
+TEST_F(CliEndToEndTest, ReduceWithFewestKeysKeepsTheBoundWithFewerKeys) {
+  const std::string output = Path("fewest.json");
+  const std::vector<std::string> bounds = {"--tolerance", "0.5", "--position-tolerance", "0.5"};
+  std::vector<std::string> plain_args = {"reduce", BandaiClip(), "-o", Path("plain.json")};
+  std::vector<std::string> fewest_args = {"reduce", BandaiClip(), "-o", output, "--fewest-keys"};
+  plain_args.insert(plain_args.end(), bounds.begin(), bounds.end());
+  fewest_args.insert(fewest_args.end(), bounds.begin(), bounds.end());
+
+  ProcessResult plain = Tempokey(plain_args);
+  ProcessResult fewest = Tempokey(fewest_args);
+
+  ASSERT_EQ(plain.exit_code, 0) << plain.err;
+  ASSERT_EQ(fewest.exit_code, 0) << fewest.err;
+  EXPECT_LT(ReportedKeys(fewest.out), ReportedKeys(plain.out));
+  absl::StatusOr<core::KeyedClip> keyed = core::ReadKeyedClipJsonFile(output);
+  ASSERT_TRUE(keyed.ok()) << keyed.status();
+  absl::StatusOr<core::ReductionReport> measured =
+      core::MeasureReduction(ReadBvhNamed(BandaiClip(), "x"), *keyed);
+  ASSERT_TRUE(measured.ok()) << measured.status();
+  EXPECT_LE(measured->max_error, 0.5);
+  EXPECT_EQ(measured->key_count, ReportedKeys(fewest.out));
+}
+
 TEST_F(CliEndToEndTest, ReduceWithAKeyBudgetKeepsIt) {
   const std::string output = Path("budget.anim");
 

@@ -100,7 +100,7 @@ INSTANTIATE_TEST_SUITE_P(
                     "{\"operations\": [\n  {\"reduce\": {\"tolerence\": 0.5}}]}",
                     "ops.json:2:28: operation 1 (reduce): no option 'tolerence' (options: "
                     "method, tolerance, position-tolerance, scalar-tolerance, key-budget, "
-                    "pose-align, joint-tolerance, step-x, step-y, step-tangent-x, "
+                    "pose-align, joint-tolerance, fewest-keys, step-x, step-y, step-tangent-x, "
                     "step-tangent-y, accuracy, iterations, smoothing-sigma, min-key-spacing, "
                     "noise, position-noise, euler-filter)"},
         BadPipeline{"BadValueIsPointedAt",

@@ -44,6 +44,7 @@ TEST(OperationConvertTest, SetOptionalFieldsAreUsed) {
   reduce->mutable_tolerance()->set_max_rotation_error_degrees(0.2);
   reduce->mutable_tolerance()->set_key_budget(40);
   reduce->mutable_tolerance()->set_pose_alignment(v1::POSE_ALIGNMENT_JOINT);
+  reduce->mutable_tolerance()->set_fewest_keys(true);
 
   absl::StatusOr<std::vector<core::PipelineStep>> steps = PipelineFromProto(ops);
 
@@ -55,6 +56,7 @@ TEST(OperationConvertTest, SetOptionalFieldsAreUsed) {
   EXPECT_EQ(step.options.tolerance.max_rotation_error_degrees, 0.2);
   EXPECT_EQ(step.options.tolerance.key_budget, 40);
   EXPECT_EQ(step.options.tolerance.pose_alignment, core::PoseAlignment::kJoint);
+  EXPECT_TRUE(step.options.tolerance.fewest_keys);
 }
 
 struct BadOperationCase {
@@ -158,6 +160,7 @@ TEST(OperationConvertTest, EveryStepRoundTripsThroughProto) {
   core::ReduceStep reduce;
   reduce.options.tolerance.key_budget = 12;
   reduce.options.tolerance.max_scalar_error = 0.01;
+  reduce.options.tolerance.fewest_keys = true;
   core::ReduceStep paper;
   paper.options.method = core::ReduceMethod::kPaper;
   paper.options.paper.accuracy = 0.001;
@@ -187,6 +190,8 @@ TEST(OperationConvertTest, EveryStepRoundTripsThroughProto) {
   EXPECT_EQ(r.options.output_rate->numerator, 30000);
   EXPECT_EQ(r.options.pins[0].output_frame, 20);
   EXPECT_EQ(std::get<core::ReduceStep>((*back)[1]).options.tolerance.key_budget, 12);
+  EXPECT_TRUE(std::get<core::ReduceStep>((*back)[1]).options.tolerance.fewest_keys);
+  EXPECT_FALSE(std::get<core::ReduceStep>((*back)[2]).options.tolerance.fewest_keys);
   EXPECT_EQ(std::get<core::ReduceStep>((*back)[2]).options.paper.accuracy, 0.001);
   EXPECT_FALSE(std::get<core::BakeStep>((*back)[4]).rate.has_value());
   EXPECT_TRUE(std::get<core::ConvertStep>((*back)[5]).wrap_rotations);

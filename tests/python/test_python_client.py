@@ -451,7 +451,8 @@ class ReduceOptionsTest(ServerTestCase):
     def test_every_option_lands_in_its_field_and_the_server_takes_it(self):
         values = {"tolerance": 0.75, "position_tolerance": 0.25, "scalar_tolerance": 0.125,
                   "key_budget": 400, "pose_alignment": "joint", "joint_tolerance": "0.5%",
-                  "noise": 0.25, "position_noise": 0.5, "euler_filter": True}
+                  "noise": 0.25, "position_noise": 0.5, "euler_filter": True,
+                  "fewest_keys": True}
         # Options that choose their field from their value: where this value must land.
         chosen_fields = {"joint_tolerance": ("tolerance.max_joint_error_percent_of_height", 0.5),
                          "noise": ("noise.rotation_sigma_degrees", 0.25),

@@ -32,6 +32,9 @@ constexpr double kPaperRetimeBisections = 64.0;
 constexpr double kTimeMapSecondsPerItem = 2.5e-6;
 // Tolerance fit: one sample of one fit on white noise (every frame ends up keyed: the worst).
 constexpr double kToleranceSecondsPerSample = 2.5e-6;
+// The fewest-keys search: one sample of one fit, the slowest input measured (22-27 us on the
+// shared captures and on a slow sine offset by 1e8, 5-10 us on white noise and calm channels).
+constexpr double kFewestKeysSecondsPerSample = 60e-6;
 // Noise-aware method: one sample of one channel (its noise estimate, Euler filter, smoothing
 // and the fit of the smoothed curve) on white noise, the worst input measured (about 1.6 us).
 constexpr double kNoiseSecondsPerSample = 4e-6;
@@ -215,9 +218,12 @@ StepCost ReduceCost(const Shape& in, const ReduceStep& step) {
     const double fits = step.options.tolerance.key_budget
                             ? BudgetFits(in, step.options.tolerance)
                             : 1.0;
-    cost.seconds = fits * in.samples() * kToleranceSecondsPerSample + measure;
-    cost.work = absl::StrCat("reduce (tolerance): ", Plural(in.channels, "channel", "channels"),
-                             " x ", in.frames, " frames");
+    const double per_sample = step.options.tolerance.fewest_keys ? kFewestKeysSecondsPerSample
+                                                                 : kToleranceSecondsPerSample;
+    cost.seconds = fits * in.samples() * per_sample + measure;
+    cost.work = absl::StrCat("reduce (tolerance", step.options.tolerance.fewest_keys ? ", fewest keys" : "",
+                             "): ", Plural(in.channels, "channel", "channels"), " x ", in.frames,
+                             " frames");
     if (fits > 1.0) absl::StrAppend(&cost.work, " x up to ", fits, " fits (key budget)");
     return cost;
   }

@@ -315,7 +315,7 @@ absl::Status FitGroups(const Clip& clip, std::span<const std::span<const double>
                        const std::vector<std::vector<int>>& groups,
                        std::span<const std::size_t> which, std::span<const double> bounds,
                        std::vector<Curve>& curves, GroupKeyFrames& last_frames,
-                       const ProgressFn& progress, std::stop_token stop) {
+                       bool fewest_keys, const ProgressFn& progress, std::stop_token stop) {
   for (std::size_t i = 0; i < which.size(); ++i) {
     TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
     const std::vector<int>& group = groups[which[i]];
@@ -336,7 +336,8 @@ absl::Status FitGroups(const Clip& clip, std::span<const std::span<const double>
     }
     std::vector<std::int64_t>& frames = last_frames[which[i]];
     absl::StatusOr<SplineFit> fit = FitWithinTolerance(
-        channels, group_bounds, {.initial_frames = std::move(frames)}, stop);
+        channels, group_bounds,
+        {.initial_frames = std::move(frames), .fewest_keys = fewest_keys}, stop);
     if (!fit.ok()) return Annotate(fit.status(), ChannelLabel(clip, group.front()));
     for (std::size_t k = 0; k < group.size(); ++k) {
       curves[group[k]] = SplineCurve(*fit, k, clip.frame_time_seconds);
@@ -380,7 +381,8 @@ class ToleranceFitter {
       : clip_(clip),
         inputs_(inputs),
         groups_(AlignmentGroups(clip, params.pose_alignment)),
-        bounds_(std::move(bounds)) {
+        bounds_(std::move(bounds)),
+        fewest_keys_(params.fewest_keys) {
     if (bounds_.joint) joint_plan_.emplace(*meter, inputs);
   }
 
@@ -396,7 +398,7 @@ class ToleranceFitter {
       GroupKeyFrames start = StartFrames(start_keys);
       TEMPOKEY_RETURN_IF_ERROR(FitGroups(clip_, inputs_, groups_, all,
                                          Scaled(bounds_.channel, scale), out.curves, start,
-                                         progress, stop));
+                                         fewest_keys_, progress, stop));
       return out;
     }
     // Progress follows the first round, which fits every group; later rounds refit a few.
@@ -412,7 +414,7 @@ class ToleranceFitter {
             std::vector<Curve>& curves) {
           const absl::Status status =
               FitGroups(clip_, inputs_, groups_, which, bounds, curves, last_frames,
-                        first_round ? progress : quiet, stop);
+                        fewest_keys_, first_round ? progress : quiet, stop);
           first_round = false;
           return status;
         };
@@ -482,6 +484,7 @@ class ToleranceFitter {
   std::span<const std::span<const double>> inputs_;
   std::vector<std::vector<int>> groups_;
   ToleranceBounds bounds_;
+  bool fewest_keys_ = false;
   std::optional<reduce_internal::JointBoundPlan> joint_plan_;
 };
 

@@ -7,10 +7,12 @@
 #include <cmath>
 #include <limits>
 #include <memory>
+#include <optional>
 #include <utility>
 
 #include "absl/strings/str_cat.h"
 #include "core/src/reduce/cubic_certificate.h"
+#include "core/src/reduce/fewest_keys_fit.h"
 #include "core/src/simd/block_scan.h"
 #include "core/src/simd/instruction_set.h"
 #include "core/src/simd/vectors.h"
@@ -1901,6 +1903,11 @@ absl::StatusOr<SplineFit> FitWithinTolerance(std::span<const std::span<const dou
                                              std::stop_token stop) {
   TEMPOKEY_RETURN_IF_ERROR(ValidateInputs(channels, max_errors, options));
   TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
+  if (options.fewest_keys) {
+    TEMPOKEY_ASSIGN_OR_RETURN(std::optional<SplineFit> fit,
+                              reduce_internal::FitFewestKeys(channels, max_errors, stop));
+    if (fit) return *std::move(fit);
+  }
 #if defined(TEMPOKEY_TOLERANCE_FIT_AVX2)
   if (simd::RunningInstructionSet() >= simd::InstructionSet::kAvx2) {
     return tolerance_fit_avx2::Fit(channels, max_errors, options, std::move(stop));

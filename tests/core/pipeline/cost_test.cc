@@ -237,6 +237,22 @@ TEST(EstimatePipelineCostTest, KeyBudgetSearchCountsItsFitsFromTheChannelsRanges
   EXPECT_GT(budget->seconds, 20.0 * plain->seconds);
 }
 
+// The fewest-keys search: 22-27 us a sample on the shared captures (README), against the usual
+// fit's 0.1-0.5: costed at 60 us, 24 times the usual fit's 2.5.
+TEST(EstimatePipelineCostTest, TheFewestKeysSearchIsCostedAtItsOwnRate) {
+  const Clip clip = ScalarClip(4, 500);
+  ReduceStep fewest;
+  fewest.options.tolerance.fewest_keys = true;
+
+  const absl::StatusOr<PipelineCost> plain = EstimatePipelineCost(clip, {{ReduceStep{}}});
+  const absl::StatusOr<PipelineCost> searched = EstimatePipelineCost(clip, {{fewest}});
+
+  ASSERT_TRUE(plain.ok() && searched.ok());
+  EXPECT_EQ(searched->steps[0].work, "reduce (tolerance, fewest keys): 4 channels x 500 frames");
+  EXPECT_GT(searched->seconds, 10.0 * plain->seconds);
+  EXPECT_GE(searched->seconds, 4 * 500 * 60e-6);
+}
+
 TEST(EstimatePipelineCostTest, EveryStepIsCostedOnTheShapeItReceives) {
   const Clip clip = ScalarClip(3, 121);
   const std::vector<PipelineStep> steps = {ConstantSpeed(0.5), ReduceStep{},
