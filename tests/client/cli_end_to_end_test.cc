@@ -464,6 +464,19 @@ std::int64_t ReportedKeys(const std::string& out) {
   return std::stoll(keys.substr(0, keys.find(' ')));
 }
 
+// The keyed clip `run` wrote to `output` (.json), measured again against BandaiClip(): every
+// channel within `bound` at every frame, with the keys `run` reported.
+void ExpectFileKeepsBoundWithReportedKeys(const std::string& output, const ProcessResult& run,
+                                          double bound) {
+  absl::StatusOr<core::KeyedClip> keyed = core::ReadKeyedClipJsonFile(output);
+  ASSERT_TRUE(keyed.ok()) << keyed.status();
+  absl::StatusOr<core::ReductionReport> measured =
+      core::MeasureReduction(ReadBvhNamed(BandaiClip(), "x"), *keyed);
+  ASSERT_TRUE(measured.ok()) << measured.status();
+  EXPECT_LE(measured->max_error, bound);
+  EXPECT_EQ(measured->key_count, ReportedKeys(run.out));
+}
+
 TEST_F(CliEndToEndTest, ReducePaperKeyedExportsAgreeWithTheBakedBvhAndTheReport) {
   const std::vector<std::string> reduce = {"reduce", BandaiClip(), "--method", "paper",
                                            "--iterations", "2"};
@@ -518,13 +531,7 @@ TEST_F(CliEndToEndTest, ReduceByDefaultStaysWithinTheBoundWithFewKeys) {
 
   ASSERT_EQ(run.exit_code, 0) << run.err;
   EXPECT_EQ(run.err, "");
-  absl::StatusOr<core::KeyedClip> keyed = core::ReadKeyedClipJsonFile(output);
-  ASSERT_TRUE(keyed.ok()) << keyed.status();
-  absl::StatusOr<core::ReductionReport> measured =
-      core::MeasureReduction(ReadBvhNamed(BandaiClip(), "x"), *keyed);
-  ASSERT_TRUE(measured.ok()) << measured.status();
-  EXPECT_LE(measured->max_error, 0.5);
-  EXPECT_EQ(measured->key_count, ReportedKeys(run.out));
+  ExpectFileKeepsBoundWithReportedKeys(output, run, 0.5);
   // 146 frames x 132 channels; most channels of the walk are constant (two keys each).
   EXPECT_LT(ReportedKeys(run.out), 146 * 132 / 10);
 }
@@ -545,13 +552,7 @@ TEST_F(CliEndToEndTest, ReduceWithFewestKeysKeepsTheBoundWithFewerKeys) {
   ASSERT_EQ(plain.exit_code, 0) << plain.err;
   ASSERT_EQ(fewest.exit_code, 0) << fewest.err;
   EXPECT_LT(ReportedKeys(fewest.out), ReportedKeys(plain.out));
-  absl::StatusOr<core::KeyedClip> keyed = core::ReadKeyedClipJsonFile(output);
-  ASSERT_TRUE(keyed.ok()) << keyed.status();
-  absl::StatusOr<core::ReductionReport> measured =
-      core::MeasureReduction(ReadBvhNamed(BandaiClip(), "x"), *keyed);
-  ASSERT_TRUE(measured.ok()) << measured.status();
-  EXPECT_LE(measured->max_error, 0.5);
-  EXPECT_EQ(measured->key_count, ReportedKeys(fewest.out));
+  ExpectFileKeepsBoundWithReportedKeys(output, fewest, 0.5);
 }
 
 TEST_F(CliEndToEndTest, ReduceWithAKeyBudgetKeepsIt) {

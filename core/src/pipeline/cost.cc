@@ -32,9 +32,10 @@ constexpr double kPaperRetimeBisections = 64.0;
 constexpr double kTimeMapSecondsPerItem = 2.5e-6;
 // Tolerance fit: one sample of one fit on white noise (every frame ends up keyed: the worst).
 constexpr double kToleranceSecondsPerSample = 2.5e-6;
-// The fewest-keys search: one sample of one fit, the slowest input measured (22-27 us on the
-// shared captures and on a slow sine offset by 1e8, 5-10 us on white noise and calm channels).
-constexpr double kFewestKeysSecondsPerSample = 60e-6;
+// The fewest-keys search (and the usual fit beside it): one sample of one fit, twice the slowest
+// input measured (24-41 us on the shared captures, 47-61 on sines offset by 1e8 or scaled to
+// 1e300 or 1e-300, 6-29 on white noise, steps and calm channels).
+constexpr double kFewestKeysSecondsPerSample = 120e-6;
 // Noise-aware method: one sample of one channel (its noise estimate, Euler filter, smoothing
 // and the fit of the smoothed curve) on white noise, the worst input measured (about 1.6 us).
 constexpr double kNoiseSecondsPerSample = 4e-6;

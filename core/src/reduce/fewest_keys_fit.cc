@@ -25,7 +25,9 @@ constexpr int kDirections = 8;
 // a round of those its solution misses.
 constexpr std::int64_t kFirstFrames = 48;
 constexpr std::size_t kAddedFrames = 16;
-// How often the search looks at `stop`, in rows of programs.
+// The largest bound the search takes (others are left to the usual fit).
+constexpr double kLargestBound = 1e300;
+// How often the search looks at `stop`, in rows of programs and frames measured.
 constexpr std::int64_t kRowsBetweenStopChecks = 65536;
 
 struct Pair {
@@ -123,10 +125,12 @@ class Search {
       std::int64_t key = -1;
       std::vector<Corners> key_sets;
       std::int64_t key_reach = -1;
-      for (std::int64_t b = farthest; b >= std::max(a + 1, farthest - kFewestKeysLookahead);
-           --b) {
+      for (std::int64_t b : Candidates(a, farthest)) {
         TEMPOKEY_ASSIGN_OR_RETURN(std::optional<std::vector<Corners>> next, Project(from, a, b));
-        if (!next) return std::nullopt;
+        if (!next) {
+          if (b == farthest) return std::nullopt;
+          continue;  // a candidate without a verdict is passed over
+        }
         if (b == n_ - 1) {
           key = b;
           key_sets = *std::move(next);
@@ -147,6 +151,22 @@ class Search {
   }
 
  private:
+  // The frames tried for the key after the key at a, the farthest first: the last
+  // kFewestKeysLookahead + 1 frames it reaches, and as many spread back to the middle of the
+  // segment (a long segment's best key can sit far from its end).
+  static std::vector<std::int64_t> Candidates(std::int64_t a, std::int64_t farthest) {
+    std::vector<std::int64_t> out;
+    for (std::int64_t d = 0; d <= kFewestKeysLookahead && farthest - d > a; ++d) {
+      out.push_back(farthest - d);
+    }
+    const std::int64_t span = farthest - a;
+    for (std::int64_t j = 1; j <= kFewestKeysLookahead; ++j) {
+      const std::int64_t b = farthest - (j * span) / (2 * kFewestKeysLookahead);
+      if (b > a && b < out.back()) out.push_back(b);
+    }
+    return out;
+  }
+
   // Frame 0's sets: the value within the bound, the slope within its limit.
   std::vector<Corners> FirstSets() const {
     std::vector<Corners> sets;
@@ -210,50 +230,60 @@ class Search {
     return {channels_[f.c][f.b] - channels_[f.c][f.a] - kInside * bounds_[f.c],
             -slope_limits_[f.c]};
   }
+  // A program whose first `weights` columns weigh a key's corners (>= 0, summing to 1), and
+  // `others` more columns; row_ zeroed for the next row.
+  void StartProgram(int weights, int others) {
+    lp_.Reset(weights + others);
+    row_.assign(static_cast<std::size_t>(weights + others), 0.0);
+    std::fill(row_.begin(), row_.begin() + weights, 1.0);
+    Put(1.0);
+    std::fill(row_.begin(), row_.begin() + weights, -1.0);
+    Put(-1.0);
+  }
+  // Adds row_ <= bound, and zeroes row_.
+  void Put(double bound) {
+    lp_.AddRow(row_, bound);
+    std::fill(row_.begin(), row_.end(), 0.0);
+  }
+
+  // Every row is in units of the channel's bound, the key's value column too, and its slope
+  // column holds the slope times the length in those units: a program is the same for the same
+  // motion at any scale, and its columns' values are of the order of 1.
   void BuildForward(const Forward& f) {
     const int p = static_cast<int>(f.from->size());
-    const double e = kInside * bounds_[f.c];
+    const double unit = bounds_[f.c];
+    const double length = static_cast<double>(f.b - f.a);
     const double origin = channels_[f.c][f.a];
     const Pair low = ForwardLow(f);
-    lp_.Reset(p + 2);
-    row_.assign(static_cast<std::size_t>(p + 2), 0.0);
-    auto put = [&](double bound) {
-      lp_.AddRow(row_, bound);
-      std::fill(row_.begin(), row_.end(), 0.0);
-    };
+    StartProgram(p, 2);
     row_[p] = 1.0;
-    put(2.0 * e);
-    row_[p + 1] = 1.0;  // the slope column holds slope times the length: rows of one scale
-    put(2.0 * slope_limits_[f.c] * static_cast<double>(f.b - f.a));
-    std::fill(row_.begin(), row_.begin() + p, 1.0);
-    put(1.0);
-    std::fill(row_.begin(), row_.begin() + p, -1.0);
-    put(-1.0);
+    Put(2.0 * kInside);
+    row_[p + 1] = 1.0;
+    Put(2.0 * slope_limits_[f.c] * length / unit);
     for (std::int64_t k : frames_) {
       const Basis h = BasisAt(k, f.b - f.a);
       const double target =
-          channels_[f.c][f.a + k] - origin - h.b0 * low.value - h.b1 * low.slope;
+          (channels_[f.c][f.a + k] - origin - h.b0 * low.value - h.b1 * low.slope) / unit;
       for (int sign : {1, -1}) {
         for (int j = 0; j < p; ++j) {
-          row_[j] = sign * (h.a0 * ((*f.from)[j].value - origin) + h.a1 * (*f.from)[j].slope);
+          row_[j] = sign *
+                    (h.a0 * ((*f.from)[j].value - origin) + h.a1 * (*f.from)[j].slope) / unit;
         }
         row_[p] = sign * h.b0;
-        row_[p + 1] = sign * h.b1 / static_cast<double>(f.b - f.a);
-        put(sign * target + e);
+        row_[p + 1] = sign * h.b1 / length;
+        Put(sign * target + kInside);
       }
     }
   }
-  // The pair z gives the key at a, and the pair at b.
+  // The weights summing to 1, as the rows read them, give the key at a; the columns after them
+  // the key at b.
   std::pair<Pair, Pair> ForwardKeys(const Forward& f, const std::vector<double>& z) const {
     const int p = static_cast<int>(f.from->size());
-    Pair at_a;
-    for (int j = 0; j < p; ++j) {
-      at_a.value += z[j] * (*f.from)[j].value;
-      at_a.slope += z[j] * (*f.from)[j].slope;
-    }
+    const double unit = bounds_[f.c];
     const Pair low = ForwardLow(f);
-    return {at_a, {channels_[f.c][f.a] + low.value + z[p],
-                   low.slope + z[p + 1] / static_cast<double>(f.b - f.a)}};
+    return {Combination(*f.from, z),
+            {channels_[f.c][f.a] + low.value + z[p] * unit,
+             low.slope + z[p + 1] * unit / static_cast<double>(f.b - f.a)}};
   }
   // Whether the segment between keys `ka` and `kb` keeps channel c within `bound` at every frame
   // between; the frames it misses by more go to `misses`.
@@ -283,6 +313,7 @@ class Search {
       TEMPOKEY_RETURN_IF_ERROR(CountRows(lp_.rows()));
       if (!lp_.FindFeasible()) return false;
       lp_.Point(z_);
+      TEMPOKEY_RETURN_IF_ERROR(CountRows(f.b - f.a));  // the frames Within() measures
       const auto [ka, kb] = ForwardKeys(f, z_);
       if (Within(f.c, f.a, f.b, ka, kb, ForwardCheck(f.c), misses_)) return true;
       if (!AddMissed(misses_)) return false;
@@ -330,6 +361,8 @@ class Search {
     objective[p] = along_value;
     objective[p + 1] = along_slope;
     for (;;) {
+      // The program's rows for the pivots, and the frames Within() measures.
+      TEMPOKEY_RETURN_IF_ERROR(CountRows(lp_.rows() + (f.b - f.a)));
       if (!lp_.Maximize(objective, z_)) return std::nullopt;
       const auto [ka, kb] = ForwardKeys(f, z_);
       if (Within(f.c, f.a, f.b, ka, kb, ForwardCheck(f.c), misses_)) return kb;
@@ -368,7 +401,8 @@ class Search {
         const double angle = (d + 0.5) * 2.0 * std::numbers::pi / kDirections;
         TEMPOKEY_ASSIGN_OR_RETURN(
             std::optional<Pair> corner,
-            Corner(f, std::cos(angle) / scale.value, std::sin(angle) / (scale.slope * length)));
+            Corner(f, std::cos(angle) * bounds_[c] / scale.value,
+                   std::sin(angle) * bounds_[c] / (scale.slope * length)));
         if (!corner) return std::nullopt;
         points.push_back(*corner);
       }
@@ -422,38 +456,30 @@ class Search {
     std::vector<double> objective(static_cast<std::size_t>(p + 1), 0.0);
     objective[p] = 1.0;
     FirstFrames(b - a);
-    for (;;) {
-      lp_.Reset(p + 1);
-      row_.assign(static_cast<std::size_t>(p + 1), 0.0);
-      auto put = [&](double bound) {
-        lp_.AddRow(row_, bound);
-        std::fill(row_.begin(), row_.end(), 0.0);
-      };
+    for (;;) {  // rows in units of the bound, as the forward programs' (the margin's too)
+      StartProgram(p, 1);
       row_[p] = 1.0;
-      put(2.0 * e);
-      std::fill(row_.begin(), row_.begin() + p, 1.0);
-      put(1.0);
-      std::fill(row_.begin(), row_.begin() + p, -1.0);
-      put(-1.0);
+      Put(2.0);
       for (std::int64_t k : frames_) {
         const Basis h = BasisAt(k, b - a);
         const double target =
-            channels_[c][a + k] - origin - h.b0 * (q.value - origin) - h.b1 * q.slope;
+            (channels_[c][a + k] - origin - h.b0 * (q.value - origin) - h.b1 * q.slope) / e;
         for (int sign : {1, -1}) {
           for (int j = 0; j < p; ++j) {
-            row_[j] = sign * (h.a0 * (corners[j].value - origin) + h.a1 * corners[j].slope);
+            row_[j] = sign * (h.a0 * (corners[j].value - origin) + h.a1 * corners[j].slope) / e;
           }
           row_[p] = 1.0;
-          put(sign * target + 2.0 * e);
+          Put(sign * target + 2.0);
         }
       }
       TEMPOKEY_RETURN_IF_ERROR(CountRows(lp_.rows()));
-      if (!lp_.FindFeasible() || !lp_.Maximize(objective, z_) || z_[p] < e) return std::nullopt;
+      if (!lp_.FindFeasible() || !lp_.Maximize(objective, z_) || z_[p] < 1.0) return std::nullopt;
       const Pair at_a = Combination(corners, z_);
       // Within the bound at every frame is what is taken; the frames that take the margin below
       // what the program found are added, so that the next solution keeps it.
+      TEMPOKEY_RETURN_IF_ERROR(CountRows(b - a));
       if (Within(c, a, b, at_a, q, e, misses_)) return at_a;
-      Within(c, a, b, at_a, q, 2.0 * e - z_[p], misses_);
+      Within(c, a, b, at_a, q, (2.0 - z_[p]) * e, misses_);
       if (!AddMissed(misses_)) return std::nullopt;
     }
   }
@@ -485,6 +511,11 @@ absl::StatusOr<std::optional<SplineFit>> FitFewestKeys(
     std::stop_token stop) {
   const auto n = static_cast<std::int64_t>(channels.front().size());
   if (n <= 2 || AllConstant(channels)) return std::nullopt;  // the usual fit's keys are fewest
+  // Bounds near the largest doubles would overflow the programs' ranges (twice the bound, four
+  // times the steepest step): there the usual fit's two keys are fewest anyway.
+  for (std::size_t c = 0; c < channels.size(); ++c) {
+    if (!(max_errors[c] <= kLargestBound)) return std::nullopt;
+  }
   return Search(channels, max_errors, std::move(stop)).Run();
 }
 

@@ -13,12 +13,16 @@
 //
 // Going forward, each key goes as far as its set reaches (a doubling, then halving, search: a
 // stretch a cubic piece can follow, any part of it can), but a key that goes farthest may leave
-// a set so narrow that the next key reaches little further. So of the last kLookahead frames the
-// farthest key could take, the one whose set lets the next key reach farthest is taken (the
-// farthest on a tie). Going back, from the centre of the last key's set, each key before takes
-// the pair inside its own set that keeps the segment between within the bound with the widest
-// margin (one more program). The search keeps its programs a ten-thousandth of the bound inside
-// it, and the whole curve is measured at every frame against the bound at the end.
+// a set so narrow that the next key reaches little further. So of the candidates (the last
+// kFewestKeysLookahead + 1 frames the key reaches, and as many spread back to the middle of its
+// segment), the one whose set lets the next key reach farthest is taken (the farthest on a tie);
+// a candidate whose programs give no verdict is passed over. Going back, from the centre of the
+// last key's set, each key before takes the pair inside its own set that keeps the segment
+// between within the bound with the widest margin (one more program). The programs' rows are in
+// units of the bound (the same program for the same motion at any scale), keep the curve a
+// ten-thousandth of the bound inside it, and start from a few dozen of a long segment's frames,
+// adding those a solution misses; every solution taken is measured at every frame of its
+// segment, and the whole curve at every frame against the bound at the end.
 //
 // Measured on ../shared/data at 0.5 degrees (rotation channels without constant ones): see the
 // README's `tolerance` entry (`--fewest-keys`).
@@ -34,8 +38,8 @@
 
 namespace tempokey::core::reduce_internal {
 
-// The frames searched back from the farthest a key reaches, for the key whose set reaches
-// farthest next.
+// The frames searched back from the farthest a key reaches (and the candidates spread back to
+// the middle of its segment), for the key whose set reaches farthest next.
 inline constexpr int kFewestKeysLookahead = 8;
 
 // The fit of `channels` (as FitWithinTolerance() takes them, already checked) by the search

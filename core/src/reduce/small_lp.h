@@ -6,8 +6,10 @@
 // by Bland's rule (the lowest index with a positive reduced cost), the leaving row by Harris's
 // two-pass ratio test (of the rows whose ratio is within a tolerance of the least, the largest
 // pivot), so that no pivot divides by a coefficient near rounding. Each row is divided by its
-// largest coefficient as it is added. Rounding is held to about 1e-9 of a row's scale; callers
-// keep a margin of their own and check what they take from a solution.
+// largest coefficient as it is added, and the tolerances (1e-9, 1e-11) are absolute on those
+// rows: a row whose coefficients span many orders of magnitude can be misjudged (a coefficient
+// below 1e-9 counts as zero, and the basis's values are clamped at 0). Callers keep their
+// columns of one scale, a margin of their own, and check every solution they take.
 #ifndef TEMPOKEY_CORE_SRC_REDUCE_SMALL_LP_H_
 #define TEMPOKEY_CORE_SRC_REDUCE_SMALL_LP_H_
 

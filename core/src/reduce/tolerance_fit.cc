@@ -1904,9 +1904,17 @@ absl::StatusOr<SplineFit> FitWithinTolerance(std::span<const std::span<const dou
   TEMPOKEY_RETURN_IF_ERROR(ValidateInputs(channels, max_errors, options));
   TEMPOKEY_RETURN_IF_ERROR(CheckNotCancelled(stop));
   if (options.fewest_keys) {
-    TEMPOKEY_ASSIGN_OR_RETURN(std::optional<SplineFit> fit,
+    // Both searches, the fewer keys kept (the usual fit's on a tie: its values and slopes are
+    // least squares, which follow the motion): the search costs a hundred times the usual fit,
+    // so the usual one's time hardly counts, and no input gets more keys for asking fewer.
+    TEMPOKEY_ASSIGN_OR_RETURN(std::optional<SplineFit> searched,
                               reduce_internal::FitFewestKeys(channels, max_errors, stop));
-    if (fit) return *std::move(fit);
+    ToleranceFitOptions usual_options = options;
+    usual_options.fewest_keys = false;
+    TEMPOKEY_ASSIGN_OR_RETURN(SplineFit usual,
+                              FitWithinTolerance(channels, max_errors, usual_options, stop));
+    if (searched && searched->frames.size() < usual.frames.size()) return *std::move(searched);
+    return usual;
   }
 #if defined(TEMPOKEY_TOLERANCE_FIT_AVX2)
   if (simd::RunningInstructionSet() >= simd::InstructionSet::kAvx2) {
