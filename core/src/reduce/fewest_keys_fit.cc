@@ -118,10 +118,10 @@ class Search {
   absl::StatusOr<std::optional<SplineFit>> Run() {
     std::vector<std::int64_t> frames{0};
     std::vector<std::vector<Corners>> sets{FirstSets()};
+    TEMPOKEY_ASSIGN_OR_RETURN(std::int64_t farthest, Reach(sets.back(), 0));
     while (frames.back() < n_ - 1) {
       const std::int64_t a = frames.back();
       const std::vector<Corners>& from = sets.back();
-      TEMPOKEY_ASSIGN_OR_RETURN(const std::int64_t farthest, Reach(from, a));
       std::int64_t key = -1;
       std::vector<Corners> key_sets;
       std::int64_t key_reach = -1;
@@ -136,7 +136,8 @@ class Search {
           key_sets = *std::move(next);
           break;
         }
-        TEMPOKEY_ASSIGN_OR_RETURN(const std::int64_t reach, Reach(*next, b));
+        // Only a reach beyond the best so far matters: Reach() may stop once it cannot be.
+        TEMPOKEY_ASSIGN_OR_RETURN(const std::int64_t reach, Reach(*next, b, key_reach));
         if (reach > key_reach) {
           key = b;
           key_reach = reach;
@@ -146,6 +147,7 @@ class Search {
       }
       frames.push_back(key);
       sets.push_back(std::move(key_sets));
+      farthest = key_reach;  // the chosen key's reach, measured in full above
     }
     return Back(frames, sets);
   }
@@ -330,8 +332,10 @@ class Search {
   }
 
   // The farthest frame the next key can take after the key at a (a + 1 always can: no frame
-  // lies between).
-  absl::StatusOr<std::int64_t> Reach(const std::vector<Corners>& from, std::int64_t a) {
+  // lies between); or, once that is known to be at most `floor`, some frame at most `floor`
+  // (the probes are the same as without a floor, so a reach beyond it is the same frame).
+  absl::StatusOr<std::int64_t> Reach(const std::vector<Corners>& from, std::int64_t a,
+                                     std::int64_t floor = -1) {
     const std::int64_t last = std::min(n_ - 1, a + kMaxMergedSegmentFrames);
     std::int64_t good = a + 1;
     std::int64_t bad = -1;
@@ -344,7 +348,7 @@ class Search {
       }
       good = b;
     }
-    while (bad - good > 1) {
+    while (bad - good > 1 && bad - 1 > floor) {
       const std::int64_t mid = good + (bad - good) / 2;
       TEMPOKEY_ASSIGN_OR_RETURN(const bool reaches, Reaches(from, a, mid));
       (reaches ? good : bad) = mid;
