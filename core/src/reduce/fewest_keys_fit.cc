@@ -136,7 +136,7 @@ class Search {
           key_sets = *std::move(next);
           break;
         }
-        // Only a reach beyond the best so far matters: Reach() may stop once it cannot be.
+        // Only a reach beyond the best so far matters: Reach() may stop once it cannot beat it.
         TEMPOKEY_ASSIGN_OR_RETURN(const std::int64_t reach, Reach(*next, b, key_reach));
         if (reach > key_reach) {
           key = b;

@@ -23,6 +23,7 @@
 #include "tempokey/core/model/rotation.h"
 #include "tempokey/core/reduce/reduce.h"
 #include "tempokey/core/reduce/tolerance_fit.h"
+#include "tests/testing/bit_digest.h"
 #include "tests/testing/test_paths.h"
 
 #pragma GCC diagnostic ignored "-Wmissing-field-initializers"
@@ -243,18 +244,16 @@ TEST(FewestKeysFitTest, ScaledOrOffsetMotionGetsTheSameKeys) {
 // far; the chosen key's reach reused as the next key's farthest frame) change the work, never
 // the keys: the search's own key frames on a real capture (no fallback to the usual fit), single
 // channels and a joint's three channels together, as the search without the shortcuts placed
-// them (a6d9f96): their count and a hash of every frame in order.
+// them (a6d9f96): their count and a digest of every frame in order.
 TEST(FewestKeysFitTest, TheSearchShortcutsKeepTheKeysOfTheFullSearch) {
   const std::vector<Samples> channels = RotationChannels("bandai/dataset-1_walk_active_001.bvh");
   ASSERT_GE(channels.size(), 3u);
   std::int64_t keys = 0;
-  std::uint64_t hash = 14695981039346656037u;  // FNV-1a over the frames
+  testing::BitDigest frames;
   auto add = [&](const std::optional<SplineFit>& fit) {
     ASSERT_TRUE(fit.has_value());
     keys += static_cast<std::int64_t>(fit->frames.size());
-    for (const std::int64_t f : fit->frames) {
-      hash = (hash ^ static_cast<std::uint64_t>(f)) * 1099511628211u;
-    }
+    for (const std::int64_t f : fit->frames) frames.AddCount(f);
   };
   for (const Samples& channel : channels) add(Search(channel, 0.5));
   const std::vector<std::span<const double>> joint(channels.begin(), channels.begin() + 3);
@@ -264,7 +263,7 @@ TEST(FewestKeysFitTest, TheSearchShortcutsKeepTheKeysOfTheFullSearch) {
   ASSERT_TRUE(together.ok()) << together.status();
   add(*together);
   EXPECT_EQ(keys, 1204);
-  EXPECT_EQ(hash, 7769936024314403211u);
+  EXPECT_EQ(frames.value(), 16702370078165810707u);
 }
 
 // Every channel of a real capture gets the search's own keys (not the usual fit's by a fallback).
